@@ -1,0 +1,22 @@
+# densemap_add_module(NAME SOURCES ... DEPS ... [PRIVATE_DEPS ...])
+# One static library per core concept: public headers in include/densemap/<module>/, the rest
+# in src/. Target name densemap_<NAME>, alias densemap::<NAME>.
+function(densemap_add_module name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;DEPS;PRIVATE_DEPS" ${ARGN})
+  add_library(densemap_${name} STATIC ${ARG_SOURCES})
+  add_library(densemap::${name} ALIAS densemap_${name})
+  target_include_directories(densemap_${name} PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/include
+                                              PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/src)
+  target_link_libraries(densemap_${name} PUBLIC ${ARG_DEPS} densemap_options
+                                         PRIVATE ${ARG_PRIVATE_DEPS})
+endfunction()
+
+# densemap_add_test(NAME SOURCES ... DEPS ... LABELS ...)
+function(densemap_add_test name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;DEPS;LABELS" ${ARGN})
+  add_executable(${name} ${ARG_SOURCES})
+  target_link_libraries(${name} PRIVATE ${ARG_DEPS} densemap_test_support GTest::gtest_main)
+  gtest_discover_tests(${name} PROPERTIES LABELS "${ARG_LABELS}"
+                       ENVIRONMENT "DENSEMAP_DATA_DIR=${DENSEMAP_DATA_DIR}"
+                       DISCOVERY_TIMEOUT 60)
+endfunction()

@@ -1,0 +1,35 @@
+#pragma once
+
+#include <cstdint>
+
+#include "densemap/geometry/voxel_key.hpp"
+
+namespace densemap::block {
+
+/// Voxels are grouped in cubes of 8^3 for storage and for per-scan update sets; a block is
+/// named by the key bits above the lowest three, packed into 39 bits.
+inline constexpr int kShift = 3;
+inline constexpr int kEdge = 1 << kShift;
+inline constexpr int kVoxels = kEdge * kEdge * kEdge;
+inline constexpr int kMaskWords = kVoxels / 64;
+
+[[nodiscard]] inline std::uint64_t blockOf(const VoxelKey& k) {
+  return (std::uint64_t{static_cast<std::uint16_t>(k.x >> kShift)}) |
+         (std::uint64_t{static_cast<std::uint16_t>(k.y >> kShift)} << 13) |
+         (std::uint64_t{static_cast<std::uint16_t>(k.z >> kShift)} << 26);
+}
+
+[[nodiscard]] inline int indexOf(const VoxelKey& k) {
+  constexpr int m = kEdge - 1;
+  return (k.x & m) | ((k.y & m) << kShift) | ((k.z & m) << (2 * kShift));
+}
+
+[[nodiscard]] inline VoxelKey keyOf(std::uint64_t block, int index) {
+  constexpr int m = kEdge - 1;
+  return {static_cast<std::uint16_t>(((block & 0x1fff) << kShift) | (index & m)),
+          static_cast<std::uint16_t>((((block >> 13) & 0x1fff) << kShift) | ((index >> kShift) & m)),
+          static_cast<std::uint16_t>((((block >> 26) & 0x1fff) << kShift) |
+                                     ((index >> (2 * kShift)) & m))};
+}
+
+}  // namespace densemap::block

@@ -1,0 +1,65 @@
+#pragma once
+
+#include <cstddef>
+#include <functional>
+#include <optional>
+#include <string_view>
+
+#include "densemap/geometry/voxel_grid.hpp"
+#include "densemap/map/scan_update.hpp"
+#include "densemap/map/sensor_model.hpp"
+
+namespace densemap {
+
+enum class Backend { kGrid, kOctree };
+
+[[nodiscard]] std::string_view backendName(Backend backend);
+
+/// What applying one scan's update did to the map.
+struct ApplyStats {
+  std::size_t updated_cells = 0;  // cells the update touched (free + occupied candidates)
+  std::size_t changed_cells = 0;  // cells whose log-odds changed or that became known
+};
+
+/// A log-odds occupancy map at one resolution: the storage behind every integration method.
+/// Each backend keeps OctoMap's per-cell semantics exactly (DESIGN.md, exactness contract).
+///
+/// Thread-safety: single writer. `apply` may use TBB internally (in the caller's task arena)
+/// but must not run concurrently with any other call; const methods are safe to call
+/// concurrently with each other.
+class OccupancyMap {
+ public:
+  OccupancyMap(double resolution_m, const SensorModel& model) : grid_(resolution_m), model_(model) {}
+  virtual ~OccupancyMap() = default;
+  OccupancyMap(const OccupancyMap&) = delete;
+  OccupancyMap& operator=(const OccupancyMap&) = delete;
+
+  [[nodiscard]] virtual Backend backend() const = 0;
+  [[nodiscard]] const VoxelGrid& grid() const { return grid_; }
+  [[nodiscard]] double resolution() const { return grid_.resolution(); }
+  [[nodiscard]] const SensorModel& sensorModel() const { return model_; }
+
+  /// Applies one scan: every cell of `update` gets exactly one hit or miss.
+  virtual ApplyStats apply(const ScanUpdate& update) = 0;
+
+  /// Log-odds of a cell; std::nullopt where the cell is unknown.
+  [[nodiscard]] virtual std::optional<float> logOdds(const VoxelKey& key) const = 0;
+  [[nodiscard]] std::optional<float> logOddsAt(const Point3f& point_world) const;
+
+  /// Calls f(key, log_odds) once for every known cell at the finest resolution.
+  virtual void forEachKnown(const std::function<void(const VoxelKey&, float)>& f) const = 0;
+
+  /// Sets a cell's log-odds directly (loading snapshots, building maps in tests).
+  virtual void setLogOdds(const VoxelKey& key, float log_odds) = 0;
+
+  [[nodiscard]] virtual std::size_t knownCells() const = 0;
+  /// Bytes held by the map's storage (approximate for the octree: OctoMap's own estimate).
+  [[nodiscard]] virtual std::size_t memoryBytes() const = 0;
+  virtual void clear() = 0;
+
+ private:
+  VoxelGrid grid_;
+  SensorModel model_;
+};
+
+}  // namespace densemap

@@ -1,0 +1,20 @@
+#pragma once
+
+#include <array>
+#include <cstdint>
+
+#include "densemap/map/block_layout.hpp"
+
+namespace densemap {
+
+/// 8^3 voxels of float log-odds (OctoMap's own representation, so every update rounds as
+/// OctoMap's does) and a bit per voxel saying whether it is known.
+struct VoxelBlock {
+  std::array<float, block::kVoxels> log_odds{};
+  std::array<std::uint64_t, block::kMaskWords> known{};
+
+  [[nodiscard]] bool isKnown(int index) const { return ((known[index >> 6] >> (index & 63)) & 1U) != 0; }
+  void markKnown(int index) { known[index >> 6] |= std::uint64_t{1} << (index & 63); }
+};
+
+}  // namespace densemap

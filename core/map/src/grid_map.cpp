@@ -1,0 +1,104 @@
+#include "densemap/map/grid_map.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
+
+#include <vector>
+
+namespace densemap {
+
+VoxelBlock& GridMap::blockFor(std::uint64_t block_key) {
+  auto& slot = blocks_[block_key];
+  if (!slot) slot = std::make_unique<VoxelBlock>();
+  return *slot;
+}
+
+ApplyStats GridMap::apply(const ScanUpdate& update) {
+  struct Job {
+    std::uint64_t block_key;
+    VoxelBlock* block;
+    const ScanUpdate::Masks* masks;
+  };
+  std::vector<Job> jobs;
+  jobs.reserve(update.blocks().size());
+  for (const auto& [block_key, masks] : update.blocks()) {
+    jobs.push_back({block_key, &blockFor(block_key), &masks});
+  }
+
+  struct Counts {
+    std::size_t updated = 0, changed = 0, newly_known = 0;
+  };
+  const SensorModel& model = sensorModel();
+  const Counts total = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, jobs.size(), 16), Counts{},
+      [&](const tbb::blocked_range<std::size_t>& range, Counts c) {
+        for (std::size_t j = range.begin(); j != range.end(); ++j) {
+          VoxelBlock& b = *jobs[j].block;
+          ScanUpdate::forEachCellInBlock(
+              jobs[j].block_key, *jobs[j].masks, [&](const VoxelKey& key, bool occupied) {
+                const int i = block::indexOf(key);
+                const bool known = b.isKnown(i);
+                const float old_value = known ? b.log_odds[i] : 0.0F;
+                const float new_value = model.update(old_value, occupied);
+                ++c.updated;
+                if (!known) {
+                  b.markKnown(i);
+                  ++c.newly_known;
+                  ++c.changed;
+                } else if (new_value != old_value) {
+                  ++c.changed;
+                }
+                b.log_odds[i] = new_value;
+              });
+        }
+        return c;
+      },
+      [](Counts a, const Counts& b) {
+        a.updated += b.updated;
+        a.changed += b.changed;
+        a.newly_known += b.newly_known;
+        return a;
+      });
+  known_cells_ += total.newly_known;
+  return {total.updated, total.changed};
+}
+
+std::optional<float> GridMap::logOdds(const VoxelKey& key) const {
+  const auto it = blocks_.find(block::blockOf(key));
+  if (it == blocks_.end()) return std::nullopt;
+  const int i = block::indexOf(key);
+  if (!it->second->isKnown(i)) return std::nullopt;
+  return it->second->log_odds[i];
+}
+
+void GridMap::forEachKnown(const std::function<void(const VoxelKey&, float)>& f) const {
+  for (const auto& [block_key, b] : blocks_) {
+    for (int i = 0; i < block::kVoxels; ++i) {
+      if (b->isKnown(i)) f(block::keyOf(block_key, i), b->log_odds[i]);
+    }
+  }
+}
+
+void GridMap::setLogOdds(const VoxelKey& key, float log_odds) {
+  VoxelBlock& b = blockFor(block::blockOf(key));
+  const int i = block::indexOf(key);
+  if (!b.isKnown(i)) {
+    b.markKnown(i);
+    ++known_cells_;
+  }
+  b.log_odds[i] = log_odds;
+}
+
+std::size_t GridMap::memoryBytes() const {
+  // Block payload + the hash node (key, pointer, next pointer, cached hash) + buckets.
+  constexpr std::size_t kNodeBytes = sizeof(std::uint64_t) + 3 * sizeof(void*);
+  return blocks_.size() * (sizeof(VoxelBlock) + kNodeBytes) +
+         blocks_.bucket_count() * sizeof(void*) + sizeof(*this);
+}
+
+void GridMap::clear() {
+  blocks_.clear();
+  known_cells_ = 0;
+}
+
+}  // namespace densemap

@@ -1,0 +1,92 @@
+#include "densemap/map/octree_map.hpp"
+
+namespace densemap {
+namespace {
+
+octomap::OcTreeKey toOcTreeKey(const VoxelKey& k) { return {k.x, k.y, k.z}; }
+
+}  // namespace
+
+void configureOcTree(octomap::OcTree& tree, const SensorModel& model) {
+  // Same probabilities through OctoMap's own setters: the log-odds are equal by construction.
+  const SensorProbabilities& p = model.probabilities();
+  tree.setProbHit(p.hit);
+  tree.setProbMiss(p.miss);
+  tree.setClampingThresMin(p.clamp_min);
+  tree.setClampingThresMax(p.clamp_max);
+}
+
+OctreeMap::OctreeMap(double resolution_m, const SensorModel& model)
+    : OccupancyMap(resolution_m, model), tree_(resolution_m) {
+  configureOcTree(tree_, model);
+}
+
+ApplyStats OctreeMap::apply(const ScanUpdate& update) {
+  ApplyStats stats;
+  update.forEachCell([&](const VoxelKey& key, bool occupied) {
+    const octomap::OcTreeKey k = toOcTreeKey(key);
+    const octomap::OcTreeNode* before = tree_.search(k);
+    const bool known = before != nullptr;
+    const float old_value = known ? before->getLogOdds() : 0.0F;
+    const octomap::OcTreeNode* after = tree_.updateNode(k, occupied, /*lazy_eval=*/false);
+    ++stats.updated_cells;
+    if (!known || after->getLogOdds() != old_value) ++stats.changed_cells;
+  });
+  return stats;
+}
+
+void OctreeMap::insertWithOctomap(const PointCloud& points_world, const Point3f& origin_world,
+                                  double max_range_m) {
+  octomap::Pointcloud cloud;
+  cloud.reserve(points_world.size());
+  for (const auto& p : points_world) cloud.push_back(p.x(), p.y(), p.z());
+  tree_.insertPointCloud(cloud, octomap::point3d(origin_world.x(), origin_world.y(), origin_world.z()),
+                         max_range_m, /*lazy_eval=*/false, /*discretize=*/false);
+}
+
+std::optional<float> OctreeMap::logOdds(const VoxelKey& key) const {
+  const octomap::OcTreeNode* node = tree_.search(toOcTreeKey(key));
+  if (node == nullptr) return std::nullopt;
+  return node->getLogOdds();
+}
+
+void forEachOcTreeCell(const octomap::OcTree& tree,
+                       const std::function<void(const VoxelKey&, float)>& f) {
+  const unsigned max_depth = tree.getTreeDepth();
+  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
+    const float value = it->getLogOdds();
+    const octomap::OcTreeKey k = it.getKey();
+    const unsigned span = 1U << (max_depth - it.getDepth());
+    const auto base = [span](std::uint16_t v) { return static_cast<unsigned>(v) & ~(span - 1U); };
+    const unsigned x0 = base(k[0]), y0 = base(k[1]), z0 = base(k[2]);
+    for (unsigned z = z0; z < z0 + span; ++z) {
+      for (unsigned y = y0; y < y0 + span; ++y) {
+        for (unsigned x = x0; x < x0 + span; ++x) {
+          f(VoxelKey{static_cast<std::uint16_t>(x), static_cast<std::uint16_t>(y),
+                     static_cast<std::uint16_t>(z)},
+            value);
+        }
+      }
+    }
+  }
+}
+
+void OctreeMap::forEachKnown(const std::function<void(const VoxelKey&, float)>& f) const {
+  forEachOcTreeCell(tree_, f);
+}
+
+void OctreeMap::setLogOdds(const VoxelKey& key, float log_odds) {
+  tree_.setNodeValue(toOcTreeKey(key), log_odds, /*lazy_eval=*/false);
+}
+
+std::size_t OctreeMap::knownCells() const {
+  std::size_t n = 0;
+  const unsigned max_depth = tree_.getTreeDepth();
+  for (auto it = tree_.begin_leafs(), end = tree_.end_leafs(); it != end; ++it) {
+    const std::size_t span = std::size_t{1} << (max_depth - it.getDepth());
+    n += span * span * span;
+  }
+  return n;
+}
+
+}  // namespace densemap

@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# Installs every Debian package densemap needs to build, test, benchmark and demo.
+# Idempotent: packages already present are skipped. Uses sudo when not root.
+set -euo pipefail
+
+PACKAGES=(
+  build-essential cmake ninja-build pkg-config ccache
+  liboctomap-dev octomap-tools
+  libtbb-dev libeigen3-dev
+  libgtest-dev libgmock-dev
+  cyclonedds-dev cyclonedds-tools
+  libprotobuf-dev protobuf-compiler
+  libcli11-dev libspdlog-dev
+  libbz2-dev zlib1g-dev
+  clang-format clang-tidy
+)
+
+missing=()
+for pkg in "${PACKAGES[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$pkg")
+  fi
+done
+
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#PACKAGES[@]} packages already installed"
+  exit 0
+fi
+
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then
+  if command -v sudo >/dev/null 2>&1; then SUDO="sudo"; else
+    echo "install-deps: not root and sudo is missing; install: ${missing[*]}" >&2
+    exit 1
+  fi
+fi
+
+echo "install-deps: installing ${missing[*]}"
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"

@@ -1,0 +1,130 @@
+#include "densemap/map/grid_map.hpp"
+
+#include <gtest/gtest.h>
+#include <tbb/task_arena.h>
+
+#include <random>
+
+#include "densemap/map/map_diff.hpp"
+#include "densemap/map/map_factory.hpp"
+#include "densemap/map/octree_map.hpp"
+
+namespace densemap {
+namespace {
+
+ScanUpdate randomUpdate(std::mt19937& rng, double p_occupied) {
+  std::uniform_int_distribution<int> coord(32700, 32830);
+  std::bernoulli_distribution occ(p_occupied);
+  ScanUpdate u;
+  for (int i = 0; i < 20000; ++i) {
+    const VoxelKey k{static_cast<std::uint16_t>(coord(rng)), static_cast<std::uint16_t>(coord(rng)),
+                     static_cast<std::uint16_t>(coord(rng) / 8 + 28600)};
+    occ(rng) ? u.markOccupied(k) : u.markFree(k);
+  }
+  return u;
+}
+
+TEST(SensorModel, DefaultsAreOctomapsLogOdds) {
+  const SensorModel sut;
+  const octomap::OcTree tree(0.1);
+  EXPECT_EQ(sut.hit(), tree.getProbHitLog());
+  EXPECT_EQ(sut.miss(), tree.getProbMissLog());
+  EXPECT_EQ(sut.clampMin(), tree.getClampingThresMinLog());
+  EXPECT_EQ(sut.clampMax(), tree.getClampingThresMaxLog());
+  EXPECT_NEAR(sut.hit(), 0.85, 0.01);
+  EXPECT_NEAR(sut.miss(), -0.4, 0.01);
+  EXPECT_NEAR(sut.clampMin(), -2.0, 0.01);
+  EXPECT_NEAR(sut.clampMax(), 3.5, 0.02);
+}
+
+TEST(SensorModel, UpdatesClampAtBothEnds) {
+  const SensorModel sut;
+  float v = 0.0F;
+  for (int i = 0; i < 20; ++i) v = sut.update(v, true);
+  EXPECT_EQ(v, sut.clampMax());
+  for (int i = 0; i < 40; ++i) v = sut.update(v, false);
+  EXPECT_EQ(v, sut.clampMin());
+}
+
+TEST(GridMap, MatchesTheOctreeBackendOverManyUpdates) {
+  std::mt19937 rng(11);
+  GridMap grid(0.1, SensorModel{});
+  OctreeMap octree(0.1, SensorModel{});
+  for (int scan = 0; scan < 12; ++scan) {
+    const ScanUpdate u = randomUpdate(rng, scan % 3 == 0 ? 0.6 : 0.1);
+    const ApplyStats a = grid.apply(u);
+    const ApplyStats b = octree.apply(u);
+    EXPECT_EQ(a.updated_cells, b.updated_cells);
+    EXPECT_EQ(a.changed_cells, b.changed_cells);
+  }
+  const MapDiff diff = diffMaps(grid, octree);
+  EXPECT_EQ(diff.differing(), 0U);
+  EXPECT_GT(diff.union_cells, 100000U);
+  EXPECT_EQ(grid.knownCells(), octree.knownCells());
+}
+
+TEST(GridMap, OneAndTwoThreadsGiveTheSameMap) {
+  GridMap one(0.2, SensorModel{}), two(0.2, SensorModel{});
+  std::mt19937 rng_a(3), rng_b(3);
+  tbb::task_arena arena1(1), arena2(2);
+  for (int scan = 0; scan < 6; ++scan) {
+    const ScanUpdate ua = randomUpdate(rng_a, 0.3);
+    const ScanUpdate ub = randomUpdate(rng_b, 0.3);
+    arena1.execute([&] { one.apply(ua); });
+    arena2.execute([&] { two.apply(ub); });
+  }
+  EXPECT_EQ(diffMaps(one, two).differing(), 0U);
+}
+
+TEST(GridMap, QueriesByKeyAndPointAgreeAndUnknownIsEmpty) {
+  GridMap sut(0.1, SensorModel{});
+  EXPECT_FALSE(sut.logOddsAt(Point3f(1, 2, 3)).has_value());
+  const VoxelKey k = *sut.grid().pointToKey(Point3f(1.05F, 2.05F, 3.05F));
+  sut.setLogOdds(k, 1.5F);
+  EXPECT_EQ(sut.logOdds(k), 1.5F);
+  EXPECT_EQ(sut.logOddsAt(Point3f(1.01F, 2.09F, 3.02F)), 1.5F);
+  EXPECT_EQ(sut.knownCells(), 1U);
+  EXPECT_GT(sut.memoryBytes(), sizeof(VoxelBlock));
+  sut.clear();
+  EXPECT_EQ(sut.knownCells(), 0U);
+  EXPECT_FALSE(sut.logOdds(k).has_value());
+}
+
+TEST(OctreeMap, ExpandsPrunedLeavesWhenIterating) {
+  OctreeMap sut(0.1, SensorModel{});
+  // Eight siblings with one value get pruned into their parent by OctoMap.
+  for (std::uint16_t dz = 0; dz < 2; ++dz) {
+    for (std::uint16_t dy = 0; dy < 2; ++dy) {
+      for (std::uint16_t dx = 0; dx < 2; ++dx) {
+        sut.setLogOdds(VoxelKey{static_cast<std::uint16_t>(32768 + dx),
+                                static_cast<std::uint16_t>(32768 + dy),
+                                static_cast<std::uint16_t>(32768 + dz)},
+                       -2.0F);
+      }
+    }
+  }
+  const_cast<octomap::OcTree&>(sut.tree()).prune();
+  EXPECT_EQ(sut.tree().getNumLeafNodes(), 1U);
+  std::size_t n = 0;
+  sut.forEachKnown([&](const VoxelKey& k, float v) {
+    ++n;
+    EXPECT_EQ(v, -2.0F);
+    EXPECT_LE(k.x, 32769);
+    EXPECT_GE(k.x, 32768);
+  });
+  EXPECT_EQ(n, 8U);
+  EXPECT_EQ(sut.knownCells(), 8U);
+}
+
+TEST(MapFactory, RejectsBadBackendsAndResolutions) {
+  EXPECT_FALSE(parseBackend("voxels").has_value());
+  EXPECT_EQ(*parseBackend("octree"), Backend::kOctree);
+  EXPECT_FALSE(makeMap(Backend::kGrid, 0.0).has_value());
+  EXPECT_FALSE(makeMap(Backend::kGrid, std::nan("")).has_value());
+  EXPECT_FALSE(makeMap(Backend::kGrid, 1e9).has_value());
+  EXPECT_FALSE(makeMap(Backend::kGrid, 0.1, SensorModel({0.3, 0.4, 0.1, 0.9})).has_value());
+  EXPECT_TRUE(makeMap(Backend::kOctree, 0.1).has_value());
+}
+
+}  // namespace
+}  // namespace densemap

@@ -1,0 +1,94 @@
+#include "densemap/raycast/raycast_integrator.hpp"
+
+#include <gtest/gtest.h>
+#include <tbb/task_arena.h>
+
+#include "densemap/map/grid_map.hpp"
+#include "densemap/map/map_diff.hpp"
+#include "densemap/map/octree_map.hpp"
+#include "densemap/test_support/random_rays.hpp"
+
+namespace densemap {
+namespace {
+
+struct Case {
+  double resolution;
+  double max_range;  // < 0: unlimited
+  int threads;
+};
+
+class RaycastMatchesOctomap : public ::testing::TestWithParam<Case> {};
+
+TEST_P(RaycastMatchesOctomap, CellForCellAfterEveryScanOnBothBackends) {
+  const Case c = GetParam();
+  const double far = c.max_range > 0 ? c.max_range : 6.0;
+  OctreeMap oracle(c.resolution, SensorModel{});
+  GridMap grid(c.resolution, SensorModel{});
+  OctreeMap octree(c.resolution, SensorModel{});
+  RaycastIntegrator sut({.max_range_m = c.max_range});
+  tbb::task_arena arena(c.threads);
+  test::RandomRays origins(c.resolution, 1.0, 17);
+  for (int scan = 0; scan < 8; ++scan) {
+    // A moving origin, every other one on grid planes.
+    const Point3f origin = origins.point(scan % 2 == 0 ? 1.0 : 0.0);
+    const PointCloud cloud = test::adversarialScan(c.resolution, origin, 6000, far, 100 + scan);
+    oracle.insertWithOctomap(cloud, origin, c.max_range);
+    arena.execute([&] {
+      const ScanStats a = sut.integrate(grid, cloud, origin);
+      const ScanStats b = sut.integrate(octree, cloud, origin);
+      EXPECT_EQ(a.visits, b.visits);
+      EXPECT_EQ(a.changed, b.changed);
+      EXPECT_GT(a.updated, 0U);
+    });
+    const MapDiff dg = diffMaps(grid, oracle);
+    const MapDiff dt = diffMaps(octree, oracle);
+    ASSERT_EQ(dg.differing(), 0U) << "grid, scan " << scan << ": only-ours " << dg.only_in_a
+                                  << " only-octomap " << dg.only_in_b << " values "
+                                  << dg.value_mismatch;
+    ASSERT_EQ(dt.differing(), 0U) << "octree, scan " << scan;
+  }
+  EXPECT_GT(oracle.knownCells(), 1000U);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    ResolutionsRangesThreads, RaycastMatchesOctomap,
+    ::testing::Values(Case{0.1, -1.0, 1}, Case{0.1, 4.0, 2}, Case{0.2, 5.0, 1},
+                      Case{0.2, -1.0, 2}, Case{0.05, 2.5, 2}, Case{0.4, 8.0, 2},
+                      Case{0.15, 3.0, 1}),
+    [](const ::testing::TestParamInfo<Case>& info) {
+      const Case& c = info.param;
+      return "res" + std::to_string(static_cast<int>(c.resolution * 1000)) + "mm_range" +
+             (c.max_range < 0 ? std::string("inf") : std::to_string(static_cast<int>(c.max_range))) +
+             "_threads" + std::to_string(c.threads);
+    });
+
+TEST(RaycastIntegrator, OneAndTwoThreadsGiveTheSameMapAndCounts) {
+  GridMap one(0.1, SensorModel{}), two(0.1, SensorModel{});
+  RaycastIntegrator a({.max_range_m = 5.0}), b({.max_range_m = 5.0});
+  tbb::task_arena arena1(1), arena2(2);
+  for (int scan = 0; scan < 4; ++scan) {
+    const Point3f origin(0.3F * scan, 0.1F, 0.05F);
+    const PointCloud cloud = test::adversarialScan(0.1, origin, 20000, 5.0, scan);
+    ScanStats sa, sb;
+    arena1.execute([&] { sa = a.integrate(one, cloud, origin); });
+    arena2.execute([&] { sb = b.integrate(two, cloud, origin); });
+    EXPECT_EQ(sa.visits, sb.visits);
+    EXPECT_EQ(sa.updated, sb.updated);
+    EXPECT_EQ(sa.changed, sb.changed);
+  }
+  EXPECT_EQ(diffMaps(one, two).differing(), 0U);
+}
+
+TEST(RaycastIntegrator, NonFinitePointsAreIgnoredNotCrashing) {
+  GridMap map(0.1, SensorModel{});
+  RaycastIntegrator sut({.max_range_m = 10.0});
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float inf = std::numeric_limits<float>::infinity();
+  const PointCloud cloud{{nan, 0, 0}, {inf, 1, 1}, {1, -inf, 0}, {1, 0, 0}};
+  const ScanStats s = sut.integrate(map, cloud, Point3f(0, 0, 0));
+  EXPECT_EQ(s.points, 4U);
+  EXPECT_EQ(map.knownCells(), 10U);  // 9 free cells to x=0.9 and the occupied end cell
+}
+
+}  // namespace
+}  // namespace densemap
