@@ -1,0 +1,109 @@
+#include <gtest/gtest.h>
+#include <octomap/ScanGraph.h>
+
+#include <fstream>
+
+#include "densemap/io/octomap_export.hpp"
+#include "densemap/io/scan_source.hpp"
+#include "densemap/map/grid_map.hpp"
+#include "densemap/map/map_diff.hpp"
+#include "densemap/map/octree_map.hpp"
+#include "densemap/raycast/raycast_integrator.hpp"
+#include "densemap/test_support/data_dir.hpp"
+#include "densemap/test_support/random_rays.hpp"
+
+namespace densemap {
+namespace {
+
+std::filesystem::path writeGraph(const std::filesystem::path& dir) {
+  octomap::ScanGraph graph;
+  for (int n = 0; n < 3; ++n) {
+    auto* cloud = new octomap::Pointcloud();
+    for (int i = 0; i < 100; ++i) cloud->push_back(0.1F * i, 0.5F * n, -0.3F * i);
+    graph.addNode(cloud, octomap::pose6d(1.0 * n, 2, 3, 0.1, 0.2, 0.3 * n));
+  }
+  const auto path = dir / "g.graph";
+  EXPECT_TRUE(graph.writeBinary(path.string()));
+  return path;
+}
+
+TEST(ScanGraph, ReadsWhatOctomapWrites) {
+  test::TempDir dir;
+  const auto path = writeGraph(dir.path());
+  octomap::ScanGraph expected;
+  ASSERT_TRUE(expected.readBinary(path.string()));
+  auto scans = readScanGraph(path);
+  ASSERT_TRUE(scans) << scans.error().message;
+  ASSERT_EQ(scans->size(), expected.size());
+  for (std::size_t n = 0; n < scans->size(); ++n) {
+    const octomap::ScanNode* node = expected.getNodeByID(static_cast<unsigned>(n));
+    ASSERT_EQ((*scans)[n].points.size(), node->scan->size());
+    for (std::size_t i = 0; i < node->scan->size(); ++i) {
+      const auto& p = (*node->scan)[i];
+      EXPECT_EQ((*scans)[n].points[i], Point3f(p.x(), p.y(), p.z()));
+    }
+    const octomap::point3d t = node->pose.trans();
+    EXPECT_EQ((*scans)[n].originWorld(), Point3f(t.x(), t.y(), t.z()));
+    const octomap::point3d q = node->pose.transform(octomap::point3d(1, 2, 3));
+    const Point3f ours = (*scans)[n].T_world_sensor.cast<float>() * Point3f(1, 2, 3);
+    EXPECT_NEAR(ours.x(), q.x(), 1e-5);
+    EXPECT_NEAR(ours.y(), q.y(), 1e-5);
+    EXPECT_NEAR(ours.z(), q.z(), 1e-5);
+  }
+}
+
+TEST(ScanGraph, TruncatedFilesAreClearErrorsAtEveryLength) {
+  test::TempDir dir;
+  const auto path = writeGraph(dir.path());
+  std::string bytes;
+  {
+    std::ifstream in(path, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  // Every cut that removes part of a node must fail; cutting only the edge list may pass.
+  const std::size_t edges_bytes = 4;
+  for (std::size_t cut = 0; cut + edges_bytes < bytes.size(); cut += 37) {
+    std::ofstream(dir.path() / "t.graph", std::ios::binary) << bytes.substr(0, cut);
+    auto scans = readScanGraph(dir.path() / "t.graph");
+    ASSERT_FALSE(scans) << "cut at " << cut;
+    EXPECT_NE(scans.error().message.find("t.graph"), std::string::npos);
+  }
+  const std::uint32_t absurd = 0xFFFFFFFF;
+  std::ofstream(dir.path() / "a.graph", std::ios::binary)
+      << std::string(reinterpret_cast<const char*>(&absurd), 4) << std::string(100, '\0');
+  EXPECT_FALSE(readScanGraph(dir.path() / "a.graph"));
+}
+
+TEST(OctomapExport, OtRoundTripsLogOddsAndBtRoundTripsOccupancy) {
+  test::TempDir dir;
+  GridMap grid(0.1, SensorModel{});
+  RaycastIntegrator integrator({.max_range_m = 5.0});
+  for (int s = 0; s < 3; ++s) {
+    const Point3f o(0.2F * s, 0, 0);
+    integrator.integrate(grid, test::adversarialScan(0.1, o, 3000, 5.0, s), o);
+  }
+  ASSERT_TRUE(exportOctomap(grid, dir.path() / "m.ot"));
+  ASSERT_TRUE(exportOctomap(grid, dir.path() / "m.bt"));
+  EXPECT_FALSE(exportOctomap(grid, dir.path() / "m.png"));
+
+  auto ot = importOctomap(dir.path() / "m.ot", Backend::kGrid);
+  ASSERT_TRUE(ot) << ot.error().message;
+  EXPECT_EQ(diffMaps(grid, **ot).differing(), 0U);
+
+  auto bt = importOctomap(dir.path() / "m.bt", Backend::kOctree);
+  ASSERT_TRUE(bt) << bt.error().message;
+  std::size_t agree = 0, total = 0;
+  grid.forEachKnown([&](const VoxelKey& k, float v) {
+    ++total;
+    const auto w = (*bt)->logOdds(k);
+    if (w && SensorModel::isOccupied(*w) == SensorModel::isOccupied(v)) ++agree;
+  });
+  EXPECT_EQ(agree, total);
+  EXPECT_EQ((*bt)->knownCells(), total);
+
+  std::ofstream(dir.path() / "broken.bt") << "# Octomap OcTree binary file\nnonsense";
+  EXPECT_FALSE(importOctomap(dir.path() / "broken.bt", Backend::kGrid));
+}
+
+}  // namespace
+}  // namespace densemap
