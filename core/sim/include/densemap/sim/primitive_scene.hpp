@@ -1,0 +1,48 @@
+#pragma once
+
+#include <vector>
+
+#include "densemap/sim/scene.hpp"
+
+namespace densemap {
+
+struct BoxShape {  // axis-aligned solid box
+  Eigen::Vector3d min, max;
+};
+struct CylinderShape {  // vertical solid cylinder
+  Eigen::Vector2d center_xy;
+  double radius;
+  double z_min, z_max;
+};
+struct SphereShape {
+  Eigen::Vector3d center;
+  double radius;
+};
+
+/// A scene of analytic solids: boxes, vertical cylinders and spheres.
+class PrimitiveScene final : public Scene {
+ public:
+  explicit PrimitiveScene(const Eigen::AlignedBox3d& bounds) : bounds_(bounds) {}
+
+  void add(const BoxShape& b) { boxes_.push_back(b); }
+  void add(const CylinderShape& c) { cylinders_.push_back(c); }
+  void add(const SphereShape& s) { spheres_.push_back(s); }
+
+  [[nodiscard]] std::optional<double> castRay(const Eigen::Vector3d& origin,
+                                              const Eigen::Vector3d& direction,
+                                              double max_range_m) const override;
+  [[nodiscard]] bool overlapsBox(const Eigen::Vector3d& min,
+                                 const Eigen::Vector3d& max) const override;
+  [[nodiscard]] Eigen::AlignedBox3d bounds() const override { return bounds_; }
+  [[nodiscard]] std::size_t primitiveCount() const {
+    return boxes_.size() + cylinders_.size() + spheres_.size();
+  }
+
+ private:
+  Eigen::AlignedBox3d bounds_;
+  std::vector<BoxShape> boxes_;
+  std::vector<CylinderShape> cylinders_;
+  std::vector<SphereShape> spheres_;
+};
+
+}  // namespace densemap

@@ -1,0 +1,37 @@
+#include "densemap/sim/trajectory.hpp"
+
+#include <cmath>
+
+namespace densemap {
+
+std::vector<Transform> trajectoryAlong(const std::vector<Eigen::Vector3d>& waypoints, int n) {
+  std::vector<Transform> poses;
+  if (waypoints.empty() || n <= 0) return poses;
+  std::vector<double> cumulative{0.0};
+  for (std::size_t i = 1; i < waypoints.size(); ++i) {
+    cumulative.push_back(cumulative.back() + (waypoints[i] - waypoints[i - 1]).norm());
+  }
+  const double total = cumulative.back();
+  for (int k = 0; k < n; ++k) {
+    Transform T = Transform::Identity();
+    if (total <= 0.0) {
+      T.translation() = waypoints.front();
+      T.linear() = Eigen::AngleAxisd(2 * M_PI * k / n, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+      poses.push_back(T);
+      continue;
+    }
+    const double s = n == 1 ? 0.0 : total * k / (n - 1);
+    std::size_t seg = 1;
+    while (seg + 1 < waypoints.size() && cumulative[seg] < s) ++seg;
+    const double len = cumulative[seg] - cumulative[seg - 1];
+    const double a = len > 0 ? (s - cumulative[seg - 1]) / len : 0.0;
+    const Eigen::Vector3d dir = waypoints[seg] - waypoints[seg - 1];
+    T.translation() = waypoints[seg - 1] + a * dir;
+    T.linear() =
+        Eigen::AngleAxisd(std::atan2(dir.y(), dir.x()), Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    poses.push_back(T);
+  }
+  return poses;
+}
+
+}  // namespace densemap

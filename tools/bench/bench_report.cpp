@@ -1,0 +1,92 @@
+#include "bench_report.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+
+namespace densemap::bench {
+
+double RunResult::percentile(double q) const {
+  if (ms_per_scan.empty()) return 0;
+  std::vector<double> v = ms_per_scan;
+  std::sort(v.begin(), v.end());
+  // Nearest rank: the smallest value with at least q of the samples at or below it.
+  const auto rank = static_cast<std::size_t>(std::ceil(q * static_cast<double>(v.size())));
+  return v[std::clamp<std::size_t>(rank, 1, v.size()) - 1];
+}
+
+std::string formatTable(const std::vector<RunResult>& runs) {
+  std::ostringstream out;
+  char line[512];
+  std::snprintf(line, sizeof(line), "%-10s %-7s %4s %3s %6s %10s %9s %9s %11s %11s %11s %10s %8s\n",
+                "method", "backend", "rule", "thr", "scans", "points", "p50 ms", "p99 ms",
+                "points/s", "visits/scan", "chg/scan", "diff cells", "speedup");
+  out << line;
+  for (const RunResult& r : runs) {
+    const std::string visits = r.has_counts ? std::to_string(std::llround(r.visits_per_scan)) : "-";
+    const std::string changed =
+        r.has_counts ? std::to_string(std::llround(r.changed_cells_per_scan)) : "-";
+    const std::string diff = r.diff_cells_vs_octomap < 0 ? "-" : std::to_string(r.diff_cells_vs_octomap);
+    char speed[32] = "-";
+    if (r.speedup_vs_octomap > 0) std::snprintf(speed, sizeof(speed), "%.2fx", r.speedup_vs_octomap);
+    std::snprintf(line, sizeof(line),
+                  "%-10s %-7s %4s %3d %6zu %10zu %9.1f %9.1f %11.3g %11s %11s %10s %8s\n",
+                  r.method.c_str(), r.backend.c_str(), r.rule.c_str(), r.threads, r.scans,
+                  r.points, r.percentile(0.5), r.percentile(0.99), r.pointsPerSecond(),
+                  visits.c_str(), changed.c_str(), diff.c_str(), speed);
+    out << line;
+  }
+  return out.str();
+}
+
+namespace {
+
+std::string quoted(const std::string& s) {
+  std::string q = "\"";
+  for (const char c : s) {
+    if (c == '"' || c == '\\') q += '\\';
+    q += c;
+  }
+  return q + "\"";
+}
+
+std::string number(double v) {
+  if (!std::isfinite(v)) return "null";
+  char buf[64];
+  std::snprintf(buf, sizeof(buf), "%.6g", v);
+  return buf;
+}
+
+}  // namespace
+
+std::string formatJson(const std::vector<RunResult>& runs, const std::string& data,
+                       const std::string& machine) {
+  std::ostringstream out;
+  out << "{\n  \"data\": " << quoted(data) << ",\n  \"machine\": " << quoted(machine)
+      << ",\n  \"runs\": [\n";
+  for (std::size_t i = 0; i < runs.size(); ++i) {
+    const RunResult& r = runs[i];
+    out << "    {\"method\": " << quoted(r.method) << ", \"backend\": " << quoted(r.backend)
+        << ", \"rule\": " << quoted(r.rule) << ", \"threads\": " << r.threads
+        << ", \"resolution\": " << number(r.resolution) << ", \"max_range\": " << number(r.max_range)
+        << ", \"scans\": " << r.scans << ", \"points\": " << r.points
+        << ", \"ms_per_scan_p50\": " << number(r.percentile(0.5))
+        << ", \"ms_per_scan_p99\": " << number(r.percentile(0.99))
+        << ", \"points_per_s\": " << number(r.pointsPerSecond())
+        << ", \"visits_per_scan\": " << (r.has_counts ? number(r.visits_per_scan) : "null")
+        << ", \"changed_cells_per_scan\": "
+        << (r.has_counts ? number(r.changed_cells_per_scan) : "null")
+        << ", \"diff_cells_vs_octomap\": "
+        << (r.diff_cells_vs_octomap < 0 ? "null" : std::to_string(r.diff_cells_vs_octomap))
+        << ", \"speedup_vs_octomap\": "
+        << (r.speedup_vs_octomap > 0 ? number(r.speedup_vs_octomap) : "null")
+        << ", \"total_s\": " << number(r.total_s) << ", \"known_cells\": " << r.known_cells
+        << ", \"memory_bytes\": " << r.memory_bytes << "}" << (i + 1 < runs.size() ? "," : "")
+        << "\n";
+  }
+  out << "  ]\n}\n";
+  return out.str();
+}
+
+}  // namespace densemap::bench

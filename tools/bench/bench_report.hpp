@@ -1,0 +1,39 @@
+#pragma once
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "densemap/geometry/error.hpp"
+
+namespace densemap::bench {
+
+/// One method on one backend over the whole dataset.
+struct RunResult {
+  std::string method;
+  std::string backend;
+  std::string rule = "set";
+  int threads = 1;
+  double resolution = 0;
+  double max_range = -1;
+  std::size_t scans = 0;
+  std::size_t points = 0;
+  std::vector<double> ms_per_scan;
+  double total_s = 0;
+  bool has_counts = false;  // visits/changed are measured for densemap's own methods only
+  double visits_per_scan = 0;
+  double changed_cells_per_scan = 0;
+  long long diff_cells_vs_octomap = -1;  // -1: no octomap run to compare with
+  double speedup_vs_octomap = 0;         // octomap p50 / this p50; 0 when unknown
+  std::size_t known_cells = 0;
+  std::size_t memory_bytes = 0;
+
+  [[nodiscard]] double percentile(double q) const;
+  [[nodiscard]] double pointsPerSecond() const { return total_s > 0 ? points / total_s : 0; }
+};
+
+[[nodiscard]] std::string formatTable(const std::vector<RunResult>& runs);
+[[nodiscard]] std::string formatJson(const std::vector<RunResult>& runs,
+                                     const std::string& data, const std::string& machine);
+
+}  // namespace densemap::bench
