@@ -62,9 +62,9 @@ inline void expectRaycastEqualsOctomap(const std::vector<WorldScan>& scans, doub
     if ((i + 1) % check_every != 0 && i + 1 != scans.size()) continue;
     for (const Subject& s : subjects) {
       const MapDiff d = diffMaps(*s.map, oracle);
-      ASSERT_EQ(d.differing(), 0U) << s.name << " after scan " << i << ": " << d.only_in_a
-                                   << " cells only ours, " << d.only_in_b << " only OctoMap's, "
-                                   << d.value_mismatch << " values differ";
+      ASSERT_EQ(d.differing(), 0U)
+          << s.name << " after scan " << i << ": " << d.only_in_a << " cells only ours, "
+          << d.only_in_b << " only OctoMap's, " << d.value_mismatch << " values differ";
     }
   }
   EXPECT_GT(oracle.knownCells(), 0U);

@@ -41,6 +41,24 @@ TEST(RealData, AkimapSampleWorldClouds) {
 
 TEST(RealData, AkimapSampleGraphMatchesItsWorldClouds) {
   DENSEMAP_REQUIRE_DATA(graph, "akimap-sample/akimap_sample.graph");
+  DENSEMAP_REQUIRE_DATA(clouds, "akimap-sample");
+  // Two independent stagings of the same data: sensor-frame points + pose in the .graph,
+  // world-frame points in clouds_world/. The readers must agree to float precision.
+  auto from_graph = openScanSource(graph);
+  auto from_clouds = openScanSource(clouds);
+  ASSERT_TRUE(from_graph && from_clouds);
+  ASSERT_EQ((*from_graph)->size(), (*from_clouds)->size());
+  for (std::size_t i = 0; i < (*from_graph)->size(); i += 9) {
+    const Scan a = *(*from_graph)->load(i);
+    const Scan b = *(*from_clouds)->load(i);
+    ASSERT_EQ(a.points.size(), b.points.size());
+    EXPECT_LT((a.originWorld() - b.originWorld()).norm(), 1e-4F);
+    const PointCloud wa = a.pointsWorld();
+    float worst = 0;
+    for (std::size_t j = 0; j < wa.size(); ++j)
+      worst = std::max(worst, (wa[j] - b.points[j]).norm());
+    EXPECT_LT(worst, 1e-4F) << "cloud " << i;
+  }
   checkDataset(graph, 0, 20, -1.0, 5);
 }
 

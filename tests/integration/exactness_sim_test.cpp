@@ -35,22 +35,21 @@ TEST_P(RaycastOnSimulatedSequences, EqualsOctomapAfterEveryScan) {
   ASSERT_TRUE(writeSimulatedSequence(o, dir.path()));
   auto source = openScanSource(dir.path());
   ASSERT_TRUE(source);
-  test::expectRaycastEqualsOctomap(test::loadWorldScans(**source, 0, 4), c.resolution,
-                                   c.max_range);
+  test::expectRaycastEqualsOctomap(test::loadWorldScans(**source, 0, 4), c.resolution, c.max_range);
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Sequences, RaycastOnSimulatedSequences,
-    ::testing::Values(SimCase{"indoor", "vlp16", 900, 0.05, 10.0, 0.0},
-                      SimCase{"indoor", "os128", 512, 0.1, -1.0, 0.01},
-                      SimCase{"outdoor", "hdl64", 1024, 0.2, 40.0, 0.0},
-                      SimCase{"outdoor", "vlp16", 1800, 0.4, 80.0, 0.02},
-                      SimCase{"outdoor", "os128", 256, 0.1, 25.0, 0.0}),
-    [](const ::testing::TestParamInfo<SimCase>& param_info) {
-      const SimCase& c = param_info.param;
-      return c.scene + "_" + c.sensor + "_" + std::to_string(static_cast<int>(c.resolution * 100)) +
-             "cm" + (c.noise > 0 ? "_noisy" : "");
-    });
+INSTANTIATE_TEST_SUITE_P(Sequences, RaycastOnSimulatedSequences,
+                         ::testing::Values(SimCase{"indoor", "vlp16", 900, 0.05, 10.0, 0.0},
+                                           SimCase{"indoor", "os128", 512, 0.1, -1.0, 0.01},
+                                           SimCase{"outdoor", "hdl64", 1024, 0.2, 40.0, 0.0},
+                                           SimCase{"outdoor", "vlp16", 1800, 0.4, 80.0, 0.02},
+                                           SimCase{"outdoor", "os128", 256, 0.1, 25.0, 0.0}),
+                         [](const ::testing::TestParamInfo<SimCase>& param_info) {
+                           const SimCase& c = param_info.param;
+                           return c.scene + "_" + c.sensor + "_" +
+                                  std::to_string(static_cast<int>(c.resolution * 100)) + "cm" +
+                                  (c.noise > 0 ? "_noisy" : "");
+                         });
 
 }  // namespace
 }  // namespace densemap

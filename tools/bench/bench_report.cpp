@@ -27,14 +27,16 @@ std::string formatTable(const std::vector<RunResult>& runs) {
     const std::string visits = r.has_counts ? std::to_string(std::llround(r.visits_per_scan)) : "-";
     const std::string changed =
         r.has_counts ? std::to_string(std::llround(r.changed_cells_per_scan)) : "-";
-    const std::string diff = r.diff_cells_vs_octomap < 0 ? "-" : std::to_string(r.diff_cells_vs_octomap);
+    const std::string diff =
+        r.diff_cells_vs_octomap < 0 ? "-" : std::to_string(r.diff_cells_vs_octomap);
     char speed[32] = "-";
-    if (r.speedup_vs_octomap > 0) std::snprintf(speed, sizeof(speed), "%.2fx", r.speedup_vs_octomap);
+    if (r.speedup_vs_octomap > 0)
+      std::snprintf(speed, sizeof(speed), "%.2fx", r.speedup_vs_octomap);
     std::snprintf(line, sizeof(line),
                   "%-10s %-7s %4s %3d %6zu %10zu %9.1f %9.1f %11.3g %11s %11s %10s %8s\n",
-                  r.method.c_str(), r.backend.c_str(), r.rule.c_str(), r.threads, r.scans,
-                  r.points, r.percentile(0.5), r.percentile(0.99), r.pointsPerSecond(),
-                  visits.c_str(), changed.c_str(), diff.c_str(), speed);
+                  r.method.c_str(), r.backend.c_str(), r.rule.c_str(), r.threads, r.scans, r.points,
+                  r.percentile(0.5), r.percentile(0.99), r.pointsPerSecond(), visits.c_str(),
+                  changed.c_str(), diff.c_str(), speed);
     out << line;
   }
   return out.str();
@@ -69,9 +71,9 @@ std::string formatJson(const std::vector<RunResult>& runs, const std::string& da
     const RunResult& r = runs[i];
     out << "    {\"method\": " << quoted(r.method) << ", \"backend\": " << quoted(r.backend)
         << ", \"rule\": " << quoted(r.rule) << ", \"threads\": " << r.threads
-        << ", \"resolution\": " << number(r.resolution) << ", \"max_range\": " << number(r.max_range)
-        << ", \"scans\": " << r.scans << ", \"points\": " << r.points
-        << ", \"ms_per_scan_p50\": " << number(r.percentile(0.5))
+        << ", \"resolution\": " << number(r.resolution)
+        << ", \"max_range\": " << number(r.max_range) << ", \"scans\": " << r.scans
+        << ", \"points\": " << r.points << ", \"ms_per_scan_p50\": " << number(r.percentile(0.5))
         << ", \"ms_per_scan_p99\": " << number(r.percentile(0.99))
         << ", \"points_per_s\": " << number(r.pointsPerSecond())
         << ", \"visits_per_scan\": " << (r.has_counts ? number(r.visits_per_scan) : "null")

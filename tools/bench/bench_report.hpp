@@ -33,7 +33,7 @@ struct RunResult {
 };
 
 [[nodiscard]] std::string formatTable(const std::vector<RunResult>& runs);
-[[nodiscard]] std::string formatJson(const std::vector<RunResult>& runs,
-                                     const std::string& data, const std::string& machine);
+[[nodiscard]] std::string formatJson(const std::vector<RunResult>& runs, const std::string& data,
+                                     const std::string& machine);
 
 }  // namespace densemap::bench

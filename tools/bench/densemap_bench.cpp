@@ -1,8 +1,8 @@
 // densemap-bench: offline integration benchmark (no DDS). Every method integrates the same
 // scans in one run; speed is reported as ratios against OctoMap's insertPointCloud, and every
 // map is compared with OctoMap's cell by cell.
-#include <CLI/CLI.hpp>
 #include <tbb/task_arena.h>
+#include <CLI/CLI.hpp>
 
 #include <chrono>
 #include <cmath>
@@ -54,8 +54,9 @@ Expected<std::vector<WorldScan>> loadScans(const Options& o) {
   auto source = openScanSource(o.data);
   if (!source) return std::unexpected(source.error());
   const std::size_t total = (*source)->size();
-  if (o.first >= total) return makeError("--first " + std::to_string(o.first) + " but only " +
-                                         std::to_string(total) + " scans");
+  if (o.first >= total)
+    return makeError("--first " + std::to_string(o.first) + " but only " + std::to_string(total) +
+                     " scans");
   const std::size_t end = o.limit == 0 ? total : std::min(total, o.first + o.limit);
   std::fprintf(stderr, "densemap-bench: %s\n", (*source)->describe().c_str());
   std::vector<WorldScan> scans;
@@ -73,7 +74,8 @@ Expected<std::vector<WorldScan>> loadScans(const Options& o) {
     std::fprintf(stderr, "\rloading scan %zu/%zu", i - o.first + 1, end - o.first);
   }
   std::fprintf(stderr, "\n");
-  if (rejected > 0) std::fprintf(stderr, "densemap-bench: dropped %zu non-finite points\n", rejected);
+  if (rejected > 0)
+    std::fprintf(stderr, "densemap-bench: dropped %zu non-finite points\n", rejected);
   return scans;
 }
 
@@ -167,7 +169,8 @@ int run(const Options& o) {
   for (const auto& method : order) {
     for (const Backend backend : backends) {
       if (method == "octomap" && backend != Backend::kOctree) {
-        if (std::find(backends.begin(), backends.end(), Backend::kOctree) != backends.end()) continue;
+        if (std::find(backends.begin(), backends.end(), Backend::kOctree) != backends.end())
+          continue;
       }
       const Backend used = method == "octomap" ? Backend::kOctree : backend;
       std::unique_ptr<OccupancyMap> map;
@@ -182,10 +185,11 @@ int run(const Options& o) {
         r.diff_cells_vs_octomap = static_cast<long long>(diff.differing());
         r.speedup_vs_octomap = reference_p50 / std::max(1e-9, r.percentile(0.5));
         if (diff.differing() > 0) {
-          std::fprintf(stderr, "%s/%s differs from OctoMap: %zu only ours, %zu only OctoMap's, "
-                       "%zu values (max |d| %g)\n", method.c_str(), r.backend.c_str(),
-                       diff.only_in_a, diff.only_in_b, diff.value_mismatch,
-                       static_cast<double>(diff.max_abs_difference));
+          std::fprintf(stderr,
+                       "%s/%s differs from OctoMap: %zu only ours, %zu only OctoMap's, "
+                       "%zu values (max |d| %g)\n",
+                       method.c_str(), r.backend.c_str(), diff.only_in_a, diff.only_in_b,
+                       diff.value_mismatch, static_cast<double>(diff.max_abs_difference));
         }
       }
       runs.push_back(std::move(r));
@@ -197,8 +201,8 @@ int run(const Options& o) {
               o.data.c_str(), o.resolution, o.max_range, scans->size(), machine.c_str());
   std::printf("%s", formatTable(runs).c_str());
   for (const RunResult& r : runs) {
-    std::printf("%s/%s: %zu known cells, %.1f MiB (%.1f MiB per million cells)\n",
-                r.method.c_str(), r.backend.c_str(), r.known_cells, r.memory_bytes / 1048576.0,
+    std::printf("%s/%s: %zu known cells, %.1f MiB (%.1f MiB per million cells)\n", r.method.c_str(),
+                r.backend.c_str(), r.known_cells, r.memory_bytes / 1048576.0,
                 r.known_cells ? r.memory_bytes / 1048576.0 / (r.known_cells / 1e6) : 0.0);
   }
   if (!o.json.empty()) {
@@ -224,11 +228,14 @@ int main(int argc, char** argv) {
   app.add_option("--max-range", o.max_range, "Rays are cut at this range, m (< 0: unlimited)")
       ->capture_default_str();
   app.add_option("--methods", o.methods, "Comma-separated: octomap, raycast")
-      ->delimiter(',')->capture_default_str();
+      ->delimiter(',')
+      ->capture_default_str();
   app.add_option("--backend", o.backends, "Comma-separated: grid, octree")
-      ->delimiter(',')->capture_default_str();
+      ->delimiter(',')
+      ->capture_default_str();
   app.add_option("--threads", o.threads, "Worker threads for densemap's methods")
-      ->check(CLI::Range(1, 256))->capture_default_str();
+      ->check(CLI::Range(1, 256))
+      ->capture_default_str();
   app.add_option("--first", o.first, "Skip this many scans")->capture_default_str();
   app.add_option("--limit", o.limit, "Use at most this many scans (0: all)")->capture_default_str();
   app.add_option("--json", o.json, "Also write the results as JSON to this file");

@@ -1,6 +1,6 @@
 // densemap-sim: writes a simulated LiDAR dataset (DESIGN.md dataset layout) with ground truth.
-#include <CLI/CLI.hpp>
 #include <tbb/task_arena.h>
+#include <CLI/CLI.hpp>
 
 #include <cstdio>
 
@@ -22,7 +22,8 @@ int main(int argc, char** argv) {
   app.add_option("--noise-std", o.noise_std_m, "Gaussian range noise, m")->capture_default_str();
   app.add_option("--dropout", o.dropout, "Probability a return is lost")->capture_default_str();
   app.add_option("--scans", o.scans, "Scans along the scene's path")->capture_default_str();
-  app.add_option("--seed", o.seed, "Seed for the scene layout and the noise")->capture_default_str();
+  app.add_option("--seed", o.seed, "Seed for the scene layout and the noise")
+      ->capture_default_str();
   app.add_option("--gt-resolution", o.ground_truth_resolution_m,
                  "Ground-truth voxel size in m (0: no ground truth)")
       ->capture_default_str();

@@ -1,6 +1,6 @@
 #include <charconv>
-#include <cstring>
 #include <cmath>
+#include <cstring>
 #include <sstream>
 
 #include "densemap/io/file_bytes.hpp"
@@ -80,7 +80,9 @@ class NumberedDirectory final : public ScanSource {
  public:
   NumberedDirectory(std::vector<std::pair<std::size_t, std::filesystem::path>> files,
                     std::vector<Transform> poses, PointFrame frame, std::string description)
-      : files_(std::move(files)), poses_(std::move(poses)), frame_(frame),
+      : files_(std::move(files)),
+        poses_(std::move(poses)),
+        frame_(frame),
         description_(std::move(description)) {}
 
   [[nodiscard]] std::size_t size() const override { return files_.size(); }
@@ -115,15 +117,14 @@ Expected<std::unique_ptr<ScanSource>> openNumberedDirectory(const std::filesyste
   // Line i is the pose of scan number i (a directory may hold only some scans).
   const std::size_t last_id = files->rbegin()->first;
   if (last_id >= poses->size()) {
-    return fileError(poses_file, "has " + std::to_string(poses->size()) +
-                                     " poses but scan " + std::to_string(last_id) +
-                                     " needs line " + std::to_string(last_id + 1));
+    return fileError(poses_file, "has " + std::to_string(poses->size()) + " poses but scan " +
+                                     std::to_string(last_id) + " needs line " +
+                                     std::to_string(last_id + 1));
   }
   std::vector<std::pair<std::size_t, std::filesystem::path>> ordered(files->begin(), files->end());
-  const std::string description = format_name + " " + scans_dir.parent_path().string() + " (" +
-                                  std::to_string(ordered.size()) + " scans, " +
-                                  std::to_string(ordered.front().first) + ".." +
-                                  std::to_string(last_id) + ")";
+  const std::string description =
+      format_name + " " + scans_dir.parent_path().string() + " (" + std::to_string(ordered.size()) +
+      " scans, " + std::to_string(ordered.front().first) + ".." + std::to_string(last_id) + ")";
   return std::make_unique<NumberedDirectory>(std::move(ordered), std::move(*poses), frame,
                                              description);
 }

@@ -16,9 +16,9 @@ Expected<DatasetWriter> DatasetWriter::create(const std::filesystem::path& dir) 
 }
 
 Expected<void> DatasetWriter::write(const Scan& scan) {
-  const PointCloud points =
-      scan.frame == PointFrame::kSensor ? scan.points
-                                        : transformPoints(scan.T_world_sensor.inverse(), scan.points);
+  const PointCloud points = scan.frame == PointFrame::kSensor
+                                ? scan.points
+                                : transformPoints(scan.T_world_sensor.inverse(), scan.points);
   std::string bytes(points.size() * 16, '\0');
   for (std::size_t i = 0; i < points.size(); ++i) {
     const float rec[4] = {points[i].x(), points[i].y(), points[i].z(),

@@ -7,8 +7,8 @@
 #include <string>
 #include <vector>
 
-#include "densemap/io/scan.hpp"
 #include "densemap/geometry/error.hpp"
+#include "densemap/io/scan.hpp"
 
 namespace densemap::kitti {
 

@@ -63,7 +63,8 @@ Expected<PcdHeader> parseHeader(const std::filesystem::path& file, const std::st
         if (values.size() != 7) return fileError(file, "VIEWPOINT needs 7 numbers");
         double v[7];
         for (int i = 0; i < 7; ++i) v[i] = std::stod(values[i]);
-        h.viewpoint = transformFromTranslationQuaternion({v[0], v[1], v[2]}, v[3], v[4], v[5], v[6]);
+        h.viewpoint =
+            transformFromTranslationQuaternion({v[0], v[1], v[2]}, v[3], v[4], v[5], v[6]);
       } else if (key == "DATA") {
         h.data = values.empty() ? "" : values[0];
         h.data_offset = pos;

@@ -54,8 +54,8 @@ Expected<std::vector<Scan>> readScanGraph(const std::filesystem::path& file) {
   scans.reserve(n_nodes);
   for (std::uint32_t node = 0; node < n_nodes; ++node) {
     auto broken = [&](const std::string& what) {
-      return fileError(file, "ScanGraph node " + std::to_string(node) + ": " + what +
-                                 " at byte " + std::to_string(in.position()) +
+      return fileError(file, "ScanGraph node " + std::to_string(node) + ": " + what + " at byte " +
+                                 std::to_string(in.position()) +
                                  " (truncated or not a .graph file)");
     };
     std::uint32_t n_points = 0;

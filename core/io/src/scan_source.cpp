@@ -12,7 +12,8 @@ Expected<std::unique_ptr<ScanSource>> inMemory(Expected<std::vector<Scan>> scans
 }
 
 bool endsWith(const std::string& s, const std::string& suffix) {
-  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+  return s.size() >= suffix.size() &&
+         s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
 }  // namespace
@@ -24,8 +25,9 @@ Expected<std::unique_ptr<ScanSource>> openScanSource(const std::filesystem::path
     if (std::filesystem::is_directory(path / "clouds_world")) return openWorldCloudDirectory(path);
     auto pcds = openPcdDirectory(path);
     if (pcds) return pcds;
-    return fileError(path, "not a dataset: expected scans/ + poses.txt, clouds_world/ + "
-                           "sensor_poses_kitti.txt, or .pcd files");
+    return fileError(path,
+                     "not a dataset: expected scans/ + poses.txt, clouds_world/ + "
+                     "sensor_poses_kitti.txt, or .pcd files");
   }
   if (!std::filesystem::exists(path, ec)) return fileError(path, "does not exist");
   const std::string name = path.filename().string();

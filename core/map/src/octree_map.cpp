@@ -40,7 +40,8 @@ void OctreeMap::insertWithOctomap(const PointCloud& points_world, const Point3f&
   octomap::Pointcloud cloud;
   cloud.reserve(points_world.size());
   for (const auto& p : points_world) cloud.push_back(p.x(), p.y(), p.z());
-  tree_.insertPointCloud(cloud, octomap::point3d(origin_world.x(), origin_world.y(), origin_world.z()),
+  tree_.insertPointCloud(cloud,
+                         octomap::point3d(origin_world.x(), origin_world.y(), origin_world.z()),
                          max_range_m, /*lazy_eval=*/false, /*discretize=*/false);
 }
 

@@ -32,7 +32,8 @@ struct Builder {
       if (!bounds.intersects(child) || child.intersection(bounds).volume() < min_volume) continue;
       const bool exists = tree.nodeChildExists(node, i);
       if (depth + 1 == max_depth) {
-        octomap::OcTreeNode* leaf = exists ? tree.getNodeChild(node, i) : tree.createNodeChild(node, i);
+        octomap::OcTreeNode* leaf =
+            exists ? tree.getNodeChild(node, i) : tree.createNodeChild(node, i);
         leaf->setLogOdds(scene.overlapsBox(clo, chi) ? occupied : free);
         continue;
       }
@@ -66,8 +67,9 @@ std::unique_ptr<octomap::OcTree> groundTruthOcTree(const Scene& scene, double re
   const Eigen::Vector3d first = snapped.min() + Eigen::Vector3d::Constant(r / 2);
   tree->setNodeValue(octomap::point3d(first.x(), first.y(), first.z()), 0.0F);
   const double half = r * 32768.0;
-  Builder b{scene, *tree, snapped, tree->getTreeDepth(), 0.5 * r * r * r,
-            model.clampMax(), model.clampMin()};
+  Builder b{
+      scene,           *tree, snapped, tree->getTreeDepth(), 0.5 * r * r * r, model.clampMax(),
+      model.clampMin()};
   b.fill(tree->getRoot(), 0, Eigen::Vector3d::Constant(-half), Eigen::Vector3d::Constant(half));
   tree->updateInnerOccupancy();
   tree->prune();

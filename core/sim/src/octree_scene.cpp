@@ -52,9 +52,7 @@ Expected<SimScene> makeOctreeScene(const std::filesystem::path& file) {
   if (!bytes) return std::unexpected(bytes.error());
   auto tree = std::make_unique<octomap::OcTree>(0.1);
   std::istringstream in(*bytes);
-  const bool ok = file.extension() == ".ot"
-                      ? false
-                      : tree->readBinary(in) && tree->size() > 0;
+  const bool ok = file.extension() == ".ot" ? false : tree->readBinary(in) && tree->size() > 0;
   if (!ok) return fileError(file, "not a readable OctoMap binary (.bt) scene");
   auto scene = std::make_unique<OctreeScene>(std::move(tree));
   const octomap::OcTree& t = scene->tree();
@@ -76,8 +74,8 @@ Expected<SimScene> makeOctreeScene(const std::filesystem::path& file) {
       start = c;
     }
   }
-  const Eigen::Vector3d axis = box.sizes().x() >= box.sizes().y() ? Eigen::Vector3d::UnitX()
-                                                                  : Eigen::Vector3d::UnitY();
+  const Eigen::Vector3d axis =
+      box.sizes().x() >= box.sizes().y() ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
   SimScene out{file.filename().string(), std::move(scene), {}};
   // Walk both ways until a wall is within 0.5 m, at most 6 m each way.
   auto reach = [&](const Eigen::Vector3d& dir) {

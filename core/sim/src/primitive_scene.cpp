@@ -10,7 +10,8 @@ namespace {
 constexpr double kEpsilon = 1e-9;
 
 // Slab method; the entry distance if the ray enters the box ahead of the origin.
-std::optional<double> hitBox(const BoxShape& b, const Eigen::Vector3d& o, const Eigen::Vector3d& d) {
+std::optional<double> hitBox(const BoxShape& b, const Eigen::Vector3d& o,
+                             const Eigen::Vector3d& d) {
   double t_near = -std::numeric_limits<double>::infinity();
   double t_far = std::numeric_limits<double>::infinity();
   for (int a = 0; a < 3; ++a) {

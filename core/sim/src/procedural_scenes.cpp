@@ -25,7 +25,7 @@ SimScene makeIndoorScene(unsigned seed) {
   constexpr double kLength = 30, kWidth = 20, kHeight = 3;
   auto scene = std::make_unique<PrimitiveScene>(
       Eigen::AlignedBox3d(V3(-0.5, -0.5, -0.3), V3(kLength + 0.5, kWidth + 0.5, kHeight + 0.3)));
-  scene->add(BoxShape{V3(-0.5, -0.5, -0.2), V3(kLength + 0.5, kWidth + 0.5, 0)});       // floor
+  scene->add(BoxShape{V3(-0.5, -0.5, -0.2), V3(kLength + 0.5, kWidth + 0.5, 0)});  // floor
   scene->add(BoxShape{V3(-0.5, -0.5, kHeight), V3(kLength + 0.5, kWidth + 0.5, kHeight + 0.2)});
   addWallX(*scene, 0, kLength, 0, kHeight);
   addWallX(*scene, 0, kLength, kWidth, kHeight);
@@ -72,7 +72,8 @@ SimScene makeOutdoorScene(unsigned seed) {
       const double w = 8 + u(rng) * 12, depth = 10 + u(rng) * 15, h = 6 + u(rng) * 19;
       const double y_near = side * (10 + u(rng) * 3);
       const double y_far = y_near + side * depth;
-      scene->add(BoxShape{V3(x, std::min(y_near, y_far), 0), V3(x + w, std::max(y_near, y_far), h)});
+      scene->add(
+          BoxShape{V3(x, std::min(y_near, y_far), 0), V3(x + w, std::max(y_near, y_far), h)});
       x += w + 2 + u(rng) * 4;
     }
     for (double x = 2; x < kLength; x += 12 + u(rng) * 6) {  // poles

@@ -26,11 +26,10 @@ Expected<LidarModel> lidarFor(const SequenceOptions& o) {
 
 std::string describe(const SequenceOptions& o, const LidarModel& lidar) {
   std::ostringstream s;
-  s << "scene " << o.scene << "\nsensor " << o.sensor << "\nbeams " << lidar.beams()
-    << "\ncolumns " << lidar.columns << "\nmax_range_m " << lidar.max_range_m
-    << "\nnoise_std_m " << o.noise_std_m << "\ndropout " << o.dropout << "\nscans " << o.scans
-    << "\nseed " << o.seed << "\nground_truth_resolution_m " << o.ground_truth_resolution_m
-    << "\n";
+  s << "scene " << o.scene << "\nsensor " << o.sensor << "\nbeams " << lidar.beams() << "\ncolumns "
+    << lidar.columns << "\nmax_range_m " << lidar.max_range_m << "\nnoise_std_m " << o.noise_std_m
+    << "\ndropout " << o.dropout << "\nscans " << o.scans << "\nseed " << o.seed
+    << "\nground_truth_resolution_m " << o.ground_truth_resolution_m << "\n";
   return s.str();
 }
 

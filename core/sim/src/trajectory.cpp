@@ -27,8 +27,8 @@ std::vector<Transform> trajectoryAlong(const std::vector<Eigen::Vector3d>& waypo
     const double a = len > 0 ? (s - cumulative[seg - 1]) / len : 0.0;
     const Eigen::Vector3d dir = waypoints[seg] - waypoints[seg - 1];
     T.translation() = waypoints[seg - 1] + a * dir;
-    T.linear() =
-        Eigen::AngleAxisd(std::atan2(dir.y(), dir.x()), Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    T.linear() = Eigen::AngleAxisd(std::atan2(dir.y(), dir.x()), Eigen::Vector3d::UnitZ())
+                     .toRotationMatrix();
     poses.push_back(T);
   }
   return poses;

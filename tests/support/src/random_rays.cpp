@@ -97,16 +97,19 @@ PointCloud adversarialScan(double resolution_m, const Point3f& origin, int n, do
         break;
       }
       case 4: {  // beyond the far range
-        Point3f d(static_cast<float>(u(rng)), static_cast<float>(u(rng)), static_cast<float>(u(rng)));
+        Point3f d(static_cast<float>(u(rng)), static_cast<float>(u(rng)),
+                  static_cast<float>(u(rng)));
         if (d.norm() < 1e-3F) d = Point3f(1, 0, 0);
-        cloud.push_back(origin + d.normalized() * static_cast<float>(far_m * (1.05 + u(rng) * 0.3 + 0.3)));
+        cloud.push_back(origin +
+                        d.normalized() * static_cast<float>(far_m * (1.05 + u(rng) * 0.3 + 0.3)));
         break;
       }
       case 5:
         cloud.push_back(i % 50 == 0 ? origin : planes.point(0.0));
         break;
       default: {
-        Point3f d(static_cast<float>(u(rng)), static_cast<float>(u(rng)), static_cast<float>(u(rng)));
+        Point3f d(static_cast<float>(u(rng)), static_cast<float>(u(rng)),
+                  static_cast<float>(u(rng)));
         cloud.push_back(origin + d * static_cast<float>(far_m * 0.99));
       }
     }

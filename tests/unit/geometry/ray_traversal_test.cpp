@@ -39,8 +39,8 @@ void expectSameAsOctomap(double resolution, double extent, RayKind kind, int n, 
     if (ok != expected.ok || keys != expected.keys) {
       if (++mismatches <= 3) {
         ADD_FAILURE() << "ray " << i << " kind " << static_cast<int>(kind) << " res " << resolution
-                      << " from " << r.origin.transpose() << " to " << r.end.transpose()
-                      << ": " << keys.size() << " keys vs OctoMap's " << expected.keys.size();
+                      << " from " << r.origin.transpose() << " to " << r.end.transpose() << ": "
+                      << keys.size() << " keys vs OctoMap's " << expected.keys.size();
       }
     }
   }

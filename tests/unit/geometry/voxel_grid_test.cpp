@@ -44,8 +44,8 @@ TEST(VoxelGrid, PackedKeysRoundTrip) {
 }
 
 TEST(RigidTransform, KittiRowsAndQuaternionAgree) {
-  const Transform a = transformFromTranslationQuaternion({1, 2, 3}, std::cos(0.25), 0, 0,
-                                                         std::sin(0.25));
+  const Transform a =
+      transformFromTranslationQuaternion({1, 2, 3}, std::cos(0.25), 0, 0, std::sin(0.25));
   double rows[12];
   for (int r = 0; r < 3; ++r) {
     for (int c = 0; c < 4; ++c) rows[r * 4 + c] = a.matrix()(r, c);

@@ -93,8 +93,11 @@ TEST(ScanSource, UnknownPathsAndFormatsAreErrors) {
 
 std::string pcdHeader(const std::string& data, int points) {
   return "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\n"
-         "COUNT 1 1 1 1\nWIDTH " + std::to_string(points) + "\nHEIGHT 1\n"
-         "VIEWPOINT 1 2 3 1 0 0 0\nPOINTS " + std::to_string(points) + "\nDATA " + data + "\n";
+         "COUNT 1 1 1 1\nWIDTH " +
+         std::to_string(points) +
+         "\nHEIGHT 1\n"
+         "VIEWPOINT 1 2 3 1 0 0 0\nPOINTS " +
+         std::to_string(points) + "\nDATA " + data + "\n";
 }
 
 TEST(Pcd, BinaryAndAsciiReadTheSamePointsAndViewpoint) {
@@ -144,7 +147,8 @@ std::string bzip2(const std::string& in) {
 
 TEST(ScanDat, PlainAndBzip2AndNodeLinesAreRead) {
   test::TempDir dir;
-  const std::string text = "NODE 1 2 3 0 0 1.5707963267948966\n1 0 0\n2 0 0\nNODE 0 0 0 0 0 0\n0 1 0\n";
+  const std::string text =
+      "NODE 1 2 3 0 0 1.5707963267948966\n1 0 0\n2 0 0\nNODE 0 0 0 0 0 0\n0 1 0\n";
   writeText(dir.path() / "s.dat", text);
   writeText(dir.path() / "s.dat.bz2", bzip2(text));
   auto plain = readScanDat(dir.path() / "s.dat");

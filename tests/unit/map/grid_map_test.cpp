@@ -96,10 +96,10 @@ TEST(OctreeMap, ExpandsPrunedLeavesWhenIterating) {
   for (std::uint16_t dz = 0; dz < 2; ++dz) {
     for (std::uint16_t dy = 0; dy < 2; ++dy) {
       for (std::uint16_t dx = 0; dx < 2; ++dx) {
-        sut.setLogOdds(VoxelKey{static_cast<std::uint16_t>(32768 + dx),
-                                static_cast<std::uint16_t>(32768 + dy),
-                                static_cast<std::uint16_t>(32768 + dz)},
-                       -2.0F);
+        sut.setLogOdds(
+            VoxelKey{static_cast<std::uint16_t>(32768 + dx), static_cast<std::uint16_t>(32768 + dy),
+                     static_cast<std::uint16_t>(32768 + dz)},
+            -2.0F);
       }
     }
   }

@@ -55,7 +55,8 @@ TEST(ScanUpdate, MergeIsOrderIndependent) {
 }
 
 TEST(BlockLayout, KeyOfInvertsBlockAndIndex) {
-  for (const VoxelKey k : {VoxelKey{0, 0, 0}, VoxelKey{65535, 65535, 65535}, VoxelKey{32768, 7, 9}}) {
+  for (const VoxelKey k :
+       {VoxelKey{0, 0, 0}, VoxelKey{65535, 65535, 65535}, VoxelKey{32768, 7, 9}}) {
     EXPECT_EQ(block::keyOf(block::blockOf(k), block::indexOf(k)), k);
   }
 }

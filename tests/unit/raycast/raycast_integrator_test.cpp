@@ -50,17 +50,19 @@ TEST_P(RaycastMatchesOctomap, CellForCellAfterEveryScanOnBothBackends) {
   EXPECT_GT(oracle.knownCells(), 1000U);
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    ResolutionsRangesThreads, RaycastMatchesOctomap,
-    ::testing::Values(Case{0.1, -1.0, 1}, Case{0.1, 4.0, 2}, Case{0.2, 5.0, 1},
-                      Case{0.2, -1.0, 2}, Case{0.05, 2.5, 2}, Case{0.4, 8.0, 2},
-                      Case{0.15, 3.0, 1}),
-    [](const ::testing::TestParamInfo<Case>& param_info) {
-      const Case& c = param_info.param;
-      return "res" + std::to_string(static_cast<int>(c.resolution * 1000)) + "mm_range" +
-             (c.max_range < 0 ? std::string("inf") : std::to_string(static_cast<int>(c.max_range))) +
-             "_threads" + std::to_string(c.threads);
-    });
+INSTANTIATE_TEST_SUITE_P(ResolutionsRangesThreads, RaycastMatchesOctomap,
+                         ::testing::Values(Case{0.1, -1.0, 1}, Case{0.1, 4.0, 2}, Case{0.2, 5.0, 1},
+                                           Case{0.2, -1.0, 2}, Case{0.05, 2.5, 2},
+                                           Case{0.4, 8.0, 2}, Case{0.15, 3.0, 1}),
+                         [](const ::testing::TestParamInfo<Case>& param_info) {
+                           const Case& c = param_info.param;
+                           return "res" + std::to_string(static_cast<int>(c.resolution * 1000)) +
+                                  "mm_range" +
+                                  (c.max_range < 0
+                                       ? std::string("inf")
+                                       : std::to_string(static_cast<int>(c.max_range))) +
+                                  "_threads" + std::to_string(c.threads);
+                         });
 
 TEST(RaycastIntegrator, OneAndTwoThreadsGiveTheSameMapAndCounts) {
   GridMap one(0.1, SensorModel{}), two(0.1, SensorModel{});

@@ -53,7 +53,8 @@ TEST(LidarSimulator, RangesRespectTheSensorAndDropoutsRemovePoints) {
 }
 
 TEST(LidarSimulator, HitsAnalyticSurfacesExactly) {
-  PrimitiveScene scene(Eigen::AlignedBox3d(Eigen::Vector3d(-10, -10, -1), Eigen::Vector3d(10, 10, 5)));
+  PrimitiveScene scene(
+      Eigen::AlignedBox3d(Eigen::Vector3d(-10, -10, -1), Eigen::Vector3d(10, 10, 5)));
   scene.add(BoxShape{Eigen::Vector3d(-50, -50, -1), Eigen::Vector3d(50, 50, 0)});  // ground z = 0
   LidarModel lidar{"test", {-10.0, -20.0}, 90};
   Transform T = Transform::Identity();

@@ -12,7 +12,9 @@ struct VoxelKey {
   std::uint16_t y = 0;
   std::uint16_t z = 0;
 
-  [[nodiscard]] std::uint16_t operator[](int axis) const { return axis == 0 ? x : axis == 1 ? y : z; }
+  [[nodiscard]] std::uint16_t operator[](int axis) const {
+    return axis == 0 ? x : axis == 1 ? y : z;
+  }
   [[nodiscard]] std::uint16_t& operator[](int axis) { return axis == 0 ? x : axis == 1 ? y : z; }
 
   /// 48-bit packing, usable as a hash key and as a total order (z major).

@@ -26,10 +26,11 @@ inline constexpr int kMaskWords = kVoxels / 64;
 
 [[nodiscard]] inline VoxelKey keyOf(std::uint64_t block, int index) {
   constexpr int m = kEdge - 1;
-  return {static_cast<std::uint16_t>(((block & 0x1fff) << kShift) | (index & m)),
-          static_cast<std::uint16_t>((((block >> 13) & 0x1fff) << kShift) | ((index >> kShift) & m)),
-          static_cast<std::uint16_t>((((block >> 26) & 0x1fff) << kShift) |
-                                     ((index >> (2 * kShift)) & m))};
+  return {
+      static_cast<std::uint16_t>(((block & 0x1fff) << kShift) | (index & m)),
+      static_cast<std::uint16_t>((((block >> 13) & 0x1fff) << kShift) | ((index >> kShift) & m)),
+      static_cast<std::uint16_t>((((block >> 26) & 0x1fff) << kShift) |
+                                 ((index >> (2 * kShift)) & m))};
 }
 
 }  // namespace densemap::block

@@ -12,8 +12,7 @@ namespace densemap {
 [[nodiscard]] Expected<Backend> parseBackend(std::string_view name);
 
 /// A new, empty map. Errors for a resolution that is not finite and positive.
-[[nodiscard]] Expected<std::unique_ptr<OccupancyMap>> makeMap(Backend backend,
-                                                              double resolution_m,
+[[nodiscard]] Expected<std::unique_ptr<OccupancyMap>> makeMap(Backend backend, double resolution_m,
                                                               const SensorModel& model = {});
 
 }  // namespace densemap

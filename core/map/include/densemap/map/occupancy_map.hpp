@@ -29,7 +29,8 @@ struct ApplyStats {
 /// concurrently with each other.
 class OccupancyMap {
  public:
-  OccupancyMap(double resolution_m, const SensorModel& model) : grid_(resolution_m), model_(model) {}
+  OccupancyMap(double resolution_m, const SensorModel& model)
+      : grid_(resolution_m), model_(model) {}
   virtual ~OccupancyMap() = default;
   OccupancyMap(const OccupancyMap&) = delete;
   OccupancyMap& operator=(const OccupancyMap&) = delete;

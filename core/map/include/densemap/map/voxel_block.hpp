@@ -13,7 +13,9 @@ struct VoxelBlock {
   std::array<float, block::kVoxels> log_odds{};
   std::array<std::uint64_t, block::kMaskWords> known{};
 
-  [[nodiscard]] bool isKnown(int index) const { return ((known[index >> 6] >> (index & 63)) & 1U) != 0; }
+  [[nodiscard]] bool isKnown(int index) const {
+    return ((known[index >> 6] >> (index & 63)) & 1U) != 0;
+  }
   void markKnown(int index) { known[index >> 6] |= std::uint64_t{1} << (index & 63); }
 };
 

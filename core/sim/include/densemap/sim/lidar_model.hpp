@@ -15,8 +15,8 @@ struct LidarModel {
   int columns = 1024;                  // azimuth steps per revolution
   double min_range_m = 0.5;
   double max_range_m = 100.0;
-  double noise_std_m = 0.0;   // Gaussian range noise
-  double dropout = 0.0;       // probability a return is lost
+  double noise_std_m = 0.0;  // Gaussian range noise
+  double dropout = 0.0;      // probability a return is lost
 
   [[nodiscard]] int beams() const { return static_cast<int>(elevations_deg.size()); }
   /// Errors for empty tables, non-positive columns, bad ranges or probabilities.

@@ -25,8 +25,9 @@ class TempDir {
 }  // namespace densemap::test
 
 /// Skips the current test, saying which shared data is missing.
-#define DENSEMAP_REQUIRE_DATA(var, relative)                                                  \
-  const auto var##_opt = ::densemap::test::sharedData(relative);                              \
-  if (!var##_opt) GTEST_SKIP() << "shared data '" << (relative)                               \
-                               << "' not found (set DENSEMAP_DATA_DIR); skipping";            \
+#define DENSEMAP_REQUIRE_DATA(var, relative)                         \
+  const auto var##_opt = ::densemap::test::sharedData(relative);     \
+  if (!var##_opt)                                                    \
+    GTEST_SKIP() << "shared data '" << (relative)                    \
+                 << "' not found (set DENSEMAP_DATA_DIR); skipping"; \
   const std::filesystem::path var = *var##_opt
