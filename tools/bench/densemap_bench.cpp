@@ -11,6 +11,7 @@
 #include <sstream>
 #include <thread>
 
+#include "../common/progress.hpp"
 #include "bench_report.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_diff.hpp"
@@ -61,19 +62,15 @@ Expected<std::vector<WorldScan>> loadScans(const Options& o) {
   std::fprintf(stderr, "densemap-bench: %s\n", (*source)->describe().c_str());
   std::vector<WorldScan> scans;
   std::size_t rejected = 0;
+  tools::Progress progress("loading scan", end - o.first);
   for (std::size_t i = o.first; i < end; ++i) {
     auto scan = (*source)->load(i);
     if (!scan) return std::unexpected(scan.error());
     WorldScan w{scan->pointsWorld(), scan->originWorld()};
-    // OctoMap's key conversion is undefined for NaN/Inf: such points are dropped and counted.
-    const auto finite_end = std::remove_if(w.points.begin(), w.points.end(),
-                                           [](const Point3f& p) { return !p.allFinite(); });
-    rejected += static_cast<std::size_t>(w.points.end() - finite_end);
-    w.points.erase(finite_end, w.points.end());
+    rejected += removeNonFinite(w.points);
     scans.push_back(std::move(w));
-    std::fprintf(stderr, "\rloading scan %zu/%zu", i - o.first + 1, end - o.first);
+    progress.update(i - o.first + 1);
   }
-  std::fprintf(stderr, "\n");
   if (rejected > 0)
     std::fprintf(stderr, "densemap-bench: dropped %zu non-finite points\n", rejected);
   return scans;
@@ -110,6 +107,7 @@ RunResult runMethod(const std::string& method, Backend backend, const Options& o
   r.max_range = o.max_range;
   r.has_counts = method != "octomap";
   tbb::task_arena arena(r.threads);
+  tools::Progress progress(method + "/" + r.backend + " scan", scans.size());
   double visits = 0, changed = 0;
   for (std::size_t i = 0; i < scans.size(); ++i) {
     ScanStats stats;
@@ -122,10 +120,10 @@ RunResult runMethod(const std::string& method, Backend backend, const Options& o
     r.points += scans[i].points.size();
     visits += static_cast<double>(stats.visits);
     changed += static_cast<double>(stats.changed);
-    std::fprintf(stderr, "\r%-8s %-6s scan %zu/%zu  %.1f ms", method.c_str(), r.backend.c_str(),
-                 i + 1, scans.size(), ms);
+    char detail[32];
+    std::snprintf(detail, sizeof(detail), "%.1f ms", ms);
+    progress.update(i + 1, detail);
   }
-  std::fprintf(stderr, "\n");
   r.scans = scans.size();
   r.visits_per_scan = visits / static_cast<double>(std::max<std::size_t>(1, r.scans));
   r.changed_cells_per_scan = changed / static_cast<double>(std::max<std::size_t>(1, r.scans));

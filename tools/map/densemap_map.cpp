@@ -5,6 +5,7 @@
 
 #include <cstdio>
 
+#include "../common/progress.hpp"
 #include "densemap/io/octomap_export.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_factory.hpp"
@@ -38,19 +39,15 @@ int main(int argc, char** argv) {
   densemap::RaycastIntegrator integrator({.max_range_m = max_range});
   tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
   std::size_t rejected = 0;
+  densemap::tools::Progress progress("densemap-map: scan", (*source)->size());
   for (std::size_t i = 0; i < (*source)->size(); ++i) {
     auto scan = (*source)->load(i);
     if (!scan) return fail(scan.error().message);
     densemap::PointCloud points = scan->pointsWorld();
-    const auto end = std::remove_if(points.begin(), points.end(),
-                                    [](const densemap::Point3f& p) { return !p.allFinite(); });
-    rejected += static_cast<std::size_t>(points.end() - end);
-    points.erase(end, points.end());
+    rejected += densemap::removeNonFinite(points);
     arena.execute([&] { integrator.integrate(**map, points, scan->originWorld()); });
-    std::fprintf(stderr, "\rdensemap-map: scan %zu/%zu, %zu known cells", i + 1, (*source)->size(),
-                 (*map)->knownCells());
+    progress.update(i + 1, std::to_string((*map)->knownCells()) + " known cells");
   }
-  std::fprintf(stderr, "\n");
   if (rejected > 0) std::fprintf(stderr, "densemap-map: dropped %zu non-finite points\n", rejected);
   if (auto ok = densemap::exportOctomap(**map, out); !ok) return fail(ok.error().message);
   std::printf("wrote %s (%zu known cells, %.1f MiB in memory)\n", out.c_str(), (*map)->knownCells(),

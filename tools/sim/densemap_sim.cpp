@@ -4,6 +4,7 @@
 
 #include <cstdio>
 
+#include "../common/progress.hpp"
 #include "densemap/sim/sequence.hpp"
 
 int main(int argc, char** argv) {
@@ -33,10 +34,9 @@ int main(int argc, char** argv) {
   tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
   densemap::Expected<densemap::SequenceSummary> summary;
   arena.execute([&] {
-    summary = densemap::writeSimulatedSequence(o, out, [](std::size_t done, std::size_t total) {
-      std::fprintf(stderr, "\rdensemap-sim: scan %zu/%zu", done, total);
-      if (done == total) std::fprintf(stderr, "\n");
-    });
+    densemap::tools::Progress progress("densemap-sim: scan", static_cast<std::size_t>(o.scans));
+    summary = densemap::writeSimulatedSequence(
+        o, out, [&](std::size_t done, std::size_t) { progress.update(done); });
   });
   if (!summary) {
     std::fprintf(stderr, "densemap-sim: error: %s\n", summary.error().message.c_str());

@@ -59,3 +59,17 @@ TEST(RigidTransform, KittiRowsAndQuaternionAgree) {
 
 }  // namespace
 }  // namespace densemap
+
+namespace densemap {
+namespace {
+
+TEST(PointCloud, RemoveNonFiniteKeepsOrderAndCounts) {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float inf = std::numeric_limits<float>::infinity();
+  PointCloud sut{{1, 2, 3}, {nan, 0, 0}, {4, 5, 6}, {0, -inf, 0}, {7, 8, 9}};
+  EXPECT_EQ(removeNonFinite(sut), 2U);
+  EXPECT_EQ(sut, (PointCloud{{1, 2, 3}, {4, 5, 6}, {7, 8, 9}}));
+}
+
+}  // namespace
+}  // namespace densemap

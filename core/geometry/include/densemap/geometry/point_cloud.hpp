@@ -1,6 +1,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <vector>
 
 namespace densemap {
@@ -9,5 +10,14 @@ namespace densemap {
 /// variable (`points_sensor`, `points_world`).
 using Point3f = Eigen::Vector3f;
 using PointCloud = std::vector<Point3f>;
+
+/// Removes NaN/Inf points (OctoMap's key conversion is undefined for them); returns how many.
+inline std::size_t removeNonFinite(PointCloud& points) {
+  const auto end = std::remove_if(points.begin(), points.end(),
+                                  [](const Point3f& p) { return !p.allFinite(); });
+  const auto removed = static_cast<std::size_t>(points.end() - end);
+  points.erase(end, points.end());
+  return removed;
+}
 
 }  // namespace densemap
