@@ -6,7 +6,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-/tmp/densemap-demo}
 ./scripts/install-deps.sh
-./scripts/build.sh -DDENSEMAP_BUILD_TESTS=OFF
+DENSEMAP_BUILD_TARGETS="densemap-sim densemap-bench densemap-map" ./scripts/build.sh
 mkdir -p "$OUT"
 echo "== simulating 10 scans of a 64-beam LiDAR driving down a street"
 build/bin/densemap-sim --out "$OUT/outdoor" --scene outdoor --sensor hdl64 --scans 10 \

@@ -13,7 +13,7 @@ VoxelBlock& GridMap::blockFor(std::uint64_t block_key) {
   return *slot;
 }
 
-ApplyStats GridMap::apply(const ScanUpdate& update) {
+ApplyStats GridMap::apply(const ScanUpdate& update, CellChanges* changes) {
   struct Job {
     std::uint64_t block_key;
     VoxelBlock* block;
@@ -25,6 +25,8 @@ ApplyStats GridMap::apply(const ScanUpdate& update) {
     jobs.push_back({block_key, &blockFor(block_key), &masks});
   }
 
+  // Each job records its changes in its own slot; slots are concatenated in job order.
+  std::vector<CellChanges> job_changes(changes != nullptr ? jobs.size() : 0);
   struct Counts {
     std::size_t updated = 0, changed = 0, newly_known = 0;
   };
@@ -34,6 +36,7 @@ ApplyStats GridMap::apply(const ScanUpdate& update) {
       [&](const tbb::blocked_range<std::size_t>& range, Counts c) {
         for (std::size_t j = range.begin(); j != range.end(); ++j) {
           VoxelBlock& b = *jobs[j].block;
+          CellChanges* out = changes != nullptr ? &job_changes[j] : nullptr;
           ScanUpdate::forEachCellInBlock(
               jobs[j].block_key, *jobs[j].masks, [&](const VoxelKey& key, bool occupied) {
                 const int i = block::indexOf(key);
@@ -44,9 +47,10 @@ ApplyStats GridMap::apply(const ScanUpdate& update) {
                 if (!known) {
                   b.markKnown(i);
                   ++c.newly_known;
+                }
+                if (!known || new_value != old_value) {
                   ++c.changed;
-                } else if (new_value != old_value) {
-                  ++c.changed;
+                  if (out != nullptr) out->push_back({key, new_value, true});
                 }
                 b.log_odds[i] = new_value;
               });
@@ -60,7 +64,34 @@ ApplyStats GridMap::apply(const ScanUpdate& update) {
         return a;
       });
   known_cells_ += total.newly_known;
+  if (changes != nullptr) {
+    for (auto& part : job_changes) changes->insert(changes->end(), part.begin(), part.end());
+  }
   return {total.updated, total.changed};
+}
+
+std::size_t GridMap::clearBox(const VoxelKey& min, const VoxelKey& max, CellChanges* changes) {
+  std::size_t erased = 0;
+  for (auto& [block_key, b] : blocks_) {
+    for (int w = 0; w < block::kMaskWords; ++w) {
+      std::uint64_t bits = b->known[w];
+      while (bits != 0) {
+        const int bit = std::countr_zero(bits);
+        bits &= bits - 1;
+        const int i = w * 64 + bit;
+        const VoxelKey k = block::keyOf(block_key, i);
+        if (k.x < min.x || k.y < min.y || k.z < min.z || k.x > max.x || k.y > max.y ||
+            k.z > max.z) {
+          continue;
+        }
+        b->known[w] &= ~(std::uint64_t{1} << bit);
+        ++erased;
+        if (changes != nullptr) changes->push_back({k, 0.0F, false});
+      }
+    }
+  }
+  known_cells_ -= erased;
+  return erased;
 }
 
 std::optional<float> GridMap::logOdds(const VoxelKey& key) const {

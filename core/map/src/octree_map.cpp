@@ -21,7 +21,7 @@ OctreeMap::OctreeMap(double resolution_m, const SensorModel& model)
   configureOcTree(tree_, model);
 }
 
-ApplyStats OctreeMap::apply(const ScanUpdate& update) {
+ApplyStats OctreeMap::apply(const ScanUpdate& update, CellChanges* changes) {
   ApplyStats stats;
   update.forEachCell([&](const VoxelKey& key, bool occupied) {
     const octomap::OcTreeKey k = toOcTreeKey(key);
@@ -30,7 +30,10 @@ ApplyStats OctreeMap::apply(const ScanUpdate& update) {
     const float old_value = known ? before->getLogOdds() : 0.0F;
     const octomap::OcTreeNode* after = tree_.updateNode(k, occupied, /*lazy_eval=*/false);
     ++stats.updated_cells;
-    if (!known || after->getLogOdds() != old_value) ++stats.changed_cells;
+    if (!known || after->getLogOdds() != old_value) {
+      ++stats.changed_cells;
+      if (changes != nullptr) changes->push_back({key, after->getLogOdds(), true});
+    }
   });
   return stats;
 }
@@ -43,6 +46,27 @@ void OctreeMap::insertWithOctomap(const PointCloud& points_world, const Point3f&
   tree_.insertPointCloud(cloud,
                          octomap::point3d(origin_world.x(), origin_world.y(), origin_world.z()),
                          max_range_m, /*lazy_eval=*/false, /*discretize=*/false);
+}
+
+std::size_t OctreeMap::clearBox(const VoxelKey& min, const VoxelKey& max, CellChanges* changes) {
+  octomap::OcTree kept(tree_.getResolution());
+  configureOcTree(kept, sensorModel());
+  std::size_t erased = 0;
+  forEachOcTreeCell(tree_, [&](const VoxelKey& k, float v) {
+    const bool inside = k.x >= min.x && k.y >= min.y && k.z >= min.z && k.x <= max.x &&
+                        k.y <= max.y && k.z <= max.z;
+    if (!inside) {
+      kept.setNodeValue(toOcTreeKey(k), v, /*lazy_eval=*/true);
+      return;
+    }
+    ++erased;
+    if (changes != nullptr) changes->push_back({k, 0.0F, false});
+  });
+  if (erased == 0) return 0;
+  kept.updateInnerOccupancy();
+  kept.prune();
+  tree_.swapContent(kept);
+  return erased;
 }
 
 std::optional<float> OctreeMap::logOdds(const VoxelKey& key) const {

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <random>
 
 #include "densemap/map/map_diff.hpp"
@@ -124,6 +125,51 @@ TEST(MapFactory, RejectsBadBackendsAndResolutions) {
   EXPECT_FALSE(makeMap(Backend::kGrid, 1e9).has_value());
   EXPECT_FALSE(makeMap(Backend::kGrid, 0.1, SensorModel({0.3, 0.4, 0.1, 0.9})).has_value());
   EXPECT_TRUE(makeMap(Backend::kOctree, 0.1).has_value());
+}
+
+}  // namespace
+}  // namespace densemap
+
+namespace densemap {
+namespace {
+
+TEST(OccupancyMaps, ReportTheSameChangesAndClearTheSameBox) {
+  std::mt19937 rng_a(21), rng_b(21);
+  GridMap grid(0.1, SensorModel{});
+  OctreeMap octree(0.1, SensorModel{});
+  for (int scan = 0; scan < 4; ++scan) {
+    CellChanges ca, cb;
+    const ApplyStats sa = grid.apply(randomUpdate(rng_a, 0.3), &ca);
+    const ApplyStats sb = octree.apply(randomUpdate(rng_b, 0.3), &cb);
+    ASSERT_EQ(ca.size(), sa.changed_cells);
+    ASSERT_EQ(cb.size(), sb.changed_cells);
+    auto sorted = [](CellChanges c) {
+      std::sort(c.begin(), c.end(), [](const CellChange& x, const CellChange& y) {
+        return x.key.packed() < y.key.packed();
+      });
+      return c;
+    };
+    const CellChanges a = sorted(ca), b = sorted(cb);
+    ASSERT_EQ(a.size(), b.size());
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      EXPECT_EQ(a[i].key, b[i].key);
+      EXPECT_EQ(a[i].log_odds, b[i].log_odds);
+      EXPECT_EQ(grid.logOdds(a[i].key), a[i].log_odds);  // changes carry the new value
+    }
+  }
+  const VoxelKey lo{32720, 32720, 32690}, hi{32760, 32800, 32700};
+  CellChanges ea, eb;
+  const std::size_t na = grid.clearBox(lo, hi, &ea);
+  const std::size_t nb = octree.clearBox(lo, hi, &eb);
+  EXPECT_GT(na, 1000U);
+  EXPECT_EQ(na, nb);
+  EXPECT_EQ(ea.size(), na);
+  for (const CellChange& c : ea) {
+    EXPECT_FALSE(c.known);
+    EXPECT_FALSE(grid.logOdds(c.key).has_value());
+  }
+  EXPECT_EQ(diffMaps(grid, octree).differing(), 0U);
+  EXPECT_EQ(grid.knownCells(), octree.knownCells());
 }
 
 }  // namespace

@@ -16,7 +16,9 @@ class GridMap final : public OccupancyMap {
   GridMap(double resolution_m, const SensorModel& model) : OccupancyMap(resolution_m, model) {}
 
   [[nodiscard]] Backend backend() const override { return Backend::kGrid; }
-  ApplyStats apply(const ScanUpdate& update) override;
+  ApplyStats apply(const ScanUpdate& update, CellChanges* changes = nullptr) override;
+  std::size_t clearBox(const VoxelKey& min, const VoxelKey& max,
+                       CellChanges* changes = nullptr) override;
   [[nodiscard]] std::optional<float> logOdds(const VoxelKey& key) const override;
   void forEachKnown(const std::function<void(const VoxelKey&, float)>& f) const override;
   void setLogOdds(const VoxelKey& key, float log_odds) override;

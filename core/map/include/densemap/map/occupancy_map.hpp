@@ -4,6 +4,7 @@
 #include <functional>
 #include <optional>
 #include <string_view>
+#include <vector>
 
 #include "densemap/geometry/voxel_grid.hpp"
 #include "densemap/map/scan_update.hpp"
@@ -14,6 +15,14 @@ namespace densemap {
 enum class Backend { kGrid, kOctree };
 
 [[nodiscard]] std::string_view backendName(Backend backend);
+
+/// A cell's value after a change; `known == false` means the cell was erased.
+struct CellChange {
+  VoxelKey key;
+  float log_odds = 0.0F;
+  bool known = true;
+};
+using CellChanges = std::vector<CellChange>;
 
 /// What applying one scan's update did to the map.
 struct ApplyStats {
@@ -40,8 +49,14 @@ class OccupancyMap {
   [[nodiscard]] double resolution() const { return grid_.resolution(); }
   [[nodiscard]] const SensorModel& sensorModel() const { return model_; }
 
-  /// Applies one scan: every cell of `update` gets exactly one hit or miss.
-  virtual ApplyStats apply(const ScanUpdate& update) = 0;
+  /// Applies one scan: every cell of `update` gets exactly one hit or miss. When `changes` is
+  /// given, the cells whose value changed (or became known) are appended to it.
+  virtual ApplyStats apply(const ScanUpdate& update, CellChanges* changes = nullptr) = 0;
+
+  /// Forgets every cell with min <= key <= max (per axis); appends them to `changes` as erased.
+  /// Returns how many cells were erased.
+  virtual std::size_t clearBox(const VoxelKey& min, const VoxelKey& max,
+                               CellChanges* changes = nullptr) = 0;
 
   /// Log-odds of a cell; std::nullopt where the cell is unknown.
   [[nodiscard]] virtual std::optional<float> logOdds(const VoxelKey& key) const = 0;

@@ -15,7 +15,10 @@ class OctreeMap final : public OccupancyMap {
   OctreeMap(double resolution_m, const SensorModel& model);
 
   [[nodiscard]] Backend backend() const override { return Backend::kOctree; }
-  ApplyStats apply(const ScanUpdate& update) override;
+  ApplyStats apply(const ScanUpdate& update, CellChanges* changes = nullptr) override;
+  /// Rebuilds the tree without the box: Debian's OctoMap asserts when inner nodes are deleted.
+  std::size_t clearBox(const VoxelKey& min, const VoxelKey& max,
+                       CellChanges* changes = nullptr) override;
   [[nodiscard]] std::optional<float> logOdds(const VoxelKey& key) const override;
   void forEachKnown(const std::function<void(const VoxelKey&, float)>& f) const override;
   void setLogOdds(const VoxelKey& key, float log_odds) override;
