@@ -31,11 +31,11 @@ std::size_t RaycastIntegrator::computeUpdate(const VoxelGrid& grid, const PointC
 }
 
 ScanStats RaycastIntegrator::integrate(OccupancyMap& map, const PointCloud& points_world,
-                                       const Point3f& origin_world) {
+                                       const Point3f& origin_world, CellChanges* changes) {
   ScanStats stats;
   stats.points = points_world.size();
   stats.visits = computeUpdate(map.grid(), points_world, origin_world, merged_);
-  const ApplyStats applied = map.apply(merged_);
+  const ApplyStats applied = map.apply(merged_, changes);
   stats.updated = applied.updated_cells;
   stats.changed = applied.changed_cells;
   return stats;

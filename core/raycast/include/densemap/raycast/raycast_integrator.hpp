@@ -30,8 +30,9 @@ class RaycastIntegrator {
  public:
   explicit RaycastIntegrator(const RaycastOptions& options = {}) : options_(options) {}
 
+  /// Integrates one scan; appends the cells it changed to `changes` when given.
   ScanStats integrate(OccupancyMap& map, const PointCloud& points_world,
-                      const Point3f& origin_world);
+                      const Point3f& origin_world, CellChanges* changes = nullptr);
 
   /// Builds the update set without applying it; returns cells visited.
   std::size_t computeUpdate(const VoxelGrid& grid, const PointCloud& points_world,

@@ -1,0 +1,42 @@
+#pragma once
+
+#include <optional>
+#include <vector>
+
+#include "densemap/geometry/error.hpp"
+#include "densemap/pipeline/map_view.hpp"
+
+namespace densemap {
+
+enum class CellState : std::uint8_t { kUnknown = 0, kFree = 1, kOccupied = 2 };
+
+[[nodiscard]] inline CellState cellState(std::optional<float> log_odds) {
+  if (!log_odds) return CellState::kUnknown;
+  return SensorModel::isOccupied(*log_odds) ? CellState::kOccupied : CellState::kFree;
+}
+
+struct BoxQueryResult {
+  std::size_t occupied = 0;
+  std::size_t free = 0;
+  std::size_t unknown = 0;
+  std::vector<Point3f> occupied_centers;  // at most `max_centers`
+};
+
+/// Counts the cells of the box [min, max] (metres) by state. Errors for an inverted box, a
+/// non-finite corner, or a box of more than `max_cells` cells.
+[[nodiscard]] Expected<BoxQueryResult> queryBox(const MapView& view, const Point3f& min,
+                                                const Point3f& max, std::size_t max_cells,
+                                                std::size_t max_centers);
+
+struct RayQueryResult {
+  bool hit = false;
+  Point3f hit_center = Point3f::Zero();  // centre of the first occupied cell
+  float distance = 0.0F;                 // origin to that centre
+};
+
+/// Walks the ray (OctoMap's traversal) from `origin` along `direction` up to `max_range`; the
+/// first occupied cell is the hit. Unknown cells are passed through.
+[[nodiscard]] Expected<RayQueryResult> castRay(const MapView& view, const Point3f& origin,
+                                               const Point3f& direction, float max_range);
+
+}  // namespace densemap

@@ -1,0 +1,127 @@
+#pragma once
+
+#include <tbb/task_arena.h>
+
+#include <array>
+#include <atomic>
+#include <functional>
+#include <future>
+#include <memory>
+#include <mutex>
+#include <thread>
+
+#include "densemap/map/map_factory.hpp"
+#include "densemap/pipeline/latest_wins_queue.hpp"
+#include "densemap/pipeline/map_view.hpp"
+#include "densemap/pipeline/raw_scan.hpp"
+#include "densemap/pipeline/scan_validator.hpp"
+#include "densemap/raycast/raycast_integrator.hpp"
+
+namespace densemap {
+
+struct PipelineOptions {
+  Backend backend = Backend::kGrid;
+  double resolution_m = 0.2;
+  SensorProbabilities sensor;
+  double max_range_m = -1.0;  // < 0: unlimited
+  int threads = 2;            // size of the task arena the pipeline owns
+  std::size_t queue_depth = 2;
+  ScanLimits limits;
+};
+
+/// What the publish stage hands on for every integrated scan.
+struct IntegrationResult {
+  bool from_scan = false;  // false: a command changed the map
+  std::string sensor_id;
+  std::uint64_t scan_seq = 0;
+  std::int64_t stamp_ns = 0;
+  std::uint64_t base_version = 0;
+  std::uint64_t new_version = 0;
+  CellChanges changes;
+  ScanStats stats;
+  double latency_ms = 0.0;  // received -> published
+};
+
+struct PipelineCounters {
+  std::uint64_t received = 0;
+  std::uint64_t integrated = 0;
+  std::uint64_t dropped = 0;
+  std::uint64_t rejected = 0;
+  std::array<std::uint64_t, kRejectReasonCount> rejected_by_reason{};
+  std::string last_reject_reason;
+  double latency_p50_ms = 0.0;  // over the last 1024 integrated scans
+  double latency_p99_ms = 0.0;
+};
+
+/// The ingest pipeline (DESIGN.md data flow): a bounded latest-wins queue feeding a TBB flow
+/// graph validate -> transform -> integrate -> publish, run one scan at a time by a worker
+/// thread inside the task arena the pipeline owns. Readers get the latest published MapView
+/// without waiting for integration. Commands (reset, clear, save...) run on the worker between
+/// scans, so the map has one writer.
+/// Thread-safety: submit(), view(), command() and counters() from any thread.
+class Pipeline {
+ public:
+  using Publisher =
+      std::function<void(const IntegrationResult&, const std::shared_ptr<const MapView>&)>;
+  using RejectHandler = std::function<void(const RawScan&, const Rejection&)>;
+  /// Runs on the worker with the map and a change list to fill; returns a message or an error.
+  using Command = std::function<Expected<std::string>(OccupancyMap&, CellChanges&)>;
+
+  /// A pipeline over `initial` (or a new empty map) starting at `initial_version`.
+  [[nodiscard]] static Expected<std::unique_ptr<Pipeline>> create(
+      const PipelineOptions& options, std::unique_ptr<OccupancyMap> initial = nullptr,
+      std::uint64_t initial_version = 0);
+  ~Pipeline();
+  Pipeline(const Pipeline&) = delete;
+  Pipeline& operator=(const Pipeline&) = delete;
+
+  /// Set before start(). Called on the worker after each scan / state change.
+  void setPublisher(Publisher publisher) { publisher_ = std::move(publisher); }
+  void setRejectHandler(RejectHandler handler) { on_reject_ = std::move(handler); }
+
+  void start();
+  /// Stops taking scans, finishes the one in flight, runs queued commands, joins. Idempotent.
+  void stop();
+
+  /// Never blocks. When integration is behind, the oldest queued scan is dropped.
+  void submit(RawScan scan);
+  /// Runs `command` on the worker between scans; a non-empty change list publishes a version.
+  [[nodiscard]] std::future<Expected<std::string>> command(Command command);
+
+  [[nodiscard]] std::shared_ptr<const MapView> view() const { return view_.load(); }
+  [[nodiscard]] PipelineCounters counters() const;
+  [[nodiscard]] const PipelineOptions& options() const { return options_; }
+
+ private:
+  struct Job;
+  struct Graph;
+  Pipeline(const PipelineOptions& options, std::unique_ptr<OccupancyMap> map,
+           std::uint64_t version);
+  void run();
+  void runCommands();
+  void process(RawScan raw);
+  void publish(IntegrationResult& result);
+
+  PipelineOptions options_;
+  std::unique_ptr<OccupancyMap> map_;
+  RaycastIntegrator integrator_;
+  tbb::task_arena arena_;
+  std::unique_ptr<Graph> graph_;
+  LatestWinsQueue<RawScan> queue_;
+  std::atomic<std::shared_ptr<const MapView>> view_;
+  Publisher publisher_;
+  RejectHandler on_reject_;
+
+  std::mutex commands_mutex_;
+  std::vector<std::pair<Command, std::promise<Expected<std::string>>>> commands_;
+
+  mutable std::mutex counters_mutex_;
+  PipelineCounters counters_;
+  std::vector<double> latencies_;  // ring of the last 1024
+  std::size_t latency_next_ = 0;
+
+  std::atomic<bool> running_{false};
+  std::thread worker_;
+};
+
+}  // namespace densemap

@@ -1,0 +1,24 @@
+#pragma once
+
+#include <array>
+#include <chrono>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace densemap {
+
+/// A scan as it arrives from outside (DDS, files), before any check: flat coordinates in the
+/// sensor frame and a pose as translation + quaternion (w, x, y, z).
+struct RawScan {
+  std::string sensor_id;
+  std::uint64_t seq = 0;
+  std::int64_t stamp_ns = 0;
+  std::array<double, 3> t_world_sensor{};
+  std::array<double, 4> q_world_sensor{1, 0, 0, 0};
+  std::vector<float> xyz;        // 3 per point
+  std::vector<float> intensity;  // empty or one per point
+  std::chrono::steady_clock::time_point received = std::chrono::steady_clock::now();
+};
+
+}  // namespace densemap

@@ -1,0 +1,46 @@
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <string_view>
+
+#include "densemap/geometry/error.hpp"
+#include "densemap/io/scan.hpp"
+#include "densemap/pipeline/raw_scan.hpp"
+
+namespace densemap {
+
+/// Why a scan was refused; counted per reason in the server's status.
+enum class RejectReason {
+  kEmpty,
+  kLengthNotMultipleOf3,
+  kTooManyPoints,
+  kIntensityLength,
+  kNonFinitePoint,
+  kBadQuaternion,
+  kPoseOutOfBounds,
+  kCount
+};
+inline constexpr std::size_t kRejectReasonCount = static_cast<std::size_t>(RejectReason::kCount);
+
+[[nodiscard]] std::string_view rejectReasonName(RejectReason reason);
+
+struct ScanLimits {
+  std::size_t max_points = 2'000'000;
+  /// The sensor must lie within this distance of the map origin on every axis (the map's
+  /// addressable half-extent is a hard upper bound).
+  double max_abs_position_m = 1000.0;
+  /// |q| must be within this of 1.
+  double quaternion_tolerance = 1e-3;
+};
+
+struct Rejection {
+  RejectReason reason;
+  std::string message;
+};
+
+/// Checks a raw scan and turns it into a sensor-frame Scan, or says why not. Pure.
+[[nodiscard]] std::expected<Scan, Rejection> validateScan(const RawScan& raw,
+                                                          const ScanLimits& limits);
+
+}  // namespace densemap

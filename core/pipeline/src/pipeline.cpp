@@ -1,0 +1,205 @@
+#include "densemap/pipeline/pipeline.hpp"
+
+#include <tbb/flow_graph.h>
+
+#include <algorithm>
+
+namespace densemap {
+
+/// One scan's way through the graph; a rejected job passes through the later stages untouched.
+struct Pipeline::Job {
+  RawScan raw;
+  std::optional<Rejection> rejection;
+  Scan scan;
+  PointCloud points_world;
+  Point3f origin_world = Point3f::Zero();
+  IntegrationResult result;
+};
+
+struct Pipeline::Graph {
+  using JobPtr = std::shared_ptr<Job>;
+  tbb::flow::graph graph;
+  tbb::flow::function_node<JobPtr, JobPtr> validate;
+  tbb::flow::function_node<JobPtr, JobPtr> transform;
+  tbb::flow::function_node<JobPtr, JobPtr> integrate;
+  tbb::flow::function_node<JobPtr> publish;
+
+  explicit Graph(Pipeline& p)
+      : validate(graph, tbb::flow::serial,
+                 [&p](JobPtr job) {
+                   auto scan = validateScan(job->raw, p.options_.limits);
+                   if (scan) {
+                     job->scan = std::move(*scan);
+                   } else {
+                     job->rejection = std::move(scan.error());
+                   }
+                   return job;
+                 }),
+        transform(graph, tbb::flow::serial,
+                  [](JobPtr job) {
+                    if (!job->rejection) {
+                      job->points_world = job->scan.pointsWorld();
+                      job->origin_world = job->scan.originWorld();
+                    }
+                    return job;
+                  }),
+        integrate(graph, tbb::flow::serial,
+                  [&p](JobPtr job) {
+                    if (!job->rejection) {
+                      job->result.stats = p.integrator_.integrate(
+                          *p.map_, job->points_world, job->origin_world, &job->result.changes);
+                    }
+                    return job;
+                  }),
+        publish(graph, tbb::flow::serial, [&p](const JobPtr& job) {
+          if (job->rejection) {
+            std::lock_guard lock(p.counters_mutex_);
+            ++p.counters_.rejected;
+            ++p.counters_.rejected_by_reason[static_cast<std::size_t>(job->rejection->reason)];
+            p.counters_.last_reject_reason = job->rejection->message;
+          } else {
+            job->result.from_scan = true;
+            job->result.sensor_id = job->raw.sensor_id;
+            job->result.scan_seq = job->raw.seq;
+            job->result.stamp_ns = job->raw.stamp_ns;
+            job->result.latency_ms = std::chrono::duration<double, std::milli>(
+                                         std::chrono::steady_clock::now() - job->raw.received)
+                                         .count();
+            p.publish(job->result);
+          }
+          if (job->rejection && p.on_reject_) p.on_reject_(job->raw, *job->rejection);
+        }) {
+    tbb::flow::make_edge(validate, transform);
+    tbb::flow::make_edge(transform, integrate);
+    tbb::flow::make_edge(integrate, publish);
+  }
+};
+
+Expected<std::unique_ptr<Pipeline>> Pipeline::create(const PipelineOptions& options,
+                                                     std::unique_ptr<OccupancyMap> initial,
+                                                     std::uint64_t initial_version) {
+  if (options.threads < 1 || options.threads > 256) return makeError("threads must be in 1..256");
+  if (options.queue_depth < 1 || options.queue_depth > 1024) {
+    return makeError("queue depth must be in 1..1024");
+  }
+  if (!initial) {
+    auto map = makeMap(options.backend, options.resolution_m, SensorModel(options.sensor));
+    if (!map) return std::unexpected(map.error());
+    initial = std::move(*map);
+  }
+  return std::unique_ptr<Pipeline>(new Pipeline(options, std::move(initial), initial_version));
+}
+
+Pipeline::Pipeline(const PipelineOptions& options, std::unique_ptr<OccupancyMap> map,
+                   std::uint64_t version)
+    : options_(options),
+      map_(std::move(map)),
+      integrator_(RaycastOptions{options.max_range_m}),
+      arena_(options.threads),
+      queue_(options.queue_depth) {
+  view_.store(MapView::fromMap(*map_, version));
+  // The graph belongs to the pipeline's arena: build it there.
+  arena_.execute([this] { graph_ = std::make_unique<Graph>(*this); });
+}
+
+Pipeline::~Pipeline() { stop(); }
+
+void Pipeline::start() {
+  if (running_.exchange(true)) return;
+  worker_ = std::thread([this] { run(); });
+}
+
+void Pipeline::stop() {
+  if (!running_.exchange(false)) return;
+  queue_.close();
+  if (worker_.joinable()) worker_.join();
+  runCommands();  // commands queued while stopping (e.g. the shutdown snapshot) still run
+}
+
+void Pipeline::submit(RawScan scan) {
+  {
+    std::lock_guard lock(counters_mutex_);
+    ++counters_.received;
+  }
+  queue_.push(std::move(scan));
+}
+
+std::future<Expected<std::string>> Pipeline::command(Command command) {
+  std::promise<Expected<std::string>> promise;
+  auto future = promise.get_future();
+  {
+    std::lock_guard lock(commands_mutex_);
+    commands_.emplace_back(std::move(command), std::move(promise));
+  }
+  if (!running_.load()) runCommands();
+  return future;
+}
+
+void Pipeline::run() {
+  while (running_.load()) {
+    runCommands();
+    auto raw = queue_.pop(std::chrono::milliseconds(20));
+    if (raw) process(std::move(*raw));
+  }
+}
+
+void Pipeline::process(RawScan raw) {
+  auto job = std::make_shared<Job>();
+  job->raw = std::move(raw);
+  arena_.execute([&] {
+    graph_->validate.try_put(job);
+    graph_->graph.wait_for_all();
+  });
+}
+
+void Pipeline::runCommands() {
+  std::vector<std::pair<Command, std::promise<Expected<std::string>>>> pending;
+  {
+    std::lock_guard lock(commands_mutex_);
+    pending.swap(commands_);
+  }
+  for (auto& [command, promise] : pending) {
+    IntegrationResult result;
+    Expected<std::string> outcome;
+    arena_.execute([&] { outcome = command(*map_, result.changes); });
+    if (!result.changes.empty()) publish(result);
+    promise.set_value(std::move(outcome));
+  }
+}
+
+void Pipeline::publish(IntegrationResult& result) {
+  const auto current = view_.load();
+  result.base_version = current->version();
+  result.new_version = current->version() + 1;
+  auto next = current->withChanges(result.changes, result.new_version);
+  view_.store(next);
+  if (result.from_scan) {
+    std::lock_guard lock(counters_mutex_);
+    ++counters_.integrated;
+    if (latencies_.size() < 1024) {
+      latencies_.push_back(result.latency_ms);
+    } else {
+      latencies_[latency_next_] = result.latency_ms;
+      latency_next_ = (latency_next_ + 1) % latencies_.size();
+    }
+  }
+  if (publisher_) publisher_(result, next);
+}
+
+PipelineCounters Pipeline::counters() const {
+  std::lock_guard lock(counters_mutex_);
+  PipelineCounters c = counters_;
+  c.dropped = queue_.dropped();
+  if (!latencies_.empty()) {
+    std::vector<double> v = latencies_;
+    std::sort(v.begin(), v.end());
+    auto at = [&](double q) {
+      return v[std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size())))];
+    };
+    c.latency_p50_ms = at(0.5);
+    c.latency_p99_ms = at(0.99);
+  }
+  return c;
+}
+
+}  // namespace densemap

@@ -1,0 +1,80 @@
+#include "densemap/pipeline/scan_validator.hpp"
+
+#include <cmath>
+#include <string>
+
+namespace densemap {
+
+std::string_view rejectReasonName(RejectReason reason) {
+  switch (reason) {
+    case RejectReason::kEmpty:
+      return "empty";
+    case RejectReason::kLengthNotMultipleOf3:
+      return "length_not_multiple_of_3";
+    case RejectReason::kTooManyPoints:
+      return "too_many_points";
+    case RejectReason::kIntensityLength:
+      return "intensity_length";
+    case RejectReason::kNonFinitePoint:
+      return "non_finite_point";
+    case RejectReason::kBadQuaternion:
+      return "bad_quaternion";
+    case RejectReason::kPoseOutOfBounds:
+      return "pose_out_of_bounds";
+    case RejectReason::kCount:
+      break;
+  }
+  return "unknown";
+}
+
+std::expected<Scan, Rejection> validateScan(const RawScan& raw, const ScanLimits& limits) {
+  auto reject = [](RejectReason r, std::string m) {
+    return std::unexpected(Rejection{r, std::move(m)});
+  };
+  if (raw.xyz.empty()) return reject(RejectReason::kEmpty, "scan has no points");
+  if (raw.xyz.size() % 3 != 0) {
+    return reject(RejectReason::kLengthNotMultipleOf3,
+                  std::to_string(raw.xyz.size()) + " coordinates is not a multiple of 3");
+  }
+  const std::size_t n = raw.xyz.size() / 3;
+  if (n > limits.max_points) {
+    return reject(RejectReason::kTooManyPoints, std::to_string(n) + " points exceed the limit of " +
+                                                    std::to_string(limits.max_points));
+  }
+  if (!raw.intensity.empty() && raw.intensity.size() != n) {
+    return reject(
+        RejectReason::kIntensityLength,
+        std::to_string(raw.intensity.size()) + " intensities for " + std::to_string(n) + " points");
+  }
+  const auto& q = raw.q_world_sensor;
+  const double q_norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  if (!std::isfinite(q_norm) || std::abs(q_norm - 1.0) > limits.quaternion_tolerance) {
+    return reject(RejectReason::kBadQuaternion,
+                  "pose quaternion norm " + std::to_string(q_norm) + " is not 1");
+  }
+  for (const double t : raw.t_world_sensor) {
+    if (!std::isfinite(t) || std::abs(t) > limits.max_abs_position_m) {
+      return reject(
+          RejectReason::kPoseOutOfBounds,
+          "sensor position outside +-" + std::to_string(limits.max_abs_position_m) + " m");
+    }
+  }
+  Scan scan;
+  scan.id = raw.seq;
+  scan.frame = PointFrame::kSensor;
+  scan.T_world_sensor = transformFromTranslationQuaternion(
+      {raw.t_world_sensor[0], raw.t_world_sensor[1], raw.t_world_sensor[2]}, q[0], q[1], q[2],
+      q[3]);
+  scan.points.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Point3f p(raw.xyz[3 * i], raw.xyz[3 * i + 1], raw.xyz[3 * i + 2]);
+    if (!p.allFinite()) {
+      return reject(RejectReason::kNonFinitePoint, "point " + std::to_string(i) + " is NaN or Inf");
+    }
+    scan.points[i] = p;
+  }
+  scan.intensities = raw.intensity;
+  return scan;
+}
+
+}  // namespace densemap

@@ -1,0 +1,190 @@
+#include "densemap/pipeline/pipeline.hpp"
+
+#include <gtest/gtest.h>
+
+#include <thread>
+
+#include "densemap/map/grid_map.hpp"
+#include "densemap/map/map_diff.hpp"
+#include "densemap/test_support/random_rays.hpp"
+
+namespace densemap {
+namespace {
+
+using namespace std::chrono_literals;
+
+RawScan rawScan(std::uint64_t seq, int n = 3000) {
+  const Point3f origin(0.1F * static_cast<float>(seq), 0.05F, 0.3F);
+  const PointCloud cloud = test::adversarialScan(0.2, Point3f::Zero(), n, 6.0, 1000 + seq);
+  RawScan raw;
+  raw.seq = seq;
+  raw.t_world_sensor = {origin.x(), origin.y(), origin.z()};
+  for (const auto& p : cloud) raw.xyz.insert(raw.xyz.end(), {p.x(), p.y(), p.z()});
+  return raw;
+}
+
+bool waitFor(const std::function<bool()>& condition) {
+  for (int i = 0; i < 500; ++i) {
+    if (condition()) return true;
+    std::this_thread::sleep_for(10ms);
+  }
+  return false;
+}
+
+/// The map a plain offline integration of the same scans builds.
+std::unique_ptr<GridMap> offlineMap(const std::vector<RawScan>& raws, double max_range) {
+  auto map = std::make_unique<GridMap>(0.2, SensorModel{});
+  RaycastIntegrator integrator({.max_range_m = max_range});
+  for (const RawScan& raw : raws) {
+    const Scan scan = *validateScan(raw, ScanLimits{});
+    integrator.integrate(*map, scan.pointsWorld(), scan.originWorld());
+  }
+  return map;
+}
+
+TEST(Pipeline, PublishedViewEqualsTheOfflineMapAndDeltasReproduceEachVersion) {
+  PipelineOptions options{.resolution_m = 0.2, .max_range_m = 5.0, .threads = 2, .queue_depth = 8};
+  auto sut = Pipeline::create(options);
+  ASSERT_TRUE(sut);
+  std::vector<std::pair<IntegrationResult, std::shared_ptr<const MapView>>> published;
+  std::mutex m;
+  (*sut)->setPublisher([&](const IntegrationResult& r, const std::shared_ptr<const MapView>& v) {
+    std::lock_guard lock(m);
+    published.emplace_back(r, v);
+  });
+  (*sut)->start();
+  std::vector<RawScan> raws;
+  for (std::uint64_t seq = 1; seq <= 5; ++seq) {
+    raws.push_back(rawScan(seq));
+    (*sut)->submit(raws.back());
+    ASSERT_TRUE(waitFor([&] { return (*sut)->counters().integrated == seq; }));
+  }
+  (*sut)->stop();
+  const auto offline = offlineMap(raws, 5.0);
+  const auto view = (*sut)->view();
+  EXPECT_EQ(view->version(), 5U);
+  EXPECT_EQ(view->knownCells(), offline->knownCells());
+  std::size_t mismatches = 0;
+  offline->forEachKnown([&](const VoxelKey& k, float v) { mismatches += view->logOdds(k) != v; });
+  EXPECT_EQ(mismatches, 0U);
+
+  ASSERT_EQ(published.size(), 5U);
+  auto previous = MapView::fromMap(GridMap(0.2, SensorModel{}), 0);
+  for (const auto& [result, next] : published) {
+    EXPECT_EQ(result.base_version, previous->version());
+    const auto rebuilt = previous->withChanges(result.changes, result.new_version);
+    std::size_t diff = 0;
+    next->forEachKnown([&](const VoxelKey& k, float v) { diff += rebuilt->logOdds(k) != v; });
+    EXPECT_EQ(diff, 0U);
+    EXPECT_EQ(rebuilt->knownCells(), next->knownCells());
+    previous = next;
+  }
+  // Old views are immutable: the first version still has only the first scan's cells.
+  EXPECT_LT(published.front().second->knownCells(), view->knownCells());
+}
+
+TEST(Pipeline, FallingBehindDropsOldScansNeverQueuesThem) {
+  auto sut = Pipeline::create({.resolution_m = 0.05, .threads = 1, .queue_depth = 2});
+  ASSERT_TRUE(sut);
+  (*sut)->start();
+  for (std::uint64_t seq = 1; seq <= 40; ++seq) (*sut)->submit(rawScan(seq, 20000));
+  ASSERT_TRUE(waitFor([&] {
+    const auto c = (*sut)->counters();
+    return c.integrated + c.dropped == 40;
+  }));
+  (*sut)->stop();
+  const auto c = (*sut)->counters();
+  EXPECT_EQ(c.received, 40U);
+  EXPECT_GT(c.dropped, 0U);
+  EXPECT_EQ(c.integrated + c.dropped, 40U);
+  EXPECT_EQ((*sut)->view()->version(), c.integrated);
+}
+
+TEST(Pipeline, BadScansAreRejectedWithTheirReasonAndLeaveTheMapUnchanged) {
+  auto sut = Pipeline::create({.resolution_m = 0.2,
+                               .threads = 2,
+                               .queue_depth = 16,
+                               .limits = {.max_points = 5000, .max_abs_position_m = 100.0}});
+  ASSERT_TRUE(sut);
+  std::vector<RejectReason> reasons;
+  std::mutex m;
+  (*sut)->setRejectHandler([&](const RawScan&, const Rejection& r) {
+    std::lock_guard lock(m);
+    reasons.push_back(r.reason);
+  });
+  (*sut)->start();
+  (*sut)->submit(rawScan(1));
+  ASSERT_TRUE(waitFor([&] { return (*sut)->counters().integrated == 1; }));
+  const auto before = (*sut)->view();
+
+  std::vector<RawScan> bad(7, rawScan(2));
+  bad[0].xyz[4] = std::numeric_limits<float>::quiet_NaN();
+  bad[1].xyz[7] = std::numeric_limits<float>::infinity();
+  bad[2].xyz.pop_back();
+  bad[3] = rawScan(2, 6000);  // over max_points
+  bad[4].q_world_sensor = {0.5, 0.0, 0.0, 0.0};
+  bad[5].t_world_sensor[1] = 1e6;
+  bad[6].xyz.clear();
+  RawScan nan_q = rawScan(2);
+  nan_q.q_world_sensor[2] = std::nan("");
+  bad.push_back(nan_q);
+  for (auto& b : bad) (*sut)->submit(b);
+  ASSERT_TRUE(waitFor([&] { return (*sut)->counters().rejected == bad.size(); }));
+  (*sut)->stop();
+  const auto c = (*sut)->counters();
+  EXPECT_EQ(c.integrated, 1U);
+  EXPECT_EQ(c.rejected_by_reason[static_cast<int>(RejectReason::kNonFinitePoint)], 2U);
+  EXPECT_EQ(c.rejected_by_reason[static_cast<int>(RejectReason::kLengthNotMultipleOf3)], 1U);
+  EXPECT_EQ(c.rejected_by_reason[static_cast<int>(RejectReason::kTooManyPoints)], 1U);
+  EXPECT_EQ(c.rejected_by_reason[static_cast<int>(RejectReason::kBadQuaternion)], 2U);
+  EXPECT_EQ(c.rejected_by_reason[static_cast<int>(RejectReason::kPoseOutOfBounds)], 1U);
+  EXPECT_EQ(c.rejected_by_reason[static_cast<int>(RejectReason::kEmpty)], 1U);
+  EXPECT_FALSE(c.last_reject_reason.empty());
+  EXPECT_EQ((*sut)->view(), before);  // nothing was published
+}
+
+TEST(Pipeline, CommandsRunBetweenScansAndPublishTheirChanges) {
+  auto sut = Pipeline::create({.resolution_m = 0.2, .threads = 2});
+  ASSERT_TRUE(sut);
+  (*sut)->start();
+  (*sut)->submit(rawScan(1));
+  ASSERT_TRUE(waitFor([&] { return (*sut)->counters().integrated == 1; }));
+  const std::size_t known = (*sut)->view()->knownCells();
+  auto cleared =
+      (*sut)->command([](OccupancyMap& map, CellChanges& changes) -> Expected<std::string> {
+        const VoxelKey lo = *map.grid().pointToKey(Point3f(-1, -1, -1));
+        const VoxelKey hi = *map.grid().pointToKey(Point3f(1, 1, 1));
+        return std::to_string(map.clearBox(lo, hi, &changes));
+      });
+  ASSERT_EQ(cleared.wait_for(5s), std::future_status::ready);
+  const auto erased = cleared.get();
+  ASSERT_TRUE(erased);
+  EXPECT_GT(std::stoul(*erased), 0U);
+  EXPECT_EQ((*sut)->view()->knownCells(), known - std::stoul(*erased));
+  EXPECT_FALSE(
+      (*sut)->view()->logOdds(*(*sut)->view()->grid().pointToKey(Point3f(0.1F, 0.1F, 0.1F))));
+  (*sut)->stop();
+  // After stop, commands still run (the server's shutdown snapshot depends on it).
+  auto after = (*sut)->command([](OccupancyMap& map, CellChanges&) -> Expected<std::string> {
+    return std::to_string(map.knownCells());
+  });
+  EXPECT_EQ(after.wait_for(1s), std::future_status::ready);
+}
+
+TEST(LatestWinsQueue, DropsTheOldestWhenFullAndCountsIt) {
+  LatestWinsQueue<int> sut(2);
+  sut.push(1);
+  sut.push(2);
+  sut.push(3);
+  EXPECT_EQ(sut.dropped(), 1U);
+  EXPECT_EQ(sut.pop(0ms), 2);
+  EXPECT_EQ(sut.pop(0ms), 3);
+  EXPECT_FALSE(sut.pop(1ms).has_value());
+  sut.push(4);
+  sut.close();
+  EXPECT_EQ(sut.dropped(), 2U);
+  EXPECT_FALSE(sut.push(5));
+}
+
+}  // namespace
+}  // namespace densemap
