@@ -1,7 +1,8 @@
 # Compiler flags shared by every densemap target (applied through densemap_options).
 add_library(densemap_options INTERFACE)
 target_compile_options(densemap_options INTERFACE
-  -Wall -Wextra -Wpedantic -Wshadow -Wnon-virtual-dtor -Wcast-align -Woverloaded-virtual
+  -Wall -Wextra -Wpedantic -Wshadow -Wcast-align
+  $<$<COMPILE_LANGUAGE:CXX>:-Wnon-virtual-dtor -Woverloaded-virtual>
   # Exactness vs OctoMap depends on the same float operations in the same order: never fuse
   # multiply-adds, never reassociate.
   -ffp-contract=off -fno-fast-math)

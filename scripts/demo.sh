@@ -1,19 +1,56 @@
 #!/usr/bin/env bash
-# The main job until the server lands (see README): simulate a short outdoor drive, integrate
-# it with densemap and with OctoMap in one benchmark run, and export the map for octovis.
+# The main job, one command: install, build, simulate a short outdoor drive, run
+# densemap-server on loopback, replay the scans at 10 Hz, query the map, save .dmap and .bt
+# snapshots and a picture, stop the server cleanly, print a summary.
 # Usage: scripts/demo.sh [output dir, default /tmp/densemap-demo]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-/tmp/densemap-demo}
+DOMAIN=${DENSEMAP_DEMO_DOMAIN:-57}
 ./scripts/install-deps.sh
-DENSEMAP_BUILD_TARGETS="densemap-sim densemap-bench densemap-map" ./scripts/build.sh
-mkdir -p "$OUT"
-echo "== simulating 10 scans of a 64-beam LiDAR driving down a street"
-build/bin/densemap-sim --out "$OUT/outdoor" --scene outdoor --sensor hdl64 --scans 10 \
+DENSEMAP_BUILD_TARGETS="densemap-sim densemap-server densemap densemap-bench" ./scripts/build.sh
+BIN=build/bin
+rm -rf "$OUT" && mkdir -p "$OUT"
+
+echo "== 1. simulating 20 scans of a 64-beam LiDAR driving down a street"
+$BIN/densemap-sim --out "$OUT/outdoor" --scene outdoor --sensor hdl64 --scans 20 \
   --noise-std 0.01 --gt-resolution 0.2
-echo "== integrating with OctoMap and densemap (0.2 m, 40 m max range), comparing cell by cell"
-build/bin/densemap-bench --data "$OUT/outdoor" --resolution 0.2 --max-range 40 \
-  --methods octomap,raycast --backend grid,octree --json "$OUT/bench.json"
-echo "== exporting the map for OctoMap's tools"
-build/bin/densemap-map --data "$OUT/outdoor" --resolution 0.2 --max-range 40 --out "$OUT/map.bt"
-echo "demo: outputs in $OUT (dataset, ground_truth.bt, bench.json, map.bt — open with octovis)"
+
+echo "== 2. starting densemap-server on loopback (DDS domain $DOMAIN)"
+cat > "$OUT/server.textproto" <<CFG
+map { backend: "grid" resolution_m: 0.2 max_range_m: 40 }
+pipeline { threads: 2 queue_depth: 2 }
+snapshot { path: "$OUT/server.dmap" autosave_period_s: 0 }
+dds { domain_id: $DOMAIN network_interface: "lo" }
+CFG
+$BIN/densemap-server --config "$OUT/server.textproto" 2> "$OUT/server.log" &
+SERVER=$!
+trap 'kill $SERVER 2>/dev/null || true' EXIT
+CLI="$BIN/densemap --domain-id $DOMAIN"
+
+echo "== 3. replaying the scans at 10 Hz"
+$CLI replay --data "$OUT/outdoor" --rate 10 | tee "$OUT/replay.txt"
+
+echo "== 4. queries"
+$CLI query point 20 -1.5 1.8 20 12 3 60 -4.6 1.0
+$CLI query ray --origin 20 -1.5 1.8 --direction 0 1 0 --range 40
+$CLI query bbox --min 0 -8 0 --max 40 8 3
+$CLI status
+
+echo "== 5. snapshots and a picture"
+$CLI snapshot --out "$OUT/map.dmap"
+$CLI snapshot --out "$OUT/map.bt"
+$CLI render --in "$OUT/map.dmap" --out "$OUT/map.png"
+
+echo "== 6. stopping the server (SIGTERM: finish, save, exit 0)"
+kill -TERM $SERVER
+wait $SERVER
+trap - EXIT
+cat "$OUT/server.log"
+
+echo
+echo "== summary"
+grep -E "^replay: (server integrated|end-to-end)" "$OUT/replay.txt" || true
+ls -l "$OUT/map.dmap" "$OUT/map.bt" "$OUT/map.png" "$OUT/server.dmap" "$OUT/outdoor/ground_truth.bt" \
+  | awk '{print "  " $NF " (" $5 " bytes)"}'
+echo "demo: done; open $OUT/map.png, or $OUT/map.bt with octovis"

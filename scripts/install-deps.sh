@@ -11,7 +11,7 @@ PACKAGES=(
   cyclonedds-dev cyclonedds-tools
   libprotobuf-dev protobuf-compiler
   libcli11-dev libspdlog-dev
-  libbz2-dev zlib1g-dev
+  libbz2-dev zlib1g-dev iproute2 util-linux
   clang-format clang-tidy
 )
 

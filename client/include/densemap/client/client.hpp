@@ -1,0 +1,103 @@
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "densemap/geometry/error.hpp"
+#include "densemap/map/grid_map.hpp"
+#include "densemap/pipeline/map_queries.hpp"
+#include "densemap/pipeline/raw_scan.hpp"
+
+namespace densemap {
+
+struct ClientOptions {
+  std::uint32_t domain_id = 0;
+  std::string network_interface = "lo";
+  std::chrono::milliseconds timeout{5000};  // per request, and for discovering the server
+};
+
+struct PointQueryAnswer {
+  std::uint64_t map_version = 0;
+  std::vector<std::optional<float>> log_odds;
+  std::vector<CellState> states;
+};
+
+struct BoxQueryAnswer {
+  std::uint64_t map_version = 0;
+  std::uint64_t occupied = 0, free = 0, unknown = 0;
+  std::vector<Point3f> occupied_centers;
+};
+
+struct RayQueryAnswer {
+  std::uint64_t map_version = 0;
+  RayQueryResult ray;
+};
+
+struct ServerStatus {
+  std::uint64_t received = 0, integrated = 0, dropped = 0, rejected = 0;
+  std::vector<std::uint64_t> rejected_by_reason;
+  std::string last_reject_reason;
+  double latency_p50_ms = 0, latency_p99_ms = 0;
+  std::uint64_t known_cells = 0, map_version = 0, memory_bytes = 0;
+  double uptime_s = 0;
+  std::uint64_t queries_answered = 0, queries_rejected = 0;
+  std::string last_query_error;
+};
+
+struct DeltaInfo {
+  std::uint64_t base_version = 0, new_version = 0;
+  bool from_scan = false;
+  std::string sensor_id;
+  std::uint64_t scan_seq = 0;
+  CellChanges changes;
+};
+
+enum class CommandKind { kReset = 0, kClearBox = 1, kSave = 2 };
+
+/// A densemap-server client over DDS (loopback by default). Requests carry a random client id
+/// and an increasing request id; replies are matched on both. Every call has a timeout.
+/// Thread-safety: one thread at a time.
+class Client {
+ public:
+  [[nodiscard]] static Expected<std::unique_ptr<Client>> create(const ClientOptions& options);
+  ~Client();
+  Client(const Client&) = delete;
+  Client& operator=(const Client&) = delete;
+
+  /// Waits until a server's scan reader and request readers are matched.
+  [[nodiscard]] Expected<void> waitForServer();
+  [[nodiscard]] Expected<void> publishScan(const RawScan& scan);
+  [[nodiscard]] Expected<PointQueryAnswer> queryPoints(const std::vector<Point3f>& points_world);
+  /// Sends raw coordinates unchecked (the server validates): for tests of bad input.
+  [[nodiscard]] Expected<PointQueryAnswer> queryPointsRaw(const std::vector<float>& xyz);
+  [[nodiscard]] Expected<BoxQueryAnswer> queryBox(const Point3f& min, const Point3f& max,
+                                                  std::uint32_t max_centers = 0);
+  [[nodiscard]] Expected<RayQueryAnswer> castRay(const Point3f& origin, const Point3f& direction,
+                                                 float max_range);
+  /// Returns the server's detail message, or its error.
+  [[nodiscard]] Expected<std::string> command(CommandKind kind, const Point3f& min = {0, 0, 0},
+                                              const Point3f& max = {0, 0, 0},
+                                              const std::string& path = {});
+  /// The latest status sample (published at 1 Hz, transient-local).
+  [[nodiscard]] Expected<ServerStatus> status();
+  /// Calls `f` for every map delta received since the last call; returns how many.
+  std::size_t pollDeltas(const std::function<void(const DeltaInfo&)>& f);
+  /// Rebuilds the server's map from its transient-local tiles (what a late joiner sees);
+  /// waits until the tiles cover the manifest's version and cell count.
+  [[nodiscard]] Expected<std::pair<std::unique_ptr<GridMap>, std::uint64_t>> fetchMap();
+
+ private:
+  struct Dds;
+  explicit Client(const ClientOptions& options);
+  ClientOptions options_;
+  std::unique_ptr<Dds> dds_;
+  std::uint64_t client_id_;
+  std::uint64_t next_request_ = 1;
+};
+
+}  // namespace densemap

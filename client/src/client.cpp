@@ -1,0 +1,365 @@
+#include "densemap/client/client.hpp"
+
+#include <cmath>
+#include <random>
+#include <thread>
+#include <unordered_map>
+
+#include "densemap/dds/dds.hpp"
+#include "densemap_msgs.h"
+
+namespace densemap {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+void copy3(float (&dst)[3], const Point3f& p) {
+  for (int i = 0; i < 3; ++i) dst[i] = p[i];
+}
+
+std::string text(const char* s) { return s != nullptr ? s : ""; }
+
+}  // namespace
+
+struct Client::Dds {
+  dds::Entity participant;
+  dds::Entity scan_t, pq_t, pr_t, bq_t, br_t, rq_t, rr_t, cq_t, cr_t, man_t, tile_t, delta_t, st_t;
+  dds::Entity scan_w, pq_w, bq_w, rq_w, cq_w;
+  dds::Entity pr_r, br_r, rr_r, cr_r, man_r, tile_r, delta_r, st_r;
+};
+
+Client::Client(const ClientOptions& options)
+    : options_(options),
+      dds_(std::make_unique<Dds>()),
+      client_id_(std::random_device{}() * 4294967296ULL + std::random_device{}()) {}
+
+Client::~Client() = default;
+
+Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
+  std::unique_ptr<Client> c(new Client(options));
+  auto& d = *c->dds_;
+  auto p = dds::createParticipant(options.domain_id, options.network_interface);
+  if (!p) return std::unexpected(p.error());
+  d.participant = std::move(*p);
+  Expected<void> status;
+  auto topic = [&](dds::Entity& out, const dds_topic_descriptor_t& desc, const char* name) {
+    if (!status) return;
+    auto t = dds::createTopic(d.participant, desc, std::string("densemap/") + name);
+    if (!t)
+      status = std::unexpected(t.error());
+    else
+      out = std::move(*t);
+  };
+  auto make = [&](dds::Entity& out, const dds::Entity& t, dds::QosSpec q, bool writer) {
+    if (!status) return;
+    auto e =
+        writer ? dds::createWriter(d.participant, t, q) : dds::createReader(d.participant, t, q);
+    if (!e)
+      status = std::unexpected(e.error());
+    else
+      out = std::move(*e);
+  };
+  topic(d.scan_t, densemap_msgs_Scan_desc, "scan");
+  topic(d.pq_t, densemap_msgs_PointQueryRequest_desc, "query/point/request");
+  topic(d.pr_t, densemap_msgs_PointQueryReply_desc, "query/point/reply");
+  topic(d.bq_t, densemap_msgs_BboxQueryRequest_desc, "query/bbox/request");
+  topic(d.br_t, densemap_msgs_BboxQueryReply_desc, "query/bbox/reply");
+  topic(d.rq_t, densemap_msgs_RayQueryRequest_desc, "query/ray/request");
+  topic(d.rr_t, densemap_msgs_RayQueryReply_desc, "query/ray/reply");
+  topic(d.cq_t, densemap_msgs_CommandRequest_desc, "cmd/request");
+  topic(d.cr_t, densemap_msgs_CommandReply_desc, "cmd/reply");
+  topic(d.man_t, densemap_msgs_MapManifest_desc, "map/manifest");
+  topic(d.tile_t, densemap_msgs_MapTile_desc, "map/tiles");
+  topic(d.delta_t, densemap_msgs_MapDelta_desc, "map/delta");
+  topic(d.st_t, densemap_msgs_Status_desc, "status");
+  const dds::QosSpec requests{.depth = 64};
+  make(d.scan_w, d.scan_t, {.depth = 4}, true);
+  make(d.pq_w, d.pq_t, requests, true);
+  make(d.bq_w, d.bq_t, requests, true);
+  make(d.rq_w, d.rq_t, requests, true);
+  make(d.cq_w, d.cq_t, {.depth = 16}, true);
+  make(d.pr_r, d.pr_t, requests, false);
+  make(d.br_r, d.br_t, requests, false);
+  make(d.rr_r, d.rr_t, requests, false);
+  make(d.cr_r, d.cr_t, {.depth = 16}, false);
+  make(d.man_r, d.man_t, {.depth = 1, .transient_local = true}, false);
+  make(d.tile_r, d.tile_t, {.depth = 1, .transient_local = true}, false);
+  make(d.delta_r, d.delta_t, {.depth = 256}, false);
+  make(d.st_r, d.st_t, {.depth = 1, .transient_local = true}, false);
+  if (!status) return std::unexpected(status.error());
+  return c;
+}
+
+Expected<void> Client::waitForServer() {
+  const auto deadline = Clock::now() + options_.timeout;
+  auto matched = [&] {
+    for (const dds::Entity* w :
+         {&dds_->scan_w, &dds_->pq_w, &dds_->bq_w, &dds_->rq_w, &dds_->cq_w}) {
+      dds_publication_matched_status_t s;
+      if (dds_get_publication_matched_status(w->get(), &s) < 0 || s.current_count == 0)
+        return false;
+    }
+    for (const dds::Entity* r : {&dds_->pr_r, &dds_->br_r, &dds_->rr_r, &dds_->cr_r}) {
+      dds_subscription_matched_status_t s;
+      if (dds_get_subscription_matched_status(r->get(), &s) < 0 || s.current_count == 0)
+        return false;
+    }
+    return true;
+  };
+  while (!matched()) {
+    if (Clock::now() > deadline) {
+      return makeError("no densemap-server found on DDS domain " +
+                       std::to_string(options_.domain_id) + " (interface " +
+                       options_.network_interface + ") within " +
+                       std::to_string(options_.timeout.count()) + " ms");
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return {};
+}
+
+Expected<void> Client::publishScan(const RawScan& scan) {
+  densemap_msgs_Scan msg{};
+  msg.sensor_id = const_cast<char*>(scan.sensor_id.c_str());
+  msg.frame = const_cast<char*>("sensor");
+  msg.seq = scan.seq;
+  msg.stamp_ns = scan.stamp_ns;
+  for (int i = 0; i < 3; ++i) msg.T_world_sensor.t[i] = scan.t_world_sensor[i];
+  for (int i = 0; i < 4; ++i) msg.T_world_sensor.q[i] = scan.q_world_sensor[i];
+  auto& xyz = const_cast<std::vector<float>&>(scan.xyz);
+  auto& intensity = const_cast<std::vector<float>&>(scan.intensity);
+  msg.points = dds::borrowSequence<dds_sequence_float>(xyz);
+  msg.intensity = dds::borrowSequence<dds_sequence_float>(intensity);
+  return dds::write(dds_->scan_w, &msg);
+}
+
+namespace {
+
+/// Waits for the reply to `id` on `reader`, calling `f` with it.
+template <class Reply>
+Expected<void> awaitReply(const dds::Entity& reader, const densemap_msgs_RequestId& id,
+                          std::chrono::milliseconds timeout,
+                          const std::function<void(const Reply&)>& f) {
+  const auto deadline = Clock::now() + timeout;
+  bool done = false;
+  while (!done) {
+    dds::takeAll<Reply>(reader, [&](const Reply& r) {
+      if (!done && r.id.client_id == id.client_id && r.id.request_id == id.request_id) {
+        f(r);
+        done = true;
+      }
+    });
+    if (done) break;
+    if (Clock::now() > deadline)
+      return makeError("no reply from densemap-server within " + std::to_string(timeout.count()) +
+                       " ms");
+    std::this_thread::sleep_for(std::chrono::microseconds(200));
+  }
+  return {};
+}
+
+}  // namespace
+
+Expected<PointQueryAnswer> Client::queryPoints(const std::vector<Point3f>& points_world) {
+  std::vector<float> xyz;
+  xyz.reserve(points_world.size() * 3);
+  for (const auto& p : points_world) xyz.insert(xyz.end(), {p.x(), p.y(), p.z()});
+  return queryPointsRaw(xyz);
+}
+
+Expected<PointQueryAnswer> Client::queryPointsRaw(const std::vector<float>& xyz) {
+  densemap_msgs_PointQueryRequest req{};
+  req.id = {client_id_, next_request_++};
+  auto& mutable_xyz = const_cast<std::vector<float>&>(xyz);
+  req.points = dds::borrowSequence<dds_sequence_float>(mutable_xyz);
+  if (auto ok = dds::write(dds_->pq_w, &req); !ok) return std::unexpected(ok.error());
+  PointQueryAnswer answer;
+  std::string error;
+  auto ok = awaitReply<densemap_msgs_PointQueryReply>(
+      dds_->pr_r, req.id, options_.timeout, [&](const densemap_msgs_PointQueryReply& r) {
+        if (r.status != 0) {
+          error = text(r.error);
+          return;
+        }
+        answer.map_version = r.map_version;
+        for (std::uint32_t i = 0; i < r.log_odds._length; ++i) {
+          const float v = r.log_odds._buffer[i];
+          answer.log_odds.push_back(std::isnan(v) ? std::nullopt : std::optional<float>(v));
+          answer.states.push_back(static_cast<CellState>(r.state._buffer[i]));
+        }
+      });
+  if (!ok) return std::unexpected(ok.error());
+  if (!error.empty()) return makeError("server: " + error);
+  return answer;
+}
+
+Expected<BoxQueryAnswer> Client::queryBox(const Point3f& min, const Point3f& max,
+                                          std::uint32_t max_centers) {
+  densemap_msgs_BboxQueryRequest req{};
+  req.id = {client_id_, next_request_++};
+  copy3(req.min, min);
+  copy3(req.max, max);
+  req.max_centers = max_centers;
+  if (auto ok = dds::write(dds_->bq_w, &req); !ok) return std::unexpected(ok.error());
+  BoxQueryAnswer answer;
+  std::string error;
+  auto ok = awaitReply<densemap_msgs_BboxQueryReply>(
+      dds_->br_r, req.id, options_.timeout, [&](const densemap_msgs_BboxQueryReply& r) {
+        if (r.status != 0) {
+          error = text(r.error);
+          return;
+        }
+        answer.map_version = r.map_version;
+        answer.occupied = r.occupied;
+        answer.free = r.free_cells;
+        answer.unknown = r.unknown;
+        for (std::uint32_t i = 0; i + 2 < r.occupied_centers._length; i += 3) {
+          const float* c = r.occupied_centers._buffer + i;
+          answer.occupied_centers.emplace_back(c[0], c[1], c[2]);
+        }
+      });
+  if (!ok) return std::unexpected(ok.error());
+  if (!error.empty()) return makeError("server: " + error);
+  return answer;
+}
+
+Expected<RayQueryAnswer> Client::castRay(const Point3f& origin, const Point3f& direction,
+                                         float max_range) {
+  densemap_msgs_RayQueryRequest req{};
+  req.id = {client_id_, next_request_++};
+  copy3(req.origin, origin);
+  copy3(req.direction, direction);
+  req.max_range = max_range;
+  if (auto ok = dds::write(dds_->rq_w, &req); !ok) return std::unexpected(ok.error());
+  RayQueryAnswer answer;
+  std::string error;
+  auto ok = awaitReply<densemap_msgs_RayQueryReply>(
+      dds_->rr_r, req.id, options_.timeout, [&](const densemap_msgs_RayQueryReply& r) {
+        if (r.status != 0) {
+          error = text(r.error);
+          return;
+        }
+        answer.map_version = r.map_version;
+        answer.ray.hit = r.hit;
+        answer.ray.hit_center = Point3f(r.hit_point[0], r.hit_point[1], r.hit_point[2]);
+        answer.ray.distance = r.distance;
+      });
+  if (!ok) return std::unexpected(ok.error());
+  if (!error.empty()) return makeError("server: " + error);
+  return answer;
+}
+
+Expected<std::string> Client::command(CommandKind kind, const Point3f& min, const Point3f& max,
+                                      const std::string& path) {
+  densemap_msgs_CommandRequest req{};
+  req.id = {client_id_, next_request_++};
+  req.kind = static_cast<std::int32_t>(kind);
+  copy3(req.min, min);
+  copy3(req.max, max);
+  req.path = const_cast<char*>(path.c_str());
+  if (auto ok = dds::write(dds_->cq_w, &req); !ok) return std::unexpected(ok.error());
+  std::string detail, error;
+  // Commands wait for the scan in flight and may write large files: allow more time.
+  auto ok = awaitReply<densemap_msgs_CommandReply>(dds_->cr_r, req.id, options_.timeout * 6,
+                                                   [&](const densemap_msgs_CommandReply& r) {
+                                                     if (r.status != 0) error = text(r.error);
+                                                     detail = text(r.detail);
+                                                   });
+  if (!ok) return std::unexpected(ok.error());
+  if (!error.empty()) return makeError("server: " + error);
+  return detail;
+}
+
+Expected<ServerStatus> Client::status() {
+  const auto deadline = Clock::now() + options_.timeout;
+  std::optional<ServerStatus> latest;
+  while (true) {
+    // read, not take: the transient-local sample stays for the next call.
+    void* samples[1] = {nullptr};
+    dds_sample_info_t info[1];
+    const dds_return_t n = dds_read(dds_->st_r.get(), samples, info, 1, 1);
+    if (n > 0 && info[0].valid_data) {
+      const auto& s = *static_cast<const densemap_msgs_Status*>(samples[0]);
+      ServerStatus out;
+      out.received = s.received;
+      out.integrated = s.integrated;
+      out.dropped = s.dropped;
+      out.rejected = s.rejected;
+      out.rejected_by_reason.assign(s.rejected_by_reason._buffer,
+                                    s.rejected_by_reason._buffer + s.rejected_by_reason._length);
+      out.last_reject_reason = text(s.last_reject_reason);
+      out.latency_p50_ms = s.latency_p50_ms;
+      out.latency_p99_ms = s.latency_p99_ms;
+      out.known_cells = s.known_cells;
+      out.map_version = s.map_version;
+      out.memory_bytes = s.memory_bytes;
+      out.uptime_s = s.uptime_s;
+      out.queries_answered = s.queries_answered;
+      out.queries_rejected = s.queries_rejected;
+      out.last_query_error = text(s.last_query_error);
+      latest = out;
+    }
+    if (n > 0) dds_return_loan(dds_->st_r.get(), samples, n);
+    if (latest) return *latest;
+    if (Clock::now() > deadline) return makeError("no status from densemap-server");
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+}
+
+std::size_t Client::pollDeltas(const std::function<void(const DeltaInfo&)>& f) {
+  return dds::takeAll<densemap_msgs_MapDelta>(dds_->delta_r, [&](const densemap_msgs_MapDelta& d) {
+    DeltaInfo info;
+    info.base_version = d.base_version;
+    info.new_version = d.new_version;
+    info.from_scan = d.from_scan;
+    info.sensor_id = text(d.sensor_id);
+    info.scan_seq = d.scan_seq;
+    info.changes.reserve(d.log_odds._length);
+    for (std::uint32_t i = 0; i < d.log_odds._length; ++i) {
+      const std::uint16_t* k = d.keys._buffer + 3 * i;
+      const float v = d.log_odds._buffer[i];
+      info.changes.push_back(
+          {VoxelKey{k[0], k[1], k[2]}, std::isnan(v) ? 0.0F : v, !std::isnan(v)});
+    }
+    f(info);
+  });
+}
+
+Expected<std::pair<std::unique_ptr<GridMap>, std::uint64_t>> Client::fetchMap() {
+  const auto deadline = Clock::now() + options_.timeout;
+  std::unordered_map<std::uint64_t, std::pair<std::vector<std::uint16_t>, std::vector<float>>>
+      tiles;
+  std::optional<densemap_msgs_MapManifest> manifest;
+  while (true) {
+    // read, not take: the reader keeps the latest manifest and tiles for the next fetch.
+    dds::forEachSample<densemap_msgs_MapManifest>(
+        dds_->man_r, false, [&](const densemap_msgs_MapManifest& m) { manifest = m; });
+    dds::forEachSample<densemap_msgs_MapTile>(
+        dds_->tile_r, false, [&](const densemap_msgs_MapTile& t) {
+          auto& cells = tiles[t.tile_id];
+          cells.first.assign(t.keys._buffer, t.keys._buffer + t.keys._length);
+          cells.second.assign(t.log_odds._buffer, t.log_odds._buffer + t.log_odds._length);
+        });
+    if (manifest) {
+      std::size_t cells = 0;
+      for (const auto& [id, c] : tiles) cells += c.second.size();
+      if (cells == manifest->known_cells) {
+        auto map = std::make_unique<GridMap>(manifest->resolution, SensorModel{});
+        for (const auto& [id, c] : tiles) {
+          for (std::size_t i = 0; i < c.second.size(); ++i) {
+            map->setLogOdds(VoxelKey{c.first[3 * i], c.first[3 * i + 1], c.first[3 * i + 2]},
+                            c.second[i]);
+          }
+        }
+        return std::pair{std::move(map), manifest->version};
+      }
+    }
+    if (Clock::now() > deadline) {
+      return makeError(manifest ? "map tiles did not complete within the timeout"
+                                : "no map manifest from densemap-server");
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+}
+
+}  // namespace densemap

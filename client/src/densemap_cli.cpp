@@ -1,0 +1,343 @@
+// densemap: the client CLI of densemap-server (replay, query, snapshot, status, commands) and an
+// offline map renderer.
+#include <CLI/CLI.hpp>
+
+#include <algorithm>
+#include <cstdio>
+#include <map>
+#include <thread>
+
+#include "../../tools/common/progress.hpp"
+#include "densemap/client/client.hpp"
+#include "densemap/io/octomap_export.hpp"
+#include "densemap/io/scan_source.hpp"
+#include "png_writer.hpp"
+#include "snapshot.hpp"
+
+namespace densemap::cli {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+int fail(const std::string& message) {
+  std::fprintf(stderr, "densemap: error: %s\n", message.c_str());
+  return 1;
+}
+
+Expected<std::unique_ptr<Client>> connect(const ClientOptions& o) {
+  auto client = Client::create(o);
+  if (!client) return client;
+  if (auto ok = (*client)->waitForServer(); !ok) return std::unexpected(ok.error());
+  return client;
+}
+
+/// A scan in the sensor frame with its pose, ready to publish.
+RawScan toRawScan(const Scan& scan, std::uint64_t seq) {
+  RawScan raw;
+  raw.sensor_id = "replay";
+  raw.seq = seq;
+  raw.stamp_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                     std::chrono::system_clock::now().time_since_epoch())
+                     .count();
+  const Eigen::Vector3d t = scan.T_world_sensor.translation();
+  const Eigen::Quaterniond q(scan.T_world_sensor.linear());
+  raw.t_world_sensor = {t.x(), t.y(), t.z()};
+  raw.q_world_sensor = {q.w(), q.x(), q.y(), q.z()};
+  const PointCloud points = scan.frame == PointFrame::kSensor
+                                ? scan.points
+                                : transformPoints(scan.T_world_sensor.inverse(), scan.points);
+  raw.xyz.reserve(points.size() * 3);
+  for (const auto& p : points) raw.xyz.insert(raw.xyz.end(), {p.x(), p.y(), p.z()});
+  raw.intensity =
+      scan.intensities.size() == points.size() ? scan.intensities : std::vector<float>{};
+  return raw;
+}
+
+double percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size())))];
+}
+
+int replay(const ClientOptions& o, const std::string& data, double rate, std::size_t first,
+           std::size_t limit) {
+  auto source = openScanSource(data);
+  if (!source) return fail(source.error().message);
+  auto client = connect(o);
+  if (!client) return fail(client.error().message);
+  auto before = (*client)->status();
+  const std::size_t end =
+      limit == 0 ? (*source)->size() : std::min((*source)->size(), first + limit);
+  std::map<std::uint64_t, Clock::time_point> sent_at;
+  std::vector<double> latencies;
+  std::size_t queries = 0;
+  auto collect = [&] {
+    (*client)->pollDeltas([&](const DeltaInfo& d) {
+      const auto it = sent_at.find(d.scan_seq);
+      if (!d.from_scan || it == sent_at.end()) return;
+      latencies.push_back(
+          std::chrono::duration<double, std::milli>(Clock::now() - it->second).count());
+      sent_at.erase(it);
+    });
+  };
+  tools::Progress progress("replay: scan", end - first);
+  const auto period = std::chrono::duration_cast<Clock::duration>(
+      std::chrono::duration<double>(rate > 0 ? 1.0 / rate : 0.0));
+  auto next = Clock::now();
+  std::size_t sent = 0;
+  for (std::size_t i = first; i < end; ++i) {
+    auto scan = (*source)->load(i);
+    if (!scan) return fail(scan.error().message);
+    const RawScan raw = toRawScan(*scan, i + 1);
+    std::this_thread::sleep_until(next);
+    next += period;
+    sent_at[raw.seq] = Clock::now();
+    if (auto ok = (*client)->publishScan(raw); !ok) return fail(ok.error().message);
+    ++sent;
+    collect();
+    progress.update(i - first + 1, std::to_string(latencies.size()) + " integrated");
+  }
+  // Wait for the last deltas: until every scan is seen or nothing new for 3 s.
+  auto last_news = Clock::now();
+  while (!sent_at.empty() && Clock::now() - last_news < std::chrono::seconds(3)) {
+    const std::size_t had = latencies.size();
+    collect();
+    if (latencies.size() != had) last_news = Clock::now();
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(1100));  // one more status period
+  auto after = (*client)->status();
+  std::printf("replay: sent %zu scans from %s\n", sent, (*source)->describe().c_str());
+  if (before && after) {
+    std::printf("replay: server integrated %llu, dropped %llu, rejected %llu (last reason: %s)\n",
+                static_cast<unsigned long long>(after->integrated - before->integrated),
+                static_cast<unsigned long long>(after->dropped - before->dropped),
+                static_cast<unsigned long long>(after->rejected - before->rejected),
+                after->last_reject_reason.empty() ? "-" : after->last_reject_reason.c_str());
+    std::printf("replay: server-side latency (receive -> published) p50 %.1f ms, p99 %.1f ms\n",
+                after->latency_p50_ms, after->latency_p99_ms);
+  }
+  std::printf(
+      "replay: end-to-end latency (publish -> delta seen) over %zu scans: p50 %.1f ms, p99 %.1f "
+      "ms\n",
+      latencies.size(), percentile(latencies, 0.5), percentile(latencies, 0.99));
+  (void)queries;
+  return 0;
+}
+
+void printStatus(const ServerStatus& s) {
+  std::printf(
+      "map version %llu, %llu known cells, %.1f MiB; received %llu, integrated %llu, "
+      "dropped %llu, rejected %llu%s%s; latency p50 %.1f ms p99 %.1f ms; queries %llu "
+      "(%llu rejected); up %.0f s\n",
+      static_cast<unsigned long long>(s.map_version),
+      static_cast<unsigned long long>(s.known_cells), s.memory_bytes / 1048576.0,
+      static_cast<unsigned long long>(s.received), static_cast<unsigned long long>(s.integrated),
+      static_cast<unsigned long long>(s.dropped), static_cast<unsigned long long>(s.rejected),
+      s.last_reject_reason.empty() ? "" : ", last: ", s.last_reject_reason.c_str(),
+      s.latency_p50_ms, s.latency_p99_ms, static_cast<unsigned long long>(s.queries_answered),
+      static_cast<unsigned long long>(s.queries_rejected), s.uptime_s);
+}
+
+Expected<std::unique_ptr<OccupancyMap>> loadMapFile(const std::string& file) {
+  const std::filesystem::path p(file);
+  if (p.extension() == ".bt" || p.extension() == ".ot") return importOctomap(p, Backend::kGrid);
+  auto loaded = server::loadSnapshot(p, Backend::kGrid, 0.0);
+  if (!loaded) return std::unexpected(loaded.error());
+  return std::move(loaded->map);
+}
+
+int render(const std::string& in, const std::string& out, std::optional<double> z_m, int scale,
+           int min_occupied) {
+  auto map = loadMapFile(in);
+  if (!map) return fail(map.error().message);
+  if ((*map)->knownCells() == 0) return fail(in + ": the map is empty");
+  int x0 = 65535, y0 = 65535, x1 = 0, y1 = 0;
+  (*map)->forEachKnown([&](const VoxelKey& k, float) {
+    x0 = std::min<int>(x0, k.x), y0 = std::min<int>(y0, k.y);
+    x1 = std::max<int>(x1, k.x), y1 = std::max<int>(y1, k.y);
+  });
+  const int w = x1 - x0 + 1, h = y1 - y0 + 1;
+  if (static_cast<long long>(w) * h * scale * scale > 64LL * 1024 * 1024) {
+    return fail("the picture would exceed 64 megapixels; use a coarser map or --scale 1");
+  }
+  const std::optional<std::uint16_t> z_key = z_m ? (*map)->grid().coordToKey(*z_m) : std::nullopt;
+  if (z_m && !z_key) return fail("--z is outside the map");
+  // Per column: occupied-cell count and whether anything is known. In a top view a column is
+  // occupied when it holds at least `min_occupied` occupied cells, so one-cell-thick ground
+  // does not hide the structures standing on it.
+  std::vector<int> occupied(static_cast<std::size_t>(w) * h, 0);
+  std::vector<std::uint8_t> state(static_cast<std::size_t>(w) * h, 0);  // 0 unknown 1 free 2 occ
+  const int needed = z_key ? 1 : min_occupied;
+  (*map)->forEachKnown([&](const VoxelKey& k, float v) {
+    if (z_key && k.z != *z_key) return;
+    const std::size_t i = static_cast<std::size_t>(y1 - k.y) * w + (k.x - x0);
+    if (SensorModel::isOccupied(v) && ++occupied[i] >= needed) state[i] = 2;
+    state[i] = std::max<std::uint8_t>(state[i], 1);
+  });
+  const int W = w * scale, H = h * scale;
+  std::vector<std::uint8_t> rgb(static_cast<std::size_t>(W) * H * 3);
+  const std::uint8_t colours[3][3] = {{128, 128, 128}, {240, 240, 235}, {20, 40, 160}};
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const auto& c = colours[state[static_cast<std::size_t>(y / scale) * w + x / scale]];
+      std::copy(c, c + 3, rgb.begin() + (static_cast<std::ptrdiff_t>(y) * W + x) * 3);
+    }
+  }
+  if (auto ok = writePng(out, W, H, rgb); !ok) return fail(ok.error().message);
+  std::printf("wrote %s (%dx%d, %s; occupied blue, free white, unknown grey)\n", out.c_str(), W, H,
+              z_m ? "z-slice" : "top view");
+  return 0;
+}
+
+}  // namespace
+}  // namespace densemap::cli
+
+int main(int argc, char** argv) {
+  using namespace densemap;
+  CLI::App app{"densemap: client of densemap-server (DDS, loopback by default)"};
+  app.require_subcommand(1);
+  ClientOptions o;
+  int timeout_ms = 5000;
+  app.add_option("--domain-id", o.domain_id, "DDS domain id")->capture_default_str();
+  app.add_option("--interface", o.network_interface, "Network interface for DDS")
+      ->capture_default_str();
+  app.add_option("--timeout-ms", timeout_ms, "Request timeout")->capture_default_str();
+
+  auto* replay = app.add_subcommand("replay", "Publish a dataset's scans to the server");
+  std::string data;
+  double rate = 10.0;
+  std::size_t first = 0, limit = 0;
+  replay->add_option("--data", data, "Dataset (any format densemap reads)")->required();
+  replay->add_option("--rate", rate, "Scans per second (0: as fast as possible)")
+      ->capture_default_str();
+  replay->add_option("--first", first, "Skip this many scans")->capture_default_str();
+  replay->add_option("--limit", limit, "At most this many scans (0: all)")->capture_default_str();
+
+  auto* query = app.add_subcommand("query", "Query the map");
+  query->require_subcommand(1);
+  auto* qpoint = query->add_subcommand("point", "Occupancy at points");
+  std::vector<float> coords;
+  qpoint->add_option("xyz", coords, "x y z [x y z ...]")->required();
+  auto* qbox = query->add_subcommand("bbox", "Cell counts in a box");
+  std::vector<float> bmin, bmax;
+  std::uint32_t centers = 0;
+  qbox->add_option("--min", bmin, "x y z")->required()->expected(3);
+  qbox->add_option("--max", bmax, "x y z")->required()->expected(3);
+  qbox->add_option("--centers", centers, "Return up to this many occupied cell centres");
+  auto* qray = query->add_subcommand("ray", "First occupied cell along a ray");
+  std::vector<float> origin, direction;
+  float range = 30.0F;
+  qray->add_option("--origin", origin, "x y z")->required()->expected(3);
+  qray->add_option("--direction", direction, "x y z")->required()->expected(3);
+  qray->add_option("--range", range, "Max range, m")->capture_default_str();
+
+  auto* snapshot =
+      app.add_subcommand("snapshot", "Fetch the map (from tiles) and write it locally");
+  std::string snapshot_out;
+  snapshot->add_option("--out", snapshot_out, "map.dmap, map.bt or map.ot")->required();
+  auto* save = app.add_subcommand("save", "Ask the server to save a snapshot on its machine");
+  std::string save_path;
+  save->add_option("--path", save_path, "Server-side path (default: its configured path)");
+  auto* status = app.add_subcommand("status", "Server status");
+  bool watch = false;
+  status->add_flag("--watch", watch, "Print every second until interrupted");
+  auto* reset = app.add_subcommand("reset", "Clear the whole map");
+  auto* clear = app.add_subcommand("clear-bbox", "Forget the cells in a box");
+  clear->add_option("--min", bmin, "x y z")->required()->expected(3);
+  clear->add_option("--max", bmax, "x y z")->required()->expected(3);
+  auto* render = app.add_subcommand("render", "Picture of a map file (top view or z-slice)");
+  std::string render_in, render_out;
+  std::optional<double> z;
+  int scale = 2;
+  int min_occupied = 3;
+  render->add_option("--in", render_in, ".dmap, .bt or .ot")->required();
+  render->add_option("--out", render_out, "PNG file")->required();
+  render->add_option("--z", z, "Height of a z-slice, m (default: top view of all heights)");
+  render->add_option("--scale", scale, "Pixels per cell")
+      ->check(CLI::Range(1, 16))
+      ->capture_default_str();
+  render
+      ->add_option("--min-occupied", min_occupied,
+                   "Top view: occupied cells a column needs to be drawn occupied")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
+  CLI11_PARSE(app, argc, argv);
+  o.timeout = std::chrono::milliseconds(timeout_ms);
+
+  if (render->parsed()) return cli::render(render_in, render_out, z, scale, min_occupied);
+  if (replay->parsed()) return cli::replay(o, data, rate, first, limit);
+  auto client = cli::connect(o);
+  if (!client) return cli::fail(client.error().message);
+  auto p3 = [](const std::vector<float>& v) { return Point3f(v[0], v[1], v[2]); };
+  if (qpoint->parsed()) {
+    if (coords.size() % 3 != 0) return cli::fail("point coordinates come in threes");
+    auto answer = (*client)->queryPointsRaw(coords);
+    if (!answer) return cli::fail(answer.error().message);
+    const char* names[] = {"unknown", "free", "occupied"};
+    for (std::size_t i = 0; i < answer->states.size(); ++i) {
+      std::printf("%g %g %g: %s", coords[3 * i], coords[3 * i + 1], coords[3 * i + 2],
+                  names[static_cast<int>(answer->states[i])]);
+      if (answer->log_odds[i])
+        std::printf(" (log-odds %.4f, p %.3f)", *answer->log_odds[i],
+                    SensorModel::probability(*answer->log_odds[i]));
+      std::printf("\n");
+    }
+    std::printf("map version %llu\n", static_cast<unsigned long long>(answer->map_version));
+    return 0;
+  }
+  if (qbox->parsed()) {
+    auto a = (*client)->queryBox(p3(bmin), p3(bmax), centers);
+    if (!a) return cli::fail(a.error().message);
+    std::printf("occupied %llu, free %llu, unknown %llu (map version %llu)\n",
+                static_cast<unsigned long long>(a->occupied),
+                static_cast<unsigned long long>(a->free),
+                static_cast<unsigned long long>(a->unknown),
+                static_cast<unsigned long long>(a->map_version));
+    for (const auto& c : a->occupied_centers) std::printf("  %g %g %g\n", c.x(), c.y(), c.z());
+    return 0;
+  }
+  if (qray->parsed()) {
+    auto a = (*client)->castRay(p3(origin), p3(direction), range);
+    if (!a) return cli::fail(a.error().message);
+    if (a->ray.hit) {
+      std::printf("hit at %g %g %g, %.3f m (map version %llu)\n", a->ray.hit_center.x(),
+                  a->ray.hit_center.y(), a->ray.hit_center.z(), a->ray.distance,
+                  static_cast<unsigned long long>(a->map_version));
+    } else {
+      std::printf("no occupied cell within %g m (map version %llu)\n", range,
+                  static_cast<unsigned long long>(a->map_version));
+    }
+    return 0;
+  }
+  if (snapshot->parsed()) {
+    auto fetched = (*client)->fetchMap();
+    if (!fetched) return cli::fail(fetched.error().message);
+    const auto view = MapView::fromMap(*fetched->first, fetched->second);
+    auto saved = server::saveSnapshot(*view, SensorModel{}, Backend::kGrid, snapshot_out);
+    if (!saved) return cli::fail(saved.error().message);
+    std::printf("wrote %s: %zu cells, map version %llu, %zu bytes\n", snapshot_out.c_str(),
+                view->knownCells(), static_cast<unsigned long long>(fetched->second), *saved);
+    return 0;
+  }
+  if (save->parsed() || reset->parsed() || clear->parsed()) {
+    const auto kind = save->parsed()    ? CommandKind::kSave
+                      : reset->parsed() ? CommandKind::kReset
+                                        : CommandKind::kClearBox;
+    auto r = clear->parsed() ? (*client)->command(kind, p3(bmin), p3(bmax))
+                             : (*client)->command(kind, {0, 0, 0}, {0, 0, 0}, save_path);
+    if (!r) return cli::fail(r.error().message);
+    std::printf("%s\n", r->c_str());
+    return 0;
+  }
+  if (status->parsed()) {
+    do {
+      auto s = (*client)->status();
+      if (!s) return cli::fail(s.error().message);
+      cli::printStatus(*s);
+      if (watch) std::this_thread::sleep_for(std::chrono::seconds(1));
+    } while (watch);
+    return 0;
+  }
+  return 0;
+}

@@ -1,0 +1,136 @@
+#pragma once
+
+#include <dds/dds.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include "densemap/geometry/error.hpp"
+
+namespace densemap::dds {
+
+/// The one place Cyclone return codes become densemap errors.
+[[nodiscard]] Expected<void> check(dds_return_t rc, std::string_view what);
+[[nodiscard]] Expected<dds_entity_t> checkEntity(dds_entity_t e, std::string_view what);
+
+/// Owns one Cyclone entity (participant, topic, reader, writer, waitset, condition) and deletes
+/// it, with its children, when destroyed. Move-only.
+class Entity {
+ public:
+  Entity() = default;
+  explicit Entity(dds_entity_t e) : e_(e) {}
+  ~Entity() { reset(); }
+  Entity(Entity&& o) noexcept : e_(std::exchange(o.e_, 0)) {}
+  Entity& operator=(Entity&& o) noexcept {
+    if (this != &o) {
+      reset();
+      e_ = std::exchange(o.e_, 0);
+    }
+    return *this;
+  }
+  Entity(const Entity&) = delete;
+  Entity& operator=(const Entity&) = delete;
+  [[nodiscard]] dds_entity_t get() const { return e_; }
+  void reset() {
+    if (e_ > 0) dds_delete(e_);
+    e_ = 0;
+  }
+
+ private:
+  dds_entity_t e_ = 0;
+};
+
+/// Cyclone configuration that keeps all traffic on one interface (DESIGN.md network safety):
+/// no multicast, unicast discovery to localhost, large receive buffers for big scans.
+[[nodiscard]] std::string loopbackConfig(const std::string& interface_name);
+
+/// A participant on `domain_id`. When CYCLONEDDS_URI is unset the domain is first created with
+/// loopbackConfig(interface_name), so nothing leaves the machine unless a user asks for it.
+[[nodiscard]] Expected<Entity> createParticipant(std::uint32_t domain_id,
+                                                 const std::string& interface_name);
+
+struct QosSpec {
+  bool reliable = true;
+  int depth = 1;  // keep-last depth
+  bool transient_local = false;
+};
+
+[[nodiscard]] Expected<Entity> createTopic(const Entity& participant,
+                                           const dds_topic_descriptor_t& descriptor,
+                                           const std::string& name);
+[[nodiscard]] Expected<Entity> createReader(const Entity& participant, const Entity& topic,
+                                            const QosSpec& qos);
+[[nodiscard]] Expected<Entity> createWriter(const Entity& participant, const Entity& topic,
+                                            const QosSpec& qos);
+
+/// Calls `f` on every available valid sample of type T in `reader` (loaned, returned right
+/// after `f` runs); `take` removes them from the reader, otherwise they stay (read).
+/// Returns how many there were.
+template <class T>
+std::size_t forEachSample(const Entity& reader, bool take, const std::function<void(const T&)>& f) {
+  // A read must see every sample at once (it does not advance); a take can go in batches.
+  const std::size_t batch = take ? 256 : 65536;
+  std::vector<void*> samples(batch);
+  std::vector<dds_sample_info_t> infos(batch);
+  std::size_t taken = 0;
+  while (true) {
+    std::fill(samples.begin(), samples.end(), nullptr);
+    const auto max = static_cast<std::uint32_t>(batch);
+    const dds_return_t n = take ? dds_take(reader.get(), samples.data(), infos.data(), max, max)
+                                : dds_read(reader.get(), samples.data(), infos.data(), max, max);
+    if (n <= 0) break;
+    for (dds_return_t i = 0; i < n; ++i) {
+      if (infos[i].valid_data) {
+        f(*static_cast<const T*>(samples[i]));
+        ++taken;
+      }
+    }
+    dds_return_loan(reader.get(), samples.data(), n);
+    if (static_cast<std::size_t>(n) < batch || !take) break;
+  }
+  return taken;
+}
+
+template <class T>
+std::size_t takeAll(const Entity& reader, const std::function<void(const T&)>& f) {
+  return forEachSample<T>(reader, true, f);
+}
+
+[[nodiscard]] inline Expected<void> write(const Entity& writer, const void* sample) {
+  return check(dds_write(writer.get(), sample), "dds_write");
+}
+
+/// Wraps a vector's storage as a Cyclone sequence for writing (no copy; `v` must outlive it).
+template <class Seq, class V>
+Seq borrowSequence(V& v) {
+  Seq s{};
+  s._maximum = static_cast<std::uint32_t>(v.size());
+  s._length = static_cast<std::uint32_t>(v.size());
+  s._buffer = v.data();
+  s._release = false;
+  return s;
+}
+
+/// A waitset with a guard condition to wake it for shutdown.
+class WaitSet {
+ public:
+  static Expected<WaitSet> create(const Entity& participant);
+  /// Wakes the waitset when `reader` has data; `tag` is returned by wait().
+  Expected<void> attachReader(const Entity& reader, dds_attach_t tag);
+  /// Blocks up to `timeout`; returns the tags that fired (empty on timeout).
+  std::vector<dds_attach_t> wait(std::chrono::milliseconds timeout);
+  void wake() { dds_set_guardcondition(guard_.get(), true); }
+
+ private:
+  Entity waitset_;
+  Entity guard_;
+  std::vector<Entity> conditions_;
+};
+
+}  // namespace densemap::dds

@@ -1,0 +1,88 @@
+#include "server_config.hpp"
+
+#include <google/protobuf/io/tokenizer.h>
+#include <google/protobuf/text_format.h>
+
+#include <cmath>
+
+#include "densemap/io/file_bytes.hpp"
+
+namespace densemap::server {
+namespace {
+
+class Collector final : public google::protobuf::io::ErrorCollector {
+ public:
+  void AddError(int line, google::protobuf::io::ColumnNumber column,
+                const std::string& message) override {
+    if (first_.empty()) {
+      first_ = "line " + std::to_string(line + 1) + ", column " + std::to_string(column + 1) +
+               ": " + message;
+    }
+  }
+  void AddWarning(int, google::protobuf::io::ColumnNumber, const std::string&) override {}
+  [[nodiscard]] const std::string& first() const { return first_; }
+
+ private:
+  std::string first_;
+};
+
+}  // namespace
+
+Expected<proto::ServerConfig> loadServerConfig(const std::filesystem::path& file) {
+  auto text = readFileBytes(file);
+  if (!text) return std::unexpected(text.error());
+  proto::ServerConfig config;
+  google::protobuf::TextFormat::Parser parser;
+  Collector collector;
+  parser.RecordErrorsTo(&collector);
+  if (!parser.ParseFromString(*text, &config)) {
+    return fileError(file, collector.first().empty() ? "invalid config" : collector.first());
+  }
+  if (auto options = pipelineOptions(config); !options) {
+    return fileError(file, options.error().message);
+  }
+  return config;
+}
+
+Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
+  PipelineOptions o;
+  auto backend = parseBackend(config.map().backend());
+  if (!backend) return makeError("map.backend: " + backend.error().message);
+  o.backend = *backend;
+  o.resolution_m = config.map().resolution_m();
+  if (!(o.resolution_m >= 0.001 && o.resolution_m <= 100.0)) {
+    return makeError("map.resolution_m must be in [0.001, 100], got " +
+                     std::to_string(o.resolution_m));
+  }
+  o.max_range_m = config.map().max_range_m();
+  if (!std::isfinite(o.max_range_m)) return makeError("map.max_range_m must be finite");
+  const auto& s = config.map().sensor();
+  o.sensor = {s.prob_hit(), s.prob_miss(), s.clamp_min(), s.clamp_max()};
+  if (!SensorModel(o.sensor).isValid() || s.prob_hit() >= 1.0 || s.clamp_max() >= 1.0 ||
+      s.prob_miss() <= 0.0 || s.clamp_min() <= 0.0) {
+    return makeError(
+        "map.sensor needs 0 < clamp_min < 0.5, prob_miss < 0.5 < prob_hit < 1, "
+        "0.5 < clamp_max < 1");
+  }
+  const auto& p = config.pipeline();
+  if (p.threads() < 1 || p.threads() > 256) return makeError("pipeline.threads must be in 1..256");
+  if (p.queue_depth() < 1 || p.queue_depth() > 1024) {
+    return makeError("pipeline.queue_depth must be in 1..1024");
+  }
+  if (p.max_points() < 1) return makeError("pipeline.max_points must be >= 1");
+  o.threads = static_cast<int>(p.threads());
+  o.queue_depth = p.queue_depth();
+  o.limits.max_points = p.max_points();
+  o.limits.max_abs_position_m = std::min(p.max_abs_position_m(), 32767.0 * o.resolution_m);
+  if (!(p.max_abs_position_m() > 0)) return makeError("pipeline.max_abs_position_m must be > 0");
+  if (config.snapshot().autosave_period_s() < 0) {
+    return makeError("snapshot.autosave_period_s must be >= 0");
+  }
+  if (config.dds().domain_id() > 232) return makeError("dds.domain_id must be in 0..232");
+  if (config.dds().network_interface().empty()) {
+    return makeError("dds.network_interface must name an interface (default lo)");
+  }
+  return o;
+}
+
+}  // namespace densemap::server

@@ -1,0 +1,18 @@
+#pragma once
+
+#include <filesystem>
+
+#include "densemap.pb.h"
+#include "densemap/geometry/error.hpp"
+#include "densemap/pipeline/pipeline.hpp"
+
+namespace densemap::server {
+
+/// Reads a protobuf text-format config. Unknown fields, syntax errors and invalid values are
+/// errors naming the file, the line and the reason.
+[[nodiscard]] Expected<proto::ServerConfig> loadServerConfig(const std::filesystem::path& file);
+
+/// Checks values and converts to the pipeline's options.
+[[nodiscard]] Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config);
+
+}  // namespace densemap::server

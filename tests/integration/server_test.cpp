@@ -1,0 +1,301 @@
+// densemap-server and its clients as separate processes on loopback, each test on its own DDS
+// domain (scripts/test.sh runs the suite in a private network namespace when it can).
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+
+#include <fstream>
+#include <thread>
+
+#include "densemap/client/client.hpp"
+#include "densemap/io/scan_source.hpp"
+#include "densemap/map/map_diff.hpp"
+#include "densemap/pipeline/scan_validator.hpp"
+#include "densemap/raycast/raycast_integrator.hpp"
+#include "densemap/sim/sequence.hpp"
+#include "densemap/test_support/data_dir.hpp"
+
+extern char** environ;
+
+namespace densemap {
+namespace {
+
+using namespace std::chrono_literals;
+
+class ServerProcess {
+ public:
+  ServerProcess(const std::filesystem::path& dir, std::uint32_t domain,
+                const std::string& extra = "")
+      : dir_(dir), domain_(domain) {
+    std::ofstream(dir / "server.textproto")
+        << "map { resolution_m: 0.2 max_range_m: 25 }\n"
+        << "snapshot { path: \"" << (dir / "map.dmap").string() << "\" autosave_period_s: 0 }\n"
+        << "dds { domain_id: " << domain << " }\n"
+        << extra;
+    start();
+  }
+  ~ServerProcess() { stop(); }
+
+  void start() {
+    const std::string config = (dir_ / "server.textproto").string();
+    const char* argv[] = {DENSEMAP_SERVER_BIN, "--config", config.c_str(), nullptr};
+    ASSERT_EQ(posix_spawn(&pid_, DENSEMAP_SERVER_BIN, nullptr, nullptr, const_cast<char**>(argv),
+                          environ),
+              0);
+  }
+  /// SIGTERM; returns the exit status (-1 if it did not exit normally).
+  int stop() {
+    if (pid_ <= 0) return -1;
+    kill(pid_, SIGTERM);
+    int status = 0;
+    waitpid(pid_, &status, 0);
+    pid_ = 0;
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  }
+
+ private:
+  std::filesystem::path dir_;
+  std::uint32_t domain_;
+  pid_t pid_ = 0;
+};
+
+std::unique_ptr<Client> connect(std::uint32_t domain) {
+  auto client = Client::create({.domain_id = domain, .timeout = 10s});
+  EXPECT_TRUE(client) << client.error().message;
+  if (!client) return nullptr;
+  auto ok = (*client)->waitForServer();
+  EXPECT_TRUE(ok) << ok.error().message;
+  return std::move(*client);
+}
+
+std::vector<RawScan> simulatedScans(const std::filesystem::path& dir, int n) {
+  SequenceOptions o;
+  o.scene = "indoor";
+  o.sensor = "vlp16";
+  o.columns = 600;
+  o.scans = n;
+  o.ground_truth_resolution_m = 0;
+  EXPECT_TRUE(writeSimulatedSequence(o, dir / "data"));
+  auto source = openScanSource(dir / "data");
+  std::vector<RawScan> raws;
+  for (std::size_t i = 0; i < (*source)->size(); ++i) {
+    const Scan scan = *(*source)->load(i);
+    RawScan raw;
+    raw.seq = i + 1;
+    const Eigen::Vector3d t = scan.T_world_sensor.translation();
+    const Eigen::Quaterniond q(scan.T_world_sensor.linear());
+    raw.t_world_sensor = {t.x(), t.y(), t.z()};
+    raw.q_world_sensor = {q.w(), q.x(), q.y(), q.z()};
+    for (const auto& p : scan.points) raw.xyz.insert(raw.xyz.end(), {p.x(), p.y(), p.z()});
+    raws.push_back(std::move(raw));
+  }
+  return raws;
+}
+
+/// What the server must hold after these scans: the offline map of the same validated scans.
+std::unique_ptr<GridMap> offlineMap(const std::vector<RawScan>& raws) {
+  auto map = std::make_unique<GridMap>(0.2, SensorModel{});
+  RaycastIntegrator integrator({.max_range_m = 25.0});
+  for (const auto& raw : raws) {
+    const Scan scan = *validateScan(raw, ScanLimits{});
+    integrator.integrate(*map, scan.pointsWorld(), scan.originWorld());
+  }
+  return map;
+}
+
+/// Publishes scans one at a time, each after the previous one's delta; returns the deltas.
+std::vector<DeltaInfo> replay(Client& client, const std::vector<RawScan>& raws) {
+  std::vector<DeltaInfo> deltas;
+  for (const auto& raw : raws) {
+    EXPECT_TRUE(client.publishScan(raw));
+    const auto deadline = std::chrono::steady_clock::now() + 20s;
+    bool seen = false;
+    while (!seen && std::chrono::steady_clock::now() < deadline) {
+      client.pollDeltas([&](const DeltaInfo& d) {
+        deltas.push_back(d);
+        seen = seen || d.scan_seq == raw.seq;
+      });
+      std::this_thread::sleep_for(5ms);
+    }
+    EXPECT_TRUE(seen) << "no delta for scan " << raw.seq;
+  }
+  return deltas;
+}
+
+TEST(Server, ReplayedScansGiveTheOfflineMapExactlyForQueriesTilesAndDeltas) {
+  test::TempDir dir;
+  const auto raws = simulatedScans(dir.path(), 4);
+  ServerProcess server(dir.path(), 141);
+  auto client = connect(141);
+  ASSERT_TRUE(client);
+  const auto deltas = replay(*client, raws);
+  const auto offline = offlineMap(raws);
+
+  // Point queries at every known cell (and a few unknown ones) return the offline values.
+  std::vector<Point3f> points;
+  std::vector<float> expected;
+  offline->forEachKnown([&](const VoxelKey& k, float v) {
+    points.push_back(offline->grid().keyToPoint(k));
+    expected.push_back(v);
+  });
+  points.emplace_back(500.0F, 500.0F, 500.0F);
+  auto answer = client->queryPoints(points);
+  ASSERT_TRUE(answer) << answer.error().message;
+  ASSERT_EQ(answer->log_odds.size(), points.size());
+  std::size_t mismatches = 0;
+  for (std::size_t i = 0; i < expected.size(); ++i)
+    mismatches += answer->log_odds[i] != expected[i];
+  EXPECT_EQ(mismatches, 0U);
+  EXPECT_FALSE(answer->log_odds.back().has_value());
+  EXPECT_EQ(answer->map_version, raws.size());
+
+  // Deltas applied in order to an empty map reproduce every version, ending at the offline map.
+  GridMap rebuilt(0.2, SensorModel{});
+  std::uint64_t version = 0;
+  for (const DeltaInfo& d : deltas) {
+    EXPECT_EQ(d.base_version, version);
+    for (const CellChange& c : d.changes) rebuilt.setLogOdds(c.key, c.log_odds);
+    version = d.new_version;
+  }
+  EXPECT_EQ(diffMaps(rebuilt, *offline).differing(), 0U);
+
+  // A late joiner rebuilds the same map from the transient-local tiles.
+  auto late = connect(141);
+  ASSERT_TRUE(late);
+  auto fetched = late->fetchMap();
+  ASSERT_TRUE(fetched) << fetched.error().message;
+  EXPECT_EQ(diffMaps(*fetched->first, *offline).differing(), 0U);
+
+  // Box and ray queries agree with core on the same map.
+  auto box = client->queryBox(Point3f(0, 5, 0), Point3f(10, 15, 2.5F));
+  ASSERT_TRUE(box);
+  const auto view = MapView::fromMap(*offline, raws.size());
+  auto core_box = queryBox(*view, Point3f(0, 5, 0), Point3f(10, 15, 2.5F), 1u << 30, 0);
+  EXPECT_EQ(box->occupied, core_box->occupied);
+  EXPECT_EQ(box->free, core_box->free);
+  auto ray = client->castRay(Point3f(5, 10, 1.2F), Point3f(0, 1, 0), 20.0F);
+  auto core_ray = castRay(*view, Point3f(5, 10, 1.2F), Point3f(0, 1, 0), 20.0F);
+  ASSERT_TRUE(ray && core_ray);
+  EXPECT_EQ(ray->ray.hit, core_ray->hit);
+  EXPECT_EQ(ray->ray.hit_center, core_ray->hit_center);
+  EXPECT_EQ(server.stop(), 0);
+}
+
+TEST(Server, SigtermSavesASnapshotAndARestartResumesTheIdenticalMap) {
+  test::TempDir dir;
+  const auto raws = simulatedScans(dir.path(), 2);
+  ServerProcess server(dir.path(), 142);
+  {
+    auto client = connect(142);
+    ASSERT_TRUE(client);
+    replay(*client, raws);
+  }
+  EXPECT_EQ(server.stop(), 0);
+  ASSERT_TRUE(std::filesystem::exists(dir.path() / "map.dmap"));
+  server.start();
+  auto client = connect(142);
+  ASSERT_TRUE(client);
+  auto fetched = client->fetchMap();
+  ASSERT_TRUE(fetched) << fetched.error().message;
+  EXPECT_EQ(fetched->second, raws.size());  // the version resumes too
+  EXPECT_EQ(diffMaps(*fetched->first, *offlineMap(raws)).differing(), 0U);
+  auto cleared = client->command(CommandKind::kClearBox, Point3f(0, 0, 0), Point3f(5, 5, 2));
+  ASSERT_TRUE(cleared) << cleared.error().message;
+  EXPECT_NE(cleared->find("erased"), std::string::npos);
+  auto reset = client->command(CommandKind::kReset);
+  ASSERT_TRUE(reset);
+  auto empty = client->queryBox(Point3f(0, 0, 0), Point3f(30, 20, 3));
+  ASSERT_TRUE(empty);
+  EXPECT_EQ(empty->occupied + empty->free, 0U);
+  EXPECT_EQ(server.stop(), 0);
+}
+
+TEST(Server, BadInputIsRejectedCountedAndLeavesTheMapUnchanged) {
+  test::TempDir dir;
+  const auto raws = simulatedScans(dir.path(), 1);
+  ServerProcess server(dir.path(), 143,
+                       "pipeline { max_points: 20000 max_abs_position_m: 500 queue_depth: 16 }\n");
+  auto client = connect(143);
+  ASSERT_TRUE(client);
+  replay(*client, raws);
+  const auto before = client->fetchMap();
+  ASSERT_TRUE(before);
+
+  std::vector<RawScan> bad(7, raws[0]);
+  bad[0].xyz[1] = std::numeric_limits<float>::quiet_NaN();
+  bad[1].xyz[5] = -std::numeric_limits<float>::infinity();
+  bad[2].xyz.pop_back();
+  bad[3].xyz.resize(3 * 20001, 1.0F);
+  bad[4].q_world_sensor = {2, 0, 0, 0};
+  bad[5].t_world_sensor = {0, 9000, 0};
+  bad[6].xyz.clear();
+  for (std::size_t i = 0; i < bad.size(); ++i) {
+    bad[i].seq = 100 + i;
+    ASSERT_TRUE(client->publishScan(bad[i]));
+    std::this_thread::sleep_for(20ms);
+  }
+  // Bad queries and commands get an error reply.
+  auto inverted = client->queryBox(Point3f(1, 1, 1), Point3f(0, 0, 0));
+  ASSERT_FALSE(inverted);
+  EXPECT_NE(inverted.error().message.find("inverted"), std::string::npos);
+  EXPECT_FALSE(client->queryBox(Point3f(-1000, -1000, -100), Point3f(1000, 1000, 100)));
+  EXPECT_FALSE(client->queryPointsRaw({1.0F, 2.0F}));
+  EXPECT_FALSE(client->castRay(Point3f(0, 0, 0), Point3f(0, 0, 0), 5.0F));
+  EXPECT_FALSE(client->command(CommandKind::kClearBox, Point3f(1, 1, 1), Point3f(0, 0, 0)));
+
+  std::optional<ServerStatus> status;
+  for (int i = 0; i < 50; ++i) {
+    std::this_thread::sleep_for(100ms);
+    auto s = client->status();
+    if (s && s->rejected == bad.size() && s->queries_rejected >= 5) {
+      status = *s;
+      break;
+    }
+  }
+  ASSERT_TRUE(status) << "status never showed every rejection";
+  ASSERT_EQ(status->rejected_by_reason.size(), kRejectReasonCount);
+  auto count = [&](RejectReason r) { return status->rejected_by_reason[static_cast<int>(r)]; };
+  EXPECT_EQ(count(RejectReason::kNonFinitePoint), 2U);
+  EXPECT_EQ(count(RejectReason::kLengthNotMultipleOf3), 1U);
+  EXPECT_EQ(count(RejectReason::kTooManyPoints), 1U);
+  EXPECT_EQ(count(RejectReason::kBadQuaternion), 1U);
+  EXPECT_EQ(count(RejectReason::kPoseOutOfBounds), 1U);
+  EXPECT_EQ(count(RejectReason::kEmpty), 1U);
+  EXPECT_EQ(status->integrated, 1U);
+  EXPECT_EQ(status->map_version, 1U);
+  auto after = client->fetchMap();
+  ASSERT_TRUE(after);
+  EXPECT_EQ(diffMaps(*after->first, *before->first).differing(), 0U);
+  EXPECT_EQ(server.stop(), 0);
+}
+
+TEST(Server, OverloadDropsScansInsteadOfQueueingThem) {
+  test::TempDir dir;
+  auto raws = simulatedScans(dir.path(), 3);
+  ServerProcess server(dir.path(), 144, "pipeline { threads: 1 queue_depth: 2 }\n");
+  auto client = connect(144);
+  ASSERT_TRUE(client);
+  constexpr int kScans = 60;
+  for (int i = 0; i < kScans; ++i) {
+    RawScan raw = raws[i % raws.size()];
+    raw.seq = i + 1;
+    ASSERT_TRUE(client->publishScan(raw));
+  }
+  std::optional<ServerStatus> status;
+  for (int i = 0; i < 100; ++i) {
+    std::this_thread::sleep_for(100ms);
+    auto s = client->status();
+    if (s && s->received == kScans && s->integrated + s->dropped == kScans) {
+      status = *s;
+      break;
+    }
+  }
+  ASSERT_TRUE(status) << "the server did not account for every scan";
+  EXPECT_GT(status->dropped, 0U);
+  EXPECT_GT(status->integrated, 0U);
+  EXPECT_EQ(server.stop(), 0);
+}
+
+}  // namespace
+}  // namespace densemap

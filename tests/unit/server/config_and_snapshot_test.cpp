@@ -1,0 +1,94 @@
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "densemap/map/grid_map.hpp"
+#include "densemap/map/map_diff.hpp"
+#include "densemap/raycast/raycast_integrator.hpp"
+#include "densemap/test_support/data_dir.hpp"
+#include "densemap/test_support/random_rays.hpp"
+#include "server_config.hpp"
+#include "snapshot.hpp"
+
+namespace densemap::server {
+namespace {
+
+std::filesystem::path writeConfig(const test::TempDir& dir, const std::string& text) {
+  const auto p = dir.path() / "c.textproto";
+  std::ofstream(p) << text;
+  return p;
+}
+
+TEST(ServerConfig, TheShippedConfigIsValidAndEqualsTheDefaults) {
+  auto config = loadServerConfig(DENSEMAP_EXAMPLE_CONFIG);
+  ASSERT_TRUE(config) << config.error().message;
+  auto options = pipelineOptions(*config);
+  ASSERT_TRUE(options);
+  auto defaults = pipelineOptions(proto::ServerConfig{});
+  ASSERT_TRUE(defaults);
+  EXPECT_EQ(options->resolution_m, defaults->resolution_m);
+  EXPECT_EQ(options->max_range_m, defaults->max_range_m);
+  EXPECT_EQ(options->queue_depth, defaults->queue_depth);
+  EXPECT_EQ(config->dds().network_interface(), "lo");
+}
+
+TEST(ServerConfig, ErrorsNameTheFileTheLineAndTheReason) {
+  test::TempDir dir;
+  auto unknown = loadServerConfig(writeConfig(dir, "map {\n  resolution_m: 0.1\n  colour: 3\n}\n"));
+  ASSERT_FALSE(unknown);
+  EXPECT_NE(unknown.error().message.find("c.textproto"), std::string::npos);
+  EXPECT_NE(unknown.error().message.find("line 3"), std::string::npos);
+  EXPECT_NE(unknown.error().message.find("colour"), std::string::npos);
+
+  auto bad_value = loadServerConfig(writeConfig(dir, "map { resolution_m: -1 }\n"));
+  ASSERT_FALSE(bad_value);
+  EXPECT_NE(bad_value.error().message.find("resolution_m"), std::string::npos);
+  EXPECT_FALSE(loadServerConfig(writeConfig(dir, "map { backend: \"voxels\" }\n")));
+  EXPECT_FALSE(loadServerConfig(writeConfig(dir, "pipeline { threads: 0 }\n")));
+  EXPECT_FALSE(loadServerConfig(writeConfig(dir, "map { sensor { prob_hit: 0.3 } }\n")));
+  EXPECT_FALSE(loadServerConfig(writeConfig(dir, "dds { network_interface: \"\" }\n")));
+  EXPECT_FALSE(loadServerConfig(writeConfig(dir, "map { resolution_m: \"x\" }\n")));
+  EXPECT_FALSE(loadServerConfig(dir.path() / "missing.textproto"));
+}
+
+TEST(Snapshot, SaveThenLoadIsTheSameMapAndVersionOnBothBackends) {
+  test::TempDir dir;
+  GridMap map(0.1, SensorModel{});
+  RaycastIntegrator integrator({.max_range_m = 4.0});
+  for (int s = 0; s < 3; ++s) {
+    const Point3f o(0.3F * s, 0, 0);
+    integrator.integrate(map, test::adversarialScan(0.1, o, 4000, 4.0, s), o);
+  }
+  const auto view = MapView::fromMap(map, 17);
+  const auto file = dir.path() / "m.dmap";
+  auto saved = saveSnapshot(*view, map.sensorModel(), Backend::kGrid, file);
+  ASSERT_TRUE(saved) << saved.error().message;
+  EXPECT_EQ(*saved, std::filesystem::file_size(file));
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "m.dmap.tmp"));
+  for (const Backend backend : {Backend::kGrid, Backend::kOctree}) {
+    auto loaded = loadSnapshot(file, backend, 0.1);
+    ASSERT_TRUE(loaded) << loaded.error().message;
+    EXPECT_EQ(loaded->version, 17U);
+    EXPECT_EQ(diffMaps(*loaded->map, map).differing(), 0U);
+  }
+  EXPECT_FALSE(loadSnapshot(file, Backend::kGrid, 0.2));  // resolution mismatch
+}
+
+TEST(Snapshot, BrokenFilesAreClearErrors) {
+  test::TempDir dir;
+  GridMap map(0.2, SensorModel{});
+  map.setLogOdds(VoxelKey{1, 2, 3}, 1.0F);
+  map.setLogOdds(VoxelKey{4, 5, 6}, -1.0F);
+  const auto file = dir.path() / "m.dmap";
+  ASSERT_TRUE(saveSnapshot(*MapView::fromMap(map, 1), map.sensorModel(), Backend::kGrid, file));
+  std::filesystem::resize_file(file, std::filesystem::file_size(file) - 5);
+  auto truncated = loadSnapshot(file, Backend::kGrid, 0.0);
+  ASSERT_FALSE(truncated);
+  EXPECT_NE(truncated.error().message.find("m.dmap"), std::string::npos);
+  std::ofstream(dir.path() / "junk.dmap") << "not a snapshot at all";
+  EXPECT_FALSE(loadSnapshot(dir.path() / "junk.dmap", Backend::kGrid, 0.0));
+  EXPECT_FALSE(loadSnapshot(dir.path() / "none.dmap", Backend::kGrid, 0.0));
+}
+
+}  // namespace
+}  // namespace densemap::server
