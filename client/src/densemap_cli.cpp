@@ -3,6 +3,7 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <map>
 #include <thread>
@@ -60,7 +61,7 @@ double percentile(std::vector<double> v, double q) {
 }
 
 int replay(const ClientOptions& o, const std::string& data, double rate, std::size_t first,
-           std::size_t limit) {
+           std::size_t limit, std::size_t query_points) {
   auto source = openScanSource(data);
   if (!source) return fail(source.error().message);
   auto client = connect(o);
@@ -71,6 +72,8 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
   std::map<std::uint64_t, Clock::time_point> sent_at;
   std::vector<double> latencies;
   std::size_t queries = 0;
+  std::size_t queried = 0;
+  double query_seconds = 0.0;
   auto collect = [&] {
     (*client)->pollDeltas([&](const DeltaInfo& d) {
       const auto it = sent_at.find(d.scan_seq);
@@ -94,6 +97,21 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
     sent_at[raw.seq] = Clock::now();
     if (auto ok = (*client)->publishScan(raw); !ok) return fail(ok.error().message);
     ++sent;
+    if (query_points > 0) {  // query load while ingesting: points around the sensor
+      std::vector<Point3f> probe;
+      const Point3f c = scan->originWorld();
+      for (std::size_t k = 0; k < query_points; ++k) {
+        const float a = 0.618034F * static_cast<float>(k),
+                    r = 20.0F * static_cast<float>(k % 97) / 97.0F;
+        probe.emplace_back(c.x() + r * std::cos(a), c.y() + r * std::sin(a),
+                           c.z() - 1.0F + static_cast<float>(k % 7) * 0.4F);
+      }
+      const auto t0 = Clock::now();
+      if (auto answer = (*client)->queryPoints(probe); answer) {
+        query_seconds += std::chrono::duration<double>(Clock::now() - t0).count();
+        queried += probe.size();
+      }
+    }
     collect();
     progress.update(i - first + 1, std::to_string(latencies.size()) + " integrated");
   }
@@ -121,6 +139,12 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
       "replay: end-to-end latency (publish -> delta seen) over %zu scans: p50 %.1f ms, p99 %.1f "
       "ms\n",
       latencies.size(), percentile(latencies, 0.5), percentile(latencies, 0.99));
+  if (queried > 0) {
+    std::printf(
+        "replay: point queries while ingesting: %zu points in %.3f s of requests, %.3g points/s "
+        "(round trip)\n",
+        queried, query_seconds, static_cast<double>(queried) / query_seconds);
+  }
   (void)queries;
   return 0;
 }
@@ -213,6 +237,11 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   replay->add_option("--first", first, "Skip this many scans")->capture_default_str();
   replay->add_option("--limit", limit, "At most this many scans (0: all)")->capture_default_str();
+  std::size_t query_points = 0;
+  replay
+      ->add_option("--query-points", query_points,
+                   "After each scan, query this many points near the sensor (load test)")
+      ->capture_default_str();
 
   auto* query = app.add_subcommand("query", "Query the map");
   query->require_subcommand(1);
@@ -266,7 +295,7 @@ int main(int argc, char** argv) {
   o.timeout = std::chrono::milliseconds(timeout_ms);
 
   if (render->parsed()) return cli::render(render_in, render_out, z, scale, min_occupied);
-  if (replay->parsed()) return cli::replay(o, data, rate, first, limit);
+  if (replay->parsed()) return cli::replay(o, data, rate, first, limit, query_points);
   auto client = cli::connect(o);
   if (!client) return cli::fail(client.error().message);
   auto p3 = [](const std::vector<float>& v) { return Point3f(v[0], v[1], v[2]); };
