@@ -92,7 +92,11 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
     auto scan = (*source)->load(i);
     if (!scan) return fail(scan.error().message);
     const RawScan raw = toRawScan(*scan, i + 1);
-    std::this_thread::sleep_until(next);
+    // Wait for the publish slot while watching deltas, so latencies are not quantised by it.
+    while (Clock::now() < next) {
+      collect();
+      std::this_thread::sleep_for(std::chrono::microseconds(500));
+    }
     next += period;
     sent_at[raw.seq] = Clock::now();
     if (auto ok = (*client)->publishScan(raw); !ok) return fail(ok.error().message);
