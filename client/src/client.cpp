@@ -6,6 +6,7 @@
 #include <unordered_map>
 
 #include "densemap/dds/dds.hpp"
+#include "densemap/dds/topics.hpp"
 #include "densemap_msgs.h"
 
 namespace densemap {
@@ -23,7 +24,7 @@ std::string text(const char* s) { return s != nullptr ? s : ""; }
 
 struct Client::Dds {
   dds::Entity participant;
-  dds::Entity scan_t, pq_t, pr_t, bq_t, br_t, rq_t, rr_t, cq_t, cr_t, man_t, tile_t, delta_t, st_t;
+  dds::Topics topics;
   dds::Entity scan_w, pq_w, bq_w, rq_w, cq_w;
   dds::Entity pr_r, br_r, rr_r, cr_r, man_r, tile_r, delta_r, st_r;
 };
@@ -42,14 +43,9 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
   if (!p) return std::unexpected(p.error());
   d.participant = std::move(*p);
   Expected<void> status;
-  auto topic = [&](dds::Entity& out, const dds_topic_descriptor_t& desc, const char* name) {
-    if (!status) return;
-    auto t = dds::createTopic(d.participant, desc, std::string("densemap/") + name);
-    if (!t)
-      status = std::unexpected(t.error());
-    else
-      out = std::move(*t);
-  };
+  auto topics = dds::Topics::create(d.participant);
+  if (!topics) return std::unexpected(topics.error());
+  d.topics = std::move(*topics);
   auto make = [&](dds::Entity& out, const dds::Entity& t, dds::QosSpec q, bool writer) {
     if (!status) return;
     auto e =
@@ -59,33 +55,20 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
     else
       out = std::move(*e);
   };
-  topic(d.scan_t, densemap_msgs_Scan_desc, "scan");
-  topic(d.pq_t, densemap_msgs_PointQueryRequest_desc, "query/point/request");
-  topic(d.pr_t, densemap_msgs_PointQueryReply_desc, "query/point/reply");
-  topic(d.bq_t, densemap_msgs_BboxQueryRequest_desc, "query/bbox/request");
-  topic(d.br_t, densemap_msgs_BboxQueryReply_desc, "query/bbox/reply");
-  topic(d.rq_t, densemap_msgs_RayQueryRequest_desc, "query/ray/request");
-  topic(d.rr_t, densemap_msgs_RayQueryReply_desc, "query/ray/reply");
-  topic(d.cq_t, densemap_msgs_CommandRequest_desc, "cmd/request");
-  topic(d.cr_t, densemap_msgs_CommandReply_desc, "cmd/reply");
-  topic(d.man_t, densemap_msgs_MapManifest_desc, "map/manifest");
-  topic(d.tile_t, densemap_msgs_MapTile_desc, "map/tiles");
-  topic(d.delta_t, densemap_msgs_MapDelta_desc, "map/delta");
-  topic(d.st_t, densemap_msgs_Status_desc, "status");
-  const dds::QosSpec requests{.depth = 64};
-  make(d.scan_w, d.scan_t, {.depth = 4}, true);
-  make(d.pq_w, d.pq_t, requests, true);
-  make(d.bq_w, d.bq_t, requests, true);
-  make(d.rq_w, d.rq_t, requests, true);
-  make(d.cq_w, d.cq_t, {.depth = 16}, true);
-  make(d.pr_r, d.pr_t, requests, false);
-  make(d.br_r, d.br_t, requests, false);
-  make(d.rr_r, d.rr_t, requests, false);
-  make(d.cr_r, d.cr_t, {.depth = 16}, false);
-  make(d.man_r, d.man_t, {.depth = 1, .transient_local = true}, false);
-  make(d.tile_r, d.tile_t, {.depth = 1, .transient_local = true}, false);
-  make(d.delta_r, d.delta_t, {.depth = 256}, false);
-  make(d.st_r, d.st_t, {.depth = 1, .transient_local = true}, false);
+  const dds::QosSpec requests = dds::kRequestQos;
+  make(d.scan_w, d.topics.scan, {.depth = 4}, true);
+  make(d.pq_w, d.topics.point_request, requests, true);
+  make(d.bq_w, d.topics.bbox_request, requests, true);
+  make(d.rq_w, d.topics.ray_request, requests, true);
+  make(d.cq_w, d.topics.command_request, dds::kCommandQos, true);
+  make(d.pr_r, d.topics.point_reply, requests, false);
+  make(d.br_r, d.topics.bbox_reply, requests, false);
+  make(d.rr_r, d.topics.ray_reply, requests, false);
+  make(d.cr_r, d.topics.command_reply, dds::kCommandQos, false);
+  make(d.man_r, d.topics.manifest, dds::kLatestStateQos, false);
+  make(d.tile_r, d.topics.tiles, dds::kLatestStateQos, false);
+  make(d.delta_r, d.topics.delta, {.depth = 256}, false);
+  make(d.st_r, d.topics.status, dds::kLatestStateQos, false);
   if (!status) return std::unexpected(status.error());
   return c;
 }
@@ -325,12 +308,15 @@ std::size_t Client::pollDeltas(const std::function<void(const DeltaInfo&)>& f) {
   });
 }
 
-Expected<std::pair<std::unique_ptr<GridMap>, std::uint64_t>> Client::fetchMap() {
+Expected<std::pair<std::unique_ptr<GridMap>, std::uint64_t>> Client::fetchMap(
+    std::uint64_t min_version) {
   const auto deadline = Clock::now() + options_.timeout;
   std::unordered_map<std::uint64_t, std::pair<std::vector<std::uint16_t>, std::vector<float>>>
       tiles;
   std::optional<densemap_msgs_MapManifest> manifest;
   while (true) {
+    std::uint64_t newest_tile = 0;
+    tiles.clear();
     // read, not take: the reader keeps the latest manifest and tiles for the next fetch.
     dds::forEachSample<densemap_msgs_MapManifest>(
         dds_->man_r, false, [&](const densemap_msgs_MapManifest& m) { manifest = m; });
@@ -340,7 +326,7 @@ Expected<std::pair<std::unique_ptr<GridMap>, std::uint64_t>> Client::fetchMap() 
           cells.first.assign(t.keys._buffer, t.keys._buffer + t.keys._length);
           cells.second.assign(t.log_odds._buffer, t.log_odds._buffer + t.log_odds._length);
         });
-    if (manifest) {
+    if (manifest && manifest->version >= min_version && newest_tile <= manifest->version) {
       std::size_t cells = 0;
       for (const auto& [id, c] : tiles) cells += c.second.size();
       if (cells == manifest->known_cells) {

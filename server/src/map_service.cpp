@@ -4,6 +4,7 @@
 #include <limits>
 #include <unordered_map>
 
+#include "densemap/dds/topics.hpp"
 #include "densemap/pipeline/map_queries.hpp"
 #include "densemap_msgs.h"
 #include "snapshot.hpp"
@@ -29,9 +30,7 @@ Point3f toPoint(const float (&v)[3]) { return {v[0], v[1], v[2]}; }
 
 struct MapService::Dds {
   dds::Entity participant;
-  dds::Entity scan_topic, point_req_topic, point_rep_topic, bbox_req_topic, bbox_rep_topic,
-      ray_req_topic, ray_rep_topic, cmd_req_topic, cmd_rep_topic, manifest_topic, tile_topic,
-      delta_topic, status_topic;
+  dds::Topics topics;
   dds::Entity scan_reader, point_reader, bbox_reader, ray_reader, cmd_reader;
   dds::Entity point_writer, bbox_writer, ray_writer, cmd_writer, manifest_writer, tile_writer,
       delta_writer, status_writer;
@@ -47,14 +46,9 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
   if (!participant) return std::unexpected(participant.error());
   d.participant = std::move(*participant);
   Expected<void> status;
-  auto topic = [&](dds::Entity& out, const dds_topic_descriptor_t& desc, const char* name) {
-    if (!status) return;
-    auto t = dds::createTopic(d.participant, desc, std::string("densemap/") + name);
-    if (!t)
-      status = std::unexpected(t.error());
-    else
-      out = std::move(*t);
-  };
+  auto topics = dds::Topics::create(d.participant);
+  if (!topics) return std::unexpected(topics.error());
+  d.topics = std::move(*topics);
   auto reader = [&](dds::Entity& out, const dds::Entity& t, dds::QosSpec q) {
     if (!status) return;
     auto r = dds::createReader(d.participant, t, q);
@@ -71,33 +65,20 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
     else
       out = std::move(*w);
   };
-  topic(d.scan_topic, densemap_msgs_Scan_desc, "scan");
-  topic(d.point_req_topic, densemap_msgs_PointQueryRequest_desc, "query/point/request");
-  topic(d.point_rep_topic, densemap_msgs_PointQueryReply_desc, "query/point/reply");
-  topic(d.bbox_req_topic, densemap_msgs_BboxQueryRequest_desc, "query/bbox/request");
-  topic(d.bbox_rep_topic, densemap_msgs_BboxQueryReply_desc, "query/bbox/reply");
-  topic(d.ray_req_topic, densemap_msgs_RayQueryRequest_desc, "query/ray/request");
-  topic(d.ray_rep_topic, densemap_msgs_RayQueryReply_desc, "query/ray/reply");
-  topic(d.cmd_req_topic, densemap_msgs_CommandRequest_desc, "cmd/request");
-  topic(d.cmd_rep_topic, densemap_msgs_CommandReply_desc, "cmd/reply");
-  topic(d.manifest_topic, densemap_msgs_MapManifest_desc, "map/manifest");
-  topic(d.tile_topic, densemap_msgs_MapTile_desc, "map/tiles");
-  topic(d.delta_topic, densemap_msgs_MapDelta_desc, "map/delta");
-  topic(d.status_topic, densemap_msgs_Status_desc, "status");
-  const dds::QosSpec requests{.depth = 64};
-  reader(d.scan_reader, d.scan_topic, {.depth = 4});
-  reader(d.point_reader, d.point_req_topic, requests);
-  reader(d.bbox_reader, d.bbox_req_topic, requests);
-  reader(d.ray_reader, d.ray_req_topic, requests);
-  reader(d.cmd_reader, d.cmd_req_topic, {.depth = 16});
-  writer(d.point_writer, d.point_rep_topic, requests);
-  writer(d.bbox_writer, d.bbox_rep_topic, requests);
-  writer(d.ray_writer, d.ray_rep_topic, requests);
-  writer(d.cmd_writer, d.cmd_rep_topic, {.depth = 16});
-  writer(d.manifest_writer, d.manifest_topic, {.depth = 1, .transient_local = true});
-  writer(d.tile_writer, d.tile_topic, {.depth = 1, .transient_local = true});
-  writer(d.delta_writer, d.delta_topic, {.depth = 32});
-  writer(d.status_writer, d.status_topic, {.depth = 1, .transient_local = true});
+  const dds::QosSpec requests = dds::kRequestQos;
+  reader(d.scan_reader, d.topics.scan, {.depth = 4});
+  reader(d.point_reader, d.topics.point_request, requests);
+  reader(d.bbox_reader, d.topics.bbox_request, requests);
+  reader(d.ray_reader, d.topics.ray_request, requests);
+  reader(d.cmd_reader, d.topics.command_request, dds::kCommandQos);
+  writer(d.point_writer, d.topics.point_reply, requests);
+  writer(d.bbox_writer, d.topics.bbox_reply, requests);
+  writer(d.ray_writer, d.topics.ray_reply, requests);
+  writer(d.cmd_writer, d.topics.command_reply, dds::kCommandQos);
+  writer(d.manifest_writer, d.topics.manifest, dds::kLatestStateQos);
+  writer(d.tile_writer, d.topics.tiles, dds::kLatestStateQos);
+  writer(d.delta_writer, d.topics.delta, {.depth = 32});
+  writer(d.status_writer, d.topics.status, dds::kLatestStateQos);
   if (!status) return std::unexpected(status.error());
 
   auto ingest_ws = dds::WaitSet::create(d.participant);

@@ -172,7 +172,7 @@ TEST(Server, ReplayedScansGiveTheOfflineMapExactlyForQueriesTilesAndDeltas) {
   // A late joiner rebuilds the same map from the transient-local tiles.
   auto late = connect(141);
   ASSERT_TRUE(late);
-  auto fetched = late->fetchMap();
+  auto fetched = late->fetchMap(raws.size());
   ASSERT_TRUE(fetched) << fetched.error().message;
   EXPECT_EQ(diffMaps(*fetched->first, *offline).differing(), 0U);
 
@@ -205,7 +205,7 @@ TEST(Server, SigtermSavesASnapshotAndARestartResumesTheIdenticalMap) {
   server.start();
   auto client = connect(142);
   ASSERT_TRUE(client);
-  auto fetched = client->fetchMap();
+  auto fetched = client->fetchMap(raws.size());
   ASSERT_TRUE(fetched) << fetched.error().message;
   EXPECT_EQ(fetched->second, raws.size());  // the version resumes too
   EXPECT_EQ(diffMaps(*fetched->first, *offlineMap(raws)).differing(), 0U);
@@ -228,7 +228,7 @@ TEST(Server, BadInputIsRejectedCountedAndLeavesTheMapUnchanged) {
   auto client = connect(143);
   ASSERT_TRUE(client);
   replay(*client, raws);
-  const auto before = client->fetchMap();
+  const auto before = client->fetchMap(1);
   ASSERT_TRUE(before);
 
   std::vector<RawScan> bad(7, raws[0]);

@@ -88,8 +88,10 @@ class Client {
   /// Calls `f` for every map delta received since the last call; returns how many.
   std::size_t pollDeltas(const std::function<void(const DeltaInfo&)>& f);
   /// Rebuilds the server's map from its transient-local tiles (what a late joiner sees);
-  /// waits until the tiles cover the manifest's version and cell count.
-  [[nodiscard]] Expected<std::pair<std::unique_ptr<GridMap>, std::uint64_t>> fetchMap();
+  /// waits until the manifest reaches `min_version` and the tiles cover its cell count (tiles
+  /// are republished at most once a second).
+  [[nodiscard]] Expected<std::pair<std::unique_ptr<GridMap>, std::uint64_t>> fetchMap(
+      std::uint64_t min_version = 0);
 
  private:
   struct Dds;

@@ -1,0 +1,26 @@
+#pragma once
+
+#include "densemap/dds/dds.hpp"
+
+namespace densemap::dds {
+
+/// Every densemap topic (DESIGN.md), created once per participant; names and types live here
+/// only, for the server and the client alike.
+struct Topics {
+  Entity scan;
+  Entity point_request, point_reply;
+  Entity bbox_request, bbox_reply;
+  Entity ray_request, ray_reply;
+  Entity command_request, command_reply;
+  Entity manifest, tiles, delta, status;
+
+  [[nodiscard]] static Expected<Topics> create(const Entity& participant);
+};
+
+/// QoS of the request/reply topics (DESIGN.md: reliable, keep-last 16-64).
+inline constexpr QosSpec kRequestQos{.depth = 64};
+inline constexpr QosSpec kCommandQos{.depth = 16};
+/// Map state for late joiners: reliable, transient-local, keep-last 1 per instance.
+inline constexpr QosSpec kLatestStateQos{.depth = 1, .transient_local = true};
+
+}  // namespace densemap::dds

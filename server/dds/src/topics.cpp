@@ -1,0 +1,36 @@
+#include "densemap/dds/topics.hpp"
+
+#include "densemap_msgs.h"
+
+namespace densemap::dds {
+
+Expected<Topics> Topics::create(const Entity& participant) {
+  Topics t;
+  const struct {
+    Entity* topic;
+    const dds_topic_descriptor_t* descriptor;
+    const char* name;
+  } table[] = {
+      {&t.scan, &densemap_msgs_Scan_desc, "scan"},
+      {&t.point_request, &densemap_msgs_PointQueryRequest_desc, "query/point/request"},
+      {&t.point_reply, &densemap_msgs_PointQueryReply_desc, "query/point/reply"},
+      {&t.bbox_request, &densemap_msgs_BboxQueryRequest_desc, "query/bbox/request"},
+      {&t.bbox_reply, &densemap_msgs_BboxQueryReply_desc, "query/bbox/reply"},
+      {&t.ray_request, &densemap_msgs_RayQueryRequest_desc, "query/ray/request"},
+      {&t.ray_reply, &densemap_msgs_RayQueryReply_desc, "query/ray/reply"},
+      {&t.command_request, &densemap_msgs_CommandRequest_desc, "cmd/request"},
+      {&t.command_reply, &densemap_msgs_CommandReply_desc, "cmd/reply"},
+      {&t.manifest, &densemap_msgs_MapManifest_desc, "map/manifest"},
+      {&t.tiles, &densemap_msgs_MapTile_desc, "map/tiles"},
+      {&t.delta, &densemap_msgs_MapDelta_desc, "map/delta"},
+      {&t.status, &densemap_msgs_Status_desc, "status"},
+  };
+  for (const auto& row : table) {
+    auto topic = createTopic(participant, *row.descriptor, std::string("densemap/") + row.name);
+    if (!topic) return std::unexpected(topic.error());
+    *row.topic = std::move(*topic);
+  }
+  return t;
+}
+
+}  // namespace densemap::dds
