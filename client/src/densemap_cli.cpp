@@ -32,28 +32,6 @@ Expected<std::unique_ptr<Client>> connect(const ClientOptions& o) {
   return client;
 }
 
-/// A scan in the sensor frame with its pose, ready to publish.
-RawScan toRawScan(const Scan& scan, std::uint64_t seq) {
-  RawScan raw;
-  raw.sensor_id = "replay";
-  raw.seq = seq;
-  raw.stamp_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                     std::chrono::system_clock::now().time_since_epoch())
-                     .count();
-  const Eigen::Vector3d t = scan.T_world_sensor.translation();
-  const Eigen::Quaterniond q(scan.T_world_sensor.linear());
-  raw.t_world_sensor = {t.x(), t.y(), t.z()};
-  raw.q_world_sensor = {q.w(), q.x(), q.y(), q.z()};
-  const PointCloud points = scan.frame == PointFrame::kSensor
-                                ? scan.points
-                                : transformPoints(scan.T_world_sensor.inverse(), scan.points);
-  raw.xyz.reserve(points.size() * 3);
-  for (const auto& p : points) raw.xyz.insert(raw.xyz.end(), {p.x(), p.y(), p.z()});
-  raw.intensity =
-      scan.intensities.size() == points.size() ? scan.intensities : std::vector<float>{};
-  return raw;
-}
-
 double percentile(std::vector<double> v, double q) {
   if (v.empty()) return 0;
   std::sort(v.begin(), v.end());
@@ -71,7 +49,6 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
       limit == 0 ? (*source)->size() : std::min((*source)->size(), first + limit);
   std::map<std::uint64_t, Clock::time_point> sent_at;
   std::vector<double> latencies;
-  std::size_t queries = 0;
   std::size_t queried = 0;
   double query_seconds = 0.0;
   auto collect = [&] {
@@ -91,7 +68,7 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
   for (std::size_t i = first; i < end; ++i) {
     auto scan = (*source)->load(i);
     if (!scan) return fail(scan.error().message);
-    const RawScan raw = toRawScan(*scan, i + 1);
+    const RawScan raw = toRawScan(*scan, i + 1, "replay");
     // Wait for the publish slot while watching deltas, so latencies are not quantised by it.
     while (Clock::now() < next) {
       collect();
@@ -149,7 +126,6 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
         "(round trip)\n",
         queried, query_seconds, static_cast<double>(queried) / query_seconds);
   }
-  (void)queries;
   return 0;
 }
 

@@ -89,15 +89,7 @@ std::vector<RawScan> simulatedScans(const std::filesystem::path& dir, int n) {
   auto source = openScanSource(dir / "data");
   std::vector<RawScan> raws;
   for (std::size_t i = 0; i < (*source)->size(); ++i) {
-    const Scan scan = *(*source)->load(i);
-    RawScan raw;
-    raw.seq = i + 1;
-    const Eigen::Vector3d t = scan.T_world_sensor.translation();
-    const Eigen::Quaterniond q(scan.T_world_sensor.linear());
-    raw.t_world_sensor = {t.x(), t.y(), t.z()};
-    raw.q_world_sensor = {q.w(), q.x(), q.y(), q.z()};
-    for (const auto& p : scan.points) raw.xyz.insert(raw.xyz.end(), {p.x(), p.y(), p.z()});
-    raws.push_back(std::move(raw));
+    raws.push_back(toRawScan(*(*source)->load(i), i + 1, "test"));
   }
   return raws;
 }

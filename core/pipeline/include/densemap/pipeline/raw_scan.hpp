@@ -21,4 +21,10 @@ struct RawScan {
   std::chrono::steady_clock::time_point received = std::chrono::steady_clock::now();
 };
 
+struct Scan;
+
+/// The raw form of a scan as a sender publishes it: sensor-frame points (world-frame scans are
+/// re-expressed in the sensor frame) and the pose as translation + unit quaternion.
+[[nodiscard]] RawScan toRawScan(const Scan& scan, std::uint64_t seq, const std::string& sensor_id);
+
 }  // namespace densemap

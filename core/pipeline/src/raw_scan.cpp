@@ -1,0 +1,27 @@
+#include "densemap/pipeline/raw_scan.hpp"
+
+#include "densemap/io/scan.hpp"
+
+namespace densemap {
+
+RawScan toRawScan(const Scan& scan, std::uint64_t seq, const std::string& sensor_id) {
+  RawScan raw;
+  raw.sensor_id = sensor_id;
+  raw.seq = seq;
+  raw.stamp_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                     std::chrono::system_clock::now().time_since_epoch())
+                     .count();
+  const Eigen::Vector3d t = scan.T_world_sensor.translation();
+  const Eigen::Quaterniond q(scan.T_world_sensor.linear());
+  raw.t_world_sensor = {t.x(), t.y(), t.z()};
+  raw.q_world_sensor = {q.w(), q.x(), q.y(), q.z()};
+  const PointCloud points = scan.frame == PointFrame::kSensor
+                                ? scan.points
+                                : transformPoints(scan.T_world_sensor.inverse(), scan.points);
+  raw.xyz.reserve(points.size() * 3);
+  for (const auto& p : points) raw.xyz.insert(raw.xyz.end(), {p.x(), p.y(), p.z()});
+  if (scan.intensities.size() == points.size()) raw.intensity = scan.intensities;
+  return raw;
+}
+
+}  // namespace densemap
