@@ -11,7 +11,7 @@
 #include "densemap/map/map_diff.hpp"
 #include "densemap/map/map_factory.hpp"
 #include "densemap/map/octree_map.hpp"
-#include "densemap/raycast/raycast_integrator.hpp"
+#include "densemap/raycast/integrator.hpp"
 
 namespace densemap::test {
 
@@ -43,7 +43,7 @@ inline void expectRaycastEqualsOctomap(const std::vector<WorldScan>& scans, doub
     std::string name;
     std::unique_ptr<OccupancyMap> map;
     std::unique_ptr<tbb::task_arena> arena;
-    RaycastIntegrator integrator;
+    Integrator integrator;
   };
   std::vector<Subject> subjects;
   for (const Backend backend : {Backend::kGrid, Backend::kOctree}) {
@@ -51,7 +51,7 @@ inline void expectRaycastEqualsOctomap(const std::vector<WorldScan>& scans, doub
       subjects.push_back({std::string(backendName(backend)) + "/" + std::to_string(threads) + "t",
                           std::move(*makeMap(backend, resolution)),
                           std::make_unique<tbb::task_arena>(threads),
-                          RaycastIntegrator({.max_range_m = max_range})});
+                          Integrator({.max_range_m = max_range})});
     }
   }
   for (std::size_t i = 0; i < scans.size(); ++i) {

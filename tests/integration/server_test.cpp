@@ -12,7 +12,7 @@
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_diff.hpp"
 #include "densemap/pipeline/scan_validator.hpp"
-#include "densemap/raycast/raycast_integrator.hpp"
+#include "densemap/raycast/integrator.hpp"
 #include "densemap/sim/sequence.hpp"
 #include "densemap/test_support/data_dir.hpp"
 
@@ -97,7 +97,7 @@ std::vector<RawScan> simulatedScans(const std::filesystem::path& dir, int n) {
 /// What the server must hold after these scans: the offline map of the same validated scans.
 std::unique_ptr<GridMap> offlineMap(const std::vector<RawScan>& raws) {
   auto map = std::make_unique<GridMap>(0.2, SensorModel{});
-  RaycastIntegrator integrator({.max_range_m = 25.0});
+  Integrator integrator({.max_range_m = 25.0});
   for (const auto& raw : raws) {
     const Scan scan = *validateScan(raw, ScanLimits{});
     integrator.integrate(*map, scan.pointsWorld(), scan.originWorld());

@@ -17,7 +17,7 @@
 #include "densemap/map/map_diff.hpp"
 #include "densemap/map/map_factory.hpp"
 #include "densemap/map/octree_map.hpp"
-#include "densemap/raycast/raycast_integrator.hpp"
+#include "densemap/raycast/integrator.hpp"
 
 namespace densemap::bench {
 namespace {
@@ -86,7 +86,7 @@ Integrate makeIntegrator(const std::string& method, const Options& o) {
     };
   }
   if (method == "raycast") {
-    auto integrator = std::make_shared<RaycastIntegrator>(RaycastOptions{o.max_range});
+    auto integrator = std::make_shared<Integrator>(IntegratorOptions{.method = IntegrationMethod::kRaycast, .max_range_m = o.max_range});
     return [integrator](OccupancyMap& map, const WorldScan& s) {
       return integrator->integrate(map, s.points, s.origin);
     };

@@ -9,7 +9,7 @@
 #include "densemap/io/octomap_export.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_factory.hpp"
-#include "densemap/raycast/raycast_integrator.hpp"
+#include "densemap/raycast/integrator.hpp"
 
 int main(int argc, char** argv) {
   std::string data, out, backend_name = "grid";
@@ -36,7 +36,7 @@ int main(int argc, char** argv) {
   auto source = densemap::openScanSource(data);
   if (!source) return fail(source.error().message);
 
-  densemap::RaycastIntegrator integrator({.max_range_m = max_range});
+  densemap::Integrator integrator({.max_range_m = max_range});
   tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
   std::size_t rejected = 0;
   densemap::tools::Progress progress("densemap-map: scan", (*source)->size());

@@ -21,18 +21,35 @@ OctreeMap::OctreeMap(double resolution_m, const SensorModel& model)
   configureOcTree(tree_, model);
 }
 
+void OctreeMap::noteValue(const VoxelKey& key, float log_odds) {
+  const int i = block::indexOf(key);
+  if (sensorModel().isFullyFree(log_odds)) {
+    block::setBit(fully_free_[block::blockOf(key)], i);
+  } else if (const auto it = fully_free_.find(block::blockOf(key)); it != fully_free_.end()) {
+    block::clearBit(it->second, i);
+  }
+}
+
 ApplyStats OctreeMap::apply(const ScanUpdate& update, CellChanges* changes) {
   ApplyStats stats;
-  update.forEachCell([&](const VoxelKey& key, bool occupied) {
+  const UpdateRule rule = update.rule();
+  const SensorModel& model = sensorModel();
+  update.forEachCell([&](const VoxelKey& key, const CellHits& hits) {
     const octomap::OcTreeKey k = toOcTreeKey(key);
     const octomap::OcTreeNode* before = tree_.search(k);
     const bool known = before != nullptr;
     const float old_value = known ? before->getLogOdds() : 0.0F;
-    const octomap::OcTreeNode* after = tree_.updateNode(k, occupied, /*lazy_eval=*/false);
+    // OctoMap's own update paths: the boolean one under kSet, a log-odds delta under kPerRay.
+    const octomap::OcTreeNode* after =
+        rule == UpdateRule::kSet
+            ? tree_.updateNode(k, hits.occupied > 0, /*lazy_eval=*/false)
+            : tree_.updateNode(k, perRayDelta(model, hits), /*lazy_eval=*/false);
+    const float new_value = after->getLogOdds();
     ++stats.updated_cells;
-    if (!known || after->getLogOdds() != old_value) {
+    if (!known || new_value != old_value) {
       ++stats.changed_cells;
-      if (changes != nullptr) changes->push_back({key, after->getLogOdds(), true});
+      noteValue(key, new_value);
+      if (changes != nullptr) changes->push_back({key, new_value, true});
     }
   });
   return stats;
@@ -46,6 +63,7 @@ void OctreeMap::insertWithOctomap(const PointCloud& points_world, const Point3f&
   tree_.insertPointCloud(cloud,
                          octomap::point3d(origin_world.x(), origin_world.y(), origin_world.z()),
                          max_range_m, /*lazy_eval=*/false, /*discretize=*/false);
+  fully_free_stale_ = true;
 }
 
 std::size_t OctreeMap::clearBox(const VoxelKey& min, const VoxelKey& max, CellChanges* changes) {
@@ -63,6 +81,15 @@ std::size_t OctreeMap::clearBox(const VoxelKey& min, const VoxelKey& max, CellCh
     if (changes != nullptr) changes->push_back({k, 0.0F, false});
   });
   if (erased == 0) return 0;
+  for (auto& [block_key, mask] : fully_free_) {
+    for (int i = 0; i < block::kVoxels; ++i) {
+      const VoxelKey k = block::keyOf(block_key, i);
+      if (k.x >= min.x && k.y >= min.y && k.z >= min.z && k.x <= max.x && k.y <= max.y &&
+          k.z <= max.z) {
+        block::clearBit(mask, i);
+      }
+    }
+  }
   kept.updateInnerOccupancy();
   kept.prune();
   tree_.swapContent(kept);
@@ -102,6 +129,30 @@ void OctreeMap::forEachKnown(const std::function<void(const VoxelKey&, float)>& 
 
 void OctreeMap::setLogOdds(const VoxelKey& key, float log_odds) {
   tree_.setNodeValue(toOcTreeKey(key), log_odds, /*lazy_eval=*/false);
+  noteValue(key, log_odds);
+}
+
+void OctreeMap::forEachFullyFreeBlock(
+    const std::function<void(std::uint64_t, const block::BlockMask&)>& f) const {
+  if (fully_free_stale_) {
+    fully_free_.clear();
+    forEachOcTreeCell(tree_, [&](const VoxelKey& k, float v) {
+      if (sensorModel().isFullyFree(v)) block::setBit(fully_free_[block::blockOf(k)], block::indexOf(k));
+    });
+    fully_free_stale_ = false;
+  }
+  for (const auto& [block_key, mask] : fully_free_) f(block_key, mask);
+}
+
+std::size_t OctreeMap::memoryBytes() const {
+  constexpr std::size_t kNodeBytes = sizeof(std::uint64_t) + 3 * sizeof(void*);
+  return tree_.memoryUsage() + fully_free_.size() * (sizeof(block::BlockMask) + kNodeBytes);
+}
+
+void OctreeMap::clear() {
+  tree_.clear();
+  fully_free_.clear();
+  fully_free_stale_ = false;
 }
 
 std::size_t OctreeMap::knownCells() const {

@@ -8,7 +8,7 @@
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_diff.hpp"
 #include "densemap/map/octree_map.hpp"
-#include "densemap/raycast/raycast_integrator.hpp"
+#include "densemap/raycast/integrator.hpp"
 #include "densemap/test_support/data_dir.hpp"
 #include "densemap/test_support/random_rays.hpp"
 
@@ -77,7 +77,7 @@ TEST(ScanGraph, TruncatedFilesAreClearErrorsAtEveryLength) {
 TEST(OctomapExport, OtRoundTripsLogOddsAndBtRoundTripsOccupancy) {
   test::TempDir dir;
   GridMap grid(0.1, SensorModel{});
-  RaycastIntegrator integrator({.max_range_m = 5.0});
+  Integrator integrator({.max_range_m = 5.0});
   for (int s = 0; s < 3; ++s) {
     const Point3f o(0.2F * s, 0, 0);
     integrator.integrate(grid, test::adversarialScan(0.1, o, 3000, 5.0, s), o);

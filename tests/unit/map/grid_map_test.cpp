@@ -13,16 +13,39 @@
 namespace densemap {
 namespace {
 
-ScanUpdate randomUpdate(std::mt19937& rng, double p_occupied) {
+ScanUpdate randomUpdate(std::mt19937& rng, double p_occupied,
+                        UpdateRule rule = UpdateRule::kSet) {
   std::uniform_int_distribution<int> coord(32700, 32830);
   std::bernoulli_distribution occ(p_occupied);
-  ScanUpdate u;
+  std::uniform_int_distribution<std::uint32_t> weight(1, 6);
+  ScanUpdate u(rule);
   for (int i = 0; i < 20000; ++i) {
     const VoxelKey k{static_cast<std::uint16_t>(coord(rng)), static_cast<std::uint16_t>(coord(rng)),
                      static_cast<std::uint16_t>(coord(rng) / 8 + 28600)};
-    occ(rng) ? u.markOccupied(k) : u.markFree(k);
+    const std::uint32_t w = weight(rng);
+    occ(rng) ? u.markOccupied(k, w) : u.markFree(k, w);
   }
   return u;
+}
+
+/// The fully-free masks a map reports equal "known and at the lower bound", cell by cell.
+void expectFullyFreeMasksMatchValues(const OccupancyMap& map) {
+  std::size_t from_masks = 0;
+  map.forEachFullyFreeBlock([&](std::uint64_t block_key, const block::BlockMask& mask) {
+    for (int i = 0; i < block::kVoxels; ++i) {
+      if (!block::testBit(mask, i)) continue;
+      ++from_masks;
+      const auto v = map.logOdds(block::keyOf(block_key, i));
+      ASSERT_TRUE(v.has_value());
+      EXPECT_LE(*v, map.sensorModel().clampMin());
+    }
+  });
+  std::size_t from_values = 0;
+  map.forEachKnown([&](const VoxelKey&, float v) {
+    if (map.sensorModel().isFullyFree(v)) ++from_values;
+  });
+  EXPECT_EQ(from_masks, from_values);
+  EXPECT_GT(from_values, 0U);
 }
 
 TEST(SensorModel, DefaultsAreOctomapsLogOdds) {
@@ -62,6 +85,51 @@ TEST(GridMap, MatchesTheOctreeBackendOverManyUpdates) {
   EXPECT_EQ(diff.differing(), 0U);
   EXPECT_GT(diff.union_cells, 100000U);
   EXPECT_EQ(grid.knownCells(), octree.knownCells());
+}
+
+TEST(OccupancyMaps, PerRayRuleIsTheSameOnBothBackendsAndSumsEveryRay) {
+  std::mt19937 rng(12);
+  GridMap grid(0.1, SensorModel{});
+  OctreeMap octree(0.1, SensorModel{});
+  for (int scan = 0; scan < 10; ++scan) {
+    const ScanUpdate u = randomUpdate(rng, scan % 3 == 0 ? 0.6 : 0.1, UpdateRule::kPerRay);
+    const ApplyStats a = grid.apply(u);
+    const ApplyStats b = octree.apply(u);
+    EXPECT_EQ(a.changed_cells, b.changed_cells);
+  }
+  EXPECT_EQ(diffMaps(grid, octree).differing(), 0U);
+  expectFullyFreeMasksMatchValues(grid);
+  expectFullyFreeMasksMatchValues(octree);
+
+  // One cell by hand: 2 hits and 3 misses in one scan move it by 2 l_occ + 3 l_free, once.
+  GridMap one(0.1, SensorModel{});
+  ScanUpdate u(UpdateRule::kPerRay);
+  const VoxelKey k{32768, 32768, 32768};
+  u.markOccupied(k, 2);
+  u.markFree(k, 3);
+  one.apply(u);
+  const SensorModel m;
+  EXPECT_EQ(*one.logOdds(k), static_cast<float>(2.0 * m.hit() + 3.0 * m.miss()));
+  for (int i = 0; i < 9; ++i) one.apply(u);  // +0.48 per scan
+  EXPECT_EQ(*one.logOdds(k), m.clampMax());  // clamped
+}
+
+TEST(OccupancyMaps, FullyFreeMasksFollowUpdatesSetsAndClears) {
+  std::mt19937 rng(4);
+  GridMap grid(0.1, SensorModel{});
+  OctreeMap octree(0.1, SensorModel{});
+  for (int scan = 0; scan < 8; ++scan) {
+    const ScanUpdate u = randomUpdate(rng, scan == 5 ? 0.5 : 0.05);
+    grid.apply(u);
+    octree.apply(u);
+  }
+  grid.setLogOdds(VoxelKey{32768, 32768, 28600 + 4090}, -2.0F);
+  octree.setLogOdds(VoxelKey{32768, 32768, 28600 + 4090}, -2.0F);
+  const VoxelKey lo{32720, 32720, 32690}, hi{32760, 32800, 32700};
+  grid.clearBox(lo, hi);
+  octree.clearBox(lo, hi);
+  expectFullyFreeMasksMatchValues(grid);
+  expectFullyFreeMasksMatchValues(octree);
 }
 
 TEST(GridMap, OneAndTwoThreadsGiveTheSameMap) {

@@ -17,8 +17,9 @@ TEST(ScanUpdate, OccupiedWinsOverFreeAndEachCellIsListedOnce) {
   sut.markOccupied(b);
   sut.markOccupied(c);
   std::map<std::uint64_t, bool> seen;
-  sut.forEachCell([&](const VoxelKey& k, bool occ) {
-    EXPECT_TRUE(seen.emplace(k.packed(), occ).second) << "listed twice";
+  sut.forEachCell([&](const VoxelKey& k, const CellHits& h) {
+    EXPECT_EQ(h.free + h.occupied, 1U) << "set rule: one hit or one miss";
+    EXPECT_TRUE(seen.emplace(k.packed(), h.occupied > 0).second) << "listed twice";
   });
   EXPECT_EQ(seen.size(), 3U);
   EXPECT_FALSE(seen.at(a.packed()));
@@ -28,31 +29,58 @@ TEST(ScanUpdate, OccupiedWinsOverFreeAndEachCellIsListedOnce) {
   EXPECT_EQ(sut.occupiedCount(), 2U);
 }
 
-TEST(ScanUpdate, MergeIsOrderIndependent) {
+TEST(ScanUpdate, PerRayCountsEveryRayWithItsWeight) {
+  ScanUpdate sut(UpdateRule::kPerRay);
+  const VoxelKey a{100, 200, 300}, b{101, 200, 300};
+  sut.markFree(a);
+  sut.markFree(a, 4);
+  sut.markFree(b, 2);
+  sut.markOccupied(b, 3);
+  std::map<std::uint64_t, std::pair<std::uint32_t, std::uint32_t>> seen;
+  sut.forEachCell([&](const VoxelKey& k, const CellHits& h) {
+    seen[k.packed()] = {h.free, h.occupied};
+  });
+  EXPECT_EQ(seen.at(a.packed()), std::make_pair(5U, 0U));
+  EXPECT_EQ(seen.at(b.packed()), std::make_pair(2U, 3U));  // both counts kept
+}
+
+class ScanUpdateMerge : public ::testing::TestWithParam<UpdateRule> {};
+
+TEST_P(ScanUpdateMerge, IsOrderIndependent) {
   std::mt19937 rng(5);
   std::uniform_int_distribution<int> coord(30000, 30040);
   std::bernoulli_distribution occ(0.2);
-  ScanUpdate parts[3];
-  ScanUpdate all;
+  std::uniform_int_distribution<std::uint32_t> weight(1, 9);
+  const UpdateRule rule = GetParam();
+  ScanUpdate parts[3] = {ScanUpdate(rule), ScanUpdate(rule), ScanUpdate(rule)};
+  ScanUpdate all(rule);
   for (int i = 0; i < 5000; ++i) {
     const VoxelKey k{static_cast<std::uint16_t>(coord(rng)), static_cast<std::uint16_t>(coord(rng)),
                      static_cast<std::uint16_t>(coord(rng))};
     const bool o = occ(rng);
+    const std::uint32_t w = weight(rng);
     ScanUpdate& part = parts[i % 3];
-    o ? part.markOccupied(k) : part.markFree(k);
-    o ? all.markOccupied(k) : all.markFree(k);
+    o ? part.markOccupied(k, w) : part.markFree(k, w);
+    o ? all.markOccupied(k, w) : all.markFree(k, w);
   }
-  ScanUpdate forward, backward;
+  ScanUpdate forward(rule), backward(rule);
   for (int i = 0; i < 3; ++i) forward.merge(parts[i]);
   for (int i = 2; i >= 0; --i) backward.merge(parts[i]);
   auto collect = [](const ScanUpdate& u) {
-    std::map<std::uint64_t, bool> m;
-    u.forEachCell([&](const VoxelKey& k, bool o) { m[k.packed()] = o; });
+    std::map<std::uint64_t, std::pair<std::uint32_t, std::uint32_t>> m;
+    u.forEachCell([&](const VoxelKey& k, const CellHits& h) {
+      m[k.packed()] = {h.free, h.occupied};
+    });
     return m;
   };
   EXPECT_EQ(collect(forward), collect(all));
   EXPECT_EQ(collect(backward), collect(all));
+  EXPECT_GT(collect(all).size(), 4000U);
 }
+
+INSTANTIATE_TEST_SUITE_P(Rules, ScanUpdateMerge,
+                         ::testing::Values(UpdateRule::kSet, UpdateRule::kPerRay),
+                         [](const auto& info) { return std::string(ruleName(info.param)); });
 
 TEST(BlockLayout, KeyOfInvertsBlockAndIndex) {
   for (const VoxelKey k :

@@ -34,7 +34,7 @@ bool waitFor(const std::function<bool()>& condition) {
 /// The map a plain offline integration of the same scans builds.
 std::unique_ptr<GridMap> offlineMap(const std::vector<RawScan>& raws, double max_range) {
   auto map = std::make_unique<GridMap>(0.2, SensorModel{});
-  RaycastIntegrator integrator({.max_range_m = max_range});
+  Integrator integrator({.max_range_m = max_range});
   for (const RawScan& raw : raws) {
     const Scan scan = *validateScan(raw, ScanLimits{});
     integrator.integrate(*map, scan.pointsWorld(), scan.originWorld());

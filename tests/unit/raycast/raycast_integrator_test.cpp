@@ -1,4 +1,4 @@
-#include "densemap/raycast/raycast_integrator.hpp"
+#include "densemap/raycast/integrator.hpp"
 
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
@@ -25,7 +25,7 @@ TEST_P(RaycastMatchesOctomap, CellForCellAfterEveryScanOnBothBackends) {
   OctreeMap oracle(c.resolution, SensorModel{});
   GridMap grid(c.resolution, SensorModel{});
   OctreeMap octree(c.resolution, SensorModel{});
-  RaycastIntegrator sut({.max_range_m = c.max_range});
+  Integrator sut({.max_range_m = c.max_range});
   tbb::task_arena arena(c.threads);
   test::RandomRays origins(c.resolution, 1.0, 17);
   for (int scan = 0; scan < 8; ++scan) {
@@ -64,9 +64,9 @@ INSTANTIATE_TEST_SUITE_P(ResolutionsRangesThreads, RaycastMatchesOctomap,
                                   "_threads" + std::to_string(c.threads);
                          });
 
-TEST(RaycastIntegrator, OneAndTwoThreadsGiveTheSameMapAndCounts) {
+TEST(Integrator, OneAndTwoThreadsGiveTheSameMapAndCounts) {
   GridMap one(0.1, SensorModel{}), two(0.1, SensorModel{});
-  RaycastIntegrator a({.max_range_m = 5.0}), b({.max_range_m = 5.0});
+  Integrator a({.max_range_m = 5.0}), b({.max_range_m = 5.0});
   tbb::task_arena arena1(1), arena2(2);
   for (int scan = 0; scan < 4; ++scan) {
     const Point3f origin(0.3F * scan, 0.1F, 0.05F);
@@ -81,9 +81,9 @@ TEST(RaycastIntegrator, OneAndTwoThreadsGiveTheSameMapAndCounts) {
   EXPECT_EQ(diffMaps(one, two).differing(), 0U);
 }
 
-TEST(RaycastIntegrator, NonFinitePointsAreIgnoredNotCrashing) {
+TEST(Integrator, NonFinitePointsAreIgnoredNotCrashing) {
   GridMap map(0.1, SensorModel{});
-  RaycastIntegrator sut({.max_range_m = 10.0});
+  Integrator sut({.max_range_m = 10.0});
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const float inf = std::numeric_limits<float>::infinity();
   const PointCloud cloud{{nan, 0, 0}, {inf, 1, 1}, {1, -inf, 0}, {1, 0, 0}};

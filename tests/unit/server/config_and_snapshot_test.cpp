@@ -4,7 +4,7 @@
 
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_diff.hpp"
-#include "densemap/raycast/raycast_integrator.hpp"
+#include "densemap/raycast/integrator.hpp"
 #include "densemap/test_support/data_dir.hpp"
 #include "densemap/test_support/random_rays.hpp"
 #include "server_config.hpp"
@@ -54,7 +54,7 @@ TEST(ServerConfig, ErrorsNameTheFileTheLineAndTheReason) {
 TEST(Snapshot, SaveThenLoadIsTheSameMapAndVersionOnBothBackends) {
   test::TempDir dir;
   GridMap map(0.1, SensorModel{});
-  RaycastIntegrator integrator({.max_range_m = 4.0});
+  Integrator integrator({.max_range_m = 4.0});
   for (int s = 0; s < 3; ++s) {
     const Point3f o(0.3F * s, 0, 0);
     integrator.integrate(map, test::adversarialScan(0.1, o, 4000, 4.0, s), o);

@@ -19,6 +19,8 @@ class VoxelGrid {
   explicit VoxelGrid(double resolution_m);
 
   [[nodiscard]] double resolution() const { return resolution_m_; }
+  /// 1 / resolution as OctoMap stores it: coordToKey floors coordinate * this.
+  [[nodiscard]] double resolutionFactor() const { return resolution_factor_; }
   /// Half the extent of the addressable cube per axis, in metres.
   [[nodiscard]] double halfExtent() const { return kMaxKey * resolution_m_; }
 

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <array>
 #include <cstdint>
 
 #include "densemap/geometry/voxel_key.hpp"
@@ -12,6 +13,17 @@ inline constexpr int kShift = 3;
 inline constexpr int kEdge = 1 << kShift;
 inline constexpr int kVoxels = kEdge * kEdge * kEdge;
 inline constexpr int kMaskWords = kVoxels / 64;
+
+/// One bit per voxel of a block, indexed by indexOf().
+using BlockMask = std::array<std::uint64_t, kMaskWords>;
+
+inline void setBit(BlockMask& m, int index) { m[index >> 6] |= std::uint64_t{1} << (index & 63); }
+inline void clearBit(BlockMask& m, int index) {
+  m[index >> 6] &= ~(std::uint64_t{1} << (index & 63));
+}
+[[nodiscard]] inline bool testBit(const BlockMask& m, int index) {
+  return ((m[index >> 6] >> (index & 63)) & 1U) != 0;
+}
 
 [[nodiscard]] inline std::uint64_t blockOf(const VoxelKey& k) {
   return (std::uint64_t{static_cast<std::uint16_t>(k.x >> kShift)}) |

@@ -22,6 +22,8 @@ class GridMap final : public OccupancyMap {
   [[nodiscard]] std::optional<float> logOdds(const VoxelKey& key) const override;
   void forEachKnown(const std::function<void(const VoxelKey&, float)>& f) const override;
   void setLogOdds(const VoxelKey& key, float log_odds) override;
+  void forEachFullyFreeBlock(
+      const std::function<void(std::uint64_t, const block::BlockMask&)>& f) const override;
   [[nodiscard]] std::size_t knownCells() const override { return known_cells_; }
   [[nodiscard]] std::size_t memoryBytes() const override;
   void clear() override;
@@ -29,9 +31,14 @@ class GridMap final : public OccupancyMap {
   [[nodiscard]] std::size_t blockCount() const { return blocks_.size(); }
 
  private:
-  VoxelBlock& blockFor(std::uint64_t block_key);
+  struct Slot {
+    VoxelBlock voxels;
+    block::BlockMask fully_free{};  // known cells at the lower clamping bound
+  };
+  Slot& slotFor(std::uint64_t block_key);
+  void store(Slot& slot, int index, float log_odds) const;
 
-  std::unordered_map<std::uint64_t, std::unique_ptr<VoxelBlock>> blocks_;
+  std::unordered_map<std::uint64_t, std::unique_ptr<Slot>> blocks_;
   std::size_t known_cells_ = 0;
 };
 

@@ -49,7 +49,7 @@ class OccupancyMap {
   [[nodiscard]] double resolution() const { return grid_.resolution(); }
   [[nodiscard]] const SensorModel& sensorModel() const { return model_; }
 
-  /// Applies one scan: every cell of `update` gets exactly one hit or miss. When `changes` is
+  /// Applies one scan under the update's rule (UpdateRule). When `changes` is
   /// given, the cells whose value changed (or became known) are appended to it.
   virtual ApplyStats apply(const ScanUpdate& update, CellChanges* changes = nullptr) = 0;
 
@@ -67,6 +67,12 @@ class OccupancyMap {
 
   /// Sets a cell's log-odds directly (loading snapshots, building maps in tests).
   virtual void setLogOdds(const VoxelKey& key, float log_odds) = 0;
+
+  /// Calls f(block_key, mask) for every block with cells at the lower clamping bound (a free
+  /// update cannot change them): the input of the culling region. Blocks may come with an
+  /// empty mask.
+  virtual void forEachFullyFreeBlock(
+      const std::function<void(std::uint64_t, const block::BlockMask&)>& f) const = 0;
 
   [[nodiscard]] virtual std::size_t knownCells() const = 0;
   /// Bytes held by the map's storage (approximate for the octree: OctoMap's own estimate).

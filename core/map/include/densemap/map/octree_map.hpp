@@ -2,6 +2,8 @@
 
 #include <octomap/OcTree.h>
 
+#include <unordered_map>
+
 #include "densemap/geometry/point_cloud.hpp"
 #include "densemap/map/occupancy_map.hpp"
 
@@ -22,9 +24,12 @@ class OctreeMap final : public OccupancyMap {
   [[nodiscard]] std::optional<float> logOdds(const VoxelKey& key) const override;
   void forEachKnown(const std::function<void(const VoxelKey&, float)>& f) const override;
   void setLogOdds(const VoxelKey& key, float log_odds) override;
+  /// After insertWithOctomap the first call rebuilds the masks (not concurrently with others).
+  void forEachFullyFreeBlock(
+      const std::function<void(std::uint64_t, const block::BlockMask&)>& f) const override;
   [[nodiscard]] std::size_t knownCells() const override;
-  [[nodiscard]] std::size_t memoryBytes() const override { return tree_.memoryUsage(); }
-  void clear() override { tree_.clear(); }
+  [[nodiscard]] std::size_t memoryBytes() const override;
+  void clear() override;
 
   [[nodiscard]] const octomap::OcTree& tree() const { return tree_; }
 
@@ -34,7 +39,15 @@ class OctreeMap final : public OccupancyMap {
                          double max_range_m);
 
  private:
+  /// Keeps the fully-free masks in step with a cell's new value.
+  void noteValue(const VoxelKey& key, float log_odds);
+
   octomap::OcTree tree_;
+  // Cells at the lower clamping bound, per 8^3 block, maintained beside the tree (searching
+  // the tree for them every scan would cost more than the culling saves).
+  // insertWithOctomap bypasses apply(): the masks are rebuilt from the tree on next use.
+  mutable std::unordered_map<std::uint64_t, block::BlockMask> fully_free_;
+  mutable bool fully_free_stale_ = false;
 };
 
 /// Configures an OcTree's sensor model to `model` (shared by OctreeMap and the oracle).

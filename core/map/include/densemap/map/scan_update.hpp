@@ -3,73 +3,112 @@
 #include <array>
 #include <bit>
 #include <cstdint>
+#include <memory>
 #include <unordered_map>
 
 #include "densemap/map/block_layout.hpp"
+#include "densemap/map/update_rule.hpp"
 
 namespace densemap {
 
-/// The candidate cells of one scan under OctoMap's rule (DESIGN.md, exactness contract): a set
-/// of free cells and a set of occupied cells; a cell in both is occupied. Stored as bit masks
-/// per 8^3 block so that marking is cheap and merging is a bitwise OR, which makes the result
-/// independent of the order in which rays (or threads) marked it.
+/// The candidate cells of one scan, per 8^3 block: bit masks of the cells crossed (free) and
+/// ended in (occupied), and under UpdateRule::kPerRay also how many rays did each. Merging is
+/// a bitwise OR plus integer sums, so the result is independent of the order in which rays (or
+/// threads) marked it.
 /// Single-writer: each thread fills its own ScanUpdate, then they are merged.
 class ScanUpdate {
  public:
-  struct Masks {
-    std::array<std::uint64_t, block::kMaskWords> free{};
-    std::array<std::uint64_t, block::kMaskWords> occupied{};
+  struct Counts {
+    std::array<std::uint32_t, block::kVoxels> free{};
+    std::array<std::uint32_t, block::kVoxels> occupied{};
+  };
+  struct Block {
+    block::BlockMask free{};
+    block::BlockMask occupied{};
+    std::unique_ptr<Counts> counts;  // kPerRay only
   };
 
-  void markFree(const VoxelKey& k) { set(masksFor(block::blockOf(k)).free, block::indexOf(k)); }
-  void markOccupied(const VoxelKey& k) {
-    set(masksFor(block::blockOf(k)).occupied, block::indexOf(k));
+  explicit ScanUpdate(UpdateRule rule = UpdateRule::kSet) : rule_(rule) {}
+
+  [[nodiscard]] UpdateRule rule() const { return rule_; }
+  /// Empties the update and sets the rule for the next scan.
+  void reset(UpdateRule rule) {
+    clear();
+    rule_ = rule;
   }
 
-  /// Bitwise OR of another update into this one.
+  /// `weight` rays crossed / ended in the cell (the weight only counts under kPerRay).
+  void markFree(const VoxelKey& k, std::uint32_t weight = 1) {
+    Block& b = blockFor(block::blockOf(k));
+    const int i = block::indexOf(k);
+    block::setBit(b.free, i);
+    if (b.counts) b.counts->free[i] += weight;
+  }
+  void markOccupied(const VoxelKey& k, std::uint32_t weight = 1) {
+    Block& b = blockFor(block::blockOf(k));
+    const int i = block::indexOf(k);
+    block::setBit(b.occupied, i);
+    if (b.counts) b.counts->occupied[i] += weight;
+  }
+  [[nodiscard]] bool isOccupied(const VoxelKey& k) const {
+    const auto it = blocks_.find(block::blockOf(k));
+    return it != blocks_.end() && block::testBit(it->second.occupied, block::indexOf(k));
+  }
+
+  /// Adds another update (same rule) into this one.
   void merge(const ScanUpdate& other);
   void clear();
   void reserveBlocks(std::size_t n) { blocks_.reserve(n); }
 
   [[nodiscard]] bool empty() const { return blocks_.empty(); }
-  [[nodiscard]] const std::unordered_map<std::uint64_t, Masks>& blocks() const { return blocks_; }
-  /// Cells to be updated (free and occupied sets disjoint after "occupied wins").
+  [[nodiscard]] const std::unordered_map<std::uint64_t, Block>& blocks() const { return blocks_; }
+  /// Cells to be updated as free (crossed, not ended in) and as occupied.
   [[nodiscard]] std::size_t freeCount() const;
   [[nodiscard]] std::size_t occupiedCount() const;
 
-  /// Calls f(key, occupied) once per cell of the update, occupied winning over free.
+  /// Calls f(key, CellHits) once per cell of the update. Under kSet a cell ended in is occupied
+  /// only (occupied wins); under kPerRay both counts are given.
   template <class F>
   void forEachCell(F&& f) const {
-    for (const auto& [block_key, m] : blocks_) forEachCellInBlock(block_key, m, f);
+    for (const auto& [block_key, b] : blocks_) forEachCellInBlock(block_key, b, f);
   }
   template <class F>
-  static void forEachCellInBlock(std::uint64_t block_key, const Masks& m, F&& f) {
+  static void forEachCellInBlock(std::uint64_t block_key, const Block& b, F&& f) {
     for (int w = 0; w < block::kMaskWords; ++w) {
-      std::uint64_t any = m.free[w] | m.occupied[w];
+      std::uint64_t any = b.free[w] | b.occupied[w];
       while (any != 0) {
         const int bit = std::countr_zero(any);
         any &= any - 1;
         const int index = w * 64 + bit;
-        f(block::keyOf(block_key, index), ((m.occupied[w] >> bit) & 1U) != 0);
+        CellHits hits;
+        if (b.counts) {
+          hits = {b.counts->free[index], b.counts->occupied[index]};
+        } else if (((b.occupied[w] >> bit) & 1U) != 0) {
+          hits.occupied = 1;
+        } else {
+          hits.free = 1;
+        }
+        f(block::keyOf(block_key, index), hits);
       }
     }
   }
 
  private:
-  static void set(std::array<std::uint64_t, block::kMaskWords>& words, int index) {
-    words[index >> 6] |= std::uint64_t{1} << (index & 63);
-  }
-  Masks& masksFor(std::uint64_t block_key) {
+  Block& blockFor(std::uint64_t block_key) {
     // Consecutive cells of a ray mostly share a block: remember the last one.
     if (cached_ != nullptr && cached_key_ == block_key) return *cached_;
     cached_key_ = block_key;
     cached_ = &blocks_[block_key];  // node-based map: the pointer survives rehashing
+    if (rule_ == UpdateRule::kPerRay && !cached_->counts) {
+      cached_->counts = std::make_unique<Counts>();
+    }
     return *cached_;
   }
 
-  std::unordered_map<std::uint64_t, Masks> blocks_;
+  UpdateRule rule_;
+  std::unordered_map<std::uint64_t, Block> blocks_;
   std::uint64_t cached_key_ = 0;
-  Masks* cached_ = nullptr;
+  Block* cached_ = nullptr;
 };
 
 }  // namespace densemap

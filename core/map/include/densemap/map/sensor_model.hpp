@@ -48,11 +48,18 @@ class SensorModel {
   /// The value after one update, as `OccupancyOcTreeBase::updateNodeLogOdds` computes it:
   /// float addition, then clamping. An unknown cell starts at 0.
   [[nodiscard]] float update(float old_log_odds, bool occupied) const {
-    float value = old_log_odds + (occupied ? hit_ : miss_);
+    return updateBy(old_log_odds, occupied ? hit_ : miss_);
+  }
+  /// `old + delta` in float, then clamped (`OccupancyOcTreeBase::updateNode(key, float)`).
+  [[nodiscard]] float updateBy(float old_log_odds, float delta) const {
+    float value = old_log_odds + delta;
     if (value < clamp_min_) value = clamp_min_;
     if (value > clamp_max_) value = clamp_max_;
     return value;
   }
+  /// At the lower clamping bound: a free update cannot change the cell (the culling region's
+  /// "fully free").
+  [[nodiscard]] bool isFullyFree(float log_odds) const { return log_odds <= clamp_min_; }
 
   /// OctoMap's occupancy threshold (probability 0.5).
   [[nodiscard]] static bool isOccupied(float log_odds) { return log_odds > 0.0F; }

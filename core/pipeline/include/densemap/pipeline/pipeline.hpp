@@ -15,7 +15,7 @@
 #include "densemap/pipeline/map_view.hpp"
 #include "densemap/pipeline/raw_scan.hpp"
 #include "densemap/pipeline/scan_validator.hpp"
-#include "densemap/raycast/raycast_integrator.hpp"
+#include "densemap/raycast/integrator.hpp"
 
 namespace densemap {
 
@@ -24,6 +24,8 @@ struct PipelineOptions {
   double resolution_m = 0.2;
   SensorProbabilities sensor;
   double max_range_m = -1.0;  // < 0: unlimited
+  IntegrationMethod method = IntegrationMethod::kSuperRayCulling;
+  UpdateRule rule = UpdateRule::kSet;
   int threads = 2;            // size of the task arena the pipeline owns
   std::size_t queue_depth = 2;
   ScanLimits limits;
@@ -104,7 +106,7 @@ class Pipeline {
 
   PipelineOptions options_;
   std::unique_ptr<OccupancyMap> map_;
-  RaycastIntegrator integrator_;
+  Integrator integrator_;
   tbb::task_arena arena_;
   std::unique_ptr<Graph> graph_;
   LatestWinsQueue<RawScan> queue_;

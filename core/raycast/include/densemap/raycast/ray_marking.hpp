@@ -2,47 +2,86 @@
 
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 
 #include "densemap/geometry/ray_traversal.hpp"
 #include "densemap/map/scan_update.hpp"
 
 namespace densemap {
 
-/// Marks one measurement into a scan's update set exactly as OctoMap 1.9.7's
-/// `OccupancyOcTreeBase::computeUpdate` does (no bounding box): cells crossed on the way are
-/// free candidates, the end cell an occupied candidate; a ray longer than `max_range_m` (< 0:
-/// unlimited) is cut there with float arithmetic and its end is not occupied.
-/// Returns the number of cells visited (marked). Thread-safe for distinct `update`s.
-inline std::size_t markRay(const VoxelGrid& grid, const Point3f& origin, const Point3f& end,
-                           double max_range_m, ScanUpdate& update) {
-  std::size_t visits = 0;
-  auto mark_free = [&](const VoxelKey& k) {
-    update.markFree(k);
-    ++visits;
-  };
-  const float dx = end.x() - origin.x();
-  const float dy = end.y() - origin.y();
-  const float dz = end.z() - origin.z();
+/// One ray to mark — a measurement, or a super ray standing for `weight` measurements whose
+/// traversals are identical: where it ends (after the max-range cut), that end's voxel, and
+/// whether the end voxel is occupied (false for rays cut at max range).
+struct RayEnd {
+  Point3f end;
+  VoxelKey key;  // grid.pointToKey(end) when key_valid
+  std::uint32_t weight = 1;
+  bool key_valid = false;  // end inside the addressable range
+  bool occupied = true;
+};
+
+/// The ray OctoMap 1.9.7's `OccupancyOcTreeBase::computeUpdate` casts for one point (no
+/// bounding box): to the point itself, occupied; or, when longer than `max_range_m`
+/// (< 0: unlimited), cut at that range with OctoMap's float arithmetic and not occupied.
+[[nodiscard]] inline RayEnd rayEndFor(const VoxelGrid& grid, const Point3f& origin,
+                                      const Point3f& point, double max_range_m) {
+  RayEnd ray;
+  const float dx = point.x() - origin.x();
+  const float dy = point.y() - origin.y();
+  const float dz = point.z() - origin.z();
   const double norm = std::sqrt(static_cast<double>(dx * dx + dy * dy + dz * dz));
   if (max_range_m < 0.0 || norm <= max_range_m) {
-    traverseRay(grid, origin, end, mark_free);
-    if (const auto key = grid.pointToKey(end)) {
-      update.markOccupied(*key);
-      ++visits;
+    ray.end = point;
+  } else {
+    // Vector3::normalized(): divide by the float-rounded double norm, then scale by (float)range.
+    Point3f direction(dx, dy, dz);
+    if (norm > 0.0) {
+      const float len = static_cast<float>(norm);
+      direction = Point3f(dx / len, dy / len, dz / len);
     }
-    return visits;
+    const float range = static_cast<float>(max_range_m);
+    ray.end = Point3f(origin.x() + direction.x() * range, origin.y() + direction.y() * range,
+                      origin.z() + direction.z() * range);
+    ray.occupied = false;
   }
-  // Vector3::normalized(): divide by the float-rounded double norm, then scale by (float)range.
-  Point3f direction(dx, dy, dz);
-  if (norm > 0.0) {
-    const float len = static_cast<float>(norm);
-    direction = Point3f(dx / len, dy / len, dz / len);
+  if (const auto key = grid.pointToKey(ray.end)) {
+    ray.key = *key;
+    ray.key_valid = true;
   }
-  const float range = static_cast<float>(max_range_m);
-  const Point3f cut_end(origin.x() + direction.x() * range, origin.y() + direction.y() * range,
-                        origin.z() + direction.z() * range);
-  traverseRay(grid, origin, cut_end, mark_free);
-  return visits;
+  return ray;
+}
+
+/// Cells marked, and cells skipped inside a culling region, while marking rays.
+struct MarkCounts {
+  std::size_t visits = 0;
+  std::size_t culled = 0;
+};
+
+/// Marks one ray into a scan's update set as OctoMap's computeUpdate does — the cells crossed
+/// (traverseRay) free, the end voxel occupied when the ray is — each `weight` times.
+/// With a culling region, crossed cells inside it are skipped: they form a prefix of the
+/// traversal (the region is closed toward the sensor's cell along each axis, and a traversal
+/// moves monotonically away from that cell), so once a cell is outside no later one is inside.
+/// `Region` needs `bool contains(const VoxelKey&) const`; pass nullptr for none.
+template <class Region>
+void markRay(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray, const Region* region,
+             ScanUpdate& update, MarkCounts& counts) {
+  bool in_region = region != nullptr;
+  traverseRay(grid, origin, ray.end, [&](const VoxelKey& k) {
+    if (in_region) {
+      if (region->contains(k)) {
+        ++counts.culled;
+        return;
+      }
+      in_region = false;
+    }
+    update.markFree(k, ray.weight);
+    ++counts.visits;
+  });
+  if (ray.occupied && ray.key_valid) {
+    update.markOccupied(ray.key, ray.weight);
+    ++counts.visits;
+  }
 }
 
 }  // namespace densemap

@@ -1,0 +1,75 @@
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "densemap/map/occupancy_map.hpp"
+
+namespace densemap {
+
+/// An axis-aligned box of voxel keys, bounds included.
+struct KeyBox {
+  VoxelKey min;
+  VoxelKey max;
+};
+
+/// The culling region of one scan (dissertation Sec. 2.3.5, Alg. 3): voxels from which every
+/// traversal back to the sensor's voxel O crosses only fully-free voxels (at the lower clamping
+/// bound), so free updates there cannot change the map.
+///
+/// A voxel C is in the region iff it is fully free, is not ended in by a ray of this scan (so
+/// the region also stays exact under UpdateRule::kPerRay, where such a voxel's free count
+/// matters), and each "test cell" — C moved one step toward O along an axis where C differs
+/// from O — is in the region; O itself needs only to be fully free. Alg. 3 grows this set by a
+/// breadth-first search from O; here the same fixed point is computed by one sweep outward from
+/// O over a dense bit grid of the scan's box, a row of voxels along x at a time (the x-test
+/// becomes "the run of bits containing O's column"), which costs a few word operations per row.
+///
+/// Immutable after build(); `contains` is thread-safe.
+class CullingRegion {
+ public:
+  /// Builds the region inside `box` (which must contain `origin`; voxels outside are never in
+  /// the region). `hit` lists the voxels rays of this scan end in.
+  void build(const OccupancyMap& map, const VoxelKey& origin, const KeyBox& box,
+             std::span<const VoxelKey> hit);
+
+  [[nodiscard]] bool contains(const VoxelKey& k) const {
+    const unsigned x = static_cast<unsigned>(k.x) - min_.x;
+    const unsigned y = static_cast<unsigned>(k.y) - min_.y;
+    const unsigned z = static_cast<unsigned>(k.z) - min_.z;
+    if (x >= nx_ || y >= ny_ || z >= nz_) return false;
+    const std::size_t row = (static_cast<std::size_t>(z) * ny_ + y) * words_per_row_;
+    return ((bits_[row + (x >> 6)] >> (x & 63)) & 1U) != 0;
+  }
+
+  /// Voxels in the region.
+  [[nodiscard]] std::size_t size() const { return size_; }
+  /// Voxels of the box the region was built in.
+  [[nodiscard]] std::size_t boxVoxels() const {
+    return static_cast<std::size_t>(nx_) * ny_ * nz_;
+  }
+
+ private:
+  std::uint64_t* row(unsigned y, unsigned z) {
+    return bits_.data() + (static_cast<std::size_t>(z) * ny_ + y) * words_per_row_;
+  }
+  void loadFullyFree(const OccupancyMap& map);
+  /// Keeps the run of set bits of `r` that contains bit `x0` (none if it is clear).
+  void keepRunThrough(std::uint64_t* r, unsigned x0) const;
+
+  VoxelKey min_{};
+  unsigned nx_ = 0, ny_ = 0, nz_ = 0;
+  unsigned words_per_row_ = 0;
+  std::vector<std::uint64_t> bits_;
+  std::size_t size_ = 0;
+};
+
+/// The box the culling region is built in for a scan: the bounding box of the sensor's voxel
+/// and the rays' end voxels (every traversed voxel lies inside it), shrunk around the sensor
+/// until it holds at most `max_voxels` voxels.
+[[nodiscard]] KeyBox cullingBox(const VoxelKey& origin, const KeyBox& rays_box,
+                                std::size_t max_voxels);
+
+}  // namespace densemap

@@ -1,0 +1,90 @@
+#pragma once
+
+#include <tbb/enumerable_thread_specific.h>
+
+#include <cstddef>
+#include <string_view>
+#include <vector>
+
+#include "densemap/geometry/error.hpp"
+#include "densemap/geometry/point_cloud.hpp"
+#include "densemap/map/occupancy_map.hpp"
+#include "densemap/raycast/culling_region.hpp"
+#include "densemap/raycast/ray_marking.hpp"
+#include "densemap/raycast/super_rays.hpp"
+
+namespace densemap {
+
+/// How a scan's rays reach the map. All methods give the same map (DESIGN.md, exactness
+/// contract), under either UpdateRule.
+/// - kRaycast: every ray traversed on its own.
+/// - kSuperRay: rays grouped into super rays first (SuperRayBuilder).
+/// - kCulling: traversals skip the scan's culling region (CullingRegion).
+/// - kSuperRayCulling: both (the default).
+enum class IntegrationMethod { kRaycast, kSuperRay, kCulling, kSuperRayCulling };
+
+[[nodiscard]] std::string_view methodName(IntegrationMethod method);
+/// "raycast", "superray", "culling" or "superray+culling".
+[[nodiscard]] Expected<IntegrationMethod> parseIntegrationMethod(std::string_view name);
+
+struct IntegratorOptions {
+  IntegrationMethod method = IntegrationMethod::kSuperRayCulling;
+  UpdateRule rule = UpdateRule::kSet;
+  /// Rays longer than this are cut and their end is not occupied; < 0 means unlimited
+  /// (OctoMap's convention).
+  double max_range_m = -1.0;
+  /// End voxels with fewer rays are not grouped (the dissertation's k, Sec. 2.4.3).
+  std::size_t superray_min_points = 20;
+  /// The culling region's box is shrunk around the sensor to at most this many voxels
+  /// (one bit each: 2^27 voxels = 16 MiB).
+  std::size_t culling_max_voxels = std::size_t{1} << 27;
+};
+
+/// What integrating one scan did; the benchmark's per-scan figures.
+struct ScanStats {
+  std::size_t points = 0;
+  std::size_t rays = 0;      // rays traversed (super rays count once)
+  std::size_t super_rays = 0;  // of which stand for more than one point
+  std::size_t visits = 0;    // cells marked while traversing rays (with repeats)
+  std::size_t culled = 0;    // traversal steps skipped inside the culling region
+  std::size_t region_voxels = 0;  // size of the culling region
+  std::size_t updated = 0;   // distinct cells updated
+  std::size_t changed = 0;   // cells whose log-odds changed or that became known
+};
+
+/// Integrates scans into a map: rays (optionally grouped into super rays) are marked into
+/// one update set per TBB worker (optionally skipping the culling region), merged (bitwise OR,
+/// integer sums), then applied once, so the result is the same for any thread count.
+/// Equal to OctoMap's `insertPointCloud(cloud, origin, max_range, false, false)` cell for cell
+/// under UpdateRule::kSet. Runs in the caller's task arena.
+/// Thread-safety: one integrate() at a time per integrator (it reuses per-worker buffers).
+class Integrator {
+ public:
+  explicit Integrator(const IntegratorOptions& options = {})
+      : options_(options), locals_([rule = options.rule] { return Local{ScanUpdate(rule), {}}; }) {}
+
+  [[nodiscard]] const IntegratorOptions& options() const { return options_; }
+
+  /// Integrates one scan; appends the cells it changed to `changes` when given.
+  ScanStats integrate(OccupancyMap& map, const PointCloud& points_world,
+                      const Point3f& origin_world, CellChanges* changes = nullptr);
+
+  /// Builds the scan's update set (against `map`'s current state) without applying it.
+  ScanStats computeUpdate(const OccupancyMap& map, const PointCloud& points_world,
+                          const Point3f& origin_world, ScanUpdate& update);
+
+ private:
+  struct Local {
+    ScanUpdate update;
+    MarkCounts counts;
+  };
+  IntegratorOptions options_;
+  std::vector<RayEnd> rays_;
+  std::vector<VoxelKey> hit_;
+  SuperRayBuilder super_rays_;
+  CullingRegion region_;
+  tbb::enumerable_thread_specific<Local> locals_;
+  ScanUpdate merged_;
+};
+
+}  // namespace densemap

@@ -1,0 +1,154 @@
+#include "densemap/raycast/culling_region.hpp"
+
+#include <algorithm>
+#include <bit>
+
+namespace densemap {
+
+KeyBox cullingBox(const VoxelKey& origin, const KeyBox& rays_box, std::size_t max_voxels) {
+  KeyBox box = rays_box;
+  for (int a = 0; a < 3; ++a) {
+    box.min[a] = std::min(box.min[a], origin[a]);
+    box.max[a] = std::max(box.max[a], origin[a]);
+  }
+  const auto voxels = [](const KeyBox& b) {
+    std::size_t n = 1;
+    for (int a = 0; a < 3; ++a) n *= static_cast<std::size_t>(b.max[a] - b.min[a]) + 1;
+    return n;
+  };
+  if (voxels(box) <= max_voxels) return box;
+  // Largest half-width h (binary search) such that the box clipped to origin +- h fits.
+  const auto clipped = [&](unsigned h) {
+    KeyBox c = box;
+    for (int a = 0; a < 3; ++a) {
+      c.min[a] = static_cast<std::uint16_t>(std::max<int>(c.min[a], origin[a] - static_cast<int>(h)));
+      c.max[a] = static_cast<std::uint16_t>(std::min<int>(c.max[a], origin[a] + static_cast<int>(h)));
+    }
+    return c;
+  };
+  unsigned lo = 0, hi = 65535;
+  while (lo < hi) {
+    const unsigned mid = (lo + hi + 1) / 2;
+    if (voxels(clipped(mid)) <= max_voxels) {
+      lo = mid;
+    } else {
+      hi = mid - 1;
+    }
+  }
+  return clipped(lo);
+}
+
+void CullingRegion::loadFullyFree(const OccupancyMap& map) {
+  const std::uint64_t bx0 = min_.x >> block::kShift, bx1 = (min_.x + nx_ - 1) >> block::kShift;
+  const std::uint64_t by0 = min_.y >> block::kShift, by1 = (min_.y + ny_ - 1) >> block::kShift;
+  const std::uint64_t bz0 = min_.z >> block::kShift, bz1 = (min_.z + nz_ - 1) >> block::kShift;
+  map.forEachFullyFreeBlock([&](std::uint64_t block_key, const block::BlockMask& mask) {
+    const std::uint64_t bx = block_key & 0x1fff, by = (block_key >> 13) & 0x1fff,
+                        bz = (block_key >> 26) & 0x1fff;
+    if (bx < bx0 || bx > bx1 || by < by0 || by > by1 || bz < bz0 || bz > bz1) return;
+    // Mask word z holds the block's 8x8 voxels of layer z, byte y the row along x.
+    const int x0 = static_cast<int>(bx << block::kShift) - min_.x;
+    for (int z = 0; z < block::kEdge; ++z) {
+      const int gz = static_cast<int>(bz << block::kShift) + z - min_.z;
+      if (gz < 0 || gz >= static_cast<int>(nz_) || mask[z] == 0) continue;
+      for (int y = 0; y < block::kEdge; ++y) {
+        const int gy = static_cast<int>(by << block::kShift) + y - min_.y;
+        if (gy < 0 || gy >= static_cast<int>(ny_)) continue;
+        std::uint64_t bits8 = (mask[z] >> (8 * y)) & 0xffU;
+        if (bits8 == 0) continue;
+        std::uint64_t* r = row(static_cast<unsigned>(gy), static_cast<unsigned>(gz));
+        for (int x = 0; x < block::kEdge; ++x) {
+          const int gx = x0 + x;
+          if (((bits8 >> x) & 1U) == 0 || gx < 0 || gx >= static_cast<int>(nx_)) continue;
+          r[gx >> 6] |= std::uint64_t{1} << (gx & 63);
+        }
+      }
+    }
+  });
+}
+
+void CullingRegion::keepRunThrough(std::uint64_t* r, unsigned x0) const {
+  const unsigned w0 = x0 >> 6, b0 = x0 & 63;
+  if (((r[w0] >> b0) & 1U) == 0) {
+    std::fill(r, r + words_per_row_, 0);
+    return;
+  }
+  // First clear bit above x0 (bits past nx_ are always clear, so one is found).
+  unsigned hi = nx_;
+  for (unsigned w = w0; w < words_per_row_; ++w) {
+    std::uint64_t zeros = ~r[w];
+    if (w == w0) zeros &= ~std::uint64_t{0} << b0;
+    if (zeros != 0) {
+      hi = w * 64 + static_cast<unsigned>(std::countr_zero(zeros));
+      break;
+    }
+  }
+  // Last clear bit below x0, or -1.
+  int lo = -1;
+  for (int w = static_cast<int>(w0); w >= 0; --w) {
+    std::uint64_t zeros = ~r[w];
+    if (w == static_cast<int>(w0)) zeros &= b0 == 63 ? ~std::uint64_t{0} : ((std::uint64_t{1} << (b0 + 1)) - 1);
+    if (zeros != 0) {
+      lo = w * 64 + 63 - std::countl_zero(zeros);
+      break;
+    }
+  }
+  // Keep bits lo+1 .. hi-1.
+  for (unsigned w = 0; w < words_per_row_; ++w) {
+    const int first = static_cast<int>(w * 64);
+    std::uint64_t keep = ~std::uint64_t{0};
+    const int from = lo + 1 - first;  // keep bits >= from
+    const int to = static_cast<int>(hi) - first;  // keep bits < to
+    if (from >= 64 || to <= 0) {
+      keep = 0;
+    } else {
+      if (from > 0) keep &= ~std::uint64_t{0} << from;
+      if (to < 64) keep &= (std::uint64_t{1} << to) - 1;
+    }
+    r[w] &= keep;
+  }
+}
+
+void CullingRegion::build(const OccupancyMap& map, const VoxelKey& origin, const KeyBox& box,
+                          std::span<const VoxelKey> hit) {
+  min_ = box.min;
+  nx_ = static_cast<unsigned>(box.max.x - box.min.x) + 1;
+  ny_ = static_cast<unsigned>(box.max.y - box.min.y) + 1;
+  nz_ = static_cast<unsigned>(box.max.z - box.min.z) + 1;
+  words_per_row_ = (nx_ + 63) / 64;
+  bits_.assign(static_cast<std::size_t>(ny_) * nz_ * words_per_row_, 0);
+  size_ = 0;
+
+  loadFullyFree(map);
+  for (const VoxelKey& k : hit) {
+    const unsigned x = static_cast<unsigned>(k.x) - min_.x;
+    const unsigned y = static_cast<unsigned>(k.y) - min_.y;
+    const unsigned z = static_cast<unsigned>(k.z) - min_.z;
+    if (x >= nx_ || y >= ny_ || z >= nz_) continue;
+    row(y, z)[x >> 6] &= ~(std::uint64_t{1} << (x & 63));
+  }
+
+  // Sweep outward from O: a row (y, z) needs the rows one step closer to O in y and in z.
+  const unsigned ox = origin.x - min_.x, oy = origin.y - min_.y, oz = origin.z - min_.z;
+  const auto outward = [](unsigned o, unsigned n, auto&& f) {
+    for (unsigned v = o; v < n; ++v) f(v, v == o ? v : v - 1);
+    for (unsigned v = o; v-- > 0;) f(v, v + 1);
+  };
+  outward(oz, nz_, [&](unsigned z, unsigned z_prev) {
+    outward(oy, ny_, [&](unsigned y, unsigned y_prev) {
+      std::uint64_t* r = row(y, z);
+      if (y != oy) {
+        const std::uint64_t* p = row(y_prev, z);
+        for (unsigned w = 0; w < words_per_row_; ++w) r[w] &= p[w];
+      }
+      if (z != oz) {
+        const std::uint64_t* p = row(y, z_prev);
+        for (unsigned w = 0; w < words_per_row_; ++w) r[w] &= p[w];
+      }
+      keepRunThrough(r, ox);
+      for (unsigned w = 0; w < words_per_row_; ++w) size_ += std::popcount(r[w]);
+    });
+  });
+}
+
+}  // namespace densemap

@@ -1,0 +1,108 @@
+#include "densemap/raycast/integrator.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <string>
+
+namespace densemap {
+
+std::string_view methodName(IntegrationMethod method) {
+  switch (method) {
+    case IntegrationMethod::kRaycast:
+      return "raycast";
+    case IntegrationMethod::kSuperRay:
+      return "superray";
+    case IntegrationMethod::kCulling:
+      return "culling";
+    case IntegrationMethod::kSuperRayCulling:
+      return "superray+culling";
+  }
+  return "unknown";
+}
+
+Expected<IntegrationMethod> parseIntegrationMethod(std::string_view name) {
+  for (const auto m : {IntegrationMethod::kRaycast, IntegrationMethod::kSuperRay,
+                       IntegrationMethod::kCulling, IntegrationMethod::kSuperRayCulling}) {
+    if (name == methodName(m)) return m;
+  }
+  return makeError("unknown integration method '" + std::string(name) +
+                   "' (expected raycast, superray, culling or superray+culling)");
+}
+
+ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& points_world,
+                                    const Point3f& origin_world, ScanUpdate& update) {
+  const VoxelGrid& grid = map.grid();
+  const bool grouping = options_.method == IntegrationMethod::kSuperRay ||
+                        options_.method == IntegrationMethod::kSuperRayCulling;
+  const bool culling = options_.method == IntegrationMethod::kCulling ||
+                       options_.method == IntegrationMethod::kSuperRayCulling;
+  ScanStats stats;
+  stats.points = points_world.size();
+
+  rays_.resize(points_world.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points_world.size(), 4096),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                        rays_[i] = rayEndFor(grid, origin_world, points_world[i],
+                                             options_.max_range_m);
+                      }
+                    });
+  if (grouping) {
+    const SuperRayStats s =
+        super_rays_.build(grid, origin_world, rays_, options_.superray_min_points);
+    stats.super_rays = s.super_rays;
+  }
+  stats.rays = rays_.size();
+
+  const CullingRegion* region = nullptr;
+  const auto origin_key = grid.pointToKey(origin_world);
+  if (culling && origin_key) {
+    KeyBox box{*origin_key, *origin_key};
+    hit_.clear();
+    for (const RayEnd& r : rays_) {
+      if (!r.key_valid) continue;
+      for (int a = 0; a < 3; ++a) {
+        box.min[a] = std::min(box.min[a], r.key[a]);
+        box.max[a] = std::max(box.max[a], r.key[a]);
+      }
+      if (r.occupied) hit_.push_back(r.key);
+    }
+    region_.build(map, *origin_key, cullingBox(*origin_key, box, options_.culling_max_voxels),
+                  hit_);
+    region = &region_;
+    stats.region_voxels = region_.size();
+  }
+
+  for (Local& local : locals_) {
+    local.update.reset(options_.rule);
+    local.counts = {};
+  }
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rays_.size(), 256),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      Local& local = locals_.local();
+                      for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                        markRay(grid, origin_world, rays_[i], region, local.update,
+                                local.counts);
+                      }
+                    });
+  update.reset(options_.rule);
+  for (Local& local : locals_) {
+    update.merge(local.update);
+    stats.visits += local.counts.visits;
+    stats.culled += local.counts.culled;
+  }
+  return stats;
+}
+
+ScanStats Integrator::integrate(OccupancyMap& map, const PointCloud& points_world,
+                                const Point3f& origin_world, CellChanges* changes) {
+  ScanStats stats = computeUpdate(map, points_world, origin_world, merged_);
+  const ApplyStats applied = map.apply(merged_, changes);
+  stats.updated = applied.updated_cells;
+  stats.changed = applied.changed_cells;
+  return stats;
+}
+
+}  // namespace densemap
