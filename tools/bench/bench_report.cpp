@@ -19,24 +19,45 @@ double RunResult::percentile(double q) const {
 std::string formatTable(const std::vector<RunResult>& runs) {
   std::ostringstream out;
   char line[512];
-  std::snprintf(line, sizeof(line), "%-10s %-7s %4s %3s %6s %10s %9s %9s %11s %11s %11s %10s %8s\n",
-                "method", "backend", "rule", "thr", "scans", "points", "p50 ms", "p99 ms",
-                "points/s", "visits/scan", "chg/scan", "diff cells", "speedup");
+  std::snprintf(line, sizeof(line),
+                "%-16s %-7s %-7s %3s %6s %10s %9s %9s %11s %11s %11s %10s %8s\n", "method",
+                "backend", "rule", "thr", "scans", "points", "p50 ms", "p99 ms", "points/s",
+                "visits/scan", "chg/scan", "diff cells", "speedup");
   out << line;
   for (const RunResult& r : runs) {
     const std::string visits = r.has_counts ? std::to_string(std::llround(r.visits_per_scan)) : "-";
     const std::string changed =
         r.has_counts ? std::to_string(std::llround(r.changed_cells_per_scan)) : "-";
-    const std::string diff =
-        r.diff_cells_vs_octomap < 0 ? "-" : std::to_string(r.diff_cells_vs_octomap);
+    const std::string diff = r.diff_cells < 0 ? "-" : std::to_string(r.diff_cells);
     char speed[32] = "-";
     if (r.speedup_vs_octomap > 0)
       std::snprintf(speed, sizeof(speed), "%.2fx", r.speedup_vs_octomap);
     std::snprintf(line, sizeof(line),
-                  "%-10s %-7s %4s %3d %6zu %10zu %9.1f %9.1f %11.3g %11s %11s %10s %8s\n",
+                  "%-16s %-7s %-7s %3d %6zu %10zu %9.1f %9.1f %11.3g %11s %11s %10s %8s\n",
                   r.method.c_str(), r.backend.c_str(), r.rule.c_str(), r.threads, r.scans, r.points,
                   r.percentile(0.5), r.percentile(0.99), r.pointsPerSecond(), visits.c_str(),
                   changed.c_str(), diff.c_str(), speed);
+    out << line;
+  }
+  return out.str();
+}
+
+std::string formatRayTable(const std::vector<RunResult>& runs) {
+  std::ostringstream out;
+  char line[512];
+  std::snprintf(line, sizeof(line), "%-16s %-7s %11s %11s %8s %11s %12s %12s   %s\n", "method",
+                "backend", "rays/scan", "super/scan", "pts/ray", "visits/scan", "culled/scan",
+                "region/scan", "mean ms: rays region mark merge apply");
+  out << line;
+  for (const RunResult& r : runs) {
+    if (!r.has_counts) continue;
+    const double points_per_scan = r.scans > 0 ? static_cast<double>(r.points) / r.scans : 0;
+    std::snprintf(line, sizeof(line),
+                  "%-16s %-7s %11.0f %11.0f %8.2f %11.0f %12.0f %12.0f   %.1f %.1f %.1f %.1f %.1f\n",
+                  r.method.c_str(), r.backend.c_str(), r.rays_per_scan, r.super_rays_per_scan,
+                  r.rays_per_scan > 0 ? points_per_scan / r.rays_per_scan : 0.0, r.visits_per_scan,
+                  r.culled_per_scan, r.region_voxels_per_scan, r.ms_stage[0], r.ms_stage[1],
+                  r.ms_stage[2], r.ms_stage[3], r.ms_stage[4]);
     out << line;
   }
   return out.str();
@@ -79,6 +100,13 @@ std::string formatJson(const std::vector<RunResult>& runs, const std::string& da
         << ", \"visits_per_scan\": " << (r.has_counts ? number(r.visits_per_scan) : "null")
         << ", \"changed_cells_per_scan\": "
         << (r.has_counts ? number(r.changed_cells_per_scan) : "null")
+        << ", \"rays_per_scan\": " << (r.has_counts ? number(r.rays_per_scan) : "null")
+        << ", \"super_rays_per_scan\": " << (r.has_counts ? number(r.super_rays_per_scan) : "null")
+        << ", \"culled_steps_per_scan\": " << (r.has_counts ? number(r.culled_per_scan) : "null")
+        << ", \"region_voxels_per_scan\": "
+        << (r.has_counts ? number(r.region_voxels_per_scan) : "null")
+        << ", \"reference\": " << quoted(r.reference) << ", \"diff_cells_vs_reference\": "
+        << (r.diff_cells < 0 ? "null" : std::to_string(r.diff_cells))
         << ", \"diff_cells_vs_octomap\": "
         << (r.diff_cells_vs_octomap < 0 ? "null" : std::to_string(r.diff_cells_vs_octomap))
         << ", \"speedup_vs_octomap\": "

@@ -23,6 +23,14 @@ struct RunResult {
   bool has_counts = false;  // visits/changed are measured for densemap's own methods only
   double visits_per_scan = 0;
   double changed_cells_per_scan = 0;
+  // Ray statistics (the dissertation's Tables 2.2-2.3), per scan.
+  double rays_per_scan = 0;        // rays traversed; a super ray counts once
+  double super_rays_per_scan = 0;  // of which stand for more than one point
+  double culled_per_scan = 0;      // traversal steps skipped inside the culling region
+  double region_voxels_per_scan = 0;
+  double ms_stage[5] = {0, 0, 0, 0, 0};  // mean ms per scan: rays, region, mark, merge, apply
+  std::string reference;                 // what diff_cells compares with ("octomap", "raycast")
+  long long diff_cells = -1;             // -1: nothing to compare with
   long long diff_cells_vs_octomap = -1;  // -1: no octomap run to compare with
   double speedup_vs_octomap = 0;         // octomap p50 / this p50; 0 when unknown
   std::size_t known_cells = 0;
@@ -33,6 +41,8 @@ struct RunResult {
 };
 
 [[nodiscard]] std::string formatTable(const std::vector<RunResult>& runs);
+/// Rays per scan, super rays, points per ray, culled steps and region size per method.
+[[nodiscard]] std::string formatRayTable(const std::vector<RunResult>& runs);
 [[nodiscard]] std::string formatJson(const std::vector<RunResult>& runs, const std::string& data,
                                      const std::string& machine);
 

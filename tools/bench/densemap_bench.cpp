@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <thread>
 
@@ -17,6 +18,7 @@
 #include "densemap/map/map_diff.hpp"
 #include "densemap/map/map_factory.hpp"
 #include "densemap/map/octree_map.hpp"
+#include "densemap/map/update_rule.hpp"
 #include "densemap/raycast/integrator.hpp"
 
 namespace densemap::bench {
@@ -31,7 +33,9 @@ struct Options {
   std::string data;
   double resolution = 0.2;
   double max_range = -1.0;
-  std::vector<std::string> methods{"octomap", "raycast"};
+  std::vector<std::string> methods{"octomap", "raycast", "superray+culling"};
+  std::string rule = "set";
+  std::size_t min_points = 20;
   std::vector<std::string> backends{"grid", "octree"};
   int threads = static_cast<int>(std::max(1U, std::thread::hardware_concurrency()));
   std::size_t first = 0;
@@ -85,13 +89,17 @@ Integrate makeIntegrator(const std::string& method, const Options& o) {
       return ScanStats{s.points.size(), 0, 0, 0};
     };
   }
-  if (method == "raycast") {
-    auto integrator = std::make_shared<Integrator>(IntegratorOptions{.method = IntegrationMethod::kRaycast, .max_range_m = o.max_range});
-    return [integrator](OccupancyMap& map, const WorldScan& s) {
-      return integrator->integrate(map, s.points, s.origin);
-    };
-  }
-  return nullptr;
+  const auto parsed = parseIntegrationMethod(method);
+  const auto rule = parseUpdateRule(o.rule);
+  if (!parsed || !rule) return nullptr;
+  auto integrator = std::make_shared<Integrator>(IntegratorOptions{.method = *parsed,
+                                                                   .rule = *rule,
+                                                                   .max_range_m = o.max_range,
+                                                                   .superray_min_points =
+                                                                       o.min_points});
+  return [integrator](OccupancyMap& map, const WorldScan& s) {
+    return integrator->integrate(map, s.points, s.origin);
+  };
 }
 
 RunResult runMethod(const std::string& method, Backend backend, const Options& o,
@@ -103,12 +111,13 @@ RunResult runMethod(const std::string& method, Backend backend, const Options& o
   r.method = method;
   r.backend = std::string(backendName(backend));
   r.threads = method == "octomap" ? 1 : o.threads;
+  r.rule = method == "octomap" ? "set" : o.rule;
   r.resolution = o.resolution;
   r.max_range = o.max_range;
   r.has_counts = method != "octomap";
   tbb::task_arena arena(r.threads);
   tools::Progress progress(method + "/" + r.backend + " scan", scans.size());
-  double visits = 0, changed = 0;
+  double visits = 0, changed = 0, rays = 0, super_rays = 0, culled = 0, region = 0;
   for (std::size_t i = 0; i < scans.size(); ++i) {
     ScanStats stats;
     const auto t0 = std::chrono::steady_clock::now();
@@ -120,13 +129,25 @@ RunResult runMethod(const std::string& method, Backend backend, const Options& o
     r.points += scans[i].points.size();
     visits += static_cast<double>(stats.visits);
     changed += static_cast<double>(stats.changed);
+    rays += static_cast<double>(stats.rays);
+    super_rays += static_cast<double>(stats.super_rays);
+    culled += static_cast<double>(stats.culled);
+    region += static_cast<double>(stats.region_voxels);
+    const double stage[5] = {stats.ms_rays, stats.ms_region, stats.ms_mark, stats.ms_merge,
+                             stats.ms_apply};
+    for (int k = 0; k < 5; ++k) r.ms_stage[k] += stage[k] / static_cast<double>(scans.size());
     char detail[32];
     std::snprintf(detail, sizeof(detail), "%.1f ms", ms);
     progress.update(i + 1, detail);
   }
   r.scans = scans.size();
-  r.visits_per_scan = visits / static_cast<double>(std::max<std::size_t>(1, r.scans));
-  r.changed_cells_per_scan = changed / static_cast<double>(std::max<std::size_t>(1, r.scans));
+  const double n = static_cast<double>(std::max<std::size_t>(1, r.scans));
+  r.visits_per_scan = visits / n;
+  r.changed_cells_per_scan = changed / n;
+  r.rays_per_scan = rays / n;
+  r.super_rays_per_scan = super_rays / n;
+  r.culled_per_scan = culled / n;
+  r.region_voxels_per_scan = region / n;
   r.known_cells = map_out->knownCells();
   r.memory_bytes = map_out->memoryBytes();
   return r;
@@ -135,7 +156,10 @@ RunResult runMethod(const std::string& method, Backend backend, const Options& o
 int run(const Options& o) {
   for (const auto& m : o.methods) {
     if (!makeIntegrator(m, o)) {
-      std::fprintf(stderr, "densemap-bench: unknown method '%s' (octomap, raycast)\n", m.c_str());
+      std::fprintf(stderr,
+                   "densemap-bench: unknown method '%s' or rule '%s' (methods: octomap, raycast, "
+                   "superray, culling, superray+culling; rules: set, per_ray)\n",
+                   m.c_str(), o.rule.c_str());
       return 2;
     }
   }
@@ -159,10 +183,18 @@ int run(const Options& o) {
   }
 
   std::vector<RunResult> runs;
-  std::unique_ptr<OccupancyMap> reference;
-  double reference_p50 = 0;
-  // OctoMap runs first: it is the reference every other map is compared with.
+  // Under "set" OctoMap is the reference every map is compared with; under "per_ray" (which
+  // OctoMap does not implement) the plain raycast map is, per backend. References run first.
+  const bool per_ray = o.rule != "set";
+  const std::string reference_method = per_ray ? "raycast" : "octomap";
+  std::map<Backend, std::unique_ptr<OccupancyMap>> references;
+  std::unique_ptr<OccupancyMap> octomap_map;
+  double octomap_p50 = 0;
   std::vector<std::string> order = o.methods;
+  if (per_ray && std::find(order.begin(), order.end(), "raycast") == order.end()) {
+    order.push_back("raycast");
+  }
+  std::stable_partition(order.begin(), order.end(), [](const auto& m) { return m == "raycast"; });
   std::stable_partition(order.begin(), order.end(), [](const auto& m) { return m == "octomap"; });
   for (const auto& method : order) {
     for (const Backend backend : backends) {
@@ -174,30 +206,51 @@ int run(const Options& o) {
       std::unique_ptr<OccupancyMap> map;
       RunResult r = runMethod(method, used, o, *scans, map);
       if (method == "octomap") {
-        reference = std::move(map);
-        reference_p50 = r.percentile(0.5);
-        r.diff_cells_vs_octomap = 0;
+        octomap_p50 = r.percentile(0.5);
         r.speedup_vs_octomap = 1.0;
-      } else if (reference) {
+      } else if (octomap_p50 > 0) {
+        r.speedup_vs_octomap = octomap_p50 / std::max(1e-9, r.percentile(0.5));
+      }
+      const OccupancyMap* reference = nullptr;
+      if (!per_ray) {
+        reference = octomap_map.get();
+      } else if (method != "raycast" && references.contains(used)) {
+        reference = references[used].get();
+      }
+      if (reference != nullptr) {
         const MapDiff diff = diffMaps(*map, *reference);
-        r.diff_cells_vs_octomap = static_cast<long long>(diff.differing());
-        r.speedup_vs_octomap = reference_p50 / std::max(1e-9, r.percentile(0.5));
+        r.reference = reference_method;
+        r.diff_cells = static_cast<long long>(diff.differing());
+        if (!per_ray) r.diff_cells_vs_octomap = r.diff_cells;
         if (diff.differing() > 0) {
           std::fprintf(stderr,
-                       "%s/%s differs from OctoMap: %zu only ours, %zu only OctoMap's, "
+                       "%s/%s differs from %s: %zu only ours, %zu only the reference's, "
                        "%zu values (max |d| %g)\n",
-                       method.c_str(), r.backend.c_str(), diff.only_in_a, diff.only_in_b,
-                       diff.value_mismatch, static_cast<double>(diff.max_abs_difference));
+                       method.c_str(), r.backend.c_str(), reference_method.c_str(),
+                       diff.only_in_a, diff.only_in_b, diff.value_mismatch,
+                       static_cast<double>(diff.max_abs_difference));
         }
+      }
+      if (method == "octomap") {
+        r.reference = "octomap";
+        r.diff_cells = r.diff_cells_vs_octomap = 0;
+        octomap_map = std::move(map);
+      } else if (per_ray && method == "raycast") {
+        r.reference = "raycast";
+        r.diff_cells = 0;
+        references[used] = std::move(map);
       }
       runs.push_back(std::move(r));
       if (method == "octomap") break;
     }
   }
   const std::string machine = machineDescription();
-  std::printf("densemap-bench: %s, resolution %g m, max range %g m, %zu scans; %s\n",
-              o.data.c_str(), o.resolution, o.max_range, scans->size(), machine.c_str());
-  std::printf("%s", formatTable(runs).c_str());
+  std::printf("densemap-bench: %s, resolution %g m, max range %g m, %zu scans, rule %s "
+              "(diff cells vs %s); %s\n",
+              o.data.c_str(), o.resolution, o.max_range, scans->size(), o.rule.c_str(),
+              reference_method.c_str(), machine.c_str());
+  std::printf("%s\n", formatTable(runs).c_str());
+  std::printf("%s", formatRayTable(runs).c_str());
   for (const RunResult& r : runs) {
     std::printf("%s/%s: %zu known cells, %.1f MiB (%.1f MiB per million cells)\n", r.method.c_str(),
                 r.backend.c_str(), r.known_cells, r.memory_bytes / 1048576.0,
@@ -225,8 +278,17 @@ int main(int argc, char** argv) {
   app.add_option("--resolution", o.resolution, "Voxel size, m")->capture_default_str();
   app.add_option("--max-range", o.max_range, "Rays are cut at this range, m (< 0: unlimited)")
       ->capture_default_str();
-  app.add_option("--methods", o.methods, "Comma-separated: octomap, raycast")
+  app.add_option("--methods", o.methods,
+                 "Comma-separated: octomap, raycast, superray, culling, superray+culling")
       ->delimiter(',')
+      ->capture_default_str();
+  app.add_option("--rule", o.rule,
+                 "Update rule: set (OctoMap's; maps are compared with OctoMap) or per_ray "
+                 "(compared with the raycast map)")
+      ->check(CLI::IsMember({"set", "per_ray"}))
+      ->capture_default_str();
+  app.add_option("--superray-min-points", o.min_points,
+                 "End voxels with fewer points are not grouped into super rays (k)")
       ->capture_default_str();
   app.add_option("--backend", o.backends, "Comma-separated: grid, octree")
       ->delimiter(',')

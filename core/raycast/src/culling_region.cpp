@@ -55,16 +55,48 @@ void CullingRegion::loadFullyFree(const OccupancyMap& map) {
         const int gy = static_cast<int>(by << block::kShift) + y - min_.y;
         if (gy < 0 || gy >= static_cast<int>(ny_)) continue;
         std::uint64_t bits8 = (mask[z] >> (8 * y)) & 0xffU;
+        if (x0 < 0) bits8 >>= -x0;  // the box starts inside this block
         if (bits8 == 0) continue;
         std::uint64_t* r = row(static_cast<unsigned>(gy), static_cast<unsigned>(gz));
-        for (int x = 0; x < block::kEdge; ++x) {
-          const int gx = x0 + x;
-          if (((bits8 >> x) & 1U) == 0 || gx < 0 || gx >= static_cast<int>(nx_)) continue;
-          r[gx >> 6] |= std::uint64_t{1} << (gx & 63);
+        const unsigned gx = static_cast<unsigned>(std::max(x0, 0));
+        if (gx + 8 > nx_) bits8 &= (std::uint64_t{1} << (nx_ - gx)) - 1;  // bits past the box
+        r[gx >> 6] |= bits8 << (gx & 63);
+        if ((gx & 63) > 56 && (gx >> 6) + 1 < words_per_row_) {
+          r[(gx >> 6) + 1] |= bits8 >> (64 - (gx & 63));
         }
       }
     }
   });
+}
+
+void CullingRegion::toBricks() {
+  for (int a = 0; a < 3; ++a) brick_min_[a] = static_cast<unsigned>(min_[a] >> block::kShift);
+  bricks_n_[0] = ((min_.x + nx_ - 1) >> block::kShift) - brick_min_[0] + 1;
+  bricks_n_[1] = ((min_.y + ny_ - 1) >> block::kShift) - brick_min_[1] + 1;
+  bricks_n_[2] = ((min_.z + nz_ - 1) >> block::kShift) - brick_min_[2] + 1;
+  bricks_.assign(static_cast<std::size_t>(bricks_n_[0]) * bricks_n_[1] * bricks_n_[2],
+                 block::BlockMask{});
+  for (unsigned z = 0; z < nz_; ++z) {
+    for (unsigned y = 0; y < ny_; ++y) {
+      const std::uint64_t* r = row(y, z);
+      const unsigned gy = min_.y + y, gz = min_.z + z;
+      const std::size_t brick_row =
+          (static_cast<std::size_t>((gz >> block::kShift) - brick_min_[2]) * bricks_n_[1] +
+           ((gy >> block::kShift) - brick_min_[1])) *
+          bricks_n_[0];
+      const unsigned shift = 8 * (gy & (block::kEdge - 1));
+      for (unsigned w = 0; w < words_per_row_; ++w) {
+        std::uint64_t bits = r[w];
+        while (bits != 0) {
+          const unsigned x = w * 64 + static_cast<unsigned>(std::countr_zero(bits));
+          bits &= bits - 1;
+          const unsigned gx = min_.x + x;
+          bricks_[brick_row + ((gx >> block::kShift) - brick_min_[0])][gz & (block::kEdge - 1)] |=
+              std::uint64_t{1} << (shift + (gx & (block::kEdge - 1)));
+        }
+      }
+    }
+  }
 }
 
 void CullingRegion::keepRunThrough(std::uint64_t* r, unsigned x0) const {
@@ -149,6 +181,7 @@ void CullingRegion::build(const OccupancyMap& map, const VoxelKey& origin, const
       for (unsigned w = 0; w < words_per_row_; ++w) size_ += std::popcount(r[w]);
     });
   });
+  toBricks();
 }
 
 }  // namespace densemap

@@ -4,9 +4,20 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <chrono>
 #include <string>
 
 namespace densemap {
+namespace {
+
+double msSince(std::chrono::steady_clock::time_point& t0) {
+  const auto now = std::chrono::steady_clock::now();
+  const double ms = std::chrono::duration<double, std::milli>(now - t0).count();
+  t0 = now;
+  return ms;
+}
+
+}  // namespace
 
 std::string_view methodName(IntegrationMethod method) {
   switch (method) {
@@ -40,6 +51,7 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
                        options_.method == IntegrationMethod::kSuperRayCulling;
   ScanStats stats;
   stats.points = points_world.size();
+  auto t0 = std::chrono::steady_clock::now();
 
   rays_.resize(points_world.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points_world.size(), 4096),
@@ -55,6 +67,7 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
     stats.super_rays = s.super_rays;
   }
   stats.rays = rays_.size();
+  stats.ms_rays = msSince(t0);
 
   const CullingRegion* region = nullptr;
   const auto origin_key = grid.pointToKey(origin_world);
@@ -74,6 +87,7 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
     region = &region_;
     stats.region_voxels = region_.size();
   }
+  stats.ms_region = msSince(t0);
 
   for (Local& local : locals_) {
     local.update.reset(options_.rule);
@@ -83,23 +97,31 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
                     [&](const tbb::blocked_range<std::size_t>& range) {
                       Local& local = locals_.local();
                       for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                        markRay(grid, origin_world, rays_[i], region, local.update,
-                                local.counts);
+                        if (region != nullptr) {
+                          markRayCulled(grid, origin_world, rays_[i], *region, local.scratch,
+                                        local.update, local.counts);
+                        } else {
+                          markRay(grid, origin_world, rays_[i], local.update, local.counts);
+                        }
                       }
                     });
+  stats.ms_mark = msSince(t0);
   update.reset(options_.rule);
   for (Local& local : locals_) {
     update.merge(local.update);
     stats.visits += local.counts.visits;
     stats.culled += local.counts.culled;
   }
+  stats.ms_merge = msSince(t0);
   return stats;
 }
 
 ScanStats Integrator::integrate(OccupancyMap& map, const PointCloud& points_world,
                                 const Point3f& origin_world, CellChanges* changes) {
   ScanStats stats = computeUpdate(map, points_world, origin_world, merged_);
+  auto t0 = std::chrono::steady_clock::now();
   const ApplyStats applied = map.apply(merged_, changes);
+  stats.ms_apply = msSince(t0);
   stats.updated = applied.updated_cells;
   stats.changed = applied.changed_cells;
   return stats;

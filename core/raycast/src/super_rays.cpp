@@ -3,7 +3,6 @@
 #include <tbb/blocked_range.h>
 #include <tbb/combinable.h>
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <cmath>
@@ -17,11 +16,35 @@ constexpr double kEndMarginPerM = 1e-5;   // x ray length; float direction error
 constexpr double kEndMarginCells = 1e-6;  // x resolution; the float half step is ~3e-8
 constexpr double kSlopeWiden = 1e-6;      // slopes just outside the rays' range still count
 
-constexpr std::uint64_t kNoKey = ~std::uint64_t{0};
+// Sort keys: (occupied flag, end voxel relative to the sensor's, 13 bits per axis) in the top
+// 40 bits, the ray's index in the low 24. Rays ending farther than 4095 voxels away (or out of
+// range) get the all-ones cell code and pass through.
+constexpr int kIndexBits = 24;
+constexpr std::uint64_t kNoCell = (std::uint64_t{1} << 40) - 1;
+constexpr int kRelativeBits = 13;
+constexpr int kRelativeMax = (1 << (kRelativeBits - 1)) - 1;
 
-std::uint64_t cellCode(const RayEnd& r) {
-  if (!r.key_valid) return kNoKey;
-  return (r.occupied ? std::uint64_t{1} << 48 : 0) | r.key.packed();
+std::uint64_t cellCode(const RayEnd& r, const VoxelKey& origin) {
+  if (!r.key_valid) return kNoCell;
+  std::uint64_t code = r.occupied ? 1 : 0;
+  for (int a = 0; a < 3; ++a) {
+    const int d = static_cast<int>(r.key[a]) - static_cast<int>(origin[a]);
+    if (d < -kRelativeMax || d > kRelativeMax) return kNoCell;
+    code = (code << kRelativeBits) | static_cast<std::uint64_t>(d + kRelativeMax);
+  }
+  return code;
+}
+
+/// LSD radix sort of the top 40 bits (5 passes of 8 bits); `tmp` is scratch.
+void radixSort(std::vector<std::uint64_t>& v, std::vector<std::uint64_t>& tmp) {
+  tmp.resize(v.size());
+  for (int shift = kIndexBits; shift < 64; shift += 8) {
+    std::size_t count[257] = {};
+    for (const std::uint64_t x : v) ++count[((x >> shift) & 0xff) + 1];
+    for (int b = 0; b < 256; ++b) count[b + 1] += count[b];
+    for (const std::uint64_t x : v) tmp[count[(x >> shift) & 0xff]++] = x;
+    v.swap(tmp);
+  }
 }
 
 /// Appends the critical slopes D_b(m) / D_a(n) in [lo, hi] for 0 <= n <= na, 0 <= m <= nb,
@@ -204,19 +227,28 @@ SuperRayStats SuperRayBuilder::build(const VoxelGrid& grid, const Point3f& origi
   SuperRayStats stats;
   const std::size_t n = rays.size();
   stats.rays_in = n;
+  const auto origin_key = grid.pointToKey(origin);
+  if (!origin_key || n >= (std::size_t{1} << kIndexBits)) {
+    stats.rays_out = n;  // nothing to traverse, or too many rays to index: leave them alone
+    return stats;
+  }
   order_.resize(n);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
                     [&](const tbb::blocked_range<std::size_t>& range) {
                       for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                        order_[i] = {cellCode(rays[i]), static_cast<std::uint32_t>(i)};
+                        order_[i] = (cellCode(rays[i], *origin_key) << kIndexBits) | i;
                       }
                     });
-  tbb::parallel_sort(order_.begin(), order_.end());
+  radixSort(order_, sort_tmp_);
 
+  const auto cellOf = [](std::uint64_t x) { return x >> kIndexBits; };
+  const auto indexOf = [](std::uint64_t x) {
+    return static_cast<std::uint32_t>(x & ((std::uint64_t{1} << kIndexBits) - 1));
+  };
   runs_.clear();
   for (std::size_t i = 0; i < n;) {
     std::size_t j = i;
-    while (j < n && order_[j].first == order_[i].first) ++j;
+    while (j < n && cellOf(order_[j]) == cellOf(order_[i])) ++j;
     runs_.emplace_back(static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(j));
     i = j;
   }
@@ -234,14 +266,14 @@ SuperRayStats SuperRayBuilder::build(const VoxelGrid& grid, const Point3f& origi
           const auto [first, last] = runs_[r];
           const std::size_t size = last - first;
           RayEnd* out = out_.data() + first;
-          if (size < std::max<std::size_t>(min_points, 2) || order_[first].first == kNoKey) {
-            for (std::size_t j = 0; j < size; ++j) out[j] = rays[order_[first + j].second];
+          if (size < std::max<std::size_t>(min_points, 2) || cellOf(order_[first]) == kNoCell) {
+            for (std::size_t j = 0; j < size; ++j) out[j] = rays[indexOf(order_[first + j])];
             written_[r] = static_cast<std::uint32_t>(size);
             continue;
           }
           ++grouped;
           scratch.cell.resize(size);
-          for (std::size_t j = 0; j < size; ++j) scratch.cell[j] = rays[order_[first + j].second];
+          for (std::size_t j = 0; j < size; ++j) scratch.cell[j] = rays[indexOf(order_[first + j])];
           written_[r] = static_cast<std::uint32_t>(
               groupCell(grid, origin, scratch.cell, out, scratch, uncertain));
         }

@@ -1,6 +1,8 @@
 #pragma once
 
+#include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <limits>
 #include <vector>
 
@@ -8,11 +10,62 @@
 
 namespace densemap {
 
+/// The state OctoMap 1.9.7's `OcTreeBaseImpl::computeRayKeys(origin, end)` starts its loop
+/// with. The arithmetic is copied operation for operation (float direction and length, double
+/// tMax/tDelta, the `(float)` half step) because a different but "more correct" rounding would
+/// visit different voxels on boundary cases.
+struct TraversalStart {
+  VoxelKey origin;
+  VoxelKey end;
+  float length = 0.0F;
+  int step[3] = {0, 0, 0};
+  double t_max[3] = {0, 0, 0};
+  double t_delta[3] = {0, 0, 0};
+};
+
+enum class TraversalKind { kInvalid, kSameVoxel, kRay };
+
+/// kInvalid: origin or end outside the addressable range (nothing is visited);
+/// kSameVoxel: both in one voxel (nothing is visited); kRay: `start` is filled.
+inline TraversalKind startTraversal(const VoxelGrid& grid, const Point3f& origin,
+                                    const Point3f& end, TraversalStart& start) {
+  const auto key_origin = grid.pointToKey(origin);
+  const auto key_end = grid.pointToKey(end);
+  if (!key_origin || !key_end) return TraversalKind::kInvalid;
+  if (*key_origin == *key_end) return TraversalKind::kSameVoxel;
+  start.origin = *key_origin;
+  start.end = *key_end;
+
+  // Vector3 arithmetic of OctoMap, one float operation at a time.
+  float dir[3] = {end.x() - origin.x(), end.y() - origin.y(), end.z() - origin.z()};
+  const float norm_sq = dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2];
+  start.length = static_cast<float>(std::sqrt(static_cast<double>(norm_sq)));
+  for (float& d : dir) d /= start.length;
+
+  const double resolution = grid.resolution();
+  for (int i = 0; i < 3; ++i) {
+    start.step[i] = dir[i] > 0.0F ? 1 : (dir[i] < 0.0F ? -1 : 0);
+    if (start.step[i] != 0) {
+      double voxel_border = grid.keyToCoord(start.origin[i]);
+      voxel_border += static_cast<float>(start.step[i] * resolution * 0.5);
+      start.t_max[i] = (voxel_border - static_cast<double>(origin[i])) / static_cast<double>(dir[i]);
+      start.t_delta[i] = resolution / static_cast<double>(std::fabs(dir[i]));
+    } else {
+      start.t_max[i] = std::numeric_limits<double>::max();
+      start.t_delta[i] = std::numeric_limits<double>::max();
+    }
+  }
+  return TraversalKind::kRay;
+}
+
+/// The axis OctoMap's loop steps along: the smallest tMax, ties to the higher axis.
+inline int nextAxis(const double t_max[3]) {
+  if (t_max[0] < t_max[1]) return t_max[0] < t_max[2] ? 0 : 2;
+  return t_max[1] < t_max[2] ? 1 : 2;
+}
+
 /// Visits the voxels that OctoMap 1.9.7's `OcTreeBaseImpl::computeRayKeys(origin, end)` returns,
-/// in the same order: the origin's voxel first, the end point's voxel excluded. The arithmetic
-/// is copied operation for operation (float direction and length, double tMax/tDelta, the
-/// `(float)` half-step, strict comparisons, the `dist > length` stop) because a different but
-/// "more correct" rounding would visit different voxels on boundary cases.
+/// in the same order: the origin's voxel first, the end point's voxel excluded.
 /// (Amanatides & Woo, "A Fast Voxel Traversal Algorithm for Ray Tracing", 1987.)
 ///
 /// Returns false (visiting nothing) when origin or end lies outside the addressable range.
@@ -20,53 +73,212 @@ namespace densemap {
 template <class Visitor>
 bool traverseRay(const VoxelGrid& grid, const Point3f& origin, const Point3f& end,
                  Visitor&& visit) {
-  const auto key_origin = grid.pointToKey(origin);
-  const auto key_end = grid.pointToKey(end);
-  if (!key_origin || !key_end) return false;
-  if (*key_origin == *key_end) return true;
-  visit(*key_origin);
-
-  // Vector3 arithmetic of OctoMap, one float operation at a time.
-  float dir[3] = {end.x() - origin.x(), end.y() - origin.y(), end.z() - origin.z()};
-  const float norm_sq = dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2];
-  const float length = static_cast<float>(std::sqrt(static_cast<double>(norm_sq)));
-  for (float& d : dir) d /= length;
-
-  const double resolution = grid.resolution();
-  int step[3];
-  double t_max[3];
-  double t_delta[3];
-  VoxelKey current = *key_origin;
-  for (int i = 0; i < 3; ++i) {
-    step[i] = dir[i] > 0.0F ? 1 : (dir[i] < 0.0F ? -1 : 0);
-    if (step[i] != 0) {
-      double voxel_border = grid.keyToCoord(current[i]);
-      voxel_border += static_cast<float>(step[i] * resolution * 0.5);
-      t_max[i] = (voxel_border - static_cast<double>(origin[i])) / static_cast<double>(dir[i]);
-      t_delta[i] = resolution / static_cast<double>(std::fabs(dir[i]));
-    } else {
-      t_max[i] = std::numeric_limits<double>::max();
-      t_delta[i] = std::numeric_limits<double>::max();
-    }
-  }
-
+  TraversalStart s;
+  const TraversalKind kind = startTraversal(grid, origin, end, s);
+  if (kind != TraversalKind::kRay) return kind == TraversalKind::kSameVoxel;
+  visit(s.origin);
+  VoxelKey current = s.origin;
   while (true) {
-    int dim;
-    if (t_max[0] < t_max[1]) {
-      dim = t_max[0] < t_max[2] ? 0 : 2;
-    } else {
-      dim = t_max[1] < t_max[2] ? 1 : 2;
-    }
-    current[dim] = static_cast<std::uint16_t>(current[dim] + step[dim]);
-    t_max[dim] += t_delta[dim];
-    if (current == *key_end) break;
-    const double dist_from_origin = std::min(std::min(t_max[0], t_max[1]), t_max[2]);
+    const int dim = nextAxis(s.t_max);
+    current[dim] = static_cast<std::uint16_t>(current[dim] + s.step[dim]);
+    s.t_max[dim] += s.t_delta[dim];
+    if (current == s.end) break;
+    const double dist_from_origin = std::min(std::min(s.t_max[0], s.t_max[1]), s.t_max[2]);
     // Accumulated rounding can step past the end voxel without entering it; OctoMap stops
     // once the travelled distance exceeds the ray length.
-    if (dist_from_origin > static_cast<double>(length)) break;
+    if (dist_from_origin > static_cast<double>(s.length)) break;
     visit(current);
   }
   return true;
+}
+
+/// Buffers reused by traverseRayBackward.
+struct BackwardScratch {
+  std::vector<double> times[3];
+  std::vector<VoxelKey> keys;
+};
+
+namespace detail {
+
+/// The exact backward walk (see traverseRayBackward); the first `skip` voxels are not visited
+/// again (the fast walk already did). Returns the forward traversal's voxel count.
+template <class Visitor>
+std::size_t backwardExact(const VoxelGrid& grid, const Point3f& origin, const Point3f& end,
+                          const TraversalStart& s, const int crossings[3], bool regular,
+                          BackwardScratch& scratch, std::size_t skip, Visitor&& visit) {
+  if (regular) {
+    // times[a][k]: tMax of axis a after k of its crossings; k = crossings[a] is the exit.
+    for (int a = 0; a < 3; ++a) {
+      if (s.step[a] == 0) continue;
+      auto& t = scratch.times[a];
+      const auto needed = static_cast<std::size_t>(crossings[a]) + 1;
+      if (t.size() < needed) t.resize(std::max(needed, 2 * t.size()));  // grow only
+      double* out = t.data();
+      double v = s.t_max[a];
+      for (int k = 0; k <= crossings[a]; ++k) {
+        out[k] = v;
+        v += s.t_delta[a];
+      }
+    }
+    // Forward order: (time, higher axis first). The last entry crossing must precede the first
+    // exit crossing and lie within the ray's length.
+    int last_axis = -1;
+    double last_time = 0;
+    int exit_axis = -1;
+    double exit_time = 0;
+    for (int a = 0; a < 3; ++a) {
+      if (s.step[a] == 0) continue;
+      const auto& t = scratch.times[a];
+      if (crossings[a] > 0) {
+        const double v = t[crossings[a] - 1];
+        if (last_axis < 0 || v > last_time || (v == last_time && a < last_axis)) {
+          last_axis = a;
+          last_time = v;
+        }
+      }
+      const double x = t[crossings[a]];
+      if (exit_axis < 0 || x < exit_time || (x == exit_time && a > exit_axis)) {
+        exit_axis = a;
+        exit_time = x;
+      }
+    }
+    const bool before_exit = exit_axis < 0 || last_time < exit_time ||
+                             (last_time == exit_time && last_axis > exit_axis);
+    if (last_axis >= 0 && before_exit && last_time <= static_cast<double>(s.length)) {
+      constexpr double kNone = -std::numeric_limits<double>::infinity();
+      int next[3] = {crossings[0] - 1, crossings[1] - 1, crossings[2] - 1};
+      const double* times[3] = {scratch.times[0].data(), scratch.times[1].data(),
+                                scratch.times[2].data()};
+      double head[3];
+      for (int a = 0; a < 3; ++a) {
+        head[a] = s.step[a] != 0 && next[a] >= 0 ? times[a][next[a]] : kNone;
+      }
+      const std::size_t total =
+          static_cast<std::size_t>(crossings[0] + crossings[1] + crossings[2]);
+      VoxelKey current = s.end;
+      for (std::size_t done = 0; done < total; ++done) {
+        // The latest crossing; ties stay with the lower axis.
+        int dim = head[0] >= head[1] ? 0 : 1;
+        if (head[2] > head[dim]) dim = 2;
+        --next[dim];
+        head[dim] = next[dim] >= 0 ? times[dim][next[dim]] : kNone;
+        current[dim] = static_cast<std::uint16_t>(current[dim] - s.step[dim]);
+        if (done >= skip && !visit(current)) break;
+      }
+      return total;
+    }
+  }
+  auto& keys = scratch.keys;
+  keys.clear();
+  traverseRay(grid, origin, end, [&keys](const VoxelKey& k) { keys.push_back(k); });
+  std::size_t done = 0;
+  for (auto it = keys.rbegin(); it != keys.rend(); ++it, ++done) {
+    if (done >= skip && !visit(*it)) break;
+  }
+  return keys.size();
+}
+
+}  // namespace detail
+
+/// Visits the voxels traverseRay(origin, end) visits in reverse order — end side first, the
+/// origin's voxel last — for as long as `visit(key)` returns true. Returns how many voxels the
+/// forward traversal has (visited or not).
+///
+/// Exact without replaying the forward loop: traverseRay takes the border crossings of the
+/// three axes in the order of their times (each axis' times accumulated by repeated addition,
+/// ties to the higher axis) — a merge of three sorted lists. So the crossing that entered a
+/// voxel is the latest of the axes' last crossings (ties to the lower axis), and walking back
+/// from the end voxel undoes crossings in exactly reverse order.
+/// Fast path: crossing times are computed directly (t0 + k * delta) and every decision must win
+/// by more than the bound on the accumulated sum's rounding (k + 8) * 2^-50 * |t|; the first
+/// decision that does not (near-ties: rays through edges and corners) hands over to the exact
+/// walk, which accumulates the times as traverseRay does. When the forward loop would not end by
+/// entering the end voxel (an end within rounding of a border: OctoMap's `dist > length` stop),
+/// the forward traversal is recorded and replayed backwards.
+template <class Visitor>
+std::size_t traverseRayBackward(const VoxelGrid& grid, const Point3f& origin, const Point3f& end,
+                                BackwardScratch& scratch, Visitor&& visit) {
+  TraversalStart s;
+  if (startTraversal(grid, origin, end, s) != TraversalKind::kRay) return 0;
+  int crossings[3];
+  bool regular = true;
+  for (int a = 0; a < 3; ++a) {
+    crossings[a] = (static_cast<int>(s.end[a]) - static_cast<int>(s.origin[a])) * s.step[a];
+    if (s.step[a] == 0 ? s.end[a] != s.origin[a] : crossings[a] < 0) regular = false;
+  }
+  if (!regular) return detail::backwardExact(grid, origin, end, s, crossings, false, scratch, 0, visit);
+
+  constexpr double kRel = 0x1p-50;
+  constexpr double kNone = -std::numeric_limits<double>::infinity();
+  const auto time = [&](int a, int k) { return s.t_max[a] + k * s.t_delta[a]; };
+  const auto tolerance = [&](int a, int k, double v) {
+    return (k + 8) * kRel * (std::fabs(v) + std::fabs(s.t_max[a]));
+  };
+  // Termination as in backwardExact, decided with margins.
+  int last_axis = -1, exit_axis = -1;
+  double last_time = 0, last_tol = 0, exit_time = 0, exit_tol = 0;
+  bool clear = true;
+  for (int a = 0; a < 3 && clear; ++a) {
+    if (s.step[a] == 0) continue;
+    if (crossings[a] > 0) {
+      const double v = time(a, crossings[a] - 1);
+      const double tol = tolerance(a, crossings[a] - 1, v);
+      if (last_axis >= 0 && std::fabs(v - last_time) <= tol + last_tol) clear = false;
+      if (last_axis < 0 || v > last_time) {
+        last_axis = a;
+        last_time = v;
+        last_tol = tol;
+      }
+    }
+    const double x = time(a, crossings[a]);
+    const double tol = tolerance(a, crossings[a], x);
+    if (exit_axis >= 0 && std::fabs(x - exit_time) <= tol + exit_tol) clear = false;
+    if (exit_axis < 0 || x < exit_time) {
+      exit_axis = a;
+      exit_time = x;
+      exit_tol = tol;
+    }
+  }
+  if (!clear || last_axis < 0 ||
+      (exit_axis >= 0 && !(exit_time - last_time > exit_tol + last_tol)) ||
+      !(static_cast<double>(s.length) - last_time > last_tol)) {
+    return detail::backwardExact(grid, origin, end, s, crossings, true, scratch, 0, visit);
+  }
+
+  // One bound for the whole walk: heads are computed t0 + k * delta, then decremented.
+  const std::size_t total = static_cast<std::size_t>(crossings[0] + crossings[1] + crossings[2]);
+  double scale = 0;
+  for (int a = 0; a < 3; ++a) {
+    if (s.step[a] != 0) {
+      scale = std::max(scale, std::fabs(s.t_max[a]) + (crossings[a] + 1) * s.t_delta[a]);
+    }
+  }
+  const double bound = 2 * (static_cast<double>(total) + 16) * kRel * scale;
+  int next[3] = {crossings[0] - 1, crossings[1] - 1, crossings[2] - 1};
+  double head[3];
+  for (int a = 0; a < 3; ++a) head[a] = s.step[a] != 0 && next[a] >= 0 ? time(a, next[a]) : kNone;
+  VoxelKey current = s.end;
+  for (std::size_t done = 0; done < total; ++done) {
+    // The latest crossing and the runner-up (-inf when an axis has none left).
+    const bool first = head[0] >= head[1];
+    int dim = first ? 0 : 1;
+    double latest = first ? head[0] : head[1];
+    double second = first ? head[1] : head[0];
+    if (head[2] > latest) {
+      second = latest;
+      latest = head[2];
+      dim = 2;
+    } else if (head[2] > second) {
+      second = head[2];
+    }
+    if (!(latest - second > bound)) {
+      return detail::backwardExact(grid, origin, end, s, crossings, true, scratch, done, visit);
+    }
+    head[dim] = --next[dim] >= 0 ? head[dim] - s.t_delta[dim] : kNone;
+    current[dim] = static_cast<std::uint16_t>(current[dim] - s.step[dim]);
+    if (!visit(current)) return total;
+  }
+  return total;
 }
 
 /// Convenience form returning the keys (tests, tools); hot paths use the visitor form.

@@ -4,7 +4,8 @@
 #include <bit>
 #include <cstdint>
 #include <memory>
-#include <unordered_map>
+#include <utility>
+#include <vector>
 
 #include "densemap/map/block_layout.hpp"
 #include "densemap/map/update_rule.hpp"
@@ -50,18 +51,16 @@ class ScanUpdate {
     block::setBit(b.occupied, i);
     if (b.counts) b.counts->occupied[i] += weight;
   }
-  [[nodiscard]] bool isOccupied(const VoxelKey& k) const {
-    const auto it = blocks_.find(block::blockOf(k));
-    return it != blocks_.end() && block::testBit(it->second.occupied, block::indexOf(k));
-  }
 
   /// Adds another update (same rule) into this one.
   void merge(const ScanUpdate& other);
   void clear();
-  void reserveBlocks(std::size_t n) { blocks_.reserve(n); }
 
   [[nodiscard]] bool empty() const { return blocks_.empty(); }
-  [[nodiscard]] const std::unordered_map<std::uint64_t, Block>& blocks() const { return blocks_; }
+  /// (block key, cells) in the order blocks were first marked.
+  [[nodiscard]] const std::vector<std::pair<std::uint64_t, Block>>& blocks() const {
+    return blocks_;
+  }
   /// Cells to be updated as free (crossed, not ended in) and as occupied.
   [[nodiscard]] std::size_t freeCount() const;
   [[nodiscard]] std::size_t occupiedCount() const;
@@ -94,21 +93,25 @@ class ScanUpdate {
   }
 
  private:
+  static constexpr std::uint64_t kEmpty = ~std::uint64_t{0};
+
   Block& blockFor(std::uint64_t block_key) {
     // Consecutive cells of a ray mostly share a block: remember the last one.
-    if (cached_ != nullptr && cached_key_ == block_key) return *cached_;
+    if (cached_key_ == block_key) return blocks_[cached_index_].second;
     cached_key_ = block_key;
-    cached_ = &blocks_[block_key];  // node-based map: the pointer survives rehashing
-    if (rule_ == UpdateRule::kPerRay && !cached_->counts) {
-      cached_->counts = std::make_unique<Counts>();
-    }
-    return *cached_;
+    cached_index_ = indexFor(block_key);
+    return blocks_[cached_index_].second;
   }
+  /// Open addressing with linear probing on the block key; creates the block when missing.
+  std::uint32_t indexFor(std::uint64_t block_key);
+  void grow();
 
   UpdateRule rule_;
-  std::unordered_map<std::uint64_t, Block> blocks_;
-  std::uint64_t cached_key_ = 0;
-  Block* cached_ = nullptr;
+  std::vector<std::pair<std::uint64_t, Block>> blocks_;
+  std::vector<std::uint64_t> slot_keys_;    // kEmpty or a block key; size a power of two
+  std::vector<std::uint32_t> slot_blocks_;  // index into blocks_
+  std::uint64_t cached_key_ = kEmpty;
+  std::uint32_t cached_index_ = 0;
 };
 
 }  // namespace densemap

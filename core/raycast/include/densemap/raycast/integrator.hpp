@@ -50,6 +50,9 @@ struct ScanStats {
   std::size_t region_voxels = 0;  // size of the culling region
   std::size_t updated = 0;   // distinct cells updated
   std::size_t changed = 0;   // cells whose log-odds changed or that became known
+  // Wall time of each stage, ms: rays (+ super rays), culling region, marking, merging the
+  // workers' update sets, applying to the map.
+  double ms_rays = 0, ms_region = 0, ms_mark = 0, ms_merge = 0, ms_apply = 0;
 };
 
 /// Integrates scans into a map: rays (optionally grouped into super rays) are marked into
@@ -61,7 +64,7 @@ struct ScanStats {
 class Integrator {
  public:
   explicit Integrator(const IntegratorOptions& options = {})
-      : options_(options), locals_([rule = options.rule] { return Local{ScanUpdate(rule), {}}; }) {}
+      : options_(options), locals_([rule = options.rule] { return Local{ScanUpdate(rule), {}, {}}; }) {}
 
   [[nodiscard]] const IntegratorOptions& options() const { return options_; }
 
@@ -77,6 +80,7 @@ class Integrator {
   struct Local {
     ScanUpdate update;
     MarkCounts counts;
+    BackwardScratch scratch;
   };
   IntegratorOptions options_;
   std::vector<RayEnd> rays_;

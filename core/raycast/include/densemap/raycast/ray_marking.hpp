@@ -59,25 +59,38 @@ struct MarkCounts {
 
 /// Marks one ray into a scan's update set as OctoMap's computeUpdate does — the cells crossed
 /// (traverseRay) free, the end voxel occupied when the ray is — each `weight` times.
-/// With a culling region, crossed cells inside it are skipped: they form a prefix of the
-/// traversal (the region is closed toward the sensor's cell along each axis, and a traversal
-/// moves monotonically away from that cell), so once a cell is outside no later one is inside.
-/// `Region` needs `bool contains(const VoxelKey&) const`; pass nullptr for none.
-template <class Region>
-void markRay(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray, const Region* region,
-             ScanUpdate& update, MarkCounts& counts) {
-  bool in_region = region != nullptr;
+inline void markRay(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray, ScanUpdate& update,
+             MarkCounts& counts) {
   traverseRay(grid, origin, ray.end, [&](const VoxelKey& k) {
-    if (in_region) {
-      if (region->contains(k)) {
-        ++counts.culled;
-        return;
-      }
-      in_region = false;
-    }
     update.markFree(k, ray.weight);
     ++counts.visits;
   });
+  if (ray.occupied && ray.key_valid) {
+    update.markOccupied(ray.key, ray.weight);
+    ++counts.visits;
+  }
+}
+
+/// markRay with a culling region (dissertation Sec. 2.3.5): the ray is traversed from its end
+/// back toward the sensor and stops at the first voxel inside the region. That is exact: the
+/// region is closed toward the sensor's voxel along each axis and a traversal moves
+/// monotonically away from that voxel, so every voxel before it on the ray is inside too — and
+/// inside, free updates cannot change the map (fully free, not ended in by this scan's rays).
+/// `Region` needs `bool contains(const VoxelKey&) const`.
+template <class Region>
+void markRayCulled(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray,
+                   const Region& region, BackwardScratch& scratch, ScanUpdate& update,
+                   MarkCounts& counts) {
+  std::size_t marked = 0;
+  const std::size_t total = traverseRayBackward(grid, origin, ray.end, scratch,
+                                                [&](const VoxelKey& k) {
+                                                  if (region.contains(k)) return false;
+                                                  update.markFree(k, ray.weight);
+                                                  ++marked;
+                                                  return true;
+                                                });
+  counts.visits += marked;
+  counts.culled += total - marked;
   if (ray.occupied && ray.key_valid) {
     update.markOccupied(ray.key, ray.weight);
     ++counts.visits;

@@ -69,7 +69,8 @@ class SuperRayBuilder {
   };
 
  private:
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> order_;
+  std::vector<std::uint64_t> order_;  // (cell code, ray index), sorted
+  std::vector<std::uint64_t> sort_tmp_;
   std::vector<std::pair<std::uint32_t, std::uint32_t>> runs_;
   std::vector<std::uint32_t> written_;
   std::vector<RayEnd> out_;
