@@ -1,5 +1,6 @@
-// The raycast integrator equals OctoMap cell for cell on real data from ../shared/data
-// (skipped with a message where the data is absent).
+// Every integration method equals OctoMap cell for cell (rule "set") and the plain per-ray
+// result (rule "per_ray") on real data from ../shared/data (skipped with a message where the
+// data is absent).
 #include <gtest/gtest.h>
 
 #include "densemap/test_support/data_dir.hpp"
@@ -9,19 +10,29 @@ namespace densemap {
 namespace {
 
 void checkDataset(const std::filesystem::path& path, std::size_t first, std::size_t count,
-                  double max_range, std::size_t check_every) {
+                  double max_range, std::size_t check_every,
+                  std::initializer_list<double> resolutions = {0.1, 0.2},
+                  const std::vector<test::MethodCase>& cases = test::standardCases(),
+                  bool expect_savings = true) {
   auto source = openScanSource(path);
   ASSERT_TRUE(source) << source.error().message;
   const auto scans = test::loadWorldScans(**source, first, count);
-  for (const double resolution : {0.1, 0.2}) {
+  for (const double resolution : resolutions) {
     SCOPED_TRACE("resolution " + std::to_string(resolution));
-    test::expectRaycastEqualsOctomap(scans, resolution, max_range, check_every);
+    test::expectMethodsAgree(scans, resolution, max_range, check_every, cases, expect_savings);
   }
 }
 
-TEST(RealData, BalmScans20To39) {
+TEST(RealData, BalmAll80ScansAt20cm) {
   DENSEMAP_REQUIRE_DATA(dir, "balm-realworld");
-  checkDataset(dir, 0, 20, 30.0, 5);
+  // Every method under both rules on the grid, the default on the octree (the octree's other
+  // methods are covered on the shorter datasets below).
+  checkDataset(dir, 0, 80, 30.0, 10, {0.2});
+}
+
+TEST(RealData, BalmScans20To39At10cm) {
+  DENSEMAP_REQUIRE_DATA(dir, "balm-realworld");
+  checkDataset(dir, 0, 20, 30.0, 5, {0.1});
 }
 
 TEST(RealData, La3dmStructured) {
@@ -64,7 +75,8 @@ TEST(RealData, AkimapSampleGraphMatchesItsWorldClouds) {
 
 TEST(RealData, OctomapScanDat) {
   DENSEMAP_REQUIRE_DATA(file, "octomap/scan.dat.bz2");
-  checkDataset(file, 0, 1, -1.0, 1);
+  checkDataset(file, 0, 1, -1.0, 1, {0.1, 0.2}, test::standardCases(),
+               /*expect_savings=*/false);  // one scan: nothing is fully free yet
 }
 
 TEST(RealData, OctomapSphericalScanGraph) {

@@ -1,0 +1,193 @@
+// The two building blocks of culling: the backward traversal (exactly traverseRay reversed)
+// and the culling region (exactly Alg. 3's fixed point, grown by breadth-first search).
+#include <gtest/gtest.h>
+
+#include <deque>
+#include <random>
+#include <set>
+
+#include "densemap/geometry/ray_traversal.hpp"
+#include "densemap/map/grid_map.hpp"
+#include "densemap/raycast/culling_region.hpp"
+#include "densemap/test_support/random_rays.hpp"
+
+namespace densemap {
+namespace {
+
+TEST(TraverseRayBackward, IsTheForwardTraversalReversedOnAdversarialRays) {
+  BackwardScratch scratch;
+  std::size_t rays = 0, nonempty = 0;
+  for (const double resolution : {0.05, 0.1, 0.15, 0.2, 1.0 / 3.0, 0.4}) {
+    const VoxelGrid grid(resolution);
+    test::RandomRays random(resolution, 12.0, 7);
+    for (const test::RayKind kind : test::kAllRayKinds) {
+      for (int i = 0; i < 4000; ++i) {
+        const test::Ray ray = random.next(kind);
+        std::vector<VoxelKey> forward, backward;
+        computeRayKeys(grid, ray.origin, ray.end, forward);
+        const std::size_t total =
+            traverseRayBackward(grid, ray.origin, ray.end, scratch, [&](const VoxelKey& k) {
+              backward.push_back(k);
+              return true;
+            });
+        ASSERT_EQ(total, forward.size());
+        std::reverse(backward.begin(), backward.end());
+        ASSERT_EQ(backward, forward) << "resolution " << resolution << " kind "
+                                     << static_cast<int>(kind) << " ray " << i;
+        // Stopping early visits a prefix of the reversed traversal.
+        if (forward.size() > 2) {
+          std::size_t seen = 0;
+          traverseRayBackward(grid, ray.origin, ray.end, scratch,
+                              [&](const VoxelKey&) { return ++seen < 2; });
+          EXPECT_EQ(seen, 2U);
+        }
+        ++rays;
+        nonempty += forward.empty() ? 0 : 1;
+      }
+    }
+  }
+  EXPECT_GT(nonempty, rays / 2);
+}
+
+/// Alg. 3 as written: breadth-first from the sensor's voxel over fully-free voxels whose test
+/// cells are all in the region.
+std::set<std::uint64_t> bfsRegion(const OccupancyMap& map, const VoxelKey& o, const KeyBox& box,
+                                  const std::set<std::uint64_t>& hit) {
+  const auto free = [&](const VoxelKey& k) {
+    for (int a = 0; a < 3; ++a) {
+      if (k[a] < box.min[a] || k[a] > box.max[a]) return false;
+    }
+    const auto v = map.logOdds(k);
+    return v && map.sensorModel().isFullyFree(*v) && !hit.contains(k.packed());
+  };
+  std::set<std::uint64_t> region;
+  std::deque<VoxelKey> queue;
+  if (!free(o)) return region;
+  region.insert(o.packed());
+  queue.push_back(o);
+  while (!queue.empty()) {
+    const VoxelKey c = queue.front();
+    queue.pop_front();
+    for (int a = 0; a < 3; ++a) {
+      for (const int d : {-1, 1}) {
+        VoxelKey n = c;
+        n[a] = static_cast<std::uint16_t>(n[a] + d);
+        if (region.contains(n.packed()) || !free(n)) continue;
+        bool tests_in = true;  // every neighbour one step closer to o must be in the region
+        for (int b = 0; b < 3 && tests_in; ++b) {
+          if (n[b] == o[b]) continue;
+          VoxelKey t = n;
+          t[b] = static_cast<std::uint16_t>(n[b] > o[b] ? n[b] - 1 : n[b] + 1);
+          tests_in = region.contains(t.packed());
+        }
+        if (!tests_in) continue;
+        region.insert(n.packed());
+        queue.push_back(n);
+      }
+    }
+  }
+  return region;
+}
+
+TEST(CullingRegion, EqualsBreadthFirstAlgorithm3OnRandomMaps) {
+  std::mt19937 rng(3);
+  for (int trial = 0; trial < 12; ++trial) {
+    GridMap map(0.1, SensorModel{});
+    const VoxelKey o{32768, 32770, 32765};
+    std::uniform_int_distribution<int> off(-14, 14);
+    std::bernoulli_distribution blocked(trial % 2 == 0 ? 0.03 : 0.12);
+    for (int dz = -14; dz <= 14; ++dz) {
+      for (int dy = -14; dy <= 14; ++dy) {
+        for (int dx = -14; dx <= 14; ++dx) {
+          const VoxelKey k{static_cast<std::uint16_t>(o.x + dx), static_cast<std::uint16_t>(o.y + dy),
+                           static_cast<std::uint16_t>(o.z + dz)};
+          map.setLogOdds(k, blocked(rng) ? 0.5F : map.sensorModel().clampMin());
+        }
+      }
+    }
+    std::vector<VoxelKey> hit;
+    std::set<std::uint64_t> hit_set;
+    for (int i = 0; i < 20; ++i) {
+      const VoxelKey k{static_cast<std::uint16_t>(o.x + off(rng)),
+                       static_cast<std::uint16_t>(o.y + off(rng)),
+                       static_cast<std::uint16_t>(o.z + off(rng))};
+      hit.push_back(k);
+      hit_set.insert(k.packed());
+    }
+    // A box reaching past the known voxels on some sides and cutting them on others.
+    const KeyBox box{{static_cast<std::uint16_t>(o.x - 9), static_cast<std::uint16_t>(o.y - 16),
+                      static_cast<std::uint16_t>(o.z - 14)},
+                     {static_cast<std::uint16_t>(o.x + 70), static_cast<std::uint16_t>(o.y + 12),
+                      static_cast<std::uint16_t>(o.z + 16)}};
+    CullingRegion sut;
+    sut.build(map, o, box, hit);
+    const auto expected = bfsRegion(map, o, box, hit_set);
+    std::size_t found = 0;
+    for (int dz = -20; dz <= 20; ++dz) {
+      for (int dy = -20; dy <= 20; ++dy) {
+        for (int dx = -20; dx <= 80; ++dx) {
+          const VoxelKey k{static_cast<std::uint16_t>(o.x + dx), static_cast<std::uint16_t>(o.y + dy),
+                           static_cast<std::uint16_t>(o.z + dz)};
+          const bool in = sut.contains(k);
+          ASSERT_EQ(in, expected.contains(k.packed())) << "trial " << trial << " at " << dx
+                                                       << "," << dy << "," << dz;
+          found += in ? 1 : 0;
+        }
+      }
+    }
+    EXPECT_EQ(found, expected.size());
+    EXPECT_EQ(sut.size(), expected.size());
+    if (trial % 2 == 0) EXPECT_GT(expected.size(), 300U);
+  }
+}
+
+TEST(CullingRegion, IsEmptyWhenTheSensorsVoxelIsNotFullyFreeAndBoxesFitTheBudget) {
+  GridMap map(0.1, SensorModel{});
+  const VoxelKey o{32768, 32768, 32768};
+  map.setLogOdds(o, -1.0F);
+  CullingRegion sut;
+  sut.build(map, o, {o, o}, {});
+  EXPECT_EQ(sut.size(), 0U);
+  const KeyBox big{{30000, 30000, 32000}, {35000, 35000, 33000}};
+  const KeyBox fitted = cullingBox(o, big, 1'000'000);
+  std::size_t voxels = 1;
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_LE(fitted.min[a], o[a]);
+    EXPECT_GE(fitted.max[a], o[a]);
+    voxels *= static_cast<std::size_t>(fitted.max[a] - fitted.min[a]) + 1;
+  }
+  EXPECT_LE(voxels, 1'000'000U);
+  EXPECT_GT(voxels, 500'000U);
+}
+
+}  // namespace
+}  // namespace densemap
+
+#include "../../integration/exactness_harness.hpp"
+
+namespace densemap {
+namespace {
+
+TEST(AllMethods, AgreeOnAdversarialScansWithAMovingOrigin) {
+  for (const double resolution : {0.1, 0.2, 0.15}) {
+    SCOPED_TRACE("resolution " + std::to_string(resolution));
+    test::RandomRays origins(resolution, 1.0, 29);
+    std::vector<test::WorldScan> scans;
+    // Dwell on one origin (on grid planes) so voxels saturate and culling starts, then move
+    // (every other origin on grid planes), then come back.
+    const Point3f home = origins.point(1.0);
+    for (int i = 0; i < 12; ++i) {
+      const Point3f origin = i < 7 || i == 11 ? home : origins.point(i % 2 == 0 ? 1.0 : 0.0);
+      PointCloud cloud = test::adversarialScan(resolution, origin, 6000, 5.0, 300 + i);
+      // No return inside the sensor's own voxel: it must be free for the culling region to grow
+      // (Alg. 3 starts there).
+      const VoxelGrid grid(resolution);
+      std::erase_if(cloud, [&](const Point3f& p) { return grid.pointToKey(p) == grid.pointToKey(origin); });
+      scans.push_back({std::move(cloud), origin});
+    }
+    test::expectMethodsAgree(scans, resolution, 4.0);
+  }
+}
+
+}  // namespace
+}  // namespace densemap
