@@ -70,6 +70,12 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
     return makeError("pipeline.queue_depth must be in 1..1024");
   }
   if (p.max_points() < 1) return makeError("pipeline.max_points must be >= 1");
+  auto method = parseIntegrationMethod(p.integration());
+  if (!method) return makeError("pipeline.integration: " + method.error().message);
+  o.method = *method;
+  auto rule = parseUpdateRule(p.update_rule());
+  if (!rule) return makeError("pipeline.update_rule: " + rule.error().message);
+  o.rule = *rule;
   o.threads = static_cast<int>(p.threads());
   o.queue_depth = p.queue_depth();
   o.limits.max_points = p.max_points();

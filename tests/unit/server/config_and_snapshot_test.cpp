@@ -29,6 +29,9 @@ TEST(ServerConfig, TheShippedConfigIsValidAndEqualsTheDefaults) {
   EXPECT_EQ(options->resolution_m, defaults->resolution_m);
   EXPECT_EQ(options->max_range_m, defaults->max_range_m);
   EXPECT_EQ(options->queue_depth, defaults->queue_depth);
+  EXPECT_EQ(options->method, defaults->method);
+  EXPECT_EQ(defaults->method, IntegrationMethod::kSuperRayCulling);
+  EXPECT_EQ(options->rule, UpdateRule::kSet);
   EXPECT_EQ(config->dds().network_interface(), "lo");
 }
 
@@ -45,6 +48,15 @@ TEST(ServerConfig, ErrorsNameTheFileTheLineAndTheReason) {
   EXPECT_NE(bad_value.error().message.find("resolution_m"), std::string::npos);
   EXPECT_FALSE(loadServerConfig(writeConfig(dir, "map { backend: \"voxels\" }\n")));
   EXPECT_FALSE(loadServerConfig(writeConfig(dir, "pipeline { threads: 0 }\n")));
+  auto bad_method = loadServerConfig(writeConfig(dir, "pipeline { integration: \"fast\" }\n"));
+  ASSERT_FALSE(bad_method);
+  EXPECT_NE(bad_method.error().message.find("superray+culling"), std::string::npos);
+  EXPECT_FALSE(loadServerConfig(writeConfig(dir, "pipeline { update_rule: \"sum\" }\n")));
+  auto per_ray = loadServerConfig(
+      writeConfig(dir, "pipeline { integration: \"raycast\" update_rule: \"per_ray\" }\n"));
+  ASSERT_TRUE(per_ray) << per_ray.error().message;
+  EXPECT_EQ(pipelineOptions(*per_ray)->rule, UpdateRule::kPerRay);
+  EXPECT_EQ(pipelineOptions(*per_ray)->method, IntegrationMethod::kRaycast);
   EXPECT_FALSE(loadServerConfig(writeConfig(dir, "map { sensor { prob_hit: 0.3 } }\n")));
   EXPECT_FALSE(loadServerConfig(writeConfig(dir, "dds { network_interface: \"\" }\n")));
   EXPECT_FALSE(loadServerConfig(writeConfig(dir, "map { resolution_m: \"x\" }\n")));
