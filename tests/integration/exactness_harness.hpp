@@ -93,13 +93,13 @@ inline void expectMethodsAgree(const std::vector<WorldScan>& scans, double resol
   all.insert(all.end(), cases.begin(), cases.end());
   subjects.reserve(all.size());
   for (const MethodCase& c : all) {
-    const std::string name = std::string(methodName(c.method)) + "/" +
-                             std::string(ruleName(c.rule)) + "/" +
-                             std::string(backendName(c.backend)) + "/" +
-                             std::to_string(c.threads) + "t";
-    subjects.push_back({c, name, std::move(*makeMap(c.backend, resolution)),
-                        std::make_unique<tbb::task_arena>(c.threads),
-                        Integrator({.method = c.method, .rule = c.rule, .max_range_m = max_range})});
+    const std::string name =
+        std::string(methodName(c.method)) + "/" + std::string(ruleName(c.rule)) + "/" +
+        std::string(backendName(c.backend)) + "/" + std::to_string(c.threads) + "t";
+    subjects.push_back(
+        {c, name, std::move(*makeMap(c.backend, resolution)),
+         std::make_unique<tbb::task_arena>(c.threads),
+         Integrator({.method = c.method, .rule = c.rule, .max_range_m = max_range})});
   }
   const auto referenceFor = [&](UpdateRule rule) -> const Subject& {
     return subjects[rule == UpdateRule::kSet ? 0 : 1];
@@ -138,9 +138,9 @@ inline void expectMethodsAgree(const std::vector<WorldScan>& scans, double resol
   }
   for (std::size_t j = 2; j < subjects.size(); ++j) {
     const Subject& s = subjects[j];
-    const OccupancyMap& ref =
-        s.c.rule == UpdateRule::kSet ? static_cast<const OccupancyMap&>(oracle)
-                                     : *referenceFor(s.c.rule).map;
+    const OccupancyMap& ref = s.c.rule == UpdateRule::kSet
+                                  ? static_cast<const OccupancyMap&>(oracle)
+                                  : *referenceFor(s.c.rule).map;
     EXPECT_EQ(diffMaps(*s.map, ref).differing(), 0U) << s.name << " at the end";
     if (!expect_savings) continue;
     if (s.c.method == IntegrationMethod::kSuperRay ||

@@ -92,11 +92,11 @@ Integrate makeIntegrator(const std::string& method, const Options& o) {
   const auto parsed = parseIntegrationMethod(method);
   const auto rule = parseUpdateRule(o.rule);
   if (!parsed || !rule) return nullptr;
-  auto integrator = std::make_shared<Integrator>(IntegratorOptions{.method = *parsed,
-                                                                   .rule = *rule,
-                                                                   .max_range_m = o.max_range,
-                                                                   .superray_min_points =
-                                                                       o.min_points});
+  auto integrator =
+      std::make_shared<Integrator>(IntegratorOptions{.method = *parsed,
+                                                     .rule = *rule,
+                                                     .max_range_m = o.max_range,
+                                                     .superray_min_points = o.min_points});
   return [integrator](OccupancyMap& map, const WorldScan& s) {
     return integrator->integrate(map, s.points, s.origin);
   };
@@ -226,8 +226,8 @@ int run(const Options& o) {
           std::fprintf(stderr,
                        "%s/%s differs from %s: %zu only ours, %zu only the reference's, "
                        "%zu values (max |d| %g)\n",
-                       method.c_str(), r.backend.c_str(), reference_method.c_str(),
-                       diff.only_in_a, diff.only_in_b, diff.value_mismatch,
+                       method.c_str(), r.backend.c_str(), reference_method.c_str(), diff.only_in_a,
+                       diff.only_in_b, diff.value_mismatch,
                        static_cast<double>(diff.max_abs_difference));
         }
       }
@@ -245,10 +245,11 @@ int run(const Options& o) {
     }
   }
   const std::string machine = machineDescription();
-  std::printf("densemap-bench: %s, resolution %g m, max range %g m, %zu scans, rule %s "
-              "(diff cells vs %s); %s\n",
-              o.data.c_str(), o.resolution, o.max_range, scans->size(), o.rule.c_str(),
-              reference_method.c_str(), machine.c_str());
+  std::printf(
+      "densemap-bench: %s, resolution %g m, max range %g m, %zu scans, rule %s "
+      "(diff cells vs %s); %s\n",
+      o.data.c_str(), o.resolution, o.max_range, scans->size(), o.rule.c_str(),
+      reference_method.c_str(), machine.c_str());
   std::printf("%s\n", formatTable(runs).c_str());
   std::printf("%s", formatRayTable(runs).c_str());
   for (const RunResult& r : runs) {

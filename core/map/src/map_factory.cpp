@@ -14,9 +14,7 @@ Expected<Backend> parseBackend(std::string_view name) {
   return makeError("unknown map backend '" + std::string(name) + "' (expected grid or octree)");
 }
 
-std::string_view ruleName(UpdateRule rule) {
-  return rule == UpdateRule::kSet ? "set" : "per_ray";
-}
+std::string_view ruleName(UpdateRule rule) { return rule == UpdateRule::kSet ? "set" : "per_ray"; }
 
 Expected<UpdateRule> parseUpdateRule(std::string_view name) {
   if (name == "set") return UpdateRule::kSet;

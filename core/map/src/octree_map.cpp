@@ -137,7 +137,8 @@ void OctreeMap::forEachFullyFreeBlock(
   if (fully_free_stale_) {
     fully_free_.clear();
     forEachOcTreeCell(tree_, [&](const VoxelKey& k, float v) {
-      if (sensorModel().isFullyFree(v)) block::setBit(fully_free_[block::blockOf(k)], block::indexOf(k));
+      if (sensorModel().isFullyFree(v))
+        block::setBit(fully_free_[block::blockOf(k)], block::indexOf(k));
     });
     fully_free_stale_ = false;
   }

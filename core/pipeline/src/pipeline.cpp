@@ -94,7 +94,8 @@ Pipeline::Pipeline(const PipelineOptions& options, std::unique_ptr<OccupancyMap>
                    std::uint64_t version)
     : options_(options),
       map_(std::move(map)),
-      integrator_({.method = options.method, .rule = options.rule, .max_range_m = options.max_range_m}),
+      integrator_(
+          {.method = options.method, .rule = options.rule, .max_range_m = options.max_range_m}),
       arena_(options.threads),
       queue_(options.queue_depth) {
   view_.store(MapView::fromMap(*map_, version));

@@ -21,8 +21,10 @@ KeyBox cullingBox(const VoxelKey& origin, const KeyBox& rays_box, std::size_t ma
   const auto clipped = [&](unsigned h) {
     KeyBox c = box;
     for (int a = 0; a < 3; ++a) {
-      c.min[a] = static_cast<std::uint16_t>(std::max<int>(c.min[a], origin[a] - static_cast<int>(h)));
-      c.max[a] = static_cast<std::uint16_t>(std::min<int>(c.max[a], origin[a] + static_cast<int>(h)));
+      c.min[a] =
+          static_cast<std::uint16_t>(std::max<int>(c.min[a], origin[a] - static_cast<int>(h)));
+      c.max[a] =
+          static_cast<std::uint16_t>(std::min<int>(c.max[a], origin[a] + static_cast<int>(h)));
     }
     return c;
   };
@@ -119,7 +121,8 @@ void CullingRegion::keepRunThrough(std::uint64_t* r, unsigned x0) const {
   int lo = -1;
   for (int w = static_cast<int>(w0); w >= 0; --w) {
     std::uint64_t zeros = ~r[w];
-    if (w == static_cast<int>(w0)) zeros &= b0 == 63 ? ~std::uint64_t{0} : ((std::uint64_t{1} << (b0 + 1)) - 1);
+    if (w == static_cast<int>(w0))
+      zeros &= b0 == 63 ? ~std::uint64_t{0} : ((std::uint64_t{1} << (b0 + 1)) - 1);
     if (zeros != 0) {
       lo = w * 64 + 63 - std::countl_zero(zeros);
       break;
@@ -129,7 +132,7 @@ void CullingRegion::keepRunThrough(std::uint64_t* r, unsigned x0) const {
   for (unsigned w = 0; w < words_per_row_; ++w) {
     const int first = static_cast<int>(w * 64);
     std::uint64_t keep = ~std::uint64_t{0};
-    const int from = lo + 1 - first;  // keep bits >= from
+    const int from = lo + 1 - first;              // keep bits >= from
     const int to = static_cast<int>(hi) - first;  // keep bits < to
     if (from >= 64 || to <= 0) {
       keep = 0;

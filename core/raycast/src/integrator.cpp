@@ -57,8 +57,8 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points_world.size(), 4096),
                     [&](const tbb::blocked_range<std::size_t>& range) {
                       for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                        rays_[i] = rayEndFor(grid, origin_world, points_world[i],
-                                             options_.max_range_m);
+                        rays_[i] =
+                            rayEndFor(grid, origin_world, points_world[i], options_.max_range_m);
                       }
                     });
   if (grouping) {

@@ -1,7 +1,6 @@
 #include "densemap/raycast/super_rays.hpp"
 
 #include <tbb/blocked_range.h>
-#include <tbb/combinable.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -88,7 +87,7 @@ void criticalSlopes(double da0, int na, double db0, int nb, double res, double l
 
 std::size_t SuperRayBuilder::groupCell(const VoxelGrid& grid, const Point3f& origin,
                                        std::span<const RayEnd> rays, RayEnd* out,
-                                       Scratch& scratch, std::size_t& uncertain) {
+                                       Scratch& scratch) {
   const std::size_t n = rays.size();
   const VoxelKey end_key = rays[0].key;
   const auto origin_key = grid.pointToKey(origin);
@@ -157,7 +156,8 @@ std::size_t SuperRayBuilder::groupCell(const VoxelGrid& grid, const Point3f& ori
       const int a = kPairs[p][0], b = kPairs[p][1];
       if (step[a] == 0 || step[b] == 0) continue;  // a zero step is never taken: same for all
       const auto slope = [&](const Scratch::Info& ri) {
-        return std::fabs(static_cast<double>(ri.dir[b])) / std::fabs(static_cast<double>(ri.dir[a]));
+        return std::fabs(static_cast<double>(ri.dir[b])) /
+               std::fabs(static_cast<double>(ri.dir[a]));
       };
       double lo = slope(first), hi = lo;
       for (std::size_t j = begin; j < end; ++j) {
@@ -192,7 +192,6 @@ std::size_t SuperRayBuilder::groupCell(const VoxelGrid& grid, const Point3f& ori
       order[kept++] = static_cast<std::uint32_t>(i);
     } else {
       out[written++] = rays[i];
-      ++uncertain;
     }
   }
   const auto same = [&](std::uint32_t a, std::uint32_t b) {
@@ -226,11 +225,9 @@ SuperRayStats SuperRayBuilder::build(const VoxelGrid& grid, const Point3f& origi
                                      std::vector<RayEnd>& rays, std::size_t min_points) {
   SuperRayStats stats;
   const std::size_t n = rays.size();
-  stats.rays_in = n;
   const auto origin_key = grid.pointToKey(origin);
   if (!origin_key || n >= (std::size_t{1} << kIndexBits)) {
-    stats.rays_out = n;  // nothing to traverse, or too many rays to index: leave them alone
-    return stats;
+    return stats;  // nothing to traverse, or too many rays to index: leave them alone
   }
   order_.resize(n);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
@@ -256,12 +253,10 @@ SuperRayStats SuperRayBuilder::build(const VoxelGrid& grid, const Point3f& origi
   // Each run writes at most its own length, at its own offset; compacted afterwards.
   out_.resize(n);
   written_.assign(runs_.size(), 0);
-  tbb::combinable<std::size_t> uncertain_total, grouped_cells;
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, runs_.size(), 64),
       [&](const tbb::blocked_range<std::size_t>& range) {
         Scratch& scratch = scratch_.local();
-        std::size_t uncertain = 0, grouped = 0;
         for (std::size_t r = range.begin(); r != range.end(); ++r) {
           const auto [first, last] = runs_[r];
           const std::size_t size = last - first;
@@ -271,14 +266,11 @@ SuperRayStats SuperRayBuilder::build(const VoxelGrid& grid, const Point3f& origi
             written_[r] = static_cast<std::uint32_t>(size);
             continue;
           }
-          ++grouped;
           scratch.cell.resize(size);
           for (std::size_t j = 0; j < size; ++j) scratch.cell[j] = rays[indexOf(order_[first + j])];
-          written_[r] = static_cast<std::uint32_t>(
-              groupCell(grid, origin, scratch.cell, out, scratch, uncertain));
+          written_[r] =
+              static_cast<std::uint32_t>(groupCell(grid, origin, scratch.cell, out, scratch));
         }
-        uncertain_total.local() += uncertain;
-        grouped_cells.local() += grouped;
       });
 
   rays.clear();
@@ -289,9 +281,6 @@ SuperRayStats SuperRayBuilder::build(const VoxelGrid& grid, const Point3f& origi
       if (out[j].weight > 1) ++stats.super_rays;
     }
   }
-  stats.rays_out = rays.size();
-  stats.uncertain = uncertain_total.combine(std::plus<>());
-  stats.grouped_cells = grouped_cells.combine(std::plus<>());
   return stats;
 }
 

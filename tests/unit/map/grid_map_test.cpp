@@ -13,8 +13,7 @@
 namespace densemap {
 namespace {
 
-ScanUpdate randomUpdate(std::mt19937& rng, double p_occupied,
-                        UpdateRule rule = UpdateRule::kSet) {
+ScanUpdate randomUpdate(std::mt19937& rng, double p_occupied, UpdateRule rule = UpdateRule::kSet) {
   std::uniform_int_distribution<int> coord(32700, 32830);
   std::bernoulli_distribution occ(p_occupied);
   std::uniform_int_distribution<std::uint32_t> weight(1, 6);

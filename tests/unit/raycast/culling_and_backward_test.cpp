@@ -32,8 +32,8 @@ TEST(TraverseRayBackward, IsTheForwardTraversalReversedOnAdversarialRays) {
             });
         ASSERT_EQ(total, forward.size());
         std::reverse(backward.begin(), backward.end());
-        ASSERT_EQ(backward, forward) << "resolution " << resolution << " kind "
-                                     << static_cast<int>(kind) << " ray " << i;
+        ASSERT_EQ(backward, forward)
+            << "resolution " << resolution << " kind " << static_cast<int>(kind) << " ray " << i;
         // Stopping early visits a prefix of the reversed traversal.
         if (forward.size() > 2) {
           std::size_t seen = 0;
@@ -99,7 +99,8 @@ TEST(CullingRegion, EqualsBreadthFirstAlgorithm3OnRandomMaps) {
     for (int dz = -14; dz <= 14; ++dz) {
       for (int dy = -14; dy <= 14; ++dy) {
         for (int dx = -14; dx <= 14; ++dx) {
-          const VoxelKey k{static_cast<std::uint16_t>(o.x + dx), static_cast<std::uint16_t>(o.y + dy),
+          const VoxelKey k{static_cast<std::uint16_t>(o.x + dx),
+                           static_cast<std::uint16_t>(o.y + dy),
                            static_cast<std::uint16_t>(o.z + dz)};
           map.setLogOdds(k, blocked(rng) ? 0.5F : map.sensorModel().clampMin());
         }
@@ -126,11 +127,12 @@ TEST(CullingRegion, EqualsBreadthFirstAlgorithm3OnRandomMaps) {
     for (int dz = -20; dz <= 20; ++dz) {
       for (int dy = -20; dy <= 20; ++dy) {
         for (int dx = -20; dx <= 80; ++dx) {
-          const VoxelKey k{static_cast<std::uint16_t>(o.x + dx), static_cast<std::uint16_t>(o.y + dy),
+          const VoxelKey k{static_cast<std::uint16_t>(o.x + dx),
+                           static_cast<std::uint16_t>(o.y + dy),
                            static_cast<std::uint16_t>(o.z + dz)};
           const bool in = sut.contains(k);
-          ASSERT_EQ(in, expected.contains(k.packed())) << "trial " << trial << " at " << dx
-                                                       << "," << dy << "," << dz;
+          ASSERT_EQ(in, expected.contains(k.packed()))
+              << "trial " << trial << " at " << dx << "," << dy << "," << dz;
           found += in ? 1 : 0;
         }
       }
@@ -182,7 +184,8 @@ TEST(AllMethods, AgreeOnAdversarialScansWithAMovingOrigin) {
       // No return inside the sensor's own voxel: it must be free for the culling region to grow
       // (Alg. 3 starts there).
       const VoxelGrid grid(resolution);
-      std::erase_if(cloud, [&](const Point3f& p) { return grid.pointToKey(p) == grid.pointToKey(origin); });
+      std::erase_if(
+          cloud, [&](const Point3f& p) { return grid.pointToKey(p) == grid.pointToKey(origin); });
       scans.push_back({std::move(cloud), origin});
     }
     test::expectMethodsAgree(scans, resolution, 4.0);

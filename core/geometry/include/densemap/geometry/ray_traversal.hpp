@@ -48,7 +48,8 @@ inline TraversalKind startTraversal(const VoxelGrid& grid, const Point3f& origin
     if (start.step[i] != 0) {
       double voxel_border = grid.keyToCoord(start.origin[i]);
       voxel_border += static_cast<float>(start.step[i] * resolution * 0.5);
-      start.t_max[i] = (voxel_border - static_cast<double>(origin[i])) / static_cast<double>(dir[i]);
+      start.t_max[i] =
+          (voxel_border - static_cast<double>(origin[i])) / static_cast<double>(dir[i]);
       start.t_delta[i] = resolution / static_cast<double>(std::fabs(dir[i]));
     } else {
       start.t_max[i] = std::numeric_limits<double>::max();
@@ -142,8 +143,8 @@ std::size_t backwardExact(const VoxelGrid& grid, const Point3f& origin, const Po
         exit_time = x;
       }
     }
-    const bool before_exit = exit_axis < 0 || last_time < exit_time ||
-                             (last_time == exit_time && last_axis > exit_axis);
+    const bool before_exit =
+        exit_axis < 0 || last_time < exit_time || (last_time == exit_time && last_axis > exit_axis);
     if (last_axis >= 0 && before_exit && last_time <= static_cast<double>(s.length)) {
       constexpr double kNone = -std::numeric_limits<double>::infinity();
       int next[3] = {crossings[0] - 1, crossings[1] - 1, crossings[2] - 1};
@@ -206,7 +207,8 @@ std::size_t traverseRayBackward(const VoxelGrid& grid, const Point3f& origin, co
     crossings[a] = (static_cast<int>(s.end[a]) - static_cast<int>(s.origin[a])) * s.step[a];
     if (s.step[a] == 0 ? s.end[a] != s.origin[a] : crossings[a] < 0) regular = false;
   }
-  if (!regular) return detail::backwardExact(grid, origin, end, s, crossings, false, scratch, 0, visit);
+  if (!regular)
+    return detail::backwardExact(grid, origin, end, s, crossings, false, scratch, 0, visit);
 
   constexpr double kRel = 0x1p-50;
   constexpr double kNone = -std::numeric_limits<double>::infinity();

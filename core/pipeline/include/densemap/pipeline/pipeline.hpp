@@ -26,7 +26,7 @@ struct PipelineOptions {
   double max_range_m = -1.0;  // < 0: unlimited
   IntegrationMethod method = IntegrationMethod::kSuperRayCulling;
   UpdateRule rule = UpdateRule::kSet;
-  int threads = 2;            // size of the task arena the pipeline owns
+  int threads = 2;  // size of the task arena the pipeline owns
   std::size_t queue_depth = 2;
   ScanLimits limits;
 };

@@ -49,9 +49,7 @@ class CullingRegion {
   /// Voxels in the region.
   [[nodiscard]] std::size_t size() const { return size_; }
   /// Voxels of the box the region was built in.
-  [[nodiscard]] std::size_t boxVoxels() const {
-    return static_cast<std::size_t>(nx_) * ny_ * nz_;
-  }
+  [[nodiscard]] std::size_t boxVoxels() const { return static_cast<std::size_t>(nx_) * ny_ * nz_; }
 
  private:
   std::uint64_t* row(unsigned y, unsigned z) {

@@ -43,13 +43,13 @@ struct IntegratorOptions {
 /// What integrating one scan did; the benchmark's per-scan figures.
 struct ScanStats {
   std::size_t points = 0;
-  std::size_t rays = 0;      // rays traversed (super rays count once)
-  std::size_t super_rays = 0;  // of which stand for more than one point
-  std::size_t visits = 0;    // cells marked while traversing rays (with repeats)
-  std::size_t culled = 0;    // traversal steps skipped inside the culling region
+  std::size_t rays = 0;           // rays traversed (super rays count once)
+  std::size_t super_rays = 0;     // of which stand for more than one point
+  std::size_t visits = 0;         // cells marked while traversing rays (with repeats)
+  std::size_t culled = 0;         // traversal steps skipped inside the culling region
   std::size_t region_voxels = 0;  // size of the culling region
-  std::size_t updated = 0;   // distinct cells updated
-  std::size_t changed = 0;   // cells whose log-odds changed or that became known
+  std::size_t updated = 0;        // distinct cells updated
+  std::size_t changed = 0;        // cells whose log-odds changed or that became known
   // Wall time of each stage, ms: rays (+ super rays), culling region, marking, merging the
   // workers' update sets, applying to the map.
   double ms_rays = 0, ms_region = 0, ms_mark = 0, ms_merge = 0, ms_apply = 0;
@@ -64,7 +64,9 @@ struct ScanStats {
 class Integrator {
  public:
   explicit Integrator(const IntegratorOptions& options = {})
-      : options_(options), locals_([rule = options.rule] { return Local{ScanUpdate(rule), {}, {}}; }) {}
+      : options_(options), locals_([rule = options.rule] {
+          return Local{ScanUpdate(rule), {}, {}};
+        }) {}
 
   [[nodiscard]] const IntegratorOptions& options() const { return options_; }
 

@@ -57,18 +57,23 @@ struct MarkCounts {
   std::size_t culled = 0;
 };
 
-/// Marks one ray into a scan's update set as OctoMap's computeUpdate does — the cells crossed
-/// (traverseRay) free, the end voxel occupied when the ray is — each `weight` times.
-inline void markRay(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray, ScanUpdate& update,
-             MarkCounts& counts) {
-  traverseRay(grid, origin, ray.end, [&](const VoxelKey& k) {
-    update.markFree(k, ray.weight);
-    ++counts.visits;
-  });
+/// The end voxel of a ray that ends in it, `weight` times.
+inline void markEnd(const RayEnd& ray, ScanUpdate& update, MarkCounts& counts) {
   if (ray.occupied && ray.key_valid) {
     update.markOccupied(ray.key, ray.weight);
     ++counts.visits;
   }
+}
+
+/// Marks one ray into a scan's update set as OctoMap's computeUpdate does — the cells crossed
+/// (traverseRay) free, the end voxel occupied when the ray is — each `weight` times.
+inline void markRay(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray,
+                    ScanUpdate& update, MarkCounts& counts) {
+  traverseRay(grid, origin, ray.end, [&](const VoxelKey& k) {
+    update.markFree(k, ray.weight);
+    ++counts.visits;
+  });
+  markEnd(ray, update, counts);
 }
 
 /// markRay with a culling region (dissertation Sec. 2.3.5): the ray is traversed from its end
@@ -82,19 +87,16 @@ void markRayCulled(const VoxelGrid& grid, const Point3f& origin, const RayEnd& r
                    const Region& region, BackwardScratch& scratch, ScanUpdate& update,
                    MarkCounts& counts) {
   std::size_t marked = 0;
-  const std::size_t total = traverseRayBackward(grid, origin, ray.end, scratch,
-                                                [&](const VoxelKey& k) {
-                                                  if (region.contains(k)) return false;
-                                                  update.markFree(k, ray.weight);
-                                                  ++marked;
-                                                  return true;
-                                                });
+  const std::size_t total =
+      traverseRayBackward(grid, origin, ray.end, scratch, [&](const VoxelKey& k) {
+        if (region.contains(k)) return false;
+        update.markFree(k, ray.weight);
+        ++marked;
+        return true;
+      });
   counts.visits += marked;
   counts.culled += total - marked;
-  if (ray.occupied && ray.key_valid) {
-    update.markOccupied(ray.key, ray.weight);
-    ++counts.visits;
-  }
+  markEnd(ray, update, counts);
 }
 
 }  // namespace densemap

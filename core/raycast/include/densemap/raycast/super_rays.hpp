@@ -14,11 +14,7 @@ namespace densemap {
 
 /// What grouping one scan's rays into super rays did (the dissertation's Table 2.2 figures).
 struct SuperRayStats {
-  std::size_t rays_in = 0;        // rays before grouping
-  std::size_t rays_out = 0;       // super rays + rays passed through
-  std::size_t super_rays = 0;     // rays out standing for more than one ray
-  std::size_t grouped_cells = 0;  // end voxels with at least min_points rays
-  std::size_t uncertain = 0;      // rays left alone: too close to a boundary to classify safely
+  std::size_t super_rays = 0;  // rays out standing for more than one ray
 };
 
 /// Groups the rays of one scan that end in the same voxel and cross exactly the same voxels
@@ -48,13 +44,7 @@ class SuperRayBuilder {
   SuperRayStats build(const VoxelGrid& grid, const Point3f& origin, std::vector<RayEnd>& rays,
                       std::size_t min_points);
 
-  /// Groups the rays of one end voxel (all with the same key and occupied flag) into `out`
-  /// (room for rays.size()); returns how many were written. Exposed for tests.
-  struct Scratch;
-  static std::size_t groupCell(const VoxelGrid& grid, const Point3f& origin,
-                               std::span<const RayEnd> rays, RayEnd* out, Scratch& scratch,
-                               std::size_t& uncertain);
-
+ private:
   struct Scratch {
     struct Info {
       float dir[3];
@@ -68,7 +58,11 @@ class SuperRayBuilder {
     std::vector<RayEnd> cell;
   };
 
- private:
+  /// Groups the rays of one end voxel (all with the same key and occupied flag) into `out`
+  /// (room for rays.size()); returns how many were written.
+  static std::size_t groupCell(const VoxelGrid& grid, const Point3f& origin,
+                               std::span<const RayEnd> rays, RayEnd* out, Scratch& scratch);
+
   std::vector<std::uint64_t> order_;  // (cell code, ray index), sorted
   std::vector<std::uint64_t> sort_tmp_;
   std::vector<std::pair<std::uint32_t, std::uint32_t>> runs_;
