@@ -34,24 +34,36 @@ ApplyStats OctreeMap::apply(const ScanUpdate& update, CellChanges* changes) {
   ApplyStats stats;
   const UpdateRule rule = update.rule();
   const SensorModel& model = sensorModel();
-  update.forEachCell([&](const VoxelKey& key, const CellHits& hits) {
-    const octomap::OcTreeKey k = toOcTreeKey(key);
-    const octomap::OcTreeNode* before = tree_.search(k);
-    const bool known = before != nullptr;
-    const float old_value = known ? before->getLogOdds() : 0.0F;
-    // OctoMap's own update paths: the boolean one under kSet, a log-odds delta under kPerRay.
-    const octomap::OcTreeNode* after =
-        rule == UpdateRule::kSet
-            ? tree_.updateNode(k, hits.occupied > 0, /*lazy_eval=*/false)
-            : tree_.updateNode(k, perRayDelta(model, hits), /*lazy_eval=*/false);
-    const float new_value = after->getLogOdds();
-    ++stats.updated_cells;
-    if (!known || new_value != old_value) {
-      ++stats.changed_cells;
-      noteValue(key, new_value);
-      if (changes != nullptr) changes->push_back({key, new_value, true});
-    }
-  });
+  refreshFullyFree();
+  for (const auto& [block_key, cells] : update.blocks()) {
+    const auto free_it = fully_free_.find(block_key);
+    const block::BlockMask* fully_free = free_it == fully_free_.end() ? nullptr : &free_it->second;
+    ScanUpdate::forEachCellInBlock(
+        block_key, cells, [&](const VoxelKey& key, const CellHits& hits) {
+          ++stats.updated_cells;
+          // A cell at the lower clamp that is only crossed stays there: OctoMap's updateNode
+          // returns early for it too ("no change: node already at threshold").
+          if (hits.occupied == 0 && fully_free != nullptr &&
+              block::testBit(*fully_free, block::indexOf(key))) {
+            return;
+          }
+          const octomap::OcTreeKey k = toOcTreeKey(key);
+          const octomap::OcTreeNode* before = tree_.search(k);
+          const bool known = before != nullptr;
+          const float old_value = known ? before->getLogOdds() : 0.0F;
+          // OctoMap's own update paths: the boolean one under kSet, a log-odds delta under kPerRay.
+          const octomap::OcTreeNode* after =
+              rule == UpdateRule::kSet
+                  ? tree_.updateNode(k, hits.occupied > 0, /*lazy_eval=*/false)
+                  : tree_.updateNode(k, perRayDelta(model, hits), /*lazy_eval=*/false);
+          const float new_value = after->getLogOdds();
+          if (!known || new_value != old_value) {
+            ++stats.changed_cells;
+            noteValue(key, new_value);
+            if (changes != nullptr) changes->push_back({key, new_value, true});
+          }
+        });
+  }
   return stats;
 }
 
@@ -134,15 +146,19 @@ void OctreeMap::setLogOdds(const VoxelKey& key, float log_odds) {
 
 void OctreeMap::forEachFullyFreeBlock(
     const std::function<void(std::uint64_t, const block::BlockMask&)>& f) const {
-  if (fully_free_stale_) {
-    fully_free_.clear();
-    forEachOcTreeCell(tree_, [&](const VoxelKey& k, float v) {
-      if (sensorModel().isFullyFree(v))
-        block::setBit(fully_free_[block::blockOf(k)], block::indexOf(k));
-    });
-    fully_free_stale_ = false;
-  }
+  refreshFullyFree();
   for (const auto& [block_key, mask] : fully_free_) f(block_key, mask);
+}
+
+void OctreeMap::refreshFullyFree() const {
+  if (!fully_free_stale_) return;
+  fully_free_.clear();
+  forEachOcTreeCell(tree_, [&](const VoxelKey& k, float v) {
+    if (sensorModel().isFullyFree(v)) {
+      block::setBit(fully_free_[block::blockOf(k)], block::indexOf(k));
+    }
+  });
+  fully_free_stale_ = false;
 }
 
 std::size_t OctreeMap::memoryBytes() const {

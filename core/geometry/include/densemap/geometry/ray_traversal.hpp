@@ -181,6 +181,119 @@ std::size_t backwardExact(const VoxelGrid& grid, const Point3f& origin, const Po
 
 }  // namespace detail
 
+/// A ray's backward walk in progress (see traverseRayBackward): the forward start, the
+/// crossings per axis, and for the fast path the next crossing time to undo per axis.
+struct BackwardWalk {
+  TraversalStart s;
+  int crossings[3] = {0, 0, 0};
+  double head[3] = {0, 0, 0};
+  int next[3] = {0, 0, 0};
+  int key[3] = {0, 0, 0};  // the voxel the walk is in
+  double bound = 0;        // decisions must win by more than this
+  std::size_t total = 0;   // voxels of the forward traversal
+};
+
+enum class BackwardMode {
+  kNothing,         // no voxels (origin or end outside the range, or both in one voxel)
+  kExactIrregular,  // replay the recorded forward traversal
+  kExact,           // the exact accumulated walk
+  kFast,            // `walk` is ready for fast steps
+};
+
+/// Sets up the backward walk of ray (origin, end); decides with margins whether the fast path
+/// may start (see traverseRayBackward).
+inline BackwardMode prepareBackward(const VoxelGrid& grid, const Point3f& origin,
+                                    const Point3f& end, BackwardWalk& walk) {
+  TraversalStart& s = walk.s;
+  if (startTraversal(grid, origin, end, s) != TraversalKind::kRay) return BackwardMode::kNothing;
+  int* crossings = walk.crossings;
+  bool regular = true;
+  for (int a = 0; a < 3; ++a) {
+    crossings[a] = (static_cast<int>(s.end[a]) - static_cast<int>(s.origin[a])) * s.step[a];
+    if (s.step[a] == 0 ? s.end[a] != s.origin[a] : crossings[a] < 0) regular = false;
+  }
+  if (!regular) return BackwardMode::kExactIrregular;
+
+  constexpr double kRel = 0x1p-50;
+  const auto time = [&](int a, int k) { return s.t_max[a] + k * s.t_delta[a]; };
+  const auto tolerance = [&](int a, int k, double v) {
+    return (k + 8) * kRel * (std::fabs(v) + std::fabs(s.t_max[a]));
+  };
+  // Termination as in backwardExact, decided with margins.
+  int last_axis = -1, exit_axis = -1;
+  double last_time = 0, last_tol = 0, exit_time = 0, exit_tol = 0;
+  for (int a = 0; a < 3; ++a) {
+    if (s.step[a] == 0) continue;
+    if (crossings[a] > 0) {
+      const double v = time(a, crossings[a] - 1);
+      const double tol = tolerance(a, crossings[a] - 1, v);
+      if (last_axis >= 0 && std::fabs(v - last_time) <= tol + last_tol) {
+        return BackwardMode::kExact;
+      }
+      if (last_axis < 0 || v > last_time) {
+        last_axis = a;
+        last_time = v;
+        last_tol = tol;
+      }
+    }
+    const double x = time(a, crossings[a]);
+    const double tol = tolerance(a, crossings[a], x);
+    if (exit_axis >= 0 && std::fabs(x - exit_time) <= tol + exit_tol) return BackwardMode::kExact;
+    if (exit_axis < 0 || x < exit_time) {
+      exit_axis = a;
+      exit_time = x;
+      exit_tol = tol;
+    }
+  }
+  if (last_axis < 0 || (exit_axis >= 0 && !(exit_time - last_time > exit_tol + last_tol)) ||
+      !(static_cast<double>(s.length) - last_time > last_tol)) {
+    return BackwardMode::kExact;
+  }
+
+  // One bound for the whole walk: heads are computed t0 + k * delta, then decremented.
+  walk.total = static_cast<std::size_t>(crossings[0] + crossings[1] + crossings[2]);
+  double scale = 0;
+  for (int a = 0; a < 3; ++a) {
+    if (s.step[a] != 0) {
+      scale = std::max(scale, std::fabs(s.t_max[a]) + (crossings[a] + 1) * s.t_delta[a]);
+    }
+  }
+  walk.bound = 2 * (static_cast<double>(walk.total) + 16) * kRel * scale;
+  for (int a = 0; a < 3; ++a) {
+    walk.next[a] = crossings[a] - 1;
+    walk.head[a] = s.step[a] != 0 && walk.next[a] >= 0 ? time(a, walk.next[a])
+                                                       : -std::numeric_limits<double>::infinity();
+    walk.key[a] = s.end[a];
+  }
+  return BackwardMode::kFast;
+}
+
+namespace detail {
+
+/// One fast backward step of `walk`: undoes the latest crossing. Returns false, changing
+/// nothing, when the latest crossing does not win by the bound (hand over to backwardExact).
+inline bool backwardStep(BackwardWalk& walk) {
+  const double h0 = walk.head[0], h1 = walk.head[1], h2 = walk.head[2];
+  // The latest crossing and the runner-up (-inf when an axis has none left), without
+  // data-dependent branches.
+  const double high01 = std::max(h0, h1);
+  const double latest = std::max(high01, h2);
+  const double second = std::max(std::min(high01, h2), std::min(h0, h1));
+  if (!(latest - second > walk.bound)) return false;
+  const int dim = h2 > high01 ? 2 : (h0 >= h1 ? 0 : 1);
+  const double previous = walk.head[dim] - walk.s.t_delta[dim];
+  walk.head[dim] = --walk.next[dim] >= 0 ? previous : -std::numeric_limits<double>::infinity();
+  walk.key[dim] = (walk.key[dim] - walk.s.step[dim]) & 0xffff;  // uint16_t, as OcTreeKey's
+  return true;
+}
+
+inline VoxelKey walkKey(const BackwardWalk& walk) {
+  return {static_cast<std::uint16_t>(walk.key[0]), static_cast<std::uint16_t>(walk.key[1]),
+          static_cast<std::uint16_t>(walk.key[2])};
+}
+
+}  // namespace detail
+
 /// Visits the voxels traverseRay(origin, end) visits in reverse order — end side first, the
 /// origin's voxel last — for as long as `visit(key)` returns true. Returns how many voxels the
 /// forward traversal has (visited or not).
@@ -199,88 +312,21 @@ std::size_t backwardExact(const VoxelGrid& grid, const Point3f& origin, const Po
 template <class Visitor>
 std::size_t traverseRayBackward(const VoxelGrid& grid, const Point3f& origin, const Point3f& end,
                                 BackwardScratch& scratch, Visitor&& visit) {
-  TraversalStart s;
-  if (startTraversal(grid, origin, end, s) != TraversalKind::kRay) return 0;
-  int crossings[3];
-  bool regular = true;
-  for (int a = 0; a < 3; ++a) {
-    crossings[a] = (static_cast<int>(s.end[a]) - static_cast<int>(s.origin[a])) * s.step[a];
-    if (s.step[a] == 0 ? s.end[a] != s.origin[a] : crossings[a] < 0) regular = false;
+  BackwardWalk walk;
+  const BackwardMode mode = prepareBackward(grid, origin, end, walk);
+  if (mode == BackwardMode::kNothing) return 0;
+  if (mode != BackwardMode::kFast) {
+    return detail::backwardExact(grid, origin, end, walk.s, walk.crossings,
+                                 mode == BackwardMode::kExact, scratch, 0, visit);
   }
-  if (!regular)
-    return detail::backwardExact(grid, origin, end, s, crossings, false, scratch, 0, visit);
-
-  constexpr double kRel = 0x1p-50;
-  constexpr double kNone = -std::numeric_limits<double>::infinity();
-  const auto time = [&](int a, int k) { return s.t_max[a] + k * s.t_delta[a]; };
-  const auto tolerance = [&](int a, int k, double v) {
-    return (k + 8) * kRel * (std::fabs(v) + std::fabs(s.t_max[a]));
-  };
-  // Termination as in backwardExact, decided with margins.
-  int last_axis = -1, exit_axis = -1;
-  double last_time = 0, last_tol = 0, exit_time = 0, exit_tol = 0;
-  bool clear = true;
-  for (int a = 0; a < 3 && clear; ++a) {
-    if (s.step[a] == 0) continue;
-    if (crossings[a] > 0) {
-      const double v = time(a, crossings[a] - 1);
-      const double tol = tolerance(a, crossings[a] - 1, v);
-      if (last_axis >= 0 && std::fabs(v - last_time) <= tol + last_tol) clear = false;
-      if (last_axis < 0 || v > last_time) {
-        last_axis = a;
-        last_time = v;
-        last_tol = tol;
-      }
+  for (std::size_t done = 0; done < walk.total; ++done) {
+    if (!detail::backwardStep(walk)) {
+      return detail::backwardExact(grid, origin, end, walk.s, walk.crossings, true, scratch, done,
+                                   visit);
     }
-    const double x = time(a, crossings[a]);
-    const double tol = tolerance(a, crossings[a], x);
-    if (exit_axis >= 0 && std::fabs(x - exit_time) <= tol + exit_tol) clear = false;
-    if (exit_axis < 0 || x < exit_time) {
-      exit_axis = a;
-      exit_time = x;
-      exit_tol = tol;
-    }
+    if (!visit(detail::walkKey(walk))) break;
   }
-  if (!clear || last_axis < 0 ||
-      (exit_axis >= 0 && !(exit_time - last_time > exit_tol + last_tol)) ||
-      !(static_cast<double>(s.length) - last_time > last_tol)) {
-    return detail::backwardExact(grid, origin, end, s, crossings, true, scratch, 0, visit);
-  }
-
-  // One bound for the whole walk: heads are computed t0 + k * delta, then decremented.
-  const std::size_t total = static_cast<std::size_t>(crossings[0] + crossings[1] + crossings[2]);
-  double scale = 0;
-  for (int a = 0; a < 3; ++a) {
-    if (s.step[a] != 0) {
-      scale = std::max(scale, std::fabs(s.t_max[a]) + (crossings[a] + 1) * s.t_delta[a]);
-    }
-  }
-  const double bound = 2 * (static_cast<double>(total) + 16) * kRel * scale;
-  int next[3] = {crossings[0] - 1, crossings[1] - 1, crossings[2] - 1};
-  double head[3];
-  for (int a = 0; a < 3; ++a) head[a] = s.step[a] != 0 && next[a] >= 0 ? time(a, next[a]) : kNone;
-  VoxelKey current = s.end;
-  for (std::size_t done = 0; done < total; ++done) {
-    // The latest crossing and the runner-up (-inf when an axis has none left).
-    const bool first = head[0] >= head[1];
-    int dim = first ? 0 : 1;
-    double latest = first ? head[0] : head[1];
-    double second = first ? head[1] : head[0];
-    if (head[2] > latest) {
-      second = latest;
-      latest = head[2];
-      dim = 2;
-    } else if (head[2] > second) {
-      second = head[2];
-    }
-    if (!(latest - second > bound)) {
-      return detail::backwardExact(grid, origin, end, s, crossings, true, scratch, done, visit);
-    }
-    head[dim] = --next[dim] >= 0 ? head[dim] - s.t_delta[dim] : kNone;
-    current[dim] = static_cast<std::uint16_t>(current[dim] - s.step[dim]);
-    if (!visit(current)) return total;
-  }
-  return total;
+  return walk.total;
 }
 
 /// Convenience form returning the keys (tests, tools); hot paths use the visitor form.

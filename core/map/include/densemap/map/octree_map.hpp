@@ -41,6 +41,8 @@ class OctreeMap final : public OccupancyMap {
  private:
   /// Keeps the fully-free masks in step with a cell's new value.
   void noteValue(const VoxelKey& key, float log_odds);
+  /// Rebuilds fully_free_ from the tree after insertWithOctomap.
+  void refreshFullyFree() const;
 
   octomap::OcTree tree_;
   // Cells at the lower clamping bound, per 8^3 block, maintained beside the tree (searching
