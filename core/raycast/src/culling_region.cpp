@@ -151,9 +151,20 @@ void CullingRegion::build(const OccupancyMap& map, const VoxelKey& origin, const
   ny_ = static_cast<unsigned>(box.max.y - box.min.y) + 1;
   nz_ = static_cast<unsigned>(box.max.z - box.min.z) + 1;
   words_per_row_ = (nx_ + 63) / 64;
-  bits_.assign(static_cast<std::size_t>(ny_) * nz_ * words_per_row_, 0);
   size_ = 0;
 
+  // The region grows from O: when O itself cannot be in it (not fully free — always so for a
+  // sensor that moved to a cell it has not crossed often enough — or ended in by a ray), it is
+  // empty, and loading the box is skipped.
+  const auto origin_value = map.logOdds(origin);
+  const bool origin_hit = std::find(hit.begin(), hit.end(), origin) != hit.end();
+  if (!origin_value || !map.sensorModel().isFullyFree(*origin_value) || origin_hit) {
+    bits_.clear();
+    bricks_.clear();
+    for (unsigned& n : bricks_n_) n = 0;
+    return;
+  }
+  bits_.assign(static_cast<std::size_t>(ny_) * nz_ * words_per_row_, 0);
   loadFullyFree(map);
   for (const VoxelKey& k : hit) {
     const unsigned x = static_cast<unsigned>(k.x) - min_.x;

@@ -84,7 +84,8 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
     }
     region_.build(map, *origin_key, cullingBox(*origin_key, box, options_.culling_max_voxels),
                   hit_);
-    region = &region_;
+    // An empty region culls nothing: the forward walk is cheaper per step than the backward one.
+    if (region_.size() != 0) region = &region_;
     stats.region_voxels = region_.size();
   }
   stats.ms_region = msSince(t0);
