@@ -1,0 +1,121 @@
+#include "densemap/kernel/bandwidth.hpp"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+
+#include "densemap/kernel/kernel_function.hpp"
+
+namespace densemap::kernel {
+
+Eigen::Matrix3d neighbourCovariance(const Eigen::Vector3d& centre,
+                                    std::span<const Neighbour> neighbours, double regulariser,
+                                    double fallback_variance) {
+  Eigen::Vector3d sum = centre;
+  int count = 1;
+  for (const Neighbour& n : neighbours) {
+    if (!n.same_label) continue;
+    sum += n.x;
+    ++count;
+  }
+  if (count < 4) return fallback_variance * Eigen::Matrix3d::Identity();
+  const Eigen::Vector3d mean = sum / count;
+  Eigen::Matrix3d cov = (centre - mean) * (centre - mean).transpose();
+  for (const Neighbour& n : neighbours) {
+    if (n.same_label) cov += (n.x - mean) * (n.x - mean).transpose();
+  }
+  cov /= count;
+  return cov + regulariser * Eigen::Matrix3d::Identity();
+}
+
+namespace {
+
+/// Squared Mahalanobis distances q_j = d^T Sigma^-1 d; k(x_j; s Sigma) = kernel(sqrt(q_j / s)).
+struct Prepared {
+  std::vector<double> q;
+  std::vector<double> target;
+  double det = 1.0;
+};
+
+Prepared prepare(const Eigen::Matrix3d& sigma, const Eigen::Vector3d& centre,
+                 std::span<const Neighbour> neighbours) {
+  Prepared p;
+  const Eigen::Matrix3d inverse = sigma.inverse();
+  p.det = sigma.determinant();
+  p.q.reserve(neighbours.size());
+  p.target.reserve(neighbours.size());
+  for (const Neighbour& n : neighbours) {
+    const Eigen::Vector3d d = n.x - centre;
+    const double q = d.dot(inverse * d);
+    p.q.push_back(q);
+    p.target.push_back(n.same_label ? sparseKernel(std::sqrt(q)) : 0.0);
+  }
+  return p;
+}
+
+double objective(double s, const Prepared& p) {
+  double error = 0.0;
+  for (std::size_t j = 0; j < p.q.size(); ++j) {
+    const double e = p.target[j] - sparseKernel(std::sqrt(p.q[j] / s));
+    error += e * e;
+  }
+  return 0.5 * error / std::sqrt(s * s * s * p.det);
+}
+
+}  // namespace
+
+double scaleObjective(double s, const Eigen::Matrix3d& sigma, const Eigen::Vector3d& centre,
+                      std::span<const Neighbour> neighbours) {
+  return objective(s, prepare(sigma, centre, neighbours));
+}
+
+double fitScale(const Eigen::Matrix3d& sigma, const Eigen::Vector3d& centre,
+                std::span<const Neighbour> neighbours, double s_min, double s_max) {
+  const Prepared p = prepare(sigma, centre, neighbours);
+  constexpr double kPerDoubling = 8.0;
+  const int i_min = static_cast<int>(std::ceil(std::log2(s_min) * kPerDoubling));
+  const int i_max = static_cast<int>(std::floor(std::log2(s_max) * kPerDoubling));
+  if (i_min > i_max) return std::clamp(1.0, s_min, s_max);
+  const auto at = [&](int i) { return std::exp2(i / kPerDoubling); };
+  int i = std::clamp(0, i_min, i_max);
+  double f = objective(at(i), p);
+  while (true) {
+    const double down = i > i_min ? objective(at(i - 1), p) : f;
+    const double up = i < i_max ? objective(at(i + 1), p) : f;
+    if (down < f && down <= up) {
+      --i;
+      f = down;
+    } else if (up < f) {
+      ++i;
+      f = up;
+    } else {
+      break;
+    }
+  }
+  // Golden-section search on log s between the grid neighbours.
+  double lo = std::log2(at(std::max(i - 1, i_min)));
+  double hi = std::log2(at(std::min(i + 1, i_max)));
+  constexpr double kInvPhi = 0.6180339887498949;
+  double a = hi - kInvPhi * (hi - lo), b = lo + kInvPhi * (hi - lo);
+  double fa = objective(std::exp2(a), p), fb = objective(std::exp2(b), p);
+  for (int iteration = 0; iteration < 24; ++iteration) {
+    if (fa <= fb) {
+      hi = b;
+      b = a;
+      fb = fa;
+      a = hi - kInvPhi * (hi - lo);
+      fa = objective(std::exp2(a), p);
+    } else {
+      lo = a;
+      a = b;
+      fa = fb;
+      b = lo + kInvPhi * (hi - lo);
+      fb = objective(std::exp2(b), p);
+    }
+  }
+  const double best = std::exp2(0.5 * (lo + hi));
+  // Never worse than the grid point the descent ended on.
+  return objective(best, p) <= f ? best : at(i);
+}
+
+}  // namespace densemap::kernel

@@ -1,0 +1,178 @@
+// Kernel inference (dissertation Ch. 3): kernel values, the scale fit of Eq. 3.7, covariance
+// shapes, and the map's behaviour and determinism for all three methods.
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <Eigen/Eigenvalues>
+#include <cmath>
+#include <numbers>
+#include <vector>
+
+#include "densemap/kernel/bandwidth.hpp"
+#include "densemap/kernel/kernel_function.hpp"
+#include "densemap/kernel/kernel_map.hpp"
+
+namespace densemap::kernel {
+namespace {
+
+TEST(SparseKernel, MatchesHandComputedValues) {
+  EXPECT_DOUBLE_EQ(sparseKernel(0.0), 1.0);
+  EXPECT_NEAR(sparseKernel(0.25), 0.5 + 1.0 / (2.0 * std::numbers::pi), 1e-12);
+  EXPECT_NEAR(sparseKernel(0.5), 1.0 / 6.0, 1e-12);
+  EXPECT_NEAR(sparseKernel(0.75), (2.0 / 3.0) * 0.25 - 1.0 / (2.0 * std::numbers::pi), 1e-12);
+  EXPECT_EQ(sparseKernel(1.0), 0.0);
+  EXPECT_EQ(sparseKernel(3.0), 0.0);
+  EXPECT_EQ(sparseKernel(std::nan("")), 0.0);
+  // Monotone decreasing on [0, 1).
+  for (double r = 0.0; r < 0.99; r += 0.01) EXPECT_GT(sparseKernel(r), sparseKernel(r + 0.01));
+}
+
+std::vector<Neighbour> ringOfPositives(double radius) {
+  std::vector<Neighbour> n;
+  for (int i = 0; i < 8; ++i) {
+    const double a = i * std::numbers::pi / 4.0;
+    n.push_back({Eigen::Vector3d(radius * std::cos(a), radius * std::sin(a), 0.0), true});
+  }
+  return n;
+}
+
+TEST(FitScale, PositiveNeighboursOnlyKeepTheCovariance) {
+  const Eigen::Matrix3d sigma = 0.04 * Eigen::Matrix3d::Identity();  // 0.2 m std
+  const auto neighbours = ringOfPositives(0.1);
+  EXPECT_NEAR(scaleObjective(1.0, sigma, Eigen::Vector3d::Zero(), neighbours), 0.0, 1e-15);
+  EXPECT_NEAR(fitScale(sigma, Eigen::Vector3d::Zero(), neighbours, 1.0 / 16, 16.0), 1.0, 0.05);
+}
+
+TEST(FitScale, NegativeNeighbourInsideTheSupportShrinksTheKernel) {
+  const Eigen::Matrix3d sigma = 0.04 * Eigen::Matrix3d::Identity();
+  auto neighbours = ringOfPositives(0.05);
+  neighbours.push_back({Eigen::Vector3d(0.12, 0.0, 0.0), false});  // r = 0.6 at s = 1
+  const double s = fitScale(sigma, Eigen::Vector3d::Zero(), neighbours, 1.0 / 16, 16.0);
+  EXPECT_LT(s, 1.0);
+  // It is the minimiser of Eq. 3.7 among nearby scales.
+  const double f = scaleObjective(s, sigma, Eigen::Vector3d::Zero(), neighbours);
+  for (const double other : {0.5 * s, 0.8 * s, 1.25 * s, 1.0}) {
+    EXPECT_LE(f, scaleObjective(other, sigma, Eigen::Vector3d::Zero(), neighbours) + 1e-12);
+  }
+  // And the shrunk kernel no longer (or barely) reaches the negative neighbour.
+  EXPECT_LT(sparseKernel(0.12 / std::sqrt(0.04 * s)), sparseKernel(0.6));
+}
+
+TEST(FitScale, MoreNegativeNeighboursShrinkMore) {
+  const Eigen::Matrix3d sigma = 0.04 * Eigen::Matrix3d::Identity();
+  auto one = ringOfPositives(0.05);
+  one.push_back({Eigen::Vector3d(0.15, 0.0, 0.0), false});
+  auto closer = one;
+  closer.push_back({Eigen::Vector3d(0.0, 0.08, 0.0), false});
+  const double s_one = fitScale(sigma, Eigen::Vector3d::Zero(), one, 1.0 / 16, 16.0);
+  const double s_closer = fitScale(sigma, Eigen::Vector3d::Zero(), closer, 1.0 / 16, 16.0);
+  EXPECT_LT(s_closer, s_one);
+}
+
+TEST(NeighbourCovariance, SamplesOnAPlaneGiveAFlatKernelAlignedWithIt) {
+  std::vector<Neighbour> plane;
+  for (int i = -3; i <= 3; ++i) {
+    for (int j = -3; j <= 3; ++j) {
+      if (i == 0 && j == 0) continue;
+      // The plane x + y + z = 0 (normal (1,1,1)/sqrt(3)).
+      const Eigen::Vector3d u = Eigen::Vector3d(1, -1, 0).normalized();
+      const Eigen::Vector3d v = Eigen::Vector3d(1, 1, -2).normalized();
+      plane.push_back({0.05 * i * u + 0.05 * j * v, true});
+    }
+  }
+  plane.push_back({Eigen::Vector3d(0.3, 0.3, 0.3), false});  // other labels do not shape it
+  const Eigen::Matrix3d sigma = neighbourCovariance(Eigen::Vector3d::Zero(), plane, 1e-6, 1.0);
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(sigma);
+  EXPECT_LT(eig.eigenvalues()[0] * 100, eig.eigenvalues()[1]);  // flat
+  const Eigen::Vector3d normal = eig.eigenvectors().col(0);
+  EXPECT_NEAR(std::abs(normal.dot(Eigen::Vector3d(1, 1, 1).normalized())), 1.0, 1e-6);
+  // Too few positive neighbours: isotropic fallback.
+  const std::vector<Neighbour> few = {{Eigen::Vector3d(0.1, 0, 0), true}};
+  EXPECT_TRUE(neighbourCovariance(Eigen::Vector3d::Zero(), few, 1e-6, 0.5)
+                  .isApprox(0.5 * Eigen::Matrix3d::Identity()));
+}
+
+/// A wall at x = 3 m seen from the origin.
+PointCloud wallScan() {
+  PointCloud points;
+  for (double y = -1.0; y <= 1.0; y += 0.04) {
+    for (double z = -0.5; z <= 0.5; z += 0.08) {
+      points.emplace_back(3.0F, static_cast<float>(y), static_cast<float>(z));
+    }
+  }
+  return points;
+}
+
+class KernelMapMethods : public ::testing::TestWithParam<KernelMethod> {};
+
+TEST_P(KernelMapMethods, WallIsOccupiedFreeSpaceIsFreeFarAwayIsUnknown) {
+  KernelOptions options = KernelOptions::defaults(GetParam());
+  options.max_range = 10.0;
+  KernelMap map(0.1, options);
+  const auto stats = map.integrate(wallScan(), Point3f(0, 0, 0));
+  EXPECT_GT(stats.samples, wallScan().size());
+  EXPECT_GT(stats.cell_updates, 0U);
+  const auto at = [&](float x, float y, float z) {
+    return map.probability(*map.grid().pointToKey(Point3f(x, y, z)));
+  };
+  ASSERT_TRUE(at(3.02F, 0.02F, 0.02F).has_value());
+  EXPECT_GT(*at(3.02F, 0.02F, 0.02F), 0.5);
+  ASSERT_TRUE(at(1.5F, 0.02F, 0.02F).has_value());
+  EXPECT_LT(*at(1.5F, 0.02F, 0.02F), 0.5);
+  EXPECT_FALSE(at(-5.0F, 4.0F, 0.0F).has_value());
+  EXPECT_GT(map.knownCells(), 100U);
+}
+
+TEST_P(KernelMapMethods, ResultDoesNotDependOnTheThreadCount) {
+  const auto build = [](KernelMethod method, int threads) {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    KernelOptions options = KernelOptions::defaults(method);
+    options.seed = 7;
+    KernelMap map(0.1, options);
+    map.integrate(wallScan(), Point3f(0, 0, 0));
+    map.integrate(wallScan(), Point3f(0.3F, 0.2F, 0.1F));
+    std::vector<std::pair<std::uint64_t, double>> cells;
+    map.forEachKnown([&](const VoxelKey& k, double p) { cells.emplace_back(k.packed(), p); });
+    std::sort(cells.begin(), cells.end());
+    return cells;
+  };
+  const auto one = build(GetParam(), 1);
+  const auto two = build(GetParam(), 2);
+  ASSERT_FALSE(one.empty());
+  EXPECT_EQ(one, two);  // bit for bit
+}
+
+INSTANTIATE_TEST_SUITE_P(All, KernelMapMethods,
+                         ::testing::Values(KernelMethod::kAkimap, KernelMethod::kBgk,
+                                           KernelMethod::kBgkl),
+                         [](const auto& param_info) {
+                           return std::string(kernelMethodName(param_info.param));
+                         });
+
+TEST(KernelMethodNames, ParseAndReject) {
+  EXPECT_EQ(*parseKernelMethod("bgkl"), KernelMethod::kBgkl);
+  const auto bad = parseKernelMethod("gmm");
+  ASSERT_FALSE(bad.has_value());
+  EXPECT_NE(bad.error().message.find("akimap"), std::string::npos);
+}
+
+TEST(OccupancySamples, RandomFreeSamplesAreReproducibleAndOnePerInterval) {
+  const PointCloud points = {Point3f(2.2F, 0, 0), Point3f(0, 40.0F, 0)};
+  SamplingOptions o;
+  o.max_range = 10.0;
+  const auto a = makeSamples(points, Point3f(0, 0, 0), o, 3);
+  const auto b = makeSamples(points, Point3f(0, 0, 0), o, 3);
+  const auto c = makeSamples(points, Point3f(0, 0, 0), o, 4);
+  // Ray 1: 1 occupied + 4 free (2.2 m / 0.5 m); ray 2 is cut at 10 m: 20 free, no occupied.
+  ASSERT_EQ(a.size(), 25U);
+  EXPECT_EQ(std::count_if(a.begin(), a.end(), [](const Sample& s) { return s.occupied; }), 1);
+  for (std::size_t i = 0; i < a.size(); ++i) EXPECT_EQ(a[i].x, b[i].x);
+  EXPECT_NE(a[1].x, c[1].x);  // another scan draws other points
+  for (int k = 0; k < 4; ++k) {
+    EXPECT_GE(a[1 + k].range, 0.5 * k);
+    EXPECT_LT(a[1 + k].range, 0.5 * (k + 1));
+  }
+}
+
+}  // namespace
+}  // namespace densemap::kernel
