@@ -1,0 +1,251 @@
+// densemap-eval: accuracy of dense maps (AKIMap, BGKOctoMap, BGKOctoMap-L) and of the log-odds
+// map on a dataset, by the hold-out protocol: each scan's points are split 80/20 (by a seeded
+// hash); maps integrate the 80%; the 20% are occupied test points, and one point drawn uniformly
+// on each of their rays (short of the end voxel) is a free test point.
+#include <tbb/task_arena.h>
+#include <CLI/CLI.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "../common/progress.hpp"
+#include "densemap/eval/metrics.hpp"
+#include "densemap/io/scan_source.hpp"
+#include "densemap/kernel/kernel_map.hpp"
+#include "densemap/map/map_factory.hpp"
+#include "densemap/raycast/integrator.hpp"
+
+namespace {
+
+using densemap::eval::Metrics;
+using densemap::eval::Prediction;
+
+struct Scan {
+  densemap::PointCloud train;
+  densemap::PointCloud test;
+  densemap::Point3f origin;
+};
+
+struct TestPoint {
+  densemap::Point3f x;
+  bool occupied;
+};
+
+struct RunResult {
+  Metrics metrics;
+  double build_s = 0.0;
+  double ms_per_scan = 0.0;
+  std::vector<Prediction> predictions;
+};
+
+std::vector<std::string> splitList(const std::string& list) {
+  std::vector<std::string> out;
+  std::stringstream ss(list);
+  for (std::string item; std::getline(ss, item, ',');) {
+    if (!item.empty()) out.push_back(item);
+  }
+  return out;
+}
+
+/// The hold-out split and the free test points, reproducible from the seed.
+void split(const densemap::PointCloud& points, const densemap::Point3f& origin, std::uint64_t seed,
+           std::uint64_t scan, double resolution, Scan& out, std::vector<TestPoint>& tests) {
+  out.origin = origin;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const std::uint64_t key = seed * 0x9E3779B97F4A7C15ULL ^ scan * 0xC2B2AE3D27D4EB4FULL ^ i;
+    if (densemap::kernel::uniformFromCounter(key) >= 0.2) {
+      out.train.push_back(points[i]);
+      continue;
+    }
+    out.test.push_back(points[i]);
+    tests.push_back({points[i], true});
+    const densemap::Point3f ray = points[i] - origin;
+    const double length = ray.norm();
+    if (length <= 2.0 * resolution) continue;
+    const double t = densemap::kernel::uniformFromCounter(key ^ 0x5555555555555555ULL) *
+                     (length - 2.0 * resolution) / length;
+    tests.push_back({origin + static_cast<float>(t) * ray, false});
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string data, methods_list = "akimap,bgk,bgkl,raycast", protocol = "holdout", json_path,
+                    roc_prefix;
+  double resolution = 0.1, max_range = -1.0;
+  std::uint64_t seed = 1;
+  int runs = 1, threads = 0;
+  std::size_t first = 0, limit = 0;
+  CLI::App app{"densemap-eval: accuracy of dense and log-odds maps (hold-out protocol)"};
+  app.add_option("--data", data, "Dataset (any format densemap reads)")->required();
+  app.add_option("--method", methods_list, "Comma-separated: akimap, bgk, bgkl, raycast")
+      ->capture_default_str();
+  app.add_option("--protocol", protocol, "holdout (oracle: not implemented yet)")
+      ->capture_default_str();
+  app.add_option("--resolution", resolution, "Voxel size, m")->capture_default_str();
+  app.add_option("--max-range", max_range, "Ray cut-off, m (< 0: unlimited)")
+      ->capture_default_str();
+  app.add_option("--seed", seed, "Seed of the split and the random free samples")
+      ->capture_default_str();
+  app.add_option("--runs", runs, "Runs with seeds seed, seed+1, ...; mean and spread")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 100));
+  app.add_option("--first", first, "First scan index")->capture_default_str();
+  app.add_option("--limit", limit, "Scans to use (0: all)")->capture_default_str();
+  app.add_option("--threads", threads, "Worker threads (0: all cores)")->capture_default_str();
+  app.add_option("--json", json_path, "Write the results as JSON");
+  app.add_option("--roc", roc_prefix, "Write PREFIX_<method>.csv ROC curves (first run)");
+  CLI11_PARSE(app, argc, argv);
+
+  const auto fail = [](const std::string& message) {
+    std::fprintf(stderr, "densemap-eval: error: %s\n", message.c_str());
+    return 1;
+  };
+  if (protocol != "holdout") {
+    return fail("protocol '" + protocol +
+                "' is not available: only 'holdout' is implemented (the dense-oracle protocol "
+                "needs densemap-sim's dense labels, not written yet)");
+  }
+  if (!(resolution > 0.0 && resolution <= 10.0)) return fail("--resolution must be in (0, 10]");
+  const std::vector<std::string> methods = splitList(methods_list);
+  if (methods.empty()) return fail("--method lists no method");
+  for (const std::string& m : methods) {
+    if (m != "raycast" && !densemap::kernel::parseKernelMethod(m)) {
+      return fail("unknown method '" + m + "' (expected akimap, bgk, bgkl or raycast)");
+    }
+  }
+  auto source = densemap::openScanSource(data);
+  if (!source) return fail(source.error().message);
+  const std::size_t total = (*source)->size();
+  if (first >= total)
+    return fail("--first is past the dataset's " + std::to_string(total) + " scans");
+  const std::size_t end = limit == 0 ? total : std::min(total, first + limit);
+
+  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  std::vector<densemap::PointCloud> clouds;
+  std::vector<densemap::Point3f> origins;
+  std::size_t rejected = 0;
+  for (std::size_t i = first; i < end; ++i) {
+    auto scan = (*source)->load(i);
+    if (!scan) return fail(scan.error().message);
+    clouds.push_back(scan->pointsWorld());
+    rejected += densemap::removeNonFinite(clouds.back());
+    origins.push_back(scan->originWorld());
+  }
+  if (rejected > 0)
+    std::fprintf(stderr, "densemap-eval: dropped %zu non-finite points\n", rejected);
+
+  // results[method][run]
+  std::vector<std::vector<RunResult>> results(methods.size());
+  for (int run = 0; run < runs; ++run) {
+    const std::uint64_t run_seed = seed + static_cast<std::uint64_t>(run);
+    std::vector<Scan> scans(clouds.size());
+    std::vector<TestPoint> tests;
+    for (std::size_t i = 0; i < clouds.size(); ++i) {
+      split(clouds[i], origins[i], run_seed, i, resolution, scans[i], tests);
+    }
+    for (std::size_t m = 0; m < methods.size(); ++m) {
+      densemap::tools::Progress progress(
+          "densemap-eval: run " + std::to_string(run + 1) + " " + methods[m] + " scan",
+          scans.size());
+      RunResult r;
+      const auto t0 = std::chrono::steady_clock::now();
+      std::function<double(const densemap::Point3f&)> probability;
+      std::unique_ptr<densemap::kernel::KernelMap> kernel_map;
+      std::unique_ptr<densemap::OccupancyMap> log_odds_map;
+      if (methods[m] == "raycast") {
+        log_odds_map = std::move(*densemap::makeMap(densemap::Backend::kGrid, resolution));
+        densemap::Integrator integrator({.max_range_m = max_range});
+        for (std::size_t i = 0; i < scans.size(); ++i) {
+          arena.execute(
+              [&] { integrator.integrate(*log_odds_map, scans[i].train, scans[i].origin); });
+          progress.update(i + 1);
+        }
+        probability = [&](const densemap::Point3f& x) {
+          const auto l = log_odds_map->logOddsAt(x);
+          return l ? 1.0 / (1.0 + std::exp(-static_cast<double>(*l))) : 0.5;
+        };
+      } else {
+        auto options = densemap::kernel::KernelOptions::defaults(
+            *densemap::kernel::parseKernelMethod(methods[m]));
+        options.max_range = max_range;
+        options.seed = run_seed;
+        kernel_map = std::make_unique<densemap::kernel::KernelMap>(resolution, options);
+        for (std::size_t i = 0; i < scans.size(); ++i) {
+          arena.execute([&] { kernel_map->integrate(scans[i].train, scans[i].origin); });
+          progress.update(i + 1, std::to_string(kernel_map->knownCells()) + " known cells");
+        }
+        probability = [&](const densemap::Point3f& x) {
+          const auto key = kernel_map->grid().pointToKey(x);
+          const auto p = key ? kernel_map->probability(*key) : std::nullopt;
+          return p.value_or(0.5);
+        };
+      }
+      r.build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      r.ms_per_scan = 1000.0 * r.build_s / static_cast<double>(scans.size());
+      r.predictions.reserve(tests.size());
+      for (const TestPoint& t : tests) r.predictions.push_back({probability(t.x), t.occupied});
+      r.metrics = densemap::eval::evaluate(r.predictions);
+      if (run == 0 && !roc_prefix.empty()) {
+        const std::string path = roc_prefix + "_" + methods[m] + ".csv";
+        std::ofstream csv(path);
+        csv << "threshold,false_positive_rate,true_positive_rate\n";
+        for (const auto& p : densemap::eval::rocCurve(r.predictions)) {
+          csv << p.threshold << ',' << p.false_positive_rate << ',' << p.true_positive_rate << '\n';
+        }
+        if (!csv) return fail("cannot write " + path);
+      }
+      r.predictions.clear();
+      results[m].push_back(std::move(r));
+    }
+  }
+
+  const auto stat = [&](const std::vector<RunResult>& rs, auto field) {
+    double mean = 0.0, sq = 0.0;
+    for (const RunResult& r : rs) mean += field(r);
+    mean /= static_cast<double>(rs.size());
+    for (const RunResult& r : rs) sq += (field(r) - mean) * (field(r) - mean);
+    return std::pair<double, double>(mean, std::sqrt(sq / static_cast<double>(rs.size())));
+  };
+  std::printf("densemap-eval: %s, protocol %s, resolution %g m, %zu scans, %d run(s), seed %llu\n",
+              data.c_str(), protocol.c_str(), resolution, clouds.size(), runs,
+              static_cast<unsigned long long>(seed));
+  std::printf("%-8s %14s %8s %8s %8s %8s %8s %9s %9s\n", "method", "auc (+-sd)", "mse", "acc_occ",
+              "acc_free", "occ>0.7", "free<0.3", "build_s", "ms/scan");
+  std::string json = "{\"results\": [";
+  for (std::size_t m = 0; m < methods.size(); ++m) {
+    const auto& rs = results[m];
+    const auto auc = stat(rs, [](const RunResult& r) { return r.metrics.auc; });
+    const auto mse = stat(rs, [](const RunResult& r) { return r.metrics.mse; });
+    const auto occ = stat(rs, [](const RunResult& r) { return r.metrics.acc_occupied; });
+    const auto fre = stat(rs, [](const RunResult& r) { return r.metrics.acc_free; });
+    const auto occ_band = stat(rs, [](const RunResult& r) { return r.metrics.acc_occupied_band; });
+    const auto free_band = stat(rs, [](const RunResult& r) { return r.metrics.acc_free_band; });
+    const auto build = stat(rs, [](const RunResult& r) { return r.build_s; });
+    const auto ms = stat(rs, [](const RunResult& r) { return r.ms_per_scan; });
+    std::printf("%-8s %7.4f+-%.4f %8.4f %8.4f %8.4f %8.4f %8.4f %9.2f %9.1f\n", methods[m].c_str(),
+                auc.first, auc.second, mse.first, occ.first, fre.first, occ_band.first,
+                free_band.first, build.first, ms.first);
+    char entry[512];
+    std::snprintf(entry, sizeof(entry),
+                  "%s{\"method\": \"%s\", \"protocol\": \"%s\", \"resolution\": %g, \"auc\": %.6f, "
+                  "\"auc_sd\": %.6f, \"mse\": %.6f, \"acc_occupied\": %.6f, \"acc_free\": %.6f, "
+                  "\"build_s\": %.4f, \"ms_per_scan\": %.3f, \"runs\": %d}",
+                  m == 0 ? "" : ", ", methods[m].c_str(), protocol.c_str(), resolution, auc.first,
+                  auc.second, mse.first, occ.first, fre.first, build.first, ms.first, runs);
+    json += entry;
+  }
+  json += "]}\n";
+  if (!json_path.empty()) {
+    std::ofstream out(json_path);
+    out << json;
+    if (!out) return fail("cannot write " + json_path);
+  }
+  return 0;
+}
