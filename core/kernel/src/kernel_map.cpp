@@ -12,6 +12,7 @@
 #include <cmath>
 #include <string>
 
+#include "densemap/geometry/stopwatch.hpp"
 #include "densemap/kernel/bandwidth.hpp"
 #include "densemap/kernel/kernel_function.hpp"
 
@@ -48,13 +49,6 @@ KernelOptions KernelOptions::defaults(KernelMethod method) {
 }
 
 namespace {
-
-double msSince(std::chrono::steady_clock::time_point& t0) {
-  const auto now = std::chrono::steady_clock::now();
-  const double ms = std::chrono::duration<double, std::milli>(now - t0).count();
-  t0 = now;
-  return ms;
-}
 
 /// One sample's kernel, ready to evaluate at cell centres.
 struct Kernel {

@@ -7,17 +7,9 @@
 #include <chrono>
 #include <string>
 
+#include "densemap/geometry/stopwatch.hpp"
+
 namespace densemap {
-namespace {
-
-double msSince(std::chrono::steady_clock::time_point& t0) {
-  const auto now = std::chrono::steady_clock::now();
-  const double ms = std::chrono::duration<double, std::milli>(now - t0).count();
-  t0 = now;
-  return ms;
-}
-
-}  // namespace
 
 std::string_view methodName(IntegrationMethod method) {
   switch (method) {
