@@ -27,7 +27,6 @@ using densemap::eval::Prediction;
 
 struct Scan {
   densemap::PointCloud train;
-  densemap::PointCloud test;
   densemap::Point3f origin;
 };
 
@@ -40,7 +39,6 @@ struct RunResult {
   Metrics metrics;
   double build_s = 0.0;
   double ms_per_scan = 0.0;
-  std::vector<Prediction> predictions;
 };
 
 std::vector<std::string> splitList(const std::string& list) {
@@ -62,7 +60,6 @@ void split(const densemap::PointCloud& points, const densemap::Point3f& origin, 
       out.train.push_back(points[i]);
       continue;
     }
-    out.test.push_back(points[i]);
     tests.push_back({points[i], true});
     const densemap::Point3f ray = points[i] - origin;
     const double length = ray.norm();
@@ -189,19 +186,19 @@ int main(int argc, char** argv) {
       }
       r.build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       r.ms_per_scan = 1000.0 * r.build_s / static_cast<double>(scans.size());
-      r.predictions.reserve(tests.size());
-      for (const TestPoint& t : tests) r.predictions.push_back({probability(t.x), t.occupied});
-      r.metrics = densemap::eval::evaluate(r.predictions);
+      std::vector<Prediction> predictions;
+      predictions.reserve(tests.size());
+      for (const TestPoint& t : tests) predictions.push_back({probability(t.x), t.occupied});
+      r.metrics = densemap::eval::evaluate(predictions);
       if (run == 0 && !roc_prefix.empty()) {
         const std::string path = roc_prefix + "_" + methods[m] + ".csv";
         std::ofstream csv(path);
         csv << "threshold,false_positive_rate,true_positive_rate\n";
-        for (const auto& p : densemap::eval::rocCurve(r.predictions)) {
+        for (const auto& p : densemap::eval::rocCurve(predictions)) {
           csv << p.threshold << ',' << p.false_positive_rate << ',' << p.true_positive_rate << '\n';
         }
         if (!csv) return fail("cannot write " + path);
       }
-      r.predictions.clear();
       results[m].push_back(std::move(r));
     }
   }

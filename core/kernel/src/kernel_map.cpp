@@ -56,6 +56,7 @@ struct Kernel {
   Eigen::Vector3d to;           // segment end (== x for point kernels)
   Eigen::Matrix3d h_inverse;    // anisotropic kernels: H^-1
   Eigen::Vector3d half_extent;  // bounding box of the support around [x, to]
+  VoxelKey key_min, key_max;    // that box's voxels (set when the kernel is scheduled)
   double weight = 1.0;          // |H|^-1/2 (AKIMap) or sf2 (BGK)
   double inverse_length = 0.0;  // isotropic kernels: 1 / length scale; 0: anisotropic
   bool occupied = false;
@@ -212,12 +213,14 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
   // the thread that runs it.
   std::vector<std::pair<std::uint64_t, std::uint32_t>> pairs;
   for (std::uint32_t i = 0; i < kernels.size(); ++i) {
-    const Kernel& k = kernels[i];
+    Kernel& k = kernels[i];
     const Eigen::Vector3d lo = k.x.cwiseMin(k.to) - k.half_extent;
     const Eigen::Vector3d hi = k.x.cwiseMax(k.to) + k.half_extent;
     const auto klo = grid_.pointToKey(lo.cast<float>());
     const auto khi = grid_.pointToKey(hi.cast<float>());
     if (!klo || !khi) continue;  // outside the addressable range
+    k.key_min = *klo;
+    k.key_max = *khi;
     for (int bz = klo->z >> block::kShift; bz <= khi->z >> block::kShift; ++bz) {
       for (int by = klo->y >> block::kShift; by <= khi->y >> block::kShift; ++by) {
         for (int bx = klo->x >> block::kShift; bx <= khi->x >> block::kShift; ++bx) {
@@ -248,10 +251,8 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
           Block& b = blocks_.find(block_key)->second;
           for (std::size_t p = starts[g]; p < starts[g + 1]; ++p) {
             const Kernel& k = kernels[pairs[p].second];
-            const Eigen::Vector3d lo = k.x.cwiseMin(k.to) - k.half_extent;
-            const Eigen::Vector3d hi = k.x.cwiseMax(k.to) + k.half_extent;
-            const VoxelKey klo = *grid_.pointToKey(lo.cast<float>());
-            const VoxelKey khi = *grid_.pointToKey(hi.cast<float>());
+            const VoxelKey& klo = k.key_min;
+            const VoxelKey& khi = k.key_max;
             const VoxelKey base = block::keyOf(block_key, 0);
             const auto range_of = [&](int axis, std::uint16_t from, std::uint16_t to) {
               const int b0 = base[axis];
