@@ -15,7 +15,8 @@ Expected<BoxQueryResult> queryBox(const MapView& view, const Point3f& min, const
   const auto hi = view.grid().pointToKey(max);
   if (!lo || !hi) return makeError("box outside the map's addressable range");
   const double cells =
-      (double{hi->x} - lo->x + 1) * (double{hi->y} - lo->y + 1) * (double{hi->z} - lo->z + 1);
+      (static_cast<double>(hi->x) - lo->x + 1) * (static_cast<double>(hi->y) - lo->y + 1) *
+      (static_cast<double>(hi->z) - lo->z + 1);
   if (cells > static_cast<double>(max_cells)) {
     return makeError("box of " + std::to_string(static_cast<long long>(cells)) +
                      " cells exceeds the limit of " + std::to_string(max_cells));

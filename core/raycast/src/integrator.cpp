@@ -61,11 +61,12 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
   stats.rays = rays_.size();
   stats.ms_rays = msSince(t0);
 
-  const CullingRegion* region = nullptr;
+  // The box of every traversal: the sensor's voxel and the rays' end voxels.
   const auto origin_key = grid.pointToKey(origin_world);
-  if (culling && origin_key) {
-    KeyBox box{*origin_key, *origin_key};
-    hit_.clear();
+  KeyBox box{};
+  hit_.clear();
+  if (origin_key) {
+    box = {*origin_key, *origin_key};
     for (const RayEnd& r : rays_) {
       if (!r.key_valid) continue;
       for (int a = 0; a < 3; ++a) {
@@ -74,6 +75,9 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
       }
       if (r.occupied) hit_.push_back(r.key);
     }
+  }
+  const CullingRegion* region = nullptr;
+  if (culling && origin_key) {
     region_.build(map, *origin_key, cullingBox(*origin_key, box, options_.culling_max_voxels),
                   hit_);
     // An empty region culls nothing: the forward walk is cheaper per step than the backward one.
@@ -82,25 +86,43 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
   }
   stats.ms_region = msSince(t0);
 
+  const bool dense = options_.rule == UpdateRule::kSet && origin_key.has_value() &&
+                     options_.dense_marks_max_blocks > 0;
   for (Local& local : locals_) {
     local.update.reset(options_.rule);
     local.counts = {};
+    local.dense_ok = dense && local.dense.reset(box.min, box.max, options_.dense_marks_max_blocks);
   }
+  const auto mark_all = [&](const tbb::blocked_range<std::size_t>& range, auto& sink,
+                            Local& local) {
+    for (std::size_t i = range.begin(); i != range.end(); ++i) {
+      if (region != nullptr) {
+        markRayCulled(grid, origin_world, rays_[i], *region, local.scratch, sink, local.counts);
+      } else {
+        markRay(grid, origin_world, rays_[i], sink, local.counts);
+      }
+    }
+  };
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rays_.size(), 256),
                     [&](const tbb::blocked_range<std::size_t>& range) {
                       Local& local = locals_.local();
-                      for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                        if (region != nullptr) {
-                          markRayCulled(grid, origin_world, rays_[i], *region, local.scratch,
-                                        local.update, local.counts);
-                        } else {
-                          markRay(grid, origin_world, rays_[i], local.update, local.counts);
-                        }
+                      if (!local.dense_ok) {
+                        // A worker that joined after the reset above (or no dense box).
+                        local.dense_ok = dense && local.dense.reset(
+                                                      box.min, box.max,
+                                                      options_.dense_marks_max_blocks);
+                      }
+                      if (local.dense_ok) {
+                        DenseSink sink{local.dense, local.update};
+                        mark_all(range, sink, local);
+                      } else {
+                        mark_all(range, local.update, local);
                       }
                     });
   stats.ms_mark = msSince(t0);
   update.reset(options_.rule);
   for (Local& local : locals_) {
+    if (local.dense_ok) local.dense.flushInto(local.update);
     update.merge(local.update);
     stats.visits += local.counts.visits;
     stats.culled += local.counts.culled;

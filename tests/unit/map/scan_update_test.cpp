@@ -1,5 +1,7 @@
 #include "densemap/map/scan_update.hpp"
 
+#include "densemap/map/dense_free_marks.hpp"
+
 #include <gtest/gtest.h>
 
 #include <map>
@@ -87,6 +89,57 @@ TEST(BlockLayout, KeyOfInvertsBlockAndIndex) {
        {VoxelKey{0, 0, 0}, VoxelKey{65535, 65535, 65535}, VoxelKey{32768, 7, 9}}) {
     EXPECT_EQ(block::keyOf(block::blockOf(k), block::indexOf(k)), k);
   }
+}
+
+}  // namespace
+}  // namespace densemap
+
+namespace densemap {
+namespace {
+
+/// Cells of an update as (packed key -> occupied?), for comparing two updates.
+std::map<std::uint64_t, bool> cellsOf(const ScanUpdate& u) {
+  std::map<std::uint64_t, bool> cells;
+  u.forEachCell([&](const VoxelKey& k, const CellHits& h) {
+    cells.emplace(k.packed(), h.occupied > 0);
+  });
+  return cells;
+}
+
+TEST(DenseFreeMarks, GivesTheSameUpdateAsTheHashInsideAndOutsideItsBox) {
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<int> coord(32700, 32800);
+  DenseFreeMarks dense;
+  for (int round = 0; round < 3; ++round) {  // reused: flushing must clear it
+    ASSERT_TRUE(dense.reset({32720, 32730, 32740}, {32790, 32780, 32770}, 1000));
+    ScanUpdate plain, sut;
+    for (int i = 0; i < 5000; ++i) {
+      const VoxelKey k{static_cast<std::uint16_t>(coord(rng)),
+                       static_cast<std::uint16_t>(coord(rng)),
+                       static_cast<std::uint16_t>(coord(rng))};
+      if (i % 7 == 0) {
+        plain.markOccupied(k);
+        sut.markOccupied(k);
+      } else {
+        plain.markFree(k);
+        dense.markFree(k, sut);  // many keys fall outside the box
+      }
+    }
+    dense.flushInto(sut);
+    EXPECT_EQ(cellsOf(sut), cellsOf(plain)) << "round " << round;
+    EXPECT_EQ(sut.freeCount(), plain.freeCount());
+  }
+}
+
+TEST(DenseFreeMarks, RefusesABoxOverItsBlockLimit) {
+  DenseFreeMarks dense;
+  EXPECT_FALSE(dense.reset({0, 0, 0}, {799, 799, 799}, 100 * 100 * 99));
+  EXPECT_TRUE(dense.reset({0, 0, 0}, {799, 799, 799}, 100 * 100 * 100));
+  // A refused box covers nothing: every mark goes to the fallback update.
+  ASSERT_FALSE(dense.reset({0, 0, 0}, {65535, 65535, 65535}, 1000));
+  ScanUpdate outside;
+  dense.markFree({5, 5, 5}, outside);
+  EXPECT_EQ(outside.freeCount(), 1U);
 }
 
 }  // namespace

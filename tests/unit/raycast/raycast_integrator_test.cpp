@@ -81,6 +81,20 @@ TEST(Integrator, OneAndTwoThreadsGiveTheSameMapAndCounts) {
   EXPECT_EQ(diffMaps(one, two).differing(), 0U);
 }
 
+TEST(Integrator, DenseMarksAndTheHashGiveTheSameMap) {
+  GridMap dense(0.1, SensorModel{}), hashed(0.1, SensorModel{});
+  Integrator a({.max_range_m = 5.0}), b({.max_range_m = 5.0, .dense_marks_max_blocks = 0});
+  for (int scan = 0; scan < 4; ++scan) {
+    const Point3f origin(0.25F * scan, -0.1F, 0.2F);
+    const PointCloud cloud = test::adversarialScan(0.1, origin, 8000, 5.0, 40 + scan);
+    const ScanStats sa = a.integrate(dense, cloud, origin);
+    const ScanStats sb = b.integrate(hashed, cloud, origin);
+    EXPECT_EQ(sa.visits, sb.visits);
+    EXPECT_EQ(sa.changed, sb.changed);
+  }
+  EXPECT_EQ(diffMaps(dense, hashed).differing(), 0U);
+}
+
 TEST(Integrator, NonFinitePointsAreIgnoredNotCrashing) {
   GridMap map(0.1, SensorModel{});
   Integrator sut({.max_range_m = 10.0});

@@ -52,6 +52,12 @@ class ScanUpdate {
     if (b.counts) b.counts->occupied[i] += weight;
   }
 
+  /// ORs a block's worth of free marks in (UpdateRule::kSet only: no counts).
+  void orFree(std::uint64_t block_key, const block::BlockMask& mask) {
+    Block& b = blockFor(block_key);
+    for (int w = 0; w < block::kMaskWords; ++w) b.free[w] |= mask[w];
+  }
+
   /// Adds another update (same rule) into this one.
   void merge(const ScanUpdate& other);
   void clear();

@@ -38,6 +38,9 @@ struct IntegratorOptions {
   /// The culling region's box is shrunk around the sensor to at most this many voxels
   /// (one bit each: 2^27 voxels = 16 MiB).
   std::size_t culling_max_voxels = std::size_t{1} << 27;
+  /// Under UpdateRule::kSet each worker marks free voxels in a dense array of 8^3 blocks over
+  /// the scan's box (64 bytes per block) when the box has at most this many blocks; 0: never.
+  std::size_t dense_marks_max_blocks = std::size_t{1} << 21;
 };
 
 /// What integrating one scan did; the benchmark's per-scan figures.
@@ -65,7 +68,7 @@ class Integrator {
  public:
   explicit Integrator(const IntegratorOptions& options = {})
       : options_(options), locals_([rule = options.rule] {
-          return Local{ScanUpdate(rule), {}, {}};
+          return Local{ScanUpdate(rule), {}, {}, {}, false};
         }) {}
 
   [[nodiscard]] const IntegratorOptions& options() const { return options_; }
@@ -83,6 +86,8 @@ class Integrator {
     ScanUpdate update;
     MarkCounts counts;
     BackwardScratch scratch;
+    DenseFreeMarks dense;
+    bool dense_ok = false;  // `dense` covers this scan's box
   };
   IntegratorOptions options_;
   std::vector<RayEnd> rays_;

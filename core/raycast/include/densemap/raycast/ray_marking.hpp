@@ -5,6 +5,7 @@
 #include <cstdint>
 
 #include "densemap/geometry/ray_traversal.hpp"
+#include "densemap/map/dense_free_marks.hpp"
 #include "densemap/map/scan_update.hpp"
 
 namespace densemap {
@@ -57,18 +58,30 @@ struct MarkCounts {
   std::size_t culled = 0;
 };
 
+/// Where marks go under UpdateRule::kSet with a dense box: free marks into `dense` (or
+/// `update` outside its box), occupied marks into `update`. ScanUpdate is the other sink.
+struct DenseSink {
+  DenseFreeMarks& dense;
+  ScanUpdate& update;
+  void markFree(const VoxelKey& k, std::uint32_t /*weight*/) { dense.markFree(k, update); }
+  void markOccupied(const VoxelKey& k, std::uint32_t weight) { update.markOccupied(k, weight); }
+};
+
 /// The end voxel of a ray that ends in it, `weight` times.
-inline void markEnd(const RayEnd& ray, ScanUpdate& update, MarkCounts& counts) {
+template <class Sink>
+void markEnd(const RayEnd& ray, Sink& update, MarkCounts& counts) {
   if (ray.occupied && ray.key_valid) {
     update.markOccupied(ray.key, ray.weight);
     ++counts.visits;
   }
 }
 
-/// Marks one ray into a scan's update set as OctoMap's computeUpdate does — the cells crossed
-/// (traverseRay) free, the end voxel occupied when the ray is — each `weight` times.
-inline void markRay(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray,
-                    ScanUpdate& update, MarkCounts& counts) {
+/// Marks one ray into a scan's update set (a ScanUpdate or a DenseSink) as OctoMap's
+/// computeUpdate does — the cells crossed (traverseRay) free, the end voxel occupied when the
+/// ray is — each `weight` times.
+template <class Sink>
+void markRay(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray, Sink& update,
+             MarkCounts& counts) {
   traverseRay(grid, origin, ray.end, [&](const VoxelKey& k) {
     update.markFree(k, ray.weight);
     ++counts.visits;
@@ -82,9 +95,9 @@ inline void markRay(const VoxelGrid& grid, const Point3f& origin, const RayEnd& 
 /// monotonically away from that voxel, so every voxel before it on the ray is inside too — and
 /// inside, free updates cannot change the map (fully free, not ended in by this scan's rays).
 /// `Region` needs `bool contains(const VoxelKey&) const`.
-template <class Region>
+template <class Region, class Sink>
 void markRayCulled(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray,
-                   const Region& region, BackwardScratch& scratch, ScanUpdate& update,
+                   const Region& region, BackwardScratch& scratch, Sink& update,
                    MarkCounts& counts) {
   std::size_t marked = 0;
   const std::size_t total =

@@ -1,0 +1,54 @@
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "densemap/map/block_layout.hpp"
+#include "densemap/map/scan_update.hpp"
+
+namespace densemap {
+
+/// The free marks of one scan under UpdateRule::kSet, in a dense array of 8^3 blocks over a
+/// box of block coordinates: marking a voxel is an index computation and a bit set, with no
+/// hash probe and no branch on block changes (a ray changes block every few voxels, which the
+/// ScanUpdate's last-block cache mispredicts). Voxels outside the box go to a ScanUpdate given
+/// by the caller, so any box is correct; a box around every ray is fast.
+/// Single-writer, like ScanUpdate; the array is kept between scans and only touched blocks are
+/// cleared.
+class DenseFreeMarks {
+ public:
+  /// Starts a scan over the blocks of voxels [min, max]. Returns false (and covers nothing)
+  /// when that is more than `max_blocks` blocks.
+  bool reset(const VoxelKey& min, const VoxelKey& max, std::size_t max_blocks);
+
+  /// Marks `k` free when inside the box; otherwise into `outside`.
+  void markFree(const VoxelKey& k, ScanUpdate& outside) {
+    const unsigned bx = static_cast<unsigned>(k.x >> block::kShift) - min_[0];
+    const unsigned by = static_cast<unsigned>(k.y >> block::kShift) - min_[1];
+    const unsigned bz = static_cast<unsigned>(k.z >> block::kShift) - min_[2];
+    if (bx >= n_[0] || by >= n_[1] || bz >= n_[2]) {
+      outside.markFree(k);
+      return;
+    }
+    const std::uint32_t i = (bz * n_[1] + by) * n_[0] + bx;
+    // Branch-free first-touch bookkeeping: the slot is overwritten until the count moves.
+    touched_[touched_count_] = i;
+    touched_count_ += seen_[i] ^ 1U;
+    seen_[i] = 1;
+    block::setBit(masks_[i], block::indexOf(k));
+  }
+
+  /// ORs the marks into `update` (as free marks) and clears them.
+  void flushInto(ScanUpdate& update);
+
+ private:
+  unsigned min_[3] = {0, 0, 0};
+  unsigned n_[3] = {0, 0, 0};
+  std::vector<block::BlockMask> masks_;
+  std::vector<std::uint8_t> seen_;
+  std::vector<std::uint32_t> touched_;  // one spare slot for the branch-free append
+  std::size_t touched_count_ = 0;
+};
+
+}  // namespace densemap

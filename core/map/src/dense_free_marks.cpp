@@ -1,0 +1,42 @@
+#include "densemap/map/dense_free_marks.hpp"
+
+namespace densemap {
+
+bool DenseFreeMarks::reset(const VoxelKey& min, const VoxelKey& max, std::size_t max_blocks) {
+  std::size_t blocks = 1;
+  for (int a = 0; a < 3; ++a) {
+    const unsigned lo = static_cast<unsigned>(min[a] >> block::kShift);
+    const unsigned hi = static_cast<unsigned>(max[a] >> block::kShift);
+    min_[a] = lo;
+    n_[a] = hi >= lo ? hi - lo + 1 : 0;
+    blocks *= n_[a];
+  }
+  if (blocks > max_blocks) {
+    n_[0] = n_[1] = n_[2] = 0;
+    return false;
+  }
+  if (masks_.size() < blocks) {
+    masks_.resize(blocks);
+    seen_.resize(blocks, 0);
+    touched_.resize(blocks + 1);
+  }
+  return true;
+}
+
+void DenseFreeMarks::flushInto(ScanUpdate& update) {
+  for (std::size_t t = 0; t < touched_count_; ++t) {
+    const std::uint32_t i = touched_[t];
+    const std::uint32_t bx = i % n_[0];
+    const std::uint32_t by = (i / n_[0]) % n_[1];
+    const std::uint32_t bz = i / (n_[0] * n_[1]);
+    const VoxelKey first{static_cast<std::uint16_t>((bx + min_[0]) << block::kShift),
+                         static_cast<std::uint16_t>((by + min_[1]) << block::kShift),
+                         static_cast<std::uint16_t>((bz + min_[2]) << block::kShift)};
+    update.orFree(block::blockOf(first), masks_[i]);
+    masks_[i] = {};
+    seen_[i] = 0;
+  }
+  touched_count_ = 0;
+}
+
+}  // namespace densemap
