@@ -10,6 +10,7 @@
 #include <bit>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include "densemap/geometry/stopwatch.hpp"
@@ -75,52 +76,81 @@ struct Kernel {
   }
 };
 
-/// Samples bucketed in cubes of `cell` metres for box searches.
+/// The point samples of a scan bucketed in a dense grid of cubes (counting sort, bucket order
+/// x fastest): a box search reads one contiguous run of samples per (y, z) row of buckets.
 class SampleIndex {
  public:
-  SampleIndex(const std::vector<Sample>& samples, double cell) : samples_(samples), cell_(cell) {
+  /// Buckets of `cell` metres, made coarser when the samples' box would need more than
+  /// `max_cells` of them.
+  SampleIndex(const std::vector<Sample>& samples, double cell, std::size_t max_cells)
+      : samples_(samples) {
+    Eigen::AlignedBox3d box;
+    for (const Sample& s : samples) {
+      if (!s.segment) box.extend(s.x);
+    }
+    if (box.isEmpty()) return;
+    const Eigen::Vector3d size = box.sizes();
+    cell_ = cell;
+    while (cellCount(size) > max_cells) cell_ *= 1.5;
+    min_ = box.min();
+    for (int a = 0; a < 3; ++a) n_[a] = static_cast<std::int64_t>(size[a] / cell_) + 1;
+    starts_.assign(static_cast<std::size_t>(n_[0] * n_[1] * n_[2]) + 1, 0);
+    std::vector<std::uint32_t> bucket(samples.size(), 0);
     for (std::uint32_t i = 0; i < samples.size(); ++i) {
-      if (!samples[i].segment) buckets_[keyOf(samples[i].x)].push_back(i);
+      if (samples[i].segment) continue;
+      const auto c = cellOf(samples[i].x.array());
+      bucket[i] = static_cast<std::uint32_t>((c[2] * n_[1] + c[1]) * n_[0] + c[0]);
+      ++starts_[bucket[i] + 1];
+    }
+    for (std::size_t b = 1; b < starts_.size(); ++b) starts_[b] += starts_[b - 1];
+    order_.resize(starts_.back());
+    std::vector<std::uint32_t> next(starts_.begin(), starts_.end() - 1);
+    for (std::uint32_t i = 0; i < samples.size(); ++i) {
+      if (!samples[i].segment) order_[next[bucket[i]]++] = i;  // stable: ascending per bucket
     }
   }
-  /// Calls f(index) for every point sample in the box centre +- half (ascending per bucket).
+
+  /// Calls f(index) for every point sample in the box centre +- half, in a fixed order.
   template <class F>
   void forEachInBox(const Eigen::Vector3d& centre, double half, F&& f) const {
+    if (order_.empty()) return;
     const auto lo = cellOf(centre.array() - half);
     const auto hi = cellOf(centre.array() + half);
     for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
       for (std::int64_t y = lo[1]; y <= hi[1]; ++y) {
-        for (std::int64_t x = lo[0]; x <= hi[0]; ++x) {
-          const auto it = buckets_.find(pack(x, y, z));
-          if (it == buckets_.end()) continue;
-          for (const std::uint32_t i : it->second) {
-            if (((samples_[i].x - centre).array().abs() <= half).all()) f(i);
-          }
+        const std::int64_t row = (z * n_[1] + y) * n_[0];
+        const std::uint32_t from = starts_[static_cast<std::size_t>(row + lo[0])];
+        const std::uint32_t to = starts_[static_cast<std::size_t>(row + hi[0] + 1)];
+        for (std::uint32_t o = from; o < to; ++o) {
+          const std::uint32_t i = order_[o];
+          if (((samples_[i].x - centre).array().abs() <= half).all()) f(i);
         }
       }
     }
   }
 
  private:
+  [[nodiscard]] std::size_t cellCount(const Eigen::Vector3d& size) const {
+    double n = 1.0;
+    for (int a = 0; a < 3; ++a) n *= std::floor(size[a] / cell_) + 1.0;
+    return n > 1e18 ? std::numeric_limits<std::size_t>::max() : static_cast<std::size_t>(n);
+  }
+  /// The bucket of p, clamped into the grid.
   [[nodiscard]] std::array<std::int64_t, 3> cellOf(const Eigen::Array3d& p) const {
-    return {static_cast<std::int64_t>(std::floor(p.x() / cell_)),
-            static_cast<std::int64_t>(std::floor(p.y() / cell_)),
-            static_cast<std::int64_t>(std::floor(p.z() / cell_))};
-  }
-  static std::uint64_t pack(std::int64_t x, std::int64_t y, std::int64_t z) {
-    constexpr std::int64_t kBias = 1 << 20;
-    return (static_cast<std::uint64_t>(x + kBias) & 0x1fffff) |
-           ((static_cast<std::uint64_t>(y + kBias) & 0x1fffff) << 21) |
-           ((static_cast<std::uint64_t>(z + kBias) & 0x1fffff) << 42);
-  }
-  [[nodiscard]] std::uint64_t keyOf(const Eigen::Vector3d& p) const {
-    const auto c = cellOf(p.array());
-    return pack(c[0], c[1], c[2]);
+    std::array<std::int64_t, 3> c{};
+    for (int a = 0; a < 3; ++a) {
+      const double v = std::floor((p[a] - min_[a]) / cell_);
+      c[a] = v < 0.0 ? 0 : (v >= static_cast<double>(n_[a]) ? n_[a] - 1 : static_cast<std::int64_t>(v));
+    }
+    return c;
   }
 
   const std::vector<Sample>& samples_;
-  double cell_;
-  std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> buckets_;
+  double cell_ = 1.0;
+  Eigen::Vector3d min_ = Eigen::Vector3d::Zero();
+  std::int64_t n_[3] = {1, 1, 1};
+  std::vector<std::uint32_t> starts_;  // per bucket, into order_; one extra at the end
+  std::vector<std::uint32_t> order_;   // point-sample indices by bucket
 };
 
 Kernel isotropicKernel(const Sample& s, const KernelOptions& o) {
@@ -193,7 +223,9 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
 
   std::vector<Kernel> kernels(samples.size());
   if (options_.method == KernelMethod::kAkimap) {
-    const SampleIndex index(samples, options_.search_max);
+    // Buckets about the smallest search box (a voxel) at most 2^23 of them.
+    const SampleIndex index(samples, std::max(grid_.resolution(), 0.25 * options_.search_max),
+                            std::size_t{1} << 23);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, samples.size(), 256),
                       [&](const tbb::blocked_range<std::size_t>& range) {
                         std::vector<Neighbour> neighbours;
