@@ -1,7 +1,10 @@
 // densemap-eval: accuracy of dense maps (AKIMap, BGKOctoMap, BGKOctoMap-L) and of the log-odds
-// map on a dataset, by the hold-out protocol: each scan's points are split 80/20 (by a seeded
-// hash); maps integrate the 80%; the 20% are occupied test points, and one point drawn uniformly
-// on each of their rays (short of the end voxel) is a free test point.
+// map on a dataset, by one of two protocols:
+// - holdout: each scan's points are split 80/20 (by a seeded hash); maps integrate the 80%; the
+//   20% are occupied test points, and one point drawn uniformly on each of their rays (short of
+//   the end voxel) is a free test point.
+// - oracle (simulated data): maps integrate every point; the test cells are the dense-oracle
+//   labels densemap-sim wrote for the same poses (DIR/oracle_<resolution>.bt).
 #include <tbb/task_arena.h>
 #include <CLI/CLI.hpp>
 
@@ -19,6 +22,7 @@
 #include "densemap/kernel/kernel_map.hpp"
 #include "densemap/map/map_factory.hpp"
 #include "densemap/raycast/integrator.hpp"
+#include "densemap/sim/oracle_labels.hpp"
 
 namespace {
 
@@ -83,8 +87,10 @@ int main(int argc, char** argv) {
   app.add_option("--data", data, "Dataset (any format densemap reads)")->required();
   app.add_option("--method", methods_list, "Comma-separated: akimap, bgk, bgkl, raycast")
       ->capture_default_str();
-  app.add_option("--protocol", protocol, "holdout (oracle: not implemented yet)")
-      ->capture_default_str();
+  app.add_option("--protocol", protocol,
+                 "holdout (any data) or oracle (densemap-sim data with --oracle-factor)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"holdout", "oracle"}));
   app.add_option("--resolution", resolution, "Voxel size, m")->capture_default_str();
   app.add_option("--max-range", max_range, "Ray cut-off, m (< 0: unlimited)")
       ->capture_default_str();
@@ -104,11 +110,6 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "densemap-eval: error: %s\n", message.c_str());
     return 1;
   };
-  if (protocol != "holdout") {
-    return fail("protocol '" + protocol +
-                "' is not available: only 'holdout' is implemented (the dense-oracle protocol "
-                "needs densemap-sim's dense labels, not written yet)");
-  }
   if (!(resolution > 0.0 && resolution <= 10.0)) return fail("--resolution must be in (0, 10]");
   const std::vector<std::string> methods = splitList(methods_list);
   if (methods.empty()) return fail("--method lists no method");
@@ -137,15 +138,33 @@ int main(int argc, char** argv) {
   }
   if (rejected > 0)
     std::fprintf(stderr, "densemap-eval: dropped %zu non-finite points\n", rejected);
+  std::vector<TestPoint> oracle_tests;
+  if (protocol == "oracle") {
+    const auto labels =
+        densemap::readOracleLabels(densemap::oracleLabelsPath(data, resolution), resolution);
+    if (!labels) return fail(labels.error().message);
+    const densemap::VoxelGrid grid(resolution);
+    for (const densemap::LabelledVoxel& v : *labels) {
+      oracle_tests.push_back({densemap::Point3f(static_cast<float>(grid.keyToCoord(v.key.x)),
+                                                static_cast<float>(grid.keyToCoord(v.key.y)),
+                                                static_cast<float>(grid.keyToCoord(v.key.z))),
+                              v.occupied});
+    }
+    if (oracle_tests.empty()) return fail("the oracle labels hold no voxel");
+  }
 
   // results[method][run]
   std::vector<std::vector<RunResult>> results(methods.size());
   for (int run = 0; run < runs; ++run) {
     const std::uint64_t run_seed = seed + static_cast<std::uint64_t>(run);
     std::vector<Scan> scans(clouds.size());
-    std::vector<TestPoint> tests;
+    std::vector<TestPoint> tests = oracle_tests;
     for (std::size_t i = 0; i < clouds.size(); ++i) {
-      split(clouds[i], origins[i], run_seed, i, resolution, scans[i], tests);
+      if (protocol == "oracle") {
+        scans[i] = {clouds[i], origins[i]};
+      } else {
+        split(clouds[i], origins[i], run_seed, i, resolution, scans[i], tests);
+      }
     }
     for (std::size_t m = 0; m < methods.size(); ++m) {
       densemap::tools::Progress progress(

@@ -13,7 +13,9 @@ int main(int argc, char** argv) {
   std::string out;
   int threads = 0;
   app.add_option("--out", out, "Output dataset directory")->required();
-  app.add_option("--scene", o.scene, "indoor, outdoor, or an OctoMap .bt file (e.g. geb079.bt)")
+  app.add_option("--scene", o.scene,
+                 "indoor, outdoor, structured, unstructured (the AKIMap benchmark's 10 x 7 x 2 m "
+                 "scenes, 4 stations), or an OctoMap .bt file (e.g. geb079.bt)")
       ->capture_default_str();
   app.add_option("--sensor", o.sensor, "vlp16, hdl64, os128 or os0-64")->capture_default_str();
   app.add_option("--columns", o.columns, "Azimuth steps per revolution (0: the sensor's)")
@@ -27,6 +29,18 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--gt-resolution", o.ground_truth_resolution_m,
                  "Ground-truth voxel size in m (0: no ground truth)")
+      ->capture_default_str();
+  app.add_option("--points-per-scan", o.points_per_scan,
+                 "Keep at most this many points per scan, drawn at random (0: all)")
+      ->capture_default_str();
+  app.add_option("--oracle-factor", o.oracle_factor,
+                 "Also write dense-oracle labels: a noise-free sensor with this factor times the "
+                 "beams and columns, same poses (0: none)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 16));
+  app.add_option("--oracle-resolutions", o.oracle_resolutions,
+                 "Voxel sizes (m) of the oracle labels, one oracle_<res>.bt each")
+      ->delimiter(',')
       ->capture_default_str();
   app.add_option("--threads", threads, "Worker threads (0: all cores)")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
@@ -46,5 +60,8 @@ int main(int argc, char** argv) {
               summary->points, static_cast<double>(summary->points) / summary->scans, out.c_str(),
               summary->ground_truth.empty() ? "" : ", ground truth ",
               summary->ground_truth.string().c_str());
+  for (const auto& path : summary->oracle_labels) {
+    std::printf("oracle labels %s\n", path.string().c_str());
+  }
   return 0;
 }

@@ -1,5 +1,6 @@
 #include "densemap/sim/procedural_scenes.hpp"
 
+#include <cmath>
 #include <random>
 
 #include "densemap/sim/octree_scene.hpp"
@@ -99,7 +100,101 @@ SimScene makeOutdoorScene(unsigned seed) {
   return out;
 }
 
+SimScene makeStructuredScene(unsigned seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  constexpr double kLength = 10, kWidth = 7, kHeight = 2;
+  auto scene = std::make_unique<PrimitiveScene>(
+      Eigen::AlignedBox3d(V3(-0.2, -0.2, -0.1), V3(kLength + 0.2, kWidth + 0.2, kHeight)));
+  scene->add(BoxShape{V3(-0.2, -0.2, -0.1), V3(kLength + 0.2, kWidth + 0.2, 0)});  // floor
+  addWallX(*scene, 0, kLength, 0, kHeight);
+  addWallX(*scene, 0, kLength, kWidth, kHeight);
+  addWallY(*scene, 0, kWidth, 0, kHeight);
+  addWallY(*scene, 0, kWidth, kLength, kHeight);
+  // Inner walls with doorways: x = 4 splits the floor; y = 3.5 splits the right half.
+  const double door1 = 1.0 + u(rng) * 1.5, door2 = 4.5 + u(rng) * 1.0;
+  addWallY(*scene, 0, door1, 4.0, kHeight);
+  addWallY(*scene, door1 + 1.0, door2, 4.0, kHeight);
+  addWallY(*scene, door2 + 1.0, kWidth, 4.0, kHeight);
+  const double door3 = 5.5 + u(rng) * 2.0;
+  addWallX(*scene, 4.0, door3, 3.5, kHeight);
+  addWallX(*scene, door3 + 1.0, kLength, 3.5, kHeight);
+  // A free-standing L-shaped wall in the left room.
+  addWallX(*scene, 1.0, 2.8, 5.2, 1.4);
+  addWallY(*scene, 5.2, 6.2, 2.8, 1.4);
+  // Tables, cabinets and pillars.
+  for (int i = 0; i < 6; ++i) {
+    const double w = 0.5 + u(rng) * 0.8, d = 0.4 + u(rng) * 0.6, h = 0.5 + u(rng) * 1.0;
+    const double x = 0.4 + u(rng) * (kLength - 0.8 - w), y = 0.4 + u(rng) * (kWidth - 0.8 - d);
+    scene->add(BoxShape{V3(x, y, 0), V3(x + w, y + d, h)});
+  }
+  scene->add(CylinderShape{Eigen::Vector2d(7.0, 1.8), 0.2, 0, kHeight});
+  scene->add(CylinderShape{Eigen::Vector2d(1.8, 2.0), 0.15, 0, kHeight});
+  SimScene out{"structured", std::move(scene), {}, true};
+  out.waypoints = {V3(2.0, 1.5, 0.6), V3(2.0, 4.5, 0.6), V3(7.0, 5.3, 0.6), V3(7.5, 1.2, 0.6)};
+  return out;
+}
+
+SimScene makeUnstructuredScene(unsigned seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  constexpr double kLength = 10, kWidth = 7, kHeight = 2;
+  auto scene = std::make_unique<PrimitiveScene>(
+      Eigen::AlignedBox3d(V3(-0.2, -0.2, -0.1), V3(kLength + 0.2, kWidth + 0.2, kHeight)));
+  scene->add(BoxShape{V3(-0.2, -0.2, -0.1), V3(kLength + 0.2, kWidth + 0.2, 0)});  // floor
+  const std::vector<V3> stations = {V3(2.5, 1.8, 0.6), V3(2.5, 5.2, 0.6), V3(7.5, 5.2, 0.6),
+                                    V3(7.5, 1.8, 0.6)};
+  const auto clear_of_stations = [&](double x, double y, double r) {
+    for (const V3& s : stations) {
+      if (std::hypot(x - s.x(), y - s.y()) < r + 0.6) return false;
+    }
+    return true;
+  };
+  int placed = 0;
+  while (placed < 28) {
+    const double x = 0.3 + u(rng) * (kLength - 0.6), y = 0.3 + u(rng) * (kWidth - 0.6);
+    const double kind = u(rng);
+    if (kind < 0.35) {  // a rock: a cluster of 2-4 overlapping spheres
+      if (!clear_of_stations(x, y, 0.8)) continue;
+      const int parts = 2 + static_cast<int>(u(rng) * 3);
+      for (int i = 0; i < parts; ++i) {
+        const double r = 0.15 + u(rng) * 0.4;
+        scene->add(SphereShape{V3(x + (u(rng) - 0.5) * 0.6, y + (u(rng) - 0.5) * 0.6,
+                                  r * (0.3 + u(rng) * 0.8)),
+                               r});
+      }
+    } else if (kind < 0.6) {  // a trunk with an uneven crown
+      if (!clear_of_stations(x, y, 0.9)) continue;
+      const double trunk = 0.8 + u(rng) * 0.7;
+      scene->add(CylinderShape{Eigen::Vector2d(x, y), 0.06 + u(rng) * 0.1, 0, trunk});
+      for (int i = 0; i < 3; ++i) {
+        scene->add(SphereShape{V3(x + (u(rng) - 0.5) * 0.5, y + (u(rng) - 0.5) * 0.5,
+                                  trunk + u(rng) * 0.3),
+                               0.25 + u(rng) * 0.3});
+      }
+    } else if (kind < 0.85) {  // debris: a small pile of boxes of random sizes
+      if (!clear_of_stations(x, y, 0.7)) continue;
+      double z = 0;
+      for (int i = 0; i < 1 + static_cast<int>(u(rng) * 3); ++i) {
+        const double w = 0.2 + u(rng) * 0.6, d = 0.2 + u(rng) * 0.6, h = 0.1 + u(rng) * 0.4;
+        const double cx = x + (u(rng) - 0.5) * 0.3, cy = y + (u(rng) - 0.5) * 0.3;
+        scene->add(BoxShape{V3(cx - w / 2, cy - d / 2, z), V3(cx + w / 2, cy + d / 2, z + h)});
+        z += h;
+      }
+    } else {  // a thin post
+      if (!clear_of_stations(x, y, 0.3)) continue;
+      scene->add(CylinderShape{Eigen::Vector2d(x, y), 0.03 + u(rng) * 0.05, 0,
+                               0.5 + u(rng) * 1.5});
+    }
+    ++placed;
+  }
+  SimScene out{"unstructured", std::move(scene), stations, true};
+  return out;
+}
+
 Expected<SimScene> makeScene(const std::string& name_or_file, unsigned seed) {
+  if (name_or_file == "structured") return makeStructuredScene(seed);
+  if (name_or_file == "unstructured") return makeUnstructuredScene(seed);
   if (name_or_file == "indoor") return makeIndoorScene(seed);
   if (name_or_file == "outdoor") return makeOutdoorScene(seed);
   return makeOctreeScene(name_or_file);

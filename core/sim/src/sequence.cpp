@@ -1,5 +1,8 @@
 #include "densemap/sim/sequence.hpp"
 
+#include <algorithm>
+#include <numeric>
+#include <random>
 #include <sstream>
 
 #include "densemap/io/dataset_writer.hpp"
@@ -7,6 +10,7 @@
 #include "densemap/sim/ground_truth.hpp"
 #include "densemap/sim/lidar_simulator.hpp"
 #include "densemap/sim/octree_scene.hpp"
+#include "densemap/sim/oracle_labels.hpp"
 #include "densemap/sim/procedural_scenes.hpp"
 #include "densemap/sim/trajectory.hpp"
 
@@ -29,8 +33,33 @@ std::string describe(const SequenceOptions& o, const LidarModel& lidar) {
   s << "scene " << o.scene << "\nsensor " << o.sensor << "\nbeams " << lidar.beams() << "\ncolumns "
     << lidar.columns << "\nmax_range_m " << lidar.max_range_m << "\nnoise_std_m " << o.noise_std_m
     << "\ndropout " << o.dropout << "\nscans " << o.scans << "\nseed " << o.seed
-    << "\nground_truth_resolution_m " << o.ground_truth_resolution_m << "\n";
+    << "\nground_truth_resolution_m " << o.ground_truth_resolution_m << "\npoints_per_scan "
+    << o.points_per_scan << "\noracle_factor " << o.oracle_factor << "\noracle_resolutions";
+  for (const double r : o.oracle_resolutions) s << ' ' << r;
+  s << "\n";
   return s.str();
+}
+
+/// Keeps `n` of the scan's points, chosen at random (seeded per scan), in their order.
+void subsample(Scan& scan, std::size_t n, std::uint64_t seed) {
+  if (n == 0 || scan.points.size() <= n) return;
+  std::vector<std::size_t> index(scan.points.size());
+  std::iota(index.begin(), index.end(), 0);
+  std::mt19937_64 rng(seed * 0x9E3779B97F4A7C15ULL + scan.id);
+  for (std::size_t i = 0; i < n; ++i) {  // partial Fisher-Yates
+    std::uniform_int_distribution<std::size_t> pick(i, index.size() - 1);
+    std::swap(index[i], index[pick(rng)]);
+  }
+  index.resize(n);
+  std::sort(index.begin(), index.end());
+  PointCloud points;
+  std::vector<float> intensities;
+  for (const std::size_t i : index) {
+    points.push_back(scan.points[i]);
+    if (!scan.intensities.empty()) intensities.push_back(scan.intensities[i]);
+  }
+  scan.points = std::move(points);
+  scan.intensities = std::move(intensities);
 }
 
 }  // namespace
@@ -40,6 +69,12 @@ Expected<SequenceSummary> writeSimulatedSequence(
     const std::function<void(std::size_t, std::size_t)>& progress) {
   if (options.scans <= 0 || options.scans > 100000) return makeError("scans must be in 1..100000");
   if (options.ground_truth_resolution_m < 0) return makeError("ground truth resolution < 0");
+  if (options.oracle_factor < 0 || options.oracle_factor > 16) {
+    return makeError("oracle factor must be in 0..16");
+  }
+  for (const double r : options.oracle_resolutions) {
+    if (!(r >= 0.01 && r <= 10.0)) return makeError("oracle resolutions must be in [0.01, 10] m");
+  }
   auto lidar = lidarFor(options);
   if (!lidar) return std::unexpected(lidar.error());
   auto scene = makeScene(options.scene, static_cast<unsigned>(options.seed));
@@ -48,9 +83,21 @@ Expected<SequenceSummary> writeSimulatedSequence(
   if (!writer) return std::unexpected(writer.error());
 
   SequenceSummary summary;
-  const auto poses = trajectoryAlong(scene->waypoints, options.scans);
+  const auto poses = scene->stations ? posesAtStations(scene->waypoints, options.scans)
+                                     : trajectoryAlong(scene->waypoints, options.scans);
+  std::vector<OracleLabeller> oracles;
+  const LidarModel dense = denseLidar(*lidar, options.oracle_factor);
+  if (options.oracle_factor > 0) {
+    for (const double r : options.oracle_resolutions) oracles.emplace_back(r);
+  }
   for (std::size_t i = 0; i < poses.size(); ++i) {
-    const Scan scan = simulateScan(*scene->scene, *lidar, poses[i], i, options.seed);
+    Scan scan = simulateScan(*scene->scene, *lidar, poses[i], i, options.seed);
+    subsample(scan, options.points_per_scan, options.seed);
+    if (!oracles.empty()) {
+      const Scan seen = simulateScan(*scene->scene, dense, poses[i], i, options.seed);
+      const PointCloud world = seen.pointsWorld();
+      for (OracleLabeller& oracle : oracles) oracle.add(world, seen.originWorld());
+    }
     if (auto ok = writer->write(scan); !ok) return std::unexpected(ok.error());
     summary.points += scan.points.size();
     ++summary.scans;
@@ -72,6 +119,11 @@ Expected<SequenceSummary> writeSimulatedSequence(
     if (auto ok = writeFileAtomically(summary.ground_truth, out.str()); !ok) {
       return std::unexpected(ok.error());
     }
+  }
+  for (const OracleLabeller& oracle : oracles) {
+    const auto path = oracleLabelsPath(dir, oracle.grid().resolution());
+    if (auto ok = oracle.write(path); !ok) return std::unexpected(ok.error());
+    summary.oracle_labels.push_back(path);
   }
   if (auto ok = writeFileAtomically(dir / "sim.txt", describe(options, *lidar)); !ok) {
     return std::unexpected(ok.error());

@@ -34,4 +34,23 @@ std::vector<Transform> trajectoryAlong(const std::vector<Eigen::Vector3d>& waypo
   return poses;
 }
 
+std::vector<Transform> posesAtStations(const std::vector<Eigen::Vector3d>& stations, int n) {
+  std::vector<Transform> poses;
+  if (stations.empty() || n <= 0) return poses;
+  const int count = static_cast<int>(stations.size());
+  for (int s = 0; s < count; ++s) {
+    const int here = n / count + (s < n % count ? 1 : 0);
+    for (int k = 0; k < here; ++k) {
+      Transform T = Transform::Identity();
+      T.translation() = stations[static_cast<std::size_t>(s)];
+      // An irrational step: yaws never repeat the azimuth grid of an earlier scan.
+      T.linear() =
+          Eigen::AngleAxisd(k * 2.0 * M_PI / (here * 1.4142135623730951), Eigen::Vector3d::UnitZ())
+              .toRotationMatrix();
+      poses.push_back(T);
+    }
+  }
+  return poses;
+}
+
 }  // namespace densemap

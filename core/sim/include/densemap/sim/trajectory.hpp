@@ -11,4 +11,10 @@ namespace densemap {
 [[nodiscard]] std::vector<Transform> trajectoryAlong(const std::vector<Eigen::Vector3d>& waypoints,
                                                      int n);
 
+/// `n` sensor poses standing at `stations` in turn (n / stations each, the first stations
+/// taking one more when it does not divide), each turned about z by a different yaw, so
+/// repeated scans from one place sample other directions.
+[[nodiscard]] std::vector<Transform> posesAtStations(const std::vector<Eigen::Vector3d>& stations,
+                                                     int n);
+
 }  // namespace densemap
