@@ -11,12 +11,16 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <algorithm>
 #include <fstream>
+#include <functional>
+#include <unordered_map>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "../common/progress.hpp"
+#include "plots.hpp"
 #include "densemap/eval/metrics.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/kernel/kernel_map.hpp"
@@ -74,6 +78,34 @@ void split(const densemap::PointCloud& points, const densemap::Point3f& origin, 
   }
 }
 
+/// The xy box of the data, for slice pictures.
+struct SliceFrame {
+  double x0 = 0, y0 = 0;
+  int cols = 0, rows = 0;
+};
+
+/// A z-slice of a map as a picture like the paper's insets: white free, black occupied, gray
+/// 0.5 (and unknown); `scale` pixels per cell; north (+y) up.
+densemap::tools::GrayImage slicePicture(const SliceFrame& f, double resolution, double z, int scale,
+                                        const std::function<double(const densemap::Point3f&)>& p) {
+  densemap::tools::GrayImage image{f.cols * scale, f.rows * scale, {}};
+  image.pixels.resize(static_cast<std::size_t>(image.width) * image.height);
+  for (int r = 0; r < f.rows; ++r) {
+    for (int c = 0; c < f.cols; ++c) {
+      const densemap::Point3f x(static_cast<float>(f.x0 + (c + 0.5) * resolution),
+                                static_cast<float>(f.y0 + (f.rows - r - 0.5) * resolution),
+                                static_cast<float>(z));
+      const auto v = static_cast<std::uint8_t>(std::lround(255.0 * (1.0 - p(x))));
+      for (int dy = 0; dy < scale; ++dy) {
+        for (int dx = 0; dx < scale; ++dx) {
+          image.pixels[static_cast<std::size_t>(r * scale + dy) * image.width + c * scale + dx] = v;
+        }
+      }
+    }
+  }
+  return image;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -103,7 +135,14 @@ int main(int argc, char** argv) {
   app.add_option("--limit", limit, "Scans to use (0: all)")->capture_default_str();
   app.add_option("--threads", threads, "Worker threads (0: all cores)")->capture_default_str();
   app.add_option("--json", json_path, "Write the results as JSON");
-  app.add_option("--roc", roc_prefix, "Write PREFIX_<method>.csv ROC curves (first run)");
+  app.add_option("--roc", roc_prefix,
+                 "Write the ROC curves of the first run: PREFIX_<method>.csv and PREFIX.svg");
+  std::string slice_prefix;
+  double slice_z = 1.0;
+  app.add_option("--slice", slice_prefix,
+                 "Write a z-slice picture per method (PREFIX_<method>.png; PREFIX_oracle.png "
+                 "for the oracle labels): white free, black occupied, gray unknown");
+  app.add_option("--slice-z", slice_z, "Height of the slice, m")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
   const auto fail = [](const std::string& message) {
@@ -138,6 +177,33 @@ int main(int argc, char** argv) {
   }
   if (rejected > 0)
     std::fprintf(stderr, "densemap-eval: dropped %zu non-finite points\n", rejected);
+  SliceFrame frame;
+  {
+    Eigen::AlignedBox3f box;
+    for (std::size_t i = 0; i < clouds.size(); ++i) {
+      box.extend(origins[i]);
+      for (const densemap::Point3f& p : clouds[i]) box.extend(p);
+    }
+    if (!box.isEmpty()) {
+      frame.x0 = std::floor(box.min().x() / resolution) * resolution;
+      frame.y0 = std::floor(box.min().y() / resolution) * resolution;
+      frame.cols = std::min(4000, static_cast<int>((box.max().x() - frame.x0) / resolution) + 1);
+      frame.rows = std::min(4000, static_cast<int>((box.max().y() - frame.y0) / resolution) + 1);
+    }
+  }
+  const int slice_scale = std::clamp(800 / std::max({frame.cols, frame.rows, 1}), 1, 8);
+  const auto write_slice = [&](const std::string& name,
+                               const std::function<double(const densemap::Point3f&)>& p) {
+    const std::string path = slice_prefix + "_" + name + ".png";
+    if (auto ok = densemap::tools::writeGrayPng(
+            path, slicePicture(frame, resolution, slice_z, slice_scale, p));
+        !ok) {
+      std::fprintf(stderr, "densemap-eval: error: %s\n", ok.error().message.c_str());
+      return false;
+    }
+    std::fprintf(stderr, "densemap-eval: wrote %s\n", path.c_str());
+    return true;
+  };
   std::vector<TestPoint> oracle_tests;
   if (protocol == "oracle") {
     const auto labels =
@@ -151,10 +217,22 @@ int main(int argc, char** argv) {
                               v.occupied});
     }
     if (oracle_tests.empty()) return fail("the oracle labels hold no voxel");
+    if (!slice_prefix.empty()) {
+      std::unordered_map<std::uint64_t, bool> truth;
+      for (const densemap::LabelledVoxel& v : *labels) truth[v.key.packed()] = v.occupied;
+      if (!write_slice("oracle", [&](const densemap::Point3f& x) {
+            const auto key = grid.pointToKey(x);
+            const auto it = key ? truth.find(key->packed()) : truth.end();
+            return it == truth.end() ? 0.5 : (it->second ? 1.0 : 0.0);
+          })) {
+        return 1;
+      }
+    }
   }
 
   // results[method][run]
   std::vector<std::vector<RunResult>> results(methods.size());
+  std::vector<densemap::tools::RocSeries> roc_series;
   for (int run = 0; run < runs; ++run) {
     const std::uint64_t run_seed = seed + static_cast<std::uint64_t>(run);
     std::vector<Scan> scans(clouds.size());
@@ -213,15 +291,26 @@ int main(int argc, char** argv) {
         const std::string path = roc_prefix + "_" + methods[m] + ".csv";
         std::ofstream csv(path);
         csv << "threshold,false_positive_rate,true_positive_rate\n";
-        for (const auto& p : densemap::eval::rocCurve(predictions)) {
+        auto curve = densemap::eval::rocCurve(predictions);
+        for (const auto& p : curve) {
           csv << p.threshold << ',' << p.false_positive_rate << ',' << p.true_positive_rate << '\n';
         }
         if (!csv) return fail("cannot write " + path);
+        roc_series.push_back({methods[m], r.metrics.auc, std::move(curve)});
       }
+      if (run == 0 && !slice_prefix.empty() && !write_slice(methods[m], probability)) return 1;
       results[m].push_back(std::move(r));
     }
   }
 
+  if (!roc_series.empty()) {
+    std::ostringstream title;
+    title << "ROC, " << protocol << " protocol, " << resolution << " m";
+    if (auto ok = densemap::tools::writeRocSvg(roc_prefix + ".svg", title.str(), roc_series); !ok) {
+      return fail(ok.error().message);
+    }
+    std::fprintf(stderr, "densemap-eval: wrote %s.svg\n", roc_prefix.c_str());
+  }
   const auto stat = [&](const std::vector<RunResult>& rs, auto field) {
     double mean = 0.0, sq = 0.0;
     for (const RunResult& r : rs) mean += field(r);

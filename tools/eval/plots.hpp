@@ -1,0 +1,36 @@
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "densemap/eval/metrics.hpp"
+#include "densemap/geometry/error.hpp"
+
+namespace densemap::tools {
+
+/// One method's ROC curve for the plot.
+struct RocSeries {
+  std::string name;
+  double auc = 0.0;
+  std::vector<eval::RocPoint> points;
+};
+
+/// An SVG line plot of ROC curves (false positive rate against true positive rate), one colour
+/// per series, with the chance diagonal and a legend carrying each AUC.
+[[nodiscard]] Expected<void> writeRocSvg(const std::filesystem::path& path, const std::string& title,
+                                         const std::vector<RocSeries>& series);
+
+/// A grayscale picture, row-major from the top row; 0 = black, 255 = white.
+struct GrayImage {
+  int width = 0;
+  int height = 0;
+  std::vector<std::uint8_t> pixels;
+};
+
+/// Writes `image` as an 8-bit grayscale PNG (deflate "stored" blocks: no compression library).
+[[nodiscard]] Expected<void> writeGrayPng(const std::filesystem::path& path,
+                                          const GrayImage& image);
+
+}  // namespace densemap::tools
