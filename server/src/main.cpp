@@ -60,6 +60,13 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "densemap-server: resumed %s (version %llu, %zu cells)\n",
                  snapshot.c_str(), static_cast<unsigned long long>(loaded->version),
                  loaded->map->knownCells());
+    if (options->kernel) {
+      std::fprintf(stderr,
+                   "densemap-server: note: map.kind %s keeps its kernel evidence in memory only; "
+                   "the snapshot's probabilities stand until new scans reach their cells, which "
+                   "then start again from the prior\n",
+                   std::string(densemap::kernel::kernelMethodName(*options->kernel)).c_str());
+    }
     initial = std::move(loaded->map);
     version = loaded->version;
   }

@@ -49,6 +49,14 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
   auto backend = parseBackend(config.map().backend());
   if (!backend) return makeError("map.backend: " + backend.error().message);
   o.backend = *backend;
+  if (config.map().kind() != "log_odds") {
+    auto kernel = kernel::parseKernelMethod(config.map().kind());
+    if (!kernel) {
+      return makeError("map.kind: unknown kind '" + config.map().kind() +
+                       "' (expected log_odds, akimap, bgk or bgkl)");
+    }
+    o.kernel = *kernel;
+  }
   o.resolution_m = config.map().resolution_m();
   if (!(o.resolution_m >= 0.001 && o.resolution_m <= 100.0)) {
     return makeError("map.resolution_m must be in [0.001, 100], got " +

@@ -207,7 +207,8 @@ Kernel adaptiveKernel(std::size_t i, const std::vector<Sample>& samples, const S
 KernelMap::KernelMap(double resolution_m, const KernelOptions& options)
     : grid_(resolution_m), options_(options) {}
 
-KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point3f& origin_world) {
+KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point3f& origin_world,
+                                     std::vector<VoxelKey>* touched) {
   KernelScanStats stats;
   auto t0 = std::chrono::steady_clock::now();
   SamplingOptions sampling;
@@ -275,6 +276,7 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
   }
   starts.push_back(pairs.size());
   std::atomic<std::size_t> cell_updates{0};
+  std::vector<block::BlockMask> reached(touched != nullptr ? starts.size() - 1 : 0);
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, starts.size() - 1, 4),
       [&](const tbb::blocked_range<std::size_t>& range) {
@@ -307,6 +309,7 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
                   const int cell = block::indexOf(key);
                   (k.occupied ? b.alpha : b.beta)[cell] += v;
                   block::setBit(b.known, cell);
+                  if (touched != nullptr) block::setBit(reached[g], cell);
                   ++updates;
                 }
               }
@@ -316,8 +319,27 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
         cell_updates += updates;
       });
   stats.cell_updates = cell_updates;
+  if (touched != nullptr) {
+    for (std::size_t g = 0; g + 1 < starts.size(); ++g) {
+      const std::uint64_t block_key = pairs[starts[g]].first;
+      for (int w = 0; w < block::kMaskWords; ++w) {
+        for (std::uint64_t bits = reached[g][w]; bits != 0; bits &= bits - 1) {
+          touched->push_back(block::keyOf(block_key, w * 64 + std::countr_zero(bits)));
+        }
+      }
+    }
+  }
   stats.ms_accumulate = msSince(t0);
   return stats;
+}
+
+void KernelMap::erase(const VoxelKey& key) {
+  const auto it = blocks_.find(block::blockOf(key));
+  if (it == blocks_.end()) return;
+  const int cell = block::indexOf(key);
+  block::clearBit(it->second.known, cell);
+  it->second.alpha[cell] = 0.0;
+  it->second.beta[cell] = 0.0;
 }
 
 std::optional<double> KernelMap::probability(const VoxelKey& key) const {

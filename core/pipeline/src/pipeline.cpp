@@ -3,6 +3,10 @@
 #include <tbb/flow_graph.h>
 
 #include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "densemap/geometry/stopwatch.hpp"
 
 namespace densemap {
 
@@ -46,8 +50,12 @@ struct Pipeline::Graph {
         integrate(graph, tbb::flow::serial,
                   [&p](JobPtr job) {
                     if (!job->rejection) {
-                      job->result.stats = p.integrator_.integrate(
-                          *p.map_, job->points_world, job->origin_world, &job->result.changes);
+                      job->result.stats =
+                          p.kernel_map_
+                              ? p.integrateKernel(job->points_world, job->origin_world,
+                                                  job->result.changes)
+                              : p.integrator_.integrate(*p.map_, job->points_world,
+                                                        job->origin_world, &job->result.changes);
                     }
                     return job;
                   }),
@@ -98,6 +106,11 @@ Pipeline::Pipeline(const PipelineOptions& options, std::unique_ptr<OccupancyMap>
           {.method = options.method, .rule = options.rule, .max_range_m = options.max_range_m}),
       arena_(options.threads),
       queue_(options.queue_depth) {
+  if (options.kernel) {
+    auto kernel_options = kernel::KernelOptions::defaults(*options.kernel);
+    kernel_options.max_range = options.max_range_m;
+    kernel_map_ = std::make_unique<kernel::KernelMap>(options.resolution_m, kernel_options);
+  }
   view_.store(MapView::fromMap(*map_, version));
   // The graph belongs to the pipeline's arena: build it there.
   arena_.execute([this] { graph_ = std::make_unique<Graph>(*this); });
@@ -163,6 +176,11 @@ void Pipeline::runCommands() {
     IntegrationResult result;
     Expected<std::string> outcome;
     arena_.execute([&] { outcome = command(*map_, result.changes); });
+    if (kernel_map_) {  // erased cells lose their kernel evidence too
+      for (const CellChange& c : result.changes) {
+        if (!c.known) kernel_map_->erase(c.key);
+      }
+    }
     if (!result.changes.empty()) publish(result);
     promise.set_value(std::move(outcome));
   }
@@ -185,6 +203,29 @@ void Pipeline::publish(IntegrationResult& result) {
     }
   }
   if (publisher_) publisher_(result, next);
+}
+
+ScanStats Pipeline::integrateKernel(const PointCloud& points_world, const Point3f& origin_world,
+                                    CellChanges& changes) {
+  auto t0 = std::chrono::steady_clock::now();
+  std::vector<VoxelKey> touched;
+  kernel_map_->integrate(points_world, origin_world, &touched);
+  ScanStats stats;
+  stats.points = points_world.size();
+  stats.rays = points_world.size();
+  stats.ms_mark = msSince(t0);
+  for (const VoxelKey& key : touched) {
+    const double p = kernel_map_->probability(key).value_or(0.5);
+    const auto log_odds = static_cast<float>(std::log(p / (1.0 - p)));
+    if (map_->logOdds(key) != log_odds) {
+      map_->setLogOdds(key, log_odds);
+      changes.push_back({key, log_odds, true});
+    }
+  }
+  stats.updated = touched.size();
+  stats.changed = changes.size();
+  stats.ms_apply = msSince(t0);
+  return stats;
 }
 
 PipelineCounters Pipeline::counters() const {

@@ -32,6 +32,7 @@ TEST(ServerConfig, TheShippedConfigIsValidAndEqualsTheDefaults) {
   EXPECT_EQ(options->method, defaults->method);
   EXPECT_EQ(defaults->method, IntegrationMethod::kSuperRayCulling);
   EXPECT_EQ(options->rule, UpdateRule::kSet);
+  EXPECT_FALSE(options->kernel) << "log-odds is the default map kind";
   EXPECT_EQ(config->dds().network_interface(), "lo");
 }
 
@@ -58,6 +59,12 @@ TEST(ServerConfig, ErrorsNameTheFileTheLineAndTheReason) {
   EXPECT_EQ(pipelineOptions(*per_ray)->rule, UpdateRule::kPerRay);
   EXPECT_EQ(pipelineOptions(*per_ray)->method, IntegrationMethod::kRaycast);
   EXPECT_FALSE(loadServerConfig(writeConfig(dir, "map { sensor { prob_hit: 0.3 } }\n")));
+  auto bad_kind = loadServerConfig(writeConfig(dir, "map { kind: \"gmm\" }\n"));
+  ASSERT_FALSE(bad_kind);
+  EXPECT_NE(bad_kind.error().message.find("akimap"), std::string::npos);
+  auto akimap = loadServerConfig(writeConfig(dir, "map { kind: \"akimap\" }\n"));
+  ASSERT_TRUE(akimap) << akimap.error().message;
+  EXPECT_EQ(pipelineOptions(*akimap)->kernel, kernel::KernelMethod::kAkimap);
   EXPECT_FALSE(loadServerConfig(writeConfig(dir, "dds { network_interface: \"\" }\n")));
   EXPECT_FALSE(loadServerConfig(writeConfig(dir, "map { resolution_m: \"x\" }\n")));
   EXPECT_FALSE(loadServerConfig(dir.path() / "missing.textproto"));

@@ -6,6 +6,7 @@
 #include <optional>
 #include <string_view>
 #include <unordered_map>
+#include <vector>
 
 #include "densemap/geometry/error.hpp"
 #include "densemap/geometry/voxel_grid.hpp"
@@ -61,8 +62,13 @@ class KernelMap {
   [[nodiscard]] const VoxelGrid& grid() const { return grid_; }
   [[nodiscard]] const KernelOptions& options() const { return options_; }
 
-  /// Integrates one scan (finite points, world frame) taken from `origin_world`.
-  KernelScanStats integrate(const PointCloud& points_world, const Point3f& origin_world);
+  /// Integrates one scan (finite points, world frame) taken from `origin_world`. When `touched`
+  /// is given, the cells this scan's kernels reached are appended to it (block by block, in
+  /// block-key order).
+  KernelScanStats integrate(const PointCloud& points_world, const Point3f& origin_world,
+                            std::vector<VoxelKey>* touched = nullptr);
+  /// Forgets a cell's evidence (it becomes unknown).
+  void erase(const VoxelKey& key);
 
   /// alpha / (alpha + beta); std::nullopt where no kernel reached the cell (unknown).
   [[nodiscard]] std::optional<double> probability(const VoxelKey& key) const;

@@ -15,6 +15,7 @@
 #include "densemap/pipeline/map_view.hpp"
 #include "densemap/pipeline/raw_scan.hpp"
 #include "densemap/pipeline/scan_validator.hpp"
+#include "densemap/kernel/kernel_map.hpp"
 #include "densemap/raycast/integrator.hpp"
 
 namespace densemap {
@@ -26,6 +27,11 @@ struct PipelineOptions {
   double max_range_m = -1.0;  // < 0: unlimited
   IntegrationMethod method = IntegrationMethod::kSuperRayCulling;
   UpdateRule rule = UpdateRule::kSet;
+  /// The map kind: std::nullopt for the log-odds map (OctoMap's semantics, `method`, `rule`),
+  /// or a dense kernel map (AKIMap, BGKOctoMap, BGKOctoMap-L; their published settings). A
+  /// kernel map publishes logit(p) = log(alpha / beta) as each cell's log-odds, so queries,
+  /// snapshots and updates read it like any map.
+  std::optional<kernel::KernelMethod> kernel;
   int threads = 2;  // size of the task arena the pipeline owns
   std::size_t queue_depth = 2;
   ScanLimits limits;
@@ -103,10 +109,14 @@ class Pipeline {
   void runCommands();
   void process(RawScan raw);
   void publish(IntegrationResult& result);
+  /// The integrate stage for kernel map kinds: map_ mirrors the kernel map as log-odds.
+  ScanStats integrateKernel(const PointCloud& points_world, const Point3f& origin_world,
+                            CellChanges& changes);
 
   PipelineOptions options_;
   std::unique_ptr<OccupancyMap> map_;
   Integrator integrator_;
+  std::unique_ptr<kernel::KernelMap> kernel_map_;  // map kinds akimap, bgk, bgkl
   tbb::task_arena arena_;
   std::unique_ptr<Graph> graph_;
   LatestWinsQueue<RawScan> queue_;
