@@ -12,7 +12,7 @@
 #include "densemap/client/client.hpp"
 #include "densemap/io/octomap_export.hpp"
 #include "densemap/io/scan_source.hpp"
-#include "png_writer.hpp"
+#include "densemap/io/png_writer.hpp"
 #include "snapshot.hpp"
 
 namespace densemap::cli {

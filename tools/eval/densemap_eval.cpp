@@ -22,6 +22,7 @@
 #include "../common/progress.hpp"
 #include "plots.hpp"
 #include "densemap/eval/metrics.hpp"
+#include "densemap/io/png_writer.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/kernel/kernel_map.hpp"
 #include "densemap/map/map_factory.hpp"
@@ -84,12 +85,16 @@ struct SliceFrame {
   int cols = 0, rows = 0;
 };
 
-/// A z-slice of a map as a picture like the paper's insets: white free, black occupied, gray
-/// 0.5 (and unknown); `scale` pixels per cell; north (+y) up.
-densemap::tools::GrayImage slicePicture(const SliceFrame& f, double resolution, double z, int scale,
-                                        const std::function<double(const densemap::Point3f&)>& p) {
-  densemap::tools::GrayImage image{f.cols * scale, f.rows * scale, {}};
-  image.pixels.resize(static_cast<std::size_t>(image.width) * image.height);
+/// A z-slice of a map as an RGB picture like the paper's grayscale insets: white free, black
+/// occupied, gray 0.5 (and unknown); `scale` pixels per cell; north (+y) up.
+struct Picture {
+  int width = 0, height = 0;
+  std::vector<std::uint8_t> rgb;
+};
+Picture slicePicture(const SliceFrame& f, double resolution, double z, int scale,
+                     const std::function<double(const densemap::Point3f&)>& p) {
+  Picture image{f.cols * scale, f.rows * scale, {}};
+  image.rgb.resize(static_cast<std::size_t>(image.width) * image.height * 3);
   for (int r = 0; r < f.rows; ++r) {
     for (int c = 0; c < f.cols; ++c) {
       const densemap::Point3f x(static_cast<float>(f.x0 + (c + 0.5) * resolution),
@@ -98,7 +103,8 @@ densemap::tools::GrayImage slicePicture(const SliceFrame& f, double resolution, 
       const auto v = static_cast<std::uint8_t>(std::lround(255.0 * (1.0 - p(x))));
       for (int dy = 0; dy < scale; ++dy) {
         for (int dx = 0; dx < scale; ++dx) {
-          image.pixels[static_cast<std::size_t>(r * scale + dy) * image.width + c * scale + dx] = v;
+          const auto at = 3 * (static_cast<std::size_t>(r * scale + dy) * image.width + c * scale + dx);
+          image.rgb[at] = image.rgb[at + 1] = image.rgb[at + 2] = v;
         }
       }
     }
@@ -195,9 +201,8 @@ int main(int argc, char** argv) {
   const auto write_slice = [&](const std::string& name,
                                const std::function<double(const densemap::Point3f&)>& p) {
     const std::string path = slice_prefix + "_" + name + ".png";
-    if (auto ok = densemap::tools::writeGrayPng(
-            path, slicePicture(frame, resolution, slice_z, slice_scale, p));
-        !ok) {
+    const Picture picture = slicePicture(frame, resolution, slice_z, slice_scale, p);
+    if (auto ok = densemap::writePng(path, picture.width, picture.height, picture.rgb); !ok) {
       std::fprintf(stderr, "densemap-eval: error: %s\n", ok.error().message.c_str());
       return false;
     }

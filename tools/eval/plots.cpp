@@ -1,6 +1,7 @@
 #include "plots.hpp"
 
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <sstream>
 
@@ -58,79 +59,6 @@ Expected<void> writeRocSvg(const std::filesystem::path& path, const std::string&
   }
   svg << "</svg>\n";
   return writeFileAtomically(path, svg.str());
-}
-
-namespace {
-
-std::uint32_t crc32(const std::string& bytes) {
-  static const auto table = [] {
-    std::array<std::uint32_t, 256> t{};
-    for (std::uint32_t n = 0; n < 256; ++n) {
-      std::uint32_t c = n;
-      for (int k = 0; k < 8; ++k) c = (c & 1U) != 0 ? 0xEDB88320U ^ (c >> 1) : c >> 1;
-      t[n] = c;
-    }
-    return t;
-  }();
-  std::uint32_t c = 0xFFFFFFFFU;
-  for (const char b : bytes) c = table[(c ^ static_cast<std::uint8_t>(b)) & 0xFFU] ^ (c >> 8);
-  return c ^ 0xFFFFFFFFU;
-}
-
-void putBigEndian(std::string& out, std::uint32_t v) {
-  for (int shift = 24; shift >= 0; shift -= 8) out += static_cast<char>((v >> shift) & 0xFFU);
-}
-
-void chunk(std::string& png, const char* type, const std::string& data) {
-  putBigEndian(png, static_cast<std::uint32_t>(data.size()));
-  const std::string typed = std::string(type) + data;
-  png += typed;
-  putBigEndian(png, crc32(typed));
-}
-
-}  // namespace
-
-Expected<void> writeGrayPng(const std::filesystem::path& path, const GrayImage& image) {
-  if (image.width <= 0 || image.height <= 0 ||
-      image.pixels.size() != static_cast<std::size_t>(image.width) * image.height) {
-    return makeError("image size does not match its pixels");
-  }
-  // Scanlines with filter byte 0, in a zlib stream of stored deflate blocks (at most 65535
-  // bytes each), ending with the Adler-32 of the raw data.
-  std::string raw;
-  for (int row = 0; row < image.height; ++row) {
-    raw += '\0';
-    raw.append(reinterpret_cast<const char*>(image.pixels.data()) +
-                   static_cast<std::size_t>(row) * image.width,
-               static_cast<std::size_t>(image.width));
-  }
-  std::string zlib = {'\x78', '\x01'};
-  for (std::size_t at = 0; at < raw.size() || raw.empty(); at += 65535) {
-    const std::size_t n = std::min<std::size_t>(65535, raw.size() - at);
-    zlib += static_cast<char>(at + n >= raw.size() ? 1 : 0);  // BFINAL, BTYPE = stored
-    zlib += static_cast<char>(n & 0xFFU);
-    zlib += static_cast<char>(n >> 8);
-    zlib += static_cast<char>(~n & 0xFFU);
-    zlib += static_cast<char>((~n >> 8) & 0xFFU);
-    zlib.append(raw, at, n);
-    if (raw.empty()) break;
-  }
-  std::uint32_t a = 1, b = 0;
-  for (const char c : raw) {
-    a = (a + static_cast<std::uint8_t>(c)) % 65521U;
-    b = (b + a) % 65521U;
-  }
-  putBigEndian(zlib, (b << 16) | a);
-
-  std::string png = "\x89PNG\r\n\x1a\n";
-  std::string header;
-  putBigEndian(header, static_cast<std::uint32_t>(image.width));
-  putBigEndian(header, static_cast<std::uint32_t>(image.height));
-  header += std::string{'\x08', '\x00', '\x00', '\x00', '\x00'};  // 8-bit gray, no interlace
-  chunk(png, "IHDR", header);
-  chunk(png, "IDAT", zlib);
-  chunk(png, "IEND", "");
-  return writeFileAtomically(path, png);
 }
 
 }  // namespace densemap::tools

@@ -1,6 +1,5 @@
 #pragma once
 
-#include <cstdint>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -21,16 +20,5 @@ struct RocSeries {
 /// per series, with the chance diagonal and a legend carrying each AUC.
 [[nodiscard]] Expected<void> writeRocSvg(const std::filesystem::path& path, const std::string& title,
                                          const std::vector<RocSeries>& series);
-
-/// A grayscale picture, row-major from the top row; 0 = black, 255 = white.
-struct GrayImage {
-  int width = 0;
-  int height = 0;
-  std::vector<std::uint8_t> pixels;
-};
-
-/// Writes `image` as an 8-bit grayscale PNG (deflate "stored" blocks: no compression library).
-[[nodiscard]] Expected<void> writeGrayPng(const std::filesystem::path& path,
-                                          const GrayImage& image);
 
 }  // namespace densemap::tools

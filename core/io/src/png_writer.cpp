@@ -1,4 +1,4 @@
-#include "png_writer.hpp"
+#include "densemap/io/png_writer.hpp"
 
 #include <zlib.h>
 
