@@ -177,10 +177,10 @@ Kernel adaptiveKernel(std::size_t i, const std::vector<Sample>& samples, const S
   index.forEachInBox(s.x, half, [&](std::uint32_t j) {
     if (j != i) neighbours.push_back({samples[j].x, samples[j].occupied == s.occupied});
   });
-  // The regulariser keeps flat kernels `thickness_voxels` voxels thick (one standard
-  // deviation), so a surface's samples reach the centres of the cells they lie in; the
+  // The regulariser keeps flat kernels at least `min_thickness` (and a voxel) thick, one
+  // standard deviation, so a surface's samples reach the centres of the cells they lie in; the
   // isotropic fallback spans half the search box.
-  const double thickness = o.thickness_voxels * resolution;
+  const double thickness = std::max(o.min_thickness, resolution);
   const double regulariser = thickness * thickness;
   const Eigen::Matrix3d sigma =
       neighbourCovariance(s.x, neighbours, regulariser, 0.25 * half * half);
