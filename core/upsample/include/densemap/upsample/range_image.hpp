@@ -1,0 +1,72 @@
+#pragma once
+
+#include <cstddef>
+#include <vector>
+
+#include "densemap/geometry/error.hpp"
+#include "densemap/geometry/point_cloud.hpp"
+
+namespace densemap::upsample {
+
+/// A spinning LiDAR's range-image grid (dissertation Sec. 4.2): `rows` beams spread evenly from
+/// `top_deg` (row 0) down to `bottom_deg` (the last row), and `cols` azimuth steps per
+/// revolution, column c looking at azimuth 2 pi c / cols (as densemap-sim's sensors do).
+/// Any rows x cols inside the same field of view is a valid query grid: the image coordinates
+/// of a direction are continuous, so layouts of different resolutions share one frame.
+struct RangeLayout {
+  int rows = 16;
+  int cols = 1024;
+  double top_deg = 15.0;
+  double bottom_deg = -15.0;
+
+  [[nodiscard]] Expected<void> validate() const;
+  /// Elevation of row r (may be fractional), degrees.
+  [[nodiscard]] double elevationDeg(double row) const;
+  /// Azimuth of column c (may be fractional), radians.
+  [[nodiscard]] double azimuth(double col) const;
+  /// The continuous (row, col) of a direction in this layout; col in [0, cols).
+  [[nodiscard]] std::pair<double, double> pixelOf(double elevation_deg, double azimuth) const;
+  /// The same direction's (row, col) in `other`'s grid, from this layout's pixel (row, col).
+  [[nodiscard]] std::pair<double, double> toLayout(const RangeLayout& other, double row,
+                                                   double col) const;
+};
+
+/// Ranges in metres, row-major; 0 marks a pixel without a return.
+struct RangeImage {
+  RangeLayout layout;
+  std::vector<float> range;
+
+  explicit RangeImage(const RangeLayout& l = {})
+      : layout(l), range(static_cast<std::size_t>(l.rows) * l.cols, 0.0F) {}
+  [[nodiscard]] float at(int row, int col) const {
+    return range[static_cast<std::size_t>(row) * layout.cols + col];
+  }
+  float& at(int row, int col) { return range[static_cast<std::size_t>(row) * layout.cols + col]; }
+  [[nodiscard]] std::size_t returns() const;
+};
+
+struct ProjectionStats {
+  std::size_t points = 0;
+  std::size_t outside_fov = 0;  // dropped: elevation beyond the layout's rows
+  std::size_t collisions = 0;   // another point of the same pixel was kept (the nearer one)
+};
+
+/// Projects sensor-frame points onto the nearest pixel of `layout`, keeping the nearest return
+/// per pixel. Non-finite points and points at the origin are skipped as outside.
+[[nodiscard]] RangeImage project(const PointCloud& points_sensor, const RangeLayout& layout,
+                                 ProjectionStats* stats = nullptr);
+
+/// Mean absolute range error of `predicted` against `truth` (same layout) over the pixels where
+/// both have a return; `coverage` is the share of truth's returns that `predicted` has.
+struct RangeError {
+  double mae = 0.0;
+  double coverage = 0.0;
+  std::size_t pixels = 0;  // compared
+};
+[[nodiscard]] Expected<RangeError> compareRanges(const RangeImage& predicted,
+                                                 const RangeImage& truth);
+
+/// The points of an image's returns, at their pixels' exact directions (sensor frame).
+[[nodiscard]] PointCloud backProject(const RangeImage& image);
+
+}  // namespace densemap::upsample

@@ -1,0 +1,70 @@
+#include "densemap/upsample/interpolation.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+namespace densemap::upsample {
+
+std::string_view interpolationName(Interpolation method) {
+  return method == Interpolation::kNearest ? "nearest" : "bilinear";
+}
+
+Expected<Interpolation> parseInterpolation(std::string_view name) {
+  if (name == "nearest") return Interpolation::kNearest;
+  if (name == "bilinear") return Interpolation::kBilinear;
+  return makeError("unknown interpolation '" + std::string(name) + "' (nearest or bilinear)");
+}
+
+Neighbourhood neighbourhood(const RangeImage& input, double row, double col) {
+  const RangeLayout& l = input.layout;
+  row = std::clamp(row, 0.0, static_cast<double>(l.rows - 1));
+  const int r0 = std::min(static_cast<int>(std::floor(row)), l.rows - 2);
+  const double c_floor = std::floor(col);
+  const int c0 = ((static_cast<int>(c_floor) % l.cols) + l.cols) % l.cols;
+  Neighbourhood n{};
+  n.d_row = row - r0;
+  n.d_col = col - c_floor;
+  for (int t = 0; t < 4; ++t) {
+    n.row[t] = r0 + t / 2;
+    n.col[t] = (c0 + t % 2) % l.cols;
+    n.range[t] = input.at(n.row[t], n.col[t]);
+    n.weight[t] = (t / 2 == 0 ? 1.0 - n.d_row : n.d_row) * (t % 2 == 0 ? 1.0 - n.d_col : n.d_col);
+  }
+  return n;
+}
+
+float interpolate(const RangeImage& input, double row, double col, Interpolation method) {
+  const Neighbourhood n = neighbourhood(input, row, col);
+  if (method == Interpolation::kNearest) {
+    const int t = (n.d_row < 0.5 ? 0 : 2) + (n.d_col < 0.5 ? 0 : 1);
+    return n.range[t];
+  }
+  double sum = 0.0, weight = 0.0;
+  for (int t = 0; t < 4; ++t) {
+    if (n.range[t] > 0.0F) {
+      sum += n.weight[t] * n.range[t];
+      weight += n.weight[t];
+    }
+  }
+  return weight > 1e-9 ? static_cast<float>(sum / weight) : 0.0F;
+}
+
+RangeImage upsample(const RangeImage& input, const RangeLayout& output, Interpolation method) {
+  RangeImage out(output);
+  tbb::parallel_for(tbb::blocked_range<int>(0, output.rows),
+                    [&](const tbb::blocked_range<int>& rows) {
+                      for (int r = rows.begin(); r != rows.end(); ++r) {
+                        for (int c = 0; c < output.cols; ++c) {
+                          const auto [row, col] = output.toLayout(input.layout, r, c);
+                          out.at(r, c) = interpolate(input, row, col, method);
+                        }
+                      }
+                    });
+  return out;
+}
+
+}  // namespace densemap::upsample
