@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# densemap-upsample-eval end to end on one simulated scan: a result per method and target grid,
+# sane metrics, and a clear error for a method that is not available.
+# Usage: upsample_eval_cli.sh UPSAMPLE_EVAL_BIN
+set -euo pipefail
+bin=$1
+dir=$(mktemp -d)
+trap 'rm -rf "$dir"' EXIT
+"$bin" --scenes outdoor --seeds 7 --scans 1 --targets 64x1024,128x2048 --threads 2 \
+  --json "$dir/r.json" >"$dir/out.txt" 2>/dev/null
+[ "$(grep -o '"method": "[a-z]*"' "$dir/r.json" | wc -l)" -eq 4 ]
+grep -o '"iou": [0-9.]*' "$dir/r.json" | awk '{ if ($2 <= 0.05 || $2 > 1) bad = 1 } END { exit bad }'
+grep -o '"mae": [0-9.]*' "$dir/r.json" | awk '{ if ($2 <= 0 || $2 > 5) bad = 1 } END { exit bad }'
+if "$bin" --methods iln --scans 1 2>"$dir/err.txt" >/dev/null; then exit 1; fi
+grep -q "not available yet" "$dir/err.txt"
+if "$bin" --targets 64by1024 --scans 1 2>"$dir/err.txt" >/dev/null; then exit 1; fi
+grep -q "ROWSxCOLS" "$dir/err.txt"
+echo "upsample eval CLI: ok"

@@ -1,0 +1,211 @@
+// densemap-upsample-eval: LiDAR range-image upsampling measured as in the dissertation's
+// Table 4.1. densemap-sim's scenes are scanned from the same poses by a sparse input sensor
+// (16 x 1024 by default) and by denser target sensors; each method upsamples the input to each
+// target grid; MAE of range and voxel IoU / precision / recall / F1 of the points compare it
+// with what the target sensor saw.
+#include <tbb/task_arena.h>
+#include <CLI/CLI.hpp>
+
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "../common/progress.hpp"
+#include "densemap/eval/point_set_metrics.hpp"
+#include "densemap/sim/lidar_simulator.hpp"
+#include "densemap/sim/procedural_scenes.hpp"
+#include "densemap/sim/trajectory.hpp"
+#include "densemap/upsample/interpolation.hpp"
+
+namespace {
+
+using densemap::upsample::RangeLayout;
+
+std::vector<std::string> splitList(const std::string& list) {
+  std::vector<std::string> out;
+  std::stringstream ss(list);
+  for (std::string item; std::getline(ss, item, ',');) {
+    if (!item.empty()) out.push_back(item);
+  }
+  return out;
+}
+
+/// "ROWSxCOLS" in the field of view [bottom, top].
+densemap::Expected<RangeLayout> parseLayout(const std::string& text, double top, double bottom) {
+  RangeLayout l{.top_deg = top, .bottom_deg = bottom};
+  char x = 0;
+  std::istringstream in(text);
+  if (!(in >> l.rows >> x >> l.cols) || x != 'x' || !in.eof()) {
+    return densemap::makeError("resolution '" + text + "' is not ROWSxCOLS (e.g. 64x1024)");
+  }
+  if (auto ok = l.validate(); !ok) return std::unexpected(ok.error());
+  return l;
+}
+
+/// A sensor with `layout`'s beams and columns, noise-free.
+densemap::LidarModel sensorFor(const RangeLayout& layout, double max_range) {
+  densemap::LidarModel m;
+  m.name = std::to_string(layout.rows) + "x" + std::to_string(layout.cols);
+  for (int r = 0; r < layout.rows; ++r) m.elevations_deg.push_back(layout.elevationDeg(r));
+  m.columns = layout.cols;
+  m.min_range_m = 0.5;
+  m.max_range_m = max_range;
+  return m;
+}
+
+struct Sum {
+  double mae = 0, coverage = 0, iou = 0, precision = 0, recall = 0, f1 = 0, ms = 0;
+  int scans = 0;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string scenes_list = "outdoor,indoor", seeds_list = "101,102", methods_list =
+                                                                          "bilinear,nearest",
+              input_text = "16x1024", targets_list = "64x1024,128x2048,256x4096", json_path;
+  double top = 15.0, bottom = -15.0, max_range = 80.0, voxel = 0.1;
+  int scans = 4, threads = 0;
+  CLI::App app{"densemap-upsample-eval: LiDAR upsampling accuracy on simulated scenes"};
+  app.add_option("--scenes", scenes_list, "densemap-sim scenes (test split)")->capture_default_str();
+  app.add_option("--seeds", seeds_list, "Scene seeds (test split)")->capture_default_str();
+  app.add_option("--scans", scans, "Poses per scene and seed")->capture_default_str()
+      ->check(CLI::Range(1, 1000));
+  app.add_option("--input", input_text, "Input grid ROWSxCOLS")->capture_default_str();
+  app.add_option("--targets", targets_list, "Target grids, comma-separated")
+      ->capture_default_str();
+  app.add_option("--fov-top", top, "Top beam elevation, deg")->capture_default_str();
+  app.add_option("--fov-bottom", bottom, "Bottom beam elevation, deg")->capture_default_str();
+  app.add_option("--max-range", max_range, "Sensor range, m")->capture_default_str();
+  app.add_option("--methods", methods_list, "bilinear, nearest (iln: not available yet)")
+      ->capture_default_str();
+  app.add_option("--voxel", voxel, "Voxel size of the point metrics, m")->capture_default_str();
+  app.add_option("--threads", threads, "Worker threads (0: all cores)")->capture_default_str();
+  app.add_option("--json", json_path, "Write the results as JSON");
+  CLI11_PARSE(app, argc, argv);
+
+  const auto fail = [](const std::string& message) {
+    std::fprintf(stderr, "densemap-upsample-eval: error: %s\n", message.c_str());
+    return 1;
+  };
+  std::vector<densemap::upsample::Interpolation> methods;
+  for (const std::string& m : splitList(methods_list)) {
+    if (m == "iln") {
+      return fail("method 'iln' is not available yet: ILN inference and its trained model are "
+                  "not built (issue 6 is in progress); use bilinear or nearest");
+    }
+    auto parsed = densemap::upsample::parseInterpolation(m);
+    if (!parsed) return fail(parsed.error().message);
+    methods.push_back(*parsed);
+  }
+  if (methods.empty()) return fail("--methods lists no method");
+  if (!(voxel > 0.0 && voxel <= 10.0)) return fail("--voxel must be in (0, 10]");
+  if (!(max_range > 1.0 && max_range <= 1000.0)) return fail("--max-range must be in (1, 1000]");
+  auto input = parseLayout(input_text, top, bottom);
+  if (!input) return fail(input.error().message);
+  std::vector<RangeLayout> targets;
+  for (const std::string& t : splitList(targets_list)) {
+    auto layout = parseLayout(t, top, bottom);
+    if (!layout) return fail(layout.error().message);
+    targets.push_back(*layout);
+  }
+  std::vector<unsigned> seeds;
+  for (const std::string& s : splitList(seeds_list)) {
+    try {
+      seeds.push_back(static_cast<unsigned>(std::stoul(s)));
+    } catch (const std::exception&) {
+      return fail("seed '" + s + "' is not a number");
+    }
+  }
+  const std::vector<std::string> scene_names = splitList(scenes_list);
+  if (scene_names.empty() || seeds.empty()) return fail("no scene or no seed to test on");
+
+  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  std::map<std::pair<std::size_t, std::size_t>, Sum> sums;  // (method, target)
+  const densemap::LidarModel input_sensor = sensorFor(*input, max_range);
+  densemap::tools::Progress progress("densemap-upsample-eval: scan",
+                                     scene_names.size() * seeds.size() * scans);
+  std::size_t done = 0;
+  for (const std::string& name : scene_names) {
+    for (const unsigned seed : seeds) {
+      auto scene = densemap::makeScene(name, seed);
+      if (!scene) return fail(scene.error().message);
+      const auto poses = densemap::trajectoryAlong(scene->waypoints, scans);
+      for (std::size_t i = 0; i < poses.size(); ++i) {
+        arena.execute([&] {
+          const auto sparse =
+              densemap::simulateScan(*scene->scene, input_sensor, poses[i], i, seed);
+          const auto low = densemap::upsample::project(sparse.points, *input);
+          for (std::size_t t = 0; t < targets.size(); ++t) {
+            const auto dense = densemap::simulateScan(
+                *scene->scene, sensorFor(targets[t], max_range), poses[i], i, seed);
+            const auto truth = densemap::upsample::project(dense.points, targets[t]);
+            const auto truth_points = densemap::upsample::backProject(truth);
+            for (std::size_t m = 0; m < methods.size(); ++m) {
+              const auto t0 = std::chrono::steady_clock::now();
+              const auto predicted = densemap::upsample::upsample(low, targets[t], methods[m]);
+              const double ms = std::chrono::duration<double, std::milli>(
+                                    std::chrono::steady_clock::now() - t0)
+                                    .count();
+              const auto range = *densemap::upsample::compareRanges(predicted, truth);
+              const auto points = densemap::eval::comparePointSets(
+                  densemap::upsample::backProject(predicted), truth_points, voxel);
+              Sum& s = sums[{m, t}];
+              s.mae += range.mae;
+              s.coverage += range.coverage;
+              s.iou += points.iou;
+              s.precision += points.precision;
+              s.recall += points.recall;
+              s.f1 += points.f1;
+              s.ms += ms;
+              ++s.scans;
+            }
+          }
+        });
+        progress.update(++done);
+      }
+    }
+  }
+
+  std::printf("densemap-upsample-eval: scenes %s, seeds %s, %d scans each, input %dx%d, FOV "
+              "[%g, %g] deg, max range %g m, voxel %g m\n",
+              scenes_list.c_str(), seeds_list.c_str(), scans, input->rows, input->cols, bottom,
+              top, max_range, voxel);
+  std::printf("%-9s %-10s %8s %8s %7s %9s %7s %7s %9s\n", "method", "target", "mae_m", "coverage",
+              "iou", "precision", "recall", "f1", "ms/scan");
+  std::string json = "{\"results\": [";
+  bool first = true;
+  for (std::size_t t = 0; t < targets.size(); ++t) {
+    for (std::size_t m = 0; m < methods.size(); ++m) {
+      const Sum& s = sums[{m, t}];
+      const double n = s.scans;
+      const std::string method(densemap::upsample::interpolationName(methods[m]));
+      const std::string grid = std::to_string(targets[t].rows) + "x" +
+                               std::to_string(targets[t].cols);
+      std::printf("%-9s %-10s %8.3f %8.3f %7.3f %9.3f %7.3f %7.3f %9.1f\n", method.c_str(),
+                  grid.c_str(), s.mae / n, s.coverage / n, s.iou / n, s.precision / n,
+                  s.recall / n, s.f1 / n, s.ms / n);
+      char entry[512];
+      std::snprintf(entry, sizeof(entry),
+                    "%s{\"method\": \"%s\", \"dataset\": \"sim:%s\", \"rows\": %d, \"cols\": %d, "
+                    "\"mae\": %.5f, \"iou\": %.5f, \"precision\": %.5f, \"recall\": %.5f, "
+                    "\"f1\": %.5f, \"ms_per_scan\": %.3f}",
+                    first ? "" : ", ", method.c_str(), scenes_list.c_str(), targets[t].rows,
+                    targets[t].cols, s.mae / n, s.iou / n, s.precision / n, s.recall / n,
+                    s.f1 / n, s.ms / n);
+      json += entry;
+      first = false;
+    }
+  }
+  json += "]}\n";
+  if (!json_path.empty()) {
+    std::ofstream out(json_path);
+    out << json;
+    if (!out) return fail("cannot write " + json_path);
+  }
+  return 0;
+}
