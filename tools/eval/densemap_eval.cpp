@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "../common/lists.hpp"
 #include "../common/progress.hpp"
 #include "plots.hpp"
 #include "densemap/eval/metrics.hpp"
@@ -49,15 +50,6 @@ struct RunResult {
   double build_s = 0.0;
   double ms_per_scan = 0.0;
 };
-
-std::vector<std::string> splitList(const std::string& list) {
-  std::vector<std::string> out;
-  std::stringstream ss(list);
-  for (std::string item; std::getline(ss, item, ',');) {
-    if (!item.empty()) out.push_back(item);
-  }
-  return out;
-}
 
 /// The hold-out split and the free test points, reproducible from the seed.
 void split(const densemap::PointCloud& points, const densemap::Point3f& origin, std::uint64_t seed,
@@ -156,7 +148,7 @@ int main(int argc, char** argv) {
     return 1;
   };
   if (!(resolution > 0.0 && resolution <= 10.0)) return fail("--resolution must be in (0, 10]");
-  const std::vector<std::string> methods = splitList(methods_list);
+  const std::vector<std::string> methods = densemap::tools::splitList(methods_list);
   if (methods.empty()) return fail("--method lists no method");
   for (const std::string& m : methods) {
     if (m != "raycast" && !densemap::kernel::parseKernelMethod(m)) {

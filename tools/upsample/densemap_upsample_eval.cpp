@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "../common/lists.hpp"
 #include "../common/progress.hpp"
 #include "densemap/eval/point_set_metrics.hpp"
 #include "densemap/sim/lidar_simulator.hpp"
@@ -24,15 +25,6 @@
 namespace {
 
 using densemap::upsample::RangeLayout;
-
-std::vector<std::string> splitList(const std::string& list) {
-  std::vector<std::string> out;
-  std::stringstream ss(list);
-  for (std::string item; std::getline(ss, item, ',');) {
-    if (!item.empty()) out.push_back(item);
-  }
-  return out;
-}
 
 /// "ROWSxCOLS" in the field of view [bottom, top].
 densemap::Expected<RangeLayout> parseLayout(const std::string& text, double top, double bottom) {
@@ -93,7 +85,7 @@ int main(int argc, char** argv) {
     return 1;
   };
   std::vector<densemap::upsample::Interpolation> methods;
-  for (const std::string& m : splitList(methods_list)) {
+  for (const std::string& m : densemap::tools::splitList(methods_list)) {
     if (m == "iln") {
       return fail("method 'iln' is not available yet: ILN inference and its trained model are "
                   "not built (issue 6 is in progress); use bilinear or nearest");
@@ -108,20 +100,20 @@ int main(int argc, char** argv) {
   auto input = parseLayout(input_text, top, bottom);
   if (!input) return fail(input.error().message);
   std::vector<RangeLayout> targets;
-  for (const std::string& t : splitList(targets_list)) {
+  for (const std::string& t : densemap::tools::splitList(targets_list)) {
     auto layout = parseLayout(t, top, bottom);
     if (!layout) return fail(layout.error().message);
     targets.push_back(*layout);
   }
   std::vector<unsigned> seeds;
-  for (const std::string& s : splitList(seeds_list)) {
+  for (const std::string& s : densemap::tools::splitList(seeds_list)) {
     try {
       seeds.push_back(static_cast<unsigned>(std::stoul(s)));
     } catch (const std::exception&) {
       return fail("seed '" + s + "' is not a number");
     }
   }
-  const std::vector<std::string> scene_names = splitList(scenes_list);
+  const std::vector<std::string> scene_names = densemap::tools::splitList(scenes_list);
   if (scene_names.empty() || seeds.empty()) return fail("no scene or no seed to test on");
 
   tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);

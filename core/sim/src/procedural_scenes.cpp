@@ -18,6 +18,15 @@ void addWallY(PrimitiveScene& s, double y0, double y1, double x, double height) 
   s.add(BoxShape{V3(x - 0.1, y0, 0), V3(x + 0.1, y1, height)});
 }
 
+/// The benchmark scenes' 10 x 7 x 2 m frame: bounds and a floor.
+constexpr double kRoomLength = 10, kRoomWidth = 7, kRoomHeight = 2;
+std::unique_ptr<PrimitiveScene> benchmarkRoom() {
+  auto scene = std::make_unique<PrimitiveScene>(Eigen::AlignedBox3d(
+      V3(-0.2, -0.2, -0.1), V3(kRoomLength + 0.2, kRoomWidth + 0.2, kRoomHeight)));
+  scene->add(BoxShape{V3(-0.2, -0.2, -0.1), V3(kRoomLength + 0.2, kRoomWidth + 0.2, 0)});  // floor
+  return scene;
+}
+
 }  // namespace
 
 SimScene makeIndoorScene(unsigned seed) {
@@ -103,10 +112,8 @@ SimScene makeOutdoorScene(unsigned seed) {
 SimScene makeStructuredScene(unsigned seed) {
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u(0.0, 1.0);
-  constexpr double kLength = 10, kWidth = 7, kHeight = 2;
-  auto scene = std::make_unique<PrimitiveScene>(
-      Eigen::AlignedBox3d(V3(-0.2, -0.2, -0.1), V3(kLength + 0.2, kWidth + 0.2, kHeight)));
-  scene->add(BoxShape{V3(-0.2, -0.2, -0.1), V3(kLength + 0.2, kWidth + 0.2, 0)});  // floor
+  constexpr double kLength = kRoomLength, kWidth = kRoomWidth, kHeight = kRoomHeight;
+  auto scene = benchmarkRoom();
   addWallX(*scene, 0, kLength, 0, kHeight);
   addWallX(*scene, 0, kLength, kWidth, kHeight);
   addWallY(*scene, 0, kWidth, 0, kHeight);
@@ -138,10 +145,8 @@ SimScene makeStructuredScene(unsigned seed) {
 SimScene makeUnstructuredScene(unsigned seed) {
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u(0.0, 1.0);
-  constexpr double kLength = 10, kWidth = 7, kHeight = 2;
-  auto scene = std::make_unique<PrimitiveScene>(
-      Eigen::AlignedBox3d(V3(-0.2, -0.2, -0.1), V3(kLength + 0.2, kWidth + 0.2, kHeight)));
-  scene->add(BoxShape{V3(-0.2, -0.2, -0.1), V3(kLength + 0.2, kWidth + 0.2, 0)});  // floor
+  constexpr double kLength = kRoomLength, kWidth = kRoomWidth;
+  auto scene = benchmarkRoom();
   const std::vector<V3> stations = {V3(2.5, 1.8, 0.6), V3(2.5, 5.2, 0.6), V3(7.5, 5.2, 0.6),
                                     V3(7.5, 1.8, 0.6)};
   const auto clear_of_stations = [&](double x, double y, double r) {
