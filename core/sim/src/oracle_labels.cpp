@@ -93,8 +93,13 @@ Expected<std::vector<LabelledVoxel>> readOracleLabels(const std::filesystem::pat
   const unsigned max_depth = tree.getTreeDepth();
   for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
     const bool occupied = tree.isNodeOccupied(*it);
-    // A pruned leaf stands for all the voxels below it.
+    // A pruned leaf stands for all the voxels below it (densemap-sim never prunes; a file
+    // that expands past the limit is not a label file).
     const unsigned span = 1U << (max_depth - it.getDepth());
+    constexpr std::size_t kMaxLabels = std::size_t{1} << 28;
+    if (static_cast<std::size_t>(span) * span * span > kMaxLabels - labels.size()) {
+      return makeError(path.string() + ": more than 2^28 labelled voxels (pruned leaves?)");
+    }
     const octomap::OcTreeKey base = it.getIndexKey();
     for (unsigned z = 0; z < span; ++z) {
       for (unsigned y = 0; y < span; ++y) {
