@@ -17,6 +17,7 @@
 #include "../common/lists.hpp"
 #include "../common/progress.hpp"
 #include "densemap/eval/point_set_metrics.hpp"
+#include "densemap/io/scan_source.hpp"
 #include "densemap/sim/lidar_simulator.hpp"
 #include "densemap/sim/procedural_scenes.hpp"
 #include "densemap/sim/trajectory.hpp"
@@ -78,6 +79,23 @@ int main(int argc, char** argv) {
   app.add_option("--voxel", voxel, "Voxel size of the point metrics, m")->capture_default_str();
   app.add_option("--threads", threads, "Worker threads (0: all cores)")->capture_default_str();
   app.add_option("--json", json_path, "Write the results as JSON");
+  std::string real_path, real_layout_text = "64x2048";
+  double real_top = 45.5, real_bottom = -44.75;
+  int reduce = 4;
+  std::size_t real_first = 0, real_limit = 0;
+  app.add_option("--real", real_path,
+                 "Also test on real scans (sensor frame, e.g. ../shared/data/balm-realworld): "
+                 "keep every --reduce-th beam, upsample back, compare with all beams");
+  app.add_option("--real-grid", real_layout_text, "The real sensor's grid ROWSxCOLS")
+      ->capture_default_str();
+  app.add_option("--real-top", real_top, "Its top beam, deg (BALM's OS0-64: 45.5)")
+      ->capture_default_str();
+  app.add_option("--real-bottom", real_bottom, "Its bottom beam, deg (BALM's: -44.75)")
+      ->capture_default_str();
+  app.add_option("--reduce", reduce, "Keep every n-th real beam")->capture_default_str()
+      ->check(CLI::Range(2, 16));
+  app.add_option("--real-first", real_first, "First real scan")->capture_default_str();
+  app.add_option("--real-limit", real_limit, "Real scans to use (0: all)")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
   const auto fail = [](const std::string& message) {
@@ -163,6 +181,62 @@ int main(int argc, char** argv) {
     }
   }
 
+  // Real data: (method) -> sums over scans.
+  std::map<std::size_t, Sum> real_sums;
+  RangeLayout real_layout;
+  if (!real_path.empty()) {
+    auto layout = parseLayout(real_layout_text, real_top, real_bottom);
+    if (!layout) return fail("--real-grid: " + layout.error().message);
+    real_layout = *layout;
+    auto source = densemap::openScanSource(real_path);
+    if (!source) return fail(source.error().message);
+    const std::size_t total = (*source)->size();
+    if (real_first >= total) return fail("--real-first is past the data's scans");
+    const std::size_t end = real_limit == 0 ? total : std::min(total, real_first + real_limit);
+    densemap::tools::Progress real_progress("densemap-upsample-eval: real scan", end - real_first);
+    std::size_t outside = 0, collisions = 0, points = 0;
+    for (std::size_t i = real_first; i < end; ++i) {
+      auto scan = (*source)->load(i);
+      if (!scan) return fail(scan.error().message);
+      if (scan->frame != densemap::PointFrame::kSensor) {
+        return fail(real_path + " stores world-frame points: range images need sensor-frame scans");
+      }
+      densemap::upsample::ProjectionStats stats;
+      const auto truth = densemap::upsample::project(scan->points, real_layout, &stats);
+      outside += stats.outside_fov;
+      collisions += stats.collisions;
+      points += stats.points;
+      const auto truth_points = densemap::upsample::backProject(truth);
+      const auto sparse = densemap::upsample::keepEveryNthRow(truth, reduce);
+      arena.execute([&] {
+        for (std::size_t m = 0; m < methods.size(); ++m) {
+          const auto t0 = std::chrono::steady_clock::now();
+          const auto predicted = densemap::upsample::upsample(sparse, real_layout, methods[m]);
+          const double ms =
+              std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                  .count();
+          const auto range = *densemap::upsample::compareRanges(predicted, truth);
+          const auto p = densemap::eval::comparePointSets(
+              densemap::upsample::backProject(predicted), truth_points, voxel);
+          Sum& sum = real_sums[m];
+          sum.mae += range.mae;
+          sum.coverage += range.coverage;
+          sum.iou += p.iou;
+          sum.precision += p.precision;
+          sum.recall += p.recall;
+          sum.f1 += p.f1;
+          sum.ms += ms;
+          ++sum.scans;
+        }
+      });
+      real_progress.update(i + 1 - real_first);
+    }
+    std::fprintf(stderr,
+                 "densemap-upsample-eval: real scans projected: %zu points, %zu outside the "
+                 "field of view, %zu sharing a pixel with a nearer one\n",
+                 points, outside, collisions);
+  }
+
   std::printf("densemap-upsample-eval: scenes %s, seeds %s, %d scans each, input %dx%d, FOV "
               "[%g, %g] deg, max range %g m, voxel %g m\n",
               scenes_list.c_str(), seeds_list.c_str(), scans, input->rows, input->cols, bottom,
@@ -192,6 +266,25 @@ int main(int argc, char** argv) {
       json += entry;
       first = false;
     }
+  }
+  for (const auto& [m, sum] : real_sums) {
+    const double n = sum.scans;
+    const std::string method(densemap::upsample::interpolationName(methods[m]));
+    const std::string grid = std::to_string(real_layout.rows) + "x" +
+                             std::to_string(real_layout.cols);
+    std::printf("%-9s %-10s %8.3f %8.3f %7.3f %9.3f %7.3f %7.3f %9.1f  (real, every %d-th beam)\n",
+                method.c_str(), grid.c_str(), sum.mae / n, sum.coverage / n, sum.iou / n,
+                sum.precision / n, sum.recall / n, sum.f1 / n, sum.ms / n, reduce);
+    char entry[512];
+    std::snprintf(entry, sizeof(entry),
+                  "%s{\"method\": \"%s\", \"dataset\": \"real:%s\", \"rows\": %d, \"cols\": %d, "
+                  "\"mae\": %.5f, \"iou\": %.5f, \"precision\": %.5f, \"recall\": %.5f, "
+                  "\"f1\": %.5f, \"ms_per_scan\": %.3f}",
+                  first ? "" : ", ", method.c_str(), real_path.c_str(), real_layout.rows,
+                  real_layout.cols, sum.mae / n, sum.iou / n, sum.precision / n,
+                  sum.recall / n, sum.f1 / n, sum.ms / n);
+    json += entry;
+    first = false;
   }
   json += "]}\n";
   if (!json_path.empty()) {

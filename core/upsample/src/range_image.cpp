@@ -1,5 +1,6 @@
 #include "densemap/upsample/range_image.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
@@ -92,6 +93,19 @@ Expected<RangeError> compareRanges(const RangeImage& predicted, const RangeImage
   if (e.pixels > 0) e.mae = sum / static_cast<double>(e.pixels);
   if (true_returns > 0) e.coverage = static_cast<double>(e.pixels) / true_returns;
   return e;
+}
+
+RangeImage keepEveryNthRow(const RangeImage& image, int n) {
+  const RangeLayout& l = image.layout;
+  n = std::max(n, 1);
+  RangeLayout kept = l;
+  kept.rows = (l.rows - 1) / n + 1;
+  kept.bottom_deg = l.elevationDeg((kept.rows - 1) * n);
+  RangeImage out(kept);
+  for (int r = 0; r < kept.rows; ++r) {
+    for (int c = 0; c < l.cols; ++c) out.at(r, c) = image.at(r * n, c);
+  }
+  return out;
 }
 
 PointCloud backProject(const RangeImage& image) {

@@ -113,6 +113,22 @@ TEST(Interpolation, NamesRoundTrip) {
   EXPECT_FALSE(parseInterpolation("bicubic"));
 }
 
+TEST(RangeImage, EveryNthRowIsASparserSensorInTheSameFrame) {
+  const RangeLayout full{.rows = 64, .cols = 32, .top_deg = 45.0, .bottom_deg = -45.0};
+  const RangeImage image = affineImage(full);
+  const RangeImage sparse = keepEveryNthRow(image, 4);
+  EXPECT_EQ(sparse.layout.rows, 16);
+  EXPECT_DOUBLE_EQ(sparse.layout.top_deg, 45.0);
+  EXPECT_NEAR(sparse.layout.bottom_deg, full.elevationDeg(60), 1e-12);
+  for (int r = 0; r < 16; ++r) {
+    EXPECT_NEAR(sparse.layout.elevationDeg(r), full.elevationDeg(4 * r), 1e-9);
+    EXPECT_EQ(sparse.at(r, 5), image.at(4 * r, 5));
+  }
+  // Upsampled back, the kept rows come back exactly.
+  const RangeImage back = upsample(sparse, full, Interpolation::kBilinear);
+  for (int r = 0; r <= 60; r += 4) EXPECT_NEAR(back.at(r, 7), image.at(r, 7), 1e-4);
+}
+
 TEST(CompareRanges, MaeOverPixelsBothHaveAndCoverage) {
   RangeImage truth(kInput), predicted(kInput);
   truth.at(0, 0) = 10.0F;

@@ -66,6 +66,10 @@ struct RangeError {
 [[nodiscard]] Expected<RangeError> compareRanges(const RangeImage& predicted,
                                                  const RangeImage& truth);
 
+/// Rows 0, n, 2n, ... of `image` as an image of their own (the same field of view frame): a
+/// sensor with every n-th beam, as for the real-data test of Table 4.1's kind.
+[[nodiscard]] RangeImage keepEveryNthRow(const RangeImage& image, int n);
+
 /// The points of an image's returns, at their pixels' exact directions (sensor frame).
 [[nodiscard]] PointCloud backProject(const RangeImage& image);
 
