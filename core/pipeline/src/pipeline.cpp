@@ -40,8 +40,13 @@ struct Pipeline::Graph {
                    return job;
                  }),
         transform(graph, tbb::flow::serial,
-                  [](JobPtr job) {
+                  [&p](JobPtr job) {
                     if (!job->rejection) {
+                      if (p.options_.upsample) {
+                        job->scan.points =
+                            upsample::upsamplePoints(job->scan.points, *p.options_.upsample);
+                        job->scan.intensities.clear();
+                      }
                       job->points_world = job->scan.pointsWorld();
                       job->origin_world = job->scan.originWorld();
                     }
@@ -89,6 +94,9 @@ Expected<std::unique_ptr<Pipeline>> Pipeline::create(const PipelineOptions& opti
   if (options.threads < 1 || options.threads > 256) return makeError("threads must be in 1..256");
   if (options.queue_depth < 1 || options.queue_depth > 1024) {
     return makeError("queue depth must be in 1..1024");
+  }
+  if (options.upsample) {
+    if (auto ok = options.upsample->validate(); !ok) return std::unexpected(ok.error());
   }
   if (!initial) {
     auto map = makeMap(options.backend, options.resolution_m, SensorModel(options.sensor));

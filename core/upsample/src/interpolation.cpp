@@ -67,4 +67,21 @@ RangeImage upsample(const RangeImage& input, const RangeLayout& output, Interpol
   return out;
 }
 
+Expected<void> UpsampleOptions::validate() const {
+  if (auto ok = input.validate(); !ok) return makeError("upsample input: " + ok.error().message);
+  if (auto ok = output.validate(); !ok) {
+    return makeError("upsample output: " + ok.error().message);
+  }
+  if (input.top_deg != output.top_deg || input.bottom_deg != output.bottom_deg) {
+    return makeError("upsample input and output must share the field of view");
+  }
+  return {};
+}
+
+PointCloud upsamplePoints(const PointCloud& points_sensor, const UpsampleOptions& options,
+                          ProjectionStats* stats) {
+  return backProject(upsample(project(points_sensor, options.input, stats), options.output,
+                              options.method));
+}
+
 }  // namespace densemap::upsample

@@ -33,6 +33,7 @@ TEST(ServerConfig, TheShippedConfigIsValidAndEqualsTheDefaults) {
   EXPECT_EQ(defaults->method, IntegrationMethod::kSuperRayCulling);
   EXPECT_EQ(options->rule, UpdateRule::kSet);
   EXPECT_FALSE(options->kernel) << "log-odds is the default map kind";
+  EXPECT_FALSE(options->upsample) << "no upsampling unless enabled";
   EXPECT_EQ(config->dds().network_interface(), "lo");
 }
 
@@ -65,6 +66,21 @@ TEST(ServerConfig, ErrorsNameTheFileTheLineAndTheReason) {
   auto akimap = loadServerConfig(writeConfig(dir, "map { kind: \"akimap\" }\n"));
   ASSERT_TRUE(akimap) << akimap.error().message;
   EXPECT_EQ(pipelineOptions(*akimap)->kernel, kernel::KernelMethod::kAkimap);
+  auto up = loadServerConfig(writeConfig(
+      dir, "upsample { enabled: true method: \"nearest\" output_rows: 61 output_cols: 2048 }\n"));
+  ASSERT_TRUE(up) << up.error().message;
+  const auto up_options = pipelineOptions(*up)->upsample;
+  ASSERT_TRUE(up_options);
+  EXPECT_EQ(up_options->method, upsample::Interpolation::kNearest);
+  EXPECT_EQ(up_options->input.rows, 16);
+  EXPECT_EQ(up_options->output.rows, 61);
+  EXPECT_EQ(up_options->output.cols, 2048);
+  auto iln = loadServerConfig(writeConfig(dir, "upsample { enabled: true method: \"iln\" }\n"));
+  ASSERT_FALSE(iln);
+  EXPECT_NE(iln.error().message.find("not available"), std::string::npos);
+  EXPECT_FALSE(loadServerConfig(writeConfig(dir, "upsample { enabled: true input_rows: 1 }\n")));
+  EXPECT_FALSE(loadServerConfig(
+      writeConfig(dir, "upsample { enabled: true top_deg: -20 bottom_deg: 10 }\n")));
   EXPECT_FALSE(loadServerConfig(writeConfig(dir, "dds { network_interface: \"\" }\n")));
   EXPECT_FALSE(loadServerConfig(writeConfig(dir, "map { resolution_m: \"x\" }\n")));
   EXPECT_FALSE(loadServerConfig(dir.path() / "missing.textproto"));

@@ -17,6 +17,7 @@
 #include "densemap/pipeline/scan_validator.hpp"
 #include "densemap/kernel/kernel_map.hpp"
 #include "densemap/raycast/integrator.hpp"
+#include "densemap/upsample/interpolation.hpp"
 
 namespace densemap {
 
@@ -32,6 +33,8 @@ struct PipelineOptions {
   /// kernel map publishes logit(p) = log(alpha / beta) as each cell's log-odds, so queries,
   /// snapshots and updates read it like any map.
   std::optional<kernel::KernelMethod> kernel;
+  /// Densify each scan before integration (issue 6's upsample stage); std::nullopt: off.
+  std::optional<upsample::UpsampleOptions> upsample;
   int threads = 2;  // size of the task arena the pipeline owns
   std::size_t queue_depth = 2;
   ScanLimits limits;

@@ -31,6 +31,22 @@ struct Neighbourhood {
 [[nodiscard]] float interpolate(const RangeImage& input, double row, double col,
                                 Interpolation method);
 
+/// A densification step for a stream of scans: sensor-frame points projected onto the sensor's
+/// grid `input`, upsampled to `output` (same field of view), back-projected.
+struct UpsampleOptions {
+  RangeLayout input{.rows = 16, .cols = 1024};
+  RangeLayout output{.rows = 64, .cols = 1024};
+  Interpolation method = Interpolation::kBilinear;
+
+  /// Errors for bad grids or an output in another field of view.
+  [[nodiscard]] Expected<void> validate() const;
+};
+
+/// Densifies one scan's sensor-frame points (UpsampleOptions); `stats` describes the projection.
+[[nodiscard]] PointCloud upsamplePoints(const PointCloud& points_sensor,
+                                        const UpsampleOptions& options,
+                                        ProjectionStats* stats = nullptr);
+
 /// `input` resampled to `output`'s grid (same field of view frame), in parallel.
 [[nodiscard]] RangeImage upsample(const RangeImage& input, const RangeLayout& output,
                                   Interpolation method);
