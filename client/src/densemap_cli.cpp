@@ -11,8 +11,9 @@
 #include "../../tools/common/progress.hpp"
 #include "densemap/client/client.hpp"
 #include "densemap/io/octomap_export.hpp"
-#include "densemap/io/scan_source.hpp"
 #include "densemap/io/png_writer.hpp"
+#include "densemap/io/scan_source.hpp"
+#include "densemap/upsample/interpolation.hpp"
 #include "snapshot.hpp"
 
 namespace densemap::cli {
@@ -39,9 +40,13 @@ double percentile(std::vector<double> v, double q) {
 }
 
 int replay(const ClientOptions& o, const std::string& data, double rate, std::size_t first,
-           std::size_t limit, std::size_t query_points) {
+           std::size_t limit, std::size_t query_points,
+           const std::optional<upsample::UpsampleOptions>& densify) {
   auto source = openScanSource(data);
   if (!source) return fail(source.error().message);
+  if (densify) {
+    if (auto ok = densify->validate(); !ok) return fail(ok.error().message);
+  }
   auto client = connect(o);
   if (!client) return fail(client.error().message);
   auto before = (*client)->status();
@@ -68,6 +73,13 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
   for (std::size_t i = first; i < end; ++i) {
     auto scan = (*source)->load(i);
     if (!scan) return fail(scan.error().message);
+    if (densify) {
+      if (scan->frame != PointFrame::kSensor) {
+        return fail("--upsample needs sensor-frame scans; " + data + " stores world-frame points");
+      }
+      scan->points = upsample::upsamplePoints(scan->points, *densify);
+      scan->intensities.clear();
+    }
     const RawScan raw = toRawScan(*scan, i + 1, "replay");
     // Wait for the publish slot while watching deltas, so latencies are not quantised by it.
     while (Clock::now() < next) {
@@ -223,6 +235,19 @@ int main(int argc, char** argv) {
                    "After each scan, query this many points near the sensor (load test)")
       ->capture_default_str();
 
+  std::string upsample_method, upsample_input = "16x1024", upsample_output = "64x1024";
+  double fov_top = 15.0, fov_bottom = -15.0;
+  replay
+      ->add_option("--upsample", upsample_method,
+                   "Densify each scan before sending: bilinear or nearest (ILN: not yet)")
+      ->check(CLI::IsMember({"bilinear", "nearest"}));
+  replay->add_option("--upsample-input", upsample_input, "The sensor's grid ROWSxCOLS")
+      ->capture_default_str();
+  replay->add_option("--upsample-output", upsample_output, "The grid sent, ROWSxCOLS")
+      ->capture_default_str();
+  replay->add_option("--fov-top", fov_top, "The sensor's top beam, deg")->capture_default_str();
+  replay->add_option("--fov-bottom", fov_bottom, "Its bottom beam, deg")->capture_default_str();
+
   auto* query = app.add_subcommand("query", "Query the map");
   query->require_subcommand(1);
   auto* qpoint = query->add_subcommand("point", "Occupancy at points");
@@ -275,7 +300,17 @@ int main(int argc, char** argv) {
   o.timeout = std::chrono::milliseconds(timeout_ms);
 
   if (render->parsed()) return cli::render(render_in, render_out, z, scale, min_occupied);
-  if (replay->parsed()) return cli::replay(o, data, rate, first, limit, query_points);
+  if (replay->parsed()) {
+    std::optional<upsample::UpsampleOptions> densify;
+    if (!upsample_method.empty()) {
+      auto in = upsample::parseRangeLayout(upsample_input, fov_top, fov_bottom);
+      if (!in) return cli::fail("--upsample-input: " + in.error().message);
+      auto out = upsample::parseRangeLayout(upsample_output, fov_top, fov_bottom);
+      if (!out) return cli::fail("--upsample-output: " + out.error().message);
+      densify = upsample::UpsampleOptions{*in, *out, *upsample::parseInterpolation(upsample_method)};
+    }
+    return cli::replay(o, data, rate, first, limit, query_points, densify);
+  }
   auto client = cli::connect(o);
   if (!client) return cli::fail(client.error().message);
   auto p3 = [](const std::vector<float>& v) { return Point3f(v[0], v[1], v[2]); };

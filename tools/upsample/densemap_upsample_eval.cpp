@@ -27,18 +27,6 @@ namespace {
 
 using densemap::upsample::RangeLayout;
 
-/// "ROWSxCOLS" in the field of view [bottom, top].
-densemap::Expected<RangeLayout> parseLayout(const std::string& text, double top, double bottom) {
-  RangeLayout l{.top_deg = top, .bottom_deg = bottom};
-  char x = 0;
-  std::istringstream in(text);
-  if (!(in >> l.rows >> x >> l.cols) || x != 'x' || !in.eof()) {
-    return densemap::makeError("resolution '" + text + "' is not ROWSxCOLS (e.g. 64x1024)");
-  }
-  if (auto ok = l.validate(); !ok) return std::unexpected(ok.error());
-  return l;
-}
-
 /// A sensor with `layout`'s beams and columns, noise-free.
 densemap::LidarModel sensorFor(const RangeLayout& layout, double max_range) {
   densemap::LidarModel m;
@@ -115,11 +103,11 @@ int main(int argc, char** argv) {
   if (methods.empty()) return fail("--methods lists no method");
   if (!(voxel > 0.0 && voxel <= 10.0)) return fail("--voxel must be in (0, 10]");
   if (!(max_range > 1.0 && max_range <= 1000.0)) return fail("--max-range must be in (1, 1000]");
-  auto input = parseLayout(input_text, top, bottom);
+  auto input = densemap::upsample::parseRangeLayout(input_text, top, bottom);
   if (!input) return fail(input.error().message);
   std::vector<RangeLayout> targets;
   for (const std::string& t : densemap::tools::splitList(targets_list)) {
-    auto layout = parseLayout(t, top, bottom);
+    auto layout = densemap::upsample::parseRangeLayout(t, top, bottom);
     if (!layout) return fail(layout.error().message);
     targets.push_back(*layout);
   }
@@ -185,7 +173,7 @@ int main(int argc, char** argv) {
   std::map<std::size_t, Sum> real_sums;
   RangeLayout real_layout;
   if (!real_path.empty()) {
-    auto layout = parseLayout(real_layout_text, real_top, real_bottom);
+    auto layout = densemap::upsample::parseRangeLayout(real_layout_text, real_top, real_bottom);
     if (!layout) return fail("--real-grid: " + layout.error().message);
     real_layout = *layout;
     auto source = densemap::openScanSource(real_path);

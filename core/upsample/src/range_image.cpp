@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <sstream>
 
 namespace densemap::upsample {
 
@@ -18,6 +19,18 @@ Expected<void> RangeLayout::validate() const {
     return makeError("range image field of view must satisfy -90 <= bottom < top <= 90 deg");
   }
   return {};
+}
+
+Expected<RangeLayout> parseRangeLayout(const std::string& text, double top_deg,
+                                       double bottom_deg) {
+  RangeLayout l{.top_deg = top_deg, .bottom_deg = bottom_deg};
+  char x = 0;
+  std::istringstream in(text);
+  if (!(in >> l.rows >> x >> l.cols) || x != 'x' || !in.eof()) {
+    return makeError("grid '" + text + "' is not ROWSxCOLS (e.g. 64x1024)");
+  }
+  if (auto ok = l.validate(); !ok) return std::unexpected(ok.error());
+  return l;
 }
 
 double RangeLayout::elevationDeg(double row) const {

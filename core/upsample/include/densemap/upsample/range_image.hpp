@@ -1,6 +1,7 @@
 #pragma once
 
 #include <cstddef>
+#include <string>
 #include <vector>
 
 #include "densemap/geometry/error.hpp"
@@ -30,6 +31,10 @@ struct RangeLayout {
   [[nodiscard]] std::pair<double, double> toLayout(const RangeLayout& other, double row,
                                                    double col) const;
 };
+
+/// "ROWSxCOLS" (e.g. "64x1024") in the field of view [bottom_deg, top_deg], validated.
+[[nodiscard]] Expected<RangeLayout> parseRangeLayout(const std::string& text, double top_deg,
+                                                     double bottom_deg);
 
 /// Ranges in metres, row-major; 0 marks a pixel without a return.
 struct RangeImage {
