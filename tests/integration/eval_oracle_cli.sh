@@ -23,6 +23,13 @@ grep -o '"auc": [0-9.]*' "$dir/r.json" | awk '{ if ($2 < 0.8) { print "auc " $2 
 for f in roc.svg roc_akimap.csv slice_akimap.png slice_oracle.png; do test -s "$dir/$f"; done
 head -c 8 "$dir/slice_oracle.png" | od -An -c | grep -q 'P   N   G'
 
+# The same scans densified (bilinear, 2x beams and columns) and scored on the same labels.
+"$evaluate" --data "$dir/scene" --protocol oracle --resolution 0.2 --max-range 8 --method raycast \
+  --upsample bilinear --upsample-input 64x256 --upsample-output 127x512 --fov-top 45 \
+  --fov-bottom -45 --labels "$dir/scene/oracle_0.2.bt" --json "$dir/up.json" --threads 2 \
+  >/dev/null 2>&1
+grep -o '"auc": [0-9.]*' "$dir/up.json" | awk '{ if ($2 < 0.8) bad = 1 } END { exit bad }'
+
 # Labels at a resolution that was not written: a clear error, exit 1.
 if "$evaluate" --data "$dir/scene" --protocol oracle --resolution 0.1 2>"$dir/err.txt" >/dev/null; then
   echo "expected an error for missing labels"

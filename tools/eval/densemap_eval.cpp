@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <fstream>
 #include <functional>
+#include <optional>
 #include <unordered_map>
 #include <sstream>
 #include <string>
@@ -29,6 +30,7 @@
 #include "densemap/map/map_factory.hpp"
 #include "densemap/raycast/integrator.hpp"
 #include "densemap/sim/oracle_labels.hpp"
+#include "densemap/upsample/interpolation.hpp"
 
 namespace {
 
@@ -141,6 +143,21 @@ int main(int argc, char** argv) {
                  "Write a z-slice picture per method (PREFIX_<method>.png; PREFIX_oracle.png "
                  "for the oracle labels): white free, black occupied, gray unknown");
   app.add_option("--slice-z", slice_z, "Height of the slice, m")->capture_default_str();
+  std::string labels_path, upsample_method, upsample_input = "16x1024",
+                            upsample_output = "64x1024";
+  double fov_top = 15.0, fov_bottom = -15.0;
+  app.add_option("--labels", labels_path,
+                 "Oracle labels file (default DATA/oracle_<resolution>.bt): score another "
+                 "sensor's dataset on the same labels");
+  app.add_option("--upsample", upsample_method,
+                 "Densify each scan before mapping: bilinear or nearest (sensor-frame data)")
+      ->check(CLI::IsMember({"bilinear", "nearest"}));
+  app.add_option("--upsample-input", upsample_input, "The sensor's grid ROWSxCOLS")
+      ->capture_default_str();
+  app.add_option("--upsample-output", upsample_output, "The grid mapped, ROWSxCOLS")
+      ->capture_default_str();
+  app.add_option("--fov-top", fov_top, "The sensor's top beam, deg")->capture_default_str();
+  app.add_option("--fov-bottom", fov_bottom, "Its bottom beam, deg")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
 
   const auto fail = [](const std::string& message) {
@@ -166,9 +183,24 @@ int main(int argc, char** argv) {
   std::vector<densemap::PointCloud> clouds;
   std::vector<densemap::Point3f> origins;
   std::size_t rejected = 0;
+  std::optional<densemap::upsample::UpsampleOptions> densify;
+  if (!upsample_method.empty()) {
+    auto in = densemap::upsample::parseRangeLayout(upsample_input, fov_top, fov_bottom);
+    if (!in) return fail("--upsample-input: " + in.error().message);
+    auto out = densemap::upsample::parseRangeLayout(upsample_output, fov_top, fov_bottom);
+    if (!out) return fail("--upsample-output: " + out.error().message);
+    densify = densemap::upsample::UpsampleOptions{
+        *in, *out, *densemap::upsample::parseInterpolation(upsample_method)};
+  }
   for (std::size_t i = first; i < end; ++i) {
     auto scan = (*source)->load(i);
     if (!scan) return fail(scan.error().message);
+    if (densify) {
+      if (scan->frame != densemap::PointFrame::kSensor) {
+        return fail("--upsample needs sensor-frame scans; " + data + " stores world-frame points");
+      }
+      scan->points = densemap::upsample::upsamplePoints(scan->points, *densify);
+    }
     clouds.push_back(scan->pointsWorld());
     rejected += densemap::removeNonFinite(clouds.back());
     origins.push_back(scan->originWorld());
@@ -203,8 +235,10 @@ int main(int argc, char** argv) {
   };
   std::vector<TestPoint> oracle_tests;
   if (protocol == "oracle") {
-    const auto labels =
-        densemap::readOracleLabels(densemap::oracleLabelsPath(data, resolution), resolution);
+    const auto labels = densemap::readOracleLabels(
+        labels_path.empty() ? densemap::oracleLabelsPath(data, resolution)
+                            : std::filesystem::path(labels_path),
+        resolution);
     if (!labels) return fail(labels.error().message);
     const densemap::VoxelGrid grid(resolution);
     for (const densemap::LabelledVoxel& v : *labels) {

@@ -20,6 +20,13 @@ int main(int argc, char** argv) {
   app.add_option("--sensor", o.sensor, "vlp16, hdl64, os128 or os0-64")->capture_default_str();
   app.add_option("--columns", o.columns, "Azimuth steps per revolution (0: the sensor's)")
       ->capture_default_str();
+  app.add_option("--beams", o.beams,
+                 "Replace the sensor's beams by this many, evenly from --fov-top to --fov-bottom "
+                 "(0: the sensor's own)")
+      ->capture_default_str();
+  app.add_option("--fov-top", o.top_deg, "Top beam with --beams, deg")->capture_default_str();
+  app.add_option("--fov-bottom", o.bottom_deg, "Bottom beam with --beams, deg")
+      ->capture_default_str();
   app.add_option("--max-range", o.max_range_m, "Max range in m (0: the sensor's)")
       ->capture_default_str();
   app.add_option("--noise-std", o.noise_std_m, "Gaussian range noise, m")->capture_default_str();

@@ -21,6 +21,15 @@ Expected<LidarModel> lidarFor(const SequenceOptions& o) {
   auto lidar = lidarPreset(o.sensor);
   if (!lidar) return lidar;
   if (o.columns != 0) lidar->columns = o.columns;
+  if (o.beams != 0) {
+    if (o.beams < 2 || o.beams > 4096 || !(o.top_deg > o.bottom_deg)) {
+      return makeError("beams must be in 2..4096 with top_deg > bottom_deg");
+    }
+    lidar->elevations_deg.clear();
+    for (int b = 0; b < o.beams; ++b) {
+      lidar->elevations_deg.push_back(o.top_deg - b * (o.top_deg - o.bottom_deg) / (o.beams - 1));
+    }
+  }
   if (o.max_range_m != 0.0) lidar->max_range_m = o.max_range_m;
   lidar->noise_std_m = o.noise_std_m;
   lidar->dropout = o.dropout;
@@ -33,6 +42,7 @@ std::string describe(const SequenceOptions& o, const LidarModel& lidar) {
   s << "scene " << o.scene << "\nsensor " << o.sensor << "\nbeams " << lidar.beams() << "\ncolumns "
     << lidar.columns << "\nmax_range_m " << lidar.max_range_m << "\nnoise_std_m " << o.noise_std_m
     << "\ndropout " << o.dropout << "\nscans " << o.scans << "\nseed " << o.seed
+    << "\nelevations_deg " << lidar.elevations_deg.front() << ' ' << lidar.elevations_deg.back()
     << "\nground_truth_resolution_m " << o.ground_truth_resolution_m << "\npoints_per_scan "
     << o.points_per_scan << "\noracle_factor " << o.oracle_factor << "\noracle_resolutions";
   for (const double r : o.oracle_resolutions) s << ' ' << r;

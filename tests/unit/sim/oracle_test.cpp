@@ -109,6 +109,26 @@ TEST(OracleLabels, MissingBrokenOrMismatchedFilesGiveClearErrors) {
   EXPECT_NE(mismatch.error().message.find("resolution"), std::string::npos);
 }
 
+TEST(SimulatedSequence, BeamsReplaceTheSensorsTableEvenlyInTheFieldOfView) {
+  test::TempDir dir;
+  SequenceOptions o;
+  o.scene = "structured";
+  o.sensor = "vlp16";
+  o.columns = 64;
+  o.scans = 1;
+  o.beams = 24;
+  o.top_deg = 10;
+  o.bottom_deg = -10;
+  o.ground_truth_resolution_m = 0;
+  ASSERT_TRUE(writeSimulatedSequence(o, dir.path()));
+  std::ifstream in(dir.path() / "sim.txt");
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("beams 24\n"), std::string::npos) << text;
+  EXPECT_NE(text.find("elevations_deg 10 -10\n"), std::string::npos) << text;
+  o.beams = 1;
+  EXPECT_FALSE(writeSimulatedSequence(o, dir.path()));
+}
+
 TEST(SimulatedSequence, SparseScansWithOracleLabelsOfTheSameSeenSpace) {
   test::TempDir dir;
   SequenceOptions o;

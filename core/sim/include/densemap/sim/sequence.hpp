@@ -17,6 +17,11 @@ struct SequenceOptions {
   std::string scene = "outdoor";  // "indoor", "outdoor" or a .bt file
   std::string sensor = "hdl64";   // a lidarPreset name
   int columns = 0;                // 0: the preset's
+  /// > 0: replace the preset's beam table by this many beams spread evenly from `top_deg` down
+  /// to `bottom_deg` (a sensor of another vertical resolution in the same field of view).
+  int beams = 0;
+  double top_deg = 15.0;
+  double bottom_deg = -15.0;
   double max_range_m = 0.0;       // 0: the preset's
   double noise_std_m = 0.0;
   double dropout = 0.0;
