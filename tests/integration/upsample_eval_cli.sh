@@ -11,6 +11,12 @@ trap 'rm -rf "$dir"' EXIT
 [ "$(grep -o '"method": "[a-z]*"' "$dir/r.json" | wc -l)" -eq 4 ]
 grep -o '"iou": [0-9.]*' "$dir/r.json" | awk '{ if ($2 <= 0.05 || $2 > 1) bad = 1 } END { exit bad }'
 grep -o '"mae": [0-9.]*' "$dir/r.json" | awk '{ if ($2 <= 0 || $2 > 5) bad = 1 } END { exit bad }'
+# Training data export: one file per pose and grid, listed in index.csv, of rows*cols floats.
+"$bin" --scenes indoor --seeds 3 --scans 2 --targets 64x1024 --threads 2 --export "$dir/data" \
+  >/dev/null 2>&1
+[ "$(tail -n +2 "$dir/data/index.csv" | wc -l)" -eq 4 ]
+[ "$(stat -c %s "$dir/data/indoor_3_1_64x1024.f32")" -eq $((64 * 1024 * 4)) ]
+[ "$(stat -c %s "$dir/data/indoor_3_0_16x1024.f32")" -eq $((16 * 1024 * 4)) ]
 if "$bin" --methods iln --scans 1 2>"$dir/err.txt" >/dev/null; then exit 1; fi
 grep -q "not available yet" "$dir/err.txt"
 if "$bin" --targets 64by1024 --scans 1 2>"$dir/err.txt" >/dev/null; then exit 1; fi

@@ -8,6 +8,7 @@
 
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <sstream>
@@ -17,6 +18,7 @@
 #include "../common/lists.hpp"
 #include "../common/progress.hpp"
 #include "densemap/eval/point_set_metrics.hpp"
+#include "densemap/io/file_bytes.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/sim/lidar_simulator.hpp"
 #include "densemap/sim/procedural_scenes.hpp"
@@ -84,6 +86,10 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(2, 16));
   app.add_option("--real-first", real_first, "First real scan")->capture_default_str();
   app.add_option("--real-limit", real_limit, "Real scans to use (0: all)")->capture_default_str();
+  std::string export_dir;
+  app.add_option("--export", export_dir,
+                 "Also write every simulated range image (input and targets) as raw float32 "
+                 "row-major files plus DIR/index.csv: training data for tools/iln");
   CLI11_PARSE(app, argc, argv);
 
   const auto fail = [](const std::string& message) {
@@ -123,6 +129,28 @@ int main(int argc, char** argv) {
   if (scene_names.empty() || seeds.empty()) return fail("no scene or no seed to test on");
 
   tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  std::string index = "scene,seed,pose,rows,cols,top_deg,bottom_deg,file\n";
+  const auto export_image = [&](const std::string& scene, unsigned seed, std::size_t pose,
+                                const densemap::upsample::RangeImage& image) {
+    if (export_dir.empty()) return densemap::Expected<void>{};
+    const RangeLayout& l = image.layout;
+    const std::string file = scene + "_" + std::to_string(seed) + "_" + std::to_string(pose) +
+                             "_" + std::to_string(l.rows) + "x" + std::to_string(l.cols) + ".f32";
+    std::ostringstream row;
+    row << scene << ',' << seed << ',' << pose << ',' << l.rows << ',' << l.cols << ','
+        << l.top_deg << ',' << l.bottom_deg << ',' << file << '\n';
+    index += row.str();
+    return densemap::writeFileAtomically(
+        std::filesystem::path(export_dir) / file,
+        std::string(reinterpret_cast<const char*>(image.range.data()),
+                    image.range.size() * sizeof(float)));
+  };
+  if (!export_dir.empty()) {
+    std::error_code ec;
+    std::filesystem::create_directories(export_dir, ec);
+    if (ec) return fail("cannot create " + export_dir + ": " + ec.message());
+  }
+  std::string export_error;
   std::map<std::pair<std::size_t, std::size_t>, Sum> sums;  // (method, target)
   const densemap::LidarModel input_sensor = sensorFor(*input, max_range);
   densemap::tools::Progress progress("densemap-upsample-eval: scan",
@@ -138,10 +166,14 @@ int main(int argc, char** argv) {
           const auto sparse =
               densemap::simulateScan(*scene->scene, input_sensor, poses[i], i, seed);
           const auto low = densemap::upsample::project(sparse.points, *input);
+          if (auto ok = export_image(name, seed, i, low); !ok) export_error = ok.error().message;
           for (std::size_t t = 0; t < targets.size(); ++t) {
             const auto dense = densemap::simulateScan(
                 *scene->scene, sensorFor(targets[t], max_range), poses[i], i, seed);
             const auto truth = densemap::upsample::project(dense.points, targets[t]);
+            if (auto ok = export_image(name, seed, i, truth); !ok) {
+              export_error = ok.error().message;
+            }
             const auto truth_points = densemap::upsample::backProject(truth);
             for (std::size_t m = 0; m < methods.size(); ++m) {
               const auto t0 = std::chrono::steady_clock::now();
@@ -167,6 +199,17 @@ int main(int argc, char** argv) {
         progress.update(++done);
       }
     }
+  }
+
+  if (!export_error.empty()) return fail(export_error);
+  if (!export_dir.empty()) {
+    if (auto ok = densemap::writeFileAtomically(std::filesystem::path(export_dir) / "index.csv",
+                                                index);
+        !ok) {
+      return fail(ok.error().message);
+    }
+    std::fprintf(stderr, "densemap-upsample-eval: wrote the range images and %s/index.csv\n",
+                 export_dir.c_str());
   }
 
   // Real data: (method) -> sums over scans.
