@@ -1,0 +1,205 @@
+#!/usr/bin/python3
+"""ILN (dissertation Ch. 4, Eq. 4.3) in PyTorch: train and evaluate on densemap's simulated range
+images. Offline only (Debian's python3-torch, CPU); densemap itself never imports torch.
+
+Data: `densemap-upsample-eval --export DIR` (raw float32 range images + index.csv).
+  train:    iln.py train --data DIR --test-seeds 101,102 --out model.pt [--minutes M]
+  evaluate: iln.py eval  --data DIR --test-seeds 101,102 --model model.pt
+
+The model predicts, for each query laser, softmax weights over the 4 input pixels around it and
+returns the weighted sum of their ranges: an EDSR-style convolutional encoder, a local feature per
+neighbour (its feature vector and the query's offset from it), one self-attention layer across
+the 4 neighbours, a shared linear score. Missing returns (range 0) get no weight.
+"""
+import argparse
+import csv
+import math
+import os
+import time
+
+import numpy as np
+import torch
+from torch import nn
+
+MAX_RANGE = 80.0  # ranges are divided by this for the network
+
+
+def load_index(data):
+    """{(scene, seed, pose): {(rows, cols): (array, top, bottom)}}"""
+    items = {}
+    with open(os.path.join(data, "index.csv")) as f:
+        for row in csv.DictReader(f):
+            rows, cols = int(row["rows"]), int(row["cols"])
+            image = np.fromfile(os.path.join(data, row["file"]), dtype=np.float32)
+            image = image.reshape(rows, cols)
+            key = (row["scene"], int(row["seed"]), int(row["pose"]))
+            items.setdefault(key, {})[(rows, cols)] = (
+                image, float(row["top_deg"]), float(row["bottom_deg"]))
+    return items
+
+
+def query_grid(in_rows, in_cols, out_rows, out_cols):
+    """Continuous (row, col) of every output pixel in the input grid (same field of view)."""
+    r = torch.arange(out_rows, dtype=torch.float32) * (in_rows - 1) / (out_rows - 1)
+    c = torch.arange(out_cols, dtype=torch.float32) * in_cols / out_cols
+    rr, cc = torch.meshgrid(r, c, indexing="ij")
+    return torch.stack([rr.reshape(-1), cc.reshape(-1)], dim=-1)
+
+
+def neighbours(image, queries):
+    """The 4 pixels around each query: ranges (B,Q,4), flat indices (Q,4), offsets (Q,4,2)."""
+    _, h, w = image.shape
+    row = queries[:, 0].clamp(0, h - 1)
+    r0 = row.floor().clamp(max=h - 2).long()
+    c_floor = queries[:, 1].floor()
+    c0 = c_floor.long() % w
+    rows = torch.stack([r0, r0, r0 + 1, r0 + 1], dim=-1)
+    cols = torch.stack([c0, (c0 + 1) % w, c0, (c0 + 1) % w], dim=-1)
+    d_row = (row - r0.float()).unsqueeze(-1)
+    d_col = (queries[:, 1] - c_floor).unsqueeze(-1)
+    offsets = torch.stack([
+        torch.cat([d_row, d_col], -1), torch.cat([d_row, d_col - 1], -1),
+        torch.cat([d_row - 1, d_col], -1), torch.cat([d_row - 1, d_col - 1], -1)], dim=1)
+    flat = rows * w + cols
+    ranges = image.reshape(image.shape[0], -1)[:, flat]
+    return ranges, flat, offsets
+
+
+def bilinear(image, queries):
+    ranges, _, offsets = neighbours(image, queries)
+    weight = (1 - offsets[..., 0].abs()) * (1 - offsets[..., 1].abs())
+    weight = weight.unsqueeze(0) * (ranges > 0)
+    total = weight.sum(-1)
+    return torch.where(total > 1e-9, (weight * ranges).sum(-1) / total.clamp(min=1e-9),
+                       torch.zeros_like(total))
+
+
+class ResBlock(nn.Module):
+    def __init__(self, width):
+        super().__init__()
+        self.conv1 = nn.Conv2d(width, width, 3, padding=1)
+        self.conv2 = nn.Conv2d(width, width, 3, padding=1)
+
+    def forward(self, x):
+        return x + self.conv2(torch.relu(self.conv1(x)))
+
+
+class ILN(nn.Module):
+    def __init__(self, width=16, blocks=2, dim=16):
+        super().__init__()
+        self.head = nn.Conv2d(1, width, 3, padding=1)
+        self.body = nn.Sequential(*[ResBlock(width) for _ in range(blocks)])
+        self.embed = nn.Linear(width + 2, dim)
+        self.q = nn.Linear(dim, dim)
+        self.k = nn.Linear(dim, dim)
+        self.v = nn.Linear(dim, dim)
+        self.score = nn.Linear(dim, 1)
+        self.dim = dim
+
+    def forward(self, image, queries):
+        """image (B,H,W) in metres (0: no return); queries (Q,2) continuous (row, col)."""
+        x = (image / MAX_RANGE).unsqueeze(1)
+        f = self.head(x)
+        f = f + self.body(f)
+        b, c, h, w = f.shape
+        ranges, flat, offsets = neighbours(image, queries)
+        feats = f.reshape(b, c, h * w).transpose(1, 2)[:, flat]  # (B,Q,4,C)
+        z = self.embed(torch.cat([feats, offsets.unsqueeze(0).expand(b, -1, -1, -1)], -1))
+        attention = torch.softmax(self.q(z) @ self.k(z).transpose(-1, -2) / math.sqrt(self.dim), -1)
+        z = z + attention @ self.v(z)
+        score = self.score(z).squeeze(-1).masked_fill(ranges <= 0, -1e9)
+        weight = torch.softmax(score, -1) * (ranges > 0)
+        return (weight * ranges).sum(-1)
+
+
+def pairs(items, seeds, split, src, dst):
+    out = []
+    for (scene, seed, pose), grids in sorted(items.items()):
+        if (seed in seeds) != (split == "test") or src not in grids or dst not in grids:
+            continue
+        out.append((torch.from_numpy(grids[src][0]), torch.from_numpy(grids[dst][0]), grids[dst]))
+    return out
+
+
+def voxel_iou(pred, truth, top, bottom, voxel=0.1):
+    rows, cols = truth.shape
+    elev = np.radians(top - np.arange(rows) * (top - bottom) / (rows - 1))[:, None]
+    az = (2 * np.pi * np.arange(cols) / cols)[None, :]
+    def keys(r):
+        mask = r > 0
+        x = (r * np.cos(elev) * np.cos(az))[mask]
+        y = (r * np.cos(elev) * np.sin(az))[mask]
+        zz = (r * np.sin(elev) * np.ones_like(az))[mask]
+        k = np.floor(np.stack([x, y, zz], -1) / voxel).astype(np.int64) + (1 << 20)
+        return np.unique((k[:, 0] << 42) | (k[:, 1] << 21) | k[:, 2])
+    a, t = keys(pred), keys(truth)
+    common = np.intersect1d(a, t).size
+    return common / max(1, a.size + t.size - common)
+
+
+def evaluate(model, test, src, dst):
+    queries = query_grid(src[0], src[1], dst[0], dst[1])
+    sums = {"iln": [0.0, 0.0], "bilinear": [0.0, 0.0]}
+    with torch.no_grad():
+        for image, target, (_, top, bottom) in test:
+            for name in sums:
+                out = (model(image[None], queries) if name == "iln" else bilinear(image[None], queries))
+                pred = out.reshape(dst).numpy()
+                t = target.numpy()
+                both = (pred > 0) & (t > 0)
+                sums[name][0] += np.abs(pred[both] - t[both]).mean()
+                sums[name][1] += voxel_iou(pred, t, top, bottom)
+    return {k: (v[0] / len(test), v[1] / len(test)) for k, v in sums.items()}
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("command", choices=["train", "eval"])
+    p.add_argument("--data", required=True)
+    p.add_argument("--test-seeds", default="101,102")
+    p.add_argument("--input", default="16x1024")
+    p.add_argument("--target", default="64x1024")
+    p.add_argument("--model", default="iln.pt")
+    p.add_argument("--minutes", type=float, default=10.0)
+    p.add_argument("--lr", type=float, default=1e-4)
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--threads", type=int, default=2)
+    a = p.parse_args()
+    torch.manual_seed(a.seed)
+    torch.set_num_threads(a.threads)
+    src = tuple(int(v) for v in a.input.split("x"))
+    dst = tuple(int(v) for v in a.target.split("x"))
+    seeds = {int(s) for s in a.test_seeds.split(",")}
+    items = load_index(a.data)
+    test = pairs(items, seeds, "test", src, dst)
+    model = ILN()
+    if a.command == "train":
+        train = pairs(items, seeds, "train", src, dst)
+        print(f"iln: {len(train)} training pairs, {len(test)} test pairs, "
+              f"{sum(p.numel() for p in model.parameters())} parameters")
+        queries = query_grid(src[0], src[1], dst[0], dst[1])
+        opt = torch.optim.Adam(model.parameters(), lr=a.lr)
+        start, step = time.time(), 0
+        while time.time() - start < a.minutes * 60:
+            image, target, _ = train[step % len(train)]
+            pred = model(image[None], queries)[0]
+            t = target.reshape(-1)
+            mask = (t > 0) & (pred > 0)
+            loss = (pred[mask] - t[mask]).abs().mean()
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            step += 1
+            if step % 50 == 0:
+                print(f"iln: step {step}, {time.time() - start:.0f} s, L1 {loss.item():.3f} m",
+                      flush=True)
+        torch.save(model.state_dict(), a.model)
+        print(f"iln: trained {step} steps in {time.time() - start:.0f} s -> {a.model}")
+    else:
+        model.load_state_dict(torch.load(a.model))
+    for name, (mae, iou) in evaluate(model, test, src, dst).items():
+        print(f"iln: test {name:8s} {dst[0]}x{dst[1]}  MAE {mae:.3f} m  IoU {iou:.3f}")
+
+
+if __name__ == "__main__":
+    main()
