@@ -24,6 +24,7 @@
 #include "../common/progress.hpp"
 #include "plots.hpp"
 #include "densemap/eval/metrics.hpp"
+#include "densemap/io/file_bytes.hpp"
 #include "densemap/io/png_writer.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/kernel/kernel_map.hpp"
@@ -379,9 +380,9 @@ int main(int argc, char** argv) {
   }
   json += "]}\n";
   if (!json_path.empty()) {
-    std::ofstream out(json_path);
-    out << json;
-    if (!out) return fail("cannot write " + json_path);
+    if (auto ok = densemap::writeFileAtomically(json_path, json); !ok) {
+      return fail(ok.error().message);
+    }
   }
   return 0;
 }

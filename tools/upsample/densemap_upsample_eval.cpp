@@ -9,7 +9,6 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <map>
 #include <sstream>
 #include <string>
@@ -43,6 +42,18 @@ densemap::LidarModel sensorFor(const RangeLayout& layout, double max_range) {
 struct Sum {
   double mae = 0, coverage = 0, iou = 0, precision = 0, recall = 0, f1 = 0, ms = 0;
   int scans = 0;
+
+  void add(const densemap::upsample::RangeError& range,
+           const densemap::eval::PointSetMetrics& points, double ms_scan) {
+    mae += range.mae;
+    coverage += range.coverage;
+    iou += points.iou;
+    precision += points.precision;
+    recall += points.recall;
+    f1 += points.f1;
+    ms += ms_scan;
+    ++scans;
+  }
 };
 
 }  // namespace
@@ -184,15 +195,7 @@ int main(int argc, char** argv) {
               const auto range = *densemap::upsample::compareRanges(predicted, truth);
               const auto points = densemap::eval::comparePointSets(
                   densemap::upsample::backProject(predicted), truth_points, voxel);
-              Sum& s = sums[{m, t}];
-              s.mae += range.mae;
-              s.coverage += range.coverage;
-              s.iou += points.iou;
-              s.precision += points.precision;
-              s.recall += points.recall;
-              s.f1 += points.f1;
-              s.ms += ms;
-              ++s.scans;
+              sums[{m, t}].add(range, points, ms);
             }
           }
         });
@@ -249,15 +252,7 @@ int main(int argc, char** argv) {
           const auto range = *densemap::upsample::compareRanges(predicted, truth);
           const auto p = densemap::eval::comparePointSets(
               densemap::upsample::backProject(predicted), truth_points, voxel);
-          Sum& sum = real_sums[m];
-          sum.mae += range.mae;
-          sum.coverage += range.coverage;
-          sum.iou += p.iou;
-          sum.precision += p.precision;
-          sum.recall += p.recall;
-          sum.f1 += p.f1;
-          sum.ms += ms;
-          ++sum.scans;
+          real_sums[m].add(range, p, ms);
         }
       });
       real_progress.update(i + 1 - real_first);
@@ -276,52 +271,40 @@ int main(int argc, char** argv) {
               "iou", "precision", "recall", "f1", "ms/scan");
   std::string json = "{\"results\": [";
   bool first = true;
-  for (std::size_t t = 0; t < targets.size(); ++t) {
-    for (std::size_t m = 0; m < methods.size(); ++m) {
-      const Sum& s = sums[{m, t}];
-      const double n = s.scans;
-      const std::string method(densemap::upsample::interpolationName(methods[m]));
-      const std::string grid = std::to_string(targets[t].rows) + "x" +
-                               std::to_string(targets[t].cols);
-      std::printf("%-9s %-10s %8.3f %8.3f %7.3f %9.3f %7.3f %7.3f %9.1f\n", method.c_str(),
-                  grid.c_str(), s.mae / n, s.coverage / n, s.iou / n, s.precision / n,
-                  s.recall / n, s.f1 / n, s.ms / n);
-      char entry[512];
-      std::snprintf(entry, sizeof(entry),
-                    "%s{\"method\": \"%s\", \"dataset\": \"sim:%s\", \"rows\": %d, \"cols\": %d, "
-                    "\"mae\": %.5f, \"iou\": %.5f, \"precision\": %.5f, \"recall\": %.5f, "
-                    "\"f1\": %.5f, \"ms_per_scan\": %.3f}",
-                    first ? "" : ", ", method.c_str(), scenes_list.c_str(), targets[t].rows,
-                    targets[t].cols, s.mae / n, s.iou / n, s.precision / n, s.recall / n,
-                    s.f1 / n, s.ms / n);
-      json += entry;
-      first = false;
-    }
-  }
-  for (const auto& [m, sum] : real_sums) {
+  const auto report = [&](const std::string& method, const std::string& dataset,
+                          const RangeLayout& grid, const Sum& sum, const char* suffix) {
     const double n = sum.scans;
-    const std::string method(densemap::upsample::interpolationName(methods[m]));
-    const std::string grid = std::to_string(real_layout.rows) + "x" +
-                             std::to_string(real_layout.cols);
-    std::printf("%-9s %-10s %8.3f %8.3f %7.3f %9.3f %7.3f %7.3f %9.1f  (real, every %d-th beam)\n",
-                method.c_str(), grid.c_str(), sum.mae / n, sum.coverage / n, sum.iou / n,
-                sum.precision / n, sum.recall / n, sum.f1 / n, sum.ms / n, reduce);
+    const std::string size = std::to_string(grid.rows) + "x" + std::to_string(grid.cols);
+    std::printf("%-9s %-10s %8.3f %8.3f %7.3f %9.3f %7.3f %7.3f %9.1f%s\n", method.c_str(),
+                size.c_str(), sum.mae / n, sum.coverage / n, sum.iou / n, sum.precision / n,
+                sum.recall / n, sum.f1 / n, sum.ms / n, suffix);
     char entry[512];
     std::snprintf(entry, sizeof(entry),
-                  "%s{\"method\": \"%s\", \"dataset\": \"real:%s\", \"rows\": %d, \"cols\": %d, "
+                  "%s{\"method\": \"%s\", \"dataset\": \"%s\", \"rows\": %d, \"cols\": %d, "
                   "\"mae\": %.5f, \"iou\": %.5f, \"precision\": %.5f, \"recall\": %.5f, "
                   "\"f1\": %.5f, \"ms_per_scan\": %.3f}",
-                  first ? "" : ", ", method.c_str(), real_path.c_str(), real_layout.rows,
-                  real_layout.cols, sum.mae / n, sum.iou / n, sum.precision / n,
-                  sum.recall / n, sum.f1 / n, sum.ms / n);
+                  first ? "" : ", ", method.c_str(), dataset.c_str(), grid.rows,
+                  grid.cols, sum.mae / n, sum.iou / n, sum.precision / n, sum.recall / n,
+                  sum.f1 / n, sum.ms / n);
     json += entry;
     first = false;
+  };
+  for (std::size_t t = 0; t < targets.size(); ++t) {
+    for (std::size_t m = 0; m < methods.size(); ++m) {
+      report(std::string(densemap::upsample::interpolationName(methods[m])), "sim:" + scenes_list,
+             targets[t], sums[{m, t}], "");
+    }
+  }
+  const std::string real_suffix = "  (real, every " + std::to_string(reduce) + "-th beam)";
+  for (const auto& [m, sum] : real_sums) {
+    report(std::string(densemap::upsample::interpolationName(methods[m])), "real:" + real_path,
+           real_layout, sum, real_suffix.c_str());
   }
   json += "]}\n";
   if (!json_path.empty()) {
-    std::ofstream out(json_path);
-    out << json;
-    if (!out) return fail("cannot write " + json_path);
+    if (auto ok = densemap::writeFileAtomically(json_path, json); !ok) {
+      return fail(ok.error().message);
+    }
   }
   return 0;
 }
