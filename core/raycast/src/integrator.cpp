@@ -61,7 +61,8 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
   stats.rays = rays_.size();
   stats.ms_rays = msSince(t0);
 
-  // The box of every traversal: the sensor's voxel and the rays' end voxels.
+  // The box of every traversal: the sensor's voxel and the rays' end voxels (and, for the
+  // culling region, the voxels rays end in).
   const auto origin_key = grid.pointToKey(origin_world);
   KeyBox box{};
   hit_.clear();
@@ -73,7 +74,7 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
         box.min[a] = std::min(box.min[a], r.key[a]);
         box.max[a] = std::max(box.max[a], r.key[a]);
       }
-      if (r.occupied) hit_.push_back(r.key);
+      if (culling && r.occupied) hit_.push_back(r.key);
     }
   }
   const CullingRegion* region = nullptr;
