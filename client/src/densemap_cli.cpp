@@ -239,8 +239,11 @@ int main(int argc, char** argv) {
   double fov_top = 15.0, fov_bottom = -15.0;
   replay
       ->add_option("--upsample", upsample_method,
-                   "Densify each scan before sending: bilinear or nearest (ILN: not yet)")
-      ->check(CLI::IsMember({"bilinear", "nearest"}));
+                   "Densify each scan before sending: bilinear, nearest or iln")
+      ->check(CLI::IsMember({"bilinear", "nearest", "iln"}));
+  std::string upsample_model = "models/iln.pb";
+  replay->add_option("--upsample-model", upsample_model, "ILN weights file (--upsample iln)")
+      ->capture_default_str();
   replay->add_option("--upsample-input", upsample_input, "The sensor's grid ROWSxCOLS")
       ->capture_default_str();
   replay->add_option("--upsample-output", upsample_output, "The grid sent, ROWSxCOLS")
@@ -307,7 +310,9 @@ int main(int argc, char** argv) {
       if (!in) return cli::fail("--upsample-input: " + in.error().message);
       auto out = upsample::parseRangeLayout(upsample_output, fov_top, fov_bottom);
       if (!out) return cli::fail("--upsample-output: " + out.error().message);
-      densify = upsample::UpsampleOptions{*in, *out, *upsample::parseInterpolation(upsample_method)};
+      auto options = upsample::makeUpsampleOptions(upsample_method, *in, *out, upsample_model);
+      if (!options) return cli::fail("--upsample: " + options.error().message);
+      densify = std::move(*options);
     }
     return cli::replay(o, data, rate, first, limit, query_points, densify);
   }

@@ -90,18 +90,12 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
   o.limits.max_abs_position_m = std::min(p.max_abs_position_m(), 32767.0 * o.resolution_m);
   if (!(p.max_abs_position_m() > 0)) return makeError("pipeline.max_abs_position_m must be > 0");
   if (const auto& u = config.upsample(); u.enabled()) {
-    if (u.method() == "iln") {
-      return makeError("upsample.method: ILN is not available yet (use bilinear or nearest)");
-    }
-    auto method = upsample::parseInterpolation(u.method());
-    if (!method) return makeError("upsample.method: " + method.error().message);
     const auto dim = [](std::uint32_t v) { return static_cast<int>(std::min(v, 1U << 20)); };
-    upsample::UpsampleOptions up{
-        .input = {dim(u.input_rows()), dim(u.input_cols()), u.top_deg(), u.bottom_deg()},
-        .output = {dim(u.output_rows()), dim(u.output_cols()), u.top_deg(), u.bottom_deg()},
-        .method = *method};
-    if (auto ok = up.validate(); !ok) return makeError(ok.error().message);
-    o.upsample = up;
+    auto up = upsample::makeUpsampleOptions(
+        u.method(), {dim(u.input_rows()), dim(u.input_cols()), u.top_deg(), u.bottom_deg()},
+        {dim(u.output_rows()), dim(u.output_cols()), u.top_deg(), u.bottom_deg()}, u.model());
+    if (!up) return makeError("upsample: " + up.error().message);
+    o.upsample = std::move(*up);
   }
   if (config.snapshot().autosave_period_s() < 0) {
     return makeError("snapshot.autosave_period_s must be >= 0");

@@ -151,8 +151,11 @@ int main(int argc, char** argv) {
                  "Oracle labels file (default DATA/oracle_<resolution>.bt): score another "
                  "sensor's dataset on the same labels");
   app.add_option("--upsample", upsample_method,
-                 "Densify each scan before mapping: bilinear or nearest (sensor-frame data)")
-      ->check(CLI::IsMember({"bilinear", "nearest"}));
+                 "Densify each scan before mapping: bilinear, nearest or iln (sensor-frame data)")
+      ->check(CLI::IsMember({"bilinear", "nearest", "iln"}));
+  std::string upsample_model = "models/iln.pb";
+  app.add_option("--upsample-model", upsample_model, "ILN weights file (--upsample iln)")
+      ->capture_default_str();
   app.add_option("--upsample-input", upsample_input, "The sensor's grid ROWSxCOLS")
       ->capture_default_str();
   app.add_option("--upsample-output", upsample_output, "The grid mapped, ROWSxCOLS")
@@ -190,8 +193,10 @@ int main(int argc, char** argv) {
     if (!in) return fail("--upsample-input: " + in.error().message);
     auto out = densemap::upsample::parseRangeLayout(upsample_output, fov_top, fov_bottom);
     if (!out) return fail("--upsample-output: " + out.error().message);
-    densify = densemap::upsample::UpsampleOptions{
-        *in, *out, *densemap::upsample::parseInterpolation(upsample_method)};
+    auto options =
+        densemap::upsample::makeUpsampleOptions(upsample_method, *in, *out, upsample_model);
+    if (!options) return fail("--upsample: " + options.error().message);
+    densify = std::move(*options);
   }
   for (std::size_t i = first; i < end; ++i) {
     auto scan = (*source)->load(i);

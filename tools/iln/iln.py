@@ -3,8 +3,11 @@
 images. Offline only (Debian's python3-torch, CPU); densemap itself never imports torch.
 
 Data: `densemap-upsample-eval --export DIR` (raw float32 range images + index.csv).
-  train:    iln.py train --data DIR --test-seeds 101,102 --out model.pt [--minutes M]
-  evaluate: iln.py eval  --data DIR --test-seeds 101,102 --model model.pt
+  train:    iln.py train  --data DIR --test-seeds 101,102 --model model.pt [--minutes M]
+  evaluate: iln.py eval   --data DIR --test-seeds 101,102 --model model.pt
+  export:   iln.py export --data DIR --model model.pt --out models/iln.pb [--golden FILE]
+            (protobuf weights, schema idl/iln_weights.proto, for densemap's C++ inference; the
+            golden file holds a test crop, queries and PyTorch's output for the C++ test)
 
 The model predicts, for each query laser, softmax weights over the 4 input pixels around it and
 returns the weighted sum of their ranges: an EDSR-style convolutional encoder, a local feature per
@@ -15,6 +18,9 @@ import argparse
 import csv
 import math
 import os
+import subprocess
+import sys
+import tempfile
 import time
 
 import numpy as np
@@ -94,7 +100,7 @@ class ILN(nn.Module):
         self.k = nn.Linear(dim, dim)
         self.v = nn.Linear(dim, dim)
         self.score = nn.Linear(dim, 1)
-        self.dim = dim
+        self.width, self.blocks, self.dim = width, blocks, dim
 
     def forward(self, image, queries):
         """image (B,H,W) in metres (0: no return); queries (Q,2) continuous (row, col)."""
@@ -152,9 +158,90 @@ def evaluate(model, test, src, dst):
     return {k: (v[0] / len(test), v[1] / len(test)) for k, v in sums.items()}
 
 
+def train_model(a, model, train, test, src, dst):
+    """L1 on range (Adam), cosine learning rate from --lr to --lr-final; each step takes one
+    training image and --queries random query lasers of its target grid."""
+    print(f"iln: {len(train)} training pairs, {len(test)} test pairs, "
+          f"{sum(p.numel() for p in model.parameters())} parameters", flush=True)
+    queries = query_grid(src[0], src[1], dst[0], dst[1])
+    opt = torch.optim.Adam(model.parameters(), lr=a.lr)
+    generator = torch.Generator().manual_seed(a.seed)
+    order = torch.randperm(len(train), generator=generator).tolist()
+    budget = a.minutes * 60
+    start, step, cursor, mean = time.time(), 0, 0, None
+    while (elapsed := time.time() - start) < budget:
+        progress = min(1.0, elapsed / budget)
+        lr = a.lr_final + 0.5 * (a.lr - a.lr_final) * (1 + math.cos(math.pi * progress))
+        for group in opt.param_groups:
+            group["lr"] = lr
+        if cursor == len(order):
+            order = torch.randperm(len(train), generator=generator).tolist()
+            cursor = 0
+        image, target, _ = train[order[cursor]]
+        cursor += 1
+        pick = torch.randperm(len(queries), generator=generator)[:a.queries]
+        pred = model(image[None], queries[pick])[0]
+        targets = target.reshape(-1)[pick]
+        mask = (targets > 0) & (pred > 0)
+        loss = (pred[mask] - targets[mask]).abs().mean()
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        step += 1
+        mean = loss.item() if mean is None else 0.98 * mean + 0.02 * loss.item()
+        if step % 100 == 0:
+            print(f"iln: step {step}, {elapsed:.0f} s, lr {lr:.2e}, L1 {mean:.3f} m", flush=True)
+            torch.save(model.state_dict(), a.model)
+    torch.save(model.state_dict(), a.model)
+    print(f"iln: trained {step} steps in {time.time() - start:.0f} s -> {a.model}", flush=True)
+
+
+def schema_module():
+    """idl/iln_weights.proto compiled for Python with protoc into a temporary directory."""
+    idl = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "idl")
+    out = tempfile.mkdtemp(prefix="iln_proto_")
+    subprocess.run(["protoc", f"--python_out={out}", f"--proto_path={idl}",
+                    os.path.join(idl, "iln_weights.proto")], check=True)
+    sys.path.insert(0, out)
+    import iln_weights_pb2  # pylint: disable=import-outside-toplevel
+    return iln_weights_pb2
+
+
+def export(a, model, test):
+    """Weights as an IlnModel protobuf; optionally a golden output on a crop of a test image."""
+    pb = schema_module()
+    message = pb.IlnModel(version=1, width=model.width, blocks=model.blocks, dim=model.dim,
+                          max_range_m=MAX_RANGE, input_rows=test[0][0].shape[0],
+                          input_cols=test[0][0].shape[1], provenance=a.provenance)
+    for name, value in model.state_dict().items():
+        message.tensors.add(name=name, shape=list(value.shape),
+                            data=value.detach().reshape(-1).tolist())
+    with open(a.out, "wb") as f:
+        f.write(message.SerializeToString())
+    print(f"iln: wrote {a.out} ({os.path.getsize(a.out)} bytes)")
+    if not a.golden:
+        return
+    # A 12 x 48 crop with missing returns punched in, queries anywhere in it (wrapping columns,
+    # rows on and between the input rows, the edges).
+    generator = torch.Generator().manual_seed(a.seed)
+    crop = test[0][0][2:14, 100:148].clone()
+    crop.view(-1)[torch.randperm(crop.numel(), generator=generator)[:40]] = 0
+    rows, cols = crop.shape
+    queries = torch.rand(300, 2, generator=generator) * torch.tensor([rows - 1.0, cols])
+    queries = torch.cat([queries, torch.tensor([[0.0, 0.0], [rows - 1.0, cols - 0.25],
+                                                [rows - 1.0, 0.0], [5.0, 47.9]])])
+    with torch.no_grad():
+        ranges = model(crop[None], queries)[0]
+    golden = pb.IlnGolden(rows=rows, cols=cols, image=crop.reshape(-1).tolist(),
+                          queries=queries.reshape(-1).tolist(), ranges=ranges.tolist())
+    with open(a.golden, "wb") as f:
+        f.write(golden.SerializeToString())
+    print(f"iln: wrote {a.golden} ({len(ranges)} golden ranges)")
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("command", choices=["train", "eval"])
+    p.add_argument("command", choices=["train", "eval", "export"])
     p.add_argument("--data", required=True)
     p.add_argument("--test-seeds", default="101,102")
     p.add_argument("--input", default="16x1024")
@@ -162,6 +249,14 @@ def main():
     p.add_argument("--model", default="iln.pt")
     p.add_argument("--minutes", type=float, default=10.0)
     p.add_argument("--lr", type=float, default=1e-4)
+    p.add_argument("--lr-final", type=float, default=1e-6, help="cosine schedule's last rate")
+    p.add_argument("--queries", type=int, default=16384, help="query lasers a training step")
+    p.add_argument("--width", type=int, default=16, help="encoder channels")
+    p.add_argument("--blocks", type=int, default=2, help="encoder residual blocks")
+    p.add_argument("--dim", type=int, default=16, help="local feature width")
+    p.add_argument("--out", default="models/iln.pb", help="export: weights file")
+    p.add_argument("--golden", help="export: also write a golden-output file")
+    p.add_argument("--provenance", default="", help="export: how the model was trained")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--threads", type=int, default=2)
     a = p.parse_args()
@@ -172,31 +267,14 @@ def main():
     seeds = {int(s) for s in a.test_seeds.split(",")}
     items = load_index(a.data)
     test = pairs(items, seeds, "test", src, dst)
-    model = ILN()
+    model = ILN(a.width, a.blocks, a.dim)
     if a.command == "train":
-        train = pairs(items, seeds, "train", src, dst)
-        print(f"iln: {len(train)} training pairs, {len(test)} test pairs, "
-              f"{sum(p.numel() for p in model.parameters())} parameters")
-        queries = query_grid(src[0], src[1], dst[0], dst[1])
-        opt = torch.optim.Adam(model.parameters(), lr=a.lr)
-        start, step = time.time(), 0
-        while time.time() - start < a.minutes * 60:
-            image, target, _ = train[step % len(train)]
-            pred = model(image[None], queries)[0]
-            t = target.reshape(-1)
-            mask = (t > 0) & (pred > 0)
-            loss = (pred[mask] - t[mask]).abs().mean()
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            step += 1
-            if step % 50 == 0:
-                print(f"iln: step {step}, {time.time() - start:.0f} s, L1 {loss.item():.3f} m",
-                      flush=True)
-        torch.save(model.state_dict(), a.model)
-        print(f"iln: trained {step} steps in {time.time() - start:.0f} s -> {a.model}")
+        train_model(a, model, pairs(items, seeds, "train", src, dst), test, src, dst)
     else:
         model.load_state_dict(torch.load(a.model))
+    if a.command == "export":
+        export(a, model, test)
+        return
     for name, (mae, iou) in evaluate(model, test, src, dst).items():
         print(f"iln: test {name:8s} {dst[0]}x{dst[1]}  MAE {mae:.3f} m  IoU {iou:.3f}")
 

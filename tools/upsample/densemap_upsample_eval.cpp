@@ -6,8 +6,10 @@
 #include <tbb/task_arena.h>
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <memory>
 #include <filesystem>
 #include <map>
 #include <sstream>
@@ -22,6 +24,7 @@
 #include "densemap/sim/lidar_simulator.hpp"
 #include "densemap/sim/procedural_scenes.hpp"
 #include "densemap/sim/trajectory.hpp"
+#include "densemap/upsample/iln.hpp"
 #include "densemap/upsample/interpolation.hpp"
 
 namespace {
@@ -42,6 +45,12 @@ densemap::LidarModel sensorFor(const RangeLayout& layout, double max_range) {
 struct Sum {
   double mae = 0, coverage = 0, iou = 0, precision = 0, recall = 0, f1 = 0, ms = 0;
   int scans = 0;
+  std::vector<double> ms_each;
+
+  [[nodiscard]] double msP50() {
+    std::sort(ms_each.begin(), ms_each.end());
+    return ms_each.empty() ? 0.0 : ms_each[ms_each.size() / 2];
+  }
 
   void add(const densemap::upsample::RangeError& range,
            const densemap::eval::PointSetMetrics& points, double ms_scan) {
@@ -52,6 +61,7 @@ struct Sum {
     recall += points.recall;
     f1 += points.f1;
     ms += ms_scan;
+    ms_each.push_back(ms_scan);
     ++scans;
   }
 };
@@ -75,7 +85,9 @@ int main(int argc, char** argv) {
   app.add_option("--fov-top", top, "Top beam elevation, deg")->capture_default_str();
   app.add_option("--fov-bottom", bottom, "Bottom beam elevation, deg")->capture_default_str();
   app.add_option("--max-range", max_range, "Sensor range, m")->capture_default_str();
-  app.add_option("--methods", methods_list, "bilinear, nearest (iln: not available yet)")
+  std::string model_path = "models/iln.pb";
+  app.add_option("--methods", methods_list, "bilinear, nearest, iln")->capture_default_str();
+  app.add_option("--model", model_path, "ILN weights file (for --methods iln)")
       ->capture_default_str();
   app.add_option("--voxel", voxel, "Voxel size of the point metrics, m")->capture_default_str();
   app.add_option("--threads", threads, "Worker threads (0: all cores)")->capture_default_str();
@@ -108,13 +120,18 @@ int main(int argc, char** argv) {
     return 1;
   };
   std::vector<densemap::upsample::Interpolation> methods;
+  std::shared_ptr<const densemap::upsample::IlnModel> model;
   for (const std::string& m : densemap::tools::splitList(methods_list)) {
-    if (m == "iln") {
-      return fail("method 'iln' is not available yet: ILN inference and its trained model are "
-                  "not built (issue 6 is in progress); use bilinear or nearest");
-    }
     auto parsed = densemap::upsample::parseInterpolation(m);
     if (!parsed) return fail(parsed.error().message);
+    if (*parsed == densemap::upsample::Interpolation::kIln && !model) {
+      auto loaded = densemap::upsample::IlnModel::load(model_path);
+      if (!loaded) return fail(loaded.error().message + " (--model)");
+      model = std::make_shared<const densemap::upsample::IlnModel>(std::move(*loaded));
+      std::fprintf(stderr, "densemap-upsample-eval: ILN model %s: width %d, %d blocks, dim %d, "
+                   "%zu parameters\n", model_path.c_str(), model->width(), model->blocks(),
+                   model->dim(), model->parameters());
+    }
     methods.push_back(*parsed);
   }
   if (methods.empty()) return fail("--methods lists no method");
@@ -188,7 +205,8 @@ int main(int argc, char** argv) {
             const auto truth_points = densemap::upsample::backProject(truth);
             for (std::size_t m = 0; m < methods.size(); ++m) {
               const auto t0 = std::chrono::steady_clock::now();
-              const auto predicted = densemap::upsample::upsample(low, targets[t], methods[m]);
+              const auto predicted = densemap::upsample::upsample(low, targets[t], methods[m],
+                                                                  model.get());
               const double ms = std::chrono::duration<double, std::milli>(
                                     std::chrono::steady_clock::now() - t0)
                                     .count();
@@ -245,7 +263,8 @@ int main(int argc, char** argv) {
       arena.execute([&] {
         for (std::size_t m = 0; m < methods.size(); ++m) {
           const auto t0 = std::chrono::steady_clock::now();
-          const auto predicted = densemap::upsample::upsample(sparse, real_layout, methods[m]);
+          const auto predicted = densemap::upsample::upsample(sparse, real_layout, methods[m],
+                                                                  model.get());
           const double ms =
               std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
                   .count();
@@ -267,25 +286,26 @@ int main(int argc, char** argv) {
               "[%g, %g] deg, max range %g m, voxel %g m\n",
               scenes_list.c_str(), seeds_list.c_str(), scans, input->rows, input->cols, bottom,
               top, max_range, voxel);
-  std::printf("%-9s %-10s %8s %8s %7s %9s %7s %7s %9s\n", "method", "target", "mae_m", "coverage",
-              "iou", "precision", "recall", "f1", "ms/scan");
+  std::printf("%-9s %-10s %8s %8s %7s %9s %7s %7s %9s %7s\n", "method", "target", "mae_m",
+              "coverage", "iou", "precision", "recall", "f1", "ms/scan", "ms_p50");
   std::string json = "{\"results\": [";
   bool first = true;
   const auto report = [&](const std::string& method, const std::string& dataset,
-                          const RangeLayout& grid, const Sum& sum, const char* suffix) {
+                          const RangeLayout& grid, Sum& sum, const char* suffix) {
     const double n = sum.scans;
     const std::string size = std::to_string(grid.rows) + "x" + std::to_string(grid.cols);
-    std::printf("%-9s %-10s %8.3f %8.3f %7.3f %9.3f %7.3f %7.3f %9.1f%s\n", method.c_str(),
+    const double p50 = sum.msP50();
+    std::printf("%-9s %-10s %8.3f %8.3f %7.3f %9.3f %7.3f %7.3f %9.1f %7.1f%s\n", method.c_str(),
                 size.c_str(), sum.mae / n, sum.coverage / n, sum.iou / n, sum.precision / n,
-                sum.recall / n, sum.f1 / n, sum.ms / n, suffix);
+                sum.recall / n, sum.f1 / n, sum.ms / n, p50, suffix);
     char entry[512];
     std::snprintf(entry, sizeof(entry),
                   "%s{\"method\": \"%s\", \"dataset\": \"%s\", \"rows\": %d, \"cols\": %d, "
                   "\"mae\": %.5f, \"iou\": %.5f, \"precision\": %.5f, \"recall\": %.5f, "
-                  "\"f1\": %.5f, \"ms_per_scan\": %.3f}",
+                  "\"f1\": %.5f, \"ms_per_scan\": %.3f, \"ms_p50\": %.3f}",
                   first ? "" : ", ", method.c_str(), dataset.c_str(), grid.rows,
                   grid.cols, sum.mae / n, sum.iou / n, sum.precision / n, sum.recall / n,
-                  sum.f1 / n, sum.ms / n);
+                  sum.f1 / n, sum.ms / n, p50);
     json += entry;
     first = false;
   };
@@ -296,7 +316,7 @@ int main(int argc, char** argv) {
     }
   }
   const std::string real_suffix = "  (real, every " + std::to_string(reduce) + "-th beam)";
-  for (const auto& [m, sum] : real_sums) {
+  for (auto& [m, sum] : real_sums) {
     report(std::string(densemap::upsample::interpolationName(methods[m])), "real:" + real_path,
            real_layout, sum, real_suffix.c_str());
   }

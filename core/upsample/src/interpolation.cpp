@@ -5,18 +5,28 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <string>
+
+#include "densemap/upsample/iln.hpp"
 
 namespace densemap::upsample {
 
 std::string_view interpolationName(Interpolation method) {
-  return method == Interpolation::kNearest ? "nearest" : "bilinear";
+  switch (method) {
+    case Interpolation::kNearest: return "nearest";
+    case Interpolation::kBilinear: return "bilinear";
+    case Interpolation::kIln: return "iln";
+  }
+  return "?";
 }
 
 Expected<Interpolation> parseInterpolation(std::string_view name) {
   if (name == "nearest") return Interpolation::kNearest;
   if (name == "bilinear") return Interpolation::kBilinear;
-  return makeError("unknown interpolation '" + std::string(name) + "' (nearest or bilinear)");
+  if (name == "iln") return Interpolation::kIln;
+  return makeError("unknown interpolation '" + std::string(name) +
+                   "' (nearest, bilinear or iln)");
 }
 
 Neighbourhood neighbourhood(const RangeImage& input, double row, double col) {
@@ -38,6 +48,7 @@ Neighbourhood neighbourhood(const RangeImage& input, double row, double col) {
 }
 
 float interpolate(const RangeImage& input, double row, double col, Interpolation method) {
+  if (method == Interpolation::kIln) std::abort();  // a caller's bug: see the header
   const Neighbourhood n = neighbourhood(input, row, col);
   if (method == Interpolation::kNearest) {
     const int t = (n.d_row < 0.5 ? 0 : 2) + (n.d_col < 0.5 ? 0 : 1);
@@ -53,7 +64,12 @@ float interpolate(const RangeImage& input, double row, double col, Interpolation
   return weight > 1e-9 ? static_cast<float>(sum / weight) : 0.0F;
 }
 
-RangeImage upsample(const RangeImage& input, const RangeLayout& output, Interpolation method) {
+RangeImage upsample(const RangeImage& input, const RangeLayout& output, Interpolation method,
+                    const IlnModel* iln) {
+  if (method == Interpolation::kIln) {
+    if (iln == nullptr) std::abort();  // a caller's bug: UpsampleOptions::validate catches it
+    return iln->upsample(input, output);
+  }
   RangeImage out(output);
   tbb::parallel_for(tbb::blocked_range<int>(0, output.rows),
                     [&](const tbb::blocked_range<int>& rows) {
@@ -75,13 +91,29 @@ Expected<void> UpsampleOptions::validate() const {
   if (input.top_deg != output.top_deg || input.bottom_deg != output.bottom_deg) {
     return makeError("upsample input and output must share the field of view");
   }
+  if (method == Interpolation::kIln && !iln) return makeError("upsample method iln needs a model");
   return {};
+}
+
+Expected<UpsampleOptions> makeUpsampleOptions(std::string_view method, const RangeLayout& input,
+                                              const RangeLayout& output,
+                                              const std::string& model_path) {
+  auto parsed = parseInterpolation(method);
+  if (!parsed) return std::unexpected(parsed.error());
+  UpsampleOptions options{.input = input, .output = output, .method = *parsed, .iln = nullptr};
+  if (*parsed == Interpolation::kIln) {
+    auto model = IlnModel::load(model_path);
+    if (!model) return std::unexpected(model.error());
+    options.iln = std::make_shared<const IlnModel>(std::move(*model));
+  }
+  if (auto ok = options.validate(); !ok) return std::unexpected(ok.error());
+  return options;
 }
 
 PointCloud upsamplePoints(const PointCloud& points_sensor, const UpsampleOptions& options,
                           ProjectionStats* stats) {
   return backProject(upsample(project(points_sensor, options.input, stats), options.output,
-                              options.method));
+                              options.method, options.iln.get()));
 }
 
 }  // namespace densemap::upsample

@@ -75,9 +75,19 @@ TEST(ServerConfig, ErrorsNameTheFileTheLineAndTheReason) {
   EXPECT_EQ(up_options->input.rows, 16);
   EXPECT_EQ(up_options->output.rows, 61);
   EXPECT_EQ(up_options->output.cols, 2048);
-  auto iln = loadServerConfig(writeConfig(dir, "upsample { enabled: true method: \"iln\" }\n"));
-  ASSERT_FALSE(iln);
-  EXPECT_NE(iln.error().message.find("not available"), std::string::npos);
+  auto iln = loadServerConfig(writeConfig(
+      dir, "upsample { enabled: true method: \"iln\" model: \"" DENSEMAP_ILN_MODEL "\" }\n"));
+  ASSERT_TRUE(iln) << iln.error().message;
+  const auto iln_options = pipelineOptions(*iln)->upsample;
+  ASSERT_TRUE(iln_options && iln_options->iln);
+  EXPECT_EQ(iln_options->method, upsample::Interpolation::kIln);
+  auto no_model = loadServerConfig(writeConfig(
+      dir, "upsample { enabled: true method: \"iln\" model: \"/nonexistent/iln.pb\" }\n"));
+  ASSERT_FALSE(no_model);
+  EXPECT_NE(no_model.error().message.find("/nonexistent/iln.pb"), std::string::npos);
+  // The ILN model is only loaded when upsampling is on.
+  EXPECT_TRUE(loadServerConfig(writeConfig(
+      dir, "upsample { enabled: false method: \"iln\" model: \"/nonexistent/iln.pb\" }\n")));
   EXPECT_FALSE(loadServerConfig(writeConfig(dir, "upsample { enabled: true input_rows: 1 }\n")));
   EXPECT_FALSE(loadServerConfig(
       writeConfig(dir, "upsample { enabled: true top_deg: -20 bottom_deg: 10 }\n")));

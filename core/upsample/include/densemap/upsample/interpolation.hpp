@@ -1,5 +1,7 @@
 #pragma once
 
+#include <memory>
+#include <string>
 #include <string_view>
 
 #include "densemap/geometry/error.hpp"
@@ -7,9 +9,12 @@
 
 namespace densemap::upsample {
 
+class IlnModel;
+
 /// The baselines of Table 4.1: the 4 input pixels around a query, blended by bilinear weights,
-/// or the nearest one. ILN (Eq. 4.3) blends the same 4 pixels with learned weights.
-enum class Interpolation { kNearest, kBilinear };
+/// or the nearest one; and ILN (Eq. 4.3), which blends the same 4 pixels with learned weights
+/// (an IlnModel, iln.hpp).
+enum class Interpolation { kNearest, kBilinear, kIln };
 
 [[nodiscard]] std::string_view interpolationName(Interpolation method);
 [[nodiscard]] Expected<Interpolation> parseInterpolation(std::string_view name);
@@ -28,6 +33,7 @@ struct Neighbourhood {
 /// The range at a continuous (row, col) of `input`'s grid; 0 when no return can be given.
 /// Missing returns are never blended in: bilinear renormalises over the neighbours that have
 /// returns, nearest takes the nearest pixel with a return only if it is the nearest pixel.
+/// kNearest or kBilinear (kIln needs an encoded input: IlnModel::predict).
 [[nodiscard]] float interpolate(const RangeImage& input, double row, double col,
                                 Interpolation method);
 
@@ -37,18 +43,28 @@ struct UpsampleOptions {
   RangeLayout input{.rows = 16, .cols = 1024};
   RangeLayout output{.rows = 64, .cols = 1024};
   Interpolation method = Interpolation::kBilinear;
+  /// The model for Interpolation::kIln.
+  std::shared_ptr<const IlnModel> iln;
 
-  /// Errors for bad grids or an output in another field of view.
+  /// Errors for bad grids, an output in another field of view, or kIln without a model.
   [[nodiscard]] Expected<void> validate() const;
 };
+
+/// Options for `method` ("nearest", "bilinear" or "iln") between two grids; for "iln" the
+/// weights file `model_path` is loaded. Errors name what is wrong (method, grids, model file).
+[[nodiscard]] Expected<UpsampleOptions> makeUpsampleOptions(std::string_view method,
+                                                            const RangeLayout& input,
+                                                            const RangeLayout& output,
+                                                            const std::string& model_path);
 
 /// Densifies one scan's sensor-frame points (UpsampleOptions); `stats` describes the projection.
 [[nodiscard]] PointCloud upsamplePoints(const PointCloud& points_sensor,
                                         const UpsampleOptions& options,
                                         ProjectionStats* stats = nullptr);
 
-/// `input` resampled to `output`'s grid (same field of view frame), in parallel.
+/// `input` resampled to `output`'s grid (same field of view frame), in parallel. kIln needs
+/// `iln` (a missing model is a bug and aborts).
 [[nodiscard]] RangeImage upsample(const RangeImage& input, const RangeLayout& output,
-                                  Interpolation method);
+                                  Interpolation method, const IlnModel* iln = nullptr);
 
 }  // namespace densemap::upsample

@@ -1,0 +1,406 @@
+#include "densemap/upsample/iln.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <Eigen/Core>
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <memory>
+
+#include "densemap/upsample/interpolation.hpp"
+#include "iln_weights.pb.h"
+
+namespace densemap::upsample {
+namespace {
+
+using RowMatrix = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+using RowMatrixD = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+constexpr std::size_t kMaxFileBytes = std::size_t{256} << 20;
+constexpr int kMaxWidth = 512;
+constexpr int kMaxBlocks = 64;
+constexpr int kMaxDim = 64;  // the query stage keeps its vectors on the stack
+
+/// The model's tensors by name, each checked for its expected shape when taken.
+class Tensors {
+ public:
+  Tensors(const proto::IlnModel& model, std::string what) : what_(std::move(what)) {
+    for (const auto& t : model.tensors()) tensors_.emplace(t.name(), &t);
+  }
+
+  Expected<std::vector<float>> take(const std::string& name, std::vector<std::uint32_t> shape) {
+    const auto it = tensors_.find(name);
+    if (it == tensors_.end()) return makeError(what_ + ": tensor '" + name + "' is missing");
+    const proto::Tensor& t = *it->second;
+    tensors_.erase(it);
+    if (!std::equal(shape.begin(), shape.end(), t.shape().begin(), t.shape().end())) {
+      return makeError(what_ + ": tensor '" + name + "' has shape " + describe(t.shape()) +
+                       ", the model needs " + describe(shape));
+    }
+    std::size_t size = 1;
+    for (const std::uint32_t s : shape) size *= s;
+    if (static_cast<std::size_t>(t.data_size()) != size) {
+      return makeError(what_ + ": tensor '" + name + "' holds " + std::to_string(t.data_size()) +
+                       " values, its shape needs " + std::to_string(size));
+    }
+    for (const float v : t.data()) {
+      if (!std::isfinite(v)) return makeError(what_ + ": tensor '" + name + "' is not finite");
+    }
+    taken_ += size;
+    return std::vector<float>(t.data().begin(), t.data().end());
+  }
+
+  /// An error naming a tensor the model does not use (a file for another architecture).
+  Expected<void> finish() const {
+    if (!tensors_.empty()) {
+      return makeError(what_ + ": unexpected tensor '" + tensors_.begin()->first + "'");
+    }
+    return {};
+  }
+  [[nodiscard]] std::size_t taken() const { return taken_; }
+
+ private:
+  template <class Shape>
+  static std::string describe(const Shape& shape) {
+    std::string out = "(";
+    for (const auto s : shape) out += (out.size() > 1 ? ", " : "") + std::to_string(s);
+    return out + ")";
+  }
+
+  std::string what_;
+  std::map<std::string, const proto::Tensor*> tensors_;
+  std::size_t taken_ = 0;
+};
+
+/// A per-thread object reused from call to call (fresh megabytes on every scan cost more in
+/// page faults than the arithmetic). If the thread re-enters while it is in use (TBB lets a
+/// waiting thread run another task), the nested call gets an object of its own. Lambdas must
+/// capture get()'s reference: the thread_local itself names another thread's object there.
+template <class T>
+class Reused {
+ public:
+  Reused() {
+    if (slot().busy) {
+      own_ = std::make_unique<T>();
+    } else {
+      slot().busy = true;
+    }
+  }
+  ~Reused() {
+    if (!own_) slot().busy = false;
+  }
+  Reused(const Reused&) = delete;
+  Reused& operator=(const Reused&) = delete;
+  T& get() { return own_ ? *own_ : slot().value; }
+
+ private:
+  struct Slot {
+    T value;
+    bool busy = false;
+  };
+  static Slot& slot() {
+    thread_local Slot s;
+    return s;
+  }
+  std::unique_ptr<T> own_;
+};
+
+RowMatrixD toMatrix(const std::vector<float>& data, int rows, int cols) {
+  return Eigen::Map<const RowMatrix>(data.data(), rows, cols).cast<double>();
+}
+
+std::vector<float> toVector(const RowMatrixD& m) {
+  std::vector<float> out(static_cast<std::size_t>(m.size()));
+  Eigen::Map<RowMatrix>(out.data(), m.rows(), m.cols()) = m.cast<float>();
+  return out;
+}
+
+}  // namespace
+
+Expected<IlnModel> IlnModel::load(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return makeError("cannot open ILN weights file '" + path + "'");
+  in.seekg(0, std::ios::end);
+  const auto size = static_cast<std::size_t>(in.tellg());
+  if (size > kMaxFileBytes) {
+    return makeError("ILN weights file '" + path + "' is " + std::to_string(size) +
+                     " bytes; refusing more than " + std::to_string(kMaxFileBytes));
+  }
+  std::string bytes(size, '\0');
+  in.seekg(0);
+  if (!in.read(bytes.data(), static_cast<std::streamsize>(size))) {
+    return makeError("cannot read ILN weights file '" + path + "'");
+  }
+  return parse(bytes, "ILN weights file '" + path + "'");
+}
+
+Expected<IlnModel> IlnModel::parse(std::string_view bytes, const std::string& what) {
+  proto::IlnModel m;
+  if (bytes.empty() || !m.ParseFromArray(bytes.data(), static_cast<int>(bytes.size()))) {
+    return makeError(what + " is not an ILN weights file (empty, truncated or corrupt)");
+  }
+  if (m.version() != 1) {
+    return makeError(what + " has format version " + std::to_string(m.version()) +
+                     "; this densemap reads version 1");
+  }
+  const int w = static_cast<int>(m.width()), b = static_cast<int>(m.blocks());
+  const int d = static_cast<int>(m.dim());
+  if (!m.has_width() || w < 1 || w > kMaxWidth || !m.has_blocks() || b > kMaxBlocks ||
+      !m.has_dim() || d < 1 || d > kMaxDim) {
+    return makeError(what + ": width, blocks and dim must be set (width 1.." +
+                     std::to_string(kMaxWidth) + ", blocks 0.." + std::to_string(kMaxBlocks) +
+                     ", dim 1.." + std::to_string(kMaxDim) + ")");
+  }
+  if (!(m.max_range_m() > 0.0F) || !std::isfinite(m.max_range_m())) {
+    return makeError(what + ": max_range_m must be a positive number");
+  }
+  IlnModel model;
+  model.width_ = w;
+  model.blocks_ = b;
+  model.dim_ = d;
+  model.max_range_ = m.max_range_m();
+  model.provenance_ = m.provenance();
+
+  Tensors tensors(m, what);
+  const auto uw = static_cast<std::uint32_t>(w), ud = static_cast<std::uint32_t>(d);
+  auto conv = [&](const std::string& name, int in) -> Expected<Conv> {
+    Conv c;
+    c.in = in;
+    c.out = w;
+    auto weight = tensors.take(name + ".weight", {uw, static_cast<std::uint32_t>(in), 3, 3});
+    if (!weight) return std::unexpected(weight.error());
+    auto bias = tensors.take(name + ".bias", {uw});
+    if (!bias) return std::unexpected(bias.error());
+    c.weight = std::move(*weight);
+    c.bias = std::move(*bias);
+    return c;
+  };
+  auto head = conv("head", 1);
+  if (!head) return std::unexpected(head.error());
+  model.head_ = std::move(*head);
+  for (int i = 0; i < b; ++i) {
+    for (const char* part : {".conv1", ".conv2"}) {
+      auto c = conv("body." + std::to_string(i) + part, w);
+      if (!c) return std::unexpected(c.error());
+      model.body_.push_back(std::move(*c));
+    }
+  }
+  std::map<std::string, std::vector<float>> linear;
+  const std::pair<const char*, std::vector<std::uint32_t>> shapes[] = {
+      {"embed.weight", {ud, uw + 2}}, {"embed.bias", {ud}}, {"q.weight", {ud, ud}},
+      {"q.bias", {ud}},  {"k.weight", {ud, ud}}, {"k.bias", {ud}},  {"v.weight", {ud, ud}},
+      {"v.bias", {ud}},  {"score.weight", {1, ud}}, {"score.bias", {1}}};
+  for (const auto& [name, shape] : shapes) {
+    auto t = tensors.take(name, shape);
+    if (!t) return std::unexpected(t.error());
+    linear[name] = std::move(*t);
+  }
+  if (auto done = tensors.finish(); !done) return std::unexpected(done.error());
+  model.parameters_ = tensors.taken();
+
+  // Fold the linear layers of the query stage. With z = E_f f + E_o o + e (the embedding of a
+  // neighbour's feature f and offset o), q = Q z + q0, k = K z + k0, v = V z + v0 and the score
+  // s . (z + sum_j a_j v_j) + s0, everything but the attention is linear in (f, o):
+  //   q = (Q E_f) f + (Q E_o) o + (Q e + q0), likewise k; s . z and s . v are scalars.
+  const RowMatrixD embed = toMatrix(linear["embed.weight"], d, w + 2);
+  const RowMatrixD ef = embed.leftCols(w), eo = embed.rightCols(2);
+  const Eigen::VectorXd e = toMatrix(linear["embed.bias"], d, 1);
+  const RowMatrixD q = toMatrix(linear["q.weight"], d, d), k = toMatrix(linear["k.weight"], d, d);
+  const RowMatrixD v = toMatrix(linear["v.weight"], d, d);
+  const Eigen::VectorXd q0 = toMatrix(linear["q.bias"], d, 1);
+  const Eigen::VectorXd k0 = toMatrix(linear["k.bias"], d, 1);
+  const Eigen::VectorXd v0 = toMatrix(linear["v.bias"], d, 1);
+  const RowMatrixD s = toMatrix(linear["score.weight"], 1, d);
+  model.fq_ = toVector(q * ef);
+  model.fk_ = toVector(k * ef);
+  model.oq_ = toVector(q * eo);
+  model.ok_ = toVector(k * eo);
+  model.cq_ = toVector(q * e + q0);
+  model.ck_ = toVector(k * e + k0);
+  model.sz_ = toVector(s * ef);
+  model.sv_ = toVector(s * v * ef);
+  const RowMatrixD oz = s * eo, ov = s * v * eo;
+  for (int i = 0; i < 2; ++i) {
+    model.oz_[i] = static_cast<float>(oz(0, i));
+    model.ov_[i] = static_cast<float>(ov(0, i));
+  }
+  model.cz_ = static_cast<float>((s * e)(0, 0));
+  model.cv_ = static_cast<float>((s * (v * e + v0))(0, 0));
+  model.score_bias_ = linear["score.bias"][0];
+  return model;
+}
+
+std::size_t IlnModel::parameters() const { return parameters_; }
+
+void IlnModel::convolve(const Conv& conv, const float* x, float* y, int rows, int cols,
+                        bool relu_input) {
+  const std::size_t plane = static_cast<std::size_t>(rows) * cols;
+  const Eigen::Map<const RowMatrix> weight(conv.weight.data(), conv.out, conv.in * 9);
+  tbb::parallel_for(tbb::blocked_range<int>(0, rows), [&](const tbb::blocked_range<int>& band) {
+    const int n = (band.end() - band.begin()) * cols;
+    thread_local RowMatrix patches;  // im2col of the band, zero padding 1; reused
+    patches.resize(conv.in * 9, n);
+    for (int ci = 0; ci < conv.in; ++ci) {
+      const float* channel = x + ci * plane;
+      for (int tap = 0; tap < 9; ++tap) {
+        const int dy = tap / 3 - 1, dx = tap % 3 - 1;
+        float* out = patches.row(ci * 9 + tap).data();
+        for (int r = band.begin(); r != band.end(); ++r, out += cols) {
+          const int sr = r + dy;
+          if (sr < 0 || sr >= rows) {
+            std::fill(out, out + cols, 0.0F);
+            continue;
+          }
+          // out[c] = src[c + dx], zero where c + dx leaves the row.
+          const float* src = channel + static_cast<std::size_t>(sr) * cols;
+          const int lo = std::max(0, -dx), hi = std::min(cols, cols - dx);
+          if (lo > 0) out[0] = 0.0F;
+          if (hi < cols) out[cols - 1] = 0.0F;
+          if (relu_input) {
+            for (int c = lo; c < hi; ++c) out[c] = std::max(src[c + dx], 0.0F);
+          } else {
+            std::copy(src + lo + dx, src + hi + dx, out + lo);
+          }
+        }
+      }
+    }
+    Eigen::Map<RowMatrix, 0, Eigen::OuterStride<>> result(
+        y + static_cast<std::size_t>(band.begin()) * cols, conv.out, n,
+        Eigen::OuterStride<>(static_cast<Eigen::Index>(plane)));
+    result.noalias() = weight * patches;
+    for (int co = 0; co < conv.out; ++co) result.row(co).array() += conv.bias[co];
+  });
+}
+
+IlnEncoding IlnModel::encode(const RangeImage& input) const {
+  IlnEncoding enc;
+  encode(input, enc);
+  return enc;
+}
+
+void IlnModel::encode(const RangeImage& input, IlnEncoding& enc) const {
+  const int rows = input.layout.rows, cols = input.layout.cols;
+  const std::size_t plane = static_cast<std::size_t>(rows) * cols;
+  // The encoder's activations, kept per thread.
+  Reused<std::array<std::vector<float>, 5>> buffers;
+  auto& [x, head, features, inner, outer] = buffers.get();
+  x.resize(plane);
+  for (const auto buffer : {&head, &features, &inner, &outer}) buffer->resize(plane * width_);
+  for (std::size_t i = 0; i < plane; ++i) x[i] = input.range[i] / max_range_;
+  // f = h + body(h), h = head(x); each block adds conv2(relu(conv1(.))) to its input.
+  convolve(head_, x.data(), head.data(), rows, cols, false);
+  std::copy(head.begin(), head.end(), features.begin());
+  for (std::size_t i = 0; i < body_.size(); i += 2) {
+    convolve(body_[i], features.data(), inner.data(), rows, cols, false);
+    convolve(body_[i + 1], inner.data(), outer.data(), rows, cols, true);
+    for (std::size_t j = 0; j < features.size(); ++j) features[j] += outer[j];
+  }
+  for (std::size_t j = 0; j < features.size(); ++j) features[j] += head[j];
+
+  enc.input = input;
+  enc.dim = dim_;
+  enc.query.resize(plane * dim_);
+  enc.key.resize(plane * dim_);
+  enc.score.resize(plane);
+  enc.value.resize(plane);
+  const Eigen::Map<const RowMatrix> fq(fq_.data(), dim_, width_), fk(fk_.data(), dim_, width_);
+  const Eigen::Map<const Eigen::RowVectorXf> sz(sz_.data(), width_), sv(sv_.data(), width_);
+  const auto n = static_cast<Eigen::Index>(plane);
+  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, n, 1024),
+                    [&](const tbb::blocked_range<Eigen::Index>& r) {
+                      const Eigen::Index b = r.begin(), len = r.end() - r.begin();
+                      const Eigen::Map<const RowMatrix, 0, Eigen::OuterStride<>> f(
+                          features.data() + b, width_, len, Eigen::OuterStride<>(n));
+                      Eigen::Map<Eigen::MatrixXf>(enc.query.data() + b * dim_, dim_, len)
+                          .noalias() = fq * f;
+                      Eigen::Map<Eigen::MatrixXf>(enc.key.data() + b * dim_, dim_, len)
+                          .noalias() = fk * f;
+                      Eigen::Map<Eigen::RowVectorXf>(enc.score.data() + b, len).noalias() =
+                          sz * f;
+                      Eigen::Map<Eigen::RowVectorXf>(enc.value.data() + b, len).noalias() =
+                          sv * f;
+                    });
+}
+
+float IlnModel::predict(const IlnEncoding& enc, double row, double col) const {
+  const Neighbourhood n = neighbourhood(enc.input, row, col);
+  bool any = false;
+  for (const float r : n.range) any = any || r > 0.0F;
+  if (!any) return 0.0F;
+  const int d = enc.dim;
+  // Each neighbour's query and key: its pixel's projections plus the offset's terms (float,
+  // as PyTorch computes them).
+  float q[kMaxDim][4], k[kMaxDim][4], z[4], v[4];  // [channel][neighbour]
+  for (int t = 0; t < 4; ++t) {
+    const auto o0 = static_cast<float>(n.d_row - (t / 2));
+    const auto o1 = static_cast<float>(n.d_col - (t % 2));
+    const std::size_t pixel = static_cast<std::size_t>(n.row[t]) * enc.input.layout.cols +
+                              static_cast<std::size_t>(n.col[t]);
+    const float* pq = enc.query.data() + pixel * d;
+    const float* pk = enc.key.data() + pixel * d;
+    for (int i = 0; i < d; ++i) {
+      q[i][t] = pq[i] + (oq_[2 * i] * o0 + oq_[2 * i + 1] * o1 + cq_[i]);
+      k[i][t] = pk[i] + (ok_[2 * i] * o0 + ok_[2 * i + 1] * o1 + ck_[i]);
+    }
+    z[t] = enc.score[pixel] + (oz_[0] * o0 + oz_[1] * o1 + cz_);
+    v[t] = enc.value[pixel] + (ov_[0] * o0 + ov_[1] * o1 + cv_);
+  }
+  const float scale = 1.0F / std::sqrt(static_cast<float>(d));
+  // Attention logits q_i . k_j: 16 independent sums (a short dependency chain per channel).
+  float logits[4][4] = {};
+  for (int c = 0; c < d; ++c) {
+    for (int i = 0; i < 4; ++i) {
+      for (int j = 0; j < 4; ++j) logits[i][j] += q[c][i] * k[c][j];
+    }
+  }
+  float score[4];
+  for (int i = 0; i < 4; ++i) {
+    float logit[4];
+    for (int j = 0; j < 4; ++j) logit[j] = logits[i][j] * scale;
+    const float top = std::max(std::max(logit[0], logit[1]), std::max(logit[2], logit[3]));
+    float sum = 0.0F, mixed = 0.0F;
+    for (int j = 0; j < 4; ++j) {
+      const float a = std::exp(logit[j] - top);
+      sum += a;
+      mixed += a * v[j];
+    }
+    score[i] = z[i] + mixed / sum + score_bias_;
+  }
+  // Softmax over the neighbours that have returns.
+  float top = -std::numeric_limits<float>::infinity();
+  for (int t = 0; t < 4; ++t) {
+    if (n.range[t] > 0.0F) top = std::max(top, score[t]);
+  }
+  float sum = 0.0F, blended = 0.0F;
+  for (int t = 0; t < 4; ++t) {
+    if (n.range[t] <= 0.0F) continue;
+    const float w = std::exp(score[t] - top);
+    sum += w;
+    blended += w * n.range[t];
+  }
+  return blended / sum;
+}
+
+RangeImage IlnModel::upsample(const RangeImage& input, const RangeLayout& output) const {
+  Reused<IlnEncoding> workspace;  // like the encoder's activations
+  IlnEncoding& enc = workspace.get();
+  encode(input, enc);
+  RangeImage out(output);
+  tbb::parallel_for(tbb::blocked_range<int>(0, output.rows),
+                    [&](const tbb::blocked_range<int>& rows) {
+                      for (int r = rows.begin(); r != rows.end(); ++r) {
+                        for (int c = 0; c < output.cols; ++c) {
+                          const auto [row, col] = output.toLayout(input.layout, r, c);
+                          out.at(r, c) = predict(enc, row, col);
+                        }
+                      }
+                    });
+  return out;
+}
+
+}  // namespace densemap::upsample
