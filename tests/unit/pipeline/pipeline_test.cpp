@@ -230,36 +230,42 @@ TEST(Pipeline, KernelMapKindsPublishLogitOfTheOfflineKernelMapAndClearBothStores
 }
 
 TEST(Pipeline, UpsampleStageIntegratesTheDensifiedScan) {
-  const upsample::UpsampleOptions up{.input = {.rows = 16, .cols = 256},
-                                     .output = {.rows = 61, .cols = 512}};
-  auto sut = Pipeline::create(
-      {.resolution_m = 0.2, .max_range_m = 20.0, .upsample = up, .threads = 2});
-  ASSERT_TRUE(sut);
-  // A 16-beam scan: a sphere of 4 m around the sensor in one sector, 6 m elsewhere.
-  RawScan raw;
-  raw.seq = 1;
-  upsample::RangeImage image(up.input);
-  for (int r = 0; r < image.layout.rows; ++r) {
-    for (int c = 0; c < image.layout.cols; ++c) image.at(r, c) = c < 64 ? 4.0F : 6.0F;
+  for (const char* method : {"bilinear", "iln"}) {
+    SCOPED_TRACE(method);
+    const auto up = upsample::makeUpsampleOptions(method, {.rows = 16, .cols = 256},
+                                                  {.rows = 61, .cols = 512}, DENSEMAP_ILN_MODEL);
+    ASSERT_TRUE(up) << up.error().message;
+    auto sut = Pipeline::create(
+        {.resolution_m = 0.2, .max_range_m = 20.0, .upsample = *up, .threads = 2});
+    ASSERT_TRUE(sut);
+    // A 16-beam scan: a sphere of 4 m around the sensor in one sector, 6 m elsewhere.
+    RawScan raw;
+    raw.seq = 1;
+    upsample::RangeImage image(up->input);
+    for (int r = 0; r < image.layout.rows; ++r) {
+      for (int c = 0; c < image.layout.cols; ++c) image.at(r, c) = c < 64 ? 4.0F : 6.0F;
+    }
+    for (const Point3f& p : upsample::backProject(image)) {
+      raw.xyz.insert(raw.xyz.end(), {p.x(), p.y(), p.z()});
+    }
+    (*sut)->start();
+    (*sut)->submit(raw);
+    ASSERT_TRUE(waitFor([&] { return (*sut)->counters().integrated == 1; }));
+    (*sut)->stop();
+    GridMap expected(0.2, SensorModel{}), sparse(0.2, SensorModel{});
+    Integrator integrator({.max_range_m = 20.0});
+    const Scan scan = *validateScan(raw, ScanLimits{});
+    integrator.integrate(expected, upsample::upsamplePoints(scan.points, *up),
+                         scan.originWorld());
+    integrator.integrate(sparse, scan.points, scan.originWorld());
+    const auto view = (*sut)->view();
+    EXPECT_EQ(view->knownCells(), expected.knownCells());
+    std::size_t mismatches = 0;
+    expected.forEachKnown(
+        [&](const VoxelKey& k, float v) { mismatches += view->logOdds(k) != v; });
+    EXPECT_EQ(mismatches, 0U);
+    EXPECT_GT(expected.knownCells(), sparse.knownCells()) << "densified scans fill more cells";
   }
-  for (const Point3f& p : upsample::backProject(image)) {
-    raw.xyz.insert(raw.xyz.end(), {p.x(), p.y(), p.z()});
-  }
-  (*sut)->start();
-  (*sut)->submit(raw);
-  ASSERT_TRUE(waitFor([&] { return (*sut)->counters().integrated == 1; }));
-  (*sut)->stop();
-  GridMap expected(0.2, SensorModel{}), sparse(0.2, SensorModel{});
-  Integrator integrator({.max_range_m = 20.0});
-  const Scan scan = *validateScan(raw, ScanLimits{});
-  integrator.integrate(expected, upsample::upsamplePoints(scan.points, up), scan.originWorld());
-  integrator.integrate(sparse, scan.points, scan.originWorld());
-  const auto view = (*sut)->view();
-  EXPECT_EQ(view->knownCells(), expected.knownCells());
-  std::size_t mismatches = 0;
-  expected.forEachKnown([&](const VoxelKey& k, float v) { mismatches += view->logOdds(k) != v; });
-  EXPECT_EQ(mismatches, 0U);
-  EXPECT_GT(expected.knownCells(), sparse.knownCells()) << "densified scans fill more cells";
 }
 
 TEST(Pipeline, RejectsAnUpsampleStageWithMismatchedFieldsOfView) {
