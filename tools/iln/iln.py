@@ -28,6 +28,8 @@ import torch
 from torch import nn
 
 MAX_RANGE = 80.0  # ranges are divided by this for the network
+PRIOR_MIN_WEIGHT = 1e-4  # the prior's floors (as in core/upsample/src/iln.cpp)
+PRIOR_MIN_RANGE = 1e-3
 
 
 def load_index(data):
@@ -91,8 +93,13 @@ class ResBlock(nn.Module):
 
 
 class ILN(nn.Module):
-    def __init__(self, width=16, blocks=2, dim=16):
+    """prior: add log(bilinear weight) - log(range) to each neighbour's score, so that an
+    untrained score (zero) is bilinear interpolation of inverse range, which is exact for planes
+    seen across the beam gap, and the network learns corrections to it."""
+
+    def __init__(self, width=16, blocks=2, dim=16, prior=True):
         super().__init__()
+        self.prior = prior
         self.head = nn.Conv2d(1, width, 3, padding=1)
         self.body = nn.Sequential(*[ResBlock(width) for _ in range(blocks)])
         self.embed = nn.Linear(width + 2, dim)
@@ -100,6 +107,9 @@ class ILN(nn.Module):
         self.k = nn.Linear(dim, dim)
         self.v = nn.Linear(dim, dim)
         self.score = nn.Linear(dim, 1)
+        if prior:
+            nn.init.zeros_(self.score.weight)
+            nn.init.zeros_(self.score.bias)
         self.width, self.blocks, self.dim = width, blocks, dim
 
     def forward(self, image, queries):
@@ -113,7 +123,12 @@ class ILN(nn.Module):
         z = self.embed(torch.cat([feats, offsets.unsqueeze(0).expand(b, -1, -1, -1)], -1))
         attention = torch.softmax(self.q(z) @ self.k(z).transpose(-1, -2) / math.sqrt(self.dim), -1)
         z = z + attention @ self.v(z)
-        score = self.score(z).squeeze(-1).masked_fill(ranges <= 0, -1e9)
+        score = self.score(z).squeeze(-1)
+        if self.prior:
+            bilinear_weight = (1 - offsets[..., 0].abs()) * (1 - offsets[..., 1].abs())
+            score = (score + torch.log(bilinear_weight.clamp(min=PRIOR_MIN_WEIGHT))
+                     - torch.log(ranges.clamp(min=PRIOR_MIN_RANGE)))
+        score = score.masked_fill(ranges <= 0, -1e9)
         weight = torch.softmax(score, -1) * (ranges > 0)
         return (weight * ranges).sum(-1)
 
@@ -211,6 +226,7 @@ def export(a, model, test):
     """Weights as an IlnModel protobuf; optionally a golden output on a crop of a test image."""
     pb = schema_module()
     message = pb.IlnModel(version=1, width=model.width, blocks=model.blocks, dim=model.dim,
+                          prior="inverse_bilinear" if model.prior else "",
                           max_range_m=MAX_RANGE, input_rows=test[0][0].shape[0],
                           input_cols=test[0][0].shape[1], provenance=a.provenance)
     for name, value in model.state_dict().items():
@@ -254,6 +270,8 @@ def main():
     p.add_argument("--width", type=int, default=16, help="encoder channels")
     p.add_argument("--blocks", type=int, default=2, help="encoder residual blocks")
     p.add_argument("--dim", type=int, default=16, help="local feature width")
+    p.add_argument("--prior", choices=["inverse_bilinear", "none"], default="inverse_bilinear",
+                   help="score prior (see ILN)")
     p.add_argument("--out", default="models/iln.pb", help="export: weights file")
     p.add_argument("--golden", help="export: also write a golden-output file")
     p.add_argument("--provenance", default="", help="export: how the model was trained")
@@ -267,7 +285,7 @@ def main():
     seeds = {int(s) for s in a.test_seeds.split(",")}
     items = load_index(a.data)
     test = pairs(items, seeds, "test", src, dst)
-    model = ILN(a.width, a.blocks, a.dim)
+    model = ILN(a.width, a.blocks, a.dim, prior=a.prior == "inverse_bilinear")
     if a.command == "train":
         train_model(a, model, pairs(items, seeds, "train", src, dst), test, src, dst)
     else:

@@ -24,7 +24,8 @@ using RowMatrixD = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::
 constexpr std::size_t kMaxFileBytes = std::size_t{256} << 20;
 constexpr int kMaxWidth = 512;
 constexpr int kMaxBlocks = 64;
-constexpr int kMaxDim = 64;  // the query stage keeps its vectors on the stack
+constexpr int kMaxDim = 64;
+constexpr float kPriorMinWeight = 1e-4F, kPriorMinRange = 1e-3F;  // as in tools/iln/iln.py  // the query stage keeps its vectors on the stack
 
 /// The model's tensors by name, each checked for its expected shape when taken.
 class Tensors {
@@ -159,7 +160,11 @@ Expected<IlnModel> IlnModel::parse(std::string_view bytes, const std::string& wh
   if (!(m.max_range_m() > 0.0F) || !std::isfinite(m.max_range_m())) {
     return makeError(what + ": max_range_m must be a positive number");
   }
+  if (m.prior() != "" && m.prior() != "inverse_bilinear") {
+    return makeError(what + ": unknown prior '" + m.prior() + "' ('' or inverse_bilinear)");
+  }
   IlnModel model;
+  model.prior_ = m.prior() == "inverse_bilinear";
   model.width_ = w;
   model.blocks_ = b;
   model.dim_ = d;
@@ -370,6 +375,12 @@ float IlnModel::predict(const IlnEncoding& enc, double row, double col) const {
       mixed += a * v[j];
     }
     score[i] = z[i] + mixed / sum + score_bias_;
+  }
+  if (prior_) {  // inverse-range bilinear interpolation as the starting point
+    for (int t = 0; t < 4; ++t) {
+      score[t] += std::log(std::max(static_cast<float>(n.weight[t]), kPriorMinWeight)) -
+                  std::log(std::max(n.range[t], kPriorMinRange));
+    }
   }
   // Softmax over the neighbours that have returns.
   float top = -std::numeric_limits<float>::infinity();

@@ -26,6 +26,8 @@ struct IlnEncoding {
 /// for each query laser the 4 input pixels around it, each with its feature and the query's
 /// offset from it, one self-attention layer across the 4, a linear score, and softmax weights
 /// over the neighbours that have returns; the output is the weighted sum of their ranges.
+/// Optionally (the "inverse_bilinear" prior) each score starts from log(bilinear weight) -
+/// log(range), so the network learns corrections to inverse-range bilinear interpolation.
 /// Weights come from `tools/iln/iln.py export` (schema idl/iln_weights.proto); inference is
 /// Eigen + TBB, matching PyTorch's output to float rounding.
 class IlnModel {
@@ -63,6 +65,7 @@ class IlnModel {
                        bool relu_input);
 
   int width_ = 0, blocks_ = 0, dim_ = 0;
+  bool prior_ = false;  // inverse_bilinear (see idl/iln_weights.proto)
   float max_range_ = 1.0F;
   std::string provenance_;
   Conv head_;
