@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Installs every Debian package densemap needs to build, test, benchmark and demo.
 # Idempotent: packages already present are skipped. Uses sudo when not root.
+# Usage: scripts/install-deps.sh [--iln]   (--iln: also PyTorch and protobuf for Python, to train
+# the ILN model with tools/iln/iln.py; never needed to build, test or run densemap)
 set -euo pipefail
 
 PACKAGES=(
@@ -14,6 +16,12 @@ PACKAGES=(
   libbz2-dev zlib1g-dev iproute2 util-linux
   clang-format clang-tidy
 )
+if [ "${1:-}" = "--iln" ]; then
+  PACKAGES+=(python3-torch python3-protobuf libopenblas0-pthread)
+elif [ $# -gt 0 ]; then
+  echo "usage: scripts/install-deps.sh [--iln]" >&2
+  exit 2
+fi
 
 missing=()
 for pkg in "${PACKAGES[@]}"; do

@@ -69,6 +69,38 @@ TEST(FitScale, MoreNegativeNeighboursShrinkMore) {
   EXPECT_LT(s_closer, s_one);
 }
 
+// Fig. 3.3-(c): "a positive neighbour ... prevents the kernel estimation from having too small
+// range". Under Eq. 3.6-3.7 a positive neighbour's target is its kernel value at s = 1, so a
+// positive neighbour inside that support resists shrinking (k falls below its target), while one
+// outside it (target 0) leaves every s <= 1 unchanged; it cannot grow the kernel beyond s = 1.
+TEST(FitScale, PositiveNeighboursInsideTheSupportHoldBackTheShrinking) {
+  const Eigen::Matrix3d sigma = 0.04 * Eigen::Matrix3d::Identity();
+  std::vector<Neighbour> negative_only{{Eigen::Vector3d(0.08, 0.0, 0.0), false}};  // r = 0.4
+  auto with_positives = negative_only;
+  for (const Neighbour& n : ringOfPositives(0.14)) with_positives.push_back(n);  // r = 0.7
+  const double s_neg = fitScale(sigma, Eigen::Vector3d::Zero(), negative_only, 1.0 / 16, 16.0);
+  const double s_pos = fitScale(sigma, Eigen::Vector3d::Zero(), with_positives, 1.0 / 16, 16.0);
+  RecordProperty("s_negative_only", std::to_string(s_neg));
+  RecordProperty("s_with_positives", std::to_string(s_pos));
+  EXPECT_LT(s_neg, 0.5);
+  EXPECT_GT(s_pos, s_neg * 1.2);
+  EXPECT_LT(s_pos, 1.0);
+}
+
+TEST(FitScale, PositiveNeighboursOutsideTheSupportDoNotChangeTheFit) {
+  const Eigen::Matrix3d sigma = 0.04 * Eigen::Matrix3d::Identity();
+  auto base = ringOfPositives(0.05);
+  base.push_back({Eigen::Vector3d(0.12, 0.0, 0.0), false});
+  auto far = base;
+  for (const Neighbour& n : ringOfPositives(0.25)) far.push_back(n);  // r = 1.25 at s = 1
+  for (const double s : {0.3, 0.6, 1.0}) {
+    EXPECT_DOUBLE_EQ(scaleObjective(s, sigma, Eigen::Vector3d::Zero(), base),
+                     scaleObjective(s, sigma, Eigen::Vector3d::Zero(), far));
+  }
+  EXPECT_NEAR(fitScale(sigma, Eigen::Vector3d::Zero(), far, 1.0 / 16, 16.0),
+              fitScale(sigma, Eigen::Vector3d::Zero(), base, 1.0 / 16, 16.0), 1e-9);
+}
+
 TEST(NeighbourCovariance, SamplesOnAPlaneGiveAFlatKernelAlignedWithIt) {
   std::vector<Neighbour> plane;
   for (int i = -3; i <= 3; ++i) {
