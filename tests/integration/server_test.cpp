@@ -15,6 +15,7 @@
 #include "densemap/raycast/integrator.hpp"
 #include "densemap/sim/sequence.hpp"
 #include "densemap/test_support/data_dir.hpp"
+#include "densemap/upsample/interpolation.hpp"
 
 extern char** environ;
 
@@ -94,12 +95,15 @@ std::vector<RawScan> simulatedScans(const std::filesystem::path& dir, int n) {
   return raws;
 }
 
-/// What the server must hold after these scans: the offline map of the same validated scans.
-std::unique_ptr<GridMap> offlineMap(const std::vector<RawScan>& raws) {
+/// What the server must hold after these scans: the offline map of the same validated scans,
+/// each densified first when `densify` is given.
+std::unique_ptr<GridMap> offlineMap(const std::vector<RawScan>& raws,
+                                    const upsample::UpsampleOptions* densify = nullptr) {
   auto map = std::make_unique<GridMap>(0.2, SensorModel{});
   Integrator integrator({.max_range_m = 25.0});
   for (const auto& raw : raws) {
-    const Scan scan = *validateScan(raw, ScanLimits{});
+    Scan scan = *validateScan(raw, ScanLimits{});
+    if (densify) scan.points = upsample::upsamplePoints(scan.points, *densify);
     integrator.integrate(*map, scan.pointsWorld(), scan.originWorld());
   }
   return map;
@@ -180,6 +184,26 @@ TEST(Server, ReplayedScansGiveTheOfflineMapExactlyForQueriesTilesAndDeltas) {
   ASSERT_TRUE(ray && core_ray);
   EXPECT_EQ(ray->ray.hit, core_ray->hit);
   EXPECT_EQ(ray->ray.hit_center, core_ray->hit_center);
+  EXPECT_EQ(server.stop(), 0);
+}
+
+TEST(Server, IlnUpsampleStageGivesTheOfflineDensifiedMap) {
+  test::TempDir dir;
+  const auto raws = simulatedScans(dir.path(), 3);  // vlp16: 16 beams, +-15 deg, 600 columns
+  ServerProcess server(dir.path(), 142,
+                       "upsample { enabled: true method: \"iln\" model: \"" DENSEMAP_ILN_MODEL
+                       "\" input_rows: 16 input_cols: 600 output_rows: 61 output_cols: 600 }\n");
+  auto client = connect(142);
+  ASSERT_TRUE(client);
+  replay(*client, raws);
+  const auto densify = upsample::makeUpsampleOptions("iln", {.rows = 16, .cols = 600},
+                                                     {.rows = 61, .cols = 600}, DENSEMAP_ILN_MODEL);
+  ASSERT_TRUE(densify) << densify.error().message;
+  const auto offline = offlineMap(raws, &*densify);
+  EXPECT_GT(offline->knownCells(), offlineMap(raws)->knownCells());
+  auto fetched = client->fetchMap(raws.size());
+  ASSERT_TRUE(fetched) << fetched.error().message;
+  EXPECT_EQ(diffMaps(*fetched->first, *offline).differing(), 0U);
   EXPECT_EQ(server.stop(), 0);
 }
 

@@ -4,6 +4,7 @@ images. Offline only (Debian's python3-torch, CPU); densemap itself never import
 
 Data: `densemap-upsample-eval --export DIR` (raw float32 range images + index.csv).
   train:    iln.py train  --data DIR --test-seeds 101,102 --model model.pt [--minutes M]
+            [--target 64x1024,128x2048]
   evaluate: iln.py eval   --data DIR --test-seeds 101,102 --model model.pt
   export:   iln.py export --data DIR --model model.pt --out models/iln.pb [--golden FILE]
             (protobuf weights, schema idl/iln_weights.proto, for densemap's C++ inference; the
@@ -173,12 +174,13 @@ def evaluate(model, test, src, dst):
     return {k: (v[0] / len(test), v[1] / len(test)) for k, v in sums.items()}
 
 
-def train_model(a, model, train, test, src, dst):
+def train_model(a, model, train, src):
     """L1 on range (Adam), cosine learning rate from --lr to --lr-final; each step takes one
-    training image and --queries random query lasers of its target grid."""
-    print(f"iln: {len(train)} training pairs, {len(test)} test pairs, "
+    training (image, target grid) pair and --queries random query lasers of that grid.
+    `train`: [(input, target, (target image, top, bottom), dst)] over every target grid."""
+    print(f"iln: {len(train)} training pairs, "
           f"{sum(p.numel() for p in model.parameters())} parameters", flush=True)
-    queries = query_grid(src[0], src[1], dst[0], dst[1])
+    grids = {item[3]: query_grid(src[0], src[1], item[3][0], item[3][1]) for item in train}
     opt = torch.optim.Adam(model.parameters(), lr=a.lr)
     generator = torch.Generator().manual_seed(a.seed)
     order = torch.randperm(len(train), generator=generator).tolist()
@@ -192,7 +194,8 @@ def train_model(a, model, train, test, src, dst):
         if cursor == len(order):
             order = torch.randperm(len(train), generator=generator).tolist()
             cursor = 0
-        image, target, _ = train[order[cursor]]
+        image, target, _, dst = train[order[cursor]]
+        queries = grids[dst]
         cursor += 1
         pick = torch.randperm(len(queries), generator=generator)[:a.queries]
         pred = model(image[None], queries[pick])[0]
@@ -261,7 +264,8 @@ def main():
     p.add_argument("--data", required=True)
     p.add_argument("--test-seeds", default="101,102")
     p.add_argument("--input", default="16x1024")
-    p.add_argument("--target", default="64x1024")
+    p.add_argument("--target", default="64x1024,128x2048",
+                   help="target grids, comma-separated (training draws from all of them)")
     p.add_argument("--model", default="iln.pt")
     p.add_argument("--minutes", type=float, default=10.0)
     p.add_argument("--lr", type=float, default=1e-4)
@@ -272,6 +276,7 @@ def main():
     p.add_argument("--dim", type=int, default=16, help="local feature width")
     p.add_argument("--prior", choices=["inverse_bilinear", "none"], default="inverse_bilinear",
                    help="score prior (see ILN)")
+    p.add_argument("--init", help="train: start from this checkpoint")
     p.add_argument("--out", default="models/iln.pb", help="export: weights file")
     p.add_argument("--golden", help="export: also write a golden-output file")
     p.add_argument("--provenance", default="", help="export: how the model was trained")
@@ -281,20 +286,25 @@ def main():
     torch.manual_seed(a.seed)
     torch.set_num_threads(a.threads)
     src = tuple(int(v) for v in a.input.split("x"))
-    dst = tuple(int(v) for v in a.target.split("x"))
+    targets = [tuple(int(v) for v in t.split("x")) for t in a.target.split(",")]
     seeds = {int(s) for s in a.test_seeds.split(",")}
     items = load_index(a.data)
-    test = pairs(items, seeds, "test", src, dst)
+    test = {dst: pairs(items, seeds, "test", src, dst) for dst in targets}
     model = ILN(a.width, a.blocks, a.dim, prior=a.prior == "inverse_bilinear")
     if a.command == "train":
-        train_model(a, model, pairs(items, seeds, "train", src, dst), test, src, dst)
+        if a.init:
+            model.load_state_dict(torch.load(a.init))
+        train = [pair + (dst,) for dst in targets for pair in pairs(items, seeds, "train", src, dst)]
+        train_model(a, model, train, src)
     else:
         model.load_state_dict(torch.load(a.model))
     if a.command == "export":
-        export(a, model, test)
+        export(a, model, test[targets[0]])
         return
-    for name, (mae, iou) in evaluate(model, test, src, dst).items():
-        print(f"iln: test {name:8s} {dst[0]}x{dst[1]}  MAE {mae:.3f} m  IoU {iou:.3f}")
+    for dst in targets:
+        for name, (mae, iou) in evaluate(model, test[dst], src, dst).items():
+            print(f"iln: test {name:8s} {dst[0]}x{dst[1]}  MAE {mae:.3f} m  IoU {iou:.3f}",
+                  flush=True)
 
 
 if __name__ == "__main__":
