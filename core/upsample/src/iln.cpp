@@ -25,7 +25,10 @@ constexpr std::size_t kMaxFileBytes = std::size_t{256} << 20;
 constexpr int kMaxWidth = 512;
 constexpr int kMaxBlocks = 64;
 constexpr int kMaxDim = 64;
-constexpr float kPriorMinWeight = 1e-4F, kPriorMinRange = 1e-3F;  // as in tools/iln/iln.py  // the query stage keeps its vectors on the stack
+constexpr float
+    kPriorMinWeight = 1e-4F,
+    kPriorMinRange =
+        1e-3F;  // as in tools/iln/iln.py  // the query stage keeps its vectors on the stack
 
 /// The model's tensors by name, each checked for its expected shape when taken.
 class Tensors {
@@ -197,9 +200,11 @@ Expected<IlnModel> IlnModel::parse(std::string_view bytes, const std::string& wh
   }
   std::map<std::string, std::vector<float>> linear;
   const std::pair<const char*, std::vector<std::uint32_t>> shapes[] = {
-      {"embed.weight", {ud, uw + 2}}, {"embed.bias", {ud}}, {"q.weight", {ud, ud}},
-      {"q.bias", {ud}},  {"k.weight", {ud, ud}}, {"k.bias", {ud}},  {"v.weight", {ud, ud}},
-      {"v.bias", {ud}},  {"score.weight", {1, ud}}, {"score.bias", {1}}};
+      {"embed.weight", {ud, uw + 2}}, {"embed.bias", {ud}},
+      {"q.weight", {ud, ud}},         {"q.bias", {ud}},
+      {"k.weight", {ud, ud}},         {"k.bias", {ud}},
+      {"v.weight", {ud, ud}},         {"v.bias", {ud}},
+      {"score.weight", {1, ud}},      {"score.bias", {1}}};
   for (const auto& [name, shape] : shapes) {
     auto t = tensors.take(name, shape);
     if (!t) return std::unexpected(t.error());
@@ -316,20 +321,16 @@ void IlnModel::encode(const RangeImage& input, IlnEncoding& enc) const {
   const Eigen::Map<const RowMatrix> fq(fq_.data(), dim_, width_), fk(fk_.data(), dim_, width_);
   const Eigen::Map<const Eigen::RowVectorXf> sz(sz_.data(), width_), sv(sv_.data(), width_);
   const auto n = static_cast<Eigen::Index>(plane);
-  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, n, 1024),
-                    [&](const tbb::blocked_range<Eigen::Index>& r) {
-                      const Eigen::Index b = r.begin(), len = r.end() - r.begin();
-                      const Eigen::Map<const RowMatrix, 0, Eigen::OuterStride<>> f(
-                          features.data() + b, width_, len, Eigen::OuterStride<>(n));
-                      Eigen::Map<Eigen::MatrixXf>(enc.query.data() + b * dim_, dim_, len)
-                          .noalias() = fq * f;
-                      Eigen::Map<Eigen::MatrixXf>(enc.key.data() + b * dim_, dim_, len)
-                          .noalias() = fk * f;
-                      Eigen::Map<Eigen::RowVectorXf>(enc.score.data() + b, len).noalias() =
-                          sz * f;
-                      Eigen::Map<Eigen::RowVectorXf>(enc.value.data() + b, len).noalias() =
-                          sv * f;
-                    });
+  tbb::parallel_for(
+      tbb::blocked_range<Eigen::Index>(0, n, 1024), [&](const tbb::blocked_range<Eigen::Index>& r) {
+        const Eigen::Index b = r.begin(), len = r.end() - r.begin();
+        const Eigen::Map<const RowMatrix, 0, Eigen::OuterStride<>> f(features.data() + b, width_,
+                                                                     len, Eigen::OuterStride<>(n));
+        Eigen::Map<Eigen::MatrixXf>(enc.query.data() + b * dim_, dim_, len).noalias() = fq * f;
+        Eigen::Map<Eigen::MatrixXf>(enc.key.data() + b * dim_, dim_, len).noalias() = fk * f;
+        Eigen::Map<Eigen::RowVectorXf>(enc.score.data() + b, len).noalias() = sz * f;
+        Eigen::Map<Eigen::RowVectorXf>(enc.value.data() + b, len).noalias() = sv * f;
+      });
 }
 
 float IlnModel::predict(const IlnEncoding& enc, double row, double col) const {
