@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <limits>
 #include <vector>
 
@@ -59,12 +60,6 @@ inline TraversalKind startTraversal(const VoxelGrid& grid, const Point3f& origin
   return TraversalKind::kRay;
 }
 
-/// The axis OctoMap's loop steps along: the smallest tMax, ties to the higher axis.
-inline int nextAxis(const double t_max[3]) {
-  if (t_max[0] < t_max[1]) return t_max[0] < t_max[2] ? 0 : 2;
-  return t_max[1] < t_max[2] ? 1 : 2;
-}
-
 /// Visits the voxels that OctoMap 1.9.7's `OcTreeBaseImpl::computeRayKeys(origin, end)` returns,
 /// in the same order: the origin's voxel first, the end point's voxel excluded.
 /// (Amanatides & Woo, "A Fast Voxel Traversal Algorithm for Ray Tracing", 1987.)
@@ -78,17 +73,35 @@ bool traverseRay(const VoxelGrid& grid, const Point3f& origin, const Point3f& en
   const TraversalKind kind = startTraversal(grid, origin, end, s);
   if (kind != TraversalKind::kRay) return kind == TraversalKind::kSameVoxel;
   visit(s.origin);
-  VoxelKey current = s.origin;
+  // Each step crosses the border with the smallest tMax, ties to the higher axis. The key lives
+  // in three registers (updating one 16-bit field of a VoxelKey in memory and comparing the
+  // whole key measured ~13% slower on BALM).
+  int key[3] = {s.origin.x, s.origin.y, s.origin.z};
+  const int last[3] = {s.end.x, s.end.y, s.end.z};
+  double t0 = s.t_max[0], t1 = s.t_max[1], t2 = s.t_max[2];
+  const double length = static_cast<double>(s.length);
   while (true) {
-    const int dim = nextAxis(s.t_max);
-    current[dim] = static_cast<std::uint16_t>(current[dim] + s.step[dim]);
-    s.t_max[dim] += s.t_delta[dim];
-    if (current == s.end) break;
-    const double dist_from_origin = std::min(std::min(s.t_max[0], s.t_max[1]), s.t_max[2]);
+    if (t0 < t1) {
+      if (t0 < t2) {
+        key[0] = (key[0] + s.step[0]) & 0xffff;  // OctoMap's uint16 key arithmetic
+        t0 += s.t_delta[0];
+      } else {
+        key[2] = (key[2] + s.step[2]) & 0xffff;
+        t2 += s.t_delta[2];
+      }
+    } else if (t1 < t2) {
+      key[1] = (key[1] + s.step[1]) & 0xffff;
+      t1 += s.t_delta[1];
+    } else {
+      key[2] = (key[2] + s.step[2]) & 0xffff;
+      t2 += s.t_delta[2];
+    }
+    if (key[0] == last[0] && key[1] == last[1] && key[2] == last[2]) break;
     // Accumulated rounding can step past the end voxel without entering it; OctoMap stops
     // once the travelled distance exceeds the ray length.
-    if (dist_from_origin > static_cast<double>(s.length)) break;
-    visit(current);
+    if (std::min(std::min(t0, t1), t2) > length) break;
+    visit(VoxelKey{static_cast<std::uint16_t>(key[0]), static_cast<std::uint16_t>(key[1]),
+                   static_cast<std::uint16_t>(key[2])});
   }
   return true;
 }
