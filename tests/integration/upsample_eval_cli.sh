@@ -13,10 +13,11 @@ trap 'rm -rf "$dir"' EXIT
 grep -o '"iou": [0-9.]*' "$dir/r.json" | awk '{ if ($2 <= 0.05 || $2 > 1) bad = 1 } END { exit bad }'
 grep -o '"mae": [0-9.]*' "$dir/r.json" | awk '{ if ($2 <= 0 || $2 > 5) bad = 1 } END { exit bad }'
 # Training data export: one file per pose and grid, listed in index.csv, of rows*cols floats.
-"$bin" --scenes indoor --seeds 3 --scans 2 --targets 64x1024 --threads 2 --export "$dir/data" \
+# Seeds as a range: 3..4 is seeds 3 and 4.
+"$bin" --scenes indoor --seeds 3..4 --scans 2 --targets 64x1024 --threads 2 --export "$dir/data" \
   >/dev/null 2>&1
-[ "$(tail -n +2 "$dir/data/index.csv" | wc -l)" -eq 4 ]
-[ "$(stat -c %s "$dir/data/indoor_3_1_64x1024.f32")" -eq $((64 * 1024 * 4)) ]
+[ "$(tail -n +2 "$dir/data/index.csv" | wc -l)" -eq 8 ]
+[ "$(stat -c %s "$dir/data/indoor_4_1_64x1024.f32")" -eq $((64 * 1024 * 4)) ]
 [ "$(stat -c %s "$dir/data/indoor_3_0_16x1024.f32")" -eq $((16 * 1024 * 4)) ]
 # ILN with the committed model: a result with sane metrics.
 "$bin" --scenes indoor --seeds 9 --scans 1 --targets 64x1024 --methods iln --model "$model" \
@@ -32,4 +33,8 @@ if "$bin" --methods bicubic --scans 1 2>"$dir/err.txt" >/dev/null; then exit 1; 
 grep -q "unknown interpolation" "$dir/err.txt"
 if "$bin" --targets 64by1024 --scans 1 2>"$dir/err.txt" >/dev/null; then exit 1; fi
 grep -q "ROWSxCOLS" "$dir/err.txt"
+for seeds in 1..40x 1.40 5..2 x; do
+  if "$bin" --seeds "$seeds" --scans 1 2>"$dir/err.txt" >/dev/null; then exit 1; fi
+  grep -q "not a number or a range" "$dir/err.txt"
+done
 echo "upsample eval CLI: ok"

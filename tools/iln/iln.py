@@ -3,8 +3,10 @@
 images. Offline only (Debian's python3-torch, CPU); densemap itself never imports torch.
 
 Data: `densemap-upsample-eval --export DIR` (raw float32 range images + index.csv).
-  train:    iln.py train  --data DIR --test-seeds 101,102 --model model.pt [--minutes M]
-            [--target 64x1024,128x2048]
+  train:    iln.py train  --data DIR[,DIR2] --test-seeds 101,102 --model model.pt [--minutes M]
+            [--input 16x1024,16x2048] [--target 64x1024,128x2048,64x2048]
+            (several directories: one sensor field of view each; every input/target pair that
+            a directory holds is trained on)
   evaluate: iln.py eval   --data DIR --test-seeds 101,102 --model model.pt
   export:   iln.py export --data DIR --model model.pt --out models/iln.pb [--golden FILE]
             (protobuf weights, schema idl/iln_weights.proto, for densemap's C++ inference; the
@@ -34,17 +36,23 @@ PRIOR_MIN_RANGE = 1e-3
 
 
 def load_index(data):
-    """{(scene, seed, pose): {(rows, cols): (array, top, bottom)}}"""
+    """{(dir, scene, seed, pose): {(rows, cols): (array, top, bottom)}} over the comma-separated
+    data directories (an item pairs only the grids of one directory: one field of view)."""
     items = {}
+    for directory in data.split(","):
+        load_directory(directory, items)
+    return items
+
+
+def load_directory(data, items):
     with open(os.path.join(data, "index.csv")) as f:
         for row in csv.DictReader(f):
             rows, cols = int(row["rows"]), int(row["cols"])
             image = np.fromfile(os.path.join(data, row["file"]), dtype=np.float32)
             image = image.reshape(rows, cols)
-            key = (row["scene"], int(row["seed"]), int(row["pose"]))
+            key = (data, row["scene"], int(row["seed"]), int(row["pose"]))
             items.setdefault(key, {})[(rows, cols)] = (
                 image, float(row["top_deg"]), float(row["bottom_deg"]))
-    return items
 
 
 def query_grid(in_rows, in_cols, out_rows, out_cols):
@@ -74,10 +82,13 @@ def neighbours(image, queries):
     return ranges, flat, offsets
 
 
+def bilinear_weights(offsets):
+    return (1 - offsets[..., 0].abs()) * (1 - offsets[..., 1].abs())
+
+
 def bilinear(image, queries):
     ranges, _, offsets = neighbours(image, queries)
-    weight = (1 - offsets[..., 0].abs()) * (1 - offsets[..., 1].abs())
-    weight = weight.unsqueeze(0) * (ranges > 0)
+    weight = bilinear_weights(offsets).unsqueeze(0) * (ranges > 0)
     total = weight.sum(-1)
     return torch.where(total > 1e-9, (weight * ranges).sum(-1) / total.clamp(min=1e-9),
                        torch.zeros_like(total))
@@ -125,18 +136,21 @@ class ILN(nn.Module):
         attention = torch.softmax(self.q(z) @ self.k(z).transpose(-1, -2) / math.sqrt(self.dim), -1)
         z = z + attention @ self.v(z)
         score = self.score(z).squeeze(-1)
+        bilinear_weight = bilinear_weights(offsets)
         if self.prior:
-            bilinear_weight = (1 - offsets[..., 0].abs()) * (1 - offsets[..., 1].abs())
             score = (score + torch.log(bilinear_weight.clamp(min=PRIOR_MIN_WEIGHT))
                      - torch.log(ranges.clamp(min=PRIOR_MIN_RANGE)))
-        score = score.masked_fill(ranges <= 0, -1e9)
-        weight = torch.softmax(score, -1) * (ranges > 0)
+        # A neighbour takes part when it has a return and a non-zero bilinear weight (a query on
+        # a pixel line does not reach across it), as in bilinear interpolation.
+        usable = (ranges > 0) & (bilinear_weight > 0)
+        score = score.masked_fill(~usable, -1e9)
+        weight = torch.softmax(score, -1) * usable
         return (weight * ranges).sum(-1)
 
 
 def pairs(items, seeds, split, src, dst):
     out = []
-    for (scene, seed, pose), grids in sorted(items.items()):
+    for (_, scene, seed, pose), grids in sorted(items.items()):
         if (seed in seeds) != (split == "test") or src not in grids or dst not in grids:
             continue
         out.append((torch.from_numpy(grids[src][0]), torch.from_numpy(grids[dst][0]), grids[dst]))
@@ -174,13 +188,13 @@ def evaluate(model, test, src, dst):
     return {k: (v[0] / len(test), v[1] / len(test)) for k, v in sums.items()}
 
 
-def train_model(a, model, train, src):
+def train_model(a, model, train):
     """L1 on range (Adam), cosine learning rate from --lr to --lr-final; each step takes one
     training (image, target grid) pair and --queries random query lasers of that grid.
-    `train`: [(input, target, (target image, top, bottom), dst)] over every target grid."""
+    `train`: [(input, target, (target image, top, bottom), (src, dst))] over every grid pair."""
     print(f"iln: {len(train)} training pairs, "
           f"{sum(p.numel() for p in model.parameters())} parameters", flush=True)
-    grids = {item[3]: query_grid(src[0], src[1], item[3][0], item[3][1]) for item in train}
+    grids = {item[3]: query_grid(*item[3][0], *item[3][1]) for item in train}
     opt = torch.optim.Adam(model.parameters(), lr=a.lr)
     generator = torch.Generator().manual_seed(a.seed)
     order = torch.randperm(len(train), generator=generator).tolist()
@@ -261,9 +275,11 @@ def export(a, model, test):
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("command", choices=["train", "eval", "export"])
-    p.add_argument("--data", required=True)
+    p.add_argument("--data", required=True,
+                   help="data directories, comma-separated (one field of view each)")
     p.add_argument("--test-seeds", default="101,102")
-    p.add_argument("--input", default="16x1024")
+    p.add_argument("--input", default="16x1024",
+                   help="input grids, comma-separated (pairs where the data has both grids)")
     p.add_argument("--target", default="64x1024,128x2048",
                    help="target grids, comma-separated (training draws from all of them)")
     p.add_argument("--model", default="iln.pt")
@@ -285,26 +301,28 @@ def main():
     a = p.parse_args()
     torch.manual_seed(a.seed)
     torch.set_num_threads(a.threads)
-    src = tuple(int(v) for v in a.input.split("x"))
+    sources = [tuple(int(v) for v in t.split("x")) for t in a.input.split(",")]
     targets = [tuple(int(v) for v in t.split("x")) for t in a.target.split(",")]
     seeds = {int(s) for s in a.test_seeds.split(",")}
     items = load_index(a.data)
-    test = {dst: pairs(items, seeds, "test", src, dst) for dst in targets}
+    grid_pairs = [(src, dst) for src in sources for dst in targets]
+    test = {g: pairs(items, seeds, "test", *g) for g in grid_pairs}
+    test = {g: t for g, t in test.items() if t}
     model = ILN(a.width, a.blocks, a.dim, prior=a.prior == "inverse_bilinear")
     if a.command == "train":
         if a.init:
             model.load_state_dict(torch.load(a.init))
-        train = [pair + (dst,) for dst in targets for pair in pairs(items, seeds, "train", src, dst)]
-        train_model(a, model, train, src)
+        train = [pair + (g,) for g in grid_pairs for pair in pairs(items, seeds, "train", *g)]
+        train_model(a, model, train)
     else:
         model.load_state_dict(torch.load(a.model))
     if a.command == "export":
-        export(a, model, test[targets[0]])
+        export(a, model, next(iter(test.values())))
         return
-    for dst in targets:
-        for name, (mae, iou) in evaluate(model, test[dst], src, dst).items():
-            print(f"iln: test {name:8s} {dst[0]}x{dst[1]}  MAE {mae:.3f} m  IoU {iou:.3f}",
-                  flush=True)
+    for (src, dst), items_test in test.items():
+        for name, (mae, iou) in evaluate(model, items_test, src, dst).items():
+            print(f"iln: test {name:8s} {src[0]}x{src[1]} -> {dst[0]}x{dst[1]}  "
+                  f"MAE {mae:.3f} m  IoU {iou:.3f}", flush=True)
 
 
 if __name__ == "__main__":

@@ -9,9 +9,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
-#include <memory>
 #include <filesystem>
 #include <map>
+#include <memory>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -69,19 +69,21 @@ struct Sum {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string scenes_list = "outdoor,indoor", seeds_list = "101,102", methods_list =
-                                                                          "bilinear,nearest",
-              input_text = "16x1024", targets_list = "64x1024,128x2048,256x4096", json_path;
+  std::string scenes_list = "outdoor,indoor", seeds_list = "101,102",
+              methods_list = "bilinear,nearest", input_text = "16x1024",
+              targets_list = "64x1024,128x2048,256x4096", json_path;
   double top = 15.0, bottom = -15.0, max_range = 80.0, voxel = 0.1;
   int scans = 4, threads = 0;
   CLI::App app{"densemap-upsample-eval: LiDAR upsampling accuracy on simulated scenes"};
-  app.add_option("--scenes", scenes_list, "densemap-sim scenes (test split)")->capture_default_str();
-  app.add_option("--seeds", seeds_list, "Scene seeds (test split)")->capture_default_str();
-  app.add_option("--scans", scans, "Poses per scene and seed")->capture_default_str()
+  app.add_option("--scenes", scenes_list, "densemap-sim scenes (test split)")
+      ->capture_default_str();
+  app.add_option("--seeds", seeds_list, "Scene seeds (test split), e.g. 101,102 or 1..40")
+      ->capture_default_str();
+  app.add_option("--scans", scans, "Poses per scene and seed")
+      ->capture_default_str()
       ->check(CLI::Range(1, 1000));
   app.add_option("--input", input_text, "Input grid ROWSxCOLS")->capture_default_str();
-  app.add_option("--targets", targets_list, "Target grids, comma-separated")
-      ->capture_default_str();
+  app.add_option("--targets", targets_list, "Target grids, comma-separated")->capture_default_str();
   app.add_option("--fov-top", top, "Top beam elevation, deg")->capture_default_str();
   app.add_option("--fov-bottom", bottom, "Bottom beam elevation, deg")->capture_default_str();
   app.add_option("--max-range", max_range, "Sensor range, m")->capture_default_str();
@@ -105,7 +107,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--real-bottom", real_bottom, "Its bottom beam, deg (BALM's: -44.75)")
       ->capture_default_str();
-  app.add_option("--reduce", reduce, "Keep every n-th real beam")->capture_default_str()
+  app.add_option("--reduce", reduce, "Keep every n-th real beam")
+      ->capture_default_str()
       ->check(CLI::Range(2, 16));
   app.add_option("--real-first", real_first, "First real scan")->capture_default_str();
   app.add_option("--real-limit", real_limit, "Real scans to use (0: all)")->capture_default_str();
@@ -128,9 +131,11 @@ int main(int argc, char** argv) {
       auto loaded = densemap::upsample::IlnModel::load(model_path);
       if (!loaded) return fail(loaded.error().message + " (--model)");
       model = std::make_shared<const densemap::upsample::IlnModel>(std::move(*loaded));
-      std::fprintf(stderr, "densemap-upsample-eval: ILN model %s: width %d, %d blocks, dim %d, "
-                   "%zu parameters\n", model_path.c_str(), model->width(), model->blocks(),
-                   model->dim(), model->parameters());
+      std::fprintf(stderr,
+                   "densemap-upsample-eval: ILN model %s: width %d, %d blocks, dim %d, "
+                   "%zu parameters\n",
+                   model_path.c_str(), model->width(), model->blocks(), model->dim(),
+                   model->parameters());
     }
     methods.push_back(*parsed);
   }
@@ -145,14 +150,9 @@ int main(int argc, char** argv) {
     if (!layout) return fail(layout.error().message);
     targets.push_back(*layout);
   }
-  std::vector<unsigned> seeds;
-  for (const std::string& s : densemap::tools::splitList(seeds_list)) {
-    try {
-      seeds.push_back(static_cast<unsigned>(std::stoul(s)));
-    } catch (const std::exception&) {
-      return fail("seed '" + s + "' is not a number");
-    }
-  }
+  const auto parsed_seeds = densemap::tools::parseNumberList(seeds_list);
+  if (!parsed_seeds) return fail("--seeds: " + parsed_seeds.error());
+  const std::vector<unsigned>& seeds = *parsed_seeds;
   const std::vector<std::string> scene_names = densemap::tools::splitList(scenes_list);
   if (scene_names.empty() || seeds.empty()) return fail("no scene or no seed to test on");
 
@@ -162,11 +162,11 @@ int main(int argc, char** argv) {
                                 const densemap::upsample::RangeImage& image) {
     if (export_dir.empty()) return densemap::Expected<void>{};
     const RangeLayout& l = image.layout;
-    const std::string file = scene + "_" + std::to_string(seed) + "_" + std::to_string(pose) +
-                             "_" + std::to_string(l.rows) + "x" + std::to_string(l.cols) + ".f32";
+    const std::string file = scene + "_" + std::to_string(seed) + "_" + std::to_string(pose) + "_" +
+                             std::to_string(l.rows) + "x" + std::to_string(l.cols) + ".f32";
     std::ostringstream row;
-    row << scene << ',' << seed << ',' << pose << ',' << l.rows << ',' << l.cols << ','
-        << l.top_deg << ',' << l.bottom_deg << ',' << file << '\n';
+    row << scene << ',' << seed << ',' << pose << ',' << l.rows << ',' << l.cols << ',' << l.top_deg
+        << ',' << l.bottom_deg << ',' << file << '\n';
     index += row.str();
     return densemap::writeFileAtomically(
         std::filesystem::path(export_dir) / file,
@@ -205,11 +205,11 @@ int main(int argc, char** argv) {
             const auto truth_points = densemap::upsample::backProject(truth);
             for (std::size_t m = 0; m < methods.size(); ++m) {
               const auto t0 = std::chrono::steady_clock::now();
-              const auto predicted = densemap::upsample::upsample(low, targets[t], methods[m],
-                                                                  model.get());
-              const double ms = std::chrono::duration<double, std::milli>(
-                                    std::chrono::steady_clock::now() - t0)
-                                    .count();
+              const auto predicted =
+                  densemap::upsample::upsample(low, targets[t], methods[m], model.get());
+              const double ms =
+                  std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                      .count();
               const auto range = *densemap::upsample::compareRanges(predicted, truth);
               const auto points = densemap::eval::comparePointSets(
                   densemap::upsample::backProject(predicted), truth_points, voxel);
@@ -224,8 +224,8 @@ int main(int argc, char** argv) {
 
   if (!export_error.empty()) return fail(export_error);
   if (!export_dir.empty()) {
-    if (auto ok = densemap::writeFileAtomically(std::filesystem::path(export_dir) / "index.csv",
-                                                index);
+    if (auto ok =
+            densemap::writeFileAtomically(std::filesystem::path(export_dir) / "index.csv", index);
         !ok) {
       return fail(ok.error().message);
     }
@@ -263,8 +263,8 @@ int main(int argc, char** argv) {
       arena.execute([&] {
         for (std::size_t m = 0; m < methods.size(); ++m) {
           const auto t0 = std::chrono::steady_clock::now();
-          const auto predicted = densemap::upsample::upsample(sparse, real_layout, methods[m],
-                                                                  model.get());
+          const auto predicted =
+              densemap::upsample::upsample(sparse, real_layout, methods[m], model.get());
           const double ms =
               std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
                   .count();
@@ -282,10 +282,11 @@ int main(int argc, char** argv) {
                  points, outside, collisions);
   }
 
-  std::printf("densemap-upsample-eval: scenes %s, seeds %s, %d scans each, input %dx%d, FOV "
-              "[%g, %g] deg, max range %g m, voxel %g m\n",
-              scenes_list.c_str(), seeds_list.c_str(), scans, input->rows, input->cols, bottom,
-              top, max_range, voxel);
+  std::printf(
+      "densemap-upsample-eval: scenes %s, seeds %s, %d scans each, input %dx%d, FOV "
+      "[%g, %g] deg, max range %g m, voxel %g m\n",
+      scenes_list.c_str(), seeds_list.c_str(), scans, input->rows, input->cols, bottom, top,
+      max_range, voxel);
   std::printf("%-9s %-10s %8s %8s %7s %9s %7s %7s %9s %7s\n", "method", "target", "mae_m",
               "coverage", "iou", "precision", "recall", "f1", "ms/scan", "ms_p50");
   std::string json = "{\"results\": [";
@@ -303,9 +304,9 @@ int main(int argc, char** argv) {
                   "%s{\"method\": \"%s\", \"dataset\": \"%s\", \"rows\": %d, \"cols\": %d, "
                   "\"mae\": %.5f, \"iou\": %.5f, \"precision\": %.5f, \"recall\": %.5f, "
                   "\"f1\": %.5f, \"ms_per_scan\": %.3f, \"ms_p50\": %.3f}",
-                  first ? "" : ", ", method.c_str(), dataset.c_str(), grid.rows,
-                  grid.cols, sum.mae / n, sum.iou / n, sum.precision / n, sum.recall / n,
-                  sum.f1 / n, sum.ms / n, p50);
+                  first ? "" : ", ", method.c_str(), dataset.c_str(), grid.rows, grid.cols,
+                  sum.mae / n, sum.iou / n, sum.precision / n, sum.recall / n, sum.f1 / n,
+                  sum.ms / n, p50);
     json += entry;
     first = false;
   };

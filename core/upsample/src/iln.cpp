@@ -335,8 +335,12 @@ void IlnModel::encode(const RangeImage& input, IlnEncoding& enc) const {
 
 float IlnModel::predict(const IlnEncoding& enc, double row, double col) const {
   const Neighbourhood n = neighbourhood(enc.input, row, col);
+  bool usable[4];
   bool any = false;
-  for (const float r : n.range) any = any || r > 0.0F;
+  for (int t = 0; t < 4; ++t) {
+    usable[t] = n.usable(t);
+    any = any || usable[t];
+  }
   if (!any) return 0.0F;
   const int d = enc.dim;
   // Each neighbour's query and key: its pixel's projections plus the offset's terms (float,
@@ -383,14 +387,14 @@ float IlnModel::predict(const IlnEncoding& enc, double row, double col) const {
                   std::log(std::max(n.range[t], kPriorMinRange));
     }
   }
-  // Softmax over the neighbours that have returns.
+  // Softmax over the usable neighbours.
   float top = -std::numeric_limits<float>::infinity();
   for (int t = 0; t < 4; ++t) {
-    if (n.range[t] > 0.0F) top = std::max(top, score[t]);
+    if (usable[t]) top = std::max(top, score[t]);
   }
   float sum = 0.0F, blended = 0.0F;
   for (int t = 0; t < 4; ++t) {
-    if (n.range[t] <= 0.0F) continue;
+    if (!usable[t]) continue;
     const float w = std::exp(score[t] - top);
     sum += w;
     blended += w * n.range[t];

@@ -102,14 +102,14 @@ TEST(Iln, CommittedModelUpsamplesWithinTheNeighbourRanges) {
       const auto [row, col] = out.layout.toLayout(input.layout, r, c);
       const Neighbourhood n = neighbourhood(input, row, col);
       float lo = 1e9F, hi = 0.0F;
-      for (const float v : n.range) {
-        if (v > 0.0F) lo = std::min(lo, v), hi = std::max(hi, v);
+      for (int t = 0; t < 4; ++t) {
+        if (n.usable(t)) lo = std::min(lo, n.range[t]), hi = std::max(hi, n.range[t]);
       }
       const float got = out.at(r, c);
       EXPECT_EQ(got, model->predict(enc, row, col));
       if (hi == 0.0F) {
         EXPECT_EQ(got, 0.0F);
-      } else {  // a convex blend of the neighbours with returns
+      } else {  // a convex blend of the usable neighbours
         EXPECT_GE(got, lo * (1 - 1e-6F));
         EXPECT_LE(got, hi * (1 + 1e-6F));
       }
@@ -117,7 +117,7 @@ TEST(Iln, CommittedModelUpsamplesWithinTheNeighbourRanges) {
   }
 }
 
-TEST(Iln, FlatScoresAverageTheNeighboursWithReturns) {
+TEST(Iln, FlatScoresAverageTheUsableNeighbours) {
   const auto model = parsed(randomModel(4, 1, 4, 1, /*flat_score=*/true));
   ASSERT_TRUE(model) << model.error().message;
   const RangeImage input = randomImage(8, 32, 2);
@@ -126,11 +126,29 @@ TEST(Iln, FlatScoresAverageTheNeighboursWithReturns) {
     const Neighbourhood n = neighbourhood(input, row, col);
     double sum = 0.0;
     int count = 0;
-    for (const float v : n.range) {
-      if (v > 0.0F) sum += v, ++count;
+    for (int t = 0; t < 4; ++t) {
+      if (n.usable(t)) sum += n.range[t], ++count;
     }
     EXPECT_NEAR(model->predict(enc, row, col), count ? sum / count : 0.0, 1e-4);
   }
+}
+
+TEST(Iln, AQueryOnAPixelLineNeverReachesAcrossIt) {
+  const auto model = IlnModel::load(DENSEMAP_ILN_MODEL);
+  ASSERT_TRUE(model) << model.error().message;
+  RangeImage input = randomImage(8, 32, 3);
+  for (int c = 0; c < 32; ++c) input.at(3, c) = 0.0F;  // a row without returns
+  for (int c = 0; c < 32; ++c) input.at(4, c) = 10.0F + c;
+  const IlnEncoding enc = model->encode(input);
+  // On row 3 only row 3's pixels can be blended (as bilinear does): no range from row 4.
+  EXPECT_EQ(model->predict(enc, 3.0, 5.5), 0.0F);
+  EXPECT_EQ(interpolate(input, 3.0, 5.5, Interpolation::kBilinear), 0.0F);
+  // On row 4 it is row 4's own blend, between its two pixels.
+  const float on_row4 = model->predict(enc, 4.0, 5.5);
+  EXPECT_GE(on_row4, 15.0F);
+  EXPECT_LE(on_row4, 16.0F);
+  // On a column line (col 7.0) only column 7 is used.
+  EXPECT_EQ(model->predict(enc, 3.5, 7.0), 17.0F);
 }
 
 TEST(Iln, ResultDoesNotDependOnTheThreadCountOrRepeat) {

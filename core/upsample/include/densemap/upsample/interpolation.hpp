@@ -27,6 +27,10 @@ struct Neighbourhood {
   float range[4];   // 0: no return
   double weight[4];  // bilinear, summing to 1
   double d_row, d_col;  // the query's offset from the top-left neighbour, each in [0, 1]
+
+  /// Whether neighbour t may be blended: it has a return and the query is not on a pixel line
+  /// that leaves it out (zero bilinear weight).
+  [[nodiscard]] bool usable(int t) const { return range[t] > 0.0F && weight[t] > 0.0; }
 };
 [[nodiscard]] Neighbourhood neighbourhood(const RangeImage& input, double row, double col);
 
