@@ -281,32 +281,6 @@ inline BackwardMode prepareBackward(const VoxelGrid& grid, const Point3f& origin
   return BackwardMode::kFast;
 }
 
-namespace detail {
-
-/// One fast backward step of `walk`: undoes the latest crossing. Returns false, changing
-/// nothing, when the latest crossing does not win by the bound (hand over to backwardExact).
-inline bool backwardStep(BackwardWalk& walk) {
-  const double h0 = walk.head[0], h1 = walk.head[1], h2 = walk.head[2];
-  // The latest crossing and the runner-up (-inf when an axis has none left), without
-  // data-dependent branches.
-  const double high01 = std::max(h0, h1);
-  const double latest = std::max(high01, h2);
-  const double second = std::max(std::min(high01, h2), std::min(h0, h1));
-  if (!(latest - second > walk.bound)) return false;
-  const int dim = h2 > high01 ? 2 : (h0 >= h1 ? 0 : 1);
-  const double previous = walk.head[dim] - walk.s.t_delta[dim];
-  walk.head[dim] = --walk.next[dim] >= 0 ? previous : -std::numeric_limits<double>::infinity();
-  walk.key[dim] = (walk.key[dim] - walk.s.step[dim]) & 0xffff;  // uint16_t, as OcTreeKey's
-  return true;
-}
-
-inline VoxelKey walkKey(const BackwardWalk& walk) {
-  return {static_cast<std::uint16_t>(walk.key[0]), static_cast<std::uint16_t>(walk.key[1]),
-          static_cast<std::uint16_t>(walk.key[2])};
-}
-
-}  // namespace detail
-
 /// Visits the voxels traverseRay(origin, end) visits in reverse order — end side first, the
 /// origin's voxel last — for as long as `visit(key)` returns true. Returns how many voxels the
 /// forward traversal has (visited or not).
@@ -332,12 +306,38 @@ std::size_t traverseRayBackward(const VoxelGrid& grid, const Point3f& origin, co
     return detail::backwardExact(grid, origin, end, walk.s, walk.crossings,
                                  mode == BackwardMode::kExact, scratch, 0, visit);
   }
+  // Each fast step undoes the latest crossing (ties to the lower axis) if it beats the runner-up
+  // (-inf when an axis has none left) by the bound; else the exact walk takes over. Heads,
+  // counts and key are locals with one branch per axis, as in traverseRay: stepping through
+  // `walk` in memory, branch-free, measured 48% slower (mark 14.2 -> 9.6 ms on BALM at 0.2 m).
+  constexpr double kNone = -std::numeric_limits<double>::infinity();
+  const TraversalStart& s = walk.s;
+  const double bound = walk.bound;
+  double h0 = walk.head[0], h1 = walk.head[1], h2 = walk.head[2];
+  int n0 = walk.next[0], n1 = walk.next[1], n2 = walk.next[2];
+  int k0 = walk.key[0], k1 = walk.key[1], k2 = walk.key[2];
   for (std::size_t done = 0; done < walk.total; ++done) {
-    if (!detail::backwardStep(walk)) {
-      return detail::backwardExact(grid, origin, end, walk.s, walk.crossings, true, scratch, done,
+    const double high01 = std::max(h0, h1);
+    const double latest = std::max(high01, h2);
+    const double second = std::max(std::min(high01, h2), std::min(h0, h1));
+    if (!(latest - second > bound)) {
+      return detail::backwardExact(grid, origin, end, s, walk.crossings, true, scratch, done,
                                    visit);
     }
-    if (!visit(detail::walkKey(walk))) break;
+    if (h2 > high01) {
+      h2 = --n2 >= 0 ? h2 - s.t_delta[2] : kNone;
+      k2 = (k2 - s.step[2]) & 0xffff;  // uint16_t, as OcTreeKey's
+    } else if (h0 >= h1) {
+      h0 = --n0 >= 0 ? h0 - s.t_delta[0] : kNone;
+      k0 = (k0 - s.step[0]) & 0xffff;
+    } else {
+      h1 = --n1 >= 0 ? h1 - s.t_delta[1] : kNone;
+      k1 = (k1 - s.step[1]) & 0xffff;
+    }
+    if (!visit(VoxelKey{static_cast<std::uint16_t>(k0), static_cast<std::uint16_t>(k1),
+                        static_cast<std::uint16_t>(k2)})) {
+      break;
+    }
   }
   return walk.total;
 }
