@@ -34,15 +34,20 @@ std::uint64_t cellCode(const RayEnd& r, const VoxelKey& origin) {
   return code;
 }
 
-/// LSD radix sort of the top 40 bits (5 passes of 8 bits); `tmp` is scratch.
-void radixSort(std::vector<std::uint64_t>& v, std::vector<std::uint64_t>& tmp) {
+/// LSD radix sort of the top 40 bits (3 passes of 14, 13 and 13 bits: measured faster than 5
+/// of 8); `tmp` and `count` are scratch.
+void radixSort(std::vector<std::uint64_t>& v, std::vector<std::uint64_t>& tmp,
+               std::vector<std::uint32_t>& count) {
   tmp.resize(v.size());
-  for (int shift = kIndexBits; shift < 64; shift += 8) {
-    std::size_t count[257] = {};
-    for (const std::uint64_t x : v) ++count[((x >> shift) & 0xff) + 1];
-    for (int b = 0; b < 256; ++b) count[b + 1] += count[b];
-    for (const std::uint64_t x : v) tmp[count[(x >> shift) & 0xff]++] = x;
+  int shift = kIndexBits;
+  for (const int bits : {14, 13, 13}) {
+    const std::uint64_t mask = (std::uint64_t{1} << bits) - 1;
+    count.assign((std::size_t{1} << bits) + 1, 0);
+    for (const std::uint64_t x : v) ++count[((x >> shift) & mask) + 1];
+    for (std::size_t b = 0; b + 1 < count.size(); ++b) count[b + 1] += count[b];
+    for (const std::uint64_t x : v) tmp[count[(x >> shift) & mask]++] = x;
     v.swap(tmp);
+    shift += bits;
   }
 }
 
@@ -81,6 +86,18 @@ void criticalSlopes(double da0, int na, double db0, int nb, double res, double l
       for (int n = n0; n <= n1; ++n) add(da0 + n * res, db);
     }
   }
+}
+
+/// How many of the sorted `values` are below `v` (std::lower_bound's index): a branch-free
+/// count for short lists (a cell's critical slopes mostly are), a binary search otherwise.
+std::size_t countBelow(const std::vector<double>& values, double v) {
+  if (values.size() > 64) {
+    return static_cast<std::size_t>(std::lower_bound(values.begin(), values.end(), v) -
+                                    values.begin());
+  }
+  std::size_t count = 0;
+  for (const double x : values) count += x < v ? 1 : 0;
+  return count;
 }
 
 }  // namespace
@@ -128,11 +145,17 @@ std::size_t SuperRayBuilder::groupCell(const VoxelGrid& grid, const Point3f& ori
   // Rays with equal step signs share the traversal's borders; classify them per class.
   auto& order = scratch.order;
   order.resize(n);
-  for (std::size_t i = 0; i < n; ++i) order[i] = static_cast<std::uint32_t>(i);
-  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
-    return info[a].step_class != info[b].step_class ? info[a].step_class < info[b].step_class
-                                                    : a < b;
-  });
+  bool one_class = true;
+  for (std::size_t i = 0; i < n; ++i) {
+    order[i] = static_cast<std::uint32_t>(i);
+    one_class = one_class && info[i].step_class == info[0].step_class;
+  }
+  if (!one_class) {  // (usually all rays of a cell step the same way)
+    std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
+      return info[a].step_class != info[b].step_class ? info[a].step_class < info[b].step_class
+                                                      : a < b;
+    });
+  }
   constexpr int kPairs[3][2] = {{0, 1}, {1, 2}, {0, 2}};
   for (std::size_t begin = 0; begin < n;) {
     std::size_t end = begin;
@@ -173,7 +196,7 @@ std::size_t SuperRayBuilder::groupCell(const VoxelGrid& grid, const Point3f& ori
       for (std::size_t j = begin; j < end; ++j) {
         auto& ri = info[order[j]];
         const double s = slope(ri);
-        const auto it = std::lower_bound(slopes.begin(), slopes.end(), s);
+        const auto it = slopes.begin() + static_cast<std::ptrdiff_t>(countBelow(slopes, s));
         ri.segment[p] = static_cast<std::uint32_t>(it - slopes.begin());
         const auto near = [&](double c) { return std::fabs(s - c) <= kSlopeMargin * (s + c); };
         if ((it != slopes.end() && near(*it)) || (it != slopes.begin() && near(*(it - 1)))) {
@@ -236,7 +259,7 @@ SuperRayStats SuperRayBuilder::build(const VoxelGrid& grid, const Point3f& origi
                         order_[i] = (cellCode(rays[i], *origin_key) << kIndexBits) | i;
                       }
                     });
-  radixSort(order_, sort_tmp_);
+  radixSort(order_, sort_tmp_, radix_count_);
 
   const auto cellOf = [](std::uint64_t x) { return x >> kIndexBits; };
   const auto indexOf = [](std::uint64_t x) {

@@ -65,6 +65,7 @@ class SuperRayBuilder {
 
   std::vector<std::uint64_t> order_;  // (cell code, ray index), sorted
   std::vector<std::uint64_t> sort_tmp_;
+  std::vector<std::uint32_t> radix_count_;
   std::vector<std::pair<std::uint32_t, std::uint32_t>> runs_;
   std::vector<std::uint32_t> written_;
   std::vector<RayEnd> out_;
