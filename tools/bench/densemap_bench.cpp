@@ -1,6 +1,6 @@
 // densemap-bench: offline integration benchmark (no DDS). Every method integrates the same
-// scans in one run; speed is reported as ratios against OctoMap's insertPointCloud, and every
-// map is compared with OctoMap's cell by cell.
+// scans in one run, taking turns scan by scan; speed is reported as ratios against OctoMap's
+// insertPointCloud, and every map is compared with OctoMap's cell by cell.
 #include <tbb/task_arena.h>
 #include <CLI/CLI.hpp>
 
@@ -102,56 +102,73 @@ Integrate makeIntegrator(const std::string& method, const Options& o) {
   };
 }
 
-RunResult runMethod(const std::string& method, Backend backend, const Options& o,
-                    const std::vector<WorldScan>& scans, std::unique_ptr<OccupancyMap>& map_out) {
-  auto map = makeMap(backend, o.resolution);
-  map_out = std::move(*map);
-  const Integrate integrate = makeIntegrator(method, o);
-  RunResult r;
-  r.method = method;
-  r.backend = std::string(backendName(backend));
-  r.threads = method == "octomap" ? 1 : o.threads;
-  r.rule = method == "octomap" ? "set" : o.rule;
-  r.resolution = o.resolution;
-  r.max_range = o.max_range;
-  r.has_counts = method != "octomap";
-  tbb::task_arena arena(r.threads);
-  tools::Progress progress(method + "/" + r.backend + " scan", scans.size());
-  double visits = 0, changed = 0, rays = 0, super_rays = 0, culled = 0, region = 0;
-  for (std::size_t i = 0; i < scans.size(); ++i) {
+/// One (method, backend) of a run: its map, its integrator and what it has measured so far.
+/// Lanes take turns scan by scan, so that every method meets the machine in the same state
+/// (a shared VM's speed drifts over seconds; ratios of runs made one after another drift too).
+/// The progress line lists the lanes in the order they ran.
+class Lane {
+ public:
+  Lane(const std::string& method, Backend backend, const Options& o)
+      : map_(std::move(*makeMap(backend, o.resolution))),
+        integrate_(makeIntegrator(method, o)),
+        arena_(method == "octomap" ? 1 : o.threads) {
+    r_.method = method;
+    r_.backend = std::string(backendName(backend));
+    r_.threads = method == "octomap" ? 1 : o.threads;
+    r_.rule = method == "octomap" ? "set" : o.rule;
+    r_.resolution = o.resolution;
+    r_.max_range = o.max_range;
+    r_.has_counts = method != "octomap";
+    name_ = method + "/" + r_.backend;
+  }
+
+  /// Integrates one scan; returns its wall time, ms.
+  double step(const WorldScan& scan) {
     ScanStats stats;
     const auto t0 = std::chrono::steady_clock::now();
-    arena.execute([&] { stats = integrate(*map_out, scans[i]); });
+    arena_.execute([&] { stats = integrate_(*map_, scan); });
     const double ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-    r.ms_per_scan.push_back(ms);
-    r.total_s += ms / 1000.0;
-    r.points += scans[i].points.size();
-    visits += static_cast<double>(stats.visits);
-    changed += static_cast<double>(stats.changed);
-    rays += static_cast<double>(stats.rays);
-    super_rays += static_cast<double>(stats.super_rays);
-    culled += static_cast<double>(stats.culled);
-    region += static_cast<double>(stats.region_voxels);
+    r_.ms_per_scan.push_back(ms);
+    r_.total_s += ms / 1000.0;
+    r_.points += scan.points.size();
+    const std::size_t counts[6] = {stats.visits, stats.changed,    stats.rays,
+                                   stats.super_rays, stats.culled, stats.region_voxels};
+    for (int k = 0; k < 6; ++k) sums_[k] += static_cast<double>(counts[k]);
     const double stage[5] = {stats.ms_rays, stats.ms_region, stats.ms_mark, stats.ms_merge,
                              stats.ms_apply};
-    for (int k = 0; k < 5; ++k) r.ms_stage[k] += stage[k] / static_cast<double>(scans.size());
-    char detail[32];
-    std::snprintf(detail, sizeof(detail), "%.1f ms", ms);
-    progress.update(i + 1, detail);
+    for (int k = 0; k < 5; ++k) stage_sums_[k] += stage[k];
+    return ms;
   }
-  r.scans = scans.size();
-  const double n = static_cast<double>(std::max<std::size_t>(1, r.scans));
-  r.visits_per_scan = visits / n;
-  r.changed_cells_per_scan = changed / n;
-  r.rays_per_scan = rays / n;
-  r.super_rays_per_scan = super_rays / n;
-  r.culled_per_scan = culled / n;
-  r.region_voxels_per_scan = region / n;
-  r.known_cells = map_out->knownCells();
-  r.memory_bytes = map_out->memoryBytes();
-  return r;
-}
+
+  /// The result after the last scan (per-scan means of the counts and stage times).
+  RunResult finish() {
+    r_.scans = r_.ms_per_scan.size();
+    const double n = static_cast<double>(std::max<std::size_t>(1, r_.scans));
+    r_.visits_per_scan = sums_[0] / n;
+    r_.changed_cells_per_scan = sums_[1] / n;
+    r_.rays_per_scan = sums_[2] / n;
+    r_.super_rays_per_scan = sums_[3] / n;
+    r_.culled_per_scan = sums_[4] / n;
+    r_.region_voxels_per_scan = sums_[5] / n;
+    for (int k = 0; k < 5; ++k) r_.ms_stage[k] = stage_sums_[k] / n;
+    r_.known_cells = map_->knownCells();
+    r_.memory_bytes = map_->memoryBytes();
+    return r_;
+  }
+
+  [[nodiscard]] const std::string& name() const { return name_; }
+  std::unique_ptr<OccupancyMap>& map() { return map_; }
+
+ private:
+  RunResult r_;
+  std::unique_ptr<OccupancyMap> map_;
+  Integrate integrate_;
+  tbb::task_arena arena_;
+  double sums_[6] = {0, 0, 0, 0, 0, 0};
+  double stage_sums_[5] = {0, 0, 0, 0, 0};
+  std::string name_;
+};
 
 int run(const Options& o) {
   for (const auto& m : o.methods) {
@@ -182,67 +199,72 @@ int run(const Options& o) {
     return 1;
   }
 
-  std::vector<RunResult> runs;
   // Under "set" OctoMap is the reference every map is compared with; under "per_ray" (which
-  // OctoMap does not implement) the plain raycast map is, per backend. References run first.
+  // OctoMap does not implement) the plain raycast map is, per backend. References come first.
   const bool per_ray = o.rule != "set";
   const std::string reference_method = per_ray ? "raycast" : "octomap";
-  std::map<Backend, std::unique_ptr<OccupancyMap>> references;
-  std::unique_ptr<OccupancyMap> octomap_map;
-  double octomap_p50 = 0;
   std::vector<std::string> order = o.methods;
   if (per_ray && std::find(order.begin(), order.end(), "raycast") == order.end()) {
     order.push_back("raycast");
   }
   std::stable_partition(order.begin(), order.end(), [](const auto& m) { return m == "raycast"; });
   std::stable_partition(order.begin(), order.end(), [](const auto& m) { return m == "octomap"; });
+  std::vector<std::unique_ptr<Lane>> lanes;
   for (const auto& method : order) {
-    for (const Backend backend : backends) {
-      if (method == "octomap" && backend != Backend::kOctree) {
-        if (std::find(backends.begin(), backends.end(), Backend::kOctree) != backends.end())
-          continue;
-      }
-      const Backend used = method == "octomap" ? Backend::kOctree : backend;
-      std::unique_ptr<OccupancyMap> map;
-      RunResult r = runMethod(method, used, o, *scans, map);
-      if (method == "octomap") {
-        octomap_p50 = r.percentile(0.5);
-        r.speedup_vs_octomap = 1.0;
-      } else if (octomap_p50 > 0) {
-        r.speedup_vs_octomap = octomap_p50 / std::max(1e-9, r.percentile(0.5));
-      }
-      const OccupancyMap* reference = nullptr;
-      if (!per_ray) {
-        reference = octomap_map.get();
-      } else if (method != "raycast" && references.contains(used)) {
-        reference = references[used].get();
-      }
-      if (reference != nullptr) {
-        const MapDiff diff = diffMaps(*map, *reference);
-        r.reference = reference_method;
-        r.diff_cells = static_cast<long long>(diff.differing());
-        if (!per_ray) r.diff_cells_vs_octomap = r.diff_cells;
-        if (diff.differing() > 0) {
-          std::fprintf(stderr,
-                       "%s/%s differs from %s: %zu only ours, %zu only the reference's, "
-                       "%zu values (max |d| %g)\n",
-                       method.c_str(), r.backend.c_str(), reference_method.c_str(), diff.only_in_a,
-                       diff.only_in_b, diff.value_mismatch,
-                       static_cast<double>(diff.max_abs_difference));
-        }
-      }
-      if (method == "octomap") {
-        r.reference = "octomap";
-        r.diff_cells = r.diff_cells_vs_octomap = 0;
-        octomap_map = std::move(map);
-      } else if (per_ray && method == "raycast") {
-        r.reference = "raycast";
-        r.diff_cells = 0;
-        references[used] = std::move(map);
-      }
-      runs.push_back(std::move(r));
-      if (method == "octomap") break;
+    if (method == "octomap") {  // OctoMap's own octree, once
+      lanes.push_back(std::make_unique<Lane>(method, Backend::kOctree, o));
+      continue;
     }
+    for (const Backend backend : backends) lanes.push_back(std::make_unique<Lane>(method, backend, o));
+  }
+  tools::Progress progress("scan", scans->size());
+  for (std::size_t i = 0; i < scans->size(); ++i) {
+    std::string detail;
+    // The lane that starts a scan rotates: none always follows OctoMap's long serial run
+    // (caches evicted, idle workers to wake).
+    for (std::size_t k = 0; k < lanes.size(); ++k) {
+      auto& lane = lanes[(i + k) % lanes.size()];
+      char ms[48];
+      std::snprintf(ms, sizeof(ms), "%s%s %.1f ms", detail.empty() ? "" : ", ",
+                    lane->name().c_str(), lane->step((*scans)[i]));
+      detail += ms;
+    }
+    progress.update(i + 1, detail);
+  }
+
+  std::vector<RunResult> runs;
+  std::map<std::string, const OccupancyMap*> references;  // by backend
+  double octomap_p50 = 0;
+  for (auto& lane : lanes) {
+    RunResult r = lane->finish();
+    const OccupancyMap& map = *lane->map();
+    if (r.method == "octomap") {  // its own reference, whatever the rule
+      octomap_p50 = r.percentile(0.5);
+      r.reference = "octomap";
+      r.diff_cells = r.diff_cells_vs_octomap = 0;
+    }
+    if (r.method == reference_method) {
+      r.reference = reference_method;
+      r.diff_cells = 0;
+      if (!per_ray) r.diff_cells_vs_octomap = 0;
+      references[per_ray ? r.backend : std::string()] = &map;
+    } else if (const auto ref = references.find(per_ray ? r.backend : std::string());
+               ref != references.end()) {
+      const MapDiff diff = diffMaps(map, *ref->second);
+      r.reference = reference_method;
+      r.diff_cells = static_cast<long long>(diff.differing());
+      if (!per_ray) r.diff_cells_vs_octomap = r.diff_cells;
+      if (diff.differing() > 0) {
+        std::fprintf(stderr,
+                     "%s/%s differs from %s: %zu only ours, %zu only the reference's, "
+                     "%zu values (max |d| %g)\n",
+                     r.method.c_str(), r.backend.c_str(), reference_method.c_str(), diff.only_in_a,
+                     diff.only_in_b, diff.value_mismatch,
+                     static_cast<double>(diff.max_abs_difference));
+      }
+    }
+    if (octomap_p50 > 0) r.speedup_vs_octomap = octomap_p50 / std::max(1e-9, r.percentile(0.5));
+    runs.push_back(std::move(r));
   }
   const std::string machine = machineDescription();
   std::printf(

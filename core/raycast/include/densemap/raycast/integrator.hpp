@@ -54,7 +54,8 @@ struct ScanStats {
   std::size_t updated = 0;        // distinct cells updated
   std::size_t changed = 0;        // cells whose log-odds changed or that became known
   // Wall time of each stage, ms: rays (+ super rays), culling region, marking, merging the
-  // workers' update sets, applying to the map.
+  // workers' update sets, applying to the map. The region is built alongside the super rays:
+  // ms_region is its own build time and ms_rays the rest of that span.
   double ms_rays = 0, ms_region = 0, ms_mark = 0, ms_merge = 0, ms_apply = 0;
 };
 
