@@ -1,5 +1,5 @@
 // densemap-bench: offline integration benchmark (no DDS). Every method integrates the same
-// scans in one run, taking turns scan by scan; speed is reported as ratios against OctoMap's
+// scans in one run, taking turns a few scans at a time; speed is reported as ratios against OctoMap's
 // insertPointCloud, and every map is compared with OctoMap's cell by cell.
 #include <tbb/task_arena.h>
 #include <CLI/CLI.hpp>
@@ -40,6 +40,7 @@ struct Options {
   int threads = static_cast<int>(std::max(1U, std::thread::hardware_concurrency()));
   std::size_t first = 0;
   std::size_t limit = 0;
+  std::size_t turn = 10;
   std::string json;
 };
 
@@ -103,9 +104,10 @@ Integrate makeIntegrator(const std::string& method, const Options& o) {
 }
 
 /// One (method, backend) of a run: its map, its integrator and what it has measured so far.
-/// Lanes take turns scan by scan, so that every method meets the machine in the same state
-/// (a shared VM's speed drifts over seconds; ratios of runs made one after another drift too).
-/// The progress line lists the lanes in the order they ran.
+/// Lanes take turns a few scans at a time (--turn), so that every method meets the machine in
+/// the same state: a shared VM's speed drifts over seconds, and ratios of methods run one after
+/// another drift with it. A few scans per turn keep each method's map warm in cache, as a
+/// server's is between scans.
 class Lane {
  public:
   Lane(const std::string& method, Backend backend, const Options& o)
@@ -217,19 +219,22 @@ int run(const Options& o) {
     }
     for (const Backend backend : backends) lanes.push_back(std::make_unique<Lane>(method, backend, o));
   }
-  tools::Progress progress("scan", scans->size());
-  for (std::size_t i = 0; i < scans->size(); ++i) {
-    std::string detail;
-    // The lane that starts a scan rotates: none always follows OctoMap's long serial run
-    // (caches evicted, idle workers to wake).
+  // Lanes take turns, `o.turn` scans at a time (0: all of them), and the lane that starts a
+  // turn rotates: none always follows OctoMap's long serial run (caches evicted, idle workers).
+  const std::size_t turn = o.turn == 0 ? scans->size() : o.turn;
+  tools::Progress progress("integrating (method, scan) pair", scans->size() * lanes.size());
+  std::size_t done = 0;
+  for (std::size_t first = 0, t = 0; first < scans->size(); first += turn, ++t) {
+    const std::size_t last = std::min(scans->size(), first + turn);
     for (std::size_t k = 0; k < lanes.size(); ++k) {
-      auto& lane = lanes[(i + k) % lanes.size()];
-      char ms[48];
-      std::snprintf(ms, sizeof(ms), "%s%s %.1f ms", detail.empty() ? "" : ", ",
-                    lane->name().c_str(), lane->step((*scans)[i]));
-      detail += ms;
+      auto& lane = lanes[(t + k) % lanes.size()];
+      for (std::size_t i = first; i < last; ++i) {
+        char detail[96];
+        std::snprintf(detail, sizeof(detail), "(%s, scan %zu: %.1f ms)", lane->name().c_str(),
+                      i + 1, lane->step((*scans)[i]));
+        progress.update(++done, detail);
+      }
     }
-    progress.update(i + 1, detail);
   }
 
   std::vector<RunResult> runs;
@@ -321,6 +326,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--first", o.first, "Skip this many scans")->capture_default_str();
   app.add_option("--limit", o.limit, "Use at most this many scans (0: all)")->capture_default_str();
+  app.add_option("--turn", o.turn,
+                 "Methods take turns this many scans at a time, so that all see the machine in "
+                 "the same state (0: each method runs all scans in one go)")
+      ->capture_default_str();
   app.add_option("--json", o.json, "Also write the results as JSON to this file");
   CLI11_PARSE(app, argc, argv);
   return densemap::bench::run(o);

@@ -188,6 +188,16 @@ def evaluate(model, test, src, dst):
     return {k: (v[0] / len(test), v[1] / len(test)) for k, v in sums.items()}
 
 
+def augment(image, noise, dropout, generator):
+    """A real sensor's input: Gaussian range noise (std `noise` m) on the returns, and a
+    fraction `dropout` of the pixels with no return."""
+    returns = image > 0
+    noisy = image + noise * torch.randn(image.shape, generator=generator)
+    noisy = torch.where(returns, noisy.clamp(min=PRIOR_MIN_RANGE), image)
+    keep = torch.rand(image.shape, generator=generator) >= dropout
+    return noisy * keep
+
+
 def train_model(a, model, train):
     """L1 on range (Adam), cosine learning rate from --lr to --lr-final; each step takes one
     training (image, target grid) pair and --queries random query lasers of that grid.
@@ -212,6 +222,8 @@ def train_model(a, model, train):
         queries = grids[dst]
         cursor += 1
         pick = torch.randperm(len(queries), generator=generator)[:a.queries]
+        if a.noise > 0 or a.dropout > 0:
+            image = augment(image, a.noise, a.dropout, generator)
         pred = model(image[None], queries[pick])[0]
         targets = target.reshape(-1)[pick]
         mask = (targets > 0) & (pred > 0)
@@ -293,6 +305,10 @@ def main():
     p.add_argument("--prior", choices=["inverse_bilinear", "none"], default="inverse_bilinear",
                    help="score prior (see ILN)")
     p.add_argument("--init", help="train: start from this checkpoint")
+    p.add_argument("--noise", type=float, default=0.0,
+                   help="train: Gaussian range noise added to the input returns, m")
+    p.add_argument("--dropout", type=float, default=0.0,
+                   help="train: fraction of input pixels turned into missing returns")
     p.add_argument("--out", default="models/iln.pb", help="export: weights file")
     p.add_argument("--golden", help="export: also write a golden-output file")
     p.add_argument("--provenance", default="", help="export: how the model was trained")

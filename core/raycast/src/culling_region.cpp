@@ -71,11 +71,11 @@ void CullingRegion::loadFullyFree(const OccupancyMap& map) {
   });
 }
 
-void CullingRegion::toBricks() {
-  for (int a = 0; a < 3; ++a) brick_min_[a] = static_cast<unsigned>(min_[a] >> block::kShift);
-  bricks_n_[0] = ((min_.x + nx_ - 1) >> block::kShift) - brick_min_[0] + 1;
-  bricks_n_[1] = ((min_.y + ny_ - 1) >> block::kShift) - brick_min_[1] + 1;
-  bricks_n_[2] = ((min_.z + nz_ - 1) >> block::kShift) - brick_min_[2] + 1;
+void CullingRegion::toBricks(const KeyBox& frame) {
+  for (int a = 0; a < 3; ++a) {
+    brick_min_[a] = static_cast<unsigned>(frame.min[a] >> block::kShift);
+    bricks_n_[a] = static_cast<unsigned>(frame.max[a] >> block::kShift) - brick_min_[a] + 1;
+  }
   bricks_.assign(static_cast<std::size_t>(bricks_n_[0]) * bricks_n_[1] * bricks_n_[2],
                  block::BlockMask{});
   for (unsigned z = 0; z < nz_; ++z) {
@@ -145,7 +145,7 @@ void CullingRegion::keepRunThrough(std::uint64_t* r, unsigned x0) const {
 }
 
 void CullingRegion::build(const OccupancyMap& map, const VoxelKey& origin, const KeyBox& box,
-                          std::span<const VoxelKey> hit) {
+                          std::span<const VoxelKey> hit, const KeyBox* frame) {
   min_ = box.min;
   nx_ = static_cast<unsigned>(box.max.x - box.min.x) + 1;
   ny_ = static_cast<unsigned>(box.max.y - box.min.y) + 1;
@@ -195,7 +195,11 @@ void CullingRegion::build(const OccupancyMap& map, const VoxelKey& origin, const
       for (unsigned w = 0; w < words_per_row_; ++w) size_ += std::popcount(r[w]);
     });
   });
-  toBricks();
+  bool inside = frame != nullptr;
+  for (int a = 0; a < 3 && inside; ++a) {
+    inside = frame->min[a] <= box.min[a] && box.max[a] <= frame->max[a];
+  }
+  toBricks(inside ? *frame : box);
 }
 
 }  // namespace densemap

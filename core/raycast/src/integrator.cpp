@@ -86,8 +86,9 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
   const auto cull = [&] {
     if (!build_region) return;
     auto t_region = std::chrono::steady_clock::now();
+    // Query bricks over the whole rays box: the layout of every worker's dense free marks.
     region_.build(map, *origin_key, cullingBox(*origin_key, box, options_.culling_max_voxels),
-                  hit_);
+                  hit_, &box);
     ms_region_only = msSince(t_region);
   };
   if (grouping && build_region) {
@@ -133,7 +134,11 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
                                                       box.min, box.max,
                                                       options_.dense_marks_max_blocks);
                       }
-                      if (local.dense_ok) {
+                      if (local.dense_ok && region != nullptr &&
+                          region->sharesFrame(local.dense)) {
+                        SharedFrameSink sink{{local.dense, local.update}};
+                        mark_all(range, sink, local);
+                      } else if (local.dense_ok) {
                         DenseSink sink{local.dense, local.update};
                         mark_all(range, sink, local);
                       } else {

@@ -82,7 +82,7 @@ TEST_P(ScanUpdateMerge, IsOrderIndependent) {
 
 INSTANTIATE_TEST_SUITE_P(Rules, ScanUpdateMerge,
                          ::testing::Values(UpdateRule::kSet, UpdateRule::kPerRay),
-                         [](const auto& info) { return std::string(ruleName(info.param)); });
+                         [](const auto& rule) { return std::string(ruleName(rule.param)); });
 
 TEST(BlockLayout, KeyOfInvertsBlockAndIndex) {
   for (const VoxelKey k :

@@ -8,6 +8,7 @@
 
 #include "densemap/geometry/ray_traversal.hpp"
 #include "densemap/map/grid_map.hpp"
+#include "densemap/map/dense_free_marks.hpp"
 #include "densemap/raycast/culling_region.hpp"
 #include "densemap/test_support/random_rays.hpp"
 
@@ -24,7 +25,7 @@ TEST(TraverseRayBackward, IsTheForwardTraversalReversedOnAdversarialRays) {
       for (int i = 0; i < 4000; ++i) {
         const test::Ray ray = random.next(kind);
         std::vector<VoxelKey> forward, backward;
-        computeRayKeys(grid, ray.origin, ray.end, forward);
+        ASSERT_TRUE(computeRayKeys(grid, ray.origin, ray.end, forward) || forward.empty());
         const std::size_t total =
             traverseRayBackward(grid, ray.origin, ray.end, scratch, [&](const VoxelKey& k) {
               backward.push_back(k);
@@ -122,6 +123,21 @@ TEST(CullingRegion, EqualsBreadthFirstAlgorithm3OnRandomMaps) {
                       static_cast<std::uint16_t>(o.z + 16)}};
     CullingRegion sut;
     sut.build(map, o, box, hit);
+    // The same region indexed in a larger frame, shared with a DenseFreeMarks of that box:
+    // markFreeUnlessIn refuses exactly the region's voxels.
+    const KeyBox frame{{static_cast<std::uint16_t>(o.x - 30), static_cast<std::uint16_t>(o.y - 21),
+                        static_cast<std::uint16_t>(o.z - 17)},
+                       {static_cast<std::uint16_t>(o.x + 75), static_cast<std::uint16_t>(o.y + 19),
+                        static_cast<std::uint16_t>(o.z + 18)}};
+    CullingRegion framed;
+    framed.build(map, o, box, hit, &frame);
+    DenseFreeMarks marks;
+    ASSERT_TRUE(marks.reset(frame.min, frame.max, 1U << 20));
+    const bool shared = framed.sharesFrame(marks);  // an empty region has no bricks
+    ASSERT_EQ(shared, sut.size() != 0);
+    EXPECT_EQ(sut.sharesFrame(marks), false);
+    ScanUpdate outside;
+    outside.reset(UpdateRule::kSet);
     const auto expected = bfsRegion(map, o, box, hit_set);
     std::size_t found = 0;
     for (int dz = -20; dz <= 20; ++dz) {
@@ -133,13 +149,19 @@ TEST(CullingRegion, EqualsBreadthFirstAlgorithm3OnRandomMaps) {
           const bool in = sut.contains(k);
           ASSERT_EQ(in, expected.contains(k.packed()))
               << "trial " << trial << " at " << dx << "," << dy << "," << dz;
+          ASSERT_EQ(framed.contains(k), in);
+          if (shared) {
+            ASSERT_EQ(marks.markFreeUnlessIn(framed, k, outside), !in);
+          }
           found += in ? 1 : 0;
         }
       }
     }
     EXPECT_EQ(found, expected.size());
     EXPECT_EQ(sut.size(), expected.size());
-    if (trial % 2 == 0) EXPECT_GT(expected.size(), 300U);
+    if (trial % 2 == 0) {
+      EXPECT_GT(expected.size(), 300U);
+    }
   }
 }
 

@@ -22,6 +22,32 @@ class DenseFreeMarks {
   /// when that is more than `max_blocks` blocks.
   bool reset(const VoxelKey& min, const VoxelKey& max, std::size_t max_blocks);
 
+  /// The box's first block and block count along axis a (0 when reset failed).
+  [[nodiscard]] unsigned blockMin(int a) const { return min_[a]; }
+  [[nodiscard]] unsigned blockCount(int a) const { return n_[a]; }
+
+  /// markFree unless `region` holds `k`; returns whether it marked. `region` must share this
+  /// box's block indexing (CullingRegion::sharesFrame): one index serves both lookups.
+  template <class Region>
+  bool markFreeUnlessIn(const Region& region, const VoxelKey& k, ScanUpdate& outside) {
+    const unsigned bx = static_cast<unsigned>(k.x >> block::kShift) - min_[0];
+    const unsigned by = static_cast<unsigned>(k.y >> block::kShift) - min_[1];
+    const unsigned bz = static_cast<unsigned>(k.z >> block::kShift) - min_[2];
+    if (bx >= n_[0] || by >= n_[1] || bz >= n_[2]) {
+      if (region.contains(k)) return false;
+      outside.markFree(k);
+      return true;
+    }
+    const std::uint32_t i = (bz * n_[1] + by) * n_[0] + bx;
+    const int index = block::indexOf(k);
+    if (region.culledAt(i, index)) return false;
+    touched_[touched_count_] = i;
+    touched_count_ += seen_[i] ^ 1U;
+    seen_[i] = 1;
+    block::setBit(masks_[i], index);
+    return true;
+  }
+
   /// Marks `k` free when inside the box; otherwise into `outside`.
   void markFree(const VoxelKey& k, ScanUpdate& outside) {
     const unsigned bx = static_cast<unsigned>(k.x >> block::kShift) - min_[0];

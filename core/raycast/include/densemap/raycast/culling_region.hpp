@@ -32,8 +32,11 @@ class CullingRegion {
  public:
   /// Builds the region inside `box` (which must contain `origin`; voxels outside are never in
   /// the region). `hit` lists the voxels rays of this scan end in.
+  /// `frame`, when given, must contain `box`: the query bricks then cover the blocks of
+  /// `frame` (voxels outside `box` are not in the region), so that a DenseFreeMarks reset to the
+  /// same box shares their indexing (see sharesFrame and culledAt).
   void build(const OccupancyMap& map, const VoxelKey& origin, const KeyBox& box,
-             std::span<const VoxelKey> hit);
+             std::span<const VoxelKey> hit, const KeyBox* frame = nullptr);
 
   [[nodiscard]] bool contains(const VoxelKey& k) const {
     // Queried in the map's 8^3 block layout: a traversal stays in one cache line for a while.
@@ -46,6 +49,19 @@ class CullingRegion {
     return block::testBit(bricks_[brick], block::indexOf(k));
   }
 
+  /// Whether the region's bricks are indexed as `marks`' blocks (same first block and counts).
+  template <class Marks>
+  [[nodiscard]] bool sharesFrame(const Marks& marks) const {
+    for (int a = 0; a < 3; ++a) {
+      if (brick_min_[a] != marks.blockMin(a) || bricks_n_[a] != marks.blockCount(a)) return false;
+    }
+    return true;
+  }
+  /// `contains` for a voxel given by its brick (in the shared frame) and index in the brick.
+  [[nodiscard]] bool culledAt(std::uint32_t brick, int index) const {
+    return block::testBit(bricks_[brick], index);
+  }
+
   /// Voxels in the region.
   [[nodiscard]] std::size_t size() const { return size_; }
   /// Voxels of the box the region was built in.
@@ -56,8 +72,8 @@ class CullingRegion {
     return bits_.data() + (static_cast<std::size_t>(z) * ny_ + y) * words_per_row_;
   }
   void loadFullyFree(const OccupancyMap& map);
-  /// Copies the swept rows into bricks_ (the query layout).
-  void toBricks();
+  /// Copies the swept rows into bricks_ (the query layout) over the blocks of `frame`.
+  void toBricks(const KeyBox& frame);
   /// Keeps the run of set bits of `r` that contains bit `x0` (none if it is clear).
   void keepRunThrough(std::uint64_t* r, unsigned x0) const;
 

@@ -67,6 +67,27 @@ struct DenseSink {
   void markOccupied(const VoxelKey& k, std::uint32_t weight) { update.markOccupied(k, weight); }
 };
 
+/// A DenseSink whose culling region shares the dense box's block indexing
+/// (CullingRegion::sharesFrame): the region test and the mark take one index computation.
+struct SharedFrameSink : DenseSink {
+  template <class Region>
+  bool markFreeUnlessIn(const Region& region, const VoxelKey& k, std::uint32_t /*weight*/) {
+    return dense.markFreeUnlessIn(region, k, update);
+  }
+};
+
+/// Marks `k` free unless `region` holds it; returns whether it marked.
+template <class Region, class Sink>
+bool markFreeUnlessIn(const Region& region, Sink& sink, const VoxelKey& k, std::uint32_t weight) {
+  if constexpr (requires { sink.markFreeUnlessIn(region, k, weight); }) {
+    return sink.markFreeUnlessIn(region, k, weight);
+  } else {
+    if (region.contains(k)) return false;
+    sink.markFree(k, weight);
+    return true;
+  }
+}
+
 /// The end voxel of a ray that ends in it, `weight` times.
 template <class Sink>
 void markEnd(const RayEnd& ray, Sink& update, MarkCounts& counts) {
@@ -102,8 +123,7 @@ void markRayCulled(const VoxelGrid& grid, const Point3f& origin, const RayEnd& r
   std::size_t marked = 0;
   const std::size_t total =
       traverseRayBackward(grid, origin, ray.end, scratch, [&](const VoxelKey& k) {
-        if (region.contains(k)) return false;
-        update.markFree(k, ray.weight);
+        if (!markFreeUnlessIn(region, update, k, ray.weight)) return false;
         ++marked;
         return true;
       });
