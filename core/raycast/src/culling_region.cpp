@@ -153,19 +153,12 @@ void CullingRegion::build(const OccupancyMap& map, const VoxelKey& origin, const
   words_per_row_ = (nx_ + 63) / 64;
   size_ = 0;
 
-  // The region reaches beyond O only through a fully-free voxel next to O (whose one test
-  // cell is O): when there is none — a fast-moving sensor's usual case — loading is skipped.
-  bool seed = false;
-  for (int a = 0; a < 3 && !seed; ++a) {
-    for (const int d : {-1, 1}) {
-      VoxelKey n = origin;
-      n[a] = static_cast<std::uint16_t>(n[a] + d);
-      if (n[a] < box.min[a] || n[a] > box.max[a]) continue;
-      const auto value = map.logOdds(n);
-      if (value && map.sensorModel().isFullyFree(*value)) seed = true;
-    }
-  }
-  if (!seed) {
+  // The region grows from O: when O itself cannot be in it (not fully free — always so for a
+  // sensor that moved to a cell it has not crossed often enough — or ended in by a ray), it is
+  // empty, and loading the box is skipped.
+  const auto origin_value = map.logOdds(origin);
+  const bool origin_hit = std::find(hit.begin(), hit.end(), origin) != hit.end();
+  if (!origin_value || !map.sensorModel().isFullyFree(*origin_value) || origin_hit) {
     bits_.clear();
     bricks_.clear();
     for (unsigned& n : bricks_n_) n = 0;
@@ -180,13 +173,9 @@ void CullingRegion::build(const OccupancyMap& map, const VoxelKey& origin, const
     if (x >= nx_ || y >= ny_ || z >= nz_) continue;
     row(y, z)[x >> 6] &= ~(std::uint64_t{1} << (x & 63));
   }
-  // O supports the sweep whatever its state, and leaves the region after it.
-  const unsigned ox = origin.x - min_.x, oy = origin.y - min_.y, oz = origin.z - min_.z;
-  std::uint64_t& origin_word = row(oy, oz)[ox >> 6];
-  const std::uint64_t origin_bit = std::uint64_t{1} << (ox & 63);
-  origin_word |= origin_bit;
 
   // Sweep outward from O: a row (y, z) needs the rows one step closer to O in y and in z.
+  const unsigned ox = origin.x - min_.x, oy = origin.y - min_.y, oz = origin.z - min_.z;
   const auto outward = [](unsigned o, unsigned n, auto&& f) {
     for (unsigned v = o; v < n; ++v) f(v, v == o ? v : v - 1);
     for (unsigned v = o; v-- > 0;) f(v, v + 1);
@@ -206,8 +195,6 @@ void CullingRegion::build(const OccupancyMap& map, const VoxelKey& origin, const
       for (unsigned w = 0; w < words_per_row_; ++w) size_ += std::popcount(r[w]);
     });
   });
-  origin_word &= ~origin_bit;
-  --size_;
   bool inside = frame != nullptr;
   for (int a = 0; a < 3 && inside; ++a) {
     inside = frame->min[a] <= box.min[a] && box.max[a] <= frame->max[a];

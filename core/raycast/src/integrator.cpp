@@ -119,8 +119,7 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
                             Local& local) {
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
       if (region != nullptr) {
-        markRayCulled(grid, origin_world, *origin_key, rays_[i], *region, local.scratch, sink,
-                      local.counts);
+        markRayCulled(grid, origin_world, rays_[i], *region, local.scratch, sink, local.counts);
       } else {
         markRay(grid, origin_world, rays_[i], sink, local.counts);
       }

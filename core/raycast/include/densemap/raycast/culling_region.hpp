@@ -17,18 +17,15 @@ struct KeyBox {
 
 /// The culling region of one scan (dissertation Sec. 2.3.5, Alg. 3): voxels from which every
 /// traversal back to the sensor's voxel O crosses only fully-free voxels (at the lower clamping
-/// bound) before O, so free updates there cannot change the map.
+/// bound), so free updates there cannot change the map.
 ///
-/// A voxel C other than O is in the region iff it is fully free, is not ended in by a ray of
-/// this scan (so the region also stays exact under UpdateRule::kPerRay, where such a voxel's free
-/// count matters), and each "test cell" — C moved one step toward O along an axis where C
-/// differs from O — is O or in the region. O itself is never in it: every traversal starts in
-/// O, so a ray stopped at the region marks O itself (markRayCulled). Unlike Alg. 3, which grows
-/// from O only when O is fully free, this culls for a moving sensor too, whose voxel is new
-/// every scan while the voxels around its path were cleared by earlier scans. Alg. 3's
-/// breadth-first growth is computed by one sweep outward from O over a dense bit grid of the
-/// scan's box, a row of voxels along x at a time (the x-test becomes "the run of bits
-/// containing O's column"), which costs a few word operations per row.
+/// A voxel C is in the region iff it is fully free, is not ended in by a ray of this scan (so
+/// the region also stays exact under UpdateRule::kPerRay, where such a voxel's free count
+/// matters), and each "test cell" — C moved one step toward O along an axis where C differs
+/// from O — is in the region; O itself needs only to be fully free. Alg. 3 grows this set by a
+/// breadth-first search from O; here the same fixed point is computed by one sweep outward from
+/// O over a dense bit grid of the scan's box, a row of voxels along x at a time (the x-test
+/// becomes "the run of bits containing O's column"), which costs a few word operations per row.
 ///
 /// Immutable after build(); `contains` is thread-safe.
 class CullingRegion {

@@ -112,15 +112,13 @@ void markRay(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray, Si
 
 /// markRay with a culling region (dissertation Sec. 2.3.5): the ray is traversed from its end
 /// back toward the sensor and stops at the first voxel inside the region. That is exact: the
-/// region together with the sensor's voxel O is closed toward O along each axis, and a
-/// traversal moves monotonically away from O, so every voxel before the stop on the ray is in
-/// the region (fully free, not ended in by this scan's rays: free updates cannot change it) or
-/// is O — the traversal's first voxel, which is marked here since the walk skipped it.
-/// `origin_key` is O (grid.pointToKey(origin)). `Region` needs `bool contains(const VoxelKey&)
-/// const`.
+/// region is closed toward the sensor's voxel along each axis and a traversal moves
+/// monotonically away from that voxel, so every voxel before it on the ray is inside too — and
+/// inside, free updates cannot change the map (fully free, not ended in by this scan's rays).
+/// `Region` needs `bool contains(const VoxelKey&) const`.
 template <class Region, class Sink>
-void markRayCulled(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& origin_key,
-                   const RayEnd& ray, const Region& region, BackwardScratch& scratch, Sink& update,
+void markRayCulled(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray,
+                   const Region& region, BackwardScratch& scratch, Sink& update,
                    MarkCounts& counts) {
   std::size_t marked = 0;
   const std::size_t total =
@@ -129,10 +127,6 @@ void markRayCulled(const VoxelGrid& grid, const Point3f& origin, const VoxelKey&
         ++marked;
         return true;
       });
-  if (marked < total) {  // stopped at the region: O was skipped
-    update.markFree(origin_key, ray.weight);
-    ++marked;
-  }
   counts.visits += marked;
   counts.culled += total - marked;
   markEnd(ray, update, counts);
