@@ -210,12 +210,36 @@ std::size_t SuperRayBuilder::groupCell(const VoxelGrid& grid, const Point3f& ori
   // Uncertain rays pass through; the others form one super ray per (class, segments).
   std::size_t written = 0;
   std::size_t kept = 0;
+  bool packable = true;  // every segment index fits 16 bits: groups sort as one integer
   for (std::size_t i = 0; i < n; ++i) {
     if (info[i].certain) {
       order[kept++] = static_cast<std::uint32_t>(i);
+      const auto& seg = info[i].segment;
+      packable = packable && (seg[0] | seg[1] | seg[2]) < (1U << 16);
     } else {
       out[written++] = rays[i];
     }
+  }
+  if (packable) {
+    auto& keyed = scratch.keyed;
+    keyed.resize(kept);
+    for (std::size_t j = 0; j < kept; ++j) {
+      const auto& x = info[order[j]];
+      keyed[j] = {(std::uint64_t{x.step_class} << 48) | (std::uint64_t{x.segment[0]} << 32) |
+                      (std::uint64_t{x.segment[1]} << 16) | x.segment[2],
+                  order[j]};
+    }
+    std::sort(keyed.begin(), keyed.end());  // (group, ray index): the order of the sort below
+    for (std::size_t j = 0; j < kept;) {
+      std::size_t k = j;
+      RayEnd group = rays[keyed[j].second];
+      group.weight = 0;
+      while (k < kept && keyed[k].first == keyed[j].first)
+        group.weight += rays[keyed[k++].second].weight;
+      out[written++] = group;
+      j = k;
+    }
+    return written;
   }
   const auto same = [&](std::uint32_t a, std::uint32_t b) {
     const auto& x = info[a];

@@ -55,6 +55,7 @@ class SuperRayBuilder {
     std::vector<Info> info;
     std::vector<double> slopes;
     std::vector<std::uint32_t> order;
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> keyed;  // (packed group, ray)
     std::vector<RayEnd> cell;
   };
 
