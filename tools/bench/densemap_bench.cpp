@@ -1,6 +1,6 @@
 // densemap-bench: offline integration benchmark (no DDS). Every method integrates the same
-// scans in one run, taking turns a few scans at a time; speed is reported as ratios against OctoMap's
-// insertPointCloud, and every map is compared with OctoMap's cell by cell.
+// scans in one run, the methods taking turns a few scans at a time; speed is reported as ratios
+// against OctoMap's insertPointCloud, and every map is compared with OctoMap's cell by cell.
 #include <tbb/task_arena.h>
 #include <CLI/CLI.hpp>
 
@@ -134,8 +134,8 @@ class Lane {
     r_.ms_per_scan.push_back(ms);
     r_.total_s += ms / 1000.0;
     r_.points += scan.points.size();
-    const std::size_t counts[6] = {stats.visits, stats.changed,    stats.rays,
-                                   stats.super_rays, stats.culled, stats.region_voxels};
+    const std::size_t counts[6] = {stats.visits,     stats.changed, stats.rays,
+                                   stats.super_rays, stats.culled,  stats.region_voxels};
     for (int k = 0; k < 6; ++k) sums_[k] += static_cast<double>(counts[k]);
     const double stage[5] = {stats.ms_rays, stats.ms_region, stats.ms_mark, stats.ms_merge,
                              stats.ms_apply};
@@ -217,7 +217,8 @@ int run(const Options& o) {
       lanes.push_back(std::make_unique<Lane>(method, Backend::kOctree, o));
       continue;
     }
-    for (const Backend backend : backends) lanes.push_back(std::make_unique<Lane>(method, backend, o));
+    for (const Backend backend : backends)
+      lanes.push_back(std::make_unique<Lane>(method, backend, o));
   }
   // Lanes take turns, `o.turn` scans at a time (0: all of them), and the lane that starts a
   // turn rotates: none always follows OctoMap's long serial run (caches evicted, idle workers).

@@ -1,8 +1,8 @@
 #include "densemap/raycast/integrator.hpp"
 
 #include <tbb/blocked_range.h>
-#include <tbb/parallel_invoke.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 
 #include <algorithm>
 #include <chrono>
@@ -87,8 +87,8 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
     if (!build_region) return;
     auto t_region = std::chrono::steady_clock::now();
     // Query bricks over the whole rays box: the layout of every worker's dense free marks.
-    region_.build(map, *origin_key, cullingBox(*origin_key, box, options_.culling_max_voxels),
-                  hit_, &box);
+    region_.build(map, *origin_key, cullingBox(*origin_key, box, options_.culling_max_voxels), hit_,
+                  &box);
     ms_region_only = msSince(t_region);
   };
   if (grouping && build_region) {
@@ -130,12 +130,11 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
                       Local& local = locals_.local();
                       if (!local.dense_ok) {
                         // A worker that joined after the reset above (or no dense box).
-                        local.dense_ok = dense && local.dense.reset(
-                                                      box.min, box.max,
-                                                      options_.dense_marks_max_blocks);
+                        local.dense_ok =
+                            dense &&
+                            local.dense.reset(box.min, box.max, options_.dense_marks_max_blocks);
                       }
-                      if (local.dense_ok && region != nullptr &&
-                          region->sharesFrame(local.dense)) {
+                      if (local.dense_ok && region != nullptr && region->sharesFrame(local.dense)) {
                         SharedFrameSink sink{{local.dense, local.update}};
                         mark_all(range, sink, local);
                       } else if (local.dense_ok) {

@@ -234,8 +234,9 @@ std::size_t SuperRayBuilder::groupCell(const VoxelGrid& grid, const Point3f& ori
       std::size_t k = j;
       RayEnd group = rays[keyed[j].second];
       group.weight = 0;
-      while (k < kept && keyed[k].first == keyed[j].first)
+      while (k < kept && keyed[k].first == keyed[j].first) {
         group.weight += rays[keyed[k++].second].weight;
+      }
       out[written++] = group;
       j = k;
     }

@@ -7,8 +7,8 @@
 #include <set>
 
 #include "densemap/geometry/ray_traversal.hpp"
-#include "densemap/map/grid_map.hpp"
 #include "densemap/map/dense_free_marks.hpp"
+#include "densemap/map/grid_map.hpp"
 #include "densemap/raycast/culling_region.hpp"
 #include "densemap/test_support/random_rays.hpp"
 
