@@ -75,6 +75,19 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
   // Super rays and the culling region are independent: built side by side (the region build
   // is serial; the super-ray build's parallel loops fill the other threads).
   const bool build_region = culling && origin_key.has_value();
+  const bool dense = options_.rule == UpdateRule::kSet && origin_key.has_value() &&
+                     options_.dense_marks_max_blocks > 0;
+  // The region's query bricks cover the whole rays box — the layout of every worker's dense
+  // free marks, so one index serves both — unless that is more blocks than the dense marks
+  // allow or than the culling box's own bricks could take (culling_max_voxels).
+  std::size_t box_blocks = 1;
+  for (int a = 0; a < 3; ++a) {
+    box_blocks *=
+        static_cast<std::size_t>((box.max[a] >> block::kShift) - (box.min[a] >> block::kShift)) + 1;
+  }
+  const bool share_frame =
+      dense && box_blocks <= std::min(options_.dense_marks_max_blocks,
+                                      options_.culling_max_voxels / block::kVoxels);
   double ms_region_only = 0;
   const auto group = [&] {
     if (!grouping) return;
@@ -86,9 +99,8 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
   const auto cull = [&] {
     if (!build_region) return;
     auto t_region = std::chrono::steady_clock::now();
-    // Query bricks over the whole rays box: the layout of every worker's dense free marks.
     region_.build(map, *origin_key, cullingBox(*origin_key, box, options_.culling_max_voxels), hit_,
-                  &box);
+                  share_frame ? &box : nullptr);
     ms_region_only = msSince(t_region);
   };
   if (grouping && build_region) {
@@ -108,8 +120,6 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
   stats.ms_rays = msSince(t0) - ms_region_only;
   stats.ms_region = ms_region_only;
 
-  const bool dense = options_.rule == UpdateRule::kSet && origin_key.has_value() &&
-                     options_.dense_marks_max_blocks > 0;
   for (Local& local : locals_) {
     local.update.reset(options_.rule);
     local.counts = {};

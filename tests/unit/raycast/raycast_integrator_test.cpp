@@ -95,6 +95,31 @@ TEST(Integrator, DenseMarksAndTheHashGiveTheSameMap) {
   EXPECT_EQ(diffMaps(dense, hashed).differing(), 0U);
 }
 
+TEST(Integrator, CullingWithAndWithoutTheSharedBrickFrameGivesTheRaycastMap) {
+  // Default: the region's bricks share the dense marks' frame. A small culling box does not
+  // (its bricks would outgrow it): the region is tested on its own, inside a shrunken box.
+  GridMap plain(0.1, SensorModel{}), shared(0.1, SensorModel{}), own(0.1, SensorModel{});
+  Integrator r({.method = IntegrationMethod::kRaycast, .max_range_m = 5.0});
+  Integrator a({.method = IntegrationMethod::kCulling, .max_range_m = 5.0});
+  Integrator b(
+      {.method = IntegrationMethod::kCulling, .max_range_m = 5.0, .culling_max_voxels = 20000});
+  std::size_t culled_a = 0, culled_b = 0;
+  for (int scan = 0; scan < 9; ++scan) {
+    const Point3f origin(0.05F, -0.05F, 0.05F);  // dwell, so voxels saturate and culling starts
+    PointCloud cloud = test::adversarialScan(0.1, origin, 6000, 5.0, 70 + scan);
+    const VoxelGrid grid(0.1);
+    std::erase_if(cloud,
+                  [&](const Point3f& p) { return grid.pointToKey(p) == grid.pointToKey(origin); });
+    r.integrate(plain, cloud, origin);
+    culled_a += a.integrate(shared, cloud, origin).culled;
+    culled_b += b.integrate(own, cloud, origin).culled;
+    ASSERT_EQ(diffMaps(shared, plain).differing(), 0U) << "scan " << scan;
+    ASSERT_EQ(diffMaps(own, plain).differing(), 0U) << "scan " << scan;
+  }
+  EXPECT_GT(culled_a, 0U);
+  EXPECT_GT(culled_b, 0U);
+}
+
 TEST(Integrator, NonFinitePointsAreIgnoredNotCrashing) {
   GridMap map(0.1, SensorModel{});
   Integrator sut({.max_range_m = 10.0});
