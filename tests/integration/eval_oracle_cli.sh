@@ -36,4 +36,16 @@ if "$evaluate" --data "$dir/scene" --protocol oracle --resolution 0.1 2>"$dir/er
   exit 1
 fi
 grep -q -- "--oracle-factor" "$dir/err.txt"
+# A denser AKIMap free sampling gives a different map (more free samples), still a sound one.
+"$evaluate" --data "$dir/scene" --protocol oracle --resolution 0.2 --max-range 8 --method akimap \
+  --akimap-free-step 0.25 --json "$dir/dense_free.json" --threads 2 >/dev/null 2>&1
+auc() { grep -m1 -o '"auc": [0-9.]*' "$1" | awk '{ print $2 }'; }
+[ "$(auc "$dir/dense_free.json")" != "$(auc "$dir/r.json")" ]
+auc "$dir/dense_free.json" | awk '{ if ($1 < 0.8) bad = 1 } END { exit bad }'
+if "$evaluate" --data "$dir/scene" --protocol oracle --resolution 0.2 --akimap-free-step 0 \
+  >/dev/null 2>"$dir/err.txt"; then
+  echo "expected an error for a zero free step"
+  exit 1
+fi
+grep -q -- "--akimap-free-step" "$dir/err.txt"
 echo "eval oracle CLI: ok"

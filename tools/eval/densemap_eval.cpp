@@ -112,7 +112,7 @@ Picture slicePicture(const SliceFrame& f, double resolution, double z, int scale
 int main(int argc, char** argv) {
   std::string data, methods_list = "akimap,bgk,bgkl,raycast", protocol = "holdout", json_path,
                     roc_prefix;
-  double resolution = 0.1, max_range = -1.0;
+  double resolution = 0.1, max_range = -1.0, akimap_free_step = 0.5;
   std::uint64_t seed = 1;
   int runs = 1, threads = 0;
   std::size_t first = 0, limit = 0;
@@ -135,6 +135,11 @@ int main(int argc, char** argv) {
   app.add_option("--first", first, "First scan index")->capture_default_str();
   app.add_option("--limit", limit, "Scans to use (0: all)")->capture_default_str();
   app.add_option("--threads", threads, "Worker threads (0: all cores)")->capture_default_str();
+  app.add_option("--akimap-free-step", akimap_free_step,
+                 "AKIMap's free sampling distance, m: one free sample drawn at random in each "
+                 "such interval of a ray (the paper's 0.5)")
+      ->check(CLI::Range(0.01, 10.0))
+      ->capture_default_str();
   app.add_option("--json", json_path, "Write the results as JSON");
   app.add_option("--roc", roc_prefix,
                  "Write the ROC curves of the first run: PREFIX_<method>.csv and PREFIX.svg");
@@ -307,6 +312,9 @@ int main(int argc, char** argv) {
             *densemap::kernel::parseKernelMethod(methods[m]));
         options.max_range = max_range;
         options.seed = run_seed;
+        if (options.method == densemap::kernel::KernelMethod::kAkimap) {
+          options.free_step = akimap_free_step;
+        }
         kernel_map = std::make_unique<densemap::kernel::KernelMap>(resolution, options);
         for (std::size_t i = 0; i < scans.size(); ++i) {
           arena.execute([&] { kernel_map->integrate(scans[i].train, scans[i].origin); });
