@@ -160,7 +160,7 @@ class Lane {
   }
 
   [[nodiscard]] const std::string& name() const { return name_; }
-  std::unique_ptr<OccupancyMap>& map() { return map_; }
+  [[nodiscard]] const OccupancyMap& map() const { return *map_; }
 
  private:
   RunResult r_;
@@ -243,17 +243,13 @@ int run(const Options& o) {
   double octomap_p50 = 0;
   for (auto& lane : lanes) {
     RunResult r = lane->finish();
-    const OccupancyMap& map = *lane->map();
-    if (r.method == "octomap") {  // its own reference, whatever the rule
-      octomap_p50 = r.percentile(0.5);
-      r.reference = "octomap";
-      r.diff_cells = r.diff_cells_vs_octomap = 0;
-    }
-    if (r.method == reference_method) {
-      r.reference = reference_method;
+    const OccupancyMap& map = lane->map();
+    if (r.method == "octomap") octomap_p50 = r.percentile(0.5);
+    if (r.method == reference_method || r.method == "octomap") {  // its own reference
+      r.reference = r.method;
       r.diff_cells = 0;
-      if (!per_ray) r.diff_cells_vs_octomap = 0;
-      references[per_ray ? r.backend : std::string()] = &map;
+      if (r.method == "octomap") r.diff_cells_vs_octomap = 0;
+      if (r.method == reference_method) references[per_ray ? r.backend : std::string()] = &map;
     } else if (const auto ref = references.find(per_ray ? r.backend : std::string());
                ref != references.end()) {
       const MapDiff diff = diffMaps(map, *ref->second);
