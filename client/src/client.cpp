@@ -7,6 +7,7 @@
 
 #include "densemap/dds/dds.hpp"
 #include "densemap/dds/topics.hpp"
+#include "densemap/pipeline/version_delta.hpp"
 #include "densemap_msgs.h"
 
 namespace densemap {
@@ -26,7 +27,7 @@ struct Client::Dds {
   dds::Entity participant;
   dds::Topics topics;
   dds::Entity scan_w, pq_w, bq_w, rq_w, cq_w;
-  dds::Entity pr_r, br_r, rr_r, cr_r, man_r, tile_r, delta_r, st_r;
+  dds::Entity pr_r, br_r, rr_r, cr_r, man_r, tile_r, delta_r, event_r, st_r;
 };
 
 Client::Client(const ClientOptions& options)
@@ -67,7 +68,8 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
   make(d.cr_r, d.topics.command_reply, dds::kCommandQos, false);
   make(d.man_r, d.topics.manifest, dds::kLatestStateQos, false);
   make(d.tile_r, d.topics.tiles, dds::kLatestStateQos, false);
-  make(d.delta_r, d.topics.delta, {.depth = 256}, false);
+  if (options.subscribe_deltas) make(d.delta_r, d.topics.delta, {.depth = 256}, false);
+  make(d.event_r, d.topics.events, {.depth = 1024}, false);
   make(d.st_r, d.topics.status, dds::kLatestStateQos, false);
   if (!status) return std::unexpected(status.error());
   return c;
@@ -82,7 +84,9 @@ Expected<void> Client::waitForServer() {
       if (dds_get_publication_matched_status(w->get(), &s) < 0 || s.current_count == 0)
         return false;
     }
-    for (const dds::Entity* r : {&dds_->pr_r, &dds_->br_r, &dds_->rr_r, &dds_->cr_r}) {
+    for (const dds::Entity* r : {&dds_->pr_r, &dds_->br_r, &dds_->rr_r, &dds_->cr_r,
+                                 &dds_->event_r, &dds_->delta_r}) {
+      if (r->get() <= 0) continue;  // deltas not subscribed
       dds_subscription_matched_status_t s;
       if (dds_get_subscription_matched_status(r->get(), &s) < 0 || s.current_count == 0)
         return false;
@@ -98,6 +102,9 @@ Expected<void> Client::waitForServer() {
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
+  // The server builds deltas only while it sees a matched reader; its side of the match may
+  // come a moment after ours.
+  if (options_.subscribe_deltas) std::this_thread::sleep_for(std::chrono::milliseconds(200));
   return {};
 }
 
@@ -290,6 +297,7 @@ Expected<ServerStatus> Client::status() {
 }
 
 std::size_t Client::pollDeltas(const std::function<void(const DeltaInfo&)>& f) {
+  if (dds_->delta_r.get() <= 0) return 0;
   return dds::takeAll<densemap_msgs_MapDelta>(dds_->delta_r, [&](const densemap_msgs_MapDelta& d) {
     DeltaInfo info;
     info.base_version = d.base_version;
@@ -297,13 +305,37 @@ std::size_t Client::pollDeltas(const std::function<void(const DeltaInfo&)>& f) {
     info.from_scan = d.from_scan;
     info.sensor_id = text(d.sensor_id);
     info.scan_seq = d.scan_seq;
-    info.changes.reserve(d.log_odds._length);
-    for (std::uint32_t i = 0; i < d.log_odds._length; ++i) {
-      const std::uint16_t* k = d.keys._buffer + 3 * i;
-      const float v = d.log_odds._buffer[i];
-      info.changes.push_back(
-          {VoxelKey{k[0], k[1], k[2]}, std::isnan(v) ? 0.0F : v, !std::isnan(v)});
+    VersionDelta delta;
+    delta.block_keys.assign(d.block_keys._buffer, d.block_keys._buffer + d.block_keys._length);
+    delta.block_ends.assign(d.block_ends._buffer, d.block_ends._buffer + d.block_ends._length);
+    delta.cells.assign(d.cells._buffer, d.cells._buffer + d.cells._length);
+    delta.log_odds.assign(d.log_odds._buffer, d.log_odds._buffer + d.log_odds._length);
+    // A malformed delta (inconsistent lengths) is dropped rather than misread.
+    bool valid = delta.block_keys.size() == delta.block_ends.size() &&
+                 delta.cells.size() == delta.log_odds.size();
+    std::uint32_t previous = 0;
+    for (const std::uint32_t end : delta.block_ends) {
+      valid = valid && end >= previous && end <= delta.cells.size();
+      previous = end;
     }
+    for (const std::uint16_t c : delta.cells) valid = valid && c < block::kVoxels;
+    if (!valid) return;
+    info.changes = delta.changes();
+    f(info);
+  });
+}
+
+std::size_t Client::pollEvents(const std::function<void(const MapEventInfo&)>& f) {
+  return dds::takeAll<densemap_msgs_MapEvent>(dds_->event_r, [&](const densemap_msgs_MapEvent& e) {
+    MapEventInfo info;
+    info.base_version = e.base_version;
+    info.new_version = e.new_version;
+    info.from_scan = e.from_scan;
+    info.sensor_id = text(e.sensor_id);
+    info.scan_seq = e.scan_seq;
+    info.changed_cells = e.changed_cells;
+    info.written_blocks = e.written_blocks;
+    info.latency_ms = e.latency_ms;
     f(info);
   });
 }

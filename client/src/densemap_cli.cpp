@@ -57,7 +57,7 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
   std::size_t queried = 0;
   double query_seconds = 0.0;
   auto collect = [&] {
-    (*client)->pollDeltas([&](const DeltaInfo& d) {
+    (*client)->pollEvents([&](const MapEventInfo& d) {
       const auto it = sent_at.find(d.scan_seq);
       if (!d.from_scan || it == sent_at.end()) return;
       latencies.push_back(
@@ -81,7 +81,7 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
       scan->intensities.clear();
     }
     const RawScan raw = toRawScan(*scan, i + 1, "replay");
-    // Wait for the publish slot while watching deltas, so latencies are not quantised by it.
+    // Wait for the publish slot while watching events, so latencies are not quantised by it.
     while (Clock::now() < next) {
       collect();
       std::this_thread::sleep_for(std::chrono::microseconds(500));
@@ -108,7 +108,7 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
     collect();
     progress.update(i - first + 1, std::to_string(latencies.size()) + " integrated");
   }
-  // Wait for the last deltas: until every scan is seen or nothing new for 3 s.
+  // Wait for the last events: until every scan is seen or nothing new for 3 s.
   auto last_news = Clock::now();
   while (!sent_at.empty() && Clock::now() - last_news < std::chrono::seconds(3)) {
     const std::size_t had = latencies.size();
@@ -129,7 +129,7 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
                 after->latency_p50_ms, after->latency_p99_ms);
   }
   std::printf(
-      "replay: end-to-end latency (publish -> delta seen) over %zu scans: p50 %.1f ms, p99 %.1f "
+      "replay: end-to-end latency (publish -> map event seen) over %zu scans: p50 %.1f ms, p99 %.1f "
       "ms\n",
       latencies.size(), percentile(latencies, 0.5), percentile(latencies, 0.99));
   if (queried > 0) {

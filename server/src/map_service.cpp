@@ -3,19 +3,15 @@
 #include <cmath>
 #include <limits>
 #include <unordered_map>
+#include <vector>
 
 #include "densemap/dds/topics.hpp"
 #include "densemap/pipeline/map_queries.hpp"
+#include "densemap/pipeline/version_delta.hpp"
 #include "densemap_msgs.h"
 #include "snapshot.hpp"
 
 namespace densemap::server {
-
-std::uint64_t tileOf(const VoxelKey& k) {
-  return std::uint64_t{static_cast<std::uint16_t>(k.x >> 5)} |
-         (std::uint64_t{static_cast<std::uint16_t>(k.y >> 5)} << 11) |
-         (std::uint64_t{static_cast<std::uint16_t>(k.z >> 5)} << 22);
-}
 
 namespace {
 
@@ -26,6 +22,27 @@ constexpr dds_attach_t kPointTag = 1, kBboxTag = 2, kRayTag = 3, kCmdTag = 4, kS
 
 Point3f toPoint(const float (&v)[3]) { return {v[0], v[1], v[2]}; }
 
+// Requests copied out of DDS's loans, answered later by a query task.
+struct PointRequest {
+  densemap_msgs_RequestId id;
+  std::vector<float> xyz;
+};
+struct BboxRequest {
+  densemap_msgs_RequestId id;
+  Point3f min, max;
+  std::uint32_t max_centers;
+};
+struct RayRequest {
+  densemap_msgs_RequestId id;
+  Point3f origin, direction;
+  float max_range;
+};
+
+// Beyond this many queries waiting for a task, requests stay in the DDS readers (keep-last).
+constexpr int kMaxQueriesInFlight = 64;
+// Beyond this many versions waiting for the publish thread, their deltas are coalesced.
+constexpr std::size_t kMaxPendingVersions = 8;
+
 }  // namespace
 
 struct MapService::Dds {
@@ -33,7 +50,7 @@ struct MapService::Dds {
   dds::Topics topics;
   dds::Entity scan_reader, point_reader, bbox_reader, ray_reader, cmd_reader;
   dds::Entity point_writer, bbox_writer, ray_writer, cmd_writer, manifest_writer, tile_writer,
-      delta_writer, status_writer;
+      delta_writer, event_writer, status_writer;
   std::optional<dds::WaitSet> ingest_waitset;
   std::optional<dds::WaitSet> service_waitset;
 };
@@ -78,6 +95,7 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
   writer(d.manifest_writer, d.topics.manifest, dds::kLatestStateQos);
   writer(d.tile_writer, d.topics.tiles, dds::kLatestStateQos);
   writer(d.delta_writer, d.topics.delta, {.depth = 32});
+  writer(d.event_writer, d.topics.events, {.depth = 64});
   writer(d.status_writer, d.topics.status, dds::kLatestStateQos);
   if (!status) return std::unexpected(status.error());
 
@@ -95,16 +113,21 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
   }
   pipeline.setPublisher(
       [s = service.get()](const IntegrationResult& r, const std::shared_ptr<const MapView>& v) {
-        s->onIntegrated(r, v);
+        s->onIntegrated(const_cast<IntegrationResult&>(r), v);
       });
   // The map loaded from a snapshot is published as tiles right away.
-  pipeline.view()->forEachKnown(
-      [&](const VoxelKey& k, float) { service->dirty_tiles_.insert(tileOf(k)); });
+  service->delta_base_ = pipeline.view();
+  pipeline.view()->forEachBlock([&](std::uint64_t block_key, const VoxelBlock&) {
+    service->dirty_tiles_.insert(tileOfBlock(block_key));
+  });
   return service;
 }
 
 MapService::MapService(Pipeline& pipeline, const ServiceOptions& options)
-    : pipeline_(pipeline), options_(options), dds_(std::make_unique<Dds>()) {}
+    : pipeline_(pipeline),
+      options_(options),
+      dds_(std::make_unique<Dds>()),
+      query_arena_(std::max(1, options.query_threads)) {}
 
 MapService::~MapService() { stop(); }
 
@@ -112,14 +135,18 @@ void MapService::start() {
   if (running_.exchange(true)) return;
   ingest_ = std::thread([this] { ingestLoop(); });
   service_ = std::thread([this] { serviceLoop(); });
+  publish_ = std::thread([this] { publishLoop(); });
 }
 
 void MapService::stop() {
   if (!running_.exchange(false)) return;
   dds_->ingest_waitset->wake();
   dds_->service_waitset->wake();
+  versions_cv_.notify_all();
   if (ingest_.joinable()) ingest_.join();
   if (service_.joinable()) service_.join();
+  query_arena_.execute([this] { queries_.wait(); });
+  if (publish_.joinable()) publish_.join();
 }
 
 void MapService::ingestLoop() {
@@ -141,16 +168,28 @@ void MapService::ingestLoop() {
 }
 
 void MapService::serviceLoop() {
-  auto next_status = std::chrono::steady_clock::now();
-  auto next_tiles = next_status;
-  auto next_save = next_status + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                                     std::chrono::duration<double>(options_.autosave_period_s));
   while (running_.load()) {
     dds_->service_waitset->wait(std::chrono::milliseconds(100));
-    answerPointQueries();
-    answerBboxQueries();
-    answerRayQueries();
+    takeQueries();
     answerCommands();
+  }
+}
+
+void MapService::publishLoop() {
+  auto next_status = std::chrono::steady_clock::now();
+  auto next_tiles = next_status;
+  const auto autosave_period = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+      std::chrono::duration<double>(options_.autosave_period_s));
+  auto next_save = next_status + autosave_period;
+  std::deque<Version> versions;
+  while (running_.load()) {
+    {
+      std::unique_lock lock(versions_mutex_);
+      versions_cv_.wait_until(lock, std::min(next_status, next_tiles),
+                              [&] { return !versions_.empty() || !running_.load(); });
+      versions.swap(versions_);
+    }
+    publishDeltas(versions);
     const auto now = std::chrono::steady_clock::now();
     if (now >= next_status) {
       publishStatus();
@@ -162,37 +201,91 @@ void MapService::serviceLoop() {
     }
     if (options_.autosave_period_s > 0 && !options_.snapshot_path.empty() && now >= next_save) {
       if (auto ok = save(); !ok) noteBadRequest("autosave: " + ok.error().message);
-      next_save = now + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                            std::chrono::duration<double>(options_.autosave_period_s));
+      next_save = now + autosave_period;
     }
   }
+  {
+    std::lock_guard lock(versions_mutex_);
+    versions.swap(versions_);
+  }
+  publishDeltas(versions);
   publishTiles();
   publishStatus();
 }
 
-void MapService::onIntegrated(const IntegrationResult& r, const std::shared_ptr<const MapView>&) {
-  std::vector<std::uint16_t> keys;
-  std::vector<float> values;
-  keys.reserve(r.changes.size() * 3);
-  values.reserve(r.changes.size());
+void MapService::onIntegrated(IntegrationResult& r, const std::shared_ptr<const MapView>& view) {
+  // On the pipeline's worker: a small event now, everything else on the publish thread.
+  densemap_msgs_MapEvent event{};
+  event.base_version = r.base_version;
+  event.new_version = r.new_version;
+  event.sensor_id = const_cast<char*>(r.sensor_id.c_str());
+  event.scan_seq = r.scan_seq;
+  event.scan_stamp_ns = r.stamp_ns;
+  event.from_scan = r.from_scan;
+  event.changed_cells = r.from_scan ? r.stats.changed : r.changes.size();
+  event.written_blocks = static_cast<std::uint32_t>(r.written_blocks.size());
+  event.latency_ms = r.latency_ms;
+  (void)dds::write(dds_->event_writer, &event);
+  Version v;
+  v.result.from_scan = r.from_scan;
+  v.result.sensor_id = r.sensor_id;
+  v.result.scan_seq = r.scan_seq;
+  v.result.stamp_ns = r.stamp_ns;
+  v.result.base_version = r.base_version;
+  v.result.new_version = r.new_version;
+  v.result.written_blocks = std::move(r.written_blocks);
+  v.view = view;
   {
-    std::lock_guard lock(dirty_mutex_);
-    for (const CellChange& c : r.changes) {
-      keys.insert(keys.end(), {c.key.x, c.key.y, c.key.z});
-      values.push_back(c.known ? c.log_odds : std::numeric_limits<float>::quiet_NaN());
-      dirty_tiles_.insert(tileOf(c.key));
-    }
+    std::lock_guard lock(versions_mutex_);
+    versions_.push_back(std::move(v));
   }
-  densemap_msgs_MapDelta delta{};
-  delta.base_version = r.base_version;
-  delta.new_version = r.new_version;
-  delta.sensor_id = const_cast<char*>(r.sensor_id.c_str());
-  delta.scan_seq = r.scan_seq;
-  delta.scan_stamp_ns = r.stamp_ns;
-  delta.from_scan = r.from_scan;
-  delta.keys = dds::borrowSequence<dds_sequence_unsigned_short>(keys);
-  delta.log_odds = dds::borrowSequence<dds_sequence_float>(values);
-  (void)dds::write(dds_->delta_writer, &delta);
+  versions_cv_.notify_one();
+}
+
+void MapService::publishDeltas(std::deque<Version>& versions) {
+  if (versions.empty()) return;
+  for (const Version& v : versions) {
+    for (const std::uint64_t b : v.result.written_blocks) dirty_tiles_.insert(tileOfBlock(b));
+  }
+  dds_publication_matched_status_t matched{};
+  const bool wanted =
+      dds_get_publication_matched_status(dds_->delta_writer.get(), &matched) >= 0 &&
+      matched.current_count > 0;
+  if (!wanted || !delta_base_) {  // nobody listens: no delta is built
+    delta_base_ = versions.back().view;
+    versions.clear();
+    return;
+  }
+  // A backlog goes out as one delta from the last base to the newest version.
+  if (versions.size() > kMaxPendingVersions) {
+    Version merged = std::move(versions.back());
+    for (std::size_t i = 0; i + 1 < versions.size(); ++i) {
+      auto& blocks = versions[i].result.written_blocks;
+      merged.result.written_blocks.insert(merged.result.written_blocks.end(), blocks.begin(),
+                                          blocks.end());
+    }
+    deltas_coalesced_ += versions.size() - 1;
+    versions.clear();
+    versions.push_back(std::move(merged));
+  }
+  for (Version& v : versions) {
+    const VersionDelta delta = diffVersions(*delta_base_, *v.view, v.result.written_blocks);
+    densemap_msgs_MapDelta msg{};
+    msg.base_version = delta_base_->version();
+    msg.new_version = v.view->version();
+    msg.sensor_id = const_cast<char*>(v.result.sensor_id.c_str());
+    msg.scan_seq = v.result.scan_seq;
+    msg.scan_stamp_ns = v.result.stamp_ns;
+    msg.from_scan = v.result.from_scan;
+    auto& d = const_cast<VersionDelta&>(delta);
+    msg.block_keys = dds::borrowSequence<dds_sequence_unsigned_long_long>(d.block_keys);
+    msg.block_ends = dds::borrowSequence<dds_sequence_unsigned_long>(d.block_ends);
+    msg.cells = dds::borrowSequence<dds_sequence_unsigned_short>(d.cells);
+    msg.log_odds = dds::borrowSequence<dds_sequence_float>(d.log_odds);
+    (void)dds::write(dds_->delta_writer, &msg);
+    delta_base_ = v.view;
+  }
+  versions.clear();
 }
 
 void MapService::noteBadRequest(const std::string& error) {
@@ -201,94 +294,139 @@ void MapService::noteBadRequest(const std::string& error) {
   last_query_error_ = error;
 }
 
-void MapService::answerPointQueries() {
-  dds::takeAll<densemap_msgs_PointQueryRequest>(
-      dds_->point_reader, [&](const densemap_msgs_PointQueryRequest& req) {
-        densemap_msgs_PointQueryReply rep{};
-        rep.id = req.id;
+namespace {
+
+void answerPoints(const dds::Entity& writer, const PointRequest& req, const MapView& view,
+                  std::string& error) {
+  densemap_msgs_PointQueryReply rep{};
+  rep.id = req.id;
+  std::vector<float> values;
+  std::vector<std::uint8_t> states;
+  rep.map_version = view.version();
+  if (req.xyz.size() % 3 != 0) {
+    error = "point query length is not a multiple of 3";
+  } else if (req.xyz.size() / 3 > 10'000'000) {
+    error = "more than 10 million query points";
+  } else {
+    const std::size_t n = req.xyz.size() / 3;
+    values.resize(n, std::numeric_limits<float>::quiet_NaN());
+    states.resize(n, 0);
+    for (std::size_t i = 0; i < n; ++i) {
+      const Point3f p(req.xyz[3 * i], req.xyz[3 * i + 1], req.xyz[3 * i + 2]);
+      const auto key = p.allFinite() ? view.grid().pointToKey(p) : std::nullopt;
+      const auto v = key ? view.logOdds(*key) : std::nullopt;
+      if (v) values[i] = *v;
+      states[i] = static_cast<std::uint8_t>(cellState(v));
+    }
+  }
+  rep.status = error.empty() ? kOk : kInvalid;
+  rep.error = const_cast<char*>(error.c_str());
+  rep.log_odds = dds::borrowSequence<dds_sequence_float>(values);
+  rep.state = dds::borrowSequence<dds_sequence_octet>(states);
+  (void)dds::write(writer, &rep);
+}
+
+void answerBox(const dds::Entity& writer, const BboxRequest& req, const MapView& view,
+               std::size_t max_cells, std::string& error) {
+  densemap_msgs_BboxQueryReply rep{};
+  rep.id = req.id;
+  rep.map_version = view.version();
+  auto result = queryBox(view, req.min, req.max, max_cells,
+                         std::min<std::uint32_t>(req.max_centers, 1'000'000));
+  std::vector<float> centers;
+  if (result) {
+    rep.occupied = result->occupied;
+    rep.free_cells = result->free;
+    rep.unknown = result->unknown;
+    for (const auto& c : result->occupied_centers) centers.insert(centers.end(), {c.x(), c.y(), c.z()});
+  } else {
+    error = result.error().message;
+  }
+  rep.status = error.empty() ? kOk : kInvalid;
+  rep.error = const_cast<char*>(error.c_str());
+  rep.occupied_centers = dds::borrowSequence<dds_sequence_float>(centers);
+  (void)dds::write(writer, &rep);
+}
+
+void answerRay(const dds::Entity& writer, const RayRequest& req, const MapView& view,
+               std::string& error) {
+  densemap_msgs_RayQueryReply rep{};
+  rep.id = req.id;
+  rep.map_version = view.version();
+  auto result = castRay(view, req.origin, req.direction, req.max_range);
+  if (result) {
+    rep.hit = result->hit;
+    for (int i = 0; i < 3; ++i) rep.hit_point[i] = result->hit_center[i];
+    rep.distance = result->distance;
+  } else {
+    error = result.error().message;
+  }
+  rep.status = error.empty() ? kOk : kInvalid;
+  rep.error = const_cast<char*>(error.c_str());
+  (void)dds::write(writer, &rep);
+}
+
+}  // namespace
+
+void MapService::takeQueries() {
+  // Each request becomes a task answered from the latest version when it runs; the task reads
+  // one view throughout, so a multi-cell answer is one consistent version.
+  auto spawn = [this](auto answer) {
+    ++queries_in_flight_;
+    query_arena_.execute([&] {
+      queries_.run([this, answer = std::move(answer)] {
         std::string error;
-        std::vector<float> values;
-        std::vector<std::uint8_t> states;
-        const auto view = pipeline_.view();
-        rep.map_version = view->version();
-        if (req.points._length % 3 != 0) {
-          error = "point query length is not a multiple of 3";
-        } else if (req.points._length / 3 > 10'000'000) {
-          error = "more than 10 million query points";
-        } else {
-          const std::size_t n = req.points._length / 3;
-          values.resize(n, std::numeric_limits<float>::quiet_NaN());
-          states.resize(n, 0);
-          for (std::size_t i = 0; i < n; ++i) {
-            const Point3f p(req.points._buffer[3 * i], req.points._buffer[3 * i + 1],
-                            req.points._buffer[3 * i + 2]);
-            const auto key = p.allFinite() ? view->grid().pointToKey(p) : std::nullopt;
-            const auto v = key ? view->logOdds(*key) : std::nullopt;
-            if (v) values[i] = *v;
-            states[i] = static_cast<std::uint8_t>(cellState(v));
-          }
-        }
-        rep.status = error.empty() ? kOk : kInvalid;
-        rep.error = const_cast<char*>(error.c_str());
-        rep.log_odds = dds::borrowSequence<dds_sequence_float>(values);
-        rep.state = dds::borrowSequence<dds_sequence_octet>(states);
+        answer(*pipeline_.view(), error);
         if (!error.empty()) noteBadRequest(error);
         ++queries_answered_;
-        (void)dds::write(dds_->point_writer, &rep);
+        --queries_in_flight_;
       });
-}
-
-void MapService::answerBboxQueries() {
-  dds::takeAll<densemap_msgs_BboxQueryRequest>(
-      dds_->bbox_reader, [&](const densemap_msgs_BboxQueryRequest& req) {
-        densemap_msgs_BboxQueryReply rep{};
-        rep.id = req.id;
-        const auto view = pipeline_.view();
-        rep.map_version = view->version();
-        auto result = queryBox(*view, toPoint(req.min), toPoint(req.max), options_.max_query_cells,
-                               std::min<std::uint32_t>(req.max_centers, 1'000'000));
-        std::string error;
-        std::vector<float> centers;
-        if (result) {
-          rep.occupied = result->occupied;
-          rep.free_cells = result->free;
-          rep.unknown = result->unknown;
-          for (const auto& c : result->occupied_centers)
-            centers.insert(centers.end(), {c.x(), c.y(), c.z()});
-        } else {
-          error = result.error().message;
-          noteBadRequest(error);
-        }
-        rep.status = error.empty() ? kOk : kInvalid;
-        rep.error = const_cast<char*>(error.c_str());
-        rep.occupied_centers = dds::borrowSequence<dds_sequence_float>(centers);
-        ++queries_answered_;
-        (void)dds::write(dds_->bbox_writer, &rep);
-      });
-}
-
-void MapService::answerRayQueries() {
-  dds::takeAll<densemap_msgs_RayQueryRequest>(
-      dds_->ray_reader, [&](const densemap_msgs_RayQueryRequest& req) {
-        densemap_msgs_RayQueryReply rep{};
-        rep.id = req.id;
-        const auto view = pipeline_.view();
-        rep.map_version = view->version();
-        auto result = castRay(*view, toPoint(req.origin), toPoint(req.direction), req.max_range);
-        std::string error;
-        if (result) {
-          rep.hit = result->hit;
-          for (int i = 0; i < 3; ++i) rep.hit_point[i] = result->hit_center[i];
-          rep.distance = result->distance;
-        } else {
-          error = result.error().message;
-          noteBadRequest(error);
-        }
-        rep.status = error.empty() ? kOk : kInvalid;
-        rep.error = const_cast<char*>(error.c_str());
-        ++queries_answered_;
-        (void)dds::write(dds_->ray_writer, &rep);
-      });
+    });
+  };
+  auto room = [this] { return queries_in_flight_.load() < kMaxQueriesInFlight; };
+  // Take one request at a time from each reader in turn, so no kind starves the others.
+  bool took = true;
+  while (took && room()) {
+    took = false;
+    void* sample = nullptr;
+    dds_sample_info_t info;
+    if (dds_take(dds_->point_reader.get(), &sample, &info, 1, 1) > 0) {
+      took = true;
+      if (info.valid_data) {
+        const auto& m = *static_cast<const densemap_msgs_PointQueryRequest*>(sample);
+        PointRequest req{m.id, std::vector<float>(m.points._buffer,
+                                                  m.points._buffer + m.points._length)};
+        spawn([this, req = std::move(req)](const MapView& view, std::string& error) {
+          answerPoints(dds_->point_writer, req, view, error);
+        });
+      }
+      dds_return_loan(dds_->point_reader.get(), &sample, 1);
+    }
+    sample = nullptr;
+    if (dds_take(dds_->bbox_reader.get(), &sample, &info, 1, 1) > 0) {
+      took = true;
+      if (info.valid_data) {
+        const auto& m = *static_cast<const densemap_msgs_BboxQueryRequest*>(sample);
+        BboxRequest req{m.id, toPoint(m.min), toPoint(m.max), m.max_centers};
+        spawn([this, req](const MapView& view, std::string& error) {
+          answerBox(dds_->bbox_writer, req, view, options_.max_query_cells, error);
+        });
+      }
+      dds_return_loan(dds_->bbox_reader.get(), &sample, 1);
+    }
+    sample = nullptr;
+    if (dds_take(dds_->ray_reader.get(), &sample, &info, 1, 1) > 0) {
+      took = true;
+      if (info.valid_data) {
+        const auto& m = *static_cast<const densemap_msgs_RayQueryRequest*>(sample);
+        RayRequest req{m.id, toPoint(m.origin), toPoint(m.direction), m.max_range};
+        spawn([this, req](const MapView& view, std::string& error) {
+          answerRay(dds_->ray_writer, req, view, error);
+        });
+      }
+      dds_return_loan(dds_->ray_reader.get(), &sample, 1);
+    }
+  }
 }
 
 void MapService::answerCommands() {
@@ -365,7 +503,7 @@ void MapService::publishStatus() {
   s.latency_p99_ms = c.latency_p99_ms;
   s.known_cells = view->knownCells();
   s.map_version = view->version();
-  s.memory_bytes = view->blockCount() * (sizeof(VoxelBlock) + 48);
+  s.memory_bytes = view->memoryBytes();
   s.uptime_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count();
   s.queries_answered = queries_answered_.load();
   s.queries_rejected = queries_rejected_.load();
@@ -379,38 +517,28 @@ void MapService::publishStatus() {
 }
 
 void MapService::publishTiles() {
-  std::set<std::uint64_t> dirty;
-  {
-    std::lock_guard lock(dirty_mutex_);
-    dirty.swap(dirty_tiles_);
-  }
-  const auto view = pipeline_.view();
-  if (dirty.empty() && manifest_published_) return;
-  if (!dirty.empty()) {
-    std::unordered_map<std::uint64_t, std::pair<std::vector<std::uint16_t>, std::vector<float>>>
-        tiles;
-    for (const auto id : dirty) tiles[id];
-    // Whole tiles from the latest version, so a late joiner's keep-last-1 copy is complete.
-    view->forEachKnown([&](const VoxelKey& k, float v) {
-      const auto it = tiles.find(tileOf(k));
-      if (it == tiles.end()) return;
-      it->second.first.insert(it->second.first.end(), {k.x, k.y, k.z});
-      it->second.second.push_back(v);
-    });
-    for (auto& [id, cells] : tiles) {
-      if (cells.second.empty()) {
-        known_tiles_.erase(id);
-      } else {
-        known_tiles_.insert(id);
-      }
-      densemap_msgs_MapTile tile{};
-      tile.tile_id = id;
-      tile.version = view->version();
-      tile.keys = dds::borrowSequence<dds_sequence_unsigned_short>(cells.first);
-      tile.log_odds = dds::borrowSequence<dds_sequence_float>(cells.second);
-      (void)dds::write(dds_->tile_writer, &tile);
+  // The newest version handed over: dirty_tiles_ holds exactly what changed up to it.
+  const auto view = delta_base_;
+  if (dirty_tiles_.empty() && manifest_published_) return;
+  // Whole tiles from the latest version (so a late joiner's keep-last-1 copy is complete),
+  // read from the blocks of the tiles the versions since the last round wrote.
+  std::vector<std::uint16_t> keys;
+  std::vector<float> values;
+  for (const std::uint64_t id : dirty_tiles_) {
+    readTile(*view, id, keys, values);
+    if (values.empty()) {
+      known_tiles_.erase(id);
+    } else {
+      known_tiles_.insert(id);
     }
+    densemap_msgs_MapTile tile{};
+    tile.tile_id = id;
+    tile.version = view->version();
+    tile.keys = dds::borrowSequence<dds_sequence_unsigned_short>(keys);
+    tile.log_odds = dds::borrowSequence<dds_sequence_float>(values);
+    (void)dds::write(dds_->tile_writer, &tile);
   }
+  dirty_tiles_.clear();
   densemap_msgs_MapManifest manifest{};
   manifest.version = view->version();
   manifest.resolution = view->grid().resolution();

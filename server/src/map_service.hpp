@@ -1,11 +1,16 @@
 #pragma once
 
+#include <tbb/task_arena.h>
+#include <tbb/task_group.h>
+
 #include <atomic>
+#include <condition_variable>
+#include <deque>
 #include <filesystem>
 #include <memory>
 #include <mutex>
-#include <set>
 #include <thread>
+#include <unordered_set>
 
 #include "densemap/dds/dds.hpp"
 #include "densemap/pipeline/pipeline.hpp"
@@ -18,13 +23,18 @@ struct ServiceOptions {
   std::filesystem::path snapshot_path;  // empty: no snapshots
   double autosave_period_s = 0.0;       // 0: off
   std::size_t max_query_cells = 50'000'000;
+  int query_threads = 2;  // the query task arena: requests are answered in parallel
 };
 
-/// densemap-server's DDS face (DESIGN.md topics): an ingest thread that only takes scans and
-/// submits them to the pipeline; a service thread that answers queries and commands from the
-/// latest published map version, publishes status at 1 Hz, map tiles + manifest (transient-
-/// local, for late joiners) at most once a second, and autosaves. Per-scan deltas are
-/// published by the pipeline's publish stage.
+/// densemap-server's DDS face (DESIGN.md topics), three threads and a task arena:
+/// - ingest: only takes scans and submits them to the pipeline;
+/// - service: takes requests; point/bbox/ray queries run as tasks in the query arena (one slow
+///   bbox does not hold up point queries), each answered from the latest published version;
+///   commands run here (they wait for the pipeline's worker);
+/// - publish: per version, a map/delta (only while a reader is matched; diffed from the
+///   versions' written blocks, never the whole map); at most once a second the tiles those
+///   blocks touched + manifest (transient-local, for late joiners); status at 1 Hz; autosave.
+/// The pipeline's worker only writes a small map/events sample and hands the version over.
 class MapService {
  public:
   [[nodiscard]] static Expected<std::unique_ptr<MapService>> create(Pipeline& pipeline,
@@ -34,21 +44,25 @@ class MapService {
   MapService& operator=(const MapService&) = delete;
 
   void start();
-  /// Stops taking scans and requests; joins the threads. Idempotent.
+  /// Stops taking scans and requests; finishes queries in flight; joins the threads. Idempotent.
   void stop();
   /// Saves the latest map version to `file` (or the configured snapshot path).
   [[nodiscard]] Expected<std::size_t> save(const std::filesystem::path& file = {});
 
  private:
   struct Dds;
+  struct Version {  // a published version handed to the publish thread
+    IntegrationResult result;
+    std::shared_ptr<const MapView> view;
+  };
   MapService(Pipeline& pipeline, const ServiceOptions& options);
   void ingestLoop();
   void serviceLoop();
-  void onIntegrated(const IntegrationResult& result, const std::shared_ptr<const MapView>& view);
-  void answerPointQueries();
-  void answerBboxQueries();
-  void answerRayQueries();
+  void publishLoop();
+  void onIntegrated(IntegrationResult& result, const std::shared_ptr<const MapView>& view);
+  void takeQueries();
   void answerCommands();
+  void publishDeltas(std::deque<Version>& versions);
   void publishStatus();
   void publishTiles();
   void noteBadRequest(const std::string& error);
@@ -59,19 +73,27 @@ class MapService {
   std::atomic<bool> running_{false};
   std::thread ingest_;
   std::thread service_;
+  std::thread publish_;
   std::chrono::steady_clock::time_point started_ = std::chrono::steady_clock::now();
 
-  std::mutex dirty_mutex_;
-  std::set<std::uint64_t> dirty_tiles_;
-  std::set<std::uint64_t> known_tiles_;  // service thread only
+  tbb::task_arena query_arena_;
+  tbb::task_group queries_;
+  std::atomic<int> queries_in_flight_{0};
+
+  std::mutex versions_mutex_;
+  std::condition_variable versions_cv_;
+  std::deque<Version> versions_;
+  // Publish thread only:
+  std::shared_ptr<const MapView> delta_base_;  // the last version a delta went out for
+  std::unordered_set<std::uint64_t> dirty_tiles_;
+  std::unordered_set<std::uint64_t> known_tiles_;
   bool manifest_published_ = false;
+
   std::atomic<std::uint64_t> queries_answered_{0};
   std::atomic<std::uint64_t> queries_rejected_{0};
+  std::atomic<std::uint64_t> deltas_coalesced_{0};
   std::mutex error_mutex_;
   std::string last_query_error_;
 };
-
-/// Tiles are cubes of 32^3 cells; a tile's id packs the upper key bits.
-[[nodiscard]] std::uint64_t tileOf(const VoxelKey& k);
 
 }  // namespace densemap::server

@@ -71,7 +71,7 @@ class ServerProcess {
 };
 
 std::unique_ptr<Client> connect(std::uint32_t domain) {
-  auto client = Client::create({.domain_id = domain, .timeout = 10s});
+  auto client = Client::create({.domain_id = domain, .timeout = 10s, .subscribe_deltas = true});
   EXPECT_TRUE(client) << client.error().message;
   if (!client) return nullptr;
   auto ok = (*client)->waitForServer();

@@ -3,35 +3,30 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_reduce.h>
 
+#include <bit>
 #include <vector>
 
 namespace densemap {
 
-GridMap::Slot& GridMap::slotFor(std::uint64_t block_key) {
-  auto& slot = blocks_[block_key];
-  if (!slot) slot = std::make_unique<Slot>();
-  return *slot;
-}
-
-void GridMap::store(Slot& slot, int index, float log_odds) const {
-  slot.voxels.log_odds[index] = log_odds;
+void GridMap::store(BlockNode& node, int index, float log_odds) const {
+  node.voxels.log_odds[index] = log_odds;
   if (sensorModel().isFullyFree(log_odds)) {
-    block::setBit(slot.fully_free, index);
+    block::setBit(node.fully_free, index);
   } else {
-    block::clearBit(slot.fully_free, index);
+    block::clearBit(node.fully_free, index);
   }
 }
 
 ApplyStats GridMap::apply(const ScanUpdate& update, CellChanges* changes) {
   struct Job {
     std::uint64_t block_key;
-    Slot* slot;
+    BlockEntry* entry;
     const ScanUpdate::Block* cells;
   };
   std::vector<Job> jobs;
   jobs.reserve(update.blocks().size());
   for (const auto& [block_key, cells] : update.blocks()) {
-    jobs.push_back({block_key, &slotFor(block_key), &cells});
+    jobs.push_back({block_key, &store_->entry(block_key), &cells});
   }
 
   // Each job records its changes in its own slot; slots are concatenated in job order.
@@ -41,29 +36,36 @@ ApplyStats GridMap::apply(const ScanUpdate& update, CellChanges* changes) {
   };
   const SensorModel& model = sensorModel();
   const UpdateRule rule = update.rule();
+  static const BlockNode kEmpty{};
   const Counts total = tbb::parallel_reduce(
       tbb::blocked_range<std::size_t>(0, jobs.size(), 16), Counts{},
       [&](const tbb::blocked_range<std::size_t>& range, Counts c) {
         for (std::size_t j = range.begin(); j != range.end(); ++j) {
-          Slot& slot = *jobs[j].slot;
-          VoxelBlock& b = slot.voxels;
+          // Read the latest contents; the first change takes the writable node (a copy when
+          // a published version still reads the head).
+          const BlockNode* head = jobs[j].entry->head.load(std::memory_order_relaxed);
+          const BlockNode* read = head != nullptr ? head : &kEmpty;
+          BlockNode* write = nullptr;
           CellChanges* out = changes != nullptr ? &job_changes[j] : nullptr;
           ScanUpdate::forEachCellInBlock(
               jobs[j].block_key, *jobs[j].cells, [&](const VoxelKey& key, const CellHits& hits) {
                 const int i = block::indexOf(key);
-                const bool known = b.isKnown(i);
-                const float old_value = known ? b.log_odds[i] : 0.0F;
+                const bool known = read->voxels.isKnown(i);
+                const float old_value = known ? read->voxels.log_odds[i] : 0.0F;
                 const float new_value = updatedLogOdds(model, rule, old_value, hits);
                 ++c.updated;
+                if (known && new_value == old_value) return;
+                if (write == nullptr) {
+                  write = &store_->writable(*jobs[j].entry);
+                  read = write;
+                }
                 if (!known) {
-                  b.markKnown(i);
+                  write->voxels.markKnown(i);
                   ++c.newly_known;
                 }
-                if (!known || new_value != old_value) {
-                  ++c.changed;
-                  if (out != nullptr) out->push_back({key, new_value, true});
-                }
-                store(slot, i, new_value);
+                ++c.changed;
+                if (out != nullptr) out->push_back({key, new_value, true});
+                store(*write, i, new_value);
               });
         }
         return c;
@@ -82,73 +84,132 @@ ApplyStats GridMap::apply(const ScanUpdate& update, CellChanges* changes) {
 }
 
 std::size_t GridMap::clearBox(const VoxelKey& min, const VoxelKey& max, CellChanges* changes) {
+  const VoxelKey bmin{static_cast<std::uint16_t>(min.x >> block::kShift),
+                      static_cast<std::uint16_t>(min.y >> block::kShift),
+                      static_cast<std::uint16_t>(min.z >> block::kShift)};
+  const VoxelKey bmax{static_cast<std::uint16_t>(max.x >> block::kShift),
+                      static_cast<std::uint16_t>(max.y >> block::kShift),
+                      static_cast<std::uint16_t>(max.z >> block::kShift)};
   std::size_t erased = 0;
-  for (auto& [block_key, slot] : blocks_) {
-    VoxelBlock& b = slot->voxels;
+  auto clearIn = [&](BlockEntry& e) {
+    const BlockNode* head = e.head.load(std::memory_order_relaxed);
+    if (head == nullptr) return;
+    const VoxelKey corner = block::keyOf(e.key, 0);
+    if ((corner.x >> block::kShift) < bmin.x || (corner.y >> block::kShift) < bmin.y ||
+        (corner.z >> block::kShift) < bmin.z || (corner.x >> block::kShift) > bmax.x ||
+        (corner.y >> block::kShift) > bmax.y || (corner.z >> block::kShift) > bmax.z) {
+      return;
+    }
+    BlockNode* node = nullptr;
     for (int w = 0; w < block::kMaskWords; ++w) {
-      std::uint64_t bits = b.known[w];
+      std::uint64_t bits = head->voxels.known[w];
       while (bits != 0) {
         const int bit = std::countr_zero(bits);
         bits &= bits - 1;
         const int i = w * 64 + bit;
-        const VoxelKey k = block::keyOf(block_key, i);
+        const VoxelKey k = block::keyOf(e.key, i);
         if (k.x < min.x || k.y < min.y || k.z < min.z || k.x > max.x || k.y > max.y ||
             k.z > max.z) {
           continue;
         }
-        block::clearBit(b.known, i);
-        block::clearBit(slot->fully_free, i);
+        if (node == nullptr) node = &store_->writable(e);
+        block::clearBit(node->voxels.known, i);
+        block::clearBit(node->fully_free, i);
         ++erased;
         if (changes != nullptr) changes->push_back({k, 0.0F, false});
       }
     }
+  };
+  // Walk the box's blocks when there are fewer of them than blocks in the map.
+  const double box_blocks = (bmax.x - bmin.x + 1.0) * (bmax.y - bmin.y + 1.0) *
+                            (bmax.z - bmin.z + 1.0);
+  if (box_blocks < static_cast<double>(store_->entryCount())) {
+    for (unsigned z = bmin.z; z <= bmax.z; ++z) {
+      for (unsigned y = bmin.y; y <= bmax.y; ++y) {
+        for (unsigned x = bmin.x; x <= bmax.x; ++x) {
+          const VoxelKey corner{static_cast<std::uint16_t>(x << block::kShift),
+                                static_cast<std::uint16_t>(y << block::kShift),
+                                static_cast<std::uint16_t>(z << block::kShift)};
+          const std::uint64_t key = block::blockOf(corner);
+          if (store_->latest(key) != nullptr) clearIn(store_->entry(key));
+        }
+      }
+    }
+  } else {
+    store_->forEachEntryWriter([&](BlockEntry& e) { clearIn(e); });
   }
   known_cells_ -= erased;
   return erased;
 }
 
 std::optional<float> GridMap::logOdds(const VoxelKey& key) const {
-  const auto it = blocks_.find(block::blockOf(key));
-  if (it == blocks_.end()) return std::nullopt;
+  const BlockNode* n = store_->latest(block::blockOf(key));
+  if (n == nullptr) return std::nullopt;
   const int i = block::indexOf(key);
-  if (!it->second->voxels.isKnown(i)) return std::nullopt;
-  return it->second->voxels.log_odds[i];
+  if (!n->voxels.isKnown(i)) return std::nullopt;
+  return n->voxels.log_odds[i];
 }
 
 void GridMap::forEachKnown(const std::function<void(const VoxelKey&, float)>& f) const {
-  for (const auto& [block_key, slot] : blocks_) {
-    const VoxelBlock& b = slot->voxels;
-    for (int i = 0; i < block::kVoxels; ++i) {
-      if (b.isKnown(i)) f(block::keyOf(block_key, i), b.log_odds[i]);
+  store_->forEachEntryWriter([&](const BlockEntry& e) {
+    const BlockNode* n = e.head.load(std::memory_order_relaxed);
+    if (n == nullptr) return;
+    for (int w = 0; w < block::kMaskWords; ++w) {
+      for (std::uint64_t bits = n->voxels.known[w]; bits != 0; bits &= bits - 1) {
+        const int i = w * 64 + std::countr_zero(bits);
+        f(block::keyOf(e.key, i), n->voxels.log_odds[i]);
+      }
     }
-  }
+  });
 }
 
 void GridMap::forEachFullyFreeBlock(
     const std::function<void(std::uint64_t, const block::BlockMask&)>& f) const {
-  for (const auto& [block_key, slot] : blocks_) f(block_key, slot->fully_free);
+  store_->forEachEntryWriter([&](const BlockEntry& e) {
+    const BlockNode* n = e.head.load(std::memory_order_relaxed);
+    if (n != nullptr) f(e.key, n->fully_free);
+  });
 }
 
 void GridMap::setLogOdds(const VoxelKey& key, float log_odds) {
-  Slot& slot = slotFor(block::blockOf(key));
+  BlockNode& node = store_->writable(store_->entry(block::blockOf(key)));
   const int i = block::indexOf(key);
-  if (!slot.voxels.isKnown(i)) {
-    slot.voxels.markKnown(i);
+  if (!node.voxels.isKnown(i)) {
+    node.voxels.markKnown(i);
     ++known_cells_;
   }
-  store(slot, i, log_odds);
+  store(node, i, log_odds);
 }
 
-std::size_t GridMap::memoryBytes() const {
-  // Block payload + the hash node (key, pointer, next pointer, cached hash) + buckets.
-  constexpr std::size_t kNodeBytes = sizeof(std::uint64_t) + 3 * sizeof(void*);
-  return blocks_.size() * (sizeof(Slot) + kNodeBytes) + blocks_.bucket_count() * sizeof(void*) +
-         sizeof(*this);
+void GridMap::erase(const VoxelKey& key) {
+  const std::uint64_t bk = block::blockOf(key);
+  const BlockNode* latest = store_->latest(bk);
+  const int i = block::indexOf(key);
+  if (latest == nullptr || !latest->voxels.isKnown(i)) return;
+  BlockNode& node = store_->writable(store_->entry(bk));
+  block::clearBit(node.voxels.known, i);
+  block::clearBit(node.fully_free, i);
+  --known_cells_;
+}
+
+void GridMap::applyChanges(const CellChanges& changes) {
+  for (const CellChange& c : changes) {
+    if (c.known) {
+      setLogOdds(c.key, c.log_odds);
+    } else {
+      erase(c.key);
+    }
+  }
 }
 
 void GridMap::clear() {
-  blocks_.clear();
-  known_cells_ = 0;
+  if (!store_->versioned()) {  // nobody reads older versions: drop everything at once
+    store_->clearUnversioned();
+    known_cells_ = 0;
+    return;
+  }
+  // Readers keep their versions: erase cell by cell (copy on write).
+  clearBox({0, 0, 0}, {65535, 65535, 65535});
 }
 
 }  // namespace densemap

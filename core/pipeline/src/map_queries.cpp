@@ -1,5 +1,6 @@
 #include "densemap/pipeline/map_queries.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -21,25 +22,51 @@ Expected<BoxQueryResult> queryBox(const MapView& view, const Point3f& min, const
     return makeError("box of " + std::to_string(static_cast<long long>(cells)) +
                      " cells exceeds the limit of " + std::to_string(max_cells));
   }
+  // Block by block: one block lookup per 8^3 cells, cells in key order within the box.
   BoxQueryResult r;
-  for (unsigned z = lo->z; z <= hi->z; ++z) {
-    for (unsigned y = lo->y; y <= hi->y; ++y) {
-      for (unsigned x = lo->x; x <= hi->x; ++x) {
-        const VoxelKey k{static_cast<std::uint16_t>(x), static_cast<std::uint16_t>(y),
-                         static_cast<std::uint16_t>(z)};
-        switch (cellState(view.logOdds(k))) {
-          case CellState::kOccupied:
-            ++r.occupied;
-            if (r.occupied_centers.size() < max_centers) {
-              r.occupied_centers.push_back(view.grid().keyToPoint(k));
+  constexpr int kS = block::kShift;
+  for (unsigned bz = lo->z >> kS; bz <= (hi->z >> kS); ++bz) {
+    for (unsigned by = lo->y >> kS; by <= (hi->y >> kS); ++by) {
+      for (unsigned bx = lo->x >> kS; bx <= (hi->x >> kS); ++bx) {
+        const VoxelKey corner{static_cast<std::uint16_t>(bx << kS),
+                              static_cast<std::uint16_t>(by << kS),
+                              static_cast<std::uint16_t>(bz << kS)};
+        const unsigned x0 = std::max<unsigned>(lo->x, corner.x),
+                       x1 = std::min<unsigned>(hi->x, corner.x + block::kEdge - 1);
+        const unsigned y0 = std::max<unsigned>(lo->y, corner.y),
+                       y1 = std::min<unsigned>(hi->y, corner.y + block::kEdge - 1);
+        const unsigned z0 = std::max<unsigned>(lo->z, corner.z),
+                       z1 = std::min<unsigned>(hi->z, corner.z + block::kEdge - 1);
+        const std::size_t cells_here =
+            std::size_t{x1 - x0 + 1} * (y1 - y0 + 1) * (z1 - z0 + 1);
+        const VoxelBlock* b = view.block(block::blockOf(corner));
+        if (b == nullptr) {
+          r.unknown += cells_here;
+          continue;
+        }
+        for (unsigned z = z0; z <= z1; ++z) {
+          for (unsigned y = y0; y <= y1; ++y) {
+            for (unsigned x = x0; x <= x1; ++x) {
+              const VoxelKey k{static_cast<std::uint16_t>(x), static_cast<std::uint16_t>(y),
+                               static_cast<std::uint16_t>(z)};
+              const int i = block::indexOf(k);
+              const auto v = b->isKnown(i) ? std::optional<float>(b->log_odds[i]) : std::nullopt;
+              switch (cellState(v)) {
+                case CellState::kOccupied:
+                  ++r.occupied;
+                  if (r.occupied_centers.size() < max_centers) {
+                    r.occupied_centers.push_back(view.grid().keyToPoint(k));
+                  }
+                  break;
+                case CellState::kFree:
+                  ++r.free;
+                  break;
+                case CellState::kUnknown:
+                  ++r.unknown;
+                  break;
+              }
             }
-            break;
-          case CellState::kFree:
-            ++r.free;
-            break;
-          case CellState::kUnknown:
-            ++r.unknown;
-            break;
+          }
         }
       }
     }

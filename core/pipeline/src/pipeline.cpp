@@ -55,12 +55,14 @@ struct Pipeline::Graph {
         integrate(graph, tbb::flow::serial,
                   [&p](JobPtr job) {
                     if (!job->rejection) {
+                      CellChanges* changes =
+                          p.options_.collect_changes || p.mirror_ ? &job->result.changes : nullptr;
                       job->result.stats =
                           p.kernel_map_
                               ? p.integrateKernel(job->points_world, job->origin_world,
                                                   job->result.changes)
                               : p.integrator_.integrate(*p.map_, job->points_world,
-                                                        job->origin_world, &job->result.changes);
+                                                        job->origin_world, changes);
                     }
                     return job;
                   }),
@@ -119,7 +121,14 @@ Pipeline::Pipeline(const PipelineOptions& options, std::unique_ptr<OccupancyMap>
     kernel_options.max_range = options.max_range_m;
     kernel_map_ = std::make_unique<kernel::KernelMap>(options.resolution_m, kernel_options);
   }
-  view_.store(MapView::fromMap(*map_, version));
+  readable_ = dynamic_cast<GridMap*>(map_.get());
+  if (readable_ == nullptr) {
+    mirror_ = std::make_unique<GridMap>(map_->resolution(), map_->sensorModel());
+    map_->forEachKnown([this](const VoxelKey& k, float v) { mirror_->setLogOdds(k, v); });
+    readable_ = mirror_.get();
+  }
+  readable_->startVersionsAt(version);
+  view_.store(MapView::publish(*readable_));
   // The graph belongs to the pipeline's arena: build it there.
   arena_.execute([this] { graph_ = std::make_unique<Graph>(*this); });
 }
@@ -195,10 +204,15 @@ void Pipeline::runCommands() {
 }
 
 void Pipeline::publish(IntegrationResult& result) {
-  const auto current = view_.load();
-  result.base_version = current->version();
-  result.new_version = current->version() + 1;
-  auto next = current->withChanges(result.changes, result.new_version);
+  if (mirror_) mirror_->applyChanges(result.changes);
+  result.base_version = view_.load()->version();
+  const std::size_t known = map_->knownCells();
+  const std::size_t bytes = readable_->memoryBytes() + (mirror_ ? map_->memoryBytes() : 0);
+  auto published = readable_->publishVersion();
+  result.new_version = published.version;
+  result.written_blocks = std::move(published.written_blocks);
+  auto next = std::make_shared<const MapView>(readable_->store(), std::move(published.pin),
+                                              map_->resolution(), published.version, known, bytes);
   view_.store(next);
   if (result.from_scan) {
     std::lock_guard lock(counters_mutex_);

@@ -23,6 +23,7 @@ Expected<Topics> Topics::create(const Entity& participant) {
       {&t.manifest, &densemap_msgs_MapManifest_desc, "map/manifest"},
       {&t.tiles, &densemap_msgs_MapTile_desc, "map/tiles"},
       {&t.delta, &densemap_msgs_MapDelta_desc, "map/delta"},
+      {&t.events, &densemap_msgs_MapEvent_desc, "map/events"},
       {&t.status, &densemap_msgs_Status_desc, "status"},
   };
   for (const auto& row : table) {

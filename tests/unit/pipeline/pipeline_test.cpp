@@ -1,4 +1,5 @@
 #include "densemap/pipeline/pipeline.hpp"
+#include "densemap/pipeline/version_delta.hpp"
 
 #include <gtest/gtest.h>
 
@@ -44,6 +45,7 @@ std::unique_ptr<GridMap> offlineMap(const std::vector<RawScan>& raws, double max
 
 TEST(Pipeline, PublishedViewEqualsTheOfflineMapAndDeltasReproduceEachVersion) {
   PipelineOptions options{.resolution_m = 0.2, .max_range_m = 5.0, .threads = 2, .queue_depth = 8};
+  options.collect_changes = true;
   auto sut = Pipeline::create(options);
   ASSERT_TRUE(sut);
   std::vector<std::pair<IntegrationResult, std::shared_ptr<const MapView>>> published;
@@ -70,13 +72,18 @@ TEST(Pipeline, PublishedViewEqualsTheOfflineMapAndDeltasReproduceEachVersion) {
 
   ASSERT_EQ(published.size(), 5U);
   auto previous = MapView::fromMap(GridMap(0.2, SensorModel{}), 0);
+  GridMap rebuilt(0.2, SensorModel{});
   for (const auto& [result, next] : published) {
     EXPECT_EQ(result.base_version, previous->version());
-    const auto rebuilt = previous->withChanges(result.changes, result.new_version);
+    // Both encodings of a version's changes reproduce it: the cell list and the diff of the
+    // written blocks (what map/delta carries).
+    rebuilt.applyChanges(result.changes);
+    const auto diffed = diffVersions(*previous, *next, result.written_blocks).changes();
+    EXPECT_EQ(diffed.size(), result.changes.size());
     std::size_t diff = 0;
-    next->forEachKnown([&](const VoxelKey& k, float v) { diff += rebuilt->logOdds(k) != v; });
+    next->forEachKnown([&](const VoxelKey& k, float v) { diff += rebuilt.logOdds(k) != v; });
     EXPECT_EQ(diff, 0U);
-    EXPECT_EQ(rebuilt->knownCells(), next->knownCells());
+    EXPECT_EQ(rebuilt.knownCells(), next->knownCells());
     previous = next;
   }
   // Old views are immutable: the first version still has only the first scan's cells.

@@ -19,6 +19,9 @@ struct ClientOptions {
   std::uint32_t domain_id = 0;
   std::string network_interface = "lo";
   std::chrono::milliseconds timeout{5000};  // per request, and for discovering the server
+  /// Subscribe to map/delta (every changed cell of every version). Off by default: while no
+  /// client subscribes, the server builds no deltas. map/events (small) is always read.
+  bool subscribe_deltas = false;
 };
 
 struct PointQueryAnswer {
@@ -57,6 +60,17 @@ struct DeltaInfo {
   CellChanges changes;
 };
 
+/// One published map version (densemap/map/events).
+struct MapEventInfo {
+  std::uint64_t base_version = 0, new_version = 0;
+  bool from_scan = false;
+  std::string sensor_id;
+  std::uint64_t scan_seq = 0;
+  std::uint64_t changed_cells = 0;
+  std::uint32_t written_blocks = 0;
+  double latency_ms = 0.0;  // the server's receive -> published
+};
+
 enum class CommandKind { kReset = 0, kClearBox = 1, kSave = 2 };
 
 /// A densemap-server client over DDS (loopback by default). Requests carry a random client id
@@ -85,8 +99,11 @@ class Client {
                                               const std::string& path = {});
   /// The latest status sample (published at 1 Hz, transient-local).
   [[nodiscard]] Expected<ServerStatus> status();
-  /// Calls `f` for every map delta received since the last call; returns how many.
+  /// Calls `f` for every map delta received since the last call; returns how many. Needs
+  /// ClientOptions::subscribe_deltas (otherwise returns 0).
   std::size_t pollDeltas(const std::function<void(const DeltaInfo&)>& f);
+  /// Calls `f` for every map event received since the last call; returns how many.
+  std::size_t pollEvents(const std::function<void(const MapEventInfo&)>& f);
   /// Rebuilds the server's map from its transient-local tiles (what a late joiner sees);
   /// waits until the manifest reaches `min_version` and the tiles cover its cell count (tiles
   /// are republished at most once a second).

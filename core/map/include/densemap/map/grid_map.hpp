@@ -1,19 +1,23 @@
 #pragma once
 
 #include <memory>
-#include <unordered_map>
+#include <vector>
 
+#include "densemap/map/block_store.hpp"
 #include "densemap/map/occupancy_map.hpp"
-#include "densemap/map/voxel_block.hpp"
 
 namespace densemap {
 
-/// The fast backend: a sparse hash of 8^3 voxel blocks (Bonxai/voxblox style).
+/// The fast backend: a sparse hash of 8^3 voxel blocks (Bonxai/voxblox style) kept in a
+/// BlockStore, so readers can hold published versions of this very map (no second copy).
 /// `apply` creates missing blocks serially, then updates blocks in parallel (TBB), each block
 /// owned by one task, so the result is the same for any number of threads.
+/// Thread-safety: single writer (OccupancyMap); `publishVersion` hands readers a version they
+/// read through `store()` from any thread.
 class GridMap final : public OccupancyMap {
  public:
-  GridMap(double resolution_m, const SensorModel& model) : OccupancyMap(resolution_m, model) {}
+  GridMap(double resolution_m, const SensorModel& model)
+      : OccupancyMap(resolution_m, model), store_(std::make_shared<BlockStore>()) {}
 
   [[nodiscard]] Backend backend() const override { return Backend::kGrid; }
   ApplyStats apply(const ScanUpdate& update, CellChanges* changes = nullptr) override;
@@ -25,20 +29,26 @@ class GridMap final : public OccupancyMap {
   void forEachFullyFreeBlock(
       const std::function<void(std::uint64_t, const block::BlockMask&)>& f) const override;
   [[nodiscard]] std::size_t knownCells() const override { return known_cells_; }
-  [[nodiscard]] std::size_t memoryBytes() const override;
+  [[nodiscard]] std::size_t memoryBytes() const override { return store_->memoryBytes(); }
   void clear() override;
 
-  [[nodiscard]] std::size_t blockCount() const { return blocks_.size(); }
+  /// Forgets one cell (a no-op for an unknown cell).
+  void erase(const VoxelKey& key);
+  /// Applies a change list (values set, erased cells forgotten): how a mirror follows a map.
+  void applyChanges(const CellChanges& changes);
+
+  [[nodiscard]] std::size_t blockCount() const { return store_->entryCount(); }
+
+  /// Versioning (MapView): before the first publish, the version the contents belong to.
+  void startVersionsAt(std::uint64_t version) { store_->startAt(version); }
+  /// Ends the version being written; readers of it hold the returned pin.
+  BlockStore::Published publishVersion() { return store_->publish(); }
+  [[nodiscard]] std::shared_ptr<const BlockStore> store() const { return store_; }
 
  private:
-  struct Slot {
-    VoxelBlock voxels;
-    block::BlockMask fully_free{};  // known cells at the lower clamping bound
-  };
-  Slot& slotFor(std::uint64_t block_key);
-  void store(Slot& slot, int index, float log_odds) const;
+  void store(BlockNode& node, int index, float log_odds) const;
 
-  std::unordered_map<std::uint64_t, std::unique_ptr<Slot>> blocks_;
+  std::shared_ptr<BlockStore> store_;
   std::size_t known_cells_ = 0;
 };
 

@@ -4,47 +4,57 @@
 #include <functional>
 #include <memory>
 #include <optional>
-#include <unordered_map>
 
-#include "densemap/map/occupancy_map.hpp"
-#include "densemap/map/voxel_block.hpp"
+#include "densemap/map/block_store.hpp"
+#include "densemap/map/grid_map.hpp"
 
 namespace densemap {
 
-/// An immutable, versioned copy of the map that readers query while integration goes on.
-/// Blocks are shared between consecutive versions; a new version copies only the block table
-/// and the blocks a scan changed (copy-on-write), so publishing costs O(blocks) pointer copies
-/// plus O(changed blocks), and readers never wait for the writer.
+/// One published version of the map, read from the map's own block store (no copy): the
+/// blocks as that version left them, whatever the writer has done since. Holding the view
+/// holds the version (its pin); dropping it lets the writer's superseded blocks go.
+/// Creating a view costs O(1); the writer pays O(changed blocks) per version (BlockStore).
 /// Thread-safety: immutable; every method is safe from any thread.
 class MapView {
  public:
-  using Blocks = std::unordered_map<std::uint64_t, std::shared_ptr<const VoxelBlock>>;
-
-  MapView(double resolution_m, std::uint64_t version, Blocks blocks, std::size_t known_cells)
+  MapView(std::shared_ptr<const BlockStore> store, std::shared_ptr<const void> pin,
+          double resolution_m, std::uint64_t version, std::size_t known_cells,
+          std::size_t memory_bytes)
       : grid_(resolution_m),
         version_(version),
-        blocks_(std::move(blocks)),
-        known_cells_(known_cells) {}
+        known_cells_(known_cells),
+        memory_bytes_(memory_bytes),
+        store_(std::move(store)),
+        pin_(std::move(pin)) {}
 
-  /// A view holding every cell of `map`.
+  /// Publishes the version `map` is writing and returns its view.
+  [[nodiscard]] static std::shared_ptr<const MapView> publish(GridMap& map);
+  /// A view of a copy of `map` (any backend) at `version`: for loaded files and tests.
   [[nodiscard]] static std::shared_ptr<const MapView> fromMap(const OccupancyMap& map,
                                                               std::uint64_t version);
-  /// The next version: this one with `changes` applied.
-  [[nodiscard]] std::shared_ptr<const MapView> withChanges(const CellChanges& changes,
-                                                           std::uint64_t new_version) const;
 
   [[nodiscard]] const VoxelGrid& grid() const { return grid_; }
   [[nodiscard]] std::uint64_t version() const { return version_; }
   [[nodiscard]] std::size_t knownCells() const { return known_cells_; }
-  [[nodiscard]] std::size_t blockCount() const { return blocks_.size(); }
+  /// Bytes the map's storage held when this version was published.
+  [[nodiscard]] std::size_t memoryBytes() const { return memory_bytes_; }
   [[nodiscard]] std::optional<float> logOdds(const VoxelKey& key) const;
+  /// The block `block_key` as of this version, or null when it had no contents.
+  [[nodiscard]] const VoxelBlock* block(std::uint64_t block_key) const {
+    const BlockNode* n = store_->find(block_key, version_);
+    return n != nullptr ? &n->voxels : nullptr;
+  }
   void forEachKnown(const std::function<void(const VoxelKey&, float)>& f) const;
+  /// Calls f(block_key, block) for every block with contents at this version.
+  void forEachBlock(const std::function<void(std::uint64_t, const VoxelBlock&)>& f) const;
 
  private:
   VoxelGrid grid_;
   std::uint64_t version_;
-  Blocks blocks_;
   std::size_t known_cells_;
+  std::size_t memory_bytes_;
+  std::shared_ptr<const BlockStore> store_;
+  std::shared_ptr<const void> pin_;  // after store_: released first
 };
 
 }  // namespace densemap

@@ -10,6 +10,7 @@
 #include <mutex>
 #include <thread>
 
+#include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_factory.hpp"
 #include "densemap/pipeline/latest_wins_queue.hpp"
 #include "densemap/pipeline/map_view.hpp"
@@ -38,6 +39,9 @@ struct PipelineOptions {
   int threads = 2;  // size of the task arena the pipeline owns
   std::size_t queue_depth = 2;
   ScanLimits limits;
+  /// Fill IntegrationResult::changes for scans (cell by cell: costs O(changed cells) per
+  /// scan). Off by default: readers diff published versions by their written blocks instead.
+  bool collect_changes = false;
 };
 
 /// What the publish stage hands on for every integrated scan.
@@ -48,6 +52,9 @@ struct IntegrationResult {
   std::int64_t stamp_ns = 0;
   std::uint64_t base_version = 0;
   std::uint64_t new_version = 0;
+  /// The blocks this version wrote (cells changed in each, or none when written and restored).
+  std::vector<std::uint64_t> written_blocks;
+  /// The changed cells: always for commands, for scans when `collect_changes` is set.
   CellChanges changes;
   ScanStats stats;
   double latency_ms = 0.0;  // received -> published
@@ -67,7 +74,9 @@ struct PipelineCounters {
 /// The ingest pipeline (DESIGN.md data flow): a bounded latest-wins queue feeding a TBB flow
 /// graph validate -> transform -> integrate -> publish, run one scan at a time by a worker
 /// thread inside the task arena the pipeline owns. Readers get the latest published MapView
-/// without waiting for integration. Commands (reset, clear, save...) run on the worker between
+/// without waiting for integration: a view reads the map's own versioned blocks, so a scan's
+/// publish costs O(changed blocks) and the map is held once (a second, mirrored GridMap only
+/// for the octree backend). Commands (reset, clear, save...) run on the worker between
 /// scans, so the map has one writer.
 /// Thread-safety: submit(), view(), command() and counters() from any thread.
 class Pipeline {
@@ -118,6 +127,8 @@ class Pipeline {
 
   PipelineOptions options_;
   std::unique_ptr<OccupancyMap> map_;
+  std::unique_ptr<GridMap> mirror_;  // readers' copy when map_ is not a GridMap (octree)
+  GridMap* readable_ = nullptr;      // map_ itself or mirror_
   Integrator integrator_;
   std::unique_ptr<kernel::KernelMap> kernel_map_;  // map kinds akimap, bgk, bgkl
   tbb::task_arena arena_;

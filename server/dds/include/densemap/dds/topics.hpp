@@ -12,7 +12,7 @@ struct Topics {
   Entity bbox_request, bbox_reply;
   Entity ray_request, ray_reply;
   Entity command_request, command_reply;
-  Entity manifest, tiles, delta, status;
+  Entity manifest, tiles, delta, events, status;
 
   [[nodiscard]] static Expected<Topics> create(const Entity& participant);
 };
