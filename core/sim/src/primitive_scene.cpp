@@ -82,11 +82,52 @@ std::optional<double> PrimitiveScene::castRay(const Eigen::Vector3d& origin,
       hit = true;
     }
   };
-  for (const auto& b : boxes_) consider(hitBox(b, origin, direction));
-  for (const auto& c : cylinders_) consider(hitCylinder(c, origin, direction));
-  for (const auto& s : spheres_) consider(hitSphere(s, origin, direction));
+  // Every point the ray can hit lies in the x extent of its segment.
+  const double x_far = origin.x() + direction.x() * max_range_m;
+  const int first = std::isfinite(x_far) ? slabOf(std::min(origin.x(), x_far)) : 0;
+  const int last = std::isfinite(x_far) ? slabOf(std::max(origin.x(), x_far))
+                                        : static_cast<int>(slabs_.size()) - 1;
+  for (int i = first; i <= last; ++i) {
+    const Slab& slab = slabs_[static_cast<std::size_t>(i)];
+    for (const auto b : slab.boxes) consider(hitBox(boxes_[b], origin, direction));
+    for (const auto c : slab.cylinders) consider(hitCylinder(cylinders_[c], origin, direction));
+    for (const auto s : slab.spheres) consider(hitSphere(spheres_[s], origin, direction));
+  }
   if (!hit) return std::nullopt;
   return best;
+}
+
+int PrimitiveScene::slabOf(double x) const {
+  const double i = std::floor((x - bounds_.min().x()) / kSlabM);
+  return static_cast<int>(std::clamp(i, 0.0, static_cast<double>(slabs_.size()) - 1.0));
+}
+
+void PrimitiveScene::index(double x_min, double x_max, std::vector<std::uint32_t> Slab::*list,
+                           std::uint32_t id) {
+  if (slabs_.empty()) {
+    const double extent = std::max(bounds_.max().x() - bounds_.min().x(), kSlabM);
+    slabs_.resize(static_cast<std::size_t>(std::ceil(extent / kSlabM)) + 1);
+  }
+  for (int i = slabOf(x_min); i <= slabOf(x_max); ++i) {
+    (slabs_[static_cast<std::size_t>(i)].*list).push_back(id);
+  }
+}
+
+void PrimitiveScene::add(const BoxShape& b) {
+  index(b.min.x(), b.max.x(), &Slab::boxes, static_cast<std::uint32_t>(boxes_.size()));
+  boxes_.push_back(b);
+}
+
+void PrimitiveScene::add(const CylinderShape& c) {
+  index(c.center_xy.x() - c.radius, c.center_xy.x() + c.radius, &Slab::cylinders,
+        static_cast<std::uint32_t>(cylinders_.size()));
+  cylinders_.push_back(c);
+}
+
+void PrimitiveScene::add(const SphereShape& s) {
+  index(s.center.x() - s.radius, s.center.x() + s.radius, &Slab::spheres,
+        static_cast<std::uint32_t>(spheres_.size()));
+  spheres_.push_back(s);
 }
 
 bool PrimitiveScene::overlapsBox(const Eigen::Vector3d& min, const Eigen::Vector3d& max) const {

@@ -1,6 +1,7 @@
 #include "densemap/sim/procedural_scenes.hpp"
 
 #include <cmath>
+#include <cstdlib>
 #include <random>
 
 #include "densemap/sim/octree_scene.hpp"
@@ -70,10 +71,10 @@ SimScene makeIndoorScene(unsigned seed) {
   return out;
 }
 
-SimScene makeOutdoorScene(unsigned seed) {
+SimScene makeOutdoorScene(unsigned seed, double length_m) {
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u(0.0, 1.0);
-  constexpr double kLength = 120;
+  const double kLength = length_m;
   auto scene = std::make_unique<PrimitiveScene>(
       Eigen::AlignedBox3d(V3(-10, -40, -0.5), V3(kLength + 10, 40, 12)));
   scene->add(BoxShape{V3(-10, -40, -0.5), V3(kLength + 10, 40, 0)});  // ground
@@ -202,6 +203,17 @@ Expected<SimScene> makeScene(const std::string& name_or_file, unsigned seed) {
   if (name_or_file == "unstructured") return makeUnstructuredScene(seed);
   if (name_or_file == "indoor") return makeIndoorScene(seed);
   if (name_or_file == "outdoor") return makeOutdoorScene(seed);
+  if (name_or_file.starts_with("street:")) {  // street:LENGTH_M, the outdoor scene made longer
+    const std::string length = name_or_file.substr(7);
+    char* end = nullptr;
+    const double m = std::strtod(length.c_str(), &end);
+    if (length.empty() || *end != '\0' || !(m >= 20.0 && m <= 50000.0)) {
+      return makeError("scene " + name_or_file + ": the street length must be 20..50000 m");
+    }
+    SimScene street = makeOutdoorScene(seed, m);
+    street.name = name_or_file;
+    return street;
+  }
   return makeOctreeScene(name_or_file);
 }
 

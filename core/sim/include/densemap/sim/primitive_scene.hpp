@@ -1,5 +1,6 @@
 #pragma once
 
+#include <cstdint>
 #include <vector>
 
 #include "densemap/sim/scene.hpp"
@@ -24,9 +25,9 @@ class PrimitiveScene final : public Scene {
  public:
   explicit PrimitiveScene(const Eigen::AlignedBox3d& bounds) : bounds_(bounds) {}
 
-  void add(const BoxShape& b) { boxes_.push_back(b); }
-  void add(const CylinderShape& c) { cylinders_.push_back(c); }
-  void add(const SphereShape& s) { spheres_.push_back(s); }
+  void add(const BoxShape& b);
+  void add(const CylinderShape& c);
+  void add(const SphereShape& s);
 
   [[nodiscard]] std::optional<double> castRay(const Eigen::Vector3d& origin,
                                               const Eigen::Vector3d& direction,
@@ -39,7 +40,18 @@ class PrimitiveScene final : public Scene {
   }
 
  private:
+  // Primitives by slab of kSlabM metres along x, so a ray only meets the primitives of the
+  // slabs its segment crosses (a long street stays as fast to scan as a short one).
+  static constexpr double kSlabM = 16.0;
+  struct Slab {
+    std::vector<std::uint32_t> boxes, cylinders, spheres;
+  };
+  void index(double x_min, double x_max, std::vector<std::uint32_t> Slab::*list,
+             std::uint32_t id);
+  [[nodiscard]] int slabOf(double x) const;
+
   Eigen::AlignedBox3d bounds_;
+  std::vector<Slab> slabs_;
   std::vector<BoxShape> boxes_;
   std::vector<CylinderShape> cylinders_;
   std::vector<SphereShape> spheres_;

@@ -21,9 +21,9 @@ struct SimScene {
 
 /// Offices on both sides of a corridor (30 x 20 x 3 m): walls with doors, furniture, pillars.
 [[nodiscard]] SimScene makeIndoorScene(unsigned seed);
-/// A 120 m street: buildings on both sides, parked cars (boxes), poles, trees (cylinder trunk,
-/// sphere crown), on a ground plane.
-[[nodiscard]] SimScene makeOutdoorScene(unsigned seed);
+/// A street (120 m unless told): buildings on both sides, parked cars (boxes), poles, trees
+/// (cylinder trunk, sphere crown), on a ground plane; the sensor drives its length.
+[[nodiscard]] SimScene makeOutdoorScene(unsigned seed, double length_m = 120.0);
 /// The AKIMap paper's "structured" benchmark (dissertation Sec. 3.4.1): rooms in 10 x 7 x 2 m —
 /// outer and inner walls with doorways, an L-shaped wall, tables and pillars — seen from 4
 /// stations.
@@ -31,7 +31,8 @@ struct SimScene {
 /// Its "unstructured" counterpart: 10 x 7 x 2 m of irregular objects (rocks as spheres and
 /// stacked boxes, trunks and bushes, slanted clutter) on a floor, seen from 4 stations.
 [[nodiscard]] SimScene makeUnstructuredScene(unsigned seed);
-/// "indoor", "outdoor", "structured", "unstructured", or a path to an OctoMap .bt/.ot file.
+/// "indoor", "outdoor", "street:LENGTH_M" (the outdoor street, LENGTH_M long: long drives),
+/// "structured", "unstructured", or a path to an OctoMap .bt/.ot file.
 [[nodiscard]] Expected<SimScene> makeScene(const std::string& name_or_file, unsigned seed);
 
 }  // namespace densemap

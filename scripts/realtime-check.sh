@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# Server against core, same scans, same session (issue 15's check): runs densemap-server on
+# loopback at RES / RANGE, replays DATA at RATE Hz (optionally with point queries), stops it,
+# then runs densemap-bench on the same scans with the same method (superray+culling, grid,
+# 2 threads). Prints the server's latency p50/p99, drops, RSS, and the bench's p50/p99.
+# Usage: scripts/realtime-check.sh DATA RES RANGE [RATE=10] [FIRST=0] [LIMIT=0] [QUERY_POINTS=0]
+# Environment: DENSEMAP_BIN (default build/bin), DENSEMAP_DOMAIN (default 77), BENCH=0 skips the
+# bench, PERF=1 records `perf record -g` of the server into $OUT/perf.data.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+DATA=$1 RES=$2 RANGE=$3 RATE=${4:-10} FIRST=${5:-0} LIMIT=${6:-0} QUERY=${7:-0}
+BIN=${DENSEMAP_BIN:-build/bin}
+DOMAIN=${DENSEMAP_DOMAIN:-77}
+OUT=$(mktemp -d /tmp/densemap-rt.XXXXXX)
+cat > "$OUT/server.textproto" <<CFG
+map { backend: "grid" resolution_m: $RES max_range_m: $RANGE }
+pipeline { threads: 2 queue_depth: 2 integration: "superray+culling" }
+snapshot { path: "" autosave_period_s: 0 }
+dds { domain_id: $DOMAIN network_interface: "lo" }
+CFG
+"$BIN/densemap-server" --config "$OUT/server.textproto" 2> "$OUT/server.log" &
+SERVER=$!
+trap 'kill $SERVER 2>/dev/null || true' EXIT
+if [ "${PERF:-0}" = 1 ]; then
+  perf record -g -o "$OUT/perf.data" -p $SERVER 2> "$OUT/perf.log" &
+  PERF_PID=$!
+fi
+# RSS of the server, sampled every 0.5 s while the replay runs.
+( while kill -0 $SERVER 2>/dev/null; do
+    awk '/VmRSS/ {print $2}' /proc/$SERVER/status 2>/dev/null || true; sleep 0.5
+  done > "$OUT/rss.txt" ) &
+"$BIN/densemap" --domain-id "$DOMAIN" replay --data "$DATA" --rate "$RATE" --first "$FIRST" \
+  --limit "$LIMIT" --query-points "$QUERY" 2> "$OUT/replay.log" | tee "$OUT/replay.txt"
+"$BIN/densemap" --domain-id "$DOMAIN" status | tee -a "$OUT/replay.txt"
+[ -n "${PERF_PID:-}" ] && kill -INT "$PERF_PID" && wait "$PERF_PID" || true
+kill -TERM $SERVER; wait $SERVER || true
+trap - EXIT
+echo "server peak RSS: $(sort -n "$OUT/rss.txt" | tail -1) KiB"
+if [ "${BENCH:-1}" = 1 ]; then
+  "$BIN/densemap-bench" --data "$DATA" --resolution "$RES" --max-range "$RANGE" \
+    --methods superray+culling --backend grid --threads 2 --first "$FIRST" --limit "$LIMIT" \
+    2> "$OUT/bench.log" | tee "$OUT/bench.txt" | head -3
+fi
+echo "outputs in $OUT"
