@@ -3,6 +3,7 @@
 # loopback at RES / RANGE, replays DATA at RATE Hz (optionally with point queries), stops it,
 # then runs densemap-bench on the same scans with the same method (superray+culling, grid,
 # 2 threads). Prints the server's latency p50/p99, drops, RSS, and the bench's p50/p99.
+# Writes $OUT/scans.csv (densemap replay --csv: per-scan latency and map size) and rss.txt.
 # Usage: scripts/realtime-check.sh DATA RES RANGE [RATE=10] [FIRST=0] [LIMIT=0] [QUERY_POINTS=0]
 # Environment: DENSEMAP_BIN (default build/bin), DENSEMAP_DOMAIN (default 77), BENCH=0 skips the
 # bench, PERF=1 records `perf record -g` of the server into $OUT/perf.data.
@@ -25,12 +26,12 @@ if [ "${PERF:-0}" = 1 ]; then
   perf record -g -o "$OUT/perf.data" -p $SERVER 2> "$OUT/perf.log" &
   PERF_PID=$!
 fi
-# RSS of the server, sampled every 0.5 s while the replay runs.
+# RSS of the server (KiB), sampled every 0.5 s while the replay runs.
 ( while kill -0 $SERVER 2>/dev/null; do
     awk '/VmRSS/ {print $2}' /proc/$SERVER/status 2>/dev/null || true; sleep 0.5
   done > "$OUT/rss.txt" ) &
 "$BIN/densemap" --domain-id "$DOMAIN" replay --data "$DATA" --rate "$RATE" --first "$FIRST" \
-  --limit "$LIMIT" --query-points "$QUERY" 2> "$OUT/replay.log" | tee "$OUT/replay.txt"
+  --limit "$LIMIT" --query-points "$QUERY" --csv "$OUT/scans.csv" 2> "$OUT/replay.log" | tee "$OUT/replay.txt"
 "$BIN/densemap" --domain-id "$DOMAIN" status | tee -a "$OUT/replay.txt"
 [ -n "${PERF_PID:-}" ] && kill -INT "$PERF_PID" && wait "$PERF_PID" || true
 kill -TERM $SERVER; wait $SERVER || true

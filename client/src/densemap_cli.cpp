@@ -41,7 +41,7 @@ double percentile(std::vector<double> v, double q) {
 
 int replay(const ClientOptions& o, const std::string& data, double rate, std::size_t first,
            std::size_t limit, std::size_t query_points,
-           const std::optional<upsample::UpsampleOptions>& densify) {
+           const std::optional<upsample::UpsampleOptions>& densify, const std::string& csv_path) {
   auto source = openScanSource(data);
   if (!source) return fail(source.error().message);
   if (densify) {
@@ -56,13 +56,34 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
   std::vector<double> latencies;
   std::size_t queried = 0;
   double query_seconds = 0.0;
+  // --csv: a row per integrated scan, with the map's size from the latest status (1 Hz).
+  std::FILE* csv = nullptr;
+  if (!csv_path.empty()) {
+    csv = std::fopen(csv_path.c_str(), "w");
+    if (csv == nullptr) return fail("cannot write " + csv_path);
+    std::fprintf(csv, "scan,server_ms,end_to_end_ms,changed_cells,written_blocks,known_cells,"
+                      "map_bytes\n");
+  }
+  ServerStatus last_status = before ? *before : ServerStatus{};
+  auto next_status = Clock::now() + std::chrono::seconds(1);
   auto collect = [&] {
+    if (csv != nullptr && Clock::now() >= next_status) {
+      if (auto s = (*client)->status(); s) last_status = *s;
+      next_status = Clock::now() + std::chrono::seconds(1);
+    }
     (*client)->pollEvents([&](const MapEventInfo& d) {
       const auto it = sent_at.find(d.scan_seq);
       if (!d.from_scan || it == sent_at.end()) return;
       latencies.push_back(
           std::chrono::duration<double, std::milli>(Clock::now() - it->second).count());
       sent_at.erase(it);
+      if (csv != nullptr) {
+        std::fprintf(csv, "%llu,%.3f,%.3f,%llu,%u,%llu,%llu\n",
+                     static_cast<unsigned long long>(d.scan_seq - 1), d.latency_ms,
+                     latencies.back(), static_cast<unsigned long long>(d.changed_cells),
+                     d.written_blocks, static_cast<unsigned long long>(last_status.known_cells),
+                     static_cast<unsigned long long>(last_status.memory_bytes));
+      }
     });
   };
   tools::Progress progress("replay: scan", end - first);
@@ -116,6 +137,7 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
     if (latencies.size() != had) last_news = Clock::now();
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
+  if (csv != nullptr) std::fclose(csv);
   std::this_thread::sleep_for(std::chrono::milliseconds(1100));  // one more status period
   auto after = (*client)->status();
   std::printf("replay: sent %zu scans from %s\n", sent, (*source)->describe().c_str());
@@ -228,6 +250,10 @@ int main(int argc, char** argv) {
   replay->add_option("--rate", rate, "Scans per second (0: as fast as possible)")
       ->capture_default_str();
   replay->add_option("--first", first, "Skip this many scans")->capture_default_str();
+  std::string replay_csv;
+  replay->add_option("--csv", replay_csv,
+                     "Write a row per integrated scan: scan, server and end-to-end latency (ms), "
+                     "changed cells, written blocks, known cells and map bytes (latest status)");
   replay->add_option("--limit", limit, "At most this many scans (0: all)")->capture_default_str();
   std::size_t query_points = 0;
   replay
@@ -314,7 +340,7 @@ int main(int argc, char** argv) {
       if (!options) return cli::fail("--upsample: " + options.error().message);
       densify = std::move(*options);
     }
-    return cli::replay(o, data, rate, first, limit, query_points, densify);
+    return cli::replay(o, data, rate, first, limit, query_points, densify, replay_csv);
   }
   auto client = cli::connect(o);
   if (!client) return cli::fail(client.error().message);
