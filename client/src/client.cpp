@@ -1,6 +1,7 @@
 #include "densemap/client/client.hpp"
 
 #include <cmath>
+#include <cstdio>
 #include <random>
 #include <thread>
 #include <unordered_map>
@@ -27,7 +28,7 @@ struct Client::Dds {
   dds::Entity participant;
   dds::Topics topics;
   dds::Entity scan_w, pq_w, bq_w, rq_w, cq_w;
-  dds::Entity pr_r, br_r, rr_r, cr_r, man_r, tile_r, delta_r, event_r, st_r;
+  dds::Entity pr_r, br_r, rr_r, cr_r, man_r, delta_r, event_r, st_r;
 };
 
 Client::Client(const ClientOptions& options)
@@ -67,7 +68,6 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
   make(d.rr_r, d.topics.ray_reply, requests, false);
   make(d.cr_r, d.topics.command_reply, dds::kCommandQos, false);
   make(d.man_r, d.topics.manifest, dds::kLatestStateQos, false);
-  make(d.tile_r, d.topics.tiles, dds::kLatestStateQos, false);
   if (options.subscribe_deltas) make(d.delta_r, d.topics.delta, {.depth = 256}, false);
   make(d.event_r, d.topics.events, {.depth = 1024}, false);
   make(d.st_r, d.topics.status, dds::kLatestStateQos, false);
@@ -310,16 +310,7 @@ std::size_t Client::pollDeltas(const std::function<void(const DeltaInfo&)>& f) {
     delta.block_ends.assign(d.block_ends._buffer, d.block_ends._buffer + d.block_ends._length);
     delta.cells.assign(d.cells._buffer, d.cells._buffer + d.cells._length);
     delta.log_odds.assign(d.log_odds._buffer, d.log_odds._buffer + d.log_odds._length);
-    // A malformed delta (inconsistent lengths) is dropped rather than misread.
-    bool valid = delta.block_keys.size() == delta.block_ends.size() &&
-                 delta.cells.size() == delta.log_odds.size();
-    std::uint32_t previous = 0;
-    for (const std::uint32_t end : delta.block_ends) {
-      valid = valid && end >= previous && end <= delta.cells.size();
-      previous = end;
-    }
-    for (const std::uint16_t c : delta.cells) valid = valid && c < block::kVoxels;
-    if (!valid) return;
+    if (!delta.wellFormed()) return;  // dropped rather than misread
     info.changes = delta.changes();
     f(info);
   });
@@ -342,42 +333,72 @@ std::size_t Client::pollEvents(const std::function<void(const MapEventInfo&)>& f
 
 Expected<std::pair<std::unique_ptr<GridMap>, std::uint64_t>> Client::fetchMap(
     std::uint64_t min_version) {
-  const auto deadline = Clock::now() + options_.timeout;
-  std::unordered_map<std::uint64_t, std::pair<std::vector<std::uint16_t>, std::vector<float>>>
-      tiles;
+  // 1. The manifest (1 Hz) says when the server's map has reached min_version.
+  auto deadline = Clock::now() + options_.timeout;
   std::optional<densemap_msgs_MapManifest> manifest;
-  while (true) {
-    std::uint64_t newest_tile = 0;
-    tiles.clear();
-    // read, not take: the reader keeps the latest manifest and tiles for the next fetch.
+  while (!manifest || manifest->version < min_version) {
     dds::forEachSample<densemap_msgs_MapManifest>(
         dds_->man_r, false, [&](const densemap_msgs_MapManifest& m) { manifest = m; });
-    dds::forEachSample<densemap_msgs_MapTile>(
-        dds_->tile_r, false, [&](const densemap_msgs_MapTile& t) {
-          auto& cells = tiles[t.tile_id];
-          cells.first.assign(t.keys._buffer, t.keys._buffer + t.keys._length);
-          cells.second.assign(t.log_odds._buffer, t.log_odds._buffer + t.log_odds._length);
-        });
-    if (manifest && manifest->version >= min_version && newest_tile <= manifest->version) {
-      std::size_t cells = 0;
-      for (const auto& [id, c] : tiles) cells += c.second.size();
-      if (cells == manifest->known_cells) {
-        auto map = std::make_unique<GridMap>(manifest->resolution, SensorModel{});
-        for (const auto& [id, c] : tiles) {
-          for (std::size_t i = 0; i < c.second.size(); ++i) {
-            map->setLogOdds(VoxelKey{c.first[3 * i], c.first[3 * i + 1], c.first[3 * i + 2]},
-                            c.second[i]);
-          }
-        }
-        return std::pair{std::move(map), manifest->version};
-      }
-    }
+    if (manifest && manifest->version >= min_version) break;
     if (Clock::now() > deadline) {
-      return makeError(manifest ? "map tiles did not complete within the timeout"
+      return makeError(manifest ? "the server's map did not reach version " +
+                                      std::to_string(min_version) + " within the timeout"
                                 : "no map manifest from densemap-server");
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
+  // 2. A tile reader for this fetch only (volatile: it must match before the request).
+  auto reader = dds::createReader(dds_->participant, dds_->topics.tiles, dds::kTileQos);
+  if (!reader) return std::unexpected(reader.error());
+  for (dds_subscription_matched_status_t m{};
+       dds_get_subscription_matched_status(reader->get(), &m) >= 0 && m.current_count == 0;) {
+    if (Clock::now() > deadline) return makeError("the server's map/tiles writer did not match");
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));  // the server's side of the match
+  // 3. send-map; the reply comes after the server wrote every tile and says how many.
+  const densemap_msgs_RequestId id{client_id_, next_request_};
+  auto detail = command(CommandKind::kSendMap);
+  if (!detail) return std::unexpected(detail.error());
+  unsigned long long version = 0, tile_count = 0, cell_count = 0;
+  if (std::sscanf(detail->c_str(), "version %llu tiles %llu cells %llu", &version, &tile_count,
+                  &cell_count) != 3) {
+    return makeError("unexpected send-map reply: " + *detail);
+  }
+  auto map = std::make_unique<GridMap>(manifest->resolution, SensorModel{});
+  std::size_t tiles = 0, cells = 0;
+  bool malformed = false;
+  deadline = Clock::now() + options_.timeout;
+  while (tiles < tile_count) {
+    const std::size_t before = tiles;
+    dds::takeAll<densemap_msgs_MapTile>(*reader, [&](const densemap_msgs_MapTile& t) {
+      if (t.request.client_id != id.client_id || t.request.request_id != id.request_id) return;
+      VersionDelta d;
+      d.block_keys.assign(t.block_keys._buffer, t.block_keys._buffer + t.block_keys._length);
+      d.block_ends.assign(t.block_ends._buffer, t.block_ends._buffer + t.block_ends._length);
+      d.cells.assign(t.cells._buffer, t.cells._buffer + t.cells._length);
+      d.log_odds.assign(t.log_odds._buffer, t.log_odds._buffer + t.log_odds._length);
+      if (!d.wellFormed()) {
+        malformed = true;
+        return;
+      }
+      map->applyChanges(d.changes());
+      cells += d.size();
+      ++tiles;
+    });
+    if (malformed) return makeError("malformed map tile from the server");
+    if (tiles != before) deadline = Clock::now() + options_.timeout;  // progress: keep going
+    if (tiles < tile_count && Clock::now() > deadline) {
+      return makeError("map tiles stopped arriving: " + std::to_string(tiles) + " of " +
+                       std::to_string(tile_count));
+    }
+    if (tiles < tile_count) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  if (cells != cell_count) {
+    return makeError("map tiles hold " + std::to_string(cells) + " cells, the server sent " +
+                     std::to_string(cell_count));
+  }
+  return std::pair{std::move(map), static_cast<std::uint64_t>(version)};
 }
 
 }  // namespace densemap

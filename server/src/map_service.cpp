@@ -1,5 +1,7 @@
 #include "map_service.hpp"
 
+#include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <unordered_map>
@@ -93,7 +95,7 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
   writer(d.ray_writer, d.topics.ray_reply, requests);
   writer(d.cmd_writer, d.topics.command_reply, dds::kCommandQos);
   writer(d.manifest_writer, d.topics.manifest, dds::kLatestStateQos);
-  writer(d.tile_writer, d.topics.tiles, dds::kLatestStateQos);
+  writer(d.tile_writer, d.topics.tiles, dds::kTileQos);
   writer(d.delta_writer, d.topics.delta, {.depth = 32});
   writer(d.event_writer, d.topics.events, {.depth = 64});
   writer(d.status_writer, d.topics.status, dds::kLatestStateQos);
@@ -117,9 +119,6 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
       });
   // The map loaded from a snapshot is published as tiles right away.
   service->delta_base_ = pipeline.view();
-  pipeline.view()->forEachBlock([&](std::uint64_t block_key, const VoxelBlock&) {
-    service->dirty_tiles_.insert(tileOfBlock(block_key));
-  });
   return service;
 }
 
@@ -177,7 +176,6 @@ void MapService::serviceLoop() {
 
 void MapService::publishLoop() {
   auto next_status = std::chrono::steady_clock::now();
-  auto next_tiles = next_status;
   const auto autosave_period = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
       std::chrono::duration<double>(options_.autosave_period_s));
   auto next_save = next_status + autosave_period;
@@ -185,7 +183,7 @@ void MapService::publishLoop() {
   while (running_.load()) {
     {
       std::unique_lock lock(versions_mutex_);
-      versions_cv_.wait_until(lock, std::min(next_status, next_tiles),
+      versions_cv_.wait_until(lock, next_status,
                               [&] { return !versions_.empty() || !running_.load(); });
       versions.swap(versions_);
     }
@@ -193,11 +191,8 @@ void MapService::publishLoop() {
     const auto now = std::chrono::steady_clock::now();
     if (now >= next_status) {
       publishStatus();
+      publishManifest();
       next_status = now + std::chrono::seconds(1);
-    }
-    if (now >= next_tiles) {
-      publishTiles();
-      next_tiles = now + std::chrono::seconds(1);
     }
     if (options_.autosave_period_s > 0 && !options_.snapshot_path.empty() && now >= next_save) {
       if (auto ok = save(); !ok) noteBadRequest("autosave: " + ok.error().message);
@@ -209,8 +204,8 @@ void MapService::publishLoop() {
     versions.swap(versions_);
   }
   publishDeltas(versions);
-  publishTiles();
   publishStatus();
+  publishManifest();
 }
 
 void MapService::onIntegrated(IntegrationResult& r, const std::shared_ptr<const MapView>& view) {
@@ -244,9 +239,6 @@ void MapService::onIntegrated(IntegrationResult& r, const std::shared_ptr<const 
 
 void MapService::publishDeltas(std::deque<Version>& versions) {
   if (versions.empty()) return;
-  for (const Version& v : versions) {
-    for (const std::uint64_t b : v.result.written_blocks) dirty_tiles_.insert(tileOfBlock(b));
-  }
   dds_publication_matched_status_t matched{};
   const bool wanted =
       dds_get_publication_matched_status(dds_->delta_writer.get(), &matched) >= 0 &&
@@ -432,6 +424,16 @@ void MapService::takeQueries() {
 void MapService::answerCommands() {
   dds::takeAll<densemap_msgs_CommandRequest>(
       dds_->cmd_reader, [&](const densemap_msgs_CommandRequest& req) {
+        if (req.kind == 3) {  // send-map: a task, so it does not hold up other commands
+          ++queries_in_flight_;
+          query_arena_.execute([&] {
+            queries_.run([this, id = req.id] {
+              replyCommand(id, sendMap(id));
+              --queries_in_flight_;
+            });
+          });
+          return;
+        }
         Expected<std::string> outcome =
             makeError("unknown command kind " + std::to_string(req.kind));
         const VoxelGrid& grid = pipeline_.view()->grid();
@@ -468,17 +470,22 @@ void MapService::answerCommands() {
           else
             outcome = std::unexpected(saved.error());
         }
-        densemap_msgs_CommandReply rep{};
-        rep.id = req.id;
-        rep.map_version = pipeline_.view()->version();
-        const std::string error = outcome ? "" : outcome.error().message;
-        const std::string detail = outcome ? *outcome : "";
-        if (!outcome) noteBadRequest(error);
-        rep.status = outcome ? kOk : kInvalid;
-        rep.error = const_cast<char*>(error.c_str());
-        rep.detail = const_cast<char*>(detail.c_str());
-        (void)dds::write(dds_->cmd_writer, &rep);
+        replyCommand(req.id, outcome);
       });
+}
+
+void MapService::replyCommand(const densemap_msgs_RequestId& id,
+                              const Expected<std::string>& outcome) {
+  densemap_msgs_CommandReply rep{};
+  rep.id = id;
+  rep.map_version = pipeline_.view()->version();
+  const std::string error = outcome ? "" : outcome.error().message;
+  const std::string detail = outcome ? *outcome : "";
+  if (!outcome) noteBadRequest(error);
+  rep.status = outcome ? kOk : kInvalid;
+  rep.error = const_cast<char*>(error.c_str());
+  rep.detail = const_cast<char*>(detail.c_str());
+  (void)dds::write(dds_->cmd_writer, &rep);
 }
 
 Expected<std::size_t> MapService::save(const std::filesystem::path& file) {
@@ -516,36 +523,56 @@ void MapService::publishStatus() {
   (void)dds::write(dds_->status_writer, &s);
 }
 
-void MapService::publishTiles() {
-  // The newest version handed over: dirty_tiles_ holds exactly what changed up to it.
-  const auto view = delta_base_;
-  if (dirty_tiles_.empty() && manifest_published_) return;
-  // Whole tiles from the latest version (so a late joiner's keep-last-1 copy is complete),
-  // read from the blocks of the tiles the versions since the last round wrote.
-  std::vector<std::uint16_t> keys;
-  std::vector<float> values;
-  for (const std::uint64_t id : dirty_tiles_) {
-    readTile(*view, id, keys, values);
-    if (values.empty()) {
-      known_tiles_.erase(id);
-    } else {
-      known_tiles_.insert(id);
-    }
-    densemap_msgs_MapTile tile{};
-    tile.tile_id = id;
-    tile.version = view->version();
-    tile.keys = dds::borrowSequence<dds_sequence_unsigned_short>(keys);
-    tile.log_odds = dds::borrowSequence<dds_sequence_float>(values);
-    (void)dds::write(dds_->tile_writer, &tile);
-  }
-  dirty_tiles_.clear();
+void MapService::publishManifest() {
+  const auto view = pipeline_.view();
   densemap_msgs_MapManifest manifest{};
   manifest.version = view->version();
   manifest.resolution = view->grid().resolution();
   manifest.known_cells = view->knownCells();
-  manifest.tile_count = static_cast<std::uint32_t>(known_tiles_.size());
   (void)dds::write(dds_->manifest_writer, &manifest);
-  manifest_published_ = true;
+}
+
+Expected<std::string> MapService::sendMap(const densemap_msgs_RequestId& request) {
+  // One version throughout: the tiles are a consistent copy of it.
+  const auto view = pipeline_.view();
+  std::unordered_map<std::uint64_t, std::vector<std::uint64_t>> tiles;
+  view->forEachBlock([&](std::uint64_t block_key, const VoxelBlock&) {
+    tiles[tileOfBlock(block_key)].push_back(block_key);
+  });
+  std::size_t cells = 0;
+  VersionDelta t;
+  for (auto& [id, blocks] : tiles) {
+    t = VersionDelta{};
+    std::sort(blocks.begin(), blocks.end());
+    for (const std::uint64_t bk : blocks) {
+      const VoxelBlock* b = view->block(bk);
+      for (int w = 0; w < block::kMaskWords; ++w) {
+        for (std::uint64_t bits = b->known[w]; bits != 0; bits &= bits - 1) {
+          const int i = w * 64 + std::countr_zero(bits);
+          t.cells.push_back(static_cast<std::uint16_t>(i));
+          t.log_odds.push_back(b->log_odds[i]);
+        }
+      }
+      t.block_keys.push_back(bk);
+      t.block_ends.push_back(static_cast<std::uint32_t>(t.cells.size()));
+    }
+    cells += t.cells.size();
+    densemap_msgs_MapTile tile{};
+    tile.request = request;
+    tile.tile_id = id;
+    tile.version = view->version();
+    tile.block_keys = dds::borrowSequence<dds_sequence_unsigned_long_long>(t.block_keys);
+    tile.block_ends = dds::borrowSequence<dds_sequence_unsigned_long>(t.block_ends);
+    tile.cells = dds::borrowSequence<dds_sequence_unsigned_short>(t.cells);
+    tile.log_odds = dds::borrowSequence<dds_sequence_float>(t.log_odds);
+    // Keep-all: a reader that does not keep up blocks the write; one that stopped ends it.
+    if (auto ok = dds::write(dds_->tile_writer, &tile); !ok) {
+      return makeError("send-map stopped after " + std::to_string(cells) +
+                       " cells: " + ok.error().message);
+    }
+  }
+  return "version " + std::to_string(view->version()) + " tiles " + std::to_string(tiles.size()) +
+         " cells " + std::to_string(cells);
 }
 
 }  // namespace densemap::server

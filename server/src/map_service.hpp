@@ -10,9 +10,9 @@
 #include <memory>
 #include <mutex>
 #include <thread>
-#include <unordered_set>
 
 #include "densemap/dds/dds.hpp"
+#include "densemap_msgs.h"
 #include "densemap/pipeline/pipeline.hpp"
 
 namespace densemap::server {
@@ -32,8 +32,9 @@ struct ServiceOptions {
 ///   bbox does not hold up point queries), each answered from the latest published version;
 ///   commands run here (they wait for the pipeline's worker);
 /// - publish: per version, a map/delta (only while a reader is matched; diffed from the
-///   versions' written blocks, never the whole map); at most once a second the tiles those
-///   blocks touched + manifest (transient-local, for late joiners); status at 1 Hz; autosave.
+///   versions' written blocks, never the whole map); status and manifest at 1 Hz; autosave.
+/// A late joiner asks for the map (send-map): a query task writes one version's tiles to it
+/// (keep-all, flow-controlled), so no copy of the map waits in DDS for readers that may come.
 /// The pipeline's worker only writes a small map/events sample and hands the version over.
 class MapService {
  public:
@@ -62,9 +63,12 @@ class MapService {
   void onIntegrated(IntegrationResult& result, const std::shared_ptr<const MapView>& view);
   void takeQueries();
   void answerCommands();
+  void replyCommand(const densemap_msgs_RequestId& id, const Expected<std::string>& outcome);
   void publishDeltas(std::deque<Version>& versions);
   void publishStatus();
-  void publishTiles();
+  void publishManifest();
+  /// Writes the latest version's tiles for `request` (send-map); returns the reply detail.
+  Expected<std::string> sendMap(const densemap_msgs_RequestId& request);
   void noteBadRequest(const std::string& error);
 
   Pipeline& pipeline_;
@@ -85,9 +89,6 @@ class MapService {
   std::deque<Version> versions_;
   // Publish thread only:
   std::shared_ptr<const MapView> delta_base_;  // the last version a delta went out for
-  std::unordered_set<std::uint64_t> dirty_tiles_;
-  std::unordered_set<std::uint64_t> known_tiles_;
-  bool manifest_published_ = false;
 
   std::atomic<std::uint64_t> queries_answered_{0};
   std::atomic<std::uint64_t> queries_rejected_{0};

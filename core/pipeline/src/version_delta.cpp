@@ -7,6 +7,20 @@
 
 namespace densemap {
 
+bool VersionDelta::wellFormed() const {
+  if (block_keys.size() != block_ends.size() || cells.size() != log_odds.size()) return false;
+  std::uint32_t previous = 0;
+  for (const std::uint32_t end : block_ends) {
+    if (end < previous || end > cells.size()) return false;
+    previous = end;
+  }
+  if (!block_ends.empty() && block_ends.back() != cells.size()) return false;
+  for (const std::uint16_t c : cells) {
+    if (c >= block::kVoxels) return false;
+  }
+  return true;
+}
+
 CellChanges VersionDelta::changes() const {
   CellChanges out;
   out.reserve(cells.size());

@@ -55,7 +55,11 @@ dds_qos_t* makeQos(const QosSpec& spec) {
   dds_qos_t* qos = dds_create_qos();
   dds_qset_reliability(qos, spec.reliable ? DDS_RELIABILITY_RELIABLE : DDS_RELIABILITY_BEST_EFFORT,
                        DDS_SECS(1));
-  dds_qset_history(qos, DDS_HISTORY_KEEP_LAST, spec.depth);
+  if (spec.depth > 0) {
+    dds_qset_history(qos, DDS_HISTORY_KEEP_LAST, spec.depth);
+  } else {
+    dds_qset_history(qos, DDS_HISTORY_KEEP_ALL, DDS_LENGTH_UNLIMITED);
+  }
   dds_qset_durability(
       qos, spec.transient_local ? DDS_DURABILITY_TRANSIENT_LOCAL : DDS_DURABILITY_VOLATILE);
   return qos;

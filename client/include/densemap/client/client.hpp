@@ -71,7 +71,7 @@ struct MapEventInfo {
   double latency_ms = 0.0;  // the server's receive -> published
 };
 
-enum class CommandKind { kReset = 0, kClearBox = 1, kSave = 2 };
+enum class CommandKind { kReset = 0, kClearBox = 1, kSave = 2, kSendMap = 3 };
 
 /// A densemap-server client over DDS (loopback by default). Requests carry a random client id
 /// and an increasing request id; replies are matched on both. Every call has a timeout.
@@ -104,9 +104,9 @@ class Client {
   std::size_t pollDeltas(const std::function<void(const DeltaInfo&)>& f);
   /// Calls `f` for every map event received since the last call; returns how many.
   std::size_t pollEvents(const std::function<void(const MapEventInfo&)>& f);
-  /// Rebuilds the server's map from its transient-local tiles (what a late joiner sees);
-  /// waits until the manifest reaches `min_version` and the tiles cover its cell count (tiles
-  /// are republished at most once a second).
+  /// Fetches the server's map (what a late joiner does): waits until the manifest reaches
+  /// `min_version`, asks for the map (send-map) and rebuilds it from the tiles of one version,
+  /// which it returns with the map. Times out only when tiles stop arriving.
   [[nodiscard]] Expected<std::pair<std::unique_ptr<GridMap>, std::uint64_t>> fetchMap(
       std::uint64_t min_version = 0);
 

@@ -19,6 +19,9 @@ struct VersionDelta {
   std::vector<float> log_odds;
 
   [[nodiscard]] std::size_t size() const { return cells.size(); }
+  /// Lengths agree, block ends increase within `cells`, cell indices fit a block (check what
+  /// came off the wire before reading it).
+  [[nodiscard]] bool wellFormed() const;
   /// The cells as a change list (key, value, known).
   [[nodiscard]] CellChanges changes() const;
 };

@@ -57,7 +57,7 @@ class Entity {
 
 struct QosSpec {
   bool reliable = true;
-  int depth = 1;  // keep-last depth
+  int depth = 1;  // keep-last depth (0: keep-all)
   bool transient_local = false;
 };
 

@@ -22,5 +22,7 @@ inline constexpr QosSpec kRequestQos{.depth = 64};
 inline constexpr QosSpec kCommandQos{.depth = 16};
 /// Map state for late joiners: reliable, transient-local, keep-last 1 per instance.
 inline constexpr QosSpec kLatestStateQos{.depth = 1, .transient_local = true};
+/// Map tiles sent on request: reliable, volatile, keep-all (flow-controlled, nothing dropped).
+inline constexpr QosSpec kTileQos{.depth = 0};
 
 }  // namespace densemap::dds
