@@ -6,7 +6,9 @@
 # Writes $OUT/scans.csv (densemap replay --csv: per-scan latency and map size) and rss.txt.
 # Usage: scripts/realtime-check.sh DATA RES RANGE [RATE=10] [FIRST=0] [LIMIT=0] [QUERY_POINTS=0]
 # Environment: DENSEMAP_BIN (default build/bin), DENSEMAP_DOMAIN (default 77), BENCH=0 skips the
-# bench, SNAPSHOT=1 times a late joiner's fetch of the whole map, PERF=1 records `perf record -g` of the server into $OUT/perf.data.
+# bench, BBOX_EDGE=M adds a client sending M-metre bbox queries back to back, SNAPSHOT=1 times a
+# late joiner's fetch of the whole map, PERF=1 records `perf record -g` of the server into
+# $OUT/perf.data, WARM_UP=true turns the pipeline's warm-up on.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DATA=$1 RES=$2 RANGE=$3 RATE=${4:-10} FIRST=${5:-0} LIMIT=${6:-0} QUERY=${7:-0}
@@ -15,7 +17,8 @@ DOMAIN=${DENSEMAP_DOMAIN:-77}
 OUT=$(mktemp -d /tmp/densemap-rt.XXXXXX)
 cat > "$OUT/server.textproto" <<CFG
 map { backend: "grid" resolution_m: $RES max_range_m: $RANGE }
-pipeline { threads: 2 queue_depth: 2 integration: "superray+culling" max_abs_position_m: 10000 }
+pipeline { threads: 2 queue_depth: 2 integration: "superray+culling" max_abs_position_m: 10000
+           warm_up: ${WARM_UP:-false} }
 snapshot { path: "" autosave_period_s: 0 }
 dds { domain_id: $DOMAIN network_interface: "lo" }
 CFG
@@ -31,7 +34,8 @@ fi
     awk '/VmRSS/ {print $2}' /proc/$SERVER/status 2>/dev/null || true; sleep 0.5
   done > "$OUT/rss.txt" ) &
 "$BIN/densemap" --domain-id "$DOMAIN" replay --data "$DATA" --rate "$RATE" --first "$FIRST" \
-  --limit "$LIMIT" --query-points "$QUERY" --csv "$OUT/scans.csv" 2> "$OUT/replay.log" | tee "$OUT/replay.txt"
+  --limit "$LIMIT" --query-points "$QUERY" --query-bbox-edge "${BBOX_EDGE:-0}" \
+  --csv "$OUT/scans.csv" 2> "$OUT/replay.log" | tee "$OUT/replay.txt"
 "$BIN/densemap" --domain-id "$DOMAIN" status | tee -a "$OUT/replay.txt"
 if [ "${SNAPSHOT:-0}" = 1 ]; then  # a late joiner fetches the whole map
   start=$(date +%s.%N)

@@ -3,6 +3,7 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <map>
@@ -41,7 +42,8 @@ double percentile(std::vector<double> v, double q) {
 
 int replay(const ClientOptions& o, const std::string& data, double rate, std::size_t first,
            std::size_t limit, std::size_t query_points,
-           const std::optional<upsample::UpsampleOptions>& densify, const std::string& csv_path) {
+           const std::optional<upsample::UpsampleOptions>& densify, const std::string& csv_path,
+           double bbox_edge_m) {
   auto source = openScanSource(data);
   if (!source) return fail(source.error().message);
   if (densify) {
@@ -56,6 +58,33 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
   std::vector<double> latencies;
   std::size_t queried = 0;
   double query_seconds = 0.0;
+  std::vector<double> point_ms;  // round trip of each point-query batch
+  // --query-bbox-edge: a second client asks for bbox queries (cubes of that edge around the
+  // latest sensor position) back to back, for as long as the replay sends scans.
+  std::atomic<bool> replaying{true};
+  std::atomic<float> centre_x{0}, centre_y{0}, centre_z{0};
+  std::vector<double> bbox_ms;
+  std::size_t bbox_failed = 0;
+  std::thread bbox_load;
+  if (bbox_edge_m > 0) {
+    bbox_load = std::thread([&] {
+      auto other = connect(o);
+      if (!other) {
+        std::fprintf(stderr, "densemap: bbox load: %s\n", other.error().message.c_str());
+        return;
+      }
+      while (replaying.load()) {
+        const Point3f c(centre_x.load(), centre_y.load(), centre_z.load());
+        const Point3f half = Point3f::Constant(static_cast<float>(bbox_edge_m / 2));
+        const auto t0 = Clock::now();
+        if ((*other)->queryBox(c - half, c + half)) {
+          bbox_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+        } else {
+          ++bbox_failed;
+        }
+      }
+    });
+  }
   // --csv: a row per integrated scan, with the map's size from the latest status (1 Hz).
   std::FILE* csv = nullptr;
   if (!csv_path.empty()) {
@@ -111,6 +140,10 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
     sent_at[raw.seq] = Clock::now();
     if (auto ok = (*client)->publishScan(raw); !ok) return fail(ok.error().message);
     ++sent;
+    {
+      const Point3f c = scan->originWorld();
+      centre_x = c.x(), centre_y = c.y(), centre_z = c.z();
+    }
     if (query_points > 0) {  // query load while ingesting: points around the sensor
       std::vector<Point3f> probe;
       const Point3f c = scan->originWorld();
@@ -123,6 +156,7 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
       const auto t0 = Clock::now();
       if (auto answer = (*client)->queryPoints(probe); answer) {
         query_seconds += std::chrono::duration<double>(Clock::now() - t0).count();
+        point_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
         queried += probe.size();
       }
     }
@@ -137,6 +171,8 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
     if (latencies.size() != had) last_news = Clock::now();
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
+  replaying = false;
+  if (bbox_load.joinable()) bbox_load.join();
   if (csv != nullptr) std::fclose(csv);
   std::this_thread::sleep_for(std::chrono::milliseconds(1100));  // one more status period
   auto after = (*client)->status();
@@ -159,6 +195,15 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
         "replay: point queries while ingesting: %zu points in %.3f s of requests, %.3g points/s "
         "(round trip)\n",
         queried, query_seconds, static_cast<double>(queried) / query_seconds);
+    std::printf("replay: point-query round trip over %zu batches of %zu: p50 %.1f ms, p99 %.1f ms\n",
+                point_ms.size(), query_points, percentile(point_ms, 0.5),
+                percentile(point_ms, 0.99));
+  }
+  if (bbox_edge_m > 0) {
+    std::printf("replay: bbox queries (%.1f m cubes) alongside: %zu answered, %zu failed, round trip "
+                "p50 %.1f ms, p99 %.1f ms\n",
+                bbox_edge_m, bbox_ms.size(), bbox_failed, percentile(bbox_ms, 0.5),
+                percentile(bbox_ms, 0.99));
   }
   return 0;
 }
@@ -251,6 +296,11 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   replay->add_option("--first", first, "Skip this many scans")->capture_default_str();
   std::string replay_csv;
+  double bbox_edge = 0;
+  replay->add_option("--query-bbox-edge", bbox_edge,
+                     "While replaying, a second client sends bbox queries back to back: cubes of "
+                     "this edge (m) around the latest sensor position (0: none)")
+      ->check(CLI::Range(0.0, 1000.0));
   replay->add_option("--csv", replay_csv,
                      "Write a row per integrated scan: scan, server and end-to-end latency (ms), "
                      "changed cells, written blocks, known cells and map bytes (latest status)");
@@ -340,7 +390,8 @@ int main(int argc, char** argv) {
       if (!options) return cli::fail("--upsample: " + options.error().message);
       densify = std::move(*options);
     }
-    return cli::replay(o, data, rate, first, limit, query_points, densify, replay_csv);
+    return cli::replay(o, data, rate, first, limit, query_points, densify, replay_csv,
+                       bbox_edge);
   }
   auto client = cli::connect(o);
   if (!client) return cli::fail(client.error().message);

@@ -1,5 +1,6 @@
 // densemap-server: the occupancy-mapping daemon (DESIGN.md). Scans in over DDS, map versions,
 // queries, commands, status, tiles and deltas out; snapshots on command, autosave and shutdown.
+#include <tbb/global_control.h>
 #include <CLI/CLI.hpp>
 
 #include <malloc.h>
@@ -57,6 +58,7 @@ int main(int argc, char** argv) {
   service_options.snapshot_path = config->snapshot().path();
   service_options.autosave_period_s = config->snapshot().autosave_period_s();
   service_options.max_query_cells = config->pipeline().max_query_cells();
+  service_options.query_threads = static_cast<int>(config->pipeline().query_threads());
 
   std::unique_ptr<densemap::OccupancyMap> initial;
   std::uint64_t version = 0;
@@ -77,6 +79,12 @@ int main(int argc, char** argv) {
     initial = std::move(loaded->map);
     version = loaded->version;
   }
+  // TBB's default pool has hardware threads - 1 workers, shared by every arena: on 2 cores a
+  // single worker, so a query task could wait for a whole scan's integration. Room for both
+  // arenas: the integration arena's workers plus the query arena's.
+  tbb::global_control parallelism(tbb::global_control::max_allowed_parallelism,
+                                  static_cast<std::size_t>(options->threads +
+                                                           service_options.query_threads));
   auto pipeline = densemap::Pipeline::create(*options, std::move(initial), version);
   if (!pipeline) return fail(pipeline.error().message);
   auto service = densemap::server::MapService::create(**pipeline, service_options);

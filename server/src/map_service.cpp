@@ -1,5 +1,8 @@
 #include "map_service.hpp"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <bit>
 #include <cmath>
@@ -126,7 +129,9 @@ MapService::MapService(Pipeline& pipeline, const ServiceOptions& options)
     : pipeline_(pipeline),
       options_(options),
       dds_(std::make_unique<Dds>()),
-      query_arena_(std::max(1, options.query_threads)) {}
+      // No slot kept for a master (the service thread only enqueues); high priority, so free
+      // workers take queries before integration's spare work.
+      query_arena_(std::max(1, options.query_threads), 0, tbb::task_arena::priority::high) {}
 
 MapService::~MapService() { stop(); }
 
@@ -303,13 +308,29 @@ void answerPoints(const dds::Entity& writer, const PointRequest& req, const MapV
     const std::size_t n = req.xyz.size() / 3;
     values.resize(n, std::numeric_limits<float>::quiet_NaN());
     states.resize(n, 0);
-    for (std::size_t i = 0; i < n; ++i) {
-      const Point3f p(req.xyz[3 * i], req.xyz[3 * i + 1], req.xyz[3 * i + 2]);
-      const auto key = p.allFinite() ? view.grid().pointToKey(p) : std::nullopt;
-      const auto v = key ? view.logOdds(*key) : std::nullopt;
-      if (v) values[i] = *v;
-      states[i] = static_cast<std::uint8_t>(cellState(v));
-    }
+    // Chunks in parallel (this task's arena); within a chunk, neighbouring points mostly share
+    // a block, so the last block found is tried first.
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+      std::uint64_t cached_key = ~std::uint64_t{0};
+      const VoxelBlock* cached = nullptr;
+      for (std::size_t i = range.begin(); i != range.end(); ++i) {
+        const Point3f p(req.xyz[3 * i], req.xyz[3 * i + 1], req.xyz[3 * i + 2]);
+        const auto key = p.allFinite() ? view.grid().pointToKey(p) : std::nullopt;
+        std::optional<float> v;
+        if (key) {
+          const std::uint64_t bk = block::blockOf(*key);
+          if (bk != cached_key) {
+            cached_key = bk;
+            cached = view.block(bk);
+          }
+          const int c = block::indexOf(*key);
+          if (cached != nullptr && cached->isKnown(c)) v = cached->log_odds[c];
+        }
+        if (v) values[i] = *v;
+        states[i] = static_cast<std::uint8_t>(cellState(v));
+      }
+    });
   }
   rep.status = error.empty() ? kOk : kInvalid;
   rep.error = const_cast<char*>(error.c_str());

@@ -131,6 +131,7 @@ Pipeline::Pipeline(const PipelineOptions& options, std::unique_ptr<OccupancyMap>
   view_.store(MapView::publish(*readable_));
   // The graph belongs to the pipeline's arena: build it there.
   arena_.execute([this] { graph_ = std::make_unique<Graph>(*this); });
+  if (options.warm_up && !kernel_map_) arena_.execute([this] { warmUp(); });
 }
 
 Pipeline::~Pipeline() { stop(); }
@@ -225,6 +226,32 @@ void Pipeline::publish(IntegrationResult& result) {
     }
   }
   if (publisher_) publisher_(result, next);
+}
+
+void Pipeline::warmUp() {
+  // A sparse fan (16 x 256 rays) at 90% of the max range (50 m when unlimited), +-3 deg about
+  // the horizon: the rays' box (which sizes the dense free marks) is as wide as a real scan's,
+  // and the blocks the rays touch size the per-worker update tables. Measured on the 64-beam
+  // simulation at 0.1 m / 80 m: p99 about 220 -> 150 ms, for about 230 MB more RSS kept for
+  // the life of the process (a 4 x 64 fan: +60 MB, no clear gain).
+  const float range = 0.9F * static_cast<float>(options_.max_range_m > 0 ? options_.max_range_m
+                                                                         : 50.0);
+  PointCloud points;
+  points.reserve(16 * 256);
+  for (int beam = 0; beam < 16; ++beam) {
+    const float elevation = (-3.0F + 6.0F * static_cast<float>(beam) / 15.0F) * 0.0174533F;
+    for (int col = 0; col < 256; ++col) {
+      const float azimuth = 6.2831853F * static_cast<float>(col) / 256.0F;
+      points.emplace_back(range * std::cos(elevation) * std::cos(azimuth),
+                          range * std::cos(elevation) * std::sin(azimuth),
+                          range * std::sin(elevation));
+    }
+  }
+  GridMap scratch(options_.resolution_m, SensorModel(options_.sensor));
+  // Twice: each TBB worker has its own buffers, and one pass may not reach every worker.
+  for (int pass = 0; pass < 2; ++pass) {
+    (void)integrator_.integrate(scratch, points, Point3f::Zero());
+  }
 }
 
 ScanStats Pipeline::integrateKernel(const PointCloud& points_world, const Point3f& origin_world,
