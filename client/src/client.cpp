@@ -84,8 +84,8 @@ Expected<void> Client::waitForServer() {
       if (dds_get_publication_matched_status(w->get(), &s) < 0 || s.current_count == 0)
         return false;
     }
-    for (const dds::Entity* r : {&dds_->pr_r, &dds_->br_r, &dds_->rr_r, &dds_->cr_r,
-                                 &dds_->event_r, &dds_->delta_r}) {
+    for (const dds::Entity* r :
+         {&dds_->pr_r, &dds_->br_r, &dds_->rr_r, &dds_->cr_r, &dds_->event_r, &dds_->delta_r}) {
       if (r->get() <= 0) continue;  // deltas not subscribed
       dds_subscription_matched_status_t s;
       if (dds_get_subscription_matched_status(r->get(), &s) < 0 || s.current_count == 0)

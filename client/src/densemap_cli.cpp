@@ -90,8 +90,9 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
   if (!csv_path.empty()) {
     csv = std::fopen(csv_path.c_str(), "w");
     if (csv == nullptr) return fail("cannot write " + csv_path);
-    std::fprintf(csv, "scan,server_ms,end_to_end_ms,changed_cells,written_blocks,known_cells,"
-                      "map_bytes\n");
+    std::fprintf(csv,
+                 "scan,server_ms,end_to_end_ms,changed_cells,written_blocks,known_cells,"
+                 "map_bytes\n");
   }
   ServerStatus last_status = before ? *before : ServerStatus{};
   auto next_status = Clock::now() + std::chrono::seconds(1);
@@ -187,7 +188,8 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
                 after->latency_p50_ms, after->latency_p99_ms);
   }
   std::printf(
-      "replay: end-to-end latency (publish -> map event seen) over %zu scans: p50 %.1f ms, p99 %.1f "
+      "replay: end-to-end latency (publish -> map event seen) over %zu scans: p50 %.1f ms, p99 "
+      "%.1f "
       "ms\n",
       latencies.size(), percentile(latencies, 0.5), percentile(latencies, 0.99));
   if (queried > 0) {
@@ -195,15 +197,16 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
         "replay: point queries while ingesting: %zu points in %.3f s of requests, %.3g points/s "
         "(round trip)\n",
         queried, query_seconds, static_cast<double>(queried) / query_seconds);
-    std::printf("replay: point-query round trip over %zu batches of %zu: p50 %.1f ms, p99 %.1f ms\n",
-                point_ms.size(), query_points, percentile(point_ms, 0.5),
-                percentile(point_ms, 0.99));
+    std::printf(
+        "replay: point-query round trip over %zu batches of %zu: p50 %.1f ms, p99 %.1f ms\n",
+        point_ms.size(), query_points, percentile(point_ms, 0.5), percentile(point_ms, 0.99));
   }
   if (bbox_edge_m > 0) {
-    std::printf("replay: bbox queries (%.1f m cubes) alongside: %zu answered, %zu failed, round trip "
-                "p50 %.1f ms, p99 %.1f ms\n",
-                bbox_edge_m, bbox_ms.size(), bbox_failed, percentile(bbox_ms, 0.5),
-                percentile(bbox_ms, 0.99));
+    std::printf(
+        "replay: bbox queries (%.1f m cubes) alongside: %zu answered, %zu failed, round trip "
+        "p50 %.1f ms, p99 %.1f ms\n",
+        bbox_edge_m, bbox_ms.size(), bbox_failed, percentile(bbox_ms, 0.5),
+        percentile(bbox_ms, 0.99));
   }
   return 0;
 }
@@ -297,9 +300,10 @@ int main(int argc, char** argv) {
   replay->add_option("--first", first, "Skip this many scans")->capture_default_str();
   std::string replay_csv;
   double bbox_edge = 0;
-  replay->add_option("--query-bbox-edge", bbox_edge,
-                     "While replaying, a second client sends bbox queries back to back: cubes of "
-                     "this edge (m) around the latest sensor position (0: none)")
+  replay
+      ->add_option("--query-bbox-edge", bbox_edge,
+                   "While replaying, a second client sends bbox queries back to back: cubes of "
+                   "this edge (m) around the latest sensor position (0: none)")
       ->check(CLI::Range(0.0, 1000.0));
   replay->add_option("--csv", replay_csv,
                      "Write a row per integrated scan: scan, server and end-to-end latency (ms), "
@@ -390,8 +394,7 @@ int main(int argc, char** argv) {
       if (!options) return cli::fail("--upsample: " + options.error().message);
       densify = std::move(*options);
     }
-    return cli::replay(o, data, rate, first, limit, query_points, densify, replay_csv,
-                       bbox_edge);
+    return cli::replay(o, data, rate, first, limit, query_points, densify, replay_csv, bbox_edge);
   }
   auto client = cli::connect(o);
   if (!client) return cli::fail(client.error().message);

@@ -82,9 +82,9 @@ int main(int argc, char** argv) {
   // TBB's default pool has hardware threads - 1 workers, shared by every arena: on 2 cores a
   // single worker, so a query task could wait for a whole scan's integration. Room for both
   // arenas: the integration arena's workers plus the query arena's.
-  tbb::global_control parallelism(tbb::global_control::max_allowed_parallelism,
-                                  static_cast<std::size_t>(options->threads +
-                                                           service_options.query_threads));
+  tbb::global_control parallelism(
+      tbb::global_control::max_allowed_parallelism,
+      static_cast<std::size_t>(options->threads + service_options.query_threads));
   auto pipeline = densemap::Pipeline::create(*options, std::move(initial), version);
   if (!pipeline) return fail(pipeline.error().message);
   auto service = densemap::server::MapService::create(**pipeline, service_options);

@@ -245,9 +245,8 @@ void MapService::onIntegrated(IntegrationResult& r, const std::shared_ptr<const 
 void MapService::publishDeltas(std::deque<Version>& versions) {
   if (versions.empty()) return;
   dds_publication_matched_status_t matched{};
-  const bool wanted =
-      dds_get_publication_matched_status(dds_->delta_writer.get(), &matched) >= 0 &&
-      matched.current_count > 0;
+  const bool wanted = dds_get_publication_matched_status(dds_->delta_writer.get(), &matched) >= 0 &&
+                      matched.current_count > 0;
   if (!wanted || !delta_base_) {  // nobody listens: no delta is built
     delta_base_ = versions.back().view;
     versions.clear();
@@ -312,25 +311,25 @@ void answerPoints(const dds::Entity& writer, const PointRequest& req, const MapV
     // a block, so the last block found is tried first.
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
                       [&](const tbb::blocked_range<std::size_t>& range) {
-      std::uint64_t cached_key = ~std::uint64_t{0};
-      const VoxelBlock* cached = nullptr;
-      for (std::size_t i = range.begin(); i != range.end(); ++i) {
-        const Point3f p(req.xyz[3 * i], req.xyz[3 * i + 1], req.xyz[3 * i + 2]);
-        const auto key = p.allFinite() ? view.grid().pointToKey(p) : std::nullopt;
-        std::optional<float> v;
-        if (key) {
-          const std::uint64_t bk = block::blockOf(*key);
-          if (bk != cached_key) {
-            cached_key = bk;
-            cached = view.block(bk);
-          }
-          const int c = block::indexOf(*key);
-          if (cached != nullptr && cached->isKnown(c)) v = cached->log_odds[c];
-        }
-        if (v) values[i] = *v;
-        states[i] = static_cast<std::uint8_t>(cellState(v));
-      }
-    });
+                        std::uint64_t cached_key = ~std::uint64_t{0};
+                        const VoxelBlock* cached = nullptr;
+                        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                          const Point3f p(req.xyz[3 * i], req.xyz[3 * i + 1], req.xyz[3 * i + 2]);
+                          const auto key = p.allFinite() ? view.grid().pointToKey(p) : std::nullopt;
+                          std::optional<float> v;
+                          if (key) {
+                            const std::uint64_t bk = block::blockOf(*key);
+                            if (bk != cached_key) {
+                              cached_key = bk;
+                              cached = view.block(bk);
+                            }
+                            const int c = block::indexOf(*key);
+                            if (cached != nullptr && cached->isKnown(c)) v = cached->log_odds[c];
+                          }
+                          if (v) values[i] = *v;
+                          states[i] = static_cast<std::uint8_t>(cellState(v));
+                        }
+                      });
   }
   rep.status = error.empty() ? kOk : kInvalid;
   rep.error = const_cast<char*>(error.c_str());
@@ -351,7 +350,8 @@ void answerBox(const dds::Entity& writer, const BboxRequest& req, const MapView&
     rep.occupied = result->occupied;
     rep.free_cells = result->free;
     rep.unknown = result->unknown;
-    for (const auto& c : result->occupied_centers) centers.insert(centers.end(), {c.x(), c.y(), c.z()});
+    for (const auto& c : result->occupied_centers)
+      centers.insert(centers.end(), {c.x(), c.y(), c.z()});
   } else {
     error = result.error().message;
   }
@@ -407,8 +407,8 @@ void MapService::takeQueries() {
       took = true;
       if (info.valid_data) {
         const auto& m = *static_cast<const densemap_msgs_PointQueryRequest*>(sample);
-        PointRequest req{m.id, std::vector<float>(m.points._buffer,
-                                                  m.points._buffer + m.points._length)};
+        PointRequest req{m.id,
+                         std::vector<float>(m.points._buffer, m.points._buffer + m.points._length)};
         spawn([this, req = std::move(req)](const MapView& view, std::string& error) {
           answerPoints(dds_->point_writer, req, view, error);
         });
@@ -556,27 +556,10 @@ void MapService::publishManifest() {
 Expected<std::string> MapService::sendMap(const densemap_msgs_RequestId& request) {
   // One version throughout: the tiles are a consistent copy of it.
   const auto view = pipeline_.view();
-  std::unordered_map<std::uint64_t, std::vector<std::uint64_t>> tiles;
-  view->forEachBlock([&](std::uint64_t block_key, const VoxelBlock&) {
-    tiles[tileOfBlock(block_key)].push_back(block_key);
-  });
+  const auto tiles = tilesOf(*view);
   std::size_t cells = 0;
-  VersionDelta t;
-  for (auto& [id, blocks] : tiles) {
-    t = VersionDelta{};
-    std::sort(blocks.begin(), blocks.end());
-    for (const std::uint64_t bk : blocks) {
-      const VoxelBlock* b = view->block(bk);
-      for (int w = 0; w < block::kMaskWords; ++w) {
-        for (std::uint64_t bits = b->known[w]; bits != 0; bits &= bits - 1) {
-          const int i = w * 64 + std::countr_zero(bits);
-          t.cells.push_back(static_cast<std::uint16_t>(i));
-          t.log_odds.push_back(b->log_odds[i]);
-        }
-      }
-      t.block_keys.push_back(bk);
-      t.block_ends.push_back(static_cast<std::uint32_t>(t.cells.size()));
-    }
+  for (const auto& [id, blocks] : tiles) {
+    VersionDelta t = cellsOf(*view, blocks);
     cells += t.cells.size();
     densemap_msgs_MapTile tile{};
     tile.request = request;

@@ -12,8 +12,8 @@
 #include <thread>
 
 #include "densemap/dds/dds.hpp"
-#include "densemap_msgs.h"
 #include "densemap/pipeline/pipeline.hpp"
+#include "densemap_msgs.h"
 
 namespace densemap::server {
 

@@ -13,10 +13,11 @@ int main(int argc, char** argv) {
   std::string out;
   int threads = 0;
   app.add_option("--out", out, "Output dataset directory")->required();
-  app.add_option("--scene", o.scene,
-                 "indoor, outdoor, street:LENGTH_M (the outdoor street made LENGTH_M long, for long "
-                 "drives), structured, unstructured (the AKIMap benchmark's 10 x 7 x 2 m "
-                 "scenes, 4 stations), or an OctoMap .bt file (e.g. geb079.bt)")
+  app.add_option(
+         "--scene", o.scene,
+         "indoor, outdoor, street:LENGTH_M (the outdoor street made LENGTH_M long, for long "
+         "drives), structured, unstructured (the AKIMap benchmark's 10 x 7 x 2 m "
+         "scenes, 4 stations), or an OctoMap .bt file (e.g. geb079.bt)")
       ->capture_default_str();
   app.add_option("--sensor", o.sensor, "vlp16, hdl64, os128 or os0-64")->capture_default_str();
   app.add_option("--columns", o.columns, "Azimuth steps per revolution (0: the sensor's)")

@@ -121,8 +121,8 @@ std::size_t GridMap::clearBox(const VoxelKey& min, const VoxelKey& max, CellChan
     }
   };
   // Walk the box's blocks when there are fewer of them than blocks in the map.
-  const double box_blocks = (bmax.x - bmin.x + 1.0) * (bmax.y - bmin.y + 1.0) *
-                            (bmax.z - bmin.z + 1.0);
+  const double box_blocks =
+      (bmax.x - bmin.x + 1.0) * (bmax.y - bmin.y + 1.0) * (bmax.z - bmin.z + 1.0);
   if (box_blocks < static_cast<double>(store_->entryCount())) {
     for (unsigned z = bmin.z; z <= bmax.z; ++z) {
       for (unsigned y = bmin.y; y <= bmax.y; ++y) {

@@ -15,9 +15,9 @@ Expected<BoxQueryResult> queryBox(const MapView& view, const Point3f& min, const
   const auto lo = view.grid().pointToKey(min);
   const auto hi = view.grid().pointToKey(max);
   if (!lo || !hi) return makeError("box outside the map's addressable range");
-  const double cells =
-      (static_cast<double>(hi->x) - lo->x + 1) * (static_cast<double>(hi->y) - lo->y + 1) *
-      (static_cast<double>(hi->z) - lo->z + 1);
+  const double cells = (static_cast<double>(hi->x) - lo->x + 1) *
+                       (static_cast<double>(hi->y) - lo->y + 1) *
+                       (static_cast<double>(hi->z) - lo->z + 1);
   if (cells > static_cast<double>(max_cells)) {
     return makeError("box of " + std::to_string(static_cast<long long>(cells)) +
                      " cells exceeds the limit of " + std::to_string(max_cells));
@@ -37,8 +37,7 @@ Expected<BoxQueryResult> queryBox(const MapView& view, const Point3f& min, const
                        y1 = std::min<unsigned>(hi->y, corner.y + block::kEdge - 1);
         const unsigned z0 = std::max<unsigned>(lo->z, corner.z),
                        z1 = std::min<unsigned>(hi->z, corner.z + block::kEdge - 1);
-        const std::size_t cells_here =
-            std::size_t{x1 - x0 + 1} * (y1 - y0 + 1) * (z1 - z0 + 1);
+        const std::size_t cells_here = std::size_t{x1 - x0 + 1} * (y1 - y0 + 1) * (z1 - z0 + 1);
         const VoxelBlock* b = view.block(block::blockOf(corner));
         if (b == nullptr) {
           r.unknown += cells_here;

@@ -28,8 +28,8 @@ CellChanges VersionDelta::changes() const {
   for (std::size_t b = 0; b < block_keys.size(); ++b) {
     for (std::size_t i = begin; i < block_ends[b]; ++i) {
       const float v = log_odds[i];
-      out.push_back({block::keyOf(block_keys[b], cells[i]), std::isnan(v) ? 0.0F : v,
-                     !std::isnan(v)});
+      out.push_back(
+          {block::keyOf(block_keys[b], cells[i]), std::isnan(v) ? 0.0F : v, !std::isnan(v)});
     }
     begin = block_ends[b];
   }
@@ -75,32 +75,34 @@ std::uint64_t tileOf(const VoxelKey& k) {
 
 std::uint64_t tileOfBlock(std::uint64_t block_key) { return tileOf(block::keyOf(block_key, 0)); }
 
-void readTile(const MapView& view, std::uint64_t tile_id, std::vector<std::uint16_t>& keys,
-              std::vector<float>& log_odds) {
-  keys.clear();
-  log_odds.clear();
-  const unsigned tx = tile_id & 0x7ff, ty = (tile_id >> 11) & 0x7ff, tz = (tile_id >> 22) & 0x7ff;
-  constexpr unsigned kBlocks = 1U << kTileBlockShift;
-  for (unsigned z = 0; z < kBlocks; ++z) {
-    for (unsigned y = 0; y < kBlocks; ++y) {
-      for (unsigned x = 0; x < kBlocks; ++x) {
-        const VoxelKey corner{static_cast<std::uint16_t>((tx << 5) | (x << block::kShift)),
-                              static_cast<std::uint16_t>((ty << 5) | (y << block::kShift)),
-                              static_cast<std::uint16_t>((tz << 5) | (z << block::kShift))};
-        const std::uint64_t bk = block::blockOf(corner);
-        const VoxelBlock* b = view.block(bk);
-        if (b == nullptr) continue;
-        for (int w = 0; w < block::kMaskWords; ++w) {
-          for (std::uint64_t bits = b->known[w]; bits != 0; bits &= bits - 1) {
-            const int i = w * 64 + std::countr_zero(bits);
-            const VoxelKey k = block::keyOf(bk, i);
-            keys.insert(keys.end(), {k.x, k.y, k.z});
-            log_odds.push_back(b->log_odds[i]);
-          }
-        }
+std::unordered_map<std::uint64_t, std::vector<std::uint64_t>> tilesOf(const MapView& view) {
+  std::unordered_map<std::uint64_t, std::vector<std::uint64_t>> tiles;
+  view.forEachBlock([&](std::uint64_t block_key, const VoxelBlock&) {
+    tiles[tileOfBlock(block_key)].push_back(block_key);
+  });
+  for (auto& [tile, blocks] : tiles) std::sort(blocks.begin(), blocks.end());
+  return tiles;
+}
+
+VersionDelta cellsOf(const MapView& view, std::span<const std::uint64_t> blocks) {
+  VersionDelta d;
+  for (const std::uint64_t key : blocks) {
+    const VoxelBlock* b = view.block(key);
+    if (b == nullptr) continue;
+    const std::size_t before = d.cells.size();
+    for (int w = 0; w < block::kMaskWords; ++w) {
+      for (std::uint64_t bits = b->known[w]; bits != 0; bits &= bits - 1) {
+        const int i = w * 64 + std::countr_zero(bits);
+        d.cells.push_back(static_cast<std::uint16_t>(i));
+        d.log_odds.push_back(b->log_odds[i]);
       }
     }
+    if (d.cells.size() != before) {
+      d.block_keys.push_back(key);
+      d.block_ends.push_back(static_cast<std::uint32_t>(d.cells.size()));
+    }
   }
+  return d;
 }
 
 }  // namespace densemap

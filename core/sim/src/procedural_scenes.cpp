@@ -165,18 +165,17 @@ SimScene makeUnstructuredScene(unsigned seed) {
       const int parts = 2 + static_cast<int>(u(rng) * 3);
       for (int i = 0; i < parts; ++i) {
         const double r = 0.15 + u(rng) * 0.4;
-        scene->add(SphereShape{V3(x + (u(rng) - 0.5) * 0.6, y + (u(rng) - 0.5) * 0.6,
-                                  r * (0.3 + u(rng) * 0.8)),
-                               r});
+        scene->add(SphereShape{
+            V3(x + (u(rng) - 0.5) * 0.6, y + (u(rng) - 0.5) * 0.6, r * (0.3 + u(rng) * 0.8)), r});
       }
     } else if (kind < 0.6) {  // a trunk with an uneven crown
       if (!clear_of_stations(x, y, 0.9)) continue;
       const double trunk = 0.8 + u(rng) * 0.7;
       scene->add(CylinderShape{Eigen::Vector2d(x, y), 0.06 + u(rng) * 0.1, 0, trunk});
       for (int i = 0; i < 3; ++i) {
-        scene->add(SphereShape{V3(x + (u(rng) - 0.5) * 0.5, y + (u(rng) - 0.5) * 0.5,
-                                  trunk + u(rng) * 0.3),
-                               0.25 + u(rng) * 0.3});
+        scene->add(SphereShape{
+            V3(x + (u(rng) - 0.5) * 0.5, y + (u(rng) - 0.5) * 0.5, trunk + u(rng) * 0.3),
+            0.25 + u(rng) * 0.3});
       }
     } else if (kind < 0.85) {  // debris: a small pile of boxes of random sizes
       if (!clear_of_stations(x, y, 0.7)) continue;
@@ -189,8 +188,7 @@ SimScene makeUnstructuredScene(unsigned seed) {
       }
     } else {  // a thin post
       if (!clear_of_stations(x, y, 0.3)) continue;
-      scene->add(CylinderShape{Eigen::Vector2d(x, y), 0.03 + u(rng) * 0.05, 0,
-                               0.5 + u(rng) * 1.5});
+      scene->add(CylinderShape{Eigen::Vector2d(x, y), 0.03 + u(rng) * 0.05, 0, 0.5 + u(rng) * 1.5});
     }
     ++placed;
   }

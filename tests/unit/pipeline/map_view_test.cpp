@@ -20,13 +20,13 @@ namespace {
 
 using Cells = std::map<std::uint64_t, float>;  // packed key -> log-odds
 
-Cells cellsOf(const MapView& view) {
+Cells snapshotOf(const MapView& view) {
   Cells cells;
   view.forEachKnown([&](const VoxelKey& k, float v) { cells[k.packed()] = v; });
   return cells;
 }
 
-Cells cellsOf(const GridMap& map) {
+Cells snapshotOf(const GridMap& map) {
   Cells cells;
   map.forEachKnown([&](const VoxelKey& k, float v) { cells[k.packed()] = v; });
   return cells;
@@ -48,8 +48,8 @@ void randomVersion(GridMap& map, std::mt19937& rng, int writes) {
 }
 
 /// Order-independent checksum of a set of cells.
-std::uint64_t checksum(const std::function<void(const std::function<void(const VoxelKey&, float)>&)>&
-                           for_each) {
+std::uint64_t checksum(
+    const std::function<void(const std::function<void(const VoxelKey&, float)>&)>& for_each) {
   std::uint64_t sum = 0;
   for_each([&](const VoxelKey& k, float v) {
     std::uint32_t bits = 0;
@@ -67,13 +67,13 @@ TEST(MapView, EveryHeldVersionKeepsExactlyTheCellsItWasPublishedWith) {
     randomVersion(sut, rng, 400);
     auto view = MapView::publish(sut);
     EXPECT_EQ(view->version(), static_cast<std::uint64_t>(v));
-    EXPECT_EQ(view->knownCells(), cellsOf(sut).size());
-    if (v % 7 == 0) held.emplace_back(view, cellsOf(sut));
+    EXPECT_EQ(view->knownCells(), snapshotOf(sut).size());
+    if (v % 7 == 0) held.emplace_back(view, snapshotOf(sut));
   }
   sut.clear();  // a versioned map erases by copy on write: held versions are untouched
   EXPECT_EQ(sut.knownCells(), 0U);
   for (const auto& [view, cells] : held) {
-    EXPECT_EQ(cellsOf(*view), cells) << "version " << view->version();
+    EXPECT_EQ(snapshotOf(*view), cells) << "version " << view->version();
     for (const auto& [packed, value] : cells) {
       ASSERT_EQ(view->logOdds(VoxelKey::fromPacked(packed)), value);
     }
@@ -94,14 +94,14 @@ TEST(MapView, SupersededBlocksAreFreedWhenTheLastReaderOfTheirVersionLetsGo) {
   }
   // A reader of an old version keeps the blocks written since, and only those.
   auto old = MapView::publish(sut);
-  const Cells old_cells = cellsOf(*old);
+  const Cells old_cells = snapshotOf(*old);
   for (int v = 0; v < 10; ++v) {
     randomVersion(sut, rng, 500);
     (void)MapView::publish(sut);
   }
   EXPECT_GT(sut.store()->liveNodes(), sut.store()->entryCount());
   EXPECT_LE(sut.store()->liveNodes(), sut.store()->entryCount() * 11);
-  EXPECT_EQ(cellsOf(*old), old_cells);
+  EXPECT_EQ(snapshotOf(*old), old_cells);
   old.reset();
   EXPECT_EQ(sut.store()->liveNodes(), sut.store()->entryCount());
   EXPECT_GE(sut.store()->entryCount(), blocks);
@@ -165,35 +165,57 @@ TEST(MapView, DiffOfTwoVersionsOverTheirWrittenBlocksTurnsOneIntoTheOther) {
   for (int v = 0; v < 4; ++v) {
     randomVersion(map, rng, 300);
     auto published = map.publishVersion();
-    written.insert(written.end(), published.written_blocks.begin(),
-                   published.written_blocks.end());
+    written.insert(written.end(), published.written_blocks.begin(), published.written_blocks.end());
   }
   auto next = MapView::publish(map);
   GridMap rebuilt(0.1, SensorModel{});
   base->forEachKnown([&](const VoxelKey& k, float v) { rebuilt.setLogOdds(k, v); });
   rebuilt.applyChanges(diffVersions(*base, *next, written).changes());
-  EXPECT_EQ(cellsOf(rebuilt), cellsOf(*next));
-  EXPECT_NE(cellsOf(*base), cellsOf(*next));
+  EXPECT_EQ(snapshotOf(rebuilt), snapshotOf(*next));
+  EXPECT_NE(snapshotOf(*base), snapshotOf(*next));
 }
 
-TEST(MapView, ATileReadsTheSameCellsAsAWholeMapWalk) {
+TEST(MapView, TilesHoldEveryCellOnceAndTheirCellsAreTheMap) {
   GridMap map(0.1, SensorModel{});
   std::mt19937 rng(17);
   randomVersion(map, rng, 5000);
   auto view = MapView::publish(map);
-  std::map<std::uint64_t, Cells> by_tile;
-  view->forEachKnown([&](const VoxelKey& k, float v) { by_tile[tileOf(k)][k.packed()] = v; });
-  ASSERT_GT(by_tile.size(), 1U);
-  std::vector<std::uint16_t> keys;
-  std::vector<float> values;
-  for (const auto& [tile, cells] : by_tile) {
-    readTile(*view, tile, keys, values);
-    Cells read;
-    for (std::size_t i = 0; i < values.size(); ++i) {
-      read[VoxelKey{keys[3 * i], keys[3 * i + 1], keys[3 * i + 2]}.packed()] = values[i];
-    }
-    EXPECT_EQ(read, cells);
+  randomVersion(map, rng, 500);  // later versions do not leak into the tiles of `view`
+  (void)MapView::publish(map);
+  const auto tiles = tilesOf(*view);
+  ASSERT_GT(tiles.size(), 1U);
+  GridMap rebuilt(0.1, SensorModel{});
+  std::size_t cells = 0;
+  for (const auto& [tile, blocks] : tiles) {
+    const VersionDelta t = cellsOf(*view, blocks);
+    ASSERT_TRUE(t.wellFormed());
+    for (const CellChange& c : t.changes()) EXPECT_EQ(tileOf(c.key), tile);
+    rebuilt.applyChanges(t.changes());
+    cells += t.size();
   }
+  EXPECT_EQ(cells, view->knownCells());
+  EXPECT_EQ(snapshotOf(rebuilt), snapshotOf(*view));
+}
+
+TEST(VersionDelta, MalformedLayoutsAreRecognised) {
+  VersionDelta ok;
+  ok.block_keys = {5};
+  ok.block_ends = {2};
+  ok.cells = {0, 511};
+  ok.log_odds = {1.0F, -1.0F};
+  EXPECT_TRUE(ok.wellFormed());
+  auto bad = ok;
+  bad.cells[1] = 512;  // past a block
+  EXPECT_FALSE(bad.wellFormed());
+  bad = ok;
+  bad.block_ends = {3};  // past the cells
+  EXPECT_FALSE(bad.wellFormed());
+  bad = ok;
+  bad.log_odds.pop_back();
+  EXPECT_FALSE(bad.wellFormed());
+  bad = ok;
+  bad.block_keys.push_back(6);  // a block without an end
+  EXPECT_FALSE(bad.wellFormed());
 }
 
 }  // namespace

@@ -86,8 +86,17 @@ TEST(Pipeline, PublishedViewEqualsTheOfflineMapAndDeltasReproduceEachVersion) {
     EXPECT_EQ(rebuilt.knownCells(), next->knownCells());
     previous = next;
   }
-  // Old views are immutable: the first version still has only the first scan's cells.
+  // Old views are immutable: each held version still equals the offline map after its scans
+  // (the views read the one, since-changed map's store at their version).
   EXPECT_LT(published.front().second->knownCells(), view->knownCells());
+  for (std::size_t k = 0; k < published.size(); ++k) {
+    const auto expected = offlineMap({raws.begin(), raws.begin() + k + 1}, 5.0);
+    const auto& held = *published[k].second;
+    EXPECT_EQ(held.knownCells(), expected->knownCells()) << "version " << k + 1;
+    std::size_t wrong = 0;
+    expected->forEachKnown([&](const VoxelKey& key, float v) { wrong += held.logOdds(key) != v; });
+    EXPECT_EQ(wrong, 0U) << "version " << k + 1;
+  }
 }
 
 TEST(Pipeline, FallingBehindDropsOldScansNeverQueuesThem) {
@@ -179,11 +188,11 @@ TEST(Pipeline, CommandsRunBetweenScansAndPublishTheirChanges) {
 }
 
 TEST(Pipeline, KernelMapKindsPublishLogitOfTheOfflineKernelMapAndClearBothStores) {
-  for (const auto method : {kernel::KernelMethod::kAkimap, kernel::KernelMethod::kBgk,
-                            kernel::KernelMethod::kBgkl}) {
+  for (const auto method :
+       {kernel::KernelMethod::kAkimap, kernel::KernelMethod::kBgk, kernel::KernelMethod::kBgkl}) {
     const std::string name(kernel::kernelMethodName(method));
-    auto sut = Pipeline::create(
-        {.resolution_m = 0.2, .max_range_m = 5.0, .kernel = method, .threads = 2});
+    auto sut =
+        Pipeline::create({.resolution_m = 0.2, .max_range_m = 5.0, .kernel = method, .threads = 2});
     ASSERT_TRUE(sut) << name;
     (*sut)->start();
     std::vector<RawScan> raws = {rawScan(1, 1500), rawScan(2, 1500)};
@@ -242,8 +251,8 @@ TEST(Pipeline, UpsampleStageIntegratesTheDensifiedScan) {
     const auto up = upsample::makeUpsampleOptions(method, {.rows = 16, .cols = 256},
                                                   {.rows = 61, .cols = 512}, DENSEMAP_ILN_MODEL);
     ASSERT_TRUE(up) << up.error().message;
-    auto sut = Pipeline::create(
-        {.resolution_m = 0.2, .max_range_m = 20.0, .upsample = *up, .threads = 2});
+    auto sut =
+        Pipeline::create({.resolution_m = 0.2, .max_range_m = 20.0, .upsample = *up, .threads = 2});
     ASSERT_TRUE(sut);
     // A 16-beam scan: a sphere of 4 m around the sensor in one sector, 6 m elsewhere.
     RawScan raw;
@@ -262,14 +271,12 @@ TEST(Pipeline, UpsampleStageIntegratesTheDensifiedScan) {
     GridMap expected(0.2, SensorModel{}), sparse(0.2, SensorModel{});
     Integrator integrator({.max_range_m = 20.0});
     const Scan scan = *validateScan(raw, ScanLimits{});
-    integrator.integrate(expected, upsample::upsamplePoints(scan.points, *up),
-                         scan.originWorld());
+    integrator.integrate(expected, upsample::upsamplePoints(scan.points, *up), scan.originWorld());
     integrator.integrate(sparse, scan.points, scan.originWorld());
     const auto view = (*sut)->view();
     EXPECT_EQ(view->knownCells(), expected.knownCells());
     std::size_t mismatches = 0;
-    expected.forEachKnown(
-        [&](const VoxelKey& k, float v) { mismatches += view->logOdds(k) != v; });
+    expected.forEachKnown([&](const VoxelKey& k, float v) { mismatches += view->logOdds(k) != v; });
     EXPECT_EQ(mismatches, 0U);
     EXPECT_GT(expected.knownCells(), sparse.knownCells()) << "densified scans fill more cells";
   }

@@ -14,8 +14,8 @@ namespace densemap {
 /// The contents of one block as one map version wrote them. Nodes of the same block form a
 /// chain from newest to oldest, so a reader of an older version finds the contents it saw.
 struct BlockNode {
-  std::uint64_t version = 0;                 // the map version that wrote these contents
-  std::atomic<BlockNode*> older{nullptr};    // the contents before; null once nobody reads them
+  std::uint64_t version = 0;               // the map version that wrote these contents
+  std::atomic<BlockNode*> older{nullptr};  // the contents before; null once nobody reads them
   VoxelBlock voxels;
   block::BlockMask fully_free{};  // known cells at the lower clamping bound
 };
@@ -122,7 +122,7 @@ class BlockStore {
   friend struct Pin;
   [[nodiscard]] static std::size_t slotOf(const Table& t, std::uint64_t key);
   void grow();
-  BlockNode* allocate();                                   // pool_mutex_ held
+  BlockNode* allocate();  // pool_mutex_ held
   void release(const std::vector<std::pair<BlockNode*, BlockNode*>>& superseded);
 
   std::uint64_t writing_ = 0;

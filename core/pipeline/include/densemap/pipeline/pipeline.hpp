@@ -10,13 +10,13 @@
 #include <mutex>
 #include <thread>
 
+#include "densemap/kernel/kernel_map.hpp"
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_factory.hpp"
 #include "densemap/pipeline/latest_wins_queue.hpp"
 #include "densemap/pipeline/map_view.hpp"
 #include "densemap/pipeline/raw_scan.hpp"
 #include "densemap/pipeline/scan_validator.hpp"
-#include "densemap/kernel/kernel_map.hpp"
 #include "densemap/raycast/integrator.hpp"
 #include "densemap/upsample/interpolation.hpp"
 

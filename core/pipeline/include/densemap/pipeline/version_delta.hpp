@@ -2,6 +2,7 @@
 
 #include <cstdint>
 #include <span>
+#include <unordered_map>
 #include <vector>
 
 #include "densemap/map/occupancy_map.hpp"
@@ -35,9 +36,12 @@ struct VersionDelta {
 inline constexpr int kTileBlockShift = 2;
 [[nodiscard]] std::uint64_t tileOf(const VoxelKey& k);
 [[nodiscard]] std::uint64_t tileOfBlock(std::uint64_t block_key);
-/// The known cells of a tile at the view's version: x y z per cell and its log-odds. Reads the
-/// tile's 64 blocks, never the rest of the map.
-void readTile(const MapView& view, std::uint64_t tile_id, std::vector<std::uint16_t>& keys,
-              std::vector<float>& log_odds);
+/// The blocks with contents at the view's version, by tile (one walk of the map; each list
+/// sorted).
+[[nodiscard]] std::unordered_map<std::uint64_t, std::vector<std::uint64_t>> tilesOf(
+    const MapView& view);
+/// Every known cell of `blocks` at the view's version, in the VersionDelta layout (the
+/// map/tiles payload).
+[[nodiscard]] VersionDelta cellsOf(const MapView& view, std::span<const std::uint64_t> blocks);
 
 }  // namespace densemap

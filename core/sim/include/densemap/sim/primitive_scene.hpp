@@ -46,8 +46,7 @@ class PrimitiveScene final : public Scene {
   struct Slab {
     std::vector<std::uint32_t> boxes, cylinders, spheres;
   };
-  void index(double x_min, double x_max, std::vector<std::uint32_t> Slab::*list,
-             std::uint32_t id);
+  void index(double x_min, double x_max, std::vector<std::uint32_t> Slab::*list, std::uint32_t id);
   [[nodiscard]] int slabOf(double x) const;
 
   Eigen::AlignedBox3d bounds_;
