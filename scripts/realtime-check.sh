@@ -8,7 +8,8 @@
 # Environment: DENSEMAP_BIN (default build/bin), DENSEMAP_DOMAIN (default 77), BENCH=0 skips the
 # bench, BBOX_EDGE=M adds a client sending M-metre bbox queries back to back, SNAPSHOT=1 times a
 # late joiner's fetch of the whole map, PERF=1 records `perf record -g` of the server into
-# $OUT/perf.data, WARM_UP=true turns the pipeline's warm-up on.
+# $OUT/perf.data, WARM_UP=true turns the pipeline's warm-up on, LEGACY=1 drives a densemap
+# built before replay's --csv and --query-bbox-edge (before/after runs).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DATA=$1 RES=$2 RANGE=$3 RATE=${4:-10} FIRST=${5:-0} LIMIT=${6:-0} QUERY=${7:-0}
@@ -18,7 +19,7 @@ OUT=$(mktemp -d /tmp/densemap-rt.XXXXXX)
 cat > "$OUT/server.textproto" <<CFG
 map { backend: "grid" resolution_m: $RES max_range_m: $RANGE }
 pipeline { threads: 2 queue_depth: 2 integration: "superray+culling" max_abs_position_m: 10000
-           warm_up: ${WARM_UP:-false} }
+           ${WARM_UP:+warm_up: $WARM_UP} }
 snapshot { path: "" autosave_period_s: 0 }
 dds { domain_id: $DOMAIN network_interface: "lo" }
 CFG
@@ -33,9 +34,11 @@ fi
 ( while kill -0 $SERVER 2>/dev/null; do
     awk '/VmRSS/ {print $2}' /proc/$SERVER/status 2>/dev/null || true; sleep 0.5
   done > "$OUT/rss.txt" ) &
+extra=(--query-bbox-edge "${BBOX_EDGE:-0}" --csv "$OUT/scans.csv")
+[ "${LEGACY:-0}" = 1 ] && extra=()  # a densemap from before these options (A/B runs)
 "$BIN/densemap" --domain-id "$DOMAIN" replay --data "$DATA" --rate "$RATE" --first "$FIRST" \
-  --limit "$LIMIT" --query-points "$QUERY" --query-bbox-edge "${BBOX_EDGE:-0}" \
-  --csv "$OUT/scans.csv" 2> "$OUT/replay.log" | tee "$OUT/replay.txt"
+  --limit "$LIMIT" --query-points "$QUERY" "${extra[@]}" 2> "$OUT/replay.log" \
+  | tee "$OUT/replay.txt"
 "$BIN/densemap" --domain-id "$DOMAIN" status | tee -a "$OUT/replay.txt"
 if [ "${SNAPSHOT:-0}" = 1 ]; then  # a late joiner fetches the whole map
   start=$(date +%s.%N)
