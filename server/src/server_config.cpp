@@ -74,6 +74,9 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
   }
   const auto& p = config.pipeline();
   if (p.threads() < 1 || p.threads() > 256) return makeError("pipeline.threads must be in 1..256");
+  if (p.reserve_blocks() > 10'000'000) {
+    return makeError("pipeline.reserve_blocks must be at most 10000000");
+  }
   if (p.query_threads() < 1 || p.query_threads() > 64) {
     return makeError("pipeline.query_threads must be in 1..64");
   }
@@ -90,6 +93,7 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
   o.threads = static_cast<int>(p.threads());
   o.queue_depth = p.queue_depth();
   o.warm_up = p.warm_up();
+  o.reserve_blocks = p.reserve_blocks();
   o.limits.max_points = p.max_points();
   o.limits.max_abs_position_m = std::min(p.max_abs_position_m(), 32767.0 * o.resolution_m);
   if (!(p.max_abs_position_m() > 0)) return makeError("pipeline.max_abs_position_m must be > 0");

@@ -105,12 +105,19 @@ const BlockNode* BlockStore::nodeAt(const BlockEntry& entry, std::uint64_t versi
   return n;
 }
 
+void BlockStore::addSlab() {
+  slabs_.emplace_back(new BlockNode[kSlabNodes]);
+  BlockNode* slab = slabs_.back().get();
+  for (std::size_t i = kSlabNodes; i-- > 0;) free_.push_back(slab + i);
+}
+
+void BlockStore::reserve(std::size_t nodes) {
+  std::lock_guard lock(pool_mutex_);
+  while (free_.size() < nodes) addSlab();
+}
+
 BlockNode* BlockStore::allocate() {
-  if (free_.empty()) {
-    slabs_.emplace_back(new BlockNode[kSlabNodes]);
-    BlockNode* slab = slabs_.back().get();
-    for (std::size_t i = kSlabNodes; i-- > 0;) free_.push_back(slab + i);
-  }
+  if (free_.empty()) addSlab();
   BlockNode* n = free_.back();
   free_.pop_back();
   live_nodes_.fetch_add(1, std::memory_order_relaxed);

@@ -127,6 +127,7 @@ Pipeline::Pipeline(const PipelineOptions& options, std::unique_ptr<OccupancyMap>
     readable_ = mirror_.get();
   }
   readable_->startVersionsAt(version);
+  readable_->reserveBlocks(options.reserve_blocks);
   view_.store(MapView::publish(*readable_));
   // The graph belongs to the pipeline's arena: build it there.
   arena_.execute([this] { graph_ = std::make_unique<Graph>(*this); });

@@ -107,6 +107,22 @@ TEST(MapView, SupersededBlocksAreFreedWhenTheLastReaderOfTheirVersionLetsGo) {
   EXPECT_GE(sut.store()->entryCount(), blocks);
 }
 
+TEST(MapView, ReservedBlocksServeTheFirstVersionsWithoutGrowingThePool) {
+  GridMap sut(0.1, SensorModel{});
+  sut.reserveBlocks(4096);
+  const std::size_t reserved = sut.memoryBytes();
+  EXPECT_GE(reserved, 4096 * sizeof(BlockNode));
+  EXPECT_EQ(sut.store()->liveNodes(), 0U);
+  std::mt19937 rng(19);
+  for (int v = 0; v < 10; ++v) {  // 512 blocks at most, copied on write while published
+    randomVersion(sut, rng, 300);
+    (void)MapView::publish(sut);
+  }
+  EXPECT_GT(sut.store()->liveNodes(), 0U);
+  EXPECT_EQ(sut.memoryBytes() - sut.store()->entryCount() * sizeof(BlockEntry),
+            reserved);  // the same slabs (only entries and table were added)
+}
+
 TEST(MapView, AnUnversionedMapWritesInPlace) {
   GridMap sut(0.1, SensorModel{});
   std::mt19937 rng(5);

@@ -75,6 +75,9 @@ class BlockStore {
     std::vector<std::uint64_t> written_blocks;
   };
   Published publish();
+  /// Grows the node pool to at least `nodes` free nodes (allocated and zeroed now, so the
+  /// pages are faulted in before they are needed).
+  void reserve(std::size_t nodes);
   /// Before the first publish: the version number the current contents belong to.
   void startAt(std::uint64_t version);
   /// Drops every block (only while unversioned, i.e. before the first publish).
@@ -123,6 +126,7 @@ class BlockStore {
   [[nodiscard]] static std::size_t slotOf(const Table& t, std::uint64_t key);
   void grow();
   BlockNode* allocate();  // pool_mutex_ held
+  void addSlab();         // pool_mutex_ held
   void release(const std::vector<std::pair<BlockNode*, BlockNode*>>& superseded);
 
   std::uint64_t writing_ = 0;

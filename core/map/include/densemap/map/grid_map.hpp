@@ -41,6 +41,8 @@ class GridMap final : public OccupancyMap {
 
   /// Versioning (MapView): before the first publish, the version the contents belong to.
   void startVersionsAt(std::uint64_t version) { store_->startAt(version); }
+  /// Pre-faults room for `blocks` more blocks in the node pool (see BlockStore::reserve).
+  void reserveBlocks(std::size_t blocks) { store_->reserve(blocks); }
   /// Ends the version being written; readers of it hold the returned pin.
   BlockStore::Published publishVersion() { return store_->publish(); }
   [[nodiscard]] std::shared_ptr<const BlockStore> store() const { return store_; }
