@@ -287,6 +287,15 @@ Expected<ServerStatus> Client::status() {
       out.queries_answered = s.queries_answered;
       out.queries_rejected = s.queries_rejected;
       out.last_query_error = text(s.last_query_error);
+      for (std::uint32_t i = 0; i < s.sensors._length; ++i) {
+        const auto& sc = s.sensors._buffer[i];
+        out.sensors.push_back({.sensor_id = text(sc.sensor_id),
+                               .received = sc.received,
+                               .integrated = sc.integrated,
+                               .dropped = sc.dropped,
+                               .rejected = sc.rejected,
+                               .seq_gaps = sc.seq_gaps});
+      }
       latest = out;
     }
     if (n > 0) dds_return_loan(dds_->st_r.get(), samples, n);

@@ -223,6 +223,13 @@ void printStatus(const ServerStatus& s) {
       s.last_reject_reason.empty() ? "" : ", last: ", s.last_reject_reason.c_str(),
       s.latency_p50_ms, s.latency_p99_ms, static_cast<unsigned long long>(s.queries_answered),
       static_cast<unsigned long long>(s.queries_rejected), s.uptime_s);
+  for (const SensorCounters& c : s.sensors) {
+    std::printf(
+        "  sensor %s: received %llu, integrated %llu, dropped %llu, rejected %llu, seq gaps %llu\n",
+        c.sensor_id.c_str(), static_cast<unsigned long long>(c.received),
+        static_cast<unsigned long long>(c.integrated), static_cast<unsigned long long>(c.dropped),
+        static_cast<unsigned long long>(c.rejected), static_cast<unsigned long long>(c.seq_gaps));
+  }
 }
 
 Expected<std::unique_ptr<OccupancyMap>> loadMapFile(const std::string& file) {

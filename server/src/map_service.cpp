@@ -541,6 +541,13 @@ void MapService::publishStatus() {
     last_error = last_query_error_;
   }
   s.last_query_error = const_cast<char*>(last_error.c_str());
+  std::vector<densemap_msgs_SensorStatus> sensors;
+  sensors.reserve(c.sensors.size());
+  for (const SensorCounters& sc : c.sensors) {
+    sensors.push_back({const_cast<char*>(sc.sensor_id.c_str()), sc.received, sc.integrated,
+                       sc.dropped, sc.rejected, sc.seq_gaps});
+  }
+  s.sensors = dds::borrowSequence<dds_sequence_densemap_msgs_SensorStatus>(sensors);
   (void)dds::write(dds_->status_writer, &s);
 }
 

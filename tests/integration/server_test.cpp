@@ -288,6 +288,13 @@ TEST(Server, BadInputIsRejectedCountedAndLeavesTheMapUnchanged) {
   EXPECT_EQ(count(RejectReason::kPoseOutOfBounds), 1U);
   EXPECT_EQ(count(RejectReason::kEmpty), 1U);
   EXPECT_EQ(status->integrated, 1U);
+  // Per sensor: the good scan (seq 1) and the bad ones (seq 100..106) of sensor "test".
+  ASSERT_EQ(status->sensors.size(), 1U);
+  EXPECT_EQ(status->sensors[0].sensor_id, "test");
+  EXPECT_EQ(status->sensors[0].received, 1 + bad.size());
+  EXPECT_EQ(status->sensors[0].integrated, 1U);
+  EXPECT_EQ(status->sensors[0].rejected, bad.size());
+  EXPECT_EQ(status->sensors[0].seq_gaps, 98U);
   EXPECT_EQ(status->map_version, 1U);
   auto after = client->fetchMap();
   ASSERT_TRUE(after);

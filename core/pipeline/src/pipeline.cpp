@@ -70,6 +70,7 @@ struct Pipeline::Graph {
             std::lock_guard lock(p.counters_mutex_);
             ++p.counters_.rejected;
             ++p.counters_.rejected_by_reason[static_cast<std::size_t>(job->rejection->reason)];
+            p.sensors_.rejected(job->raw.sensor_id);
             p.counters_.last_reject_reason = job->rejection->message;
           } else {
             job->result.from_scan = true;
@@ -143,7 +144,11 @@ void Pipeline::start() {
 
 void Pipeline::stop() {
   if (!running_.exchange(false)) return;
-  queue_.close();
+  const auto discarded = queue_.close();
+  {
+    std::lock_guard lock(counters_mutex_);
+    for (const RawScan& scan : discarded) sensors_.dropped(scan.sensor_id);
+  }
   if (worker_.joinable()) worker_.join();
   runCommands();  // commands queued while stopping (e.g. the shutdown snapshot) still run
 }
@@ -152,8 +157,14 @@ void Pipeline::submit(RawScan scan) {
   {
     std::lock_guard lock(counters_mutex_);
     ++counters_.received;
+    sensors_.received(scan.sensor_id, scan.seq);
   }
-  queue_.push(std::move(scan));
+  std::optional<RawScan> dropped;
+  queue_.push(std::move(scan), &dropped);
+  if (dropped) {
+    std::lock_guard lock(counters_mutex_);
+    sensors_.dropped(dropped->sensor_id);
+  }
 }
 
 std::future<Expected<std::string>> Pipeline::command(Command command) {
@@ -218,6 +229,7 @@ void Pipeline::publish(IntegrationResult& result) {
   if (result.from_scan) {
     std::lock_guard lock(counters_mutex_);
     ++counters_.integrated;
+    sensors_.integrated(result.sensor_id);
     if (latencies_.size() < 1024) {
       latencies_.push_back(result.latency_ms);
     } else {
@@ -281,6 +293,7 @@ PipelineCounters Pipeline::counters() const {
   std::lock_guard lock(counters_mutex_);
   PipelineCounters c = counters_;
   c.dropped = queue_.dropped();
+  c.sensors = sensors_.sensors();
   if (!latencies_.empty()) {
     std::vector<double> v = latencies_;
     std::sort(v.begin(), v.end());

@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+
 #include <thread>
 
 #include "densemap/map/grid_map.hpp"
@@ -290,17 +292,91 @@ TEST(Pipeline, RejectsAnUpsampleStageWithMismatchedFieldsOfView) {
 
 TEST(LatestWinsQueue, DropsTheOldestWhenFullAndCountsIt) {
   LatestWinsQueue<int> sut(2);
-  sut.push(1);
-  sut.push(2);
-  sut.push(3);
+  std::optional<int> dropped;
+  sut.push(1, &dropped);
+  sut.push(2, &dropped);
+  EXPECT_FALSE(dropped.has_value());
+  sut.push(3, &dropped);
+  EXPECT_EQ(dropped, 1);  // handed back, so the caller knows whose item it was
   EXPECT_EQ(sut.dropped(), 1U);
   EXPECT_EQ(sut.pop(0ms), 2);
   EXPECT_EQ(sut.pop(0ms), 3);
   EXPECT_FALSE(sut.pop(1ms).has_value());
   sut.push(4);
-  sut.close();
+  const auto discarded = sut.close();
+  ASSERT_EQ(discarded.size(), 1U);
+  EXPECT_EQ(discarded.front(), 4);
   EXPECT_EQ(sut.dropped(), 2U);
   EXPECT_FALSE(sut.push(5));
+}
+
+TEST(SensorTally, CountsGapsWithinEachSensorsIncreasingSequence) {
+  SensorTally sut;
+  for (std::uint64_t seq : {1, 2, 5, 6, 10}) sut.received("a", seq);  // 2 + 3 skipped
+  for (std::uint64_t seq : {7, 8, 1, 2}) sut.received("b", seq);      // a restart, no gap
+  sut.integrated("a");
+  sut.dropped("b");
+  sut.rejected("b");
+  const auto sensors = sut.sensors();
+  ASSERT_EQ(sensors.size(), 2U);
+  EXPECT_EQ(sensors[0].sensor_id, "a");
+  EXPECT_EQ(sensors[0].received, 5U);
+  EXPECT_EQ(sensors[0].seq_gaps, 5U);
+  EXPECT_EQ(sensors[0].integrated, 1U);
+  EXPECT_EQ(sensors[1].seq_gaps, 0U);
+  EXPECT_EQ(sensors[1].dropped, 1U);
+  EXPECT_EQ(sensors[1].rejected, 1U);
+}
+
+TEST(SensorTally, KeepsAtMostSixtyFourIdsApartAndCountsTheRestTogether) {
+  SensorTally sut;
+  for (int i = 0; i < 100; ++i) sut.received("robot" + std::to_string(i), 1);
+  const auto sensors = sut.sensors();
+  EXPECT_LE(sensors.size(), SensorTally::kMaxSensors + 1);
+  std::uint64_t total = 0;
+  for (const auto& c : sensors) total += c.received;
+  EXPECT_EQ(total, 100U);
+  EXPECT_TRUE(std::any_of(sensors.begin(), sensors.end(), [](const SensorCounters& c) {
+    return c.sensor_id == SensorTally::kOtherSensors && c.received == 36;
+  }));
+}
+
+TEST(Pipeline, CountsEachSensorsScansAndTheirSeqGaps) {
+  // One worker thread on a fine map falls behind: scans are dropped. Every scan of each sensor
+  // ends integrated, dropped or rejected, and a skipped seq is a gap of that sensor only.
+  auto sut = Pipeline::create({.resolution_m = 0.05, .threads = 1, .queue_depth = 2});
+  ASSERT_TRUE(sut);
+  (*sut)->start();
+  std::uint64_t sent_a = 0, sent_b = 0;
+  for (std::uint64_t seq = 1; seq <= 30; ++seq) {
+    RawScan a = rawScan(seq, 5000);
+    a.sensor_id = "front";
+    (*sut)->submit(std::move(a));
+    ++sent_a;
+    if (seq % 3 != 0) {  // "rear" skips every third seq
+      RawScan b = rawScan(seq, 5000);
+      b.sensor_id = "rear";
+      if (seq == 20) b.xyz.push_back(1.0F);  // length not a multiple of 3: rejected
+      (*sut)->submit(std::move(b));
+      ++sent_b;
+    }
+  }
+  (*sut)->stop();
+  const auto c = (*sut)->counters();
+  ASSERT_EQ(c.sensors.size(), 2U);
+  const SensorCounters& front = c.sensors[0];
+  const SensorCounters& rear = c.sensors[1];
+  EXPECT_EQ(front.sensor_id, "front");
+  EXPECT_EQ(front.received, sent_a);
+  EXPECT_EQ(front.seq_gaps, 0U);
+  EXPECT_EQ(rear.received, sent_b);
+  EXPECT_EQ(rear.seq_gaps, 9U);  // seqs 3, 6, ..., 27 (30 is never followed)
+  for (const SensorCounters& s : c.sensors) {
+    EXPECT_EQ(s.integrated + s.dropped + s.rejected, s.received) << s.sensor_id;
+  }
+  EXPECT_GT(front.dropped + rear.dropped, 0U);  // it did fall behind
+  EXPECT_EQ(front.integrated + rear.integrated, c.integrated);
+  EXPECT_EQ(front.rejected + rear.rejected, c.rejected);
 }
 
 }  // namespace

@@ -12,6 +12,7 @@
 #include "densemap/map/grid_map.hpp"
 #include "densemap/pipeline/map_queries.hpp"
 #include "densemap/pipeline/raw_scan.hpp"
+#include "densemap/pipeline/sensor_tally.hpp"
 
 namespace densemap {
 
@@ -50,6 +51,7 @@ struct ServerStatus {
   double uptime_s = 0;
   std::uint64_t queries_answered = 0, queries_rejected = 0;
   std::string last_query_error;
+  std::vector<SensorCounters> sensors;  // per sensor id (last_seq is not sent)
 };
 
 struct DeltaInfo {

@@ -17,12 +17,14 @@ class LatestWinsQueue {
  public:
   explicit LatestWinsQueue(std::size_t capacity) : capacity_(capacity == 0 ? 1 : capacity) {}
 
-  /// Returns false if the queue was closed (the item is discarded).
-  bool push(T item) {
+  /// Returns false if the queue was closed (the item is discarded). When the queue was full,
+  /// the oldest item is dropped and, if `dropped` is given, moved there.
+  bool push(T item, std::optional<T>* dropped = nullptr) {
     {
       std::lock_guard lock(mutex_);
       if (closed_) return false;
       if (items_.size() == capacity_) {
+        if (dropped != nullptr) *dropped = std::move(items_.front());
         items_.pop_front();
         ++dropped_;
       }
@@ -43,15 +45,18 @@ class LatestWinsQueue {
     return item;
   }
 
-  /// Refuses further pushes; items already queued are discarded and counted as dropped.
-  void close() {
+  /// Refuses further pushes; items already queued are discarded, counted as dropped and
+  /// returned.
+  std::deque<T> close() {
+    std::deque<T> discarded;
     {
       std::lock_guard lock(mutex_);
       closed_ = true;
       dropped_ += items_.size();
-      items_.clear();
+      discarded.swap(items_);
     }
     ready_.notify_all();
+    return discarded;
   }
 
   [[nodiscard]] std::size_t dropped() const {

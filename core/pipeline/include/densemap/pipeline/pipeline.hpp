@@ -17,6 +17,7 @@
 #include "densemap/pipeline/map_view.hpp"
 #include "densemap/pipeline/raw_scan.hpp"
 #include "densemap/pipeline/scan_validator.hpp"
+#include "densemap/pipeline/sensor_tally.hpp"
 #include "densemap/raycast/integrator.hpp"
 #include "densemap/upsample/interpolation.hpp"
 
@@ -79,6 +80,7 @@ struct PipelineCounters {
   std::string last_reject_reason;
   double latency_p50_ms = 0.0;  // over the last 1024 integrated scans
   double latency_p99_ms = 0.0;
+  std::vector<SensorCounters> sensors;  // the same counts per sensor id, with seq gaps
 };
 
 /// The ingest pipeline (DESIGN.md data flow): a bounded latest-wins queue feeding a TBB flow
@@ -154,6 +156,7 @@ class Pipeline {
 
   mutable std::mutex counters_mutex_;
   PipelineCounters counters_;
+  SensorTally sensors_;
   std::vector<double> latencies_;  // ring of the last 1024
   std::size_t latency_next_ = 0;
 
