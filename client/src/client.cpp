@@ -7,6 +7,7 @@
 #include <unordered_map>
 
 #include "densemap/dds/dds.hpp"
+#include "densemap/dds/delta_wire.hpp"
 #include "densemap/dds/topics.hpp"
 #include "densemap/pipeline/version_delta.hpp"
 #include "densemap_msgs.h"
@@ -314,11 +315,7 @@ std::size_t Client::pollDeltas(const std::function<void(const DeltaInfo&)>& f) {
     info.from_scan = d.from_scan;
     info.sensor_id = text(d.sensor_id);
     info.scan_seq = d.scan_seq;
-    VersionDelta delta;
-    delta.block_keys.assign(d.block_keys._buffer, d.block_keys._buffer + d.block_keys._length);
-    delta.block_ends.assign(d.block_ends._buffer, d.block_ends._buffer + d.block_ends._length);
-    delta.cells.assign(d.cells._buffer, d.cells._buffer + d.cells._length);
-    delta.log_odds.assign(d.log_odds._buffer, d.log_odds._buffer + d.log_odds._length);
+    const VersionDelta delta = dds::cellsFrom(d);
     if (!delta.wellFormed()) return;  // dropped rather than misread
     info.changes = delta.changes();
     f(info);
@@ -382,11 +379,7 @@ Expected<std::pair<std::unique_ptr<GridMap>, std::uint64_t>> Client::fetchMap(
     const std::size_t before = tiles;
     dds::takeAll<densemap_msgs_MapTile>(*reader, [&](const densemap_msgs_MapTile& t) {
       if (t.request.client_id != id.client_id || t.request.request_id != id.request_id) return;
-      VersionDelta d;
-      d.block_keys.assign(t.block_keys._buffer, t.block_keys._buffer + t.block_keys._length);
-      d.block_ends.assign(t.block_ends._buffer, t.block_ends._buffer + t.block_ends._length);
-      d.cells.assign(t.cells._buffer, t.cells._buffer + t.cells._length);
-      d.log_odds.assign(t.log_odds._buffer, t.log_odds._buffer + t.log_odds._length);
+      const VersionDelta d = dds::cellsFrom(t);
       if (!d.wellFormed()) {
         malformed = true;
         return;

@@ -10,6 +10,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "densemap/dds/delta_wire.hpp"
 #include "densemap/dds/topics.hpp"
 #include "densemap/pipeline/map_queries.hpp"
 #include "densemap/pipeline/version_delta.hpp"
@@ -118,7 +119,7 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
   }
   pipeline.setPublisher(
       [s = service.get()](const IntegrationResult& r, const std::shared_ptr<const MapView>& v) {
-        s->onIntegrated(const_cast<IntegrationResult&>(r), v);
+        s->onIntegrated(r, v);
       });
   // The map loaded from a snapshot is published as tiles right away.
   service->delta_base_ = pipeline.view();
@@ -213,7 +214,8 @@ void MapService::publishLoop() {
   publishManifest();
 }
 
-void MapService::onIntegrated(IntegrationResult& r, const std::shared_ptr<const MapView>& view) {
+void MapService::onIntegrated(const IntegrationResult& r,
+                              const std::shared_ptr<const MapView>& view) {
   // On the pipeline's worker: a small event now, everything else on the publish thread.
   densemap_msgs_MapEvent event{};
   event.base_version = r.base_version;
@@ -233,7 +235,7 @@ void MapService::onIntegrated(IntegrationResult& r, const std::shared_ptr<const 
   v.result.stamp_ns = r.stamp_ns;
   v.result.base_version = r.base_version;
   v.result.new_version = r.new_version;
-  v.result.written_blocks = std::move(r.written_blocks);
+  v.result.written_blocks = r.written_blocks;
   v.view = view;
   {
     std::lock_guard lock(versions_mutex_);
@@ -247,7 +249,7 @@ void MapService::publishDeltas(std::deque<Version>& versions) {
   dds_publication_matched_status_t matched{};
   const bool wanted = dds_get_publication_matched_status(dds_->delta_writer.get(), &matched) >= 0 &&
                       matched.current_count > 0;
-  if (!wanted || !delta_base_) {  // nobody listens: no delta is built
+  if (!wanted) {  // nobody listens: no delta is built
     delta_base_ = versions.back().view;
     versions.clear();
     return;
@@ -260,12 +262,11 @@ void MapService::publishDeltas(std::deque<Version>& versions) {
       merged.result.written_blocks.insert(merged.result.written_blocks.end(), blocks.begin(),
                                           blocks.end());
     }
-    deltas_coalesced_ += versions.size() - 1;
     versions.clear();
     versions.push_back(std::move(merged));
   }
   for (Version& v : versions) {
-    const VersionDelta delta = diffVersions(*delta_base_, *v.view, v.result.written_blocks);
+    VersionDelta delta = diffVersions(*delta_base_, *v.view, v.result.written_blocks);
     densemap_msgs_MapDelta msg{};
     msg.base_version = delta_base_->version();
     msg.new_version = v.view->version();
@@ -273,11 +274,7 @@ void MapService::publishDeltas(std::deque<Version>& versions) {
     msg.scan_seq = v.result.scan_seq;
     msg.scan_stamp_ns = v.result.stamp_ns;
     msg.from_scan = v.result.from_scan;
-    auto& d = const_cast<VersionDelta&>(delta);
-    msg.block_keys = dds::borrowSequence<dds_sequence_unsigned_long_long>(d.block_keys);
-    msg.block_ends = dds::borrowSequence<dds_sequence_unsigned_long>(d.block_ends);
-    msg.cells = dds::borrowSequence<dds_sequence_unsigned_short>(d.cells);
-    msg.log_odds = dds::borrowSequence<dds_sequence_float>(d.log_odds);
+    dds::borrowCells(msg, delta);
     (void)dds::write(dds_->delta_writer, &msg);
     delta_base_ = v.view;
   }
@@ -381,64 +378,52 @@ void answerRay(const dds::Entity& writer, const RayRequest& req, const MapView& 
 
 }  // namespace
 
+void MapService::runTask(std::function<void()> task) {
+  ++queries_in_flight_;
+  query_arena_.execute([&] {
+    queries_.run([this, task = std::move(task)] {
+      task();
+      --queries_in_flight_;
+    });
+  });
+}
+
 void MapService::takeQueries() {
   // Each request becomes a task answered from the latest version when it runs; the task reads
   // one view throughout, so a multi-cell answer is one consistent version.
   auto spawn = [this](auto answer) {
-    ++queries_in_flight_;
-    query_arena_.execute([&] {
-      queries_.run([this, answer = std::move(answer)] {
-        std::string error;
-        answer(*pipeline_.view(), error);
-        if (!error.empty()) noteBadRequest(error);
-        ++queries_answered_;
-        --queries_in_flight_;
-      });
+    runTask([this, answer = std::move(answer)] {
+      std::string error;
+      answer(*pipeline_.view(), error);
+      if (!error.empty()) noteBadRequest(error);
+      ++queries_answered_;
     });
   };
-  auto room = [this] { return queries_in_flight_.load() < kMaxQueriesInFlight; };
   // Take one request at a time from each reader in turn, so no kind starves the others.
   bool took = true;
-  while (took && room()) {
-    took = false;
-    void* sample = nullptr;
-    dds_sample_info_t info;
-    if (dds_take(dds_->point_reader.get(), &sample, &info, 1, 1) > 0) {
-      took = true;
-      if (info.valid_data) {
-        const auto& m = *static_cast<const densemap_msgs_PointQueryRequest*>(sample);
-        PointRequest req{m.id,
-                         std::vector<float>(m.points._buffer, m.points._buffer + m.points._length)};
-        spawn([this, req = std::move(req)](const MapView& view, std::string& error) {
-          answerPoints(dds_->point_writer, req, view, error);
+  while (took && queries_in_flight_.load() < kMaxQueriesInFlight) {
+    took = dds::takeOne<densemap_msgs_PointQueryRequest>(
+        dds_->point_reader, [&](const densemap_msgs_PointQueryRequest& m) {
+          PointRequest req{
+              m.id, std::vector<float>(m.points._buffer, m.points._buffer + m.points._length)};
+          spawn([this, req = std::move(req)](const MapView& view, std::string& error) {
+            answerPoints(dds_->point_writer, req, view, error);
+          });
         });
-      }
-      dds_return_loan(dds_->point_reader.get(), &sample, 1);
-    }
-    sample = nullptr;
-    if (dds_take(dds_->bbox_reader.get(), &sample, &info, 1, 1) > 0) {
-      took = true;
-      if (info.valid_data) {
-        const auto& m = *static_cast<const densemap_msgs_BboxQueryRequest*>(sample);
-        BboxRequest req{m.id, toPoint(m.min), toPoint(m.max), m.max_centers};
-        spawn([this, req](const MapView& view, std::string& error) {
-          answerBox(dds_->bbox_writer, req, view, options_.max_query_cells, error);
+    took |= dds::takeOne<densemap_msgs_BboxQueryRequest>(
+        dds_->bbox_reader, [&](const densemap_msgs_BboxQueryRequest& m) {
+          BboxRequest req{m.id, toPoint(m.min), toPoint(m.max), m.max_centers};
+          spawn([this, req](const MapView& view, std::string& error) {
+            answerBox(dds_->bbox_writer, req, view, options_.max_query_cells, error);
+          });
         });
-      }
-      dds_return_loan(dds_->bbox_reader.get(), &sample, 1);
-    }
-    sample = nullptr;
-    if (dds_take(dds_->ray_reader.get(), &sample, &info, 1, 1) > 0) {
-      took = true;
-      if (info.valid_data) {
-        const auto& m = *static_cast<const densemap_msgs_RayQueryRequest*>(sample);
-        RayRequest req{m.id, toPoint(m.origin), toPoint(m.direction), m.max_range};
-        spawn([this, req](const MapView& view, std::string& error) {
-          answerRay(dds_->ray_writer, req, view, error);
+    took |= dds::takeOne<densemap_msgs_RayQueryRequest>(
+        dds_->ray_reader, [&](const densemap_msgs_RayQueryRequest& m) {
+          RayRequest req{m.id, toPoint(m.origin), toPoint(m.direction), m.max_range};
+          spawn([this, req](const MapView& view, std::string& error) {
+            answerRay(dds_->ray_writer, req, view, error);
+          });
         });
-      }
-      dds_return_loan(dds_->ray_reader.get(), &sample, 1);
-    }
   }
 }
 
@@ -446,13 +431,7 @@ void MapService::answerCommands() {
   dds::takeAll<densemap_msgs_CommandRequest>(
       dds_->cmd_reader, [&](const densemap_msgs_CommandRequest& req) {
         if (req.kind == 3) {  // send-map: a task, so it does not hold up other commands
-          ++queries_in_flight_;
-          query_arena_.execute([&] {
-            queries_.run([this, id = req.id] {
-              replyCommand(id, sendMap(id));
-              --queries_in_flight_;
-            });
-          });
+          runTask([this, id = req.id] { replyCommand(id, sendMap(id)); });
           return;
         }
         Expected<std::string> outcome =
@@ -572,10 +551,7 @@ Expected<std::string> MapService::sendMap(const densemap_msgs_RequestId& request
     tile.request = request;
     tile.tile_id = id;
     tile.version = view->version();
-    tile.block_keys = dds::borrowSequence<dds_sequence_unsigned_long_long>(t.block_keys);
-    tile.block_ends = dds::borrowSequence<dds_sequence_unsigned_long>(t.block_ends);
-    tile.cells = dds::borrowSequence<dds_sequence_unsigned_short>(t.cells);
-    tile.log_odds = dds::borrowSequence<dds_sequence_float>(t.log_odds);
+    dds::borrowCells(tile, t);
     // Keep-all: a reader that does not keep up blocks the write; one that stopped ends it.
     if (auto ok = dds::write(dds_->tile_writer, &tile); !ok) {
       return makeError("send-map stopped after " + std::to_string(cells) +

@@ -60,7 +60,9 @@ class MapService {
   void ingestLoop();
   void serviceLoop();
   void publishLoop();
-  void onIntegrated(IntegrationResult& result, const std::shared_ptr<const MapView>& view);
+  void onIntegrated(const IntegrationResult& result, const std::shared_ptr<const MapView>& view);
+  /// Runs `task` in the query arena, counted in queries_in_flight_ until it ends.
+  void runTask(std::function<void()> task);
   void takeQueries();
   void answerCommands();
   void replyCommand(const densemap_msgs_RequestId& id, const Expected<std::string>& outcome);
@@ -92,7 +94,6 @@ class MapService {
 
   std::atomic<std::uint64_t> queries_answered_{0};
   std::atomic<std::uint64_t> queries_rejected_{0};
-  std::atomic<std::uint64_t> deltas_coalesced_{0};
   std::mutex error_mutex_;
   std::string last_query_error_;
 };

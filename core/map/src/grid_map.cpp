@@ -3,7 +3,6 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_reduce.h>
 
-#include <bit>
 #include <vector>
 
 namespace densemap {
@@ -101,24 +100,17 @@ std::size_t GridMap::clearBox(const VoxelKey& min, const VoxelKey& max, CellChan
       return;
     }
     BlockNode* node = nullptr;
-    for (int w = 0; w < block::kMaskWords; ++w) {
-      std::uint64_t bits = head->voxels.known[w];
-      while (bits != 0) {
-        const int bit = std::countr_zero(bits);
-        bits &= bits - 1;
-        const int i = w * 64 + bit;
-        const VoxelKey k = block::keyOf(e.key, i);
-        if (k.x < min.x || k.y < min.y || k.z < min.z || k.x > max.x || k.y > max.y ||
-            k.z > max.z) {
-          continue;
-        }
-        if (node == nullptr) node = &store_->writable(e);
-        block::clearBit(node->voxels.known, i);
-        block::clearBit(node->fully_free, i);
-        ++erased;
-        if (changes != nullptr) changes->push_back({k, 0.0F, false});
+    block::forEachSetBit(head->voxels.known, [&](int i) {
+      const VoxelKey k = block::keyOf(e.key, i);
+      if (k.x < min.x || k.y < min.y || k.z < min.z || k.x > max.x || k.y > max.y || k.z > max.z) {
+        return;
       }
-    }
+      if (node == nullptr) node = &store_->writable(e);
+      block::clearBit(node->voxels.known, i);
+      block::clearBit(node->fully_free, i);
+      ++erased;
+      if (changes != nullptr) changes->push_back({k, 0.0F, false});
+    });
   };
   // Walk the box's blocks when there are fewer of them than blocks in the map.
   const double box_blocks =
@@ -154,12 +146,8 @@ void GridMap::forEachKnown(const std::function<void(const VoxelKey&, float)>& f)
   store_->forEachEntryWriter([&](const BlockEntry& e) {
     const BlockNode* n = e.head.load(std::memory_order_relaxed);
     if (n == nullptr) return;
-    for (int w = 0; w < block::kMaskWords; ++w) {
-      for (std::uint64_t bits = n->voxels.known[w]; bits != 0; bits &= bits - 1) {
-        const int i = w * 64 + std::countr_zero(bits);
-        f(block::keyOf(e.key, i), n->voxels.log_odds[i]);
-      }
-    }
+    block::forEachSetBit(n->voxels.known,
+                         [&](int i) { f(block::keyOf(e.key, i), n->voxels.log_odds[i]); });
   });
 }
 

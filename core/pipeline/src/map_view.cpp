@@ -1,13 +1,13 @@
 #include "densemap/pipeline/map_view.hpp"
 
-#include <bit>
-
 namespace densemap {
 
-std::shared_ptr<const MapView> MapView::publish(GridMap& map) {
+std::shared_ptr<const MapView> MapView::publish(GridMap& map, std::size_t other_bytes,
+                                                std::vector<std::uint64_t>* written_blocks) {
   const std::size_t known = map.knownCells();
-  const std::size_t bytes = map.memoryBytes();
+  const std::size_t bytes = map.memoryBytes() + other_bytes;
   auto published = map.publishVersion();
+  if (written_blocks != nullptr) *written_blocks = std::move(published.written_blocks);
   return std::make_shared<const MapView>(map.store(), std::move(published.pin), map.resolution(),
                                          published.version, known, bytes);
 }
@@ -35,12 +35,7 @@ void MapView::forEachBlock(const std::function<void(std::uint64_t, const VoxelBl
 
 void MapView::forEachKnown(const std::function<void(const VoxelKey&, float)>& f) const {
   forEachBlock([&](std::uint64_t key, const VoxelBlock& b) {
-    for (int w = 0; w < block::kMaskWords; ++w) {
-      for (std::uint64_t bits = b.known[w]; bits != 0; bits &= bits - 1) {
-        const int i = w * 64 + std::countr_zero(bits);
-        f(block::keyOf(key, i), b.log_odds[i]);
-      }
-    }
+    block::forEachSetBit(b.known, [&](int i) { f(block::keyOf(key, i), b.log_odds[i]); });
   });
 }
 

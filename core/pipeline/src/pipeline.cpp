@@ -218,13 +218,10 @@ void Pipeline::runCommands() {
 void Pipeline::publish(IntegrationResult& result) {
   if (mirror_) mirror_->applyChanges(result.changes);
   result.base_version = view_.load()->version();
-  const std::size_t known = map_->knownCells();
-  const std::size_t bytes = readable_->memoryBytes() + (mirror_ ? map_->memoryBytes() : 0);
-  auto published = readable_->publishVersion();
-  result.new_version = published.version;
-  result.written_blocks = std::move(published.written_blocks);
-  auto next = std::make_shared<const MapView>(readable_->store(), std::move(published.pin),
-                                              map_->resolution(), published.version, known, bytes);
+  // The mirror follows the octree cell for cell, so its known-cell count is the map's.
+  auto next =
+      MapView::publish(*readable_, mirror_ ? map_->memoryBytes() : 0, &result.written_blocks);
+  result.new_version = next->version();
   view_.store(next);
   if (result.from_scan) {
     std::lock_guard lock(counters_mutex_);

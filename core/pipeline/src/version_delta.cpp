@@ -1,7 +1,6 @@
 #include "densemap/pipeline/version_delta.hpp"
 
 #include <algorithm>
-#include <bit>
 #include <cmath>
 #include <limits>
 
@@ -19,6 +18,13 @@ bool VersionDelta::wellFormed() const {
     if (c >= block::kVoxels) return false;
   }
   return true;
+}
+
+void VersionDelta::closeBlock(std::uint64_t block_key) {
+  const std::uint32_t begin = block_ends.empty() ? 0 : block_ends.back();
+  if (cells.size() == begin) return;  // no cell of this block: no entry
+  block_keys.push_back(block_key);
+  block_ends.push_back(static_cast<std::uint32_t>(cells.size()));
 }
 
 CellChanges VersionDelta::changes() const {
@@ -49,20 +55,15 @@ VersionDelta diffVersions(const MapView& base, const MapView& next,
     if (a == b) continue;  // the same node: unchanged between the versions
     if (a == nullptr) a = &kEmpty;
     if (b == nullptr) b = &kEmpty;
-    const std::size_t before = d.cells.size();
-    for (int w = 0; w < block::kMaskWords; ++w) {
-      for (std::uint64_t bits = a->known[w] | b->known[w]; bits != 0; bits &= bits - 1) {
-        const int i = w * 64 + std::countr_zero(bits);
-        const bool in_a = a->isKnown(i), in_b = b->isKnown(i);
-        if (in_a && in_b && a->log_odds[i] == b->log_odds[i]) continue;
-        d.cells.push_back(static_cast<std::uint16_t>(i));
-        d.log_odds.push_back(in_b ? b->log_odds[i] : std::numeric_limits<float>::quiet_NaN());
-      }
-    }
-    if (d.cells.size() != before) {
-      d.block_keys.push_back(key);
-      d.block_ends.push_back(static_cast<std::uint32_t>(d.cells.size()));
-    }
+    block::BlockMask either;
+    for (int w = 0; w < block::kMaskWords; ++w) either[w] = a->known[w] | b->known[w];
+    block::forEachSetBit(either, [&](int i) {
+      const bool in_a = a->isKnown(i), in_b = b->isKnown(i);
+      if (in_a && in_b && a->log_odds[i] == b->log_odds[i]) return;
+      d.cells.push_back(static_cast<std::uint16_t>(i));
+      d.log_odds.push_back(in_b ? b->log_odds[i] : std::numeric_limits<float>::quiet_NaN());
+    });
+    d.closeBlock(key);
   }
   return d;
 }
@@ -89,18 +90,11 @@ VersionDelta cellsOf(const MapView& view, std::span<const std::uint64_t> blocks)
   for (const std::uint64_t key : blocks) {
     const VoxelBlock* b = view.block(key);
     if (b == nullptr) continue;
-    const std::size_t before = d.cells.size();
-    for (int w = 0; w < block::kMaskWords; ++w) {
-      for (std::uint64_t bits = b->known[w]; bits != 0; bits &= bits - 1) {
-        const int i = w * 64 + std::countr_zero(bits);
-        d.cells.push_back(static_cast<std::uint16_t>(i));
-        d.log_odds.push_back(b->log_odds[i]);
-      }
-    }
-    if (d.cells.size() != before) {
-      d.block_keys.push_back(key);
-      d.block_ends.push_back(static_cast<std::uint32_t>(d.cells.size()));
-    }
+    block::forEachSetBit(b->known, [&](int i) {
+      d.cells.push_back(static_cast<std::uint16_t>(i));
+      d.log_odds.push_back(b->log_odds[i]);
+    });
+    d.closeBlock(key);
   }
   return d;
 }

@@ -1,6 +1,7 @@
 #pragma once
 
 #include <array>
+#include <bit>
 #include <cstdint>
 
 #include "densemap/geometry/voxel_key.hpp"
@@ -23,6 +24,14 @@ inline void clearBit(BlockMask& m, int index) {
 }
 [[nodiscard]] inline bool testBit(const BlockMask& m, int index) {
   return ((m[index >> 6] >> (index & 63)) & 1U) != 0;
+}
+
+/// Calls f(index) for every set bit of `m`, in increasing index order.
+template <class F>
+void forEachSetBit(const BlockMask& m, F&& f) {
+  for (int w = 0; w < kMaskWords; ++w) {
+    for (std::uint64_t bits = m[w]; bits != 0; bits &= bits - 1) f(w * 64 + std::countr_zero(bits));
+  }
 }
 
 [[nodiscard]] inline std::uint64_t blockOf(const VoxelKey& k) {

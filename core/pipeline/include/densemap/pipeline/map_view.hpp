@@ -4,6 +4,7 @@
 #include <functional>
 #include <memory>
 #include <optional>
+#include <vector>
 
 #include "densemap/map/block_store.hpp"
 #include "densemap/map/grid_map.hpp"
@@ -27,8 +28,12 @@ class MapView {
         store_(std::move(store)),
         pin_(std::move(pin)) {}
 
-  /// Publishes the version `map` is writing and returns its view.
-  [[nodiscard]] static std::shared_ptr<const MapView> publish(GridMap& map);
+  /// Publishes the version `map` is writing and returns its view. `other_bytes`: storage held
+  /// elsewhere for the same map (the octree a mirrored GridMap follows), added to the view's
+  /// memoryBytes(); `written_blocks`, when given, receives the blocks the version wrote.
+  [[nodiscard]] static std::shared_ptr<const MapView> publish(
+      GridMap& map, std::size_t other_bytes = 0,
+      std::vector<std::uint64_t>* written_blocks = nullptr);
   /// A view of a copy of `map` (any backend) at `version`: for loaded files and tests.
   [[nodiscard]] static std::shared_ptr<const MapView> fromMap(const OccupancyMap& map,
                                                               std::uint64_t version);

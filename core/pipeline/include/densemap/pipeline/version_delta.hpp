@@ -25,6 +25,9 @@ struct VersionDelta {
   [[nodiscard]] bool wellFormed() const;
   /// The cells as a change list (key, value, known).
   [[nodiscard]] CellChanges changes() const;
+  /// Ends block `block_key`: the cells appended since the previous block are its cells (a
+  /// block without cells gets no entry).
+  void closeBlock(std::uint64_t block_key);
 };
 
 /// What changed from `base` to `next` in `blocks` (the blocks the versions between them wrote;
@@ -33,7 +36,6 @@ struct VersionDelta {
                                         std::span<const std::uint64_t> blocks);
 
 /// Map tiles (densemap/map/tiles): cubes of 32^3 cells = 4^3 blocks.
-inline constexpr int kTileBlockShift = 2;
 [[nodiscard]] std::uint64_t tileOf(const VoxelKey& k);
 [[nodiscard]] std::uint64_t tileOfBlock(std::uint64_t block_key);
 /// The blocks with contents at the view's version, by tile (one walk of the map; each list

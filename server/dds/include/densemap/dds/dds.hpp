@@ -102,6 +102,18 @@ std::size_t takeAll(const Entity& reader, const std::function<void(const T&)>& f
   return forEachSample<T>(reader, true, f);
 }
 
+/// Takes at most one sample and calls `f` on it when it is valid data. Returns whether a
+/// sample (valid or not) was taken.
+template <class T, class F>
+bool takeOne(const Entity& reader, F&& f) {
+  void* sample = nullptr;
+  dds_sample_info_t info;
+  if (dds_take(reader.get(), &sample, &info, 1, 1) <= 0) return false;
+  if (info.valid_data) f(*static_cast<const T*>(sample));
+  dds_return_loan(reader.get(), &sample, 1);
+  return true;
+}
+
 [[nodiscard]] inline Expected<void> write(const Entity& writer, const void* sample) {
   return check(dds_write(writer.get(), sample), "dds_write");
 }
