@@ -285,6 +285,8 @@ Expected<ServerStatus> Client::status() {
       out.map_version = s.map_version;
       out.memory_bytes = s.memory_bytes;
       out.uptime_s = s.uptime_s;
+      out.rss_bytes = s.rss_bytes;
+      out.cpu_s = s.cpu_s;
       out.queries_answered = s.queries_answered;
       out.queries_rejected = s.queries_rejected;
       out.last_query_error = text(s.last_query_error);

@@ -15,6 +15,7 @@
 #include "densemap/io/png_writer.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/upsample/interpolation.hpp"
+#include "load_command.hpp"
 #include "snapshot.hpp"
 
 namespace densemap::cli {
@@ -293,8 +294,9 @@ int main(int argc, char** argv) {
   ClientOptions o;
   int timeout_ms = 5000;
   app.add_option("--domain-id", o.domain_id, "DDS domain id")->capture_default_str();
-  app.add_option("--interface", o.network_interface, "Network interface for DDS")
-      ->capture_default_str();
+  auto* interface_option =
+      app.add_option("--interface", o.network_interface, "Network interface for DDS")
+          ->capture_default_str();
   app.add_option("--timeout-ms", timeout_ms, "Request timeout")->capture_default_str();
 
   auto* replay = app.add_subcommand("replay", "Publish a dataset's scans to the server");
@@ -386,8 +388,10 @@ int main(int argc, char** argv) {
                    "Top view: occupied cells a column needs to be drawn occupied")
       ->check(CLI::Range(1, 1000))
       ->capture_default_str();
+  cli::LoadCommand load(app);
   CLI11_PARSE(app, argc, argv);
   o.timeout = std::chrono::milliseconds(timeout_ms);
+  if (load.parsed()) return load.run(o, interface_option->count() > 0);
 
   if (render->parsed()) return cli::render(render_in, render_out, z, scale, min_occupied);
   if (replay->parsed()) {

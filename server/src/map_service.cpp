@@ -13,6 +13,7 @@
 #include "densemap/dds/delta_wire.hpp"
 #include "densemap/dds/topics.hpp"
 #include "densemap/pipeline/map_queries.hpp"
+#include "densemap/io/process_usage.hpp"
 #include "densemap/pipeline/version_delta.hpp"
 #include "densemap_msgs.h"
 #include "snapshot.hpp"
@@ -512,6 +513,9 @@ void MapService::publishStatus() {
   s.map_version = view->version();
   s.memory_bytes = view->memoryBytes();
   s.uptime_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count();
+  const ProcessUsage usage = processUsage();
+  s.rss_bytes = usage.rss_bytes;
+  s.cpu_s = usage.cpu_s;
   s.queries_answered = queries_answered_.load();
   s.queries_rejected = queries_rejected_.load();
   std::string last_error;

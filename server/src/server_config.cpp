@@ -1,42 +1,18 @@
 #include "server_config.hpp"
 
-#include <google/protobuf/io/tokenizer.h>
-#include <google/protobuf/text_format.h>
-
 #include <cmath>
 
+#include "densemap/idl/text_format.hpp"
 #include "densemap/io/file_bytes.hpp"
 
 namespace densemap::server {
-namespace {
-
-class Collector final : public google::protobuf::io::ErrorCollector {
- public:
-  void AddError(int line, google::protobuf::io::ColumnNumber column,
-                const std::string& message) override {
-    if (first_.empty()) {
-      first_ = "line " + std::to_string(line + 1) + ", column " + std::to_string(column + 1) +
-               ": " + message;
-    }
-  }
-  void AddWarning(int, google::protobuf::io::ColumnNumber, const std::string&) override {}
-  [[nodiscard]] const std::string& first() const { return first_; }
-
- private:
-  std::string first_;
-};
-
-}  // namespace
 
 Expected<proto::ServerConfig> loadServerConfig(const std::filesystem::path& file) {
   auto text = readFileBytes(file);
   if (!text) return std::unexpected(text.error());
   proto::ServerConfig config;
-  google::protobuf::TextFormat::Parser parser;
-  Collector collector;
-  parser.RecordErrorsTo(&collector);
-  if (!parser.ParseFromString(*text, &config)) {
-    return fileError(file, collector.first().empty() ? "invalid config" : collector.first());
+  if (auto parsed = parseTextFormat(*text, config); !parsed) {
+    return fileError(file, parsed.error().message);
   }
   if (auto options = pipelineOptions(config); !options) {
     return fileError(file, options.error().message);

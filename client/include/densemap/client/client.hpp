@@ -52,6 +52,8 @@ struct ServerStatus {
   std::uint64_t queries_answered = 0, queries_rejected = 0;
   std::string last_query_error;
   std::vector<SensorCounters> sensors;  // per sensor id (last_seq is not sent)
+  std::uint64_t rss_bytes = 0;          // the server process's resident memory
+  double cpu_s = 0;                     // and its CPU time since start
 };
 
 struct DeltaInfo {

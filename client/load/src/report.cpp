@@ -1,0 +1,537 @@
+#include "densemap/load/report.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+#include "densemap/load/chart.hpp"
+
+namespace densemap::load {
+namespace {
+
+std::string format(const char* fmt, auto... args) {
+  char buf[512];
+  std::snprintf(buf, sizeof buf, fmt, args...);
+  return buf;
+}
+
+unsigned long long ull(std::uint64_t v) { return static_cast<unsigned long long>(v); }
+
+std::vector<Timed> allE2e(const RunResult& run) {
+  std::vector<Timed> all;
+  for (const auto& s : run.sensors) all.insert(all.end(), s.e2e.begin(), s.e2e.end());
+  return all;
+}
+
+std::vector<Timed> allQueries(const RunResult& run) {
+  std::vector<Timed> all;
+  for (const auto& c : run.clients) {
+    for (const auto& l : c.latency) all.insert(all.end(), l.begin(), l.end());
+  }
+  return all;
+}
+
+std::vector<Timed> between(const std::vector<Timed>& v, double from_s, double to_s) {
+  std::vector<Timed> out;
+  for (const Timed& t : v) {
+    if (t.t_s >= from_s && t.t_s < to_s) out.push_back(t);
+  }
+  return out;
+}
+
+std::uint64_t lostScans(const SensorResult& s) {
+  return s.server.dropped + s.server.rejected + (s.sent > s.server.received ? s.sent - s.server.received : 0);
+}
+
+/// A minimal JSON writer: objects and arrays opened and closed in order, commas handled.
+class Json {
+ public:
+  Json& open(const char* key, char bracket) {
+    comma();
+    if (key != nullptr) out_ << '"' << key << "\":";
+    out_ << bracket;
+    first_ = true;
+    return *this;
+  }
+  Json& close(char bracket) {
+    out_ << bracket;
+    first_ = false;
+    return *this;
+  }
+  Json& num(const char* key, double v) {
+    comma();
+    if (key != nullptr) out_ << '"' << key << "\":";
+    if (std::isfinite(v)) {
+      out_ << format("%.6g", v);
+    } else {
+      out_ << "null";
+    }
+    return *this;
+  }
+  Json& str(const char* key, const std::string& v) {
+    comma();
+    if (key != nullptr) out_ << '"' << key << "\":";
+    out_ << '"';
+    for (const char c : v) {
+      if (c == '"' || c == '\\') {
+        out_ << '\\' << c;
+      } else if (static_cast<unsigned char>(c) < 0x20) {
+        out_ << format("\\u%04x", c);
+      } else {
+        out_ << c;
+      }
+    }
+    out_ << '"';
+    return *this;
+  }
+  Json& boolean(const char* key, bool v) {
+    comma();
+    out_ << '"' << key << "\":" << (v ? "true" : "false");
+    return *this;
+  }
+  Json& stats(const char* key, const LatencyStats& s) {
+    open(key, '{').num("n", static_cast<double>(s.n)).num("p50_ms", s.p50).num("p99_ms", s.p99);
+    return num("p999_ms", s.p999).num("max_ms", s.max).close('}');
+  }
+  [[nodiscard]] std::string text() const { return out_.str(); }
+
+ private:
+  void comma() {
+    if (!first_) out_ << ',';
+    first_ = false;
+  }
+  std::ostringstream out_;
+  bool first_ = true;
+};
+
+Expected<void> writeText(const std::filesystem::path& file, const std::string& text) {
+  std::ofstream out(file);
+  out << text << '\n';
+  if (!out) return makeError("cannot write " + file.string());
+  return {};
+}
+
+void sloJson(Json& j, const SloVerdict& v) {
+  j.open("slo", '{').boolean("kept", v.kept).str("broken", v.broken);
+  j.stats("e2e", v.e2e).stats("query", v.query);
+  j.num("dropped", static_cast<double>(v.dropped));
+  j.num("failed_queries", static_cast<double>(v.failed_queries)).close('}');
+}
+
+void cpuJson(Json& j, const char* key, const CpuUse& c) {
+  j.open(key, '{').num("server_pct", c.server_pct).num("load_tool_pct", c.load_pct);
+  j.num("machine_busy_pct", c.machine_busy_pct).close('}');
+}
+
+}  // namespace
+
+LatencyStats latencyStats(const std::vector<Timed>& samples) {
+  LatencyStats s;
+  s.n = samples.size();
+  if (samples.empty()) return s;
+  std::vector<double> v;
+  v.reserve(samples.size());
+  for (const Timed& t : samples) v.push_back(t.ms);
+  std::sort(v.begin(), v.end());
+  auto rank = [&](double q) {
+    const auto i = static_cast<std::size_t>(std::ceil(q * static_cast<double>(v.size())));
+    return v[std::clamp<std::size_t>(i, 1, v.size()) - 1];
+  };
+  s.p50 = rank(0.5);
+  s.p99 = rank(0.99);
+  s.p999 = rank(0.999);
+  s.max = v.back();
+  return s;
+}
+
+CpuUse cpuUse(const std::vector<UsageSample>& usage, double from_s, double to_s) {
+  CpuUse c;
+  if (usage.size() < 2) return c;
+  std::size_t a = 0, b = usage.size() - 1;
+  for (std::size_t i = 0; i < usage.size(); ++i) {
+    if (usage[i].t_s <= from_s) a = i;
+  }
+  for (std::size_t i = usage.size(); i-- > 0;) {
+    if (usage[i].t_s >= to_s) b = i;
+  }
+  if (b <= a) b = std::min(a + 1, usage.size() - 1);
+  if (b <= a) return c;
+  const UsageSample &x = usage[a], &y = usage[b];
+  const double dt = y.t_s - x.t_s;
+  if (dt <= 0) return c;
+  c.server_pct = 100.0 * (y.server_cpu_s - x.server_cpu_s) / dt;
+  c.load_pct = 100.0 * (y.load_cpu_s - x.load_cpu_s) / dt;
+  const double total = y.machine_total_s - x.machine_total_s;
+  if (total > 0) c.machine_busy_pct = 100.0 * (y.machine_busy_s - x.machine_busy_s) / total;
+  return c;
+}
+
+std::vector<TimelineBin> timeline(const RunResult& run, double period_s) {
+  std::vector<TimelineBin> bins;
+  const auto e2e = allE2e(run);
+  const auto queries = allQueries(run);
+  for (double t = 0; t < run.duration_s - 1e-9; t += period_s) {
+    TimelineBin b;
+    b.t_s = t;
+    const auto e = between(e2e, t, t + period_s);
+    const auto q = between(queries, t, t + period_s);
+    b.e2e = latencyStats(e);
+    b.query = latencyStats(q);
+    b.scans_per_s = static_cast<double>(e.size()) / period_s;
+    b.queries_per_s = static_cast<double>(q.size()) / period_s;
+    b.cpu = cpuUse(run.usage, t, t + period_s);
+    const std::uint64_t lost_before = run.before.dropped + run.before.rejected;
+    for (const UsageSample& u : run.usage) {
+      if (u.t_s >= t + period_s) break;
+      b.server_rss_mib = static_cast<double>(u.server_rss) / 1048576.0;
+      const std::uint64_t lost = u.dropped + u.rejected;
+      if (u.server_rss > 0) b.dropped = lost > lost_before ? lost - lost_before : 0;
+    }
+    bins.push_back(b);
+  }
+  return bins;
+}
+
+SloVerdict checkSlo(const RunResult& run, const Slo& slo) {
+  SloVerdict v;
+  v.e2e = latencyStats(allE2e(run));
+  v.query = latencyStats(allQueries(run));
+  std::uint64_t sent = 0;
+  for (const auto& s : run.sensors) v.dropped += lostScans(s), sent += s.sent;
+  for (const auto& c : run.clients) {
+    for (const auto f : c.failed) v.failed_queries += f;
+  }
+  std::vector<std::string> broken;
+  if (sent > 0 && v.e2e.n == 0) broken.push_back("no scan reached the map");
+  if (v.e2e.p99 > slo.e2e_p99_ms) {
+    broken.push_back(format("e2e p99 %.1f ms > %.0f ms", v.e2e.p99, slo.e2e_p99_ms));
+  }
+  if (v.dropped > slo.max_dropped) {
+    broken.push_back(format("%llu scans dropped or rejected > %llu", ull(v.dropped),
+                            ull(slo.max_dropped)));
+  }
+  if (slo.query_p99_ms > 0 && v.query.p99 > slo.query_p99_ms) {
+    broken.push_back(format("query p99 %.1f ms > %.0f ms", v.query.p99, slo.query_p99_ms));
+  }
+  if (v.failed_queries > slo.max_failed_queries) {
+    broken.push_back(format("%llu queries failed > %llu", ull(v.failed_queries),
+                            ull(slo.max_failed_queries)));
+  }
+  for (const auto& b : broken) v.broken += (v.broken.empty() ? "" : "; ") + b;
+  v.kept = broken.empty();
+  return v;
+}
+
+SoakVerdict checkSoak(const RunResult& run, const SoakPlan& soak) {
+  SoakVerdict v;
+  const UsageSample* warm = nullptr;
+  for (const UsageSample& u : run.usage) {
+    if (u.t_s >= soak.warm_up_s && u.server_rss > 0) {
+      if (warm == nullptr) warm = &u;
+      v.rss_max_after_mib = std::max(v.rss_max_after_mib, static_cast<double>(u.server_rss) / 1048576.0);
+    }
+  }
+  if (warm == nullptr) {
+    v.passed = false;
+    v.why = "no server status after the warm-up (is warm_up_s shorter than the run?)";
+    return v;
+  }
+  v.rss_at_warm_up_mib = static_cast<double>(warm->server_rss) / 1048576.0;
+  v.rss_growth = v.rss_max_after_mib / v.rss_at_warm_up_mib - 1.0;
+  // Two windows after the warm-up: the first and the last `window_s`, or halves if shorter.
+  const double span = run.duration_s - soak.warm_up_s;
+  const double window = std::min(soak.window_s, span / 2);
+  const auto e2e = allE2e(run);
+  v.first_window = latencyStats(between(e2e, soak.warm_up_s, soak.warm_up_s + window));
+  v.last_window = latencyStats(between(e2e, run.duration_s - window, run.duration_s));
+  v.p99_drift = v.first_window.p99 > 0 ? v.last_window.p99 / v.first_window.p99 - 1.0 : 0.0;
+  std::vector<std::string> why;
+  if (v.rss_growth > soak.max_rss_growth) {
+    why.push_back(format("server RSS grew %.1f%% after warm-up (%.0f -> %.0f MiB) > %.0f%%",
+                         100 * v.rss_growth, v.rss_at_warm_up_mib, v.rss_max_after_mib,
+                         100 * soak.max_rss_growth));
+  }
+  if (v.p99_drift > soak.max_p99_drift &&
+      v.last_window.p99 - v.first_window.p99 > soak.drift_floor_ms) {
+    why.push_back(format("e2e p99 drifted %.1f%% (%.1f -> %.1f ms) > %.0f%%", 100 * v.p99_drift,
+                         v.first_window.p99, v.last_window.p99, 100 * soak.max_p99_drift));
+  }
+  if (v.first_window.n == 0 || v.last_window.n == 0) why.push_back("no scans in a window");
+  for (const auto& w : why) v.why += (v.why.empty() ? "" : "; ") + w;
+  v.passed = why.empty();
+  return v;
+}
+
+std::string tables(const RunResult& run) {
+  std::string out;
+  out += "| sensor stream | sent | received | integrated | dropped | rejected | seq gaps | "
+         "late sends | e2e p50 ms | p99 | p99.9 | max |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const auto& s : run.sensors) {
+    const auto l = latencyStats(s.e2e);
+    out += format("| %s | %llu | %llu | %llu | %llu | %llu | %llu | %llu | %.1f | %.1f | %.1f | %.1f |\n",
+                  s.sensor_id.c_str(), ull(s.sent), ull(s.server.received),
+                  ull(s.server.integrated), ull(s.server.dropped), ull(s.server.rejected),
+                  ull(s.server.seq_gaps), ull(s.late_sends), l.p50, l.p99, l.p999, l.max);
+  }
+  if (!run.clients.empty()) {
+    out += "\n| query client | kind | answered | failed | timeouts | per s | p50 ms | p99 | p99.9 | "
+           "max |\n|---|---|---|---|---|---|---|---|---|---|\n";
+    std::vector<Timed> all[kQueryKinds];
+    std::uint64_t answered[kQueryKinds] = {}, failed[kQueryKinds] = {}, timeouts[kQueryKinds] = {};
+    auto row = [&](const std::string& name, int k, std::uint64_t a, std::uint64_t f,
+                   std::uint64_t t, const std::vector<Timed>& lat) {
+      const auto l = latencyStats(lat);
+      out += format("| %s | %s | %llu | %llu | %llu | %.1f | %.1f | %.1f | %.1f | %.1f |\n",
+                    name.c_str(), queryKindName(static_cast<QueryKind>(k)), ull(a), ull(f),
+                    ull(t), static_cast<double>(a) / run.duration_s, l.p50, l.p99, l.p999, l.max);
+    };
+    for (const auto& c : run.clients) {
+      for (int k = 0; k < kQueryKinds; ++k) {
+        if (c.answered[k] + c.failed[k] == 0) continue;
+        if (run.clients.size() <= 16) {
+          row(c.name, k, c.answered[k], c.failed[k], c.timeouts[k], c.latency[k]);
+        }
+        all[k].insert(all[k].end(), c.latency[k].begin(), c.latency[k].end());
+        answered[k] += c.answered[k], failed[k] += c.failed[k], timeouts[k] += c.timeouts[k];
+      }
+    }
+    for (int k = 0; k < kQueryKinds; ++k) {
+      if (answered[k] + failed[k] > 0) {
+        row("all " + std::to_string(run.clients.size()) + " clients", k, answered[k], failed[k],
+            timeouts[k], all[k]);
+      }
+    }
+  }
+  if (!run.joiners.empty()) {
+    out += "\n| late joiner | at s | seconds to map | cells | version | versions behind | error |\n"
+           "|---|---|---|---|---|---|---|\n";
+    for (std::size_t i = 0; i < run.joiners.size(); ++i) {
+      const auto& j = run.joiners[i];
+      out += format("| %zu | %.1f | %.2f | %llu | %llu | %llu | %s |\n", i + 1, j.at_s, j.seconds,
+                    ull(j.cells), ull(j.version), ull(j.versions_behind),
+                    j.error.empty() ? "-" : j.error.c_str());
+    }
+  }
+  const CpuUse cpu = cpuUse(run.usage, 0, run.duration_s);
+  double rss_max = 0;
+  for (const auto& u : run.usage) rss_max = std::max(rss_max, static_cast<double>(u.server_rss));
+  const double rss_first = run.usage.empty() ? 0 : static_cast<double>(run.usage.front().server_rss);
+  const double rss_last = run.usage.empty() ? 0 : static_cast<double>(run.usage.back().server_rss);
+  out += "\n| server CPU % (of one core) | load tool CPU % | machine busy % | server RSS MiB "
+         "start / end / max | known cells at end | map versions |\n|---|---|---|---|---|---|\n";
+  out += format("| %.0f | %.0f | %.0f | %.0f / %.0f / %.0f | %llu | %llu |\n", cpu.server_pct,
+                cpu.load_pct, cpu.machine_busy_pct, rss_first / 1048576.0, rss_last / 1048576.0,
+                rss_max / 1048576.0, ull(run.after.known_cells),
+                ull(run.after.map_version - std::min(run.after.map_version, run.before.map_version)));
+  return out;
+}
+
+std::string timelineTable(const RunResult& run, const Scenario& scenario) {
+  std::string out =
+      "| t s | e2e p50 ms | e2e p99 | scans/s | queries/s | query p99 ms | dropped so far | "
+      "server CPU % | server RSS MiB |\n|---|---|---|---|---|---|---|---|---|\n";
+  for (const auto& b : timeline(run, scenario.sample_period_s)) {
+    out += format("| %.0f | %.1f | %.1f | %.1f | %.1f | %.1f | %llu | %.0f | %.0f |\n", b.t_s,
+                  b.e2e.p50, b.e2e.p99, b.scans_per_s, b.queries_per_s, b.query.p99,
+                  ull(b.dropped), b.cpu.server_pct, b.server_rss_mib);
+  }
+  return out;
+}
+
+std::string soakSummary(const SoakVerdict& v) {
+  return format(
+      "soak %s: server RSS %.0f MiB after warm-up, at most %.0f MiB later (%+.1f%%); e2e p99 "
+      "%.1f ms in the first window after warm-up, %.1f ms in the last (%+.1f%%)%s%s\n",
+      v.passed ? "passed" : "FAILED", v.rss_at_warm_up_mib, v.rss_max_after_mib,
+      100 * v.rss_growth, v.first_window.p99, v.last_window.p99, 100 * v.p99_drift,
+      v.why.empty() ? "" : ": ", v.why.c_str());
+}
+
+std::string rampTable(const std::vector<RampStepResult>& steps, bool vary_sensors) {
+  std::string out = format(
+      "| %s | scans/s | e2e p50 ms | e2e p99 | dropped | queries/s | query p99 ms | failed | "
+      "server CPU %% | load tool CPU %% | machine busy %% | SLO |\n"
+      "|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+      vary_sensors ? "sensors" : "clients");
+  for (const auto& s : steps) {
+    out += format("| %u | %.1f | %.1f | %.1f | %llu | %.1f | %.1f | %llu | %.0f | %.0f | %.0f | %s |\n",
+                  s.count, s.scans_per_s, s.slo.e2e.p50, s.slo.e2e.p99, ull(s.slo.dropped),
+                  s.queries_per_s, s.slo.query.p99, ull(s.slo.failed_queries), s.cpu.server_pct,
+                  s.cpu.load_pct, s.cpu.machine_busy_pct,
+                  s.slo.kept ? "kept" : s.slo.broken.c_str());
+  }
+  return out;
+}
+
+std::string kneeSummary(const std::vector<RampStepResult>& steps, bool vary_sensors,
+                        const Slo& slo) {
+  const char* what = vary_sensors ? "sensors" : "query clients";
+  const std::string slo_text =
+      format("e2e p99 <= %.0f ms, at most %llu dropped, %llu failed queries%s", slo.e2e_p99_ms,
+             ull(slo.max_dropped), ull(slo.max_failed_queries),
+             slo.query_p99_ms > 0 ? format(", query p99 <= %.0f ms", slo.query_p99_ms).c_str() : "");
+  const RampStepResult* last_kept = nullptr;
+  const RampStepResult* first_broken = nullptr;
+  for (const auto& s : steps) {
+    if (s.slo.kept && first_broken == nullptr) last_kept = &s;
+    if (!s.slo.kept && first_broken == nullptr) first_broken = &s;
+  }
+  std::string out = "SLO: " + slo_text + "\n";
+  if (first_broken == nullptr) {
+    return out + format("knee: not reached; the SLO held up to %u %s (the ramp's last step)\n",
+                        steps.empty() ? 0U : steps.back().count, what);
+  }
+  out += last_kept != nullptr ? format("knee: %u %s keep the SLO; %u break it (%s)\n",
+                                       last_kept->count, what, first_broken->count,
+                                       first_broken->slo.broken.c_str())
+                              : format("knee: below the first step; %u %s already break the SLO (%s)\n",
+                                       first_broken->count, what,
+                                       first_broken->slo.broken.c_str());
+  const CpuUse& c = first_broken->cpu;
+  std::string saturated;
+  if (c.machine_busy_pct >= 90) {
+    saturated = format("the machine's CPU (%.0f%% busy: server %.0f%%, load tool %.0f%% of one core)",
+                       c.machine_busy_pct, c.server_pct, c.load_pct);
+  } else if (c.server_pct >= 90) {
+    saturated = format("the server's integration (%.0f%% of a core, machine %.0f%% busy)",
+                       c.server_pct, c.machine_busy_pct);
+  } else {
+    saturated = format("neither CPU (machine %.0f%% busy, server %.0f%%, load tool %.0f%%): "
+                       "latency from scheduling or DDS",
+                       c.machine_busy_pct, c.server_pct, c.load_pct);
+  }
+  return out + "at the knee the saturated resource is " + saturated + "\n";
+}
+
+Expected<void> writeJson(const std::filesystem::path& file, const RunResult& run,
+                         const Scenario& scenario) {
+  Json j;
+  j.open(nullptr, '{').str("scenario", run.scenario).num("duration_s", run.duration_s);
+  sloJson(j, checkSlo(run, scenario.slo));
+  if (scenario.soak) {
+    const SoakVerdict s = checkSoak(run, *scenario.soak);
+    j.open("soak", '{').boolean("passed", s.passed).str("why", s.why);
+    j.num("rss_at_warm_up_mib", s.rss_at_warm_up_mib).num("rss_max_after_mib", s.rss_max_after_mib);
+    j.num("rss_growth", s.rss_growth).stats("first_window", s.first_window);
+    j.stats("last_window", s.last_window).num("p99_drift", s.p99_drift).close('}');
+  }
+  cpuJson(j, "cpu", cpuUse(run.usage, 0, run.duration_s));
+  j.open("sensors", '[');
+  for (const auto& s : run.sensors) {
+    j.open(nullptr, '{').str("sensor_id", s.sensor_id).num("sent", static_cast<double>(s.sent));
+    j.num("received", static_cast<double>(s.server.received));
+    j.num("integrated", static_cast<double>(s.server.integrated));
+    j.num("dropped", static_cast<double>(s.server.dropped));
+    j.num("rejected", static_cast<double>(s.server.rejected));
+    j.num("seq_gaps", static_cast<double>(s.server.seq_gaps));
+    j.num("seen", static_cast<double>(s.seen)).num("late_sends", static_cast<double>(s.late_sends));
+    j.stats("e2e", latencyStats(s.e2e)).close('}');
+  }
+  j.close(']').open("clients", '[');
+  for (const auto& c : run.clients) {
+    j.open(nullptr, '{').str("name", c.name).num("late_ticks", static_cast<double>(c.late_ticks));
+    j.str("last_error", c.last_error).open("kinds", '[');
+    for (int k = 0; k < kQueryKinds; ++k) {
+      j.open(nullptr, '{').str("kind", queryKindName(static_cast<QueryKind>(k)));
+      j.num("answered", static_cast<double>(c.answered[k]));
+      j.num("failed", static_cast<double>(c.failed[k]));
+      j.num("timeouts", static_cast<double>(c.timeouts[k]));
+      j.stats("latency", latencyStats(c.latency[k])).close('}');
+    }
+    j.close(']').close('}');
+  }
+  j.close(']').open("late_joiners", '[');
+  for (const auto& x : run.joiners) {
+    j.open(nullptr, '{').num("at_s", x.at_s).num("seconds", x.seconds);
+    j.num("cells", static_cast<double>(x.cells)).num("version", static_cast<double>(x.version));
+    j.num("versions_behind", static_cast<double>(x.versions_behind)).str("error", x.error);
+    j.close('}');
+  }
+  j.close(']').open("timeline", '[');
+  for (const auto& b : timeline(run, scenario.sample_period_s)) {
+    j.open(nullptr, '{').num("t_s", b.t_s).stats("e2e", b.e2e).num("scans_per_s", b.scans_per_s);
+    j.num("queries_per_s", b.queries_per_s).stats("query", b.query);
+    cpuJson(j, "cpu", b.cpu);
+    j.num("server_rss_mib", b.server_rss_mib).close('}');
+  }
+  j.close(']').close('}');
+  return writeText(file, j.text());
+}
+
+Expected<void> writeRampJson(const std::filesystem::path& file,
+                             const std::vector<RampStepResult>& steps, const Scenario& scenario) {
+  Json j;
+  j.open(nullptr, '{').str("scenario", scenario.name);
+  j.str("vary", scenario.ramp && scenario.ramp->vary_sensors ? "sensors" : "clients");
+  j.str("knee", kneeSummary(steps, !scenario.ramp || scenario.ramp->vary_sensors, scenario.slo));
+  j.open("steps", '[');
+  for (const auto& s : steps) {
+    j.open(nullptr, '{').num("count", s.count).num("scans_per_s", s.scans_per_s);
+    j.num("queries_per_s", s.queries_per_s);
+    sloJson(j, s.slo);
+    cpuJson(j, "cpu", s.cpu);
+    j.close('}');
+  }
+  j.close(']').close('}');
+  return writeText(file, j.text());
+}
+
+namespace {
+constexpr std::array<std::uint8_t, 3> kBlue{20, 60, 200}, kRed{210, 30, 30}, kGreen{20, 150, 60},
+    kBlack{0, 0, 0}, kOrange{230, 130, 0};
+}  // namespace
+
+Expected<void> writeRunChart(const std::filesystem::path& file, const RunResult& run,
+                             const Scenario& scenario) {
+  const auto bins = timeline(run, scenario.sample_period_s);
+  std::vector<double> x;
+  Series e50{"e2e p50", kBlue, {}}, e99{"e2e p99", kRed, {}}, q99{"query p99", kGreen, {}};
+  Series scans{"scans/s", kBlue, {}}, queries{"queries/s", kGreen, {}};
+  Series server{"server", kRed, {}}, tool{"load tool", kGreen, {}}, busy{"machine busy", kBlack, {}};
+  Series rss{"server RSS", kOrange, {}};
+  const double nan = std::nan("");
+  for (const auto& b : bins) {
+    x.push_back(b.t_s + scenario.sample_period_s / 2);
+    e50.y.push_back(b.e2e.n > 0 ? b.e2e.p50 : nan);
+    e99.y.push_back(b.e2e.n > 0 ? b.e2e.p99 : nan);
+    q99.y.push_back(b.query.n > 0 ? b.query.p99 : nan);
+    scans.y.push_back(b.scans_per_s);
+    queries.y.push_back(b.queries_per_s);
+    server.y.push_back(b.cpu.server_pct);
+    tool.y.push_back(b.cpu.load_pct);
+    busy.y.push_back(b.cpu.machine_busy_pct * static_cast<double>(std::max(1U, std::thread::hardware_concurrency())));
+    rss.y.push_back(b.server_rss_mib);
+  }
+  std::vector<Panel> panels = {{"latency ms", {e50, e99, q99}}, {"", {scans}}, {"", {queries}},
+                               {"cpu % of a core", {server, tool, busy}},
+                               {"mib", {rss}}};
+  return writeChart(file, run.scenario, "time s", x, panels);
+}
+
+Expected<void> writeRampChart(const std::filesystem::path& file,
+                              const std::vector<RampStepResult>& steps, const Scenario& scenario) {
+  std::vector<double> x;
+  Series e50{"e2e p50", kBlue, {}}, e99{"e2e p99", kRed, {}}, q99{"query p99", kGreen, {}};
+  Series scans{"scans/s", kBlue, {}}, queries{"queries/s", kGreen, {}};
+  Series server{"server", kRed, {}}, tool{"load tool", kGreen, {}}, busy{"machine busy", kBlack, {}};
+  for (const auto& s : steps) {
+    x.push_back(s.count);
+    e50.y.push_back(s.slo.e2e.p50);
+    e99.y.push_back(s.slo.e2e.p99);
+    q99.y.push_back(s.slo.query.p99);
+    scans.y.push_back(s.scans_per_s);
+    queries.y.push_back(s.queries_per_s);
+    server.y.push_back(s.cpu.server_pct);
+    tool.y.push_back(s.cpu.load_pct);
+    busy.y.push_back(s.cpu.machine_busy_pct * static_cast<double>(std::max(1U, std::thread::hardware_concurrency())));
+  }
+  const bool sensors = !scenario.ramp || scenario.ramp->vary_sensors;
+  std::vector<Panel> panels = {{"latency ms", {e50, e99, q99}}, {"", {scans}}, {"", {queries}},
+                               {"cpu % of a core", {server, tool, busy}}};
+  return writeChart(file, scenario.name + " ramp", sensors ? "sensors" : "query clients", x, panels);
+}
+
+}  // namespace densemap::load
