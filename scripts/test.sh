@@ -10,13 +10,19 @@ start=$(date +%s)
 built=$(date +%s)
 echo "test.sh: build took $((built - start)) s"
 BUILD_DIR=${DENSEMAP_BUILD_DIR:-build}
-run_tests=(ctest --test-dir "$BUILD_DIR" --output-on-failure --parallel "$(nproc)" --timeout 900)
 # As root, run every test in a private network namespace with only `lo`: DDS traffic cannot
 # leave the machine even by mistake. Elsewhere the tests bind loopback themselves.
-if [ "$(id -u)" -eq 0 ] && unshare -n true 2>/dev/null; then
-  echo "test.sh: running tests in a private network namespace (loopback only)"
-  unshare -n sh -c 'ip link set lo up && exec "$@"' sh "${run_tests[@]}"
-else
-  "${run_tests[@]}"
-fi
-echo "test.sh: tests took $(( $(date +%s) - built )) s; total $(( $(date +%s) - start )) s"
+isolated() {
+  if [ "$(id -u)" -eq 0 ] && unshare -n true 2>/dev/null; then
+    unshare -n sh -c 'ip link set lo up && exec "$@"' sh "$@"
+  else
+    "$@"
+  fi
+}
+echo "test.sh: tests run in a private network namespace (loopback only) when root"
+isolated ctest --test-dir "$BUILD_DIR" --output-on-failure --parallel "$(nproc)" --timeout 900
+tested=$(date +%s)
+echo "test.sh: tests took $((tested - built)) s"
+# A 2-minute soak (scripts/soak.sh MINUTES for longer ones): fails on RSS growth or p99 drift.
+DENSEMAP_BIN="$BUILD_DIR/bin" SOAK_OUT=/tmp/densemap-soak-ci isolated ./scripts/soak.sh 2
+echo "test.sh: soak took $(( $(date +%s) - tested )) s; total $(( $(date +%s) - start )) s"

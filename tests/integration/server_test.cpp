@@ -15,6 +15,7 @@
 #include "densemap/raycast/integrator.hpp"
 #include "densemap/sim/sequence.hpp"
 #include "densemap/test_support/data_dir.hpp"
+#include "densemap/test_support/server_process.hpp"
 #include "densemap/upsample/interpolation.hpp"
 
 extern char** environ;
@@ -24,51 +25,7 @@ namespace {
 
 using namespace std::chrono_literals;
 
-class ServerProcess {
- public:
-  ServerProcess(const std::filesystem::path& dir, std::uint32_t domain,
-                const std::string& extra = "")
-      : dir_(dir), domain_(domain) {
-    std::ofstream(dir / "server.textproto")
-        << "map { resolution_m: 0.2 max_range_m: 25 }\n"
-        << "snapshot { path: \"" << (dir / "map.dmap").string() << "\" autosave_period_s: 0 }\n"
-        << "dds { domain_id: " << domain << " }\n"
-        << extra;
-    start();
-  }
-  ~ServerProcess() { stop(); }
-
-  void start() {
-    const std::string config = (dir_ / "server.textproto").string();
-    const char* argv[] = {DENSEMAP_SERVER_BIN, "--config", config.c_str(), nullptr};
-    ASSERT_EQ(posix_spawn(&pid_, DENSEMAP_SERVER_BIN, nullptr, nullptr, const_cast<char**>(argv),
-                          environ),
-              0);
-  }
-  /// Resident memory of the server process, kB (0 if unknown).
-  [[nodiscard]] long residentKb() const {
-    std::ifstream in("/proc/" + std::to_string(pid_) + "/status");
-    std::string line;
-    while (std::getline(in, line)) {
-      if (line.rfind("VmRSS:", 0) == 0) return std::stol(line.substr(6));
-    }
-    return 0;
-  }
-  /// SIGTERM; returns the exit status (-1 if it did not exit normally).
-  int stop() {
-    if (pid_ <= 0) return -1;
-    kill(pid_, SIGTERM);
-    int status = 0;
-    waitpid(pid_, &status, 0);
-    pid_ = 0;
-    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  }
-
- private:
-  std::filesystem::path dir_;
-  std::uint32_t domain_;
-  pid_t pid_ = 0;
-};
+using test::ServerProcess;
 
 std::unique_ptr<Client> connect(std::uint32_t domain) {
   auto client = Client::create({.domain_id = domain, .timeout = 10s, .subscribe_deltas = true});
