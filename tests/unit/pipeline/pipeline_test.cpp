@@ -310,6 +310,23 @@ TEST(LatestWinsQueue, DropsTheOldestWhenFullAndCountsIt) {
   EXPECT_FALSE(sut.push(5));
 }
 
+TEST(LatestWinsQueue, PerKeyTheLatestWinsWithinItsOwnKeyAndTheTotalIsBounded) {
+  // Items "a1", "b1", ...: the key is the letter.
+  LatestWinsQueue<std::string> sut(2, 5, [](const std::string& s) { return s.substr(0, 1); });
+  std::optional<std::string> dropped;
+  for (const char* item : {"a1", "b1", "a2", "b2"}) sut.push(item, &dropped);
+  EXPECT_FALSE(dropped.has_value());
+  sut.push("a3", &dropped);  // a is full: its oldest goes, b keeps both
+  EXPECT_EQ(dropped, "a1");
+  dropped.reset();
+  sut.push("c1", &dropped);  // 5 in all: fits
+  EXPECT_FALSE(dropped.has_value());
+  sut.push("d1", &dropped);  // beyond the total: the oldest of any key goes
+  EXPECT_EQ(dropped, "b1");
+  EXPECT_EQ(sut.dropped(), 2U);
+  for (const char* expected : {"a2", "b2", "a3", "c1", "d1"}) EXPECT_EQ(sut.pop(0ms), expected);
+}
+
 TEST(SensorTally, CountsGapsWithinEachSensorsIncreasingSequence) {
   SensorTally sut;
   for (std::uint64_t seq : {1, 2, 5, 6, 10}) sut.received("a", seq);  // 2 + 3 skipped
@@ -339,6 +356,33 @@ TEST(SensorTally, KeepsAtMostSixtyFourIdsApartAndCountsTheRestTogether) {
   EXPECT_TRUE(std::any_of(sensors.begin(), sensors.end(), [](const SensorCounters& c) {
     return c.sensor_id == SensorTally::kOtherSensors && c.received == 36;
   }));
+}
+
+TEST(Pipeline, OneSensorsBurstNeverPushesOutAnotherSensorsScan) {
+  // The worker is busy with front's first scan while rear's scan waits and front floods the
+  // queue: front's own older scans are dropped, rear's is integrated.
+  auto sut = Pipeline::create({.resolution_m = 0.05, .threads = 1, .queue_depth = 2});
+  ASSERT_TRUE(sut);
+  (*sut)->start();
+  auto scan = [](const char* id, std::uint64_t seq) {
+    RawScan r = rawScan(seq, 20000);
+    r.sensor_id = id;
+    return r;
+  };
+  (*sut)->submit(scan("front", 1));
+  (*sut)->submit(scan("rear", 1));
+  for (std::uint64_t seq = 2; seq <= 20; ++seq) (*sut)->submit(scan("front", seq));
+  ASSERT_TRUE(waitFor([&] {
+    const auto c = (*sut)->counters();
+    return c.integrated + c.dropped == 21;
+  }));
+  (*sut)->stop();
+  const auto c = (*sut)->counters();
+  ASSERT_EQ(c.sensors.size(), 2U);
+  EXPECT_EQ(c.sensors[1].sensor_id, "rear");
+  EXPECT_EQ(c.sensors[1].integrated, 1U);
+  EXPECT_EQ(c.sensors[1].dropped, 0U);
+  EXPECT_GT(c.sensors[0].dropped, 0U);  // front fell behind, at its own expense
 }
 
 TEST(Pipeline, CountsEachSensorsScansAndTheirSeqGaps) {

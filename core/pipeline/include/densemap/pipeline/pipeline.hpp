@@ -23,6 +23,9 @@
 
 namespace densemap {
 
+/// The waiting scans of all sensors together: at most this many times `queue_depth`.
+inline constexpr std::size_t kQueueSensorShare = 8;
+
 struct PipelineOptions {
   Backend backend = Backend::kGrid;
   double resolution_m = 0.2;
@@ -38,6 +41,8 @@ struct PipelineOptions {
   /// Densify each scan before integration (issue 6's upsample stage); std::nullopt: off.
   std::optional<upsample::UpsampleOptions> upsample;
   int threads = 2;  // size of the task arena the pipeline owns
+  /// Scans waiting per sensor id (latest wins per sensor: a full sensor's oldest is dropped);
+  /// all sensors together hold at most kQueueSensorShare times as many.
   std::size_t queue_depth = 2;
   ScanLimits limits;
   /// Fill IntegrationResult::changes for scans (cell by cell: costs O(changed cells) per
