@@ -395,6 +395,10 @@ std::string kneeSummary(const std::vector<RampStepResult>& steps, bool vary_sens
   if (c.machine_busy_pct >= 90) {
     saturated = format("the machine's CPU (%.0f%% busy: server %.0f%%, load tool %.0f%% of one core)",
                        c.machine_busy_pct, c.server_pct, c.load_pct);
+  } else if (c.machine_busy_pct >= 75) {
+    saturated = format("nearly the machine's CPU (%.0f%% busy: server %.0f%%, load tool %.0f%% of one "
+                       "core; scheduling delays start before 100%%)",
+                       c.machine_busy_pct, c.server_pct, c.load_pct);
   } else if (c.server_pct >= 90) {
     saturated = format("the server's integration (%.0f%% of a core, machine %.0f%% busy)",
                        c.server_pct, c.machine_busy_pct);
