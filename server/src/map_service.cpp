@@ -1,5 +1,6 @@
 #include "map_service.hpp"
 
+#include <malloc.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -379,6 +380,21 @@ void answerRay(const dds::Entity& writer, const RayRequest& req, const MapView& 
 
 }  // namespace
 
+namespace {
+
+/// After work that allocates and frees a copy of the map (a snapshot, a late joiner's tiles):
+/// hands the freed memory back to the system. glibc keeps freed memory in per-thread arenas,
+/// so without this a daemon's RSS climbs to the sum of each thread's peak (seen as +10% steps
+/// in a 2-minute soak).
+struct ReturnFreeMemory {
+  ReturnFreeMemory() = default;
+  ReturnFreeMemory(const ReturnFreeMemory&) = delete;
+  ReturnFreeMemory& operator=(const ReturnFreeMemory&) = delete;
+  ~ReturnFreeMemory() { malloc_trim(0); }
+};
+
+}  // namespace
+
 void MapService::runTask(std::function<void()> task) {
   ++queries_in_flight_;
   query_arena_.execute([&] {
@@ -492,6 +508,7 @@ void MapService::replyCommand(const densemap_msgs_RequestId& id,
 Expected<std::size_t> MapService::save(const std::filesystem::path& file) {
   const std::filesystem::path target = file.empty() ? options_.snapshot_path : file;
   if (target.empty()) return makeError("no snapshot path configured or given");
+  const ReturnFreeMemory trim;  // the snapshot's buffers (about the file's size)
   return saveSnapshot(*pipeline_.view(), SensorModel(pipeline_.options().sensor),
                       pipeline_.options().backend, target);
 }
@@ -545,6 +562,7 @@ void MapService::publishManifest() {
 
 Expected<std::string> MapService::sendMap(const densemap_msgs_RequestId& request) {
   // One version throughout: the tiles are a consistent copy of it.
+  const ReturnFreeMemory trim;  // the tiles' buffers and the writer's copies until acked
   const auto view = pipeline_.view();
   const auto tiles = tilesOf(*view);
   std::size_t cells = 0;
