@@ -1,7 +1,9 @@
 #include "densemap/client/client.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <random>
 #include <thread>
 #include <unordered_map>
@@ -30,6 +32,8 @@ struct Client::Dds {
   dds::Topics topics;
   dds::Entity scan_w, pq_w, bq_w, rq_w, cq_w;
   dds::Entity pr_r, br_r, rr_r, cr_r, man_r, delta_r, event_r, st_r;
+  // One per reply reader: a request waits for data on its own reader, not by polling.
+  std::optional<dds::WaitSet> pr_ws, br_ws, rr_ws, cr_ws;
 };
 
 Client::Client(const ClientOptions& options)
@@ -73,6 +77,13 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
   make(d.event_r, d.topics.events, {.depth = 1024}, false);
   make(d.st_r, d.topics.status, dds::kLatestStateQos, false);
   if (!status) return std::unexpected(status.error());
+  for (auto [ws, reader] : {std::pair{&d.pr_ws, &d.pr_r}, std::pair{&d.br_ws, &d.br_r},
+                            std::pair{&d.rr_ws, &d.rr_r}, std::pair{&d.cr_ws, &d.cr_r}}) {
+    auto w = dds::WaitSet::create(d.participant);
+    if (!w) return std::unexpected(w.error());
+    if (auto ok = w->attachReader(*reader, 1); !ok) return std::unexpected(ok.error());
+    ws->emplace(std::move(*w));
+  }
   return c;
 }
 
@@ -126,10 +137,11 @@ Expected<void> Client::publishScan(const RawScan& scan) {
 
 namespace {
 
-/// Waits for the reply to `id` on `reader`, calling `f` with it.
+/// Waits for the reply to `id` on `reader` (asleep on `waitset` until samples arrive; replies
+/// to other clients are taken and skipped), calling `f` with it.
 template <class Reply>
-Expected<void> awaitReply(const dds::Entity& reader, const densemap_msgs_RequestId& id,
-                          std::chrono::milliseconds timeout,
+Expected<void> awaitReply(const dds::Entity& reader, dds::WaitSet& waitset,
+                          const densemap_msgs_RequestId& id, std::chrono::milliseconds timeout,
                           const std::function<void(const Reply&)>& f) {
   const auto deadline = Clock::now() + timeout;
   bool done = false;
@@ -141,10 +153,13 @@ Expected<void> awaitReply(const dds::Entity& reader, const densemap_msgs_Request
       }
     });
     if (done) break;
-    if (Clock::now() > deadline)
+    const auto now = Clock::now();
+    if (now > deadline)
       return makeError("no reply from densemap-server within " + std::to_string(timeout.count()) +
                        " ms");
-    std::this_thread::sleep_for(std::chrono::microseconds(200));
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - now);
+    (void)waitset.wait(
+        std::clamp(left, std::chrono::milliseconds(1), std::chrono::milliseconds(100)));
   }
   return {};
 }
@@ -167,7 +182,8 @@ Expected<PointQueryAnswer> Client::queryPointsRaw(const std::vector<float>& xyz)
   PointQueryAnswer answer;
   std::string error;
   auto ok = awaitReply<densemap_msgs_PointQueryReply>(
-      dds_->pr_r, req.id, options_.timeout, [&](const densemap_msgs_PointQueryReply& r) {
+      dds_->pr_r, *dds_->pr_ws, req.id, options_.timeout,
+      [&](const densemap_msgs_PointQueryReply& r) {
         if (r.status != 0) {
           error = text(r.error);
           return;
@@ -195,7 +211,8 @@ Expected<BoxQueryAnswer> Client::queryBox(const Point3f& min, const Point3f& max
   BoxQueryAnswer answer;
   std::string error;
   auto ok = awaitReply<densemap_msgs_BboxQueryReply>(
-      dds_->br_r, req.id, options_.timeout, [&](const densemap_msgs_BboxQueryReply& r) {
+      dds_->br_r, *dds_->br_ws, req.id, options_.timeout,
+      [&](const densemap_msgs_BboxQueryReply& r) {
         if (r.status != 0) {
           error = text(r.error);
           return;
@@ -225,7 +242,8 @@ Expected<RayQueryAnswer> Client::castRay(const Point3f& origin, const Point3f& d
   RayQueryAnswer answer;
   std::string error;
   auto ok = awaitReply<densemap_msgs_RayQueryReply>(
-      dds_->rr_r, req.id, options_.timeout, [&](const densemap_msgs_RayQueryReply& r) {
+      dds_->rr_r, *dds_->rr_ws, req.id, options_.timeout,
+      [&](const densemap_msgs_RayQueryReply& r) {
         if (r.status != 0) {
           error = text(r.error);
           return;
@@ -251,11 +269,12 @@ Expected<std::string> Client::command(CommandKind kind, const Point3f& min, cons
   if (auto ok = dds::write(dds_->cq_w, &req); !ok) return std::unexpected(ok.error());
   std::string detail, error;
   // Commands wait for the scan in flight and may write large files: allow more time.
-  auto ok = awaitReply<densemap_msgs_CommandReply>(dds_->cr_r, req.id, options_.timeout * 6,
-                                                   [&](const densemap_msgs_CommandReply& r) {
-                                                     if (r.status != 0) error = text(r.error);
-                                                     detail = text(r.detail);
-                                                   });
+  auto ok =
+      awaitReply<densemap_msgs_CommandReply>(dds_->cr_r, *dds_->cr_ws, req.id, options_.timeout * 6,
+                                             [&](const densemap_msgs_CommandReply& r) {
+                                               if (r.status != 0) error = text(r.error);
+                                               detail = text(r.detail);
+                                             });
   if (!ok) return std::unexpected(ok.error());
   if (!error.empty()) return makeError("server: " + error);
   return detail;
