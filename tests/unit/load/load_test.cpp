@@ -171,13 +171,17 @@ TEST(LoadReport, SoakFailsOnRssGrowthOrP99DriftAfterWarmUp) {
   RunResult r = syntheticRun();
   for (auto& u : r.usage) {
     if (u.t_s < 20) u.server_rss = 50 << 20;  // growth during warm-up does not count
+    if (u.t_s >= 20 && static_cast<int>(u.t_s) % 10 == 5) u.server_rss = 80 << 20;  // a sawtooth
   }
   EXPECT_TRUE(checkSoak(r, plan).passed) << checkSoak(r, plan).why;
-  r.usage[90].server_rss = 115 << 20;
+  r.usage[90].server_rss = 115 << 20;  // a higher peak in the last window
   auto v = checkSoak(r, plan);
   EXPECT_FALSE(v.passed);
   EXPECT_NEAR(v.rss_growth, 0.15, 1e-9);
   r.usage[90].server_rss = 105 << 20;
+  EXPECT_TRUE(checkSoak(r, plan).passed);
+  r.usage[90].server_rss = 100 << 20;
+  r.usage[30].server_rss = 115 << 20;  // a peak in the middle, not a trend
   EXPECT_TRUE(checkSoak(r, plan).passed);
   // The last 30 s at 30 ms against 20 ms: +50%, 10 ms over the 5 ms floor.
   for (auto& e : r.sensors[0].e2e) {

@@ -44,12 +44,13 @@ struct SloVerdict {
 };
 [[nodiscard]] SloVerdict checkSlo(const RunResult& run, const Slo& slo);
 
-/// Soak verdict: RSS growth after warm-up and drift of the end-to-end p99, first window after
-/// warm-up against the last.
+/// Soak verdict, the first window after warm-up against the last: growth of the server's peak
+/// RSS and drift of the end-to-end p99.
 struct SoakVerdict {
   bool passed = true;
   std::string why;
-  double rss_at_warm_up_mib = 0, rss_max_after_mib = 0, rss_growth = 0;
+  double rss_at_warm_up_mib = 0, rss_max_after_mib = 0;  // peaks in the first / last window
+  double rss_growth = 0;
   LatencyStats first_window, last_window;
   double p99_drift = 0;
 };
