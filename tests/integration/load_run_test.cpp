@@ -2,7 +2,8 @@
 // query clients (threads and processes) and a late joiner; every scan sent is accounted for.
 #include <gtest/gtest.h>
 
-#include "densemap/load/report.hpp"
+#include <fstream>
+
 #include "densemap/load/runner.hpp"
 #include "densemap/sim/sequence.hpp"
 #include "densemap/test_support/data_dir.hpp"
@@ -13,14 +14,20 @@ namespace {
 
 using namespace std::chrono_literals;
 
+/// Two robots (30 m apart) at 5 Hz, two clients asking for every query kind, a late joiner.
+std::string smallScenarioText(const std::filesystem::path& data) {
+  return "name: \"small\" duration_s: 4\n"
+         "sensors { sensor_id: \"r\" data: \"" +
+         data.string() +
+         "\" rate_hz: 5 count: 2 "
+         "offset_step { x: 30 } }\n"
+         "clients { name: \"v\" count: 2 rate_hz: 20 point_weight: 2 bbox_weight: 1 ray_weight: 1 "
+         "point_batch: 200 bbox_edge_m: 5 }\n"
+         "late_joiners { count: 1 first_at_s: 2 }\n";
+}
+
 Scenario smallScenario(const std::filesystem::path& data) {
-  auto s = parseScenario(
-      "name: \"small\" duration_s: 4\n"
-      "sensors { sensor_id: \"r\" data: \"" + data.string() + "\" rate_hz: 5 count: 2 "
-      "offset_step { x: 30 } }\n"
-      "clients { name: \"v\" count: 2 rate_hz: 20 point_weight: 2 bbox_weight: 1 ray_weight: 1 "
-      "point_batch: 200 bbox_edge_m: 5 }\n"
-      "late_joiners { count: 1 first_at_s: 2 }\n");
+  auto s = parseScenario(smallScenarioText(data));
   EXPECT_TRUE(s) << s.error().message;
   return *s;
 }
@@ -36,7 +43,7 @@ std::filesystem::path simulate(const std::filesystem::path& dir) {
   return dir / "data";
 }
 
-void expectEveryScanAccountedFor(const RunResult& r, const Scenario& s) {
+void expectEveryScanAccountedFor(const RunResult& r) {
   ASSERT_EQ(r.sensors.size(), 2U);
   for (const SensorResult& x : r.sensors) {
     // 5 Hz for 4 s, the second copy a tenth of a second later.
@@ -65,7 +72,6 @@ void expectEveryScanAccountedFor(const RunResult& r, const Scenario& s) {
   EXPECT_GT(r.after.rss_bytes, 0U);
   EXPECT_GT(r.after.cpu_s, 0.0);
   EXPECT_GE(r.usage.size(), 4U);
-  EXPECT_TRUE(checkSlo(r, s.slo).dropped == 0 || r.after.dropped > 0);
 }
 
 TEST(LoadRun, TwoSensorsTwoClientsAndALateJoinerAreAllCounted) {
@@ -81,8 +87,7 @@ TEST(LoadRun, TwoSensorsTwoClientsAndALateJoinerAreAllCounted) {
   ASSERT_TRUE(r) << r.error().message;
   // Bounded: the duration, discovery and at most a few seconds of draining.
   EXPECT_LT(std::chrono::steady_clock::now() - start, 40s);
-  expectEveryScanAccountedFor(*r, s);
-  // Both robots' scans are in the one map: the second robot, 30 m further on, added cells.
+  expectEveryScanAccountedFor(*r);
   EXPECT_GT(r->after.known_cells, 0U);
   EXPECT_EQ(server.stop(), 0);
 }
@@ -94,23 +99,18 @@ TEST(LoadRun, QueryClientsAsProcesses) {
   const Scenario s = smallScenario(data);
   // The children rebuild the scenario from a file, as `densemap load --processes` does.
   const auto file = dir.path() / "small.textproto";
-  std::ofstream(file) << "name: \"small\" duration_s: 4\n"
-                      << "sensors { sensor_id: \"r\" data: \"" << data.string()
-                      << "\" rate_hz: 5 count: 2 offset_step { x: 30 } }\n"
-                      << "clients { name: \"v\" count: 2 rate_hz: 20 point_weight: 2 "
-                      << "bbox_weight: 1 ray_weight: 1 point_batch: 200 bbox_edge_m: 5 }\n"
-                      << "late_joiners { count: 1 first_at_s: 2 }\n";
+  std::ofstream(file) << smallScenarioText(data);
   RunOptions o;
   o.client = {.domain_id = 162, .timeout = 10s};
   o.work_dir = dir.path() / "work";
   o.progress = false;
   o.processes = true;
   o.self_exe = DENSEMAP_CLI_BIN;
-  o.child_args = {"--domain-id", "162", "--timeout-ms", "10000", "load", "--scenario",
+  o.child_args = {"--domain-id", "162",        "--timeout-ms",     "10000", "load", "--scenario",
                   file.string(), "--work-dir", o.work_dir.string()};
   auto r = runScenario(s, o);
   ASSERT_TRUE(r) << r.error().message;
-  expectEveryScanAccountedFor(*r, s);
+  expectEveryScanAccountedFor(*r);
   for (const QueryResult& c : r->clients) EXPECT_GT(c.cpu_s, 0.0) << c.name;
 }
 

@@ -1,7 +1,6 @@
 #include "densemap/load/runner.hpp"
 
 #include <spawn.h>
-#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -12,7 +11,6 @@
 #include <map>
 #include <mutex>
 #include <random>
-#include <sstream>
 #include <thread>
 #include <unordered_map>
 
@@ -52,6 +50,12 @@ std::filesystem::path dataPath(const SensorPlan& p, const std::filesystem::path&
   return p.sim ? simDatasetDir(*p.sim, work_dir) : p.data;
 }
 
+/// Streams that replay the same part of the same dataset share one preloaded copy.
+std::string datasetKey(const SensorPlan& p, const std::filesystem::path& work_dir) {
+  return dataPath(p, work_dir).string() + "#" + std::to_string(p.first) + "+" +
+         std::to_string(p.limit);
+}
+
 /// A dataset's scans as a sender publishes them (sensor frame, pose as given).
 struct Dataset {
   std::vector<RawScan> scans;
@@ -84,13 +88,11 @@ struct Track {
 
 RawScan withOffset(const RawScan& scan, const Transform& offset) {
   RawScan out = scan;
-  const Eigen::Vector3d t = offset * Eigen::Vector3d(scan.t_world_sensor[0],
-                                                     scan.t_world_sensor[1],
+  const Eigen::Vector3d t = offset * Eigen::Vector3d(scan.t_world_sensor[0], scan.t_world_sensor[1],
                                                      scan.t_world_sensor[2]);
-  const Eigen::Quaterniond q =
-      Eigen::Quaterniond(offset.linear()) *
-      Eigen::Quaterniond(scan.q_world_sensor[0], scan.q_world_sensor[1], scan.q_world_sensor[2],
-                         scan.q_world_sensor[3]);
+  const Eigen::Quaterniond q = Eigen::Quaterniond(offset.linear()) *
+                               Eigen::Quaterniond(scan.q_world_sensor[0], scan.q_world_sensor[1],
+                                                  scan.q_world_sensor[2], scan.q_world_sensor[3]);
   out.t_world_sensor = {t.x(), t.y(), t.z()};
   out.q_world_sensor = {q.w(), q.x(), q.y(), q.z()};
   return out;
@@ -101,8 +103,7 @@ Expected<std::map<std::string, std::shared_ptr<const Dataset>>> preload(
   std::map<std::string, std::shared_ptr<const Dataset>> out;
   std::size_t bytes = 0;
   for (const SensorPlan& p : scenario.sensors) {
-    const std::string key = dataPath(p, work_dir).string() + "#" + std::to_string(p.first) + "+" +
-                            std::to_string(p.limit);
+    const std::string key = datasetKey(p, work_dir);
     if (out.count(key) != 0) continue;
     auto source = openData(p, work_dir);
     if (!source) return std::unexpected(source.error());
@@ -119,9 +120,10 @@ Expected<std::map<std::string, std::shared_ptr<const Dataset>>> preload(
       data->scans.push_back(toRawScan(*scan, 0, p.sensor_id));
       bytes += data->scans.back().xyz.size() * sizeof(float);
       if (bytes > kPreloadBudget) {
-        return makeError("the scenario's datasets exceed the load tool's preload budget of 3 GiB "
-                         "(at " + (*source)->describe() + " scan " + std::to_string(i) +
-                         "); set a limit on the streams");
+        return makeError(
+            "the scenario's datasets exceed the load tool's preload budget of 3 GiB "
+            "(at " +
+            (*source)->describe() + " scan " + std::to_string(i) + "); set a limit on the streams");
       }
     }
     out.emplace(key, std::move(data));
@@ -134,8 +136,7 @@ std::vector<Track> tracksOf(const Scenario& scenario,
                             const std::filesystem::path& work_dir) {
   std::vector<Track> tracks;
   for (const SensorPlan& p : scenario.sensors) {
-    const auto& d = *data.at(dataPath(p, work_dir).string() + "#" + std::to_string(p.first) + "+" +
-                             std::to_string(p.limit));
+    const auto& d = *data.at(datasetKey(p, work_dir));
     Track t{{}, p.rate_hz, p.start_offset_s, p.loop};
     for (const RawScan& s : d.scans) {
       const Eigen::Vector3d o =
@@ -332,9 +333,8 @@ class Children {
  public:
   Expected<void> spawn(const RunOptions& o, const Scenario& scenario, Clock::time_point epoch,
                        const std::filesystem::path& tracks, const std::filesystem::path& dir) {
-    const auto epoch_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                              epoch.time_since_epoch())
-                              .count();
+    const auto epoch_ns =
+        std::chrono::duration_cast<std::chrono::nanoseconds>(epoch.time_since_epoch()).count();
     for (std::size_t i = 0; i < scenario.clients.size(); ++i) {
       outs_.push_back(dir / ("client-" + std::to_string(i) + ".txt"));
       std::vector<std::string> args = {o.self_exe.string()};
@@ -357,7 +357,8 @@ class Children {
     }
     return {};
   }
-  /// Their CPU time so far (live processes from /proc, exited ones from wait4).
+  /// Their CPU time so far, from /proc (while they run; their own final figure comes in their
+  /// result files).
   double cpuSeconds() const {
     double s = 0;
     for (const pid_t pid : pids_) s += processUsage(pid).cpu_s;
@@ -489,11 +490,10 @@ Expected<RunResult> runScenario(const Scenario& scenario, const RunOptions& opti
   std::vector<std::thread> threads;
   for (std::size_t i = 0; i < senders.size(); ++i) {
     const SensorPlan& p = scenario.sensors[i];
-    const Dataset& d = *data->at(dataPath(p, options.work_dir).string() + "#" +
-                                 std::to_string(p.first) + "+" + std::to_string(p.limit));
+    const Dataset& d = *data->at(datasetKey(p, options.work_dir));
     threads.emplace_back([&, i, &d = d] {
-      runSensor(*senders[i], scenario.sensors[i], i, d, epoch, scenario.duration_s, in_flight,
-                stop, result.sensors[i]);
+      runSensor(*senders[i], scenario.sensors[i], i, d, epoch, scenario.duration_s, in_flight, stop,
+                result.sensors[i]);
     });
   }
   for (std::size_t i = 0; i < queriers.size(); ++i) {

@@ -1,6 +1,8 @@
 #include "densemap/load/scenario.hpp"
 
+#include <cctype>
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 #include <set>
 
@@ -82,7 +84,8 @@ Expected<ClientTemplate> clientTemplate(const proto::QueryClient& c, std::size_t
   ClientTemplate t;
   ClientPlan& p = t.plan;
   p.name = c.name();
-  if (p.name.empty() || p.name.size() > 48) return makeError(field + ".name must be 1 .. 48 characters");
+  if (p.name.empty() || p.name.size() > 48)
+    return makeError(field + ".name must be 1 .. 48 characters");
   if (c.count() < 1 || c.count() > kMaxClients) {
     return makeError(field + ".count must be in 1 .. " + std::to_string(kMaxClients));
   }
@@ -100,8 +103,10 @@ Expected<ClientTemplate> clientTemplate(const proto::QueryClient& c, std::size_t
   if (c.point_batch() < 1 || c.point_batch() > 100000) {
     return makeError(field + ".point_batch must be in 1 .. 100000");
   }
-  if (!within(c.bbox_edge_m(), 0.1, 200)) return makeError(field + ".bbox_edge_m must be in 0.1 .. 200");
-  if (!within(c.ray_range_m(), 0.1, 1000)) return makeError(field + ".ray_range_m must be in 0.1 .. 1000");
+  if (!within(c.bbox_edge_m(), 0.1, 200))
+    return makeError(field + ".bbox_edge_m must be in 0.1 .. 200");
+  if (!within(c.ray_range_m(), 0.1, 1000))
+    return makeError(field + ".ray_range_m must be in 0.1 .. 1000");
   if (!within(c.spread_m(), 0, 1000)) return makeError(field + ".spread_m must be in 0 .. 1000");
   if (c.max_requests() < 1) return makeError(field + ".max_requests must be >= 1");
   p.rate_hz = c.rate_hz();
@@ -133,9 +138,12 @@ std::string sanitized(const std::string& s) {
 
 const char* queryKindName(QueryKind kind) {
   switch (kind) {
-    case QueryKind::kPoint: return "point";
-    case QueryKind::kBox: return "bbox";
-    case QueryKind::kRay: return "ray";
+    case QueryKind::kPoint:
+      return "point";
+    case QueryKind::kBox:
+      return "bbox";
+    case QueryKind::kRay:
+      return "ray";
   }
   return "?";
 }
@@ -169,8 +177,10 @@ Expected<Scenario> parseScenario(const std::string& text) {
   if (auto parsed = parseTextFormat(text, in); !parsed) return std::unexpected(parsed.error());
   Scenario s;
   s.name = in.name().empty() ? "unnamed" : in.name();
-  if (!within(in.duration_s(), 1, kMaxDurationS)) return makeError("duration_s must be in 1 .. 86400");
-  if (!within(in.sample_period_s(), 0.1, 600)) return makeError("sample_period_s must be in 0.1 .. 600");
+  if (!within(in.duration_s(), 1, kMaxDurationS))
+    return makeError("duration_s must be in 1 .. 86400");
+  if (!within(in.sample_period_s(), 0.1, 600))
+    return makeError("sample_period_s must be in 0.1 .. 600");
   s.duration_s = in.duration_s();
   s.sample_period_s = in.sample_period_s();
   for (int i = 0; i < in.sensors_size(); ++i) {
@@ -204,7 +214,8 @@ Expected<Scenario> parseScenario(const std::string& text) {
   }
   std::set<std::string> ids;
   for (const auto& p : s.sensors) {
-    if (!ids.insert(p.sensor_id).second) return makeError("sensor id '" + p.sensor_id + "' repeats");
+    if (!ids.insert(p.sensor_id).second)
+      return makeError("sensor id '" + p.sensor_id + "' repeats");
   }
   const auto& lj = in.late_joiners();
   if (lj.count() > kMaxJoiners) return makeError("late_joiners.count must be at most 1000");
@@ -306,9 +317,9 @@ std::filesystem::path simDatasetDir(const SequenceOptions& sim,
                                     const std::filesystem::path& work_dir) {
   char range[32];
   std::snprintf(range, sizeof range, "%g", sim.max_range_m);
-  return work_dir / ("sim-" + sanitized(sim.scene) + "-" + sanitized(sim.sensor) + "-" +
-                     std::to_string(sim.scans) + "-" + sanitized(range) + "-" +
-                     std::to_string(sim.seed));
+  return work_dir /
+         ("sim-" + sanitized(sim.scene) + "-" + sanitized(sim.sensor) + "-" +
+          std::to_string(sim.scans) + "-" + sanitized(range) + "-" + std::to_string(sim.seed));
 }
 
 }  // namespace densemap::load

@@ -4,7 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
-
+#include <map>
 #include <thread>
 
 #include "densemap/map/grid_map.hpp"
@@ -311,8 +311,11 @@ TEST(LatestWinsQueue, DropsTheOldestWhenFullAndCountsIt) {
 }
 
 TEST(LatestWinsQueue, PerKeyTheLatestWinsWithinItsOwnKeyAndTheTotalIsBounded) {
-  // Items "a1", "b1", ...: the key is the letter.
-  LatestWinsQueue<std::string> sut(2, 5, [](const std::string& s) { return s.substr(0, 1); });
+  // Items "a1", "b1", ... are keyed by their letter.
+  const std::map<std::string, std::string> letter = {
+      {"a1", "a"}, {"a2", "a"}, {"a3", "a"}, {"b1", "b"}, {"b2", "b"}, {"c1", "c"}, {"d1", "d"}};
+  LatestWinsQueue<std::string> sut(
+      2, 5, [&](const std::string& s) -> const std::string& { return letter.at(s); });
   std::optional<std::string> dropped;
   for (const char* item : {"a1", "b1", "a2", "b2"}) sut.push(item, &dropped);
   EXPECT_FALSE(dropped.has_value());

@@ -1,8 +1,8 @@
 #pragma once
 
+#include <algorithm>
 #include <chrono>
 #include <condition_variable>
-#include <algorithm>
 #include <cstddef>
 #include <deque>
 #include <functional>
@@ -22,7 +22,7 @@ namespace densemap {
 template <class T>
 class LatestWinsQueue {
  public:
-  using KeyOf = std::function<std::string(const T&)>;
+  using KeyOf = std::function<const std::string&(const T&)>;
   explicit LatestWinsQueue(std::size_t capacity, std::size_t total_capacity = 0, KeyOf key = {})
       : capacity_(capacity == 0 ? 1 : capacity),
         total_capacity_(std::max(capacity_, total_capacity)),
@@ -37,7 +37,7 @@ class LatestWinsQueue {
       if (closed_) return false;
       auto victim = items_.end();
       if (key_) {
-        const std::string key = key_(item);
+        const std::string& key = key_(item);
         std::size_t same = 0;
         for (auto it = items_.begin(); it != items_.end(); ++it) {
           if (key_(*it) != key) continue;
