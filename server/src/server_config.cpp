@@ -29,7 +29,7 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
     auto kernel = kernel::parseKernelMethod(config.map().kind());
     if (!kernel) {
       return makeError("map.kind: unknown kind '" + config.map().kind() +
-                       "' (expected log_odds, akimap, bgk or bgkl)");
+                       "' (expected log_odds, akimap, bgk, bgkl or akimap_rays)");
     }
     o.kernel = *kernel;
   }

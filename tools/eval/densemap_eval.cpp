@@ -140,9 +140,19 @@ int main(int argc, char** argv) {
                  "such interval of a ray (the paper's 0.5)")
       ->check(CLI::Range(0.01, 10.0))
       ->capture_default_str();
+  std::vector<std::string> kernel_settings;
+  app.add_option("--kernel-set", kernel_settings,
+                 "Override a kernel map setting for every kernel method of the run, NAME=VALUE "
+                 "(repeatable): free_step, length_scale, sf2, prior, free_margin, negative_step, "
+                 "search_max, min_thickness");
   app.add_option("--json", json_path, "Write the results as JSON");
   app.add_option("--roc", roc_prefix,
                  "Write the ROC curves of the first run: PREFIX_<method>.csv and PREFIX.svg");
+  std::string reliability_prefix;
+  app.add_option("--reliability", reliability_prefix,
+                 "Write the reliability diagrams of the first run (10 bins of predicted "
+                 "probability: mean prediction, observed occupied share): PREFIX.csv and "
+                 "PREFIX.svg");
   std::string slice_prefix;
   double slice_z = 1.0;
   app.add_option("--slice", slice_prefix,
@@ -275,6 +285,7 @@ int main(int argc, char** argv) {
   // results[method][run]
   std::vector<std::vector<RunResult>> results(methods.size());
   std::vector<densemap::tools::RocSeries> roc_series;
+  std::vector<densemap::tools::ReliabilitySeries> reliability_series;
   for (int run = 0; run < runs; ++run) {
     const std::uint64_t run_seed = seed + static_cast<std::uint64_t>(run);
     std::vector<Scan> scans(clouds.size());
@@ -292,7 +303,7 @@ int main(int argc, char** argv) {
           scans.size());
       RunResult r;
       const auto t0 = std::chrono::steady_clock::now();
-      std::function<double(const densemap::Point3f&)> probability;
+      std::function<std::optional<double>(const densemap::Point3f&)> probability;
       std::unique_ptr<densemap::kernel::KernelMap> kernel_map;
       std::unique_ptr<densemap::OccupancyMap> log_odds_map;
       if (methods[m] == "raycast") {
@@ -303,9 +314,10 @@ int main(int argc, char** argv) {
               [&] { integrator.integrate(*log_odds_map, scans[i].train, scans[i].origin); });
           progress.update(i + 1);
         }
-        probability = [&](const densemap::Point3f& x) {
+        probability = [&](const densemap::Point3f& x) -> std::optional<double> {
           const auto l = log_odds_map->logOddsAt(x);
-          return l ? 1.0 / (1.0 + std::exp(-static_cast<double>(*l))) : 0.5;
+          if (!l) return std::nullopt;
+          return 1.0 / (1.0 + std::exp(-static_cast<double>(*l)));
         };
       } else {
         auto options = densemap::kernel::KernelOptions::defaults(
@@ -315,6 +327,9 @@ int main(int argc, char** argv) {
         if (options.method == densemap::kernel::KernelMethod::kAkimap) {
           options.free_step = akimap_free_step;
         }
+        if (auto ok = densemap::kernel::applySettings(options, kernel_settings); !ok) {
+          return fail("--kernel-set: " + ok.error().message);
+        }
         kernel_map = std::make_unique<densemap::kernel::KernelMap>(resolution, options);
         for (std::size_t i = 0; i < scans.size(); ++i) {
           arena.execute([&] { kernel_map->integrate(scans[i].train, scans[i].origin); });
@@ -322,15 +337,17 @@ int main(int argc, char** argv) {
         }
         probability = [&](const densemap::Point3f& x) {
           const auto key = kernel_map->grid().pointToKey(x);
-          const auto p = key ? kernel_map->probability(*key) : std::nullopt;
-          return p.value_or(0.5);
+          return key ? kernel_map->probability(*key) : std::nullopt;
         };
       }
       r.build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       r.ms_per_scan = 1000.0 * r.build_s / static_cast<double>(scans.size());
       std::vector<Prediction> predictions;
       predictions.reserve(tests.size());
-      for (const TestPoint& t : tests) predictions.push_back({probability(t.x), t.occupied});
+      for (const TestPoint& t : tests) {
+        const auto p = probability(t.x);
+        predictions.push_back({p.value_or(0.5), t.occupied, p.has_value()});
+      }
       r.metrics = densemap::eval::evaluate(predictions);
       if (run == 0 && !roc_prefix.empty()) {
         const std::string path = roc_prefix + "_" + methods[m] + ".csv";
@@ -343,7 +360,15 @@ int main(int argc, char** argv) {
         if (!csv) return fail("cannot write " + path);
         roc_series.push_back({methods[m], r.metrics.auc, std::move(curve)});
       }
-      if (run == 0 && !slice_prefix.empty() && !write_slice(methods[m], probability)) return 1;
+      if (run == 0 && !reliability_prefix.empty()) {
+        reliability_series.push_back({methods[m], r.metrics.ece, r.metrics.reliability});
+      }
+      if (run == 0 && !slice_prefix.empty() &&
+          !write_slice(methods[m], [&](const densemap::Point3f& x) {
+            return probability(x).value_or(0.5);
+          })) {
+        return 1;
+      }
       results[m].push_back(std::move(r));
     }
   }
@@ -356,6 +381,27 @@ int main(int argc, char** argv) {
     }
     std::fprintf(stderr, "densemap-eval: wrote %s.svg\n", roc_prefix.c_str());
   }
+  if (!reliability_series.empty()) {
+    std::ostringstream title, csv;
+    title << "Reliability, " << protocol << " protocol, " << resolution << " m";
+    csv << "method,bin_lower,bin_upper,count,mean_predicted,observed\n";
+    for (const auto& s : reliability_series) {
+      for (const auto& b : s.bins) {
+        csv << s.name << ',' << b.lower << ',' << b.upper << ',' << b.count << ','
+            << b.mean_predicted << ',' << b.observed << '\n';
+      }
+    }
+    if (auto ok = densemap::writeFileAtomically(reliability_prefix + ".csv", csv.str()); !ok) {
+      return fail(ok.error().message);
+    }
+    if (auto ok = densemap::tools::writeReliabilitySvg(reliability_prefix + ".svg", title.str(),
+                                                       reliability_series);
+        !ok) {
+      return fail(ok.error().message);
+    }
+    std::fprintf(stderr, "densemap-eval: wrote %s.csv and %s.svg\n", reliability_prefix.c_str(),
+                 reliability_prefix.c_str());
+  }
   const auto stat = [&](const std::vector<RunResult>& rs, auto field) {
     double mean = 0.0, sq = 0.0;
     for (const RunResult& r : rs) mean += field(r);
@@ -366,8 +412,9 @@ int main(int argc, char** argv) {
   std::printf("densemap-eval: %s, protocol %s, resolution %g m, %zu scans, %d run(s), seed %llu\n",
               data.c_str(), protocol.c_str(), resolution, clouds.size(), runs,
               static_cast<unsigned long long>(seed));
-  std::printf("%-8s %14s %8s %8s %8s %8s %8s %9s %9s\n", "method", "auc (+-sd)", "mse", "acc_occ",
-              "acc_free", "occ>0.7", "free<0.3", "build_s", "ms/scan");
+  std::printf("%-11s %14s %7s %7s %7s %8s %7s %8s %7s %8s %8s\n", "method", "auc (+-sd)", "mse",
+              "ece", "acc_occ", "acc_free", "occ>0.7", "free<0.3", "known", "build_s",
+              "ms/scan");
   std::string json = "{\"results\": [";
   for (std::size_t m = 0; m < methods.size(); ++m) {
     const auto& rs = results[m];
@@ -379,16 +426,20 @@ int main(int argc, char** argv) {
     const auto free_band = stat(rs, [](const RunResult& r) { return r.metrics.acc_free_band; });
     const auto build = stat(rs, [](const RunResult& r) { return r.build_s; });
     const auto ms = stat(rs, [](const RunResult& r) { return r.ms_per_scan; });
-    std::printf("%-8s %7.4f+-%.4f %8.4f %8.4f %8.4f %8.4f %8.4f %9.2f %9.1f\n", methods[m].c_str(),
-                auc.first, auc.second, mse.first, occ.first, fre.first, occ_band.first,
-                free_band.first, build.first, ms.first);
-    char entry[512];
+    const auto ece = stat(rs, [](const RunResult& r) { return r.metrics.ece; });
+    const auto known = stat(rs, [](const RunResult& r) { return r.metrics.coverage; });
+    std::printf("%-11s %7.4f+-%.4f %7.4f %7.4f %7.4f %8.4f %7.4f %8.4f %7.4f %8.2f %8.1f\n",
+                methods[m].c_str(), auc.first, auc.second, mse.first, ece.first, occ.first,
+                fre.first, occ_band.first, free_band.first, known.first, build.first, ms.first);
+    char entry[768];
     std::snprintf(entry, sizeof(entry),
                   "%s{\"method\": \"%s\", \"protocol\": \"%s\", \"resolution\": %g, \"auc\": %.6f, "
                   "\"auc_sd\": %.6f, \"mse\": %.6f, \"acc_occupied\": %.6f, \"acc_free\": %.6f, "
-                  "\"build_s\": %.4f, \"ms_per_scan\": %.3f, \"runs\": %d}",
+                  "\"build_s\": %.4f, \"ms_per_scan\": %.3f, \"ece\": %.6f, \"known\": %.6f, "
+                  "\"runs\": %d}",
                   m == 0 ? "" : ", ", methods[m].c_str(), protocol.c_str(), resolution, auc.first,
-                  auc.second, mse.first, occ.first, fre.first, build.first, ms.first, runs);
+                  auc.second, mse.first, occ.first, fre.first, build.first, ms.first, ece.first,
+                  known.first, runs);
     json += entry;
   }
   json += "]}\n";

@@ -2,6 +2,7 @@
 
 #include <filesystem>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "densemap/eval/metrics.hpp"
@@ -20,5 +21,19 @@ struct RocSeries {
 /// per series, with the chance diagonal and a legend carrying each AUC.
 [[nodiscard]] Expected<void> writeRocSvg(const std::filesystem::path& path, const std::string& title,
                                          const std::vector<RocSeries>& series);
+
+/// One method's reliability diagram for the plot.
+struct ReliabilitySeries {
+  std::string name;
+  double ece = 0.0;
+  std::vector<eval::ReliabilityBin> bins;
+};
+
+/// An SVG reliability diagram: per method, the observed share of occupied test points against
+/// the mean predicted probability of each non-empty bin, with the diagonal of perfect
+/// calibration and a legend carrying each expected calibration error.
+[[nodiscard]] Expected<void> writeReliabilitySvg(const std::filesystem::path& path,
+                                                 const std::string& title,
+                                                 const std::vector<ReliabilitySeries>& series);
 
 }  // namespace densemap::tools

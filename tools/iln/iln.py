@@ -2,8 +2,12 @@
 """ILN (dissertation Ch. 4, Eq. 4.3) in PyTorch: train and evaluate on densemap's simulated range
 images. Offline only (Debian's python3-torch, CPU); densemap itself never imports torch.
 
-Data: `densemap-upsample-eval --export DIR` (raw float32 range images + index.csv).
+Data: `densemap-upsample-eval --export DIR` (simulated: raw float32 range images + index.csv) and
+`densemap-upsample-eval --real SCANS --export-real DIR` (real scans' full range images with their
+beam table; trained self-supervised: every n-th beam (--real-reduce) in, all beams as target).
   train:    iln.py train  --data DIR[,DIR2] --test-seeds 101,102 --model model.pt [--minutes M]
+            [--real-val 32-39] (real scans held out for validation; the test range of a real
+            dataset must never be exported for training)
             [--input 16x1024,16x2048] [--target 64x1024,128x2048,64x2048]
             (several directories: one sensor field of view each; every input/target pair that
             a directory holds is trained on)
@@ -35,29 +39,49 @@ PRIOR_MIN_WEIGHT = 1e-4  # the prior's floors (as in core/upsample/src/iln.cpp)
 PRIOR_MIN_RANGE = 1e-3
 
 
-def load_index(data):
-    """{(dir, scene, seed, pose): {(rows, cols): (array, top, bottom)}} over the comma-separated
-    data directories (an item pairs only the grids of one directory: one field of view)."""
+def load_index(data, real_reduce=(4, 2)):
+    """{(dir, scene, seed, pose): {(rows, cols): (array, beam elevations)}} over the
+    comma-separated data directories (an item pairs only the grids of one directory: one field of
+    view). A real scan (scene "real") also yields its every n-th beam grids (real_reduce)."""
     items = {}
     for directory in data.split(","):
-        load_directory(directory, items)
+        load_directory(directory, items, real_reduce)
     return items
 
 
-def load_directory(data, items):
+def read_beams(path):
+    """A beam table file (densemap-upsample-eval): one elevation per line, '#' comments."""
+    with open(path) as f:
+        values = [line.split("#")[0].strip() for line in f]
+    return np.array([float(v) for v in values if v], dtype=np.float64)
+
+
+def load_directory(data, items, real_reduce):
     with open(os.path.join(data, "index.csv")) as f:
         for row in csv.DictReader(f):
             rows, cols = int(row["rows"]), int(row["cols"])
             image = np.fromfile(os.path.join(data, row["file"]), dtype=np.float32)
             image = image.reshape(rows, cols)
+            if row.get("beams"):
+                elevations = read_beams(os.path.join(data, row["beams"]))
+            else:
+                elevations = np.linspace(float(row["top_deg"]), float(row["bottom_deg"]), rows)
             key = (data, row["scene"], int(row["seed"]), int(row["pose"]))
-            items.setdefault(key, {})[(rows, cols)] = (
-                image, float(row["top_deg"]), float(row["bottom_deg"]))
+            grids = items.setdefault(key, {})
+            grids[(rows, cols)] = (image, elevations)
+            if row["scene"] == "real":
+                for n in real_reduce:
+                    kept = image[::n]
+                    grids[(kept.shape[0], cols)] = (np.ascontiguousarray(kept), elevations[::n])
 
 
-def query_grid(in_rows, in_cols, out_rows, out_cols):
-    """Continuous (row, col) of every output pixel in the input grid (same field of view)."""
-    r = torch.arange(out_rows, dtype=torch.float32) * (in_rows - 1) / (out_rows - 1)
+def query_grid(in_elevations, in_cols, out_elevations, out_cols):
+    """Continuous (row, col) of every output pixel in the input grid (same field of view): an
+    output beam's row lies between the input beams around its elevation, in proportion to
+    elevation (as RangeLayout::pixelOf; rows past the edges are clamped by `neighbours`)."""
+    r = np.interp(-np.asarray(out_elevations), -np.asarray(in_elevations),
+                  np.arange(len(in_elevations), dtype=np.float64))
+    r = torch.from_numpy(r.astype(np.float32))
     c = torch.arange(out_cols, dtype=torch.float32) * in_cols / out_cols
     rr, cc = torch.meshgrid(r, c, indexing="ij")
     return torch.stack([rr.reshape(-1), cc.reshape(-1)], dim=-1)
@@ -148,18 +172,23 @@ class ILN(nn.Module):
         return (weight * ranges).sum(-1)
 
 
-def pairs(items, seeds, split, src, dst):
+def pairs(items, seeds, real_val, split, src, dst):
+    """(input, target, (target image, target elevations), queries) per item of `split`: "test"
+    takes the simulated seeds in `seeds` and the real scans in `real_val`."""
     out = []
     for (_, scene, seed, pose), grids in sorted(items.items()):
-        if (seed in seeds) != (split == "test") or src not in grids or dst not in grids:
+        held_out = seed in (real_val if scene == "real" else seeds)
+        if held_out != (split == "test") or src not in grids or dst not in grids:
             continue
-        out.append((torch.from_numpy(grids[src][0]), torch.from_numpy(grids[dst][0]), grids[dst]))
+        queries = query_grid(grids[src][1], src[1], grids[dst][1], dst[1])
+        out.append((torch.from_numpy(grids[src][0]), torch.from_numpy(grids[dst][0]), grids[dst],
+                    queries))
     return out
 
 
-def voxel_iou(pred, truth, top, bottom, voxel=0.1):
+def voxel_iou(pred, truth, elevations, voxel=0.1):
     rows, cols = truth.shape
-    elev = np.radians(top - np.arange(rows) * (top - bottom) / (rows - 1))[:, None]
+    elev = np.radians(np.asarray(elevations))[:, None]
     az = (2 * np.pi * np.arange(cols) / cols)[None, :]
     def keys(r):
         mask = r > 0
@@ -173,18 +202,17 @@ def voxel_iou(pred, truth, top, bottom, voxel=0.1):
     return common / max(1, a.size + t.size - common)
 
 
-def evaluate(model, test, src, dst):
-    queries = query_grid(src[0], src[1], dst[0], dst[1])
+def evaluate(model, test, dst):
     sums = {"iln": [0.0, 0.0], "bilinear": [0.0, 0.0]}
     with torch.no_grad():
-        for image, target, (_, top, bottom) in test:
+        for image, target, (_, elevations), queries in test:
             for name in sums:
                 out = (model(image[None], queries) if name == "iln" else bilinear(image[None], queries))
                 pred = out.reshape(dst).numpy()
                 t = target.numpy()
                 both = (pred > 0) & (t > 0)
                 sums[name][0] += np.abs(pred[both] - t[both]).mean()
-                sums[name][1] += voxel_iou(pred, t, top, bottom)
+                sums[name][1] += voxel_iou(pred, t, elevations)
     return {k: (v[0] / len(test), v[1] / len(test)) for k, v in sums.items()}
 
 
@@ -201,10 +229,9 @@ def augment(image, noise, dropout, generator):
 def train_model(a, model, train):
     """L1 on range (Adam), cosine learning rate from --lr to --lr-final; each step takes one
     training (image, target grid) pair and --queries random query lasers of that grid.
-    `train`: [(input, target, (target image, top, bottom), (src, dst))] over every grid pair."""
+    `train`: [(input, target, (target image, elevations), queries)] over every grid pair."""
     print(f"iln: {len(train)} training pairs, "
           f"{sum(p.numel() for p in model.parameters())} parameters", flush=True)
-    grids = {item[3]: query_grid(*item[3][0], *item[3][1]) for item in train}
     opt = torch.optim.Adam(model.parameters(), lr=a.lr)
     generator = torch.Generator().manual_seed(a.seed)
     order = torch.randperm(len(train), generator=generator).tolist()
@@ -218,8 +245,7 @@ def train_model(a, model, train):
         if cursor == len(order):
             order = torch.randperm(len(train), generator=generator).tolist()
             cursor = 0
-        image, target, _, dst = train[order[cursor]]
-        queries = grids[dst]
+        image, target, _, queries = train[order[cursor]]
         cursor += 1
         pick = torch.randperm(len(queries), generator=generator)[:a.queries]
         if a.noise > 0 or a.dropout > 0:
@@ -249,6 +275,18 @@ def schema_module():
     sys.path.insert(0, out)
     import iln_weights_pb2  # pylint: disable=import-outside-toplevel
     return iln_weights_pb2
+
+
+def load_pb(path):
+    """A weights file written by `export`: ({width, blocks, dim, prior, state}, provenance)."""
+    pb = schema_module()
+    message = pb.IlnModel()
+    with open(path, "rb") as f:
+        message.ParseFromString(f.read())
+    state = {t.name: torch.tensor(list(t.data), dtype=torch.float32).reshape(list(t.shape))
+             for t in message.tensors}
+    return ({"width": message.width, "blocks": message.blocks, "dim": message.dim,
+             "prior": message.prior, "state": state}, message.provenance)
 
 
 def export(a, model, test):
@@ -290,6 +328,13 @@ def main():
     p.add_argument("--data", required=True,
                    help="data directories, comma-separated (one field of view each)")
     p.add_argument("--test-seeds", default="101,102")
+    p.add_argument("--real-val", default="",
+                   help="real scans (dataset indices FIRST-LAST or a list) held out for validation")
+    p.add_argument("--real-weight", type=int, default=1,
+                   help="train: each real pair is drawn this many times as often as a simulated "
+                   "one")
+    p.add_argument("--real-reduce", default="4,2",
+                   help="real scans: inputs keep every n-th beam, for each n listed")
     p.add_argument("--input", default="16x1024",
                    help="input grids, comma-separated (pairs where the data has both grids)")
     p.add_argument("--target", default="64x1024,128x2048",
@@ -304,7 +349,8 @@ def main():
     p.add_argument("--dim", type=int, default=16, help="local feature width")
     p.add_argument("--prior", choices=["inverse_bilinear", "none"], default="inverse_bilinear",
                    help="score prior (see ILN)")
-    p.add_argument("--init", help="train: start from this checkpoint")
+    p.add_argument("--init", help="train: start from this checkpoint (.pt) or weights file (.pb; "
+                   "its architecture too)")
     p.add_argument("--noise", type=float, default=0.0,
                    help="train: Gaussian range noise added to the input returns, m")
     p.add_argument("--dropout", type=float, default=0.0,
@@ -320,15 +366,30 @@ def main():
     sources = [tuple(int(v) for v in t.split("x")) for t in a.input.split(",")]
     targets = [tuple(int(v) for v in t.split("x")) for t in a.target.split(",")]
     seeds = {int(s) for s in a.test_seeds.split(",")}
-    items = load_index(a.data)
+    real_val = set()
+    for part in filter(None, a.real_val.split(",")):
+        first, _, last = part.partition("-")
+        real_val.update(range(int(first), int(last or first) + 1))
+    items = load_index(a.data, tuple(int(n) for n in a.real_reduce.split(",")))
     grid_pairs = [(src, dst) for src in sources for dst in targets]
-    test = {g: pairs(items, seeds, "test", *g) for g in grid_pairs}
+    test = {g: pairs(items, seeds, real_val, "test", *g) for g in grid_pairs}
     test = {g: t for g, t in test.items() if t}
+    if a.init and a.init.endswith(".pb"):
+        init, provenance = load_pb(a.init)
+        a.width, a.blocks, a.dim = init["width"], init["blocks"], init["dim"]
+        a.prior = init["prior"] or "none"
+        print(f"iln: starting from {a.init} ({provenance[:200]})", flush=True)
     model = ILN(a.width, a.blocks, a.dim, prior=a.prior == "inverse_bilinear")
     if a.command == "train":
-        if a.init:
+        if a.init and a.init.endswith(".pb"):
+            model.load_state_dict(init["state"])
+        elif a.init:
             model.load_state_dict(torch.load(a.init))
-        train = [pair + (g,) for g in grid_pairs for pair in pairs(items, seeds, "train", *g)]
+        train = [pair for g in grid_pairs for pair in pairs(items, seeds, real_val, "train", *g)]
+        real = [pair for g in grid_pairs
+                for pair in pairs({k: v for k, v in items.items() if k[1] == "real"}, seeds,
+                                  real_val, "train", *g)]
+        train += real * (a.real_weight - 1)
         train_model(a, model, train)
     else:
         model.load_state_dict(torch.load(a.model))
@@ -336,7 +397,7 @@ def main():
         export(a, model, next(iter(test.values())))
         return
     for (src, dst), items_test in test.items():
-        for name, (mae, iou) in evaluate(model, items_test, src, dst).items():
+        for name, (mae, iou) in evaluate(model, items_test, dst).items():
             print(f"iln: test {name:8s} {src[0]}x{src[1]} -> {dst[0]}x{dst[1]}  "
                   f"MAE {mae:.3f} m  IoU {iou:.3f}", flush=True)
 

@@ -10,10 +10,12 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <iomanip>
 #include <map>
 #include <memory>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "../common/lists.hpp"
@@ -94,24 +96,37 @@ int main(int argc, char** argv) {
   app.add_option("--voxel", voxel, "Voxel size of the point metrics, m")->capture_default_str();
   app.add_option("--threads", threads, "Worker threads (0: all cores)")->capture_default_str();
   app.add_option("--json", json_path, "Write the results as JSON");
-  std::string real_path, real_layout_text = "64x2048";
+  std::string real_path, real_layout_text = "64x2048", real_beams_path, estimate_beams_path,
+      real_splits_text, reduce_text = "4", export_real_dir;
   double real_top = 45.5, real_bottom = -44.75;
-  int reduce = 4;
   std::size_t real_first = 0, real_limit = 0;
   app.add_option("--real", real_path,
                  "Also test on real scans (sensor frame, e.g. ../shared/data/balm-realworld): "
                  "keep every --reduce-th beam, upsample back, compare with all beams");
-  app.add_option("--real-grid", real_layout_text, "The real sensor's grid ROWSxCOLS")
+  app.add_option("--real-grid", real_layout_text,
+                 "The real sensor's grid ROWSxCOLS (ROWS must match --real-beams)")
       ->capture_default_str();
   app.add_option("--real-top", real_top, "Its top beam, deg (BALM's OS0-64: 45.5)")
       ->capture_default_str();
   app.add_option("--real-bottom", real_bottom, "Its bottom beam, deg (BALM's: -44.75)")
       ->capture_default_str();
-  app.add_option("--reduce", reduce, "Keep every n-th real beam")
-      ->capture_default_str()
-      ->check(CLI::Range(2, 16));
+  app.add_option("--real-beams", real_beams_path,
+                 "The real sensor's beam table (one elevation per line, deg, top first; e.g. "
+                 "config/sensors/balm-os0-64.beams) instead of evenly spread beams");
+  app.add_option("--estimate-beams", estimate_beams_path,
+                 "Estimate the real sensor's beam table from the --real scans (k-means on the "
+                 "elevations of returns beyond 3 m), write it to this file and use it");
+  app.add_option("--reduce", reduce_text,
+                 "Keep every n-th real beam; a comma-separated list tests each (e.g. 4,2)")
+      ->capture_default_str();
   app.add_option("--real-first", real_first, "First real scan")->capture_default_str();
   app.add_option("--real-limit", real_limit, "Real scans to use (0: all)")->capture_default_str();
+  app.add_option("--real-splits", real_splits_text,
+                 "Report the real scans per split, NAME:FIRST-LAST of dataset indices, "
+                 "comma-separated (e.g. train:0-39,test:40-79); default one split 'all'");
+  app.add_option("--export-real", export_real_dir,
+                 "Write every real scan's full range image (and the beam table) as training data "
+                 "for tools/iln: DIR/index.csv, raw float32 row-major files");
   std::string export_dir;
   app.add_option("--export", export_dir,
                  "Also write every simulated range image (input and targets) as raw float32 "
@@ -233,10 +248,24 @@ int main(int argc, char** argv) {
                  export_dir.c_str());
   }
 
-  // Real data: (method) -> sums over scans.
-  std::map<std::size_t, Sum> real_sums;
+  // Real data: (split, reduce, method) -> sums over scans.
+  struct Split {
+    std::string name;
+    std::size_t first = 0, last = 0;
+  };
+  std::vector<Split> splits;
+  std::vector<int> reduces;
+  std::map<std::tuple<std::size_t, std::size_t, std::size_t>, Sum> real_sums;
   RangeLayout real_layout;
   if (!real_path.empty()) {
+    for (const std::string& item : densemap::tools::splitList(reduce_text)) {
+      const auto n = densemap::tools::parseNumberList(item);
+      if (!n || n->size() != 1 || n->front() < 2 || n->front() > 16) {
+        return fail("--reduce: '" + item + "' is not a number in 2..16");
+      }
+      reduces.push_back(static_cast<int>(n->front()));
+    }
+    if (reduces.empty()) return fail("--reduce lists nothing");
     auto layout = densemap::upsample::parseRangeLayout(real_layout_text, real_top, real_bottom);
     if (!layout) return fail("--real-grid: " + layout.error().message);
     real_layout = *layout;
@@ -245,41 +274,147 @@ int main(int argc, char** argv) {
     const std::size_t total = (*source)->size();
     if (real_first >= total) return fail("--real-first is past the data's scans");
     const std::size_t end = real_limit == 0 ? total : std::min(total, real_first + real_limit);
+    if (real_splits_text.empty()) {
+      splits.push_back({"all", real_first, end - 1});
+    } else {
+      for (const std::string& item : densemap::tools::splitList(real_splits_text)) {
+        const auto colon = item.find(':');
+        const auto dash = item.find('-', colon == std::string::npos ? 0 : colon);
+        Split split;
+        try {
+          if (colon == std::string::npos || dash == std::string::npos) throw std::exception();
+          split = {item.substr(0, colon), std::stoul(item.substr(colon + 1, dash - colon - 1)),
+                   std::stoul(item.substr(dash + 1))};
+        } catch (const std::exception&) {
+          return fail("--real-splits: '" + item + "' is not NAME:FIRST-LAST");
+        }
+        if (split.name.empty() || split.first > split.last) {
+          return fail("--real-splits: '" + item + "' is not NAME:FIRST-LAST");
+        }
+        splits.push_back(split);
+      }
+    }
+    const auto scan_of = [&](std::size_t i) -> densemap::Expected<densemap::PointCloud> {
+      auto scan = (*source)->load(i);
+      if (!scan) return std::unexpected(scan.error());
+      if (scan->frame != densemap::PointFrame::kSensor) {
+        return densemap::makeError(real_path +
+                                   " stores world-frame points: range images need sensor-frame "
+                                   "scans");
+      }
+      return std::move(scan->points);
+    };
+    if (!estimate_beams_path.empty()) {
+      std::vector<densemap::PointCloud> clouds;
+      for (std::size_t i = real_first; i < end; ++i) {
+        auto points = scan_of(i);
+        if (!points) return fail(points.error().message);
+        clouds.push_back(std::move(*points));
+      }
+      auto beams = densemap::upsample::estimateBeams(clouds, real_layout.rows);
+      if (!beams) return fail("--estimate-beams: " + beams.error().message);
+      std::ostringstream comment;
+      comment << "Beam table of " << real_path << " (scans " << real_first << ".." << end - 1
+              << "), estimated by densemap-upsample-eval --estimate-beams:\nelevations, deg, "
+                 "top beam first";
+      if (auto ok = densemap::writeFileAtomically(
+              estimate_beams_path, densemap::upsample::formatBeamTable(*beams, comment.str()));
+          !ok) {
+        return fail(ok.error().message);
+      }
+      std::fprintf(stderr, "densemap-upsample-eval: wrote the beam table %s\n",
+                   estimate_beams_path.c_str());
+      real_beams_path = estimate_beams_path;
+    }
+    if (!real_beams_path.empty()) {
+      auto beams = densemap::upsample::readBeamTable(real_beams_path);
+      if (!beams) return fail(beams.error().message);
+      auto with = densemap::upsample::withBeams(std::move(*beams), real_layout.cols);
+      if (!with) return fail(real_beams_path + ": " + with.error().message);
+      if (with->rows != real_layout.rows) {
+        return fail(real_beams_path + " has " + std::to_string(with->rows) +
+                    " beams but --real-grid has " + std::to_string(real_layout.rows) + " rows");
+      }
+      real_layout = std::move(*with);
+    }
+    std::string real_index = "scene,seed,pose,rows,cols,top_deg,bottom_deg,file,beams\n";
+    const std::string beams_file = "beams_" + std::to_string(real_layout.rows) + ".txt";
+    if (!export_real_dir.empty()) {
+      std::error_code ec;
+      std::filesystem::create_directories(export_real_dir, ec);
+      if (ec) return fail("cannot create " + export_real_dir + ": " + ec.message());
+      std::vector<double> beams = real_layout.beams_deg;
+      for (int r = 0; beams.empty() && r < real_layout.rows; ++r) {
+        beams.push_back(real_layout.elevationDeg(r));
+      }
+      if (auto ok = densemap::writeFileAtomically(
+              std::filesystem::path(export_real_dir) / beams_file,
+              densemap::upsample::formatBeamTable(beams, "beams of " + real_path));
+          !ok) {
+        return fail(ok.error().message);
+      }
+    }
     densemap::tools::Progress real_progress("densemap-upsample-eval: real scan", end - real_first);
     std::size_t outside = 0, collisions = 0, points = 0;
     for (std::size_t i = real_first; i < end; ++i) {
-      auto scan = (*source)->load(i);
+      auto scan = scan_of(i);
       if (!scan) return fail(scan.error().message);
-      if (scan->frame != densemap::PointFrame::kSensor) {
-        return fail(real_path + " stores world-frame points: range images need sensor-frame scans");
-      }
       densemap::upsample::ProjectionStats stats;
-      const auto truth = densemap::upsample::project(scan->points, real_layout, &stats);
+      const auto truth = densemap::upsample::project(*scan, real_layout, &stats);
       outside += stats.outside_fov;
       collisions += stats.collisions;
       points += stats.points;
-      const auto truth_points = densemap::upsample::backProject(truth);
-      const auto sparse = densemap::upsample::keepEveryNthRow(truth, reduce);
-      arena.execute([&] {
-        for (std::size_t m = 0; m < methods.size(); ++m) {
-          const auto t0 = std::chrono::steady_clock::now();
-          const auto predicted =
-              densemap::upsample::upsample(sparse, real_layout, methods[m], model.get());
-          const double ms =
-              std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-                  .count();
-          const auto range = *densemap::upsample::compareRanges(predicted, truth);
-          const auto p = densemap::eval::comparePointSets(
-              densemap::upsample::backProject(predicted), truth_points, voxel);
-          real_sums[m].add(range, p, ms);
+      if (!export_real_dir.empty()) {
+        const std::string file = "real_" + std::to_string(i) + ".f32";
+        std::ostringstream row;
+        row << std::setprecision(10) << "real," << i << ",0," << real_layout.rows << ','
+            << real_layout.cols << ',' << real_layout.top_deg << ',' << real_layout.bottom_deg
+            << ',' << file << ',' << beams_file << '\n';
+        real_index += row.str();
+        if (auto ok = densemap::writeFileAtomically(
+                std::filesystem::path(export_real_dir) / file,
+                std::string(reinterpret_cast<const char*>(truth.range.data()),
+                             truth.range.size() * sizeof(float)));
+            !ok) {
+          return fail(ok.error().message);
         }
-      });
+      }
+      const auto truth_points = densemap::upsample::backProject(truth);
+      for (std::size_t s = 0; s < splits.size(); ++s) {
+        if (i < splits[s].first || i > splits[s].last) continue;
+        for (std::size_t r = 0; r < reduces.size(); ++r) {
+          const auto sparse = densemap::upsample::keepEveryNthRow(truth, reduces[r]);
+          arena.execute([&] {
+            for (std::size_t m = 0; m < methods.size(); ++m) {
+              const auto t0 = std::chrono::steady_clock::now();
+              const auto predicted =
+                  densemap::upsample::upsample(sparse, real_layout, methods[m], model.get());
+              const double ms = std::chrono::duration<double, std::milli>(
+                                    std::chrono::steady_clock::now() - t0)
+                                    .count();
+              const auto range = *densemap::upsample::compareRanges(predicted, truth);
+              const auto p = densemap::eval::comparePointSets(
+                  densemap::upsample::backProject(predicted), truth_points, voxel);
+              real_sums[{s, r, m}].add(range, p, ms);
+            }
+          });
+        }
+      }
       real_progress.update(i + 1 - real_first);
     }
     std::fprintf(stderr,
                  "densemap-upsample-eval: real scans projected: %zu points, %zu outside the "
                  "field of view, %zu sharing a pixel with a nearer one\n",
                  points, outside, collisions);
+    if (!export_real_dir.empty()) {
+      if (auto ok = densemap::writeFileAtomically(
+              std::filesystem::path(export_real_dir) / "index.csv", real_index);
+          !ok) {
+        return fail(ok.error().message);
+      }
+      std::fprintf(stderr, "densemap-upsample-eval: wrote the real range images and %s/index.csv\n",
+                   export_real_dir.c_str());
+    }
   }
 
   std::printf(
@@ -316,10 +451,16 @@ int main(int argc, char** argv) {
              targets[t], sums[{m, t}], "");
     }
   }
-  const std::string real_suffix = "  (real, every " + std::to_string(reduce) + "-th beam)";
-  for (auto& [m, sum] : real_sums) {
-    report(std::string(densemap::upsample::interpolationName(methods[m])), "real:" + real_path,
-           real_layout, sum, real_suffix.c_str());
+  for (auto& [key, sum] : real_sums) {
+    const auto [split, reduce, m] = key;
+    const std::string suffix = "  (real " + splits[split].name + " " +
+                               std::to_string(splits[split].first) + "-" +
+                               std::to_string(splits[split].last) + ", every " +
+                               std::to_string(reduces[reduce]) + "-th beam)";
+    report(std::string(densemap::upsample::interpolationName(methods[m])),
+           "real:" + real_path + ":" + splits[split].name + ":every" +
+               std::to_string(reduces[reduce]),
+           real_layout, sum, suffix.c_str());
   }
   json += "]}\n";
   if (!json_path.empty()) {

@@ -1,6 +1,7 @@
 #include "densemap/eval/metrics.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 
 namespace densemap::eval {
@@ -18,10 +19,22 @@ std::vector<Prediction> sortedDescending(std::span<const Prediction> predictions
 Metrics evaluate(std::span<const Prediction> predictions) {
   Metrics m;
   double squared = 0.0;
-  std::size_t occ_ok = 0, free_ok = 0, occ_band = 0, free_band = 0;
+  std::size_t occ_ok = 0, free_ok = 0, occ_band = 0, free_band = 0, known = 0;
+  constexpr int kBins = 10;
+  m.reliability.resize(kBins);
+  for (int b = 0; b < kBins; ++b) {
+    m.reliability[b].lower = static_cast<double>(b) / kBins;
+    m.reliability[b].upper = static_cast<double>(b + 1) / kBins;
+  }
   for (const Prediction& p : predictions) {
     const double label = p.occupied ? 1.0 : 0.0;
     squared += (p.probability - label) * (p.probability - label);
+    known += p.known ? 1 : 0;
+    ReliabilityBin& bin =
+        m.reliability[std::clamp(static_cast<int>(p.probability * kBins), 0, kBins - 1)];
+    ++bin.count;
+    bin.mean_predicted += p.probability;
+    bin.observed += label;
     if (p.occupied) {
       ++m.occupied;
       occ_ok += p.probability > 0.5 ? 1 : 0;
@@ -36,6 +49,14 @@ Metrics evaluate(std::span<const Prediction> predictions) {
     return b == 0 ? 0.0 : static_cast<double>(a) / static_cast<double>(b);
   };
   m.mse = predictions.empty() ? 0.0 : squared / static_cast<double>(predictions.size());
+  m.coverage = ratio(known, predictions.size());
+  for (ReliabilityBin& bin : m.reliability) {
+    if (bin.count == 0) continue;
+    bin.mean_predicted /= static_cast<double>(bin.count);
+    bin.observed /= static_cast<double>(bin.count);
+    m.ece += static_cast<double>(bin.count) / static_cast<double>(predictions.size()) *
+             std::abs(bin.mean_predicted - bin.observed);
+  }
   m.acc_occupied = ratio(occ_ok, m.occupied);
   m.acc_free = ratio(free_ok, m.free);
   m.acc_occupied_band = ratio(occ_band, m.occupied);

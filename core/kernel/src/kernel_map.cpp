@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 #include <string>
 
 #include "densemap/geometry/stopwatch.hpp"
@@ -27,16 +28,19 @@ std::string_view kernelMethodName(KernelMethod method) {
       return "bgk";
     case KernelMethod::kBgkl:
       return "bgkl";
+    case KernelMethod::kAkimapRays:
+      return "akimap_rays";
   }
   return "unknown";
 }
 
 Expected<KernelMethod> parseKernelMethod(std::string_view name) {
-  for (const auto m : {KernelMethod::kAkimap, KernelMethod::kBgk, KernelMethod::kBgkl}) {
+  for (const auto m : {KernelMethod::kAkimap, KernelMethod::kBgk, KernelMethod::kBgkl,
+                       KernelMethod::kAkimapRays}) {
     if (name == kernelMethodName(m)) return m;
   }
   return makeError("unknown kernel method '" + std::string(name) +
-                   "' (expected akimap, bgk or bgkl)");
+                   "' (expected akimap, bgk, bgkl or akimap_rays)");
 }
 
 KernelOptions KernelOptions::defaults(KernelMethod method) {
@@ -46,7 +50,70 @@ KernelOptions KernelOptions::defaults(KernelMethod method) {
     o.free_step = 0.3;
     o.sf2 = 0.1;
   }
+  if (method == KernelMethod::kAkimapRays) {
+    // Chosen on the oracle scenes at 0.1 m and the la3dm and AKIMap hold-outs (issue 17 note):
+    // occupied kernels of weight 1 plus each hit's cell (0.7) and a 0.2 m kernel around it
+    // (0.3); free segments of 0.3 m, radius 0.15 m, weight 0.4, stopping 0.2 m from the
+    // surface, then a 0.1 m thin tip to 0.05 m from it.
+    o.free_step = 0.3;
+    o.length_scale = 0.15;
+    o.sf2 = 0.4;
+    o.occupied_weight = 1.0;
+    o.hit_weight = 0.7;
+    o.hit_kernel_weight = 0.3;
+    o.hit_length_scale = 0.2;
+    o.free_margin = 0.2;
+    o.max_margin = 1.0;
+    o.tip_margin = 0.05;
+    o.tip_length_scale = 0.1;
+  }
   return o;
+}
+
+Expected<void> applySettings(KernelOptions& options, const std::vector<std::string>& settings) {
+  const std::pair<std::string_view, double KernelOptions::*> fields[] = {
+      {"free_step", &KernelOptions::free_step},
+      {"length_scale", &KernelOptions::length_scale},
+      {"sf2", &KernelOptions::sf2},
+      {"prior", &KernelOptions::prior},
+      {"free_margin", &KernelOptions::free_margin},
+      {"max_margin", &KernelOptions::max_margin},
+      {"tip_margin", &KernelOptions::tip_margin},
+      {"tip_length_scale", &KernelOptions::tip_length_scale},
+      {"occupied_weight", &KernelOptions::occupied_weight},
+      {"hit_weight", &KernelOptions::hit_weight},
+      {"hit_length_scale", &KernelOptions::hit_length_scale},
+      {"hit_kernel_weight", &KernelOptions::hit_kernel_weight},
+      {"negative_step", &KernelOptions::negative_step},
+      {"search_max", &KernelOptions::search_max},
+      {"search_range", &KernelOptions::search_range},
+      {"min_thickness", &KernelOptions::min_thickness}};
+  for (const std::string& setting : settings) {
+    const auto eq = setting.find('=');
+    const std::string name = setting.substr(0, eq);
+    const auto field = std::find_if(std::begin(fields), std::end(fields),
+                                    [&](const auto& f) { return f.first == name; });
+    if (eq == std::string::npos || field == std::end(fields)) {
+      return makeError("'" + setting + "' is not NAME=VALUE with a known kernel setting");
+    }
+    double value = 0.0;
+    try {
+      std::size_t used = 0;
+      value = std::stod(setting.substr(eq + 1), &used);
+      if (used != setting.size() - eq - 1) throw std::invalid_argument("trailing");
+    } catch (const std::exception&) {
+      return makeError("'" + setting + "': the value is not a number");
+    }
+    // Steps, scales and the prior must be positive; the margin may be 0.
+    if (!std::isfinite(value) || value < 0.0 || (value == 0.0 && name != "free_margin" && name != "tip_margin" &&
+                                  name != "hit_weight" &&
+                                  name != "hit_kernel_weight") ||
+        value > 1000.0) {
+      return makeError("'" + setting + "': out of range");
+    }
+    options.*(field->second) = value;
+  }
+  return {};
 }
 
 namespace {
@@ -61,8 +128,10 @@ struct Kernel {
   double weight = 1.0;          // |H|^-1/2 (AKIMap) or sf2 (BGK)
   double inverse_length = 0.0;  // isotropic kernels: 1 / length scale; 0: anisotropic
   bool occupied = false;
+  bool cell = false;  // `weight` on the one cell [key_min, key_max] (a hit's cell)
 
   [[nodiscard]] double at(const Eigen::Vector3d& c) const {
+    if (cell) return weight;
     if (inverse_length == 0.0) {
       const Eigen::Vector3d d = c - x;
       return weight * sparseKernel(std::sqrt(std::max(0.0, d.dot(h_inverse * d))));
@@ -73,6 +142,57 @@ struct Kernel {
     double t = len2 > 0.0 ? (c - x).dot(seg) / len2 : 0.0;
     t = std::clamp(t, 0.0, 1.0);
     return weight * sparseKernel((c - (x + t * seg)).norm() * inverse_length);
+  }
+
+  /// The x interval [lo, hi] (m) of the row at (y, z) outside which the kernel is 0: exact for
+  /// ellipsoids, the infinite cylinder around a segment cut by its end planes (a superset of
+  /// the capsule) otherwise. False when the row misses the support. Widened by a micrometre so
+  /// that rounding never drops a cell the kernel reaches.
+  [[nodiscard]] bool rowInterval(double y, double z, double& lo, double& hi) const {
+    constexpr double kSlack = 1e-6;
+    lo = -std::numeric_limits<double>::infinity();
+    hi = std::numeric_limits<double>::infinity();
+    if (cell) return true;
+    const double dy = y - x.y(), dz = z - x.z();
+    // a t^2 + 2 b t + c < 1 for t = cx - x.x (ellipsoid, or cylinder scaled to radius 1).
+    double a = 0.0, b = 0.0, c = 0.0;
+    if (inverse_length == 0.0) {
+      const Eigen::Matrix3d& m = h_inverse;
+      a = m(0, 0);
+      b = m(0, 1) * dy + m(0, 2) * dz;
+      c = m(1, 1) * dy * dy + 2.0 * m(1, 2) * dy * dz + m(2, 2) * dz * dz;
+    } else {
+      const Eigen::Vector3d seg = to - x;
+      const double length = seg.norm();
+      const double r2 = inverse_length * inverse_length;
+      if (length > 0.0) {
+        const Eigen::Vector3d u = seg / length;
+        const double along_yz = dy * u.y() + dz * u.z();
+        a = (1.0 - u.x() * u.x()) * r2;
+        b = -u.x() * along_yz * r2;
+        c = (dy * dy + dz * dz - along_yz * along_yz) * r2;
+        // End planes: -radius <= t u.x + along_yz <= length + radius.
+        const double radius = 1.0 / inverse_length;
+        if (std::abs(u.x()) > 1e-12) {
+          double t0 = (-radius - along_yz) / u.x(), t1 = (length + radius - along_yz) / u.x();
+          if (t0 > t1) std::swap(t0, t1);
+          lo = x.x() + t0 - kSlack;
+          hi = x.x() + t1 + kSlack;
+        } else if (along_yz < -radius || along_yz > length + radius) {
+          return false;
+        }
+      } else {
+        a = r2;
+        c = (dy * dy + dz * dz) * r2;
+      }
+    }
+    if (a <= 1e-12) return c < 1.0 + kSlack;  // the row runs along the axis
+    const double disc = b * b - a * (c - 1.0);
+    if (disc < 0.0) return false;
+    const double root = std::sqrt(disc);
+    lo = std::max(lo, x.x() + (-b - root) / a - kSlack);
+    hi = std::min(hi, x.x() + (-b + root) / a + kSlack);
+    return lo <= hi;
   }
 };
 
@@ -157,18 +277,22 @@ Kernel isotropicKernel(const Sample& s, const KernelOptions& o) {
   Kernel k;
   k.x = s.x;
   k.to = s.to;
+  const double length = s.tip ? o.tip_length_scale : o.length_scale;
   k.weight = o.sf2;
-  k.inverse_length = 1.0 / o.length_scale;
+  k.inverse_length = 1.0 / length;
   k.occupied = s.occupied;
-  k.half_extent = Eigen::Vector3d::Constant(o.length_scale);
+  k.half_extent = Eigen::Vector3d::Constant(length);
   return k;
 }
 
 /// AKIMap's kernel for sample i (Sec. 3.3.3): covariance of same-label neighbours in the search
 /// box, then the scale minimising Eq. 3.7.
+/// When `normal` is given, it is set to the surface normal at the sample (the covariance's
+/// least axis) where the same-label neighbourhood is flat (least spread under a quarter of
+/// the middle one, regulariser aside), else to zero.
 Kernel adaptiveKernel(std::size_t i, const std::vector<Sample>& samples, const SampleIndex& index,
                       const KernelOptions& o, double resolution,
-                      std::vector<Neighbour>& neighbours) {
+                      std::vector<Neighbour>& neighbours, Eigen::Vector3d* normal = nullptr) {
   const Sample& s = samples[i];
   const double range_ref = o.max_range > 0.0 ? o.max_range : o.search_range;
   const double half =
@@ -184,10 +308,18 @@ Kernel adaptiveKernel(std::size_t i, const std::vector<Sample>& samples, const S
   const double regulariser = thickness * thickness;
   const Eigen::Matrix3d sigma =
       neighbourCovariance(s.x, neighbours, regulariser, 0.25 * half * half);
-  const double largest =
-      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(sigma, Eigen::EigenvaluesOnly)
-          .eigenvalues()
-          .maxCoeff();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(
+      sigma, normal != nullptr ? Eigen::ComputeEigenvectors : Eigen::EigenvaluesOnly);
+  const double largest = eigen.eigenvalues().maxCoeff();  // ascending: [0] least, [2] largest
+  if (normal != nullptr) {
+    const std::size_t same = static_cast<std::size_t>(std::count_if(
+        neighbours.begin(), neighbours.end(), [](const Neighbour& n) { return n.same_label; }));
+    const double least = eigen.eigenvalues()[0] - regulariser;
+    const double middle = eigen.eigenvalues()[1] - regulariser;
+    *normal = same >= 3 && middle > 4.0 * std::max(least, 0.0) && middle > 0.0
+                  ? Eigen::Vector3d(eigen.eigenvectors().col(0))
+                  : Eigen::Vector3d::Zero();
+  }
   // The support (sqrt(s * lambda) along each axis) stays inside the search box.
   const double s_max = std::max(1.0, half * half / largest);
   const double scale = fitScale(sigma, s.x, neighbours, 1.0 / 16.0, s_max);
@@ -196,7 +328,9 @@ Kernel adaptiveKernel(std::size_t i, const std::vector<Sample>& samples, const S
   k.x = s.x;
   k.to = s.x;
   k.h_inverse = h.inverse();
-  k.weight = 1.0 / std::sqrt(h.determinant());
+  k.weight = o.method == KernelMethod::kAkimapRays && o.occupied_weight > 0.0
+                 ? o.occupied_weight
+                 : 1.0 / std::sqrt(h.determinant());
   k.occupied = s.occupied;
   k.half_extent = h.diagonal().cwiseSqrt();
   return k;
@@ -215,32 +349,94 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
   sampling.free_step = options_.free_step;
   sampling.max_range = options_.max_range;
   sampling.seed = options_.seed;
-  sampling.free = options_.method == KernelMethod::kAkimap ? FreeSampling::kRandomPerInterval
-                  : options_.method == KernelMethod::kBgk  ? FreeSampling::kRegular
-                                                           : FreeSampling::kSegments;
-  const std::vector<Sample> samples = makeSamples(points_world, origin_world, sampling, scans_);
+  sampling.free = options_.method == KernelMethod::kBgk    ? FreeSampling::kRegular
+                  : options_.method == KernelMethod::kBgkl ? FreeSampling::kSegments
+                                                           : FreeSampling::kRandomPerInterval;
+  const bool rays = options_.method == KernelMethod::kAkimapRays;
+  std::function<bool(const Eigen::Vector3d&)> keep_free;
+  std::optional<NearHits> near_hits;
+  if (rays) {
+    // Free samples only shape the occupied kernels, through the search boxes around hits:
+    // the others are never drawn (the same kernels, far fewer samples on long rays).
+    sampling.free_step = options_.negative_step;
+    std::vector<Eigen::Vector3d> hits;
+    const Eigen::Vector3d origin = origin_world.cast<double>();
+    for (const Point3f& p : points_world) {
+      const double length = (p.cast<double>() - origin).norm();
+      if (length > 0.0 && (options_.max_range < 0.0 || length <= options_.max_range)) {
+        hits.push_back(p.cast<double>());
+      }
+    }
+    near_hits.emplace(hits, std::max(options_.search_max, grid_.resolution()));
+    keep_free = [&](const Eigen::Vector3d& x) { return (*near_hits)(x); };
+  }
+  const std::vector<Sample> samples =
+      makeSamples(points_world, origin_world, sampling, scans_, keep_free);
   ++scans_;
-  stats.samples = samples.size();
   stats.ms_samples = msSince(t0);
 
-  std::vector<Kernel> kernels(samples.size());
-  if (options_.method == KernelMethod::kAkimap) {
+  std::vector<Kernel> kernels;
+  if (options_.method == KernelMethod::kAkimap || rays) {
     // Buckets about the smallest search box (a voxel) at most 2^23 of them.
     const SampleIndex index(samples, std::max(grid_.resolution(), 0.25 * options_.search_max),
                             std::size_t{1} << 23);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, samples.size(), 256),
-                      [&](const tbb::blocked_range<std::size_t>& range) {
-                        std::vector<Neighbour> neighbours;
-                        for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                          kernels[i] = adaptiveKernel(i, samples, index, options_,
-                                                      grid_.resolution(), neighbours);
-                        }
-                      });
-  } else {
-    for (std::size_t i = 0; i < samples.size(); ++i) {
-      kernels[i] = isotropicKernel(samples[i], options_);
+    // kAkimapRays: kernels for the occupied samples only (then the free segments).
+    std::vector<std::uint32_t> centres;
+    for (std::uint32_t i = 0; i < samples.size(); ++i) {
+      if (!rays || samples[i].occupied) centres.push_back(i);
     }
+    kernels.resize(centres.size());
+    std::vector<RayStop> stops(rays ? centres.size() : 0);
+    const Eigen::Vector3d origin = origin_world.cast<double>();
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, centres.size(), 256),
+        [&](const tbb::blocked_range<std::size_t>& range) {
+          std::vector<Neighbour> neighbours;
+          Eigen::Vector3d normal;
+          for (std::size_t c = range.begin(); c != range.end(); ++c) {
+            kernels[c] = adaptiveKernel(centres[c], samples, index, options_, grid_.resolution(),
+                                        neighbours, rays ? &normal : nullptr);
+            if (!rays) continue;
+            // Along the ray, a distance d from the surface is d / cos(incidence) from the hit.
+            const Eigen::Vector3d ray = (samples[centres[c]].x - origin).normalized();
+            const double cosine = std::abs(ray.dot(normal));
+            const auto along = [&](double margin) {
+              if (margin < 0.0) return margin;
+              return normal.isZero() ? margin : std::min(margin / std::max(cosine, 1e-6),
+                                                         std::max(options_.max_margin, margin));
+            };
+            stops[c] = {along(options_.free_margin), along(options_.tip_margin)};
+          }
+        });
+    const std::vector<Sample> segments =
+        rays ? makeRaySegments(points_world, origin_world, options_.free_step,
+                               options_.max_range, stops)
+             : std::vector<Sample>{};
+    kernels.reserve(kernels.size() + 2 * (rays ? centres.size() : 0) + segments.size());
+    for (const std::uint32_t c : rays ? centres : std::vector<std::uint32_t>{}) {
+      Kernel k;
+      k.x = k.to = samples[c].x;
+      k.occupied = true;
+      if (options_.hit_weight > 0.0) {
+        k.weight = options_.hit_weight;
+        k.cell = true;
+        k.half_extent.setZero();
+        kernels.push_back(k);
+      }
+      if (options_.hit_kernel_weight > 0.0) {
+        k.weight = options_.hit_kernel_weight;
+        k.cell = false;
+        k.half_extent.setConstant(options_.hit_length_scale);
+        k.inverse_length = 1.0 / options_.hit_length_scale;
+        kernels.push_back(k);
+      }
+    }
+    for (const Sample& s : segments) kernels.push_back(isotropicKernel(s, options_));
+  } else {
+    kernels.reserve(samples.size());
+    for (const Sample& s : samples) kernels.push_back(isotropicKernel(s, options_));
   }
+  stats.samples = kernels.size();
   stats.ms_bandwidth = msSince(t0);
 
   // (block, kernel) pairs, sorted: each block then sums its kernels in sample order, whatever
@@ -248,7 +444,7 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
   std::vector<std::pair<std::uint64_t, std::uint32_t>> pairs;
   for (std::uint32_t i = 0; i < kernels.size(); ++i) {
     Kernel& k = kernels[i];
-    const Eigen::Vector3d lo = k.x.cwiseMin(k.to) - k.half_extent;
+    const Eigen::Vector3d lo = k.x.cwiseMin(k.to) - k.half_extent;  // a cell kernel: x itself
     const Eigen::Vector3d hi = k.x.cwiseMax(k.to) + k.half_extent;
     const auto klo = grid_.pointToKey(lo.cast<float>());
     const auto khi = grid_.pointToKey(hi.cast<float>());
@@ -297,9 +493,21 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
             const auto [x0, x1] = range_of(0, klo.x, khi.x);
             const auto [y0, y1] = range_of(1, klo.y, khi.y);
             const auto [z0, z1] = range_of(2, klo.z, khi.z);
+            const double res = grid_.resolution();
+            const double base_x = grid_.keyToCoord(static_cast<std::uint16_t>(x0));
             for (int z = z0; z <= z1; ++z) {
               for (int y = y0; y <= y1; ++y) {
-                for (int x = x0; x <= x1; ++x) {
+                double lo = 0.0, hi = 0.0;
+                if (!k.rowInterval(grid_.keyToCoord(static_cast<std::uint16_t>(y)),
+                                   grid_.keyToCoord(static_cast<std::uint16_t>(z)), lo, hi)) {
+                  continue;
+                }
+                const int from = lo <= base_x ? x0
+                                 : static_cast<int>(std::min<double>(
+                                       x1 + 1, x0 + std::ceil((lo - base_x) / res)));
+                const int to = static_cast<int>(std::clamp<double>(
+                    x0 + std::floor((hi - base_x) / res), x0 - 1, x1));
+                for (int x = from; x <= to; ++x) {
                   const VoxelKey key{static_cast<std::uint16_t>(x), static_cast<std::uint16_t>(y),
                                      static_cast<std::uint16_t>(z)};
                   const Eigen::Vector3d c(grid_.keyToCoord(key.x), grid_.keyToCoord(key.y),

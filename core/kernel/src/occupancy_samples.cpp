@@ -1,6 +1,9 @@
 #include "densemap/kernel/occupancy_samples.hpp"
 
+#include <algorithm>
 #include <cmath>
+
+#include <Eigen/Geometry>
 
 namespace densemap::kernel {
 
@@ -13,7 +16,8 @@ double uniformFromCounter(std::uint64_t counter) {
 }
 
 std::vector<Sample> makeSamples(const PointCloud& points_world, const Point3f& origin_world,
-                                const SamplingOptions& options, std::uint64_t scan_index) {
+                                const SamplingOptions& options, std::uint64_t scan_index,
+                                const std::function<bool(const Eigen::Vector3d&)>& keep_free) {
   std::vector<Sample> samples;
   const Eigen::Vector3d origin = origin_world.cast<double>();
   const double step = options.free_step;
@@ -54,10 +58,93 @@ std::vector<Sample> makeSamples(const PointCloud& points_world, const Point3f& o
           break;
       }
       if (!s.segment) s.to = s.x;
+      if (keep_free && !keep_free(s.x)) continue;
       samples.push_back(s);
     }
   }
   return samples;
+}
+
+NearHits::NearHits(const std::vector<Eigen::Vector3d>& hits, double reach) : cell_(reach) {
+  if (hits.empty() || !(reach > 0.0)) return;
+  Eigen::AlignedBox3d box;
+  for (const Eigen::Vector3d& h : hits) box.extend(h);
+  // A margin of one cube on each side holds the dilation.
+  min_ = box.min().array() - cell_;
+  for (int a = 0; a < 3; ++a) n_[a] = static_cast<std::int64_t>(box.sizes()[a] / cell_) + 3;
+  // Very sparse hits over a huge box: coarser cubes (still a superset).
+  while (static_cast<double>(n_[0]) * static_cast<double>(n_[1]) * static_cast<double>(n_[2]) >
+         double{1 << 26}) {
+    cell_ *= 2.0;
+    min_ = box.min().array() - cell_;
+    for (int a = 0; a < 3; ++a) n_[a] = static_cast<std::int64_t>(box.sizes()[a] / cell_) + 3;
+  }
+  marks_.assign(static_cast<std::size_t>(n_[0] * n_[1] * n_[2]), false);
+  for (const Eigen::Vector3d& h : hits) {
+    std::int64_t c[3];
+    for (int a = 0; a < 3; ++a) c[a] = static_cast<std::int64_t>((h[a] - min_[a]) / cell_);
+    for (std::int64_t z = c[2] - 1; z <= c[2] + 1; ++z) {
+      for (std::int64_t y = c[1] - 1; y <= c[1] + 1; ++y) {
+        for (std::int64_t x = c[0] - 1; x <= c[0] + 1; ++x) {
+          marks_[static_cast<std::size_t>((z * n_[1] + y) * n_[0] + x)] = true;
+        }
+      }
+    }
+  }
+}
+
+bool NearHits::operator()(const Eigen::Vector3d& x) const {
+  std::int64_t c[3];
+  for (int a = 0; a < 3; ++a) {
+    const double v = std::floor((x[a] - min_[a]) / cell_);
+    if (!(v >= 0.0 && v < static_cast<double>(n_[a]))) return false;
+    c[a] = static_cast<std::int64_t>(v);
+  }
+  return marks_[static_cast<std::size_t>((c[2] * n_[1] + c[1]) * n_[0] + c[0])];
+}
+
+std::vector<Sample> makeRaySegments(const PointCloud& points_world, const Point3f& origin_world,
+                                    double step, double max_range,
+                                    std::span<const RayStop> stops) {
+  std::vector<Sample> segments;
+  const Eigen::Vector3d origin = origin_world.cast<double>();
+  std::size_t hit = 0;
+  for (const Point3f& p : points_world) {
+    Eigen::Vector3d direction = p.cast<double>() - origin;
+    double length = direction.norm();
+    if (!(length > 0.0)) continue;
+    direction /= length;
+    const bool cut = max_range >= 0.0 && length > max_range;
+    RayStop stop;
+    if (cut) {
+      length = max_range;
+    } else if (hit < stops.size()) {
+      stop = stops[hit++];
+    }
+    const double extent = length - stop.free;
+    if (extent > 0.0) {
+      const double pieces = std::ceil(extent / step);
+      const double piece = extent / pieces;
+      for (double k = 0.0; k < pieces; k += 1.0) {
+        Sample s;
+        s.x = origin + k * piece * direction;
+        s.to = origin + (k + 1.0) * piece * direction;
+        s.range = k * piece;
+        s.segment = true;
+        segments.push_back(s);
+      }
+    }
+    if (!cut && stop.tip >= 0.0 && stop.tip < stop.free && length - stop.tip > 0.0) {
+      Sample s;
+      s.range = std::max(0.0, extent);
+      s.x = origin + s.range * direction;
+      s.to = origin + (length - stop.tip) * direction;
+      s.segment = true;
+      s.tip = true;
+      segments.push_back(s);
+    }
+  }
+  return segments;
 }
 
 }  // namespace densemap::kernel

@@ -11,6 +11,16 @@ namespace densemap::eval {
 struct Prediction {
   double probability = 0.5;
   bool occupied = false;
+  bool known = true;  // false: the map had no evidence there (scored as `probability`, 0.5)
+};
+
+/// One bin of a reliability diagram: the test points whose predicted probability falls in
+/// [lower, upper), their mean prediction and the share of them that is occupied.
+struct ReliabilityBin {
+  double lower = 0.0, upper = 0.0;
+  std::size_t count = 0;
+  double mean_predicted = 0.0;
+  double observed = 0.0;
 };
 
 /// Accuracy figures of the dissertation (Sec. 2.4.2, Table 3.2).
@@ -22,6 +32,11 @@ struct Metrics {
   double acc_free = 0.0;               // p < 0.5 among free points
   double acc_occupied_band = 0.0;      // p > 0.7 among occupied points (0.3/0.7 thresholds)
   double acc_free_band = 0.0;          // p < 0.3 among free points
+  double coverage = 0.0;               // share of test points the map knows
+  /// Calibration: 10 equal bins of predicted probability (the last includes 1), and the
+  /// expected calibration error, sum over bins of count/N * |mean_predicted - observed|.
+  std::vector<ReliabilityBin> reliability;
+  double ece = 0.0;
 };
 
 /// Metrics of `predictions`; AUC is 0.5 when one label is absent.

@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <functional>
 #include <optional>
+#include <string>
 #include <string_view>
 #include <unordered_map>
 #include <vector>
@@ -15,11 +16,16 @@
 
 namespace densemap::kernel {
 
-/// One engine, three configurations (dissertation Ch. 3 and its baselines).
+/// One engine, four configurations (dissertation Ch. 3, its baselines, and their combination).
 enum class KernelMethod {
   kAkimap,  // adaptive anisotropic kernels, random free samples
   kBgk,     // BGKOctoMap: isotropic kernels on points, regular free points
   kBgkl,    // BGKOctoMap-L: isotropic kernels on points, free ray segments
+  /// AKIMap's adaptive kernels for occupied evidence (their scale fitted against AKIMap's
+  /// random free samples, which add no evidence themselves) and free evidence from segment
+  /// kernels that cover every ray up to `free_margin` short of its hit: the rays' free space
+  /// is covered as by BGKOctoMap-L, without blurring free evidence into the surfaces.
+  kAkimapRays,
 };
 
 [[nodiscard]] std::string_view kernelMethodName(KernelMethod method);
@@ -27,11 +33,32 @@ enum class KernelMethod {
 
 struct KernelOptions {
   KernelMethod method = KernelMethod::kAkimap;
-  double free_step = 0.5;     // m between free samples; segment length for kBgkl
+  double free_step = 0.5;     // m between free samples; segment length for kBgkl, kAkimapRays
   double max_range = -1.0;    // < 0: unlimited
   double prior = 0.001;       // alpha0 = beta0
-  double length_scale = 0.2;  // kBgk, kBgkl: kernel support radius, m
-  double sf2 = 1.0;           // kBgk, kBgkl: kernel signal variance
+  double length_scale = 0.2;  // kBgk, kBgkl, kAkimapRays' segments: kernel support radius, m
+  double sf2 = 1.0;           // kBgk, kBgkl, kAkimapRays' segments: kernel signal variance
+  /// kAkimapRays: free segments stop where a ray comes within `free_margin` of the surface it
+  /// hits (m, measured along the surface normal, which AKIMap's kernel shape gives; along the
+  /// ray where the neighbourhood is not flat), at most `max_margin` short of the hit; a thin
+  /// tip segment continues to `tip_margin` from the surface (< 0: none).
+  double free_margin = 0.1;
+  double max_margin = 1.0;
+  double tip_margin = -1.0;
+  double tip_length_scale = 0.1;  // kAkimapRays: the tip's support radius, m
+  /// kAkimapRays: > 0: each occupied kernel weighs this at its centre (instead of AKIMap's
+  /// |H|^-1/2, which grows as kernels thin), so `sf2` / `occupied_weight` is the balance of
+  /// free and occupied evidence whatever the resolution.
+  double occupied_weight = -1.0;
+  /// kAkimapRays: occupied evidence added to the cell each hit lies in (as a log-odds map's
+  /// hit update; 0: none).
+  double hit_weight = 0.0;
+  /// kAkimapRays: occupied evidence of an isotropic kernel of support radius
+  /// `hit_length_scale` (m) around each hit, weighing `hit_kernel_weight` at its centre (0: none).
+  double hit_kernel_weight = 0.0;
+  double hit_length_scale = 0.2;
+  /// kAkimapRays: the spacing of AKIMap's random free samples that shape the occupied kernels.
+  double negative_step = 0.5;
   // kAkimap: the neighbour search box's half-size grows linearly from the voxel size at the
   // sensor to `search_max` at `search_range` (max_range when set).
   double search_max = 0.5;
@@ -45,6 +72,12 @@ struct KernelOptions {
   /// The published settings of each method (la3dm's for the baselines).
   [[nodiscard]] static KernelOptions defaults(KernelMethod method);
 };
+
+/// Applies "NAME=VALUE" settings (free_step, length_scale, sf2, prior, free_margin, max_margin,
+/// tip_margin, hit_weight, hit_kernel_weight, hit_length_scale,
+/// tip_length_scale, occupied_weight, negative_step, search_max, search_range, min_thickness) to `options`; errors name the setting.
+[[nodiscard]] Expected<void> applySettings(KernelOptions& options,
+                                           const std::vector<std::string>& settings);
 
 struct KernelScanStats {
   std::size_t samples = 0;

@@ -2,6 +2,8 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <functional>
+#include <span>
 #include <vector>
 
 #include "densemap/geometry/point_cloud.hpp"
@@ -17,6 +19,7 @@ struct Sample {
   double range = 0.0;
   bool occupied = false;
   bool segment = false;
+  bool tip = false;  // the thin last free segment before a hit (makeRaySegments)
 };
 
 enum class FreeSampling {
@@ -35,10 +38,45 @@ struct SamplingOptions {
 /// The samples of one scan: every point within max range is occupied; free samples lie on
 /// each ray from the origin to its (cut) end. Random draws depend only on (seed, scan, ray,
 /// interval), never on threads or order. Points must be finite (callers validate scans).
-[[nodiscard]] std::vector<Sample> makeSamples(const PointCloud& points_world,
-                                              const Point3f& origin_world,
-                                              const SamplingOptions& options,
-                                              std::uint64_t scan_index);
+/// `keep_free`, when given, drops the free samples it returns false for (the random draws of
+/// the others do not change).
+[[nodiscard]] std::vector<Sample> makeSamples(
+    const PointCloud& points_world, const Point3f& origin_world, const SamplingOptions& options,
+    std::uint64_t scan_index,
+    const std::function<bool(const Eigen::Vector3d&)>& keep_free = nullptr);
+
+/// Whether a point lies within `reach` (per axis, a box) of a scan's hits, by a bitmap of
+/// cubes of `reach` over the hits' bounding box: a superset (it may say yes a little farther
+/// away, never no within reach). For kAkimapRays, whose free samples only shape occupied
+/// kernels through the search boxes around hits.
+class NearHits {
+ public:
+  NearHits(const std::vector<Eigen::Vector3d>& hits, double reach);
+  [[nodiscard]] bool operator()(const Eigen::Vector3d& x) const;
+
+ private:
+  double cell_ = 1.0;
+  Eigen::Vector3d min_ = Eigen::Vector3d::Zero();
+  std::int64_t n_[3] = {0, 0, 0};
+  std::vector<bool> marks_;
+};
+
+/// How far short of its hit a ray's free evidence stops, m along the ray: its segments end
+/// `free` short of the hit, then a tip segment (Sample::tip) runs on to `tip` short of it
+/// (none when tip < 0 or tip >= free).
+struct RayStop {
+  double free = 0.0;
+  double tip = -1.0;
+};
+
+/// The free segments of a scan's rays (every ray of makeSamples, in the same order; a cut ray
+/// is free all the way to max_range): [origin, hit - stop.free] split into equal segments of
+/// at most `step`, then the tip. `stops` holds one entry per hit, in the order of the
+/// occupied samples makeSamples returns (rays within max range).
+[[nodiscard]] std::vector<Sample> makeRaySegments(const PointCloud& points_world,
+                                                  const Point3f& origin_world, double step,
+                                                  double max_range,
+                                                  std::span<const RayStop> stops);
 
 /// A uniform double in [0, 1) from a counter (SplitMix64): reproducible random numbers.
 [[nodiscard]] double uniformFromCounter(std::uint64_t counter);
