@@ -498,8 +498,12 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
             for (int z = z0; z <= z1; ++z) {
               for (int y = y0; y <= y1; ++y) {
                 double lo = 0.0, hi = 0.0;
-                if (!k.rowInterval(grid_.keyToCoord(static_cast<std::uint16_t>(y)),
-                                   grid_.keyToCoord(static_cast<std::uint16_t>(z)), lo, hi)) {
+                if (options_.whole_boxes) {
+                  lo = -std::numeric_limits<double>::infinity();
+                  hi = std::numeric_limits<double>::infinity();
+                } else if (!k.rowInterval(grid_.keyToCoord(static_cast<std::uint16_t>(y)),
+                                          grid_.keyToCoord(static_cast<std::uint16_t>(z)), lo,
+                                          hi)) {
                   continue;
                 }
                 const int from = lo <= base_x ? x0

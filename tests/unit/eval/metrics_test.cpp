@@ -51,5 +51,24 @@ TEST(Roc, CurveRunsFromOriginToOneOneAndItsAreaIsTheAuc) {
   EXPECT_NEAR(area, evaluate(p).auc, 1e-12);
 }
 
+TEST(Metrics, ReliabilityBinsCalibrationErrorAndKnownShare) {
+  // Bin [0.1, 0.2): 0.15 twice, one occupied (observed 0.5); bin [0.9, 1]: 0.95 and 1.0, both
+  // occupied; the unknown point scores 0.5 in bin [0.5, 0.6).
+  const std::vector<Prediction> p = {{0.15, true},  {0.15, false}, {0.95, true},
+                                     {1.0, true},   {0.5, false, false}};
+  const Metrics m = evaluate(p);
+  ASSERT_EQ(m.reliability.size(), 10U);
+  EXPECT_EQ(m.reliability[1].count, 2U);
+  EXPECT_DOUBLE_EQ(m.reliability[1].mean_predicted, 0.15);
+  EXPECT_DOUBLE_EQ(m.reliability[1].observed, 0.5);
+  EXPECT_EQ(m.reliability[9].count, 2U);  // 1.0 falls in the last bin
+  EXPECT_DOUBLE_EQ(m.reliability[9].mean_predicted, 0.975);
+  EXPECT_EQ(m.reliability[5].count, 1U);
+  EXPECT_EQ(m.reliability[0].count, 0U);
+  EXPECT_DOUBLE_EQ(m.reliability[3].lower, 0.3);
+  EXPECT_NEAR(m.ece, (2 * 0.35 + 2 * 0.025 + 1 * 0.5) / 5.0, 1e-12);
+  EXPECT_DOUBLE_EQ(m.coverage, 0.8);
+}
+
 }  // namespace
 }  // namespace densemap::eval

@@ -1,9 +1,10 @@
 // Kernel inference (dissertation Ch. 3): kernel values, the scale fit of Eq. 3.7, covariance
-// shapes, and the map's behaviour and determinism for all three methods.
+// shapes, the map's behaviour and determinism for all four methods, and akimap_rays' parts.
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
 #include <Eigen/Eigenvalues>
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <vector>
@@ -11,6 +12,7 @@
 #include "densemap/kernel/bandwidth.hpp"
 #include "densemap/kernel/kernel_function.hpp"
 #include "densemap/kernel/kernel_map.hpp"
+#include "densemap/kernel/occupancy_samples.hpp"
 
 namespace densemap::kernel {
 namespace {
@@ -135,6 +137,25 @@ PointCloud wallScan() {
   return points;
 }
 
+/// A wall at x = 3 m and a floor at z = -1.2 m out to 12 m, seen from `origin`: grazing rays.
+PointCloud roomScan() {
+  PointCloud points = wallScan();
+  for (double x = 0.5; x <= 12.0; x += 0.07) {
+    for (double y = -2.0; y <= 2.0; y += 0.09) {
+      points.emplace_back(static_cast<float>(x), static_cast<float>(y), -1.2F);
+    }
+  }
+  points.emplace_back(25.0F, 0.0F, 0.5F);  // beyond max range: a cut ray
+  return points;
+}
+
+std::vector<std::pair<std::uint64_t, double>> cellsOf(const KernelMap& map) {
+  std::vector<std::pair<std::uint64_t, double>> cells;
+  map.forEachKnown([&](const VoxelKey& k, double p) { cells.emplace_back(k.packed(), p); });
+  std::sort(cells.begin(), cells.end());
+  return cells;
+}
+
 class KernelMapMethods : public ::testing::TestWithParam<KernelMethod> {};
 
 TEST_P(KernelMapMethods, WallIsOccupiedFreeSpaceIsFreeFarAwayIsUnknown) {
@@ -163,10 +184,7 @@ TEST_P(KernelMapMethods, ResultDoesNotDependOnTheThreadCount) {
     KernelMap map(0.1, options);
     map.integrate(wallScan(), Point3f(0, 0, 0));
     map.integrate(wallScan(), Point3f(0.3F, 0.2F, 0.1F));
-    std::vector<std::pair<std::uint64_t, double>> cells;
-    map.forEachKnown([&](const VoxelKey& k, double p) { cells.emplace_back(k.packed(), p); });
-    std::sort(cells.begin(), cells.end());
-    return cells;
+    return cellsOf(map);
   };
   const auto one = build(GetParam(), 1);
   const auto two = build(GetParam(), 2);
@@ -174,15 +192,33 @@ TEST_P(KernelMapMethods, ResultDoesNotDependOnTheThreadCount) {
   EXPECT_EQ(one, two);  // bit for bit
 }
 
+TEST_P(KernelMapMethods, RowStretchesGiveTheWholeBoxesMapBitForBit) {
+  for (const double resolution : {0.1, 0.07}) {
+    KernelOptions options = KernelOptions::defaults(GetParam());
+    options.max_range = 15.0;
+    KernelMap fast(resolution, options);
+    options.whole_boxes = true;
+    KernelMap plain(resolution, options);
+    for (const Point3f& origin : {Point3f(0, 0, 0), Point3f(0.4F, -0.3F, 0.2F)}) {
+      fast.integrate(roomScan(), origin);
+      plain.integrate(roomScan(), origin);
+    }
+    const auto a = cellsOf(fast);
+    ASSERT_GT(a.size(), 1000U);
+    EXPECT_EQ(a, cellsOf(plain)) << "resolution " << resolution;
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(All, KernelMapMethods,
                          ::testing::Values(KernelMethod::kAkimap, KernelMethod::kBgk,
-                                           KernelMethod::kBgkl),
+                                           KernelMethod::kBgkl, KernelMethod::kAkimapRays),
                          [](const auto& param_info) {
                            return std::string(kernelMethodName(param_info.param));
                          });
 
 TEST(KernelMethodNames, ParseAndReject) {
   EXPECT_EQ(*parseKernelMethod("bgkl"), KernelMethod::kBgkl);
+  EXPECT_EQ(*parseKernelMethod("akimap_rays"), KernelMethod::kAkimapRays);
   const auto bad = parseKernelMethod("gmm");
   ASSERT_FALSE(bad.has_value());
   EXPECT_NE(bad.error().message.find("akimap"), std::string::npos);
@@ -204,6 +240,77 @@ TEST(OccupancySamples, RandomFreeSamplesAreReproducibleAndOnePerInterval) {
     EXPECT_GE(a[1 + k].range, 0.5 * k);
     EXPECT_LT(a[1 + k].range, 0.5 * (k + 1));
   }
+}
+
+TEST(AkimapRays, GrazingRaysLeaveTheFloorOccupiedAndFreeSpaceAboveItFree) {
+  KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
+  options.max_range = 15.0;
+  KernelMap rays(0.1, options);
+  rays.integrate(roomScan(), Point3f(0, 0, 0));
+  const auto at = [&](float x, float y, float z) {
+    return rays.probability(*rays.grid().pointToKey(Point3f(x, y, z))).value_or(0.5);
+  };
+  // Behind the wall the floor is not seen; in front of it, rays meet the floor at 22 to 67 deg
+  // from it, and up to 1.3 m short of the wall at the height of the floor under it.
+  for (const float x : {1.05F, 1.55F, 2.05F, 2.45F}) {
+    EXPECT_GT(at(x, 0.05F, -1.15F), 0.5) << "floor at x " << x;
+    EXPECT_LT(at(x, 0.05F, -0.65F), 0.5) << "free 0.5 m above the floor at x " << x;
+  }
+  EXPECT_GT(at(3.02F, 0.02F, 0.02F), 0.5);
+  EXPECT_LT(at(2.55F, 0.02F, 0.02F), 0.5);  // free 0.45 m in front of the wall
+}
+
+TEST(RaySegments, CoverEachRayToItsStopThenTheTip) {
+  const PointCloud points = {Point3f(2.0F, 0, 0), Point3f(0, 40.0F, 0), Point3f(0, 0, 0)};
+  const std::vector<RayStop> stops = {{0.25, 0.05}};
+  const auto segments = makeRaySegments(points, Point3f(0, 0, 0), 0.3, 10.0, stops);
+  // Ray 1: [0, 1.75] in 6 equal pieces, then the tip [1.75, 1.95]; ray 2 is cut at 10 m:
+  // 34 pieces, no tip; the zero-length ray gives nothing.
+  ASSERT_EQ(segments.size(), 6U + 1U + 34U);
+  double end = 0.0;
+  for (int i = 0; i < 6; ++i) {
+    EXPECT_TRUE(segments[i].segment);
+    EXPECT_FALSE(segments[i].tip);
+    EXPECT_NEAR(segments[i].x.x(), end, 1e-12);
+    end = segments[i].to.x();
+    EXPECT_LE(segments[i].to.x() - segments[i].x.x(), 0.3 + 1e-12);
+  }
+  EXPECT_NEAR(end, 1.75, 1e-12);
+  EXPECT_TRUE(segments[6].tip);
+  EXPECT_NEAR(segments[6].x.x(), 1.75, 1e-12);
+  EXPECT_NEAR(segments[6].to.x(), 1.95, 1e-12);
+  EXPECT_NEAR(segments.back().to.y(), 10.0, 1e-9);
+  EXPECT_FALSE(segments.back().tip);
+  // No tip when it would not pass the free part's end.
+  const std::vector<RayStop> no_tip = {{0.25, 0.25}};
+  EXPECT_EQ(makeRaySegments({Point3f(2.0F, 0, 0)}, Point3f(0, 0, 0), 0.3, 10.0, no_tip).size(),
+            6U);
+}
+
+TEST(NearHits, SaysYesWithinReachOfEveryHitAndNoFarAway) {
+  const std::vector<Eigen::Vector3d> hits = {{0, 0, 0}, {5.3, -2.1, 0.7}};
+  const NearHits near(hits, 0.5);
+  for (const auto& h : hits) {
+    for (int i = 0; i < 27; ++i) {
+      const Eigen::Vector3d d(0.49 * (i % 3 - 1), 0.49 * (i / 3 % 3 - 1), 0.49 * (i / 9 - 1));
+      EXPECT_TRUE(near(h + d));
+    }
+  }
+  EXPECT_FALSE(near(Eigen::Vector3d(2.6, -1.0, 0.3)));
+  EXPECT_FALSE(near(Eigen::Vector3d(-3, 0, 0)));
+  EXPECT_FALSE(NearHits({}, 0.5)(Eigen::Vector3d::Zero()));
+}
+
+TEST(KernelSettings, ApplyKnownNamesAndRejectTheRest) {
+  KernelOptions o = KernelOptions::defaults(KernelMethod::kAkimapRays);
+  ASSERT_TRUE(applySettings(o, {"sf2=0.7", "free_margin=0", "hit_weight=2"}));
+  EXPECT_DOUBLE_EQ(o.sf2, 0.7);
+  EXPECT_DOUBLE_EQ(o.free_margin, 0.0);
+  EXPECT_DOUBLE_EQ(o.hit_weight, 2.0);
+  for (const char* bad : {"sf2", "nope=1", "sf2=abc", "sf2=1x", "sf2=-1", "sf2=0", "sf2=nan"}) {
+    EXPECT_FALSE(applySettings(o, {bad})) << bad;
+  }
+  EXPECT_DOUBLE_EQ(o.sf2, 0.7);
 }
 
 }  // namespace

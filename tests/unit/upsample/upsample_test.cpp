@@ -1,6 +1,9 @@
 // Range images and the interpolation baselines of issue 6 (dissertation Sec. 4.2, Table 4.1).
 #include <gtest/gtest.h>
 
+#include <filesystem>
+#include <fstream>
+#include <numbers>
 #include <random>
 
 #include "densemap/eval/point_set_metrics.hpp"
@@ -160,6 +163,94 @@ TEST(PointSetMetrics, VoxelIouPrecisionRecall) {
   EXPECT_NEAR(m.precision, 0.5, 1e-12);
   EXPECT_NEAR(m.recall, 0.5, 1e-12);
   EXPECT_NEAR(m.f1, 0.5, 1e-12);
+}
+
+/// An uneven 8-beam table, pairs 1 and 2 deg apart (like BALM's OS0-64), top first.
+std::vector<double> unevenBeams() { return {20.0, 19.0, 17.0, 16.0, 14.0, 13.0, 11.0, 10.0}; }
+
+TEST(BeamTable, LayoutFollowsTheTableAndRejectsBadOnes) {
+  const auto layout = withBeams(unevenBeams(), 64);
+  ASSERT_TRUE(layout);
+  EXPECT_EQ(layout->rows, 8);
+  EXPECT_DOUBLE_EQ(layout->top_deg, 20.0);
+  EXPECT_DOUBLE_EQ(layout->bottom_deg, 10.0);
+  EXPECT_DOUBLE_EQ(layout->elevationDeg(2), 17.0);
+  EXPECT_DOUBLE_EQ(layout->elevationDeg(1.5), 18.0);  // halfway in elevation
+  EXPECT_DOUBLE_EQ(layout->elevationDeg(-1.0), 21.0);  // beyond the edges at their spacing
+  for (const double e : {20.5, 19.7, 17.2, 13.9, 10.0, 9.0}) {
+    EXPECT_NEAR(layout->elevationDeg(layout->pixelOf(e, 0.3).first), e, 1e-12) << e;
+  }
+  EXPECT_FALSE(withBeams({20.0, 20.0, 10.0}, 64));  // not strictly decreasing
+  EXPECT_FALSE(withBeams({20.0}, 64));
+  RangeLayout inconsistent = *layout;
+  inconsistent.top_deg = 25.0;
+  EXPECT_FALSE(inconsistent.validate());
+  // Every n-th beam keeps its elevations; projection lands on the nearest beam and back.
+  RangeImage image(*layout);
+  for (std::size_t i = 0; i < image.range.size(); ++i) image.range[i] = 5.0F + 0.01F * i;
+  ProjectionStats stats;
+  const RangeImage back = project(backProject(image), *layout, &stats);
+  EXPECT_EQ(stats.collisions, 0U);
+  EXPECT_EQ(stats.outside_fov, 0U);
+  for (std::size_t i = 0; i < image.range.size(); ++i) {
+    ASSERT_NEAR(back.range[i], image.range[i], 1e-4F) << "pixel " << i;
+  }
+  const RangeImage sparse = keepEveryNthRow(image, 2);
+  EXPECT_EQ(sparse.layout.beams_deg, (std::vector<double>{20.0, 17.0, 14.0, 11.0}));
+  EXPECT_TRUE(sparse.layout.validate());
+  // Beam 1 (19 deg) lies a third of the way from kept beam 0 (20) to kept beam 1 (17).
+  EXPECT_NEAR(layout->toLayout(sparse.layout, 1, 0).first, 1.0 / 3.0, 1e-12);
+}
+
+TEST(BeamTable, FileRoundTripsAndBadLinesAreNamed) {
+  const auto path = std::filesystem::temp_directory_path() / "densemap_beams_test.txt";
+  {
+    std::ofstream out(path);
+    out << formatBeamTable(unevenBeams(), "test table\nsecond line");
+  }
+  const auto read = readBeamTable(path.string());
+  ASSERT_TRUE(read);
+  EXPECT_EQ(*read, unevenBeams());
+  {
+    std::ofstream out(path);
+    out << "# comment\n20.0\n\n19.5 # trailing comment\n18 17\n";
+  }
+  const auto bad = readBeamTable(path.string());
+  ASSERT_FALSE(bad);
+  EXPECT_NE(bad.error().message.find(":5:"), std::string::npos) << bad.error().message;
+  {
+    std::ofstream out(path);
+    out << "95\n";
+  }
+  EXPECT_FALSE(readBeamTable(path.string()));
+  std::filesystem::remove(path);
+  EXPECT_FALSE(readBeamTable(path.string()));
+}
+
+TEST(BeamTable, EstimatedFromScansOfAnUnevenSensor) {
+  // Returns of the uneven sensor at 3..30 m with 0.03 deg of elevation noise, and near returns
+  // (under the estimate's 3 m) far off their beams.
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> range(3.5, 30.0), azimuth(-3.1, 3.1);
+  std::normal_distribution<double> noise(0.0, 0.03);
+  std::vector<PointCloud> scans(2);
+  for (PointCloud& scan : scans) {
+    for (const double beam : unevenBeams()) {
+      for (int i = 0; i < 400; ++i) {
+        const double e = (beam + noise(rng)) * std::numbers::pi / 180.0, a = azimuth(rng);
+        const double r = range(rng);
+        scan.emplace_back(static_cast<float>(r * std::cos(e) * std::cos(a)),
+                          static_cast<float>(r * std::cos(e) * std::sin(a)),
+                          static_cast<float>(r * std::sin(e)));
+        scan.emplace_back(0.5F, 0.0F, static_cast<float>(i % 7) * 0.1F);  // near, ignored
+      }
+    }
+  }
+  const auto beams = estimateBeams(scans, 8);
+  ASSERT_TRUE(beams) << beams.error().message;
+  ASSERT_EQ(beams->size(), 8U);
+  for (std::size_t b = 0; b < 8; ++b) EXPECT_NEAR((*beams)[b], unevenBeams()[b], 0.01);
+  EXPECT_FALSE(estimateBeams({PointCloud{}}, 8));  // too few returns
 }
 
 }  // namespace

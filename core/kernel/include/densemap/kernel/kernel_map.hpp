@@ -68,6 +68,9 @@ struct KernelOptions {
   /// and the la3dm hold-out (issue 5 note).
   double min_thickness = 0.1;
   std::uint64_t seed = 1;
+  /// The plain path, for tests: visit every cell of each kernel's bounding box instead of
+  /// only each row's stretch that the kernel can reach (the results are the same, bit for bit).
+  bool whole_boxes = false;
 
   /// The published settings of each method (la3dm's for the baselines).
   [[nodiscard]] static KernelOptions defaults(KernelMethod method);

@@ -24,7 +24,7 @@ struct RangeLayout {
   double bottom_deg = -15.0;
   /// Empty: evenly spread beams. Otherwise `rows` strictly decreasing elevations, deg, whose
   /// first and last equal top_deg and bottom_deg (withBeams sets all four).
-  std::vector<double> beams_deg;
+  std::vector<double> beams_deg{};
 
   [[nodiscard]] Expected<void> validate() const;
   /// Elevation of row r (may be fractional), degrees.
