@@ -51,9 +51,9 @@ KernelOptions KernelOptions::defaults(KernelMethod method) {
     o.sf2 = 0.1;
   }
   if (method == KernelMethod::kAkimapRays) {
-    // Chosen on the oracle scenes at 0.1 m and the la3dm and AKIMap hold-outs (issue 17 note):
-    // occupied kernels of weight 1 plus each hit's cell (0.7) and a 0.2 m kernel around it
-    // (0.3); free segments of 0.3 m, radius 0.15 m, weight 0.4, stopping 0.2 m from the
+    // Chosen on the oracle scenes at 0.1 and 0.05 m and the la3dm and AKIMap hold-outs (issue
+    // 17 note): occupied kernels of weight 1 plus each hit's cell (0.7) and a 2-voxel kernel
+    // around it (0.3); free segments of 0.3 m, radius 0.15 m, weight 0.4, stopping 0.2 m from the
     // surface, then a 0.1 m thin tip to 0.05 m from it.
     o.free_step = 0.3;
     o.length_scale = 0.15;
@@ -61,7 +61,7 @@ KernelOptions KernelOptions::defaults(KernelMethod method) {
     o.occupied_weight = 1.0;
     o.hit_weight = 0.7;
     o.hit_kernel_weight = 0.3;
-    o.hit_length_scale = 0.2;
+    o.hit_length_voxels = 2.0;
     o.free_margin = 0.2;
     o.max_margin = 1.0;
     o.tip_margin = 0.05;
@@ -82,7 +82,7 @@ Expected<void> applySettings(KernelOptions& options, const std::vector<std::stri
       {"tip_length_scale", &KernelOptions::tip_length_scale},
       {"occupied_weight", &KernelOptions::occupied_weight},
       {"hit_weight", &KernelOptions::hit_weight},
-      {"hit_length_scale", &KernelOptions::hit_length_scale},
+      {"hit_length_voxels", &KernelOptions::hit_length_voxels},
       {"hit_kernel_weight", &KernelOptions::hit_kernel_weight},
       {"negative_step", &KernelOptions::negative_step},
       {"search_max", &KernelOptions::search_max},
@@ -426,8 +426,9 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
       if (options_.hit_kernel_weight > 0.0) {
         k.weight = options_.hit_kernel_weight;
         k.cell = false;
-        k.half_extent.setConstant(options_.hit_length_scale);
-        k.inverse_length = 1.0 / options_.hit_length_scale;
+        const double radius = options_.hit_length_voxels * grid_.resolution();
+        k.half_extent.setConstant(radius);
+        k.inverse_length = 1.0 / radius;
         kernels.push_back(k);
       }
     }

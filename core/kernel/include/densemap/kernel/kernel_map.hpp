@@ -54,9 +54,10 @@ struct KernelOptions {
   /// hit update; 0: none).
   double hit_weight = 0.0;
   /// kAkimapRays: occupied evidence of an isotropic kernel of support radius
-  /// `hit_length_scale` (m) around each hit, weighing `hit_kernel_weight` at its centre (0: none).
+  /// `hit_length_voxels` voxels around each hit (so that it reaches the same neighbours at
+  /// every resolution), weighing `hit_kernel_weight` at its centre (0: none).
   double hit_kernel_weight = 0.0;
-  double hit_length_scale = 0.2;
+  double hit_length_voxels = 2.0;
   /// kAkimapRays: the spacing of AKIMap's random free samples that shape the occupied kernels.
   double negative_step = 0.5;
   // kAkimap: the neighbour search box's half-size grows linearly from the voxel size at the
@@ -77,7 +78,7 @@ struct KernelOptions {
 };
 
 /// Applies "NAME=VALUE" settings (free_step, length_scale, sf2, prior, free_margin, max_margin,
-/// tip_margin, hit_weight, hit_kernel_weight, hit_length_scale,
+/// tip_margin, hit_weight, hit_kernel_weight, hit_length_voxels,
 /// tip_length_scale, occupied_weight, negative_step, search_max, search_range, min_thickness) to `options`; errors name the setting.
 [[nodiscard]] Expected<void> applySettings(KernelOptions& options,
                                            const std::vector<std::string>& settings);
