@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # End to end, as a user runs it: densemap-sim writes a sparse benchmark scene with dense-oracle
-# labels; densemap-eval scores the four map kinds on them and writes JSON, ROC and slices.
+# labels; densemap-eval scores the five map kinds on them and writes JSON, ROC, reliability
+# diagrams and slices.
 # Usage: eval_oracle_cli.sh SIM_BIN EVAL_BIN
 set -euo pipefail
 sim=$1
@@ -14,13 +15,29 @@ trap 'rm -rf "$dir"' EXIT
 test -s "$dir/scene/oracle_0.2.bt"
 
 "$evaluate" --data "$dir/scene" --protocol oracle --resolution 0.2 --max-range 8 \
-  --json "$dir/r.json" --roc "$dir/roc" --slice "$dir/slice" --threads 2 >"$dir/out.txt" 2>/dev/null
-[ "$(grep -o '"method": "[a-z]*"' "$dir/r.json" | wc -l)" -eq 4 ]
+  --json "$dir/r.json" --roc "$dir/roc" --slice "$dir/slice" --reliability "$dir/rel" \
+  --threads 2 >"$dir/out.txt" 2>/dev/null
+[ "$(grep -o '"method": "[a-z_]*"' "$dir/r.json" | wc -l)" -eq 5 ]
+grep -q '"method": "akimap_rays"' "$dir/r.json"
+# Reliability: 10 bins per method, their counts summing to the test cells of each method.
+[ "$(grep -c '^akimap_rays,' "$dir/rel.csv")" -eq 10 ]
+awk -F, 'NR > 1 { n[$1] += $4 } END { for (m in n) if (n[m] != n["bgk"]) bad = 1; exit bad }' \
+  "$dir/rel.csv"
+grep -q 'ECE' "$dir/rel.svg"
 grep -q '"protocol": "oracle"' "$dir/r.json"
 # Every method ranks the labelled cells far better than chance.
 grep -o '"auc": [0-9.]*' "$dir/r.json" | awk '{ if ($2 < 0.8) { print "auc " $2 " too low"; bad = 1 } }
   END { exit bad }'
-for f in roc.svg roc_akimap.csv slice_akimap.png slice_oracle.png; do test -s "$dir/$f"; done
+for f in roc.svg roc_akimap.csv slice_akimap.png slice_akimap_rays.png slice_oracle.png; do
+  test -s "$dir/$f"
+done
+# A kernel setting the maps do not have: a clear error, exit 1.
+if "$evaluate" --data "$dir/scene" --protocol oracle --resolution 0.2 --method bgkl \
+  --kernel-set widht=3 2>"$dir/err.txt" >/dev/null; then
+  echo "expected an error for an unknown kernel setting"
+  exit 1
+fi
+grep -q "widht=3" "$dir/err.txt"
 head -c 8 "$dir/slice_oracle.png" | od -An -c | grep -q 'P   N   G'
 
 # The same scans densified (bilinear, 2x beams and columns) and scored on the same labels.

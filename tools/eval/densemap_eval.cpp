@@ -110,7 +110,7 @@ Picture slicePicture(const SliceFrame& f, double resolution, double z, int scale
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string data, methods_list = "akimap,bgk,bgkl,raycast", protocol = "holdout", json_path,
+  std::string data, methods_list = "akimap,bgk,bgkl,raycast,akimap_rays", protocol = "holdout", json_path,
                     roc_prefix;
   double resolution = 0.1, max_range = -1.0, akimap_free_step = 0.5;
   std::uint64_t seed = 1;
@@ -118,7 +118,8 @@ int main(int argc, char** argv) {
   std::size_t first = 0, limit = 0;
   CLI::App app{"densemap-eval: accuracy of dense and log-odds maps (hold-out protocol)"};
   app.add_option("--data", data, "Dataset (any format densemap reads)")->required();
-  app.add_option("--method", methods_list, "Comma-separated: akimap, bgk, bgkl, raycast")
+  app.add_option("--method", methods_list,
+                 "Comma-separated: akimap, bgk, bgkl, raycast, akimap_rays")
       ->capture_default_str();
   app.add_option("--protocol", protocol,
                  "holdout (any data) or oracle (densemap-sim data with --oracle-factor)")
@@ -188,7 +189,8 @@ int main(int argc, char** argv) {
   if (methods.empty()) return fail("--method lists no method");
   for (const std::string& m : methods) {
     if (m != "raycast" && !densemap::kernel::parseKernelMethod(m)) {
-      return fail("unknown method '" + m + "' (expected akimap, bgk, bgkl or raycast)");
+      return fail("unknown method '" + m +
+                  "' (expected akimap, bgk, bgkl, raycast or akimap_rays)");
     }
   }
   auto source = densemap::openScanSource(data);

@@ -114,7 +114,7 @@ int main(int argc, char** argv) {
                  "The real sensor's beam table (one elevation per line, deg, top first; e.g. "
                  "config/sensors/balm-os0-64.beams) instead of evenly spread beams");
   app.add_option("--estimate-beams", estimate_beams_path,
-                 "Estimate the real sensor's beam table from the --real scans (k-means on the "
+                 "Estimate the real sensor's beam table from the --real scans (20 or more; k-means on the "
                  "elevations of returns beyond 3 m), write it to this file and use it");
   app.add_option("--reduce", reduce_text,
                  "Keep every n-th real beam; a comma-separated list tests each (e.g. 4,2)")
