@@ -336,6 +336,55 @@ Kernel adaptiveKernel(std::size_t i, const std::vector<Sample>& samples, const S
   return k;
 }
 
+/// The hits of a scan: the points within max range (the occupied samples of makeSamples).
+std::vector<Eigen::Vector3d> hitsOf(const PointCloud& points_world, const Eigen::Vector3d& origin,
+                                    double max_range) {
+  std::vector<Eigen::Vector3d> hits;
+  for (const Point3f& p : points_world) {
+    const double length = (p.cast<double>() - origin).norm();
+    if (length > 0.0 && (max_range < 0.0 || length <= max_range)) hits.push_back(p.cast<double>());
+  }
+  return hits;
+}
+
+/// Where kAkimapRays' free evidence along a ray stops: `free_margin` and `tip_margin` from the
+/// surface, measured along its normal (a distance d from the surface is d / cos(incidence)
+/// along the ray, at most max_margin), or along the ray where no normal is known (zero).
+RayStop rayStop(const Eigen::Vector3d& ray, const Eigen::Vector3d& normal,
+                const KernelOptions& o) {
+  const double cosine = std::abs(ray.dot(normal));
+  const auto along = [&](double margin) {
+    if (margin < 0.0 || normal.isZero()) return margin;
+    return std::min(margin / std::max(cosine, 1e-6), std::max(o.max_margin, margin));
+  };
+  return {along(o.free_margin), along(o.tip_margin)};
+}
+
+/// kAkimapRays' direct hit evidence: per hit, its cell (hit_weight) and an isotropic kernel of
+/// hit_length_voxels (hit_kernel_weight).
+void appendHitKernels(const std::vector<Sample>& samples, const std::vector<std::uint32_t>& hits,
+                      const KernelOptions& o, double resolution, std::vector<Kernel>& kernels) {
+  const double radius = o.hit_length_voxels * resolution;
+  for (const std::uint32_t i : hits) {
+    Kernel k;
+    k.x = k.to = samples[i].x;
+    k.occupied = true;
+    if (o.hit_weight > 0.0) {
+      k.weight = o.hit_weight;
+      k.cell = true;
+      k.half_extent.setZero();
+      kernels.push_back(k);
+    }
+    if (o.hit_kernel_weight > 0.0) {
+      k.weight = o.hit_kernel_weight;
+      k.cell = false;
+      k.half_extent.setConstant(radius);
+      k.inverse_length = 1.0 / radius;
+      kernels.push_back(k);
+    }
+  }
+}
+
 }  // namespace
 
 KernelMap::KernelMap(double resolution_m, const KernelOptions& options)
@@ -359,15 +408,8 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
     // Free samples only shape the occupied kernels, through the search boxes around hits:
     // the others are never drawn (the same kernels, far fewer samples on long rays).
     sampling.free_step = options_.negative_step;
-    std::vector<Eigen::Vector3d> hits;
-    const Eigen::Vector3d origin = origin_world.cast<double>();
-    for (const Point3f& p : points_world) {
-      const double length = (p.cast<double>() - origin).norm();
-      if (length > 0.0 && (options_.max_range < 0.0 || length <= options_.max_range)) {
-        hits.push_back(p.cast<double>());
-      }
-    }
-    near_hits.emplace(hits, std::max(options_.search_max, grid_.resolution()));
+    near_hits.emplace(hitsOf(points_world, origin_world.cast<double>(), options_.max_range),
+                      std::max(options_.search_max, grid_.resolution()));
     keep_free = [&](const Eigen::Vector3d& x) { return (*near_hits)(x); };
   }
   const std::vector<Sample> samples =
@@ -396,16 +438,9 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
           for (std::size_t c = range.begin(); c != range.end(); ++c) {
             kernels[c] = adaptiveKernel(centres[c], samples, index, options_, grid_.resolution(),
                                         neighbours, rays ? &normal : nullptr);
-            if (!rays) continue;
-            // Along the ray, a distance d from the surface is d / cos(incidence) from the hit.
-            const Eigen::Vector3d ray = (samples[centres[c]].x - origin).normalized();
-            const double cosine = std::abs(ray.dot(normal));
-            const auto along = [&](double margin) {
-              if (margin < 0.0) return margin;
-              return normal.isZero() ? margin : std::min(margin / std::max(cosine, 1e-6),
-                                                         std::max(options_.max_margin, margin));
-            };
-            stops[c] = {along(options_.free_margin), along(options_.tip_margin)};
+            if (rays) {
+              stops[c] = rayStop((samples[centres[c]].x - origin).normalized(), normal, options_);
+            }
           }
         });
     const std::vector<Sample> segments =
@@ -413,25 +448,7 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
                                options_.max_range, stops)
              : std::vector<Sample>{};
     kernels.reserve(kernels.size() + 2 * (rays ? centres.size() : 0) + segments.size());
-    for (const std::uint32_t c : rays ? centres : std::vector<std::uint32_t>{}) {
-      Kernel k;
-      k.x = k.to = samples[c].x;
-      k.occupied = true;
-      if (options_.hit_weight > 0.0) {
-        k.weight = options_.hit_weight;
-        k.cell = true;
-        k.half_extent.setZero();
-        kernels.push_back(k);
-      }
-      if (options_.hit_kernel_weight > 0.0) {
-        k.weight = options_.hit_kernel_weight;
-        k.cell = false;
-        const double radius = options_.hit_length_voxels * grid_.resolution();
-        k.half_extent.setConstant(radius);
-        k.inverse_length = 1.0 / radius;
-        kernels.push_back(k);
-      }
-    }
+    if (rays) appendHitKernels(samples, centres, options_, grid_.resolution(), kernels);
     for (const Sample& s : segments) kernels.push_back(isotropicKernel(s, options_));
   } else {
     kernels.reserve(samples.size());
