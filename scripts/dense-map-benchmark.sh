@@ -5,11 +5,13 @@
 #      (12 scans x 3,500 points from 4 stations, 8 m range), at 0.1 m and 0.05 m;
 #   2. hold-out protocol on real data, where DATA (default ../shared/data) holds it: la3dm's
 #      two scenes (0.1 m, 8 m), the AKIMap authors' sample (0.1 m) and BALM scans 20-59
-#      (0.2 m, 15 m; slow: AKIMap alone takes about 30 minutes on 2 cores).
+#      (0.2 m, 15 m; slow: AKIMap takes about 75 s per scan on 2 cores, 50 min for the 40;
+#      BALM_SCANS=N scores scans 20..19+N).
 # Methods: akimap, bgk, bgkl, raycast and akimap_rays. Writes per case a table (.txt), JSON,
 # ROC curves and reliability diagrams (SVG + CSV) into OUT_DIR, and OUT_DIR/summary.md.
 # Usage: scripts/dense-map-benchmark.sh OUT_DIR [RUNS [DATA]]   (after scripts/build.sh)
 #   RUNS: seeds per oracle case (default 1); BENCH_SKIP_BALM=1 leaves BALM out.
+balm_scans=${BALM_SCANS:-40}
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:?usage: scripts/dense-map-benchmark.sh OUT_DIR [RUNS [DATA]]}
@@ -54,7 +56,8 @@ else
   echo "dense-map-benchmark: $data/akimap-sample is absent: skipped"
 fi
 if [ -d "$data/balm-realworld" ] && [ -z "${BENCH_SKIP_BALM:-}" ]; then
-  score holdout_balm_20-59 --data "$data/balm-realworld" --first 0 --limit 40 \
+  score "holdout_balm_20-$((19 + balm_scans))" --data "$data/balm-realworld" --first 0 \
+    --limit "$balm_scans" \
     --protocol holdout --resolution 0.2 --max-range 15
 else
   echo "dense-map-benchmark: BALM skipped (absent, or BENCH_SKIP_BALM set)"

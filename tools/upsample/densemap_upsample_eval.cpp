@@ -7,12 +7,14 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <charconv>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <iomanip>
 #include <map>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <tuple>
@@ -67,6 +69,30 @@ struct Sum {
     ++scans;
   }
 };
+
+/// A named range of real scans (dataset indices FIRST..LAST), reported on its own.
+struct Split {
+  std::string name;
+  std::size_t first = 0, last = 0;
+};
+
+/// "NAME:FIRST-LAST", FIRST <= LAST.
+std::optional<Split> parseSplit(const std::string& text) {
+  const auto colon = text.find(':');
+  const auto dash = colon == std::string::npos ? colon : text.find('-', colon);
+  if (colon == 0 || dash == std::string::npos) return std::nullopt;
+  const auto number = [](std::string_view digits, std::size_t& value) {
+    const auto [end, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), value);
+    return ec == std::errc() && end == digits.data() + digits.size() && !digits.empty();
+  };
+  Split split{text.substr(0, colon), 0, 0};
+  const std::string_view view(text);
+  if (!number(view.substr(colon + 1, dash - colon - 1), split.first) ||
+      !number(view.substr(dash + 1), split.last) || split.first > split.last) {
+    return std::nullopt;
+  }
+  return split;
+}
 
 }  // namespace
 
@@ -249,10 +275,6 @@ int main(int argc, char** argv) {
   }
 
   // Real data: (split, reduce, method) -> sums over scans.
-  struct Split {
-    std::string name;
-    std::size_t first = 0, last = 0;
-  };
   std::vector<Split> splits;
   std::vector<int> reduces;
   std::map<std::tuple<std::size_t, std::size_t, std::size_t>, Sum> real_sums;
@@ -278,20 +300,9 @@ int main(int argc, char** argv) {
       splits.push_back({"all", real_first, end - 1});
     } else {
       for (const std::string& item : densemap::tools::splitList(real_splits_text)) {
-        const auto colon = item.find(':');
-        const auto dash = item.find('-', colon == std::string::npos ? 0 : colon);
-        Split split;
-        try {
-          if (colon == std::string::npos || dash == std::string::npos) throw std::exception();
-          split = {item.substr(0, colon), std::stoul(item.substr(colon + 1, dash - colon - 1)),
-                   std::stoul(item.substr(dash + 1))};
-        } catch (const std::exception&) {
-          return fail("--real-splits: '" + item + "' is not NAME:FIRST-LAST");
-        }
-        if (split.name.empty() || split.first > split.last) {
-          return fail("--real-splits: '" + item + "' is not NAME:FIRST-LAST");
-        }
-        splits.push_back(split);
+        const auto split = parseSplit(item);
+        if (!split) return fail("--real-splits: '" + item + "' is not NAME:FIRST-LAST");
+        splits.push_back(*split);
       }
     }
     const auto scan_of = [&](std::size_t i) -> densemap::Expected<densemap::PointCloud> {
