@@ -144,8 +144,10 @@ int main(int argc, char** argv) {
   std::vector<std::string> kernel_settings;
   app.add_option("--kernel-set", kernel_settings,
                  "Override a kernel map setting for every kernel method of the run, NAME=VALUE "
-                 "(repeatable): free_step, length_scale, sf2, prior, free_margin, negative_step, "
-                 "search_max, min_thickness");
+                 "(repeatable): free_step, length_scale, sf2, prior, free_margin, max_margin, "
+                 "tip_margin, tip_length_scale, occupied_weight, hit_weight, hit_kernel_weight, "
+                 "hit_length_voxels, negative_step, search_max, search_range, min_thickness "
+                 "(core/kernel/include/densemap/kernel/kernel_map.hpp)");
   app.add_option("--json", json_path, "Write the results as JSON");
   app.add_option("--roc", roc_prefix,
                  "Write the ROC curves of the first run: PREFIX_<method>.csv and PREFIX.svg");
@@ -191,6 +193,12 @@ int main(int argc, char** argv) {
     if (m != "raycast" && !densemap::kernel::parseKernelMethod(m)) {
       return fail("unknown method '" + m +
                   "' (expected akimap, bgk, bgkl, raycast or akimap_rays)");
+    }
+  }
+  {
+    densemap::kernel::KernelOptions check;
+    if (auto set = densemap::kernel::applySettings(check, kernel_settings); !set) {
+      return fail("--kernel-set: " + set.error().message);
     }
   }
   auto source = densemap::openScanSource(data);

@@ -122,7 +122,7 @@ namespace {
 struct Kernel {
   Eigen::Vector3d x;
   Eigen::Vector3d to;           // segment end (== x for point kernels)
-  Eigen::Matrix3d h_inverse;    // anisotropic kernels: H^-1
+  Eigen::Matrix3d h_inverse = Eigen::Matrix3d::Zero();  // anisotropic kernels: H^-1
   Eigen::Vector3d half_extent;  // bounding box of the support around [x, to]
   VoxelKey key_min, key_max;    // that box's voxels (set when the kernel is scheduled)
   double weight = 1.0;          // |H|^-1/2 (AKIMap) or sf2 (BGK)

@@ -60,11 +60,11 @@ struct KernelOptions {
   double hit_length_voxels = 2.0;
   /// kAkimapRays: the spacing of AKIMap's random free samples that shape the occupied kernels.
   double negative_step = 0.5;
-  // kAkimap: the neighbour search box's half-size grows linearly from the voxel size at the
+  // kAkimap, kAkimapRays: the neighbour search box's half-size grows linearly from the voxel size at the
   // sensor to `search_max` at `search_range` (max_range when set).
   double search_max = 0.5;
   double search_range = 30.0;
-  /// kAkimap: covariance regulariser, a standard deviation (m; at least a voxel) added on every
+  /// kAkimap, kAkimapRays: covariance regulariser, a standard deviation (m; at least a voxel) added on every
   /// axis. 0.1 m measured best of {1, 2, 3} voxels at 0.1 m and 0.05 m on the oracle scenes
   /// and the la3dm hold-out (issue 5 note).
   double min_thickness = 0.1;
@@ -73,13 +73,15 @@ struct KernelOptions {
   /// only each row's stretch that the kernel can reach (the results are the same, bit for bit).
   bool whole_boxes = false;
 
-  /// The published settings of each method (la3dm's for the baselines).
+  /// The published settings of each method (la3dm's for the baselines); for kAkimapRays the
+  /// settings chosen in issue 17 (kernel_map.cpp says how).
   [[nodiscard]] static KernelOptions defaults(KernelMethod method);
 };
 
-/// Applies "NAME=VALUE" settings (free_step, length_scale, sf2, prior, free_margin, max_margin,
-/// tip_margin, hit_weight, hit_kernel_weight, hit_length_voxels,
-/// tip_length_scale, occupied_weight, negative_step, search_max, search_range, min_thickness) to `options`; errors name the setting.
+/// Applies "NAME=VALUE" settings to `options`: any double field above by its name (free_step,
+/// length_scale, sf2, prior, free_margin, max_margin, tip_margin, tip_length_scale,
+/// occupied_weight, hit_weight, hit_kernel_weight, hit_length_voxels, negative_step,
+/// search_max, search_range, min_thickness); errors name the setting.
 [[nodiscard]] Expected<void> applySettings(KernelOptions& options,
                                            const std::vector<std::string>& settings);
 
