@@ -8,21 +8,20 @@
 #include <tbb/task_arena.h>
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <algorithm>
 #include <fstream>
 #include <functional>
 #include <optional>
-#include <unordered_map>
 #include <sstream>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "../common/lists.hpp"
 #include "../common/progress.hpp"
-#include "plots.hpp"
 #include "densemap/eval/metrics.hpp"
 #include "densemap/io/file_bytes.hpp"
 #include "densemap/io/png_writer.hpp"
@@ -32,6 +31,7 @@
 #include "densemap/raycast/integrator.hpp"
 #include "densemap/sim/oracle_labels.hpp"
 #include "densemap/upsample/interpolation.hpp"
+#include "plots.hpp"
 
 namespace {
 
@@ -98,7 +98,8 @@ Picture slicePicture(const SliceFrame& f, double resolution, double z, int scale
       const auto v = static_cast<std::uint8_t>(std::lround(255.0 * (1.0 - p(x))));
       for (int dy = 0; dy < scale; ++dy) {
         for (int dx = 0; dx < scale; ++dx) {
-          const auto at = 3 * (static_cast<std::size_t>(r * scale + dy) * image.width + c * scale + dx);
+          const auto at =
+              3 * (static_cast<std::size_t>(r * scale + dy) * image.width + c * scale + dx);
           image.rgb[at] = image.rgb[at + 1] = image.rgb[at + 2] = v;
         }
       }
@@ -110,8 +111,8 @@ Picture slicePicture(const SliceFrame& f, double resolution, double z, int scale
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string data, methods_list = "akimap,bgk,bgkl,raycast,akimap_rays", protocol = "holdout", json_path,
-                    roc_prefix;
+  std::string data, methods_list = "akimap,bgk,bgkl,raycast,akimap_rays", protocol = "holdout",
+                    json_path, roc_prefix;
   double resolution = 0.1, max_range = -1.0, akimap_free_step = 0.5;
   std::uint64_t seed = 1;
   int runs = 1, threads = 0;
@@ -162,8 +163,7 @@ int main(int argc, char** argv) {
                  "Write a z-slice picture per method (PREFIX_<method>.png; PREFIX_oracle.png "
                  "for the oracle labels): white free, black occupied, gray unknown");
   app.add_option("--slice-z", slice_z, "Height of the slice, m")->capture_default_str();
-  std::string labels_path, upsample_method, upsample_input = "16x1024",
-                            upsample_output = "64x1024";
+  std::string labels_path, upsample_method, upsample_input = "16x1024", upsample_output = "64x1024";
   double fov_top = 15.0, fov_bottom = -15.0;
   app.add_option("--labels", labels_path,
                  "Oracle labels file (default DATA/oracle_<resolution>.bt): score another "
@@ -374,9 +374,8 @@ int main(int argc, char** argv) {
         reliability_series.push_back({methods[m], r.metrics.ece, r.metrics.reliability});
       }
       if (run == 0 && !slice_prefix.empty() &&
-          !write_slice(methods[m], [&](const densemap::Point3f& x) {
-            return probability(x).value_or(0.5);
-          })) {
+          !write_slice(methods[m],
+                       [&](const densemap::Point3f& x) { return probability(x).value_or(0.5); })) {
         return 1;
       }
       results[m].push_back(std::move(r));
@@ -423,8 +422,7 @@ int main(int argc, char** argv) {
               data.c_str(), protocol.c_str(), resolution, clouds.size(), runs,
               static_cast<unsigned long long>(seed));
   std::printf("%-11s %14s %7s %7s %7s %8s %7s %8s %7s %8s %8s\n", "method", "auc (+-sd)", "mse",
-              "ece", "acc_occ", "acc_free", "occ>0.7", "free<0.3", "known", "build_s",
-              "ms/scan");
+              "ece", "acc_occ", "acc_free", "occ>0.7", "free<0.3", "known", "build_s", "ms/scan");
   std::string json = "{\"results\": [";
   for (std::size_t m = 0; m < methods.size(); ++m) {
     const auto& rs = results[m];

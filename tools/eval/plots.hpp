@@ -19,7 +19,8 @@ struct RocSeries {
 
 /// An SVG line plot of ROC curves (false positive rate against true positive rate), one colour
 /// per series, with the chance diagonal and a legend carrying each AUC.
-[[nodiscard]] Expected<void> writeRocSvg(const std::filesystem::path& path, const std::string& title,
+[[nodiscard]] Expected<void> writeRocSvg(const std::filesystem::path& path,
+                                         const std::string& title,
                                          const std::vector<RocSeries>& series);
 
 /// One method's reliability diagram for the plot.

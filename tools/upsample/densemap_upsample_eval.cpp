@@ -123,7 +123,7 @@ int main(int argc, char** argv) {
   app.add_option("--threads", threads, "Worker threads (0: all cores)")->capture_default_str();
   app.add_option("--json", json_path, "Write the results as JSON");
   std::string real_path, real_layout_text = "64x2048", real_beams_path, estimate_beams_path,
-      real_splits_text, reduce_text = "4", export_real_dir;
+                         real_splits_text, reduce_text = "4", export_real_dir;
   double real_top = 45.5, real_bottom = -44.75;
   std::size_t real_first = 0, real_limit = 0;
   app.add_option("--real", real_path,
@@ -139,9 +139,10 @@ int main(int argc, char** argv) {
   app.add_option("--real-beams", real_beams_path,
                  "The real sensor's beam table (one elevation per line, deg, top first; e.g. "
                  "config/sensors/balm-os0-64.beams) instead of evenly spread beams");
-  app.add_option("--estimate-beams", estimate_beams_path,
-                 "Estimate the real sensor's beam table from the --real scans (20 or more; k-means on the "
-                 "elevations of returns beyond 3 m), write it to this file and use it");
+  app.add_option(
+      "--estimate-beams", estimate_beams_path,
+      "Estimate the real sensor's beam table from the --real scans (20 or more; k-means on the "
+      "elevations of returns beyond 3 m), write it to this file and use it");
   app.add_option("--reduce", reduce_text,
                  "Keep every n-th real beam; a comma-separated list tests each (e.g. 4,2)")
       ->capture_default_str();
@@ -385,7 +386,7 @@ int main(int argc, char** argv) {
         if (auto ok = densemap::writeFileAtomically(
                 std::filesystem::path(export_real_dir) / file,
                 std::string(reinterpret_cast<const char*>(truth.range.data()),
-                             truth.range.size() * sizeof(float)));
+                            truth.range.size() * sizeof(float)));
             !ok) {
           return fail(ok.error().message);
         }
@@ -400,9 +401,9 @@ int main(int argc, char** argv) {
               const auto t0 = std::chrono::steady_clock::now();
               const auto predicted =
                   densemap::upsample::upsample(sparse, real_layout, methods[m], model.get());
-              const double ms = std::chrono::duration<double, std::milli>(
-                                    std::chrono::steady_clock::now() - t0)
-                                    .count();
+              const double ms =
+                  std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                      .count();
               const auto range = *densemap::upsample::compareRanges(predicted, truth);
               const auto p = densemap::eval::comparePointSets(
                   densemap::upsample::backProject(predicted), truth_points, voxel);
@@ -468,10 +469,10 @@ int main(int argc, char** argv) {
                                std::to_string(splits[split].first) + "-" +
                                std::to_string(splits[split].last) + ", every " +
                                std::to_string(reduces[reduce]) + "-th beam)";
-    report(std::string(densemap::upsample::interpolationName(methods[m])),
-           "real:" + real_path + ":" + splits[split].name + ":every" +
-               std::to_string(reduces[reduce]),
-           real_layout, sum, suffix.c_str());
+    report(
+        std::string(densemap::upsample::interpolationName(methods[m])),
+        "real:" + real_path + ":" + splits[split].name + ":every" + std::to_string(reduces[reduce]),
+        real_layout, sum, suffix.c_str());
   }
   json += "]}\n";
   if (!json_path.empty()) {

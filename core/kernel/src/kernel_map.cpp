@@ -104,10 +104,10 @@ Expected<void> applySettings(KernelOptions& options, const std::vector<std::stri
     } catch (const std::exception&) {
       return makeError("'" + setting + "': the value is not a number");
     }
-    // Steps, scales and the prior must be positive; the margin may be 0.
-    if (!std::isfinite(value) || value < 0.0 || (value == 0.0 && name != "free_margin" && name != "tip_margin" &&
-                                  name != "hit_weight" &&
-                                  name != "hit_kernel_weight") ||
+    // Steps, scales and the prior must be positive; margins and hit weights may be 0.
+    if (!std::isfinite(value) || value < 0.0 ||
+        (value == 0.0 && name != "free_margin" && name != "tip_margin" && name != "hit_weight" &&
+         name != "hit_kernel_weight") ||
         value > 1000.0) {
       return makeError("'" + setting + "': out of range");
     }
@@ -121,8 +121,9 @@ namespace {
 /// One sample's kernel, ready to evaluate at cell centres.
 struct Kernel {
   Eigen::Vector3d x;
-  Eigen::Vector3d to;           // segment end (== x for point kernels)
-  Eigen::Matrix3d h_inverse = Eigen::Matrix3d::Zero();  // anisotropic kernels: H^-1
+  Eigen::Vector3d to;  // segment end (== x for point kernels)
+  // Anisotropic kernels: H^-1.
+  Eigen::Matrix3d h_inverse = Eigen::Matrix3d::Zero();
   Eigen::Vector3d half_extent;  // bounding box of the support around [x, to]
   VoxelKey key_min, key_max;    // that box's voxels (set when the kernel is scheduled)
   double weight = 1.0;          // |H|^-1/2 (AKIMap) or sf2 (BGK)
@@ -260,7 +261,8 @@ class SampleIndex {
     std::array<std::int64_t, 3> c{};
     for (int a = 0; a < 3; ++a) {
       const double v = std::floor((p[a] - min_[a]) / cell_);
-      c[a] = v < 0.0 ? 0 : (v >= static_cast<double>(n_[a]) ? n_[a] - 1 : static_cast<std::int64_t>(v));
+      c[a] = v < 0.0 ? 0
+                     : (v >= static_cast<double>(n_[a]) ? n_[a] - 1 : static_cast<std::int64_t>(v));
     }
     return c;
   }
@@ -291,8 +293,8 @@ Kernel isotropicKernel(const Sample& s, const KernelOptions& o) {
 /// least axis) where the same-label neighbourhood is flat (least spread under a quarter of
 /// the middle one, regulariser aside), else to zero.
 Kernel adaptiveKernel(std::size_t i, const std::vector<Sample>& samples, const SampleIndex& index,
-                      const KernelOptions& o, double resolution,
-                      std::vector<Neighbour>& neighbours, Eigen::Vector3d* normal = nullptr) {
+                      const KernelOptions& o, double resolution, std::vector<Neighbour>& neighbours,
+                      Eigen::Vector3d* normal = nullptr) {
   const Sample& s = samples[i];
   const double range_ref = o.max_range > 0.0 ? o.max_range : o.search_range;
   const double half =
@@ -350,8 +352,7 @@ std::vector<Eigen::Vector3d> hitsOf(const PointCloud& points_world, const Eigen:
 /// Where kAkimapRays' free evidence along a ray stops: `free_margin` and `tip_margin` from the
 /// surface, measured along its normal (a distance d from the surface is d / cos(incidence)
 /// along the ray, at most max_margin), or along the ray where no normal is known (zero).
-RayStop rayStop(const Eigen::Vector3d& ray, const Eigen::Vector3d& normal,
-                const KernelOptions& o) {
+RayStop rayStop(const Eigen::Vector3d& ray, const Eigen::Vector3d& normal, const KernelOptions& o) {
   const double cosine = std::abs(ray.dot(normal));
   const auto along = [&](double margin) {
     if (margin < 0.0 || normal.isZero()) return margin;
@@ -444,8 +445,8 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
           }
         });
     const std::vector<Sample> segments =
-        rays ? makeRaySegments(points_world, origin_world, options_.free_step,
-                               options_.max_range, stops)
+        rays ? makeRaySegments(points_world, origin_world, options_.free_step, options_.max_range,
+                               stops)
              : std::vector<Sample>{};
     kernels.reserve(kernels.size() + 2 * (rays ? centres.size() : 0) + segments.size());
     if (rays) appendHitKernels(samples, centres, options_, grid_.resolution(), kernels);
@@ -525,10 +526,10 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
                   continue;
                 }
                 const int from = lo <= base_x ? x0
-                                 : static_cast<int>(std::min<double>(
-                                       x1 + 1, x0 + std::ceil((lo - base_x) / res)));
-                const int to = static_cast<int>(std::clamp<double>(
-                    x0 + std::floor((hi - base_x) / res), x0 - 1, x1));
+                                              : static_cast<int>(std::min<double>(
+                                                    x1 + 1, x0 + std::ceil((lo - base_x) / res)));
+                const int to = static_cast<int>(
+                    std::clamp<double>(x0 + std::floor((hi - base_x) / res), x0 - 1, x1));
                 for (int x = from; x <= to; ++x) {
                   const VoxelKey key{static_cast<std::uint16_t>(x), static_cast<std::uint16_t>(y),
                                      static_cast<std::uint16_t>(z)};

@@ -104,8 +104,7 @@ bool NearHits::operator()(const Eigen::Vector3d& x) const {
 }
 
 std::vector<Sample> makeRaySegments(const PointCloud& points_world, const Point3f& origin_world,
-                                    double step, double max_range,
-                                    std::span<const RayStop> stops) {
+                                    double step, double max_range, std::span<const RayStop> stops) {
   std::vector<Sample> segments;
   const Eigen::Vector3d origin = origin_world.cast<double>();
   std::size_t hit = 0;

@@ -23,8 +23,8 @@ Expected<void> RangeLayout::validate() const {
   }
   if (beams_deg.empty()) return {};
   if (beams_deg.size() != static_cast<std::size_t>(rows)) {
-    return makeError("the beam table has " + std::to_string(beams_deg.size()) +
-                     " elevations for " + std::to_string(rows) + " rows");
+    return makeError("the beam table has " + std::to_string(beams_deg.size()) + " elevations for " +
+                     std::to_string(rows) + " rows");
   }
   for (std::size_t i = 1; i < beams_deg.size(); ++i) {
     if (!(beams_deg[i] < beams_deg[i - 1])) {
@@ -138,8 +138,7 @@ Expected<std::vector<double>> estimateBeams(const std::vector<PointCloud>& scans
   return centres;
 }
 
-Expected<RangeLayout> parseRangeLayout(const std::string& text, double top_deg,
-                                       double bottom_deg) {
+Expected<RangeLayout> parseRangeLayout(const std::string& text, double top_deg, double bottom_deg) {
   RangeLayout l{.top_deg = top_deg, .bottom_deg = bottom_deg};
   char x = 0;
   std::istringstream in(text);

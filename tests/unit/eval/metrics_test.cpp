@@ -54,8 +54,8 @@ TEST(Roc, CurveRunsFromOriginToOneOneAndItsAreaIsTheAuc) {
 TEST(Metrics, ReliabilityBinsCalibrationErrorAndKnownShare) {
   // Bin [0.1, 0.2): 0.15 twice, one occupied (observed 0.5); bin [0.9, 1]: 0.95 and 1.0, both
   // occupied; the unknown point scores 0.5 in bin [0.5, 0.6).
-  const std::vector<Prediction> p = {{0.15, true},  {0.15, false}, {0.95, true},
-                                     {1.0, true},   {0.5, false, false}};
+  const std::vector<Prediction> p = {
+      {0.15, true}, {0.15, false}, {0.95, true}, {1.0, true}, {0.5, false, false}};
   const Metrics m = evaluate(p);
   ASSERT_EQ(m.reliability.size(), 10U);
   EXPECT_EQ(m.reliability[1].count, 2U);

@@ -283,8 +283,7 @@ TEST(RaySegments, CoverEachRayToItsStopThenTheTip) {
   EXPECT_FALSE(segments.back().tip);
   // No tip when it would not pass the free part's end.
   const std::vector<RayStop> no_tip = {{0.25, 0.25}};
-  EXPECT_EQ(makeRaySegments({Point3f(2.0F, 0, 0)}, Point3f(0, 0, 0), 0.3, 10.0, no_tip).size(),
-            6U);
+  EXPECT_EQ(makeRaySegments({Point3f(2.0F, 0, 0)}, Point3f(0, 0, 0), 0.3, 10.0, no_tip).size(), 6U);
 }
 
 TEST(NearHits, SaysYesWithinReachOfEveryHitAndNoFarAway) {

@@ -190,9 +190,8 @@ TEST(Pipeline, CommandsRunBetweenScansAndPublishTheirChanges) {
 }
 
 TEST(Pipeline, KernelMapKindsPublishLogitOfTheOfflineKernelMapAndClearBothStores) {
-  for (const auto method :
-       {kernel::KernelMethod::kAkimap, kernel::KernelMethod::kBgk, kernel::KernelMethod::kBgkl,
-        kernel::KernelMethod::kAkimapRays}) {
+  for (const auto method : {kernel::KernelMethod::kAkimap, kernel::KernelMethod::kBgk,
+                            kernel::KernelMethod::kBgkl, kernel::KernelMethod::kAkimapRays}) {
     const std::string name(kernel::kernelMethodName(method));
     auto sut =
         Pipeline::create({.resolution_m = 0.2, .max_range_m = 5.0, .kernel = method, .threads = 2});

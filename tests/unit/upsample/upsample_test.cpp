@@ -55,7 +55,7 @@ TEST(RangeImage, ProjectionKeepsTheNearerReturnAndCountsWhatItDrops) {
   const RangeImage image = project(points, kInput, &stats);
   EXPECT_EQ(stats.points, 4U);
   EXPECT_EQ(stats.collisions, 1U);
-  EXPECT_EQ(stats.outside_fov, 2U);  // straight up, and NaN
+  EXPECT_EQ(stats.outside_fov, 2U);                        // straight up, and NaN
   EXPECT_FLOAT_EQ(image.at(7, 0) + image.at(8, 0), 5.0F);  // 0 deg lies between rows 7 and 8
 }
 
@@ -150,10 +150,12 @@ TEST(CompareRanges, MaeOverPixelsBothHaveAndCoverage) {
 
 TEST(PointSetMetrics, VoxelIouPrecisionRecall) {
   // Truth: 4 voxels; prediction: 2 of them plus 2 others (one duplicated point).
-  const PointCloud truth = {{0.05F, 0.05F, 0.05F}, {0.15F, 0.05F, 0.05F}, {0.25F, 0.05F, 0.05F},
-                            {0.35F, 0.05F, 0.05F}};
-  const PointCloud predicted = {{0.05F, 0.05F, 0.05F}, {0.06F, 0.04F, 0.05F},
-                                {0.15F, 0.05F, 0.05F}, {1.05F, 0.05F, 0.05F},
+  const PointCloud truth = {
+      {0.05F, 0.05F, 0.05F}, {0.15F, 0.05F, 0.05F}, {0.25F, 0.05F, 0.05F}, {0.35F, 0.05F, 0.05F}};
+  const PointCloud predicted = {{0.05F, 0.05F, 0.05F},
+                                {0.06F, 0.04F, 0.05F},
+                                {0.15F, 0.05F, 0.05F},
+                                {1.05F, 0.05F, 0.05F},
                                 {2.05F, 0.05F, 0.05F}};
   const auto m = eval::comparePointSets(predicted, truth, 0.1);
   EXPECT_EQ(m.predicted_voxels, 4U);
@@ -175,7 +177,7 @@ TEST(BeamTable, LayoutFollowsTheTableAndRejectsBadOnes) {
   EXPECT_DOUBLE_EQ(layout->top_deg, 20.0);
   EXPECT_DOUBLE_EQ(layout->bottom_deg, 10.0);
   EXPECT_DOUBLE_EQ(layout->elevationDeg(2), 17.0);
-  EXPECT_DOUBLE_EQ(layout->elevationDeg(1.5), 18.0);  // halfway in elevation
+  EXPECT_DOUBLE_EQ(layout->elevationDeg(1.5), 18.0);   // halfway in elevation
   EXPECT_DOUBLE_EQ(layout->elevationDeg(-1.0), 21.0);  // beyond the edges at their spacing
   for (const double e : {20.5, 19.7, 17.2, 13.9, 10.0, 9.0}) {
     EXPECT_NEAR(layout->elevationDeg(layout->pixelOf(e, 0.3).first), e, 1e-12) << e;

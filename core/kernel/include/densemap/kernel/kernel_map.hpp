@@ -60,13 +60,13 @@ struct KernelOptions {
   double hit_length_voxels = 2.0;
   /// kAkimapRays: the spacing of AKIMap's random free samples that shape the occupied kernels.
   double negative_step = 0.5;
-  // kAkimap, kAkimapRays: the neighbour search box's half-size grows linearly from the voxel size at the
-  // sensor to `search_max` at `search_range` (max_range when set).
+  // kAkimap, kAkimapRays: the neighbour search box's half-size grows linearly from the voxel size
+  // at the sensor to `search_max` at `search_range` (max_range when set).
   double search_max = 0.5;
   double search_range = 30.0;
-  /// kAkimap, kAkimapRays: covariance regulariser, a standard deviation (m; at least a voxel) added on every
-  /// axis. 0.1 m measured best of {1, 2, 3} voxels at 0.1 m and 0.05 m on the oracle scenes
-  /// and the la3dm hold-out (issue 5 note).
+  /// kAkimap, kAkimapRays: covariance regulariser, a standard deviation (m; at least a voxel) added
+  /// on every axis. 0.1 m measured best of {1, 2, 3} voxels at 0.1 m and 0.05 m on the oracle
+  /// scenes and the la3dm hold-out (issue 5 note).
   double min_thickness = 0.1;
   std::uint64_t seed = 1;
   /// The plain path, for tests: visit every cell of each kernel's bounding box instead of

@@ -75,8 +75,7 @@ struct RayStop {
 /// occupied samples makeSamples returns (rays within max range).
 [[nodiscard]] std::vector<Sample> makeRaySegments(const PointCloud& points_world,
                                                   const Point3f& origin_world, double step,
-                                                  double max_range,
-                                                  std::span<const RayStop> stops);
+                                                  double max_range, std::span<const RayStop> stops);
 
 /// A uniform double in [0, 1) from a counter (SplitMix64): reproducible random numbers.
 [[nodiscard]] double uniformFromCounter(std::uint64_t counter);
