@@ -66,6 +66,10 @@ TEST(ServerConfig, ErrorsNameTheFileTheLineAndTheReason) {
   auto akimap = loadServerConfig(writeConfig(dir, "map { kind: \"akimap\" }\n"));
   ASSERT_TRUE(akimap) << akimap.error().message;
   EXPECT_EQ(pipelineOptions(*akimap)->kernel, kernel::KernelMethod::kAkimap);
+  EXPECT_NE(bad_kind.error().message.find("akimap_rays"), std::string::npos);
+  auto rays = loadServerConfig(writeConfig(dir, "map { kind: \"akimap_rays\" }\n"));
+  ASSERT_TRUE(rays) << rays.error().message;
+  EXPECT_EQ(pipelineOptions(*rays)->kernel, kernel::KernelMethod::kAkimapRays);
   auto up = loadServerConfig(writeConfig(
       dir, "upsample { enabled: true method: \"nearest\" output_rows: 61 output_cols: 2048 }\n"));
   ASSERT_TRUE(up) << up.error().message;
