@@ -46,6 +46,31 @@ densemap::LidarModel sensorFor(const RangeLayout& layout, double max_range) {
   return m;
 }
 
+/// One method's upsampling of one scan: its errors and the upsampling time alone.
+struct Score {
+  densemap::upsample::RangeError range;
+  densemap::eval::PointSetMetrics points;
+  double ms = 0.0;
+};
+
+/// `input` upsampled by `method` to `truth`'s grid, timed and compared with `truth` (whose
+/// points are `truth_points`) by range and by voxels of `voxel` metres.
+Score scoreUpsampling(const densemap::upsample::RangeImage& input,
+                      const densemap::upsample::RangeImage& truth,
+                      const densemap::PointCloud& truth_points,
+                      densemap::upsample::Interpolation method,
+                      const densemap::upsample::IlnModel* model, double voxel) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto predicted = densemap::upsample::upsample(input, truth.layout, method, model);
+  Score score;
+  score.ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  score.range = *densemap::upsample::compareRanges(predicted, truth);
+  score.points = densemap::eval::comparePointSets(densemap::upsample::backProject(predicted),
+                                                  truth_points, voxel);
+  return score;
+}
+
 struct Sum {
   double mae = 0, coverage = 0, iou = 0, precision = 0, recall = 0, f1 = 0, ms = 0;
   int scans = 0;
@@ -56,16 +81,15 @@ struct Sum {
     return ms_each.empty() ? 0.0 : ms_each[ms_each.size() / 2];
   }
 
-  void add(const densemap::upsample::RangeError& range,
-           const densemap::eval::PointSetMetrics& points, double ms_scan) {
-    mae += range.mae;
-    coverage += range.coverage;
-    iou += points.iou;
-    precision += points.precision;
-    recall += points.recall;
-    f1 += points.f1;
-    ms += ms_scan;
-    ms_each.push_back(ms_scan);
+  void add(const Score& s) {
+    mae += s.range.mae;
+    coverage += s.range.coverage;
+    iou += s.points.iou;
+    precision += s.points.precision;
+    recall += s.points.recall;
+    f1 += s.points.f1;
+    ms += s.ms;
+    ms_each.push_back(s.ms);
     ++scans;
   }
 };
@@ -246,16 +270,8 @@ int main(int argc, char** argv) {
             }
             const auto truth_points = densemap::upsample::backProject(truth);
             for (std::size_t m = 0; m < methods.size(); ++m) {
-              const auto t0 = std::chrono::steady_clock::now();
-              const auto predicted =
-                  densemap::upsample::upsample(low, targets[t], methods[m], model.get());
-              const double ms =
-                  std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-                      .count();
-              const auto range = *densemap::upsample::compareRanges(predicted, truth);
-              const auto points = densemap::eval::comparePointSets(
-                  densemap::upsample::backProject(predicted), truth_points, voxel);
-              sums[{m, t}].add(range, points, ms);
+              sums[{m, t}].add(
+                  scoreUpsampling(low, truth, truth_points, methods[m], model.get(), voxel));
             }
           }
         });
@@ -391,23 +407,20 @@ int main(int argc, char** argv) {
           return fail(ok.error().message);
         }
       }
-      const auto truth_points = densemap::upsample::backProject(truth);
-      for (std::size_t s = 0; s < splits.size(); ++s) {
-        if (i < splits[s].first || i > splits[s].last) continue;
+      // Each (reduction, method) is scored once and counted in every split holding the scan.
+      std::vector<std::size_t> in_splits;
+      for (std::size_t sp = 0; sp < splits.size(); ++sp) {
+        if (i >= splits[sp].first && i <= splits[sp].last) in_splits.push_back(sp);
+      }
+      if (!in_splits.empty()) {
+        const auto truth_points = densemap::upsample::backProject(truth);
         for (std::size_t r = 0; r < reduces.size(); ++r) {
           const auto sparse = densemap::upsample::keepEveryNthRow(truth, reduces[r]);
           arena.execute([&] {
             for (std::size_t m = 0; m < methods.size(); ++m) {
-              const auto t0 = std::chrono::steady_clock::now();
-              const auto predicted =
-                  densemap::upsample::upsample(sparse, real_layout, methods[m], model.get());
-              const double ms =
-                  std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-                      .count();
-              const auto range = *densemap::upsample::compareRanges(predicted, truth);
-              const auto p = densemap::eval::comparePointSets(
-                  densemap::upsample::backProject(predicted), truth_points, voxel);
-              real_sums[{s, r, m}].add(range, p, ms);
+              const Score score =
+                  scoreUpsampling(sparse, truth, truth_points, methods[m], model.get(), voxel);
+              for (const std::size_t sp : in_splits) real_sums[{sp, r, m}].add(score);
             }
           });
         }
