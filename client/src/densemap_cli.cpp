@@ -9,14 +9,14 @@
 #include <map>
 #include <thread>
 
-#include "../../tools/common/progress.hpp"
+#include "densemap/cli/progress.hpp"
 #include "densemap/client/client.hpp"
 #include "densemap/io/octomap_export.hpp"
 #include "densemap/io/png_writer.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/upsample/interpolation.hpp"
 #include "load_command.hpp"
-#include "snapshot.hpp"
+#include "densemap/store/snapshot.hpp"
 
 namespace densemap::cli {
 namespace {
@@ -236,7 +236,7 @@ void printStatus(const ServerStatus& s) {
 Expected<std::unique_ptr<OccupancyMap>> loadMapFile(const std::string& file) {
   const std::filesystem::path p(file);
   if (p.extension() == ".bt" || p.extension() == ".ot") return importOctomap(p, Backend::kGrid);
-  auto loaded = server::loadSnapshot(p, Backend::kGrid, 0.0);
+  auto loaded = loadSnapshot(p, Backend::kGrid, 0.0);
   if (!loaded) return std::unexpected(loaded.error());
   return std::move(loaded->map);
 }
@@ -454,7 +454,7 @@ int main(int argc, char** argv) {
     auto fetched = (*client)->fetchMap();
     if (!fetched) return cli::fail(fetched.error().message);
     const auto view = MapView::fromMap(*fetched->first, fetched->second);
-    auto saved = server::saveSnapshot(*view, SensorModel{}, Backend::kGrid, snapshot_out);
+    auto saved = saveSnapshot(*view, SensorModel{}, Backend::kGrid, snapshot_out);
     if (!saved) return cli::fail(saved.error().message);
     std::printf("wrote %s: %zu cells, map version %llu, %zu bytes\n", snapshot_out.c_str(),
                 view->knownCells(), static_cast<unsigned long long>(fetched->second), *saved);

@@ -11,7 +11,7 @@
 
 #include "map_service.hpp"
 #include "server_config.hpp"
-#include "snapshot.hpp"
+#include "densemap/store/snapshot.hpp"
 
 namespace {
 
@@ -64,7 +64,7 @@ int main(int argc, char** argv) {
   std::uint64_t version = 0;
   const auto& snapshot = service_options.snapshot_path;
   if (!snapshot.empty() && std::filesystem::exists(snapshot)) {
-    auto loaded = densemap::server::loadSnapshot(snapshot, options->backend, options->resolution_m);
+    auto loaded = densemap::loadSnapshot(snapshot, options->backend, options->resolution_m);
     if (!loaded) return fail("snapshot: " + loaded.error().message);
     std::fprintf(stderr, "densemap-server: resumed %s (version %llu, %zu cells)\n",
                  snapshot.c_str(), static_cast<unsigned long long>(loaded->version),

@@ -17,7 +17,7 @@
 #include "densemap/io/process_usage.hpp"
 #include "densemap/pipeline/version_delta.hpp"
 #include "densemap_msgs.h"
-#include "snapshot.hpp"
+#include "densemap/store/snapshot.hpp"
 
 namespace densemap::server {
 

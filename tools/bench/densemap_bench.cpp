@@ -12,7 +12,7 @@
 #include <sstream>
 #include <thread>
 
-#include "../common/progress.hpp"
+#include "densemap/cli/progress.hpp"
 #include "bench_report.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_diff.hpp"

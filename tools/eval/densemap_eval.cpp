@@ -20,8 +20,8 @@
 #include <unordered_map>
 #include <vector>
 
-#include "../common/lists.hpp"
-#include "../common/progress.hpp"
+#include "densemap/cli/lists.hpp"
+#include "densemap/cli/progress.hpp"
 #include "densemap/eval/metrics.hpp"
 #include "densemap/io/file_bytes.hpp"
 #include "densemap/io/png_writer.hpp"

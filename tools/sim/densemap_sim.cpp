@@ -4,7 +4,7 @@
 
 #include <cstdio>
 
-#include "../common/progress.hpp"
+#include "densemap/cli/progress.hpp"
 #include "densemap/sim/sequence.hpp"
 
 int main(int argc, char** argv) {

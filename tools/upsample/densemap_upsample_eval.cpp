@@ -20,8 +20,8 @@
 #include <tuple>
 #include <vector>
 
-#include "../common/lists.hpp"
-#include "../common/progress.hpp"
+#include "densemap/cli/lists.hpp"
+#include "densemap/cli/progress.hpp"
 #include "densemap/eval/point_set_metrics.hpp"
 #include "densemap/io/file_bytes.hpp"
 #include "densemap/io/scan_source.hpp"

@@ -76,11 +76,12 @@ Expected<std::vector<Scan>> readScanGraph(const std::filesystem::path& file) {
     if (!readDoubles(in, 4, q)) return broken("bad pose rotation");
     const double q_norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
     if (!std::isfinite(q_norm) || q_norm < 1e-6) return broken("degenerate pose quaternion");
-    // OctoMap keeps pose6d in float; round the same way so origins match OctoMap's.
-    scan.T_world_sensor = transformFromTranslationQuaternion(
-        {static_cast<float>(t[0]), static_cast<float>(t[1]), static_cast<float>(t[2])},
-        static_cast<float>(q[0]), static_cast<float>(q[1]), static_cast<float>(q[2]),
-        static_cast<float>(q[3]));
+    // Pose6D::readBinary stores the doubles as float too.
+    scan.octomap_pose =
+        OctomapPose{{static_cast<float>(t[0]), static_cast<float>(t[1]), static_cast<float>(t[2])},
+                    {static_cast<float>(q[0]), static_cast<float>(q[1]), static_cast<float>(q[2]),
+                     static_cast<float>(q[3])}};
+    scan.T_world_sensor = transformFromOctomapPose(*scan.octomap_pose);
     std::uint32_t id = 0;
     if (!in.read(id)) return broken("missing node id");
     scan.id = id;

@@ -42,14 +42,63 @@ TEST(ScanGraph, ReadsWhatOctomapWrites) {
       const auto& p = (*node->scan)[i];
       EXPECT_EQ((*scans)[n].points[i], Point3f(p.x(), p.y(), p.z()));
     }
-    const octomap::point3d t = node->pose.trans();
-    EXPECT_EQ((*scans)[n].originWorld(), Point3f(t.x(), t.y(), t.z()));
+    // World points and origin exactly as graph2tree computes them (float pose6d).
+    octomap::Pointcloud world(*node->scan);
+    world.transform(node->pose);
+    const PointCloud ours = (*scans)[n].pointsWorld();
+    ASSERT_EQ(ours.size(), world.size());
+    for (std::size_t i = 0; i < world.size(); ++i) {
+      EXPECT_EQ(ours[i], Point3f(world[i].x(), world[i].y(), world[i].z()));
+    }
+    const octomap::point3d o =
+        node->pose.transform(node->pose.inv().transform(node->pose.trans()));
+    EXPECT_EQ((*scans)[n].originWorld(), Point3f(o.x(), o.y(), o.z()));
+    // The double pose is the same one.
     const octomap::point3d q = node->pose.transform(octomap::point3d(1, 2, 3));
-    const Point3f ours = (*scans)[n].T_world_sensor.cast<float>() * Point3f(1, 2, 3);
-    EXPECT_NEAR(ours.x(), q.x(), 1e-5);
-    EXPECT_NEAR(ours.y(), q.y(), 1e-5);
-    EXPECT_NEAR(ours.z(), q.z(), 1e-5);
+    const Point3f mapped = (*scans)[n].T_world_sensor.cast<float>() * Point3f(1, 2, 3);
+    EXPECT_NEAR(mapped.x(), q.x(), 1e-5);
+    EXPECT_NEAR(mapped.y(), q.y(), 1e-5);
+    EXPECT_NEAR(mapped.z(), q.z(), 1e-5);
   }
+}
+
+TEST(ScanGraph, WrittenGraphsAreReadByOctomapWithTheSameWorldPoints) {
+  test::TempDir dir;
+  // Sensor-frame scans with double poses, and world-frame scans with an origin.
+  std::vector<Scan> scans(3);
+  for (std::size_t n = 0; n < scans.size(); ++n) {
+    scans[n].id = n;
+    scans[n].frame = n == 2 ? PointFrame::kWorld : PointFrame::kSensor;
+    scans[n].T_world_sensor = transformFromTranslationQuaternion(
+        {0.5 * n, -1.25, 0.3}, std::cos(0.2 * n), 0, 0.1, std::sin(0.2 * n));
+    for (int i = 0; i < 50; ++i) scans[n].points.emplace_back(0.2F * i, 1.0F + n, -0.1F * i);
+  }
+  const MemoryScanSource source(scans, "test scans");
+  std::size_t reported = 0;
+  ASSERT_TRUE(writeScanGraph(source, 0, 10, dir.path() / "w.graph",
+                             [&](std::size_t k) { reported = k; }));
+  EXPECT_EQ(reported, 3U);
+  octomap::ScanGraph graph;
+  ASSERT_TRUE(graph.readBinary((dir.path() / "w.graph").string()));
+  ASSERT_EQ(graph.size(), 3U);
+  auto back = readScanGraph(dir.path() / "w.graph");
+  ASSERT_TRUE(back) << back.error().message;
+  for (std::size_t n = 0; n < scans.size(); ++n) {
+    const PointCloud expected = scans[n].pointsWorld();
+    const PointCloud got = (*back)[n].pointsWorld();
+    ASSERT_EQ(got.size(), expected.size());
+    for (std::size_t i = 0; i < got.size(); ++i) {
+      EXPECT_NEAR((got[i] - expected[i]).norm(), 0.0, 1e-5) << "scan " << n << " point " << i;
+    }
+    EXPECT_NEAR(((*back)[n].originWorld() - scans[n].originWorld()).norm(), 0.0, 1e-6);
+  }
+  // A part of the source; a first scan past the end is an error.
+  ASSERT_TRUE(writeScanGraph(source, 1, 1, dir.path() / "one.graph"));
+  auto one = readScanGraph(dir.path() / "one.graph");
+  ASSERT_TRUE(one);
+  EXPECT_EQ(one->size(), 1U);
+  EXPECT_EQ((*one)[0].points, scans[1].points);
+  EXPECT_FALSE(writeScanGraph(source, 3, 1, dir.path() / "none.graph"));
 }
 
 TEST(ScanGraph, TruncatedFilesAreClearErrorsAtEveryLength) {

@@ -8,7 +8,7 @@
 #include "densemap/test_support/data_dir.hpp"
 #include "densemap/test_support/random_rays.hpp"
 #include "server_config.hpp"
-#include "snapshot.hpp"
+#include "densemap/store/snapshot.hpp"
 
 namespace densemap::server {
 namespace {

@@ -1,6 +1,8 @@
 #pragma once
 
+#include <array>
 #include <cstddef>
+#include <optional>
 #include <vector>
 
 #include "densemap/geometry/point_cloud.hpp"
@@ -9,6 +11,12 @@
 namespace densemap {
 
 enum class PointFrame { kSensor, kWorld };
+
+/// A pose as OctoMap's `pose6d` holds it: float translation and unit quaternion (w, x, y, z).
+struct OctomapPose {
+  std::array<float, 3> t{0, 0, 0};
+  std::array<float, 4> q{1, 0, 0, 0};
+};
 
 /// One LiDAR measurement as read from disk: its points, the frame they are in, and the sensor
 /// pose. Datasets that store world-frame points (la3dm PCDs, the AKIMap sample) keep them as
@@ -19,11 +27,20 @@ struct Scan {
   Transform T_world_sensor = Transform::Identity();
   PointCloud points;
   std::vector<float> intensities;  // empty, or one per point
+  /// Set by the readers of OctoMap's own formats (.graph, scan.dat): the pose exactly as
+  /// OctoMap's tools hold it. pointsWorld() and originWorld() then transform a sensor-frame scan
+  /// with OctoMap's float arithmetic (liboctomath) as graph2tree does, so that densemap-map and
+  /// graph2tree build the same tree. T_world_sensor holds the same pose in double.
+  std::optional<OctomapPose> octomap_pose;
 
-  /// The points in the world frame (transformed once, in double, if they are sensor-frame).
+  /// The points in the world frame: transformed once, in double (or as graph2tree does, with
+  /// `octomap_pose`), if they are sensor-frame.
   [[nodiscard]] PointCloud pointsWorld() const;
   /// The ray origin in the world frame.
-  [[nodiscard]] Point3f originWorld() const { return sensorOrigin(T_world_sensor); }
+  [[nodiscard]] Point3f originWorld() const;
 };
+
+/// The same pose in double (for consumers that take sensor-frame scans with a pose).
+[[nodiscard]] Transform transformFromOctomapPose(const OctomapPose& pose);
 
 }  // namespace densemap

@@ -1,6 +1,7 @@
 #pragma once
 
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -54,5 +55,14 @@ class MemoryScanSource final : public ScanSource {
 [[nodiscard]] Expected<Scan> readPcd(const std::filesystem::path& file);
 [[nodiscard]] Expected<std::vector<Scan>> readScanGraph(const std::filesystem::path& file);
 [[nodiscard]] Expected<std::vector<Scan>> readScanDat(const std::filesystem::path& file);
+
+/// Writes scans [first, first + count) of `source` as an OctoMap ScanGraph (`.graph`, what
+/// graph2tree, octovis and OctoMap's ScanGraph read), atomically, without edges. Sensor-frame
+/// scans keep their points and pose (their OctoMap pose, or the double pose rounded to float);
+/// world-frame scans are stored relative to their origin, unrotated. `progress(n)` is called
+/// after the n-th scan.
+[[nodiscard]] Expected<void> writeScanGraph(
+    const ScanSource& source, std::size_t first, std::size_t count,
+    const std::filesystem::path& file, const std::function<void(std::size_t)>& progress = {});
 
 }  // namespace densemap

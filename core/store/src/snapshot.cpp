@@ -1,13 +1,13 @@
-#include "snapshot.hpp"
+#include "densemap/store/snapshot.hpp"
 
 #include <cstring>
 
-#include "densemap.pb.h"
+#include "snapshot.pb.h"
 #include "densemap/io/file_bytes.hpp"
 #include "densemap/io/octomap_export.hpp"
 #include "densemap/map/map_factory.hpp"
 
-namespace densemap::server {
+namespace densemap {
 namespace {
 
 Expected<std::unique_ptr<OccupancyMap>> toMap(const MapView& view, const SensorModel& model,
@@ -91,4 +91,4 @@ Expected<LoadedSnapshot> loadSnapshot(const std::filesystem::path& file, Backend
   return LoadedSnapshot{std::move(*map), s.map_version()};
 }
 
-}  // namespace densemap::server
+}  // namespace densemap

@@ -7,7 +7,7 @@
 #include "densemap/map/occupancy_map.hpp"
 #include "densemap/pipeline/map_view.hpp"
 
-namespace densemap::server {
+namespace densemap {
 
 struct LoadedSnapshot {
   std::unique_ptr<OccupancyMap> map;
@@ -25,4 +25,4 @@ struct LoadedSnapshot {
 [[nodiscard]] Expected<LoadedSnapshot> loadSnapshot(const std::filesystem::path& file,
                                                     Backend backend, double expected_resolution_m);
 
-}  // namespace densemap::server
+}  // namespace densemap
