@@ -5,8 +5,9 @@ function(densemap_add_module name)
   cmake_parse_arguments(ARG "" "" "SOURCES;DEPS;PRIVATE_DEPS" ${ARGN})
   add_library(densemap_${name} STATIC ${ARG_SOURCES})
   add_library(densemap::${name} ALIAS densemap_${name})
-  target_include_directories(densemap_${name} PUBLIC ${CMAKE_CURRENT_SOURCE_DIR}/include
-                                              PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/src)
+  target_include_directories(densemap_${name}
+                             PUBLIC $<BUILD_INTERFACE:${CMAKE_CURRENT_SOURCE_DIR}/include>
+                             PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/src)
   target_link_libraries(densemap_${name} PUBLIC ${ARG_DEPS} densemap_options
                                          PRIVATE ${ARG_PRIVATE_DEPS})
 endfunction()

@@ -1,11 +1,13 @@
 # Compiler flags shared by every densemap target (applied through densemap_options).
 add_library(densemap_options INTERFACE)
+# Exactness vs OctoMap depends on the same float operations in the same order: never fuse
+# multiply-adds, never reassociate.
+set(DENSEMAP_FLAGS -Wall -Wextra -Wpedantic -Wshadow -Wcast-align -ffp-contract=off -fno-fast-math)
+set(DENSEMAP_CXX_FLAGS -Wnon-virtual-dtor -Woverloaded-virtual)
+# Build-only: the installed SDK's densemap::options carries no flags into users' projects.
 target_compile_options(densemap_options INTERFACE
-  -Wall -Wextra -Wpedantic -Wshadow -Wcast-align
-  $<$<COMPILE_LANGUAGE:CXX>:-Wnon-virtual-dtor -Woverloaded-virtual>
-  # Exactness vs OctoMap depends on the same float operations in the same order: never fuse
-  # multiply-adds, never reassociate.
-  -ffp-contract=off -fno-fast-math)
+  "$<BUILD_INTERFACE:${DENSEMAP_FLAGS}>"
+  "$<BUILD_INTERFACE:$<$<COMPILE_LANGUAGE:CXX>:${DENSEMAP_CXX_FLAGS}>>")
 
 if(DENSEMAP_SANITIZER STREQUAL "address")
   target_compile_options(densemap_options INTERFACE -fsanitize=address -fno-omit-frame-pointer)

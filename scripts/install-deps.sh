@@ -15,6 +15,7 @@ PACKAGES=(
   libcli11-dev libspdlog-dev
   libbz2-dev zlib1g-dev iproute2 util-linux
   clang-format clang-tidy
+  dpkg-dev fakeroot lintian adduser
 )
 if [ "${1:-}" = "--iln" ]; then
   PACKAGES+=(python3-torch python3-protobuf libopenblas0-pthread)

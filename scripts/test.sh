@@ -25,4 +25,9 @@ tested=$(date +%s)
 echo "test.sh: tests took $((tested - built)) s"
 # A 2-minute soak (scripts/soak.sh MINUTES for longer ones): fails on RSS growth or p99 drift.
 DENSEMAP_BIN="$BUILD_DIR/bin" SOAK_OUT=/tmp/densemap-soak-ci isolated ./scripts/soak.sh 2
-echo "test.sh: soak took $(( $(date +%s) - tested )) s; total $(( $(date +%s) - start )) s"
+soaked=$(date +%s)
+echo "test.sh: soak took $((soaked - tested)) s"
+# The .debs (contents, lintian, dpkg -i as root), the SDK in a temporary prefix and the example
+# client built against it.
+isolated ./scripts/check-packages.sh
+echo "test.sh: packages took $(( $(date +%s) - soaked )) s; total $(( $(date +%s) - start )) s"

@@ -9,8 +9,8 @@
 #include <cstdio>
 #include <filesystem>
 
-#include "map_service.hpp"
-#include "server_config.hpp"
+#include "densemap/server/map_service.hpp"
+#include "densemap/server/server_config.hpp"
 #include "densemap/store/snapshot.hpp"
 
 namespace {
@@ -36,15 +36,24 @@ int main(int argc, char** argv) {
   sigaddset(&signals, SIGTERM);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
-  std::string config_path;
+  std::string config_path, check_path;
   int domain_override = -1;
   CLI::App app{"densemap-server: real-time occupancy mapping over DDS (loopback by default)"};
-  app.add_option("--config", config_path, "Server config, protobuf text format")
-      ->required()
-      ->check(CLI::ExistingFile);
+  auto* config_option =
+      app.add_option("--config", config_path, "Server config, protobuf text format")
+          ->check(CLI::ExistingFile);
+  app.add_option("--check-config", check_path,
+                 "Check a config (and the snapshot it would resume) and exit: 0 if the server "
+                 "would start with it, 2 with the reason if not")
+      ->excludes(config_option);
   app.add_option("--domain-id", domain_override, "DDS domain id (overrides the config)")
       ->check(CLI::Range(0, 232));
   CLI11_PARSE(app, argc, argv);
+  if (config_path.empty() && check_path.empty()) {
+    return fail("--config FILE is required (or --check-config FILE)", 2);
+  }
+  const bool check_only = !check_path.empty();
+  if (check_only) config_path = check_path;
 
   auto config = densemap::server::loadServerConfig(config_path);
   if (!config) return fail("config: " + config.error().message, 2);
@@ -65,7 +74,7 @@ int main(int argc, char** argv) {
   const auto& snapshot = service_options.snapshot_path;
   if (!snapshot.empty() && std::filesystem::exists(snapshot)) {
     auto loaded = densemap::loadSnapshot(snapshot, options->backend, options->resolution_m);
-    if (!loaded) return fail("snapshot: " + loaded.error().message);
+    if (!loaded) return fail("snapshot: " + loaded.error().message, check_only ? 2 : 1);
     std::fprintf(stderr, "densemap-server: resumed %s (version %llu, %zu cells)\n",
                  snapshot.c_str(), static_cast<unsigned long long>(loaded->version),
                  loaded->map->knownCells());
@@ -78,6 +87,21 @@ int main(int argc, char** argv) {
     }
     initial = std::move(loaded->map);
     version = loaded->version;
+  } else if (const auto dir = std::filesystem::path(snapshot).parent_path();
+             !snapshot.empty() && !dir.empty() && !std::filesystem::is_directory(dir)) {
+    return fail(
+        "snapshot.path " + snapshot.string() + ": directory " + dir.string() + " does not exist",
+        check_only ? 2 : 1);
+  }
+  if (check_only) {
+    std::printf(
+        "densemap-server: %s is valid: %s backend, %s map at %g m, %d threads, DDS domain "
+        "%u on %s, snapshot %s\n",
+        config_path.c_str(), config->map().backend().c_str(), config->map().kind().c_str(),
+        options->resolution_m, options->threads, service_options.domain_id,
+        service_options.network_interface.c_str(),
+        snapshot.empty() ? "off" : snapshot.string().c_str());
+    return 0;
   }
   // TBB's default pool has hardware threads - 1 workers, shared by every arena: on 2 cores a
   // single worker, so a query task could wait for a whole scan's integration. Room for both

@@ -1,4 +1,4 @@
-#include "map_service.hpp"
+#include "densemap/server/map_service.hpp"
 
 #include <malloc.h>
 #include <tbb/blocked_range.h>

@@ -1,4 +1,4 @@
-#include "server_config.hpp"
+#include "densemap/server/server_config.hpp"
 
 #include <cmath>
 

@@ -7,7 +7,7 @@
 #include "densemap/raycast/integrator.hpp"
 #include "densemap/test_support/data_dir.hpp"
 #include "densemap/test_support/random_rays.hpp"
-#include "server_config.hpp"
+#include "densemap/server/server_config.hpp"
 #include "densemap/store/snapshot.hpp"
 
 namespace densemap::server {

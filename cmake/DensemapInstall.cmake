@@ -1,0 +1,76 @@
+# What `cmake --install` and `cpack -G DEB` ship, in two components:
+#   server: the programs, the default config in /etc/densemap, the systemd unit, the ILN model
+#           (package densemap-server);
+#   dev:    the client SDK: static libraries, headers, densemapConfig.cmake with the exported
+#           targets densemap::client, densemap::io, densemap::map, ... (package libdensemap-dev).
+# The SDK alone into any prefix: cmake --install build --component dev --prefix /opt/densemap
+include(GNUInstallDirs)
+include(CMakePackageConfigHelpers)
+
+set(DENSEMAP_CMAKE_DIR ${CMAKE_INSTALL_LIBDIR}/cmake/densemap)
+
+# The client library and everything it links, as static libraries; exported as densemap::<name>.
+set(DENSEMAP_SDK_TARGETS
+    densemap_options densemap_geometry densemap_map densemap_raycast densemap_kernel
+    densemap_iln_proto densemap_upsample densemap_io densemap_pipeline densemap_snapshot_proto
+    densemap_store densemap_dds_msgs densemap_dds densemap_client)
+set(DENSEMAP_SDK_HEADER_DIRS
+    core/geometry core/map core/raycast core/kernel core/upsample core/io core/pipeline core/store
+    server/dds client)
+foreach(target IN LISTS DENSEMAP_SDK_TARGETS)
+  string(REGEX REPLACE "^densemap_" "" export_name ${target})
+  set_target_properties(${target} PROPERTIES EXPORT_NAME ${export_name})
+endforeach()
+install(TARGETS ${DENSEMAP_SDK_TARGETS} EXPORT densemapTargets
+        ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR} COMPONENT dev
+        INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
+foreach(dir IN LISTS DENSEMAP_SDK_HEADER_DIRS)
+  install(DIRECTORY ${PROJECT_SOURCE_DIR}/${dir}/include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}
+          COMPONENT dev)
+endforeach()
+install(EXPORT densemapTargets NAMESPACE densemap:: DESTINATION ${DENSEMAP_CMAKE_DIR}
+        COMPONENT dev)
+configure_package_config_file(${PROJECT_SOURCE_DIR}/cmake/densemapConfig.cmake.in
+                              ${PROJECT_BINARY_DIR}/densemapConfig.cmake
+                              INSTALL_DESTINATION ${DENSEMAP_CMAKE_DIR})
+write_basic_package_version_file(${PROJECT_BINARY_DIR}/densemapConfigVersion.cmake
+                                 COMPATIBILITY SameMinorVersion)
+install(FILES ${PROJECT_BINARY_DIR}/densemapConfig.cmake
+              ${PROJECT_BINARY_DIR}/densemapConfigVersion.cmake
+        DESTINATION ${DENSEMAP_CMAKE_DIR} COMPONENT dev)
+
+# The server's files, laid out for the Debian package (prefix /usr): programs in bin/ (each
+# add_executable installs itself with COMPONENT server), the ILN model in share/densemap, and the
+# system paths Debian uses: /etc/densemap, /var/lib/densemap, /lib/systemd/system. The packaged
+# config is config/densemap.textproto with its two relative paths made absolute: the snapshot in
+# the state directory, the model under /usr/share.
+set(DENSEMAP_PACKAGE_PREFIX /usr)
+set(DENSEMAP_STATE_DIR /var/lib/densemap)
+set(DENSEMAP_SYSCONF_DIR /etc/densemap)
+set(DENSEMAP_SHARE_DIR ${DENSEMAP_PACKAGE_PREFIX}/share/densemap)
+set(DENSEMAP_DOC_DIR ${DENSEMAP_PACKAGE_PREFIX}/share/doc/densemap-server)
+set(DENSEMAP_SERVER_BIN ${DENSEMAP_PACKAGE_PREFIX}/bin/densemap-server)
+file(READ ${PROJECT_SOURCE_DIR}/config/densemap.textproto DENSEMAP_PACKAGED_CONFIG)
+foreach(pair "path: \"densemap.dmap\"|path: \"${DENSEMAP_STATE_DIR}/densemap.dmap\""
+             "model: \"models/iln.pb\"|model: \"${DENSEMAP_SHARE_DIR}/models/iln.pb\"")
+  string(REPLACE "|" ";" pair "${pair}")
+  list(GET pair 0 from)
+  list(GET pair 1 to)
+  string(FIND "${DENSEMAP_PACKAGED_CONFIG}" "${from}" found)
+  if(found LESS 0)
+    message(FATAL_ERROR "config/densemap.textproto no longer contains '${from}'; update ${CMAKE_CURRENT_LIST_FILE}")
+  endif()
+  string(REPLACE "${from}" "${to}" DENSEMAP_PACKAGED_CONFIG "${DENSEMAP_PACKAGED_CONFIG}")
+endforeach()
+file(WRITE ${PROJECT_BINARY_DIR}/packaging/densemap.textproto "${DENSEMAP_PACKAGED_CONFIG}")
+configure_file(${PROJECT_SOURCE_DIR}/config/densemap-server.service.in
+               ${PROJECT_BINARY_DIR}/packaging/densemap-server.service @ONLY)
+install(FILES ${PROJECT_BINARY_DIR}/packaging/densemap.textproto
+        DESTINATION ${DENSEMAP_SYSCONF_DIR} COMPONENT server)
+install(FILES ${PROJECT_BINARY_DIR}/packaging/densemap-server.service
+        DESTINATION /lib/systemd/system COMPONENT server)
+install(FILES ${PROJECT_SOURCE_DIR}/models/iln.pb DESTINATION share/densemap/models
+        COMPONENT server)
+install(DIRECTORY ${PROJECT_SOURCE_DIR}/config/load ${PROJECT_SOURCE_DIR}/config/sensors
+        DESTINATION share/densemap/config COMPONENT server)
+install(DIRECTORY DESTINATION ${DENSEMAP_STATE_DIR} COMPONENT server)

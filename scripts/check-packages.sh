@@ -1,0 +1,121 @@
+#!/usr/bin/env bash
+# Checks what a user installs (scripts/test.sh runs it after the tests):
+#  1. builds the .debs (scripts/package.sh) and checks their contents (dpkg-deb -c) and that
+#     lintian finds no errors;
+#  2. installs the SDK alone to a temporary prefix (cmake --install --component dev), builds the
+#     example client (client/examples/wall_scan) against it and runs it against a server;
+#  3. as root: installs both packages with dpkg -i, checks the packaged config with
+#     `densemap-server --check-config /etc/densemap/densemap.textproto`, builds the example
+#     against the installed libdensemap-dev, then purges both packages (the machine is left as
+#     it was, but for the `densemap` system user). Not root: the server package is unpacked
+#     with dpkg-deb -x and its config checked there instead.
+# DDS stays on loopback: run it in a private network namespace (test.sh does).
+# Usage: scripts/check-packages.sh      Env: DENSEMAP_BUILD_DIR (default build)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+BUILD_DIR=${DENSEMAP_BUILD_DIR:-build}
+BIN="$PWD/$BUILD_DIR/bin"
+work=$(mktemp -d)
+installed=0
+cleanup() {
+  if [ "$installed" -eq 1 ]; then
+    dpkg --purge densemap-server libdensemap-dev >/dev/null 2>&1 || true
+  fi
+  rm -rf "$work"
+}
+trap cleanup EXIT
+say() { echo "check-packages: $*"; }
+die() {
+  echo "check-packages: FAILED: $*" >&2
+  exit 1
+}
+
+# --- 1. The packages and their contents -----------------------------------------------------
+scripts/package.sh >/dev/null
+server_deb=$(ls "$BUILD_DIR"/packages/densemap-server_*.deb)
+dev_deb=$(ls "$BUILD_DIR"/packages/libdensemap-dev_*.deb)
+dpkg-deb -c "$server_deb" | awk '{print $6}' >"$work/server.txt"
+dpkg-deb -c "$dev_deb" | awk '{print $6}' >"$work/dev.txt"
+for f in ./usr/bin/densemap-server ./usr/bin/densemap ./usr/bin/densemap-map \
+  ./etc/densemap/densemap.textproto ./lib/systemd/system/densemap-server.service \
+  ./var/lib/densemap/ ./usr/share/densemap/models/iln.pb \
+  ./usr/share/doc/densemap-server/copyright ./usr/share/doc/densemap-server/changelog.Debian.gz; do
+  grep -qxF "$f" "$work/server.txt" || die "densemap-server lacks $f"
+done
+for f in ./usr/include/densemap/client/client.hpp ./usr/lib/libdensemap_client.a \
+  ./usr/lib/cmake/densemap/densemapConfig.cmake ./usr/lib/cmake/densemap/densemapTargets.cmake \
+  ./usr/share/doc/libdensemap-dev/copyright; do
+  grep -qxF "$f" "$work/dev.txt" || die "libdensemap-dev lacks $f"
+done
+# Nothing of the build tree, the tests or the shared data leaks into a package.
+if grep -E '/tests?/|_test|/work/|shared/data|\.o$' "$work/server.txt" "$work/dev.txt"; then
+  die "unexpected files in a package"
+fi
+dpkg-deb -f "$server_deb" Depends | grep -q libddsc || die "densemap-server does not depend on Cyclone DDS"
+grep -q '/var/lib/densemap/densemap.dmap' <(dpkg-deb --fsys-tarfile "$server_deb" |
+  tar -xO ./etc/densemap/densemap.textproto) || die "the packaged config does not keep its snapshot in /var/lib/densemap"
+say "contents ok: densemap-server $(wc -l <"$work/server.txt") entries, libdensemap-dev $(wc -l <"$work/dev.txt")"
+if command -v lintian >/dev/null 2>&1; then
+  lintian --tag-display-limit 0 "$server_deb" "$dev_deb" >"$work/lintian.txt" 2>&1 || true
+  if grep -q '^E:' "$work/lintian.txt"; then
+    cat "$work/lintian.txt" >&2
+    die "lintian reports errors"
+  fi
+  say "lintian: no errors ($(grep -c '^W:' "$work/lintian.txt" || true) warnings)"
+else
+  say "lintian not installed (scripts/install-deps.sh installs it): skipped"
+fi
+
+# --- 2. The SDK in a temporary prefix, and the example built against it ---------------------
+cmake --install "$BUILD_DIR" --component dev --prefix "$work/sdk" >/dev/null
+cmake -S client/examples/wall_scan -B "$work/example" -DCMAKE_PREFIX_PATH="$work/sdk" \
+  -DCMAKE_BUILD_TYPE=Release >"$work/example.log" 2>&1 || { cat "$work/example.log" >&2; die "example: configure"; }
+cmake --build "$work/example" >>"$work/example.log" 2>&1 || { cat "$work/example.log" >&2; die "example: build"; }
+say "example built against the SDK in a temporary prefix"
+
+# Run it against a server on loopback (its own domain and snapshot file).
+run_example() {
+  local server=$1 example=$2 domain=$3
+  mkdir -p "$work/run"
+  sed -e "s|path: \"densemap.dmap\"|path: \"$work/run/map.dmap\"|" config/densemap.textproto \
+    >"$work/run/config.textproto"
+  "$server" --config "$work/run/config.textproto" --domain-id "$domain" 2>"$work/run/server.log" &
+  local pid=$!
+  local rc=0
+  timeout 60 "$example" "$domain" >"$work/run/example.txt" 2>&1 || rc=$?
+  kill -TERM "$pid" 2>/dev/null || true
+  wait "$pid" || true
+  cat "$work/run/example.txt"
+  [ "$rc" -eq 0 ] || { cat "$work/run/server.log" >&2; die "the example client failed (exit $rc)"; }
+  grep -q "on the wall: occupied" "$work/run/example.txt" || die "the example saw no wall"
+  grep -q "in front of it: free" "$work/run/example.txt" || die "the example saw no free space"
+}
+run_example "$BIN/densemap-server" "$work/example/wall_scan" 171
+
+# --- 3. The packages installed (root) or unpacked ---------------------------------------------
+if [ "$(id -u)" -eq 0 ] && [ "${DENSEMAP_SKIP_DPKG_INSTALL:-0}" != 1 ]; then
+  if dpkg-query -W densemap-server >/dev/null 2>&1; then
+    die "densemap-server is already installed on this machine; not touching it"
+  fi
+  installed=1
+  dpkg -i "$server_deb" "$dev_deb" >"$work/dpkg.log" 2>&1 || { cat "$work/dpkg.log" >&2; die "dpkg -i"; }
+  /usr/bin/densemap-server --check-config /etc/densemap/densemap.textproto ||
+    die "the packaged config does not pass --check-config"
+  [ "$(stat -c %U /var/lib/densemap)" = densemap ] || die "/var/lib/densemap is not owned by densemap"
+  cmake -S client/examples/wall_scan -B "$work/example-usr" >"$work/example-usr.log" 2>&1 &&
+    cmake --build "$work/example-usr" >>"$work/example-usr.log" 2>&1 ||
+    { cat "$work/example-usr.log" >&2; die "example against the installed libdensemap-dev"; }
+  run_example /usr/bin/densemap-server "$work/example-usr/wall_scan" 172 >/dev/null
+  say "dpkg -i ok: --check-config passes, the example builds against /usr and talks to /usr/bin/densemap-server"
+  dpkg --purge densemap-server libdensemap-dev >/dev/null
+  installed=0
+  [ ! -e /usr/bin/densemap-server ] || die "dpkg --purge left /usr/bin/densemap-server"
+else
+  dpkg-deb -x "$server_deb" "$work/root"
+  sed -e "s|/var/lib/densemap|$work/root/var/lib/densemap|" -e "s|/usr/share/densemap|$work/root/usr/share/densemap|" \
+    "$work/root/etc/densemap/densemap.textproto" >"$work/root/check.textproto"
+  "$work/root/usr/bin/densemap-server" --check-config "$work/root/check.textproto" ||
+    die "the packaged config does not pass --check-config"
+  say "not root: the server package was unpacked (dpkg-deb -x) and its config checked there"
+fi
+say "all ok"

@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# densemap-server --check-config: 0 and a summary for a good config; 2 and the reason for a bad
+# one, a broken snapshot or a snapshot directory that does not exist. Starts no DDS participant.
+# Usage: check_config_cli.sh SERVER_BIN SOURCE_DIR
+set -euo pipefail
+server=$1
+src=$2
+dir=$(mktemp -d)
+trap 'rm -rf "$dir"' EXIT
+expect_fail() {  # NAME EXPECTED_TEXT CONFIG
+  local rc=0
+  "$server" --check-config "$3" >"$dir/out.txt" 2>&1 || rc=$?
+  [ "$rc" -eq 2 ] || { echo "$1: exit $rc, expected 2"; cat "$dir/out.txt"; exit 1; }
+  grep -q "$2" "$dir/out.txt" || { echo "$1: no '$2' in:"; cat "$dir/out.txt"; exit 1; }
+}
+
+"$server" --check-config "$src/config/densemap.textproto" >"$dir/out.txt"
+grep -q "is valid: grid backend, log_odds map at 0.2 m" "$dir/out.txt"
+
+printf 'map { resolution_m: -1 }\n' >"$dir/neg.textproto"
+expect_fail "negative resolution" "resolution" "$dir/neg.textproto"
+printf 'map { resolutoin_m: 0.1 }\n' >"$dir/typo.textproto"
+expect_fail "unknown field" "resolutoin_m" "$dir/typo.textproto"
+printf 'snapshot { path: "%s/no/such/dir/map.dmap" }\n' "$dir" >"$dir/nodir.textproto"
+expect_fail "missing snapshot directory" "does not exist" "$dir/nodir.textproto"
+printf 'not a dmap' >"$dir/bad.dmap"
+printf 'snapshot { path: "%s/bad.dmap" }\n' "$dir" >"$dir/badsnap.textproto"
+expect_fail "corrupt snapshot" "snapshot" "$dir/badsnap.textproto"
+printf 'upsample { enabled: true method: "iln" model: "%s/none.pb" }\n' "$dir" >"$dir/model.textproto"
+expect_fail "missing ILN model" "none.pb" "$dir/model.textproto"
+# --config and --check-config together: a usage error.
+if "$server" --config "$src/config/densemap.textproto" --check-config "$src/config/densemap.textproto" \
+  >/dev/null 2>&1; then
+  echo "--config with --check-config should be refused"
+  exit 1
+fi
+echo "check_config_cli: ok"
