@@ -2,6 +2,9 @@
 
 #include <octomap/OcTree.h>
 
+#include <algorithm>
+#include <cmath>
+#include <limits>
 #include <memory>
 #include <sstream>
 
@@ -16,12 +19,33 @@ Expected<void> exportOctomap(const OccupancyMap& map, const std::filesystem::pat
   if (ext != ".bt" && ext != ".ot") return fileError(file, "export needs a .bt or .ot name");
   std::unique_ptr<octomap::OcTree> copy;
   const octomap::OcTree* tree = nullptr;
-  if (const auto* octree = dynamic_cast<const OctreeMap*>(&map)) {
+  const bool binary = ext == ".bt";
+  const auto* octree = dynamic_cast<const OctreeMap*>(&map);
+  if (octree != nullptr && !binary) {
     tree = &octree->tree();
   } else {
     copy = std::make_unique<octomap::OcTree>(map.resolution());
     configureOcTree(*copy, map.sensorModel());
+    // OcTree::setNodeValue clamps to the tree's thresholds. A log-odds map never leaves them,
+    // but a kernel map's logit(p) can: widen them so that every value is written as it is (the
+    // thresholds are not part of the file).
+    float lowest = 0.0F, highest = 0.0F;
+    map.forEachKnown([&](const VoxelKey&, float v) {
+      lowest = std::min(lowest, v);
+      highest = std::max(highest, v);
+    });
+    const auto probability = [](double log_odds) { return 1.0 / (1.0 + std::exp(-log_odds)); };
+    if (lowest < copy->getClampingThresMinLog()) {
+      copy->setClampingThresMin(probability(lowest - 1.0));
+    }
+    if (highest > copy->getClampingThresMaxLog()) {
+      copy->setClampingThresMax(probability(highest + 1.0));
+    }
     map.forEachKnown([&](const VoxelKey& k, float v) {
+      // A .bt keeps only occupied / free, by OctoMap's rule (log-odds >= 0: occupied); densemap
+      // calls a cell occupied when its log-odds is > 0. The two differ only at exactly 0 (a
+      // kernel map's p = 0.5): write such a cell as the nearest free value.
+      if (binary && v == 0.0F) v = -std::numeric_limits<float>::denorm_min();
       copy->setNodeValue(octomap::OcTreeKey(k.x, k.y, k.z), v, /*lazy_eval=*/true);
     });
     copy->updateInnerOccupancy();

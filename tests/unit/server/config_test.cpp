@@ -5,10 +5,10 @@
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_diff.hpp"
 #include "densemap/raycast/integrator.hpp"
-#include "densemap/test_support/data_dir.hpp"
-#include "densemap/test_support/random_rays.hpp"
 #include "densemap/server/server_config.hpp"
 #include "densemap/store/snapshot.hpp"
+#include "densemap/test_support/data_dir.hpp"
+#include "densemap/test_support/random_rays.hpp"
 
 namespace densemap::server {
 namespace {
@@ -98,45 +98,6 @@ TEST(ServerConfig, ErrorsNameTheFileTheLineAndTheReason) {
   EXPECT_FALSE(loadServerConfig(writeConfig(dir, "dds { network_interface: \"\" }\n")));
   EXPECT_FALSE(loadServerConfig(writeConfig(dir, "map { resolution_m: \"x\" }\n")));
   EXPECT_FALSE(loadServerConfig(dir.path() / "missing.textproto"));
-}
-
-TEST(Snapshot, SaveThenLoadIsTheSameMapAndVersionOnBothBackends) {
-  test::TempDir dir;
-  GridMap map(0.1, SensorModel{});
-  Integrator integrator({.max_range_m = 4.0});
-  for (int s = 0; s < 3; ++s) {
-    const Point3f o(0.3F * s, 0, 0);
-    integrator.integrate(map, test::adversarialScan(0.1, o, 4000, 4.0, s), o);
-  }
-  const auto view = MapView::fromMap(map, 17);
-  const auto file = dir.path() / "m.dmap";
-  auto saved = saveSnapshot(*view, map.sensorModel(), Backend::kGrid, file);
-  ASSERT_TRUE(saved) << saved.error().message;
-  EXPECT_EQ(*saved, std::filesystem::file_size(file));
-  EXPECT_FALSE(std::filesystem::exists(dir.path() / "m.dmap.tmp"));
-  for (const Backend backend : {Backend::kGrid, Backend::kOctree}) {
-    auto loaded = loadSnapshot(file, backend, 0.1);
-    ASSERT_TRUE(loaded) << loaded.error().message;
-    EXPECT_EQ(loaded->version, 17U);
-    EXPECT_EQ(diffMaps(*loaded->map, map).differing(), 0U);
-  }
-  EXPECT_FALSE(loadSnapshot(file, Backend::kGrid, 0.2));  // resolution mismatch
-}
-
-TEST(Snapshot, BrokenFilesAreClearErrors) {
-  test::TempDir dir;
-  GridMap map(0.2, SensorModel{});
-  map.setLogOdds(VoxelKey{1, 2, 3}, 1.0F);
-  map.setLogOdds(VoxelKey{4, 5, 6}, -1.0F);
-  const auto file = dir.path() / "m.dmap";
-  ASSERT_TRUE(saveSnapshot(*MapView::fromMap(map, 1), map.sensorModel(), Backend::kGrid, file));
-  std::filesystem::resize_file(file, std::filesystem::file_size(file) - 5);
-  auto truncated = loadSnapshot(file, Backend::kGrid, 0.0);
-  ASSERT_FALSE(truncated);
-  EXPECT_NE(truncated.error().message.find("m.dmap"), std::string::npos);
-  std::ofstream(dir.path() / "junk.dmap") << "not a snapshot at all";
-  EXPECT_FALSE(loadSnapshot(dir.path() / "junk.dmap", Backend::kGrid, 0.0));
-  EXPECT_FALSE(loadSnapshot(dir.path() / "none.dmap", Backend::kGrid, 0.0));
 }
 
 }  // namespace

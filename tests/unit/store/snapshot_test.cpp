@@ -1,0 +1,157 @@
+// Snapshot files (core/store): .dmap round trips and clear errors; OctoMap .ot/.bt written from
+// every map kind are read by OctoMap itself (AbstractOcTree::read, OcTree::readBinary) with the
+// right type, resolution and every cell's value (kernel maps: their probabilities, unclamped).
+#include <gtest/gtest.h>
+#include <octomap/AbstractOcTree.h>
+#include <octomap/OcTree.h>
+
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <thread>
+
+#include "densemap/kernel/kernel_map.hpp"
+#include "densemap/map/grid_map.hpp"
+#include "densemap/map/map_diff.hpp"
+#include "densemap/pipeline/pipeline.hpp"
+#include "densemap/raycast/integrator.hpp"
+#include "densemap/store/snapshot.hpp"
+#include "densemap/test_support/data_dir.hpp"
+#include "densemap/test_support/random_rays.hpp"
+
+namespace densemap {
+namespace {
+
+TEST(Snapshot, SaveThenLoadIsTheSameMapAndVersionOnBothBackends) {
+  test::TempDir dir;
+  GridMap map(0.1, SensorModel{});
+  Integrator integrator({.max_range_m = 4.0});
+  for (int s = 0; s < 3; ++s) {
+    const Point3f o(0.3F * s, 0, 0);
+    integrator.integrate(map, test::adversarialScan(0.1, o, 4000, 4.0, s), o);
+  }
+  const auto view = MapView::fromMap(map, 17);
+  const auto file = dir.path() / "m.dmap";
+  auto saved = saveSnapshot(*view, map.sensorModel(), Backend::kGrid, file);
+  ASSERT_TRUE(saved) << saved.error().message;
+  EXPECT_EQ(*saved, std::filesystem::file_size(file));
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "m.dmap.tmp"));
+  for (const Backend backend : {Backend::kGrid, Backend::kOctree}) {
+    auto loaded = loadSnapshot(file, backend, 0.1);
+    ASSERT_TRUE(loaded) << loaded.error().message;
+    EXPECT_EQ(loaded->version, 17U);
+    EXPECT_EQ(diffMaps(*loaded->map, map).differing(), 0U);
+  }
+  EXPECT_FALSE(loadSnapshot(file, Backend::kGrid, 0.2));  // resolution mismatch
+}
+
+TEST(Snapshot, BrokenFilesAreClearErrors) {
+  test::TempDir dir;
+  GridMap map(0.2, SensorModel{});
+  map.setLogOdds(VoxelKey{1, 2, 3}, 1.0F);
+  map.setLogOdds(VoxelKey{4, 5, 6}, -1.0F);
+  const auto file = dir.path() / "m.dmap";
+  ASSERT_TRUE(saveSnapshot(*MapView::fromMap(map, 1), map.sensorModel(), Backend::kGrid, file));
+  std::filesystem::resize_file(file, std::filesystem::file_size(file) - 5);
+  auto truncated = loadSnapshot(file, Backend::kGrid, 0.0);
+  ASSERT_FALSE(truncated);
+  EXPECT_NE(truncated.error().message.find("m.dmap"), std::string::npos);
+  std::ofstream(dir.path() / "junk.dmap") << "not a snapshot at all";
+  EXPECT_FALSE(loadSnapshot(dir.path() / "junk.dmap", Backend::kGrid, 0.0));
+  EXPECT_FALSE(loadSnapshot(dir.path() / "none.dmap", Backend::kGrid, 0.0));
+}
+
+struct KindCase {
+  std::string kind;  // "log_odds" or a kernel method name
+  Backend backend;
+};
+
+class OctomapFilesOfEveryKind : public ::testing::TestWithParam<KindCase> {};
+
+/// The map a server with this kind and backend holds after two scans.
+std::shared_ptr<const MapView> serverMap(const KindCase& c, double resolution) {
+  PipelineOptions options;
+  options.backend = c.backend;
+  options.resolution_m = resolution;
+  options.max_range_m = 6.0;
+  if (c.kind != "log_odds") {
+    auto method = kernel::parseKernelMethod(c.kind);
+    EXPECT_TRUE(method) << c.kind;
+    options.kernel = *method;
+  }
+  auto pipeline = Pipeline::create(options);
+  EXPECT_TRUE(pipeline) << pipeline.error().message;
+  (*pipeline)->start();
+  for (int s = 0; s < 2; ++s) {
+    RawScan scan;
+    scan.sensor_id = "lidar";
+    scan.seq = static_cast<std::uint64_t>(s) + 1;
+    scan.t_world_sensor = {0.4 * s, 0.1, 0.0};
+    const PointCloud points = test::adversarialScan(resolution, Point3f::Zero(), 1500, 6.0, s);
+    for (const Point3f& p : points) scan.xyz.insert(scan.xyz.end(), {p.x(), p.y(), p.z()});
+    (*pipeline)->submit(std::move(scan));
+    for (int i = 0; i < 600 && (*pipeline)->counters().integrated <= static_cast<unsigned>(s);
+         ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+  }
+  EXPECT_EQ((*pipeline)->counters().integrated, 2U);
+  (*pipeline)->stop();
+  return (*pipeline)->view();
+}
+
+TEST_P(OctomapFilesOfEveryKind, OtAndBtAreReadByOctomapWithEveryCell) {
+  const KindCase c = GetParam();
+  constexpr double kResolution = 0.1;
+  test::TempDir dir;
+  const auto view = serverMap(c, kResolution);
+  ASSERT_GT(view->knownCells(), 1000U);
+  const SensorModel model{};
+  ASSERT_TRUE(saveSnapshot(*view, model, c.backend, dir.path() / "m.ot"));
+  ASSERT_TRUE(saveSnapshot(*view, model, c.backend, dir.path() / "m.bt"));
+
+  std::unique_ptr<octomap::AbstractOcTree> abstract(
+      octomap::AbstractOcTree::read((dir.path() / "m.ot").string()));
+  ASSERT_NE(abstract, nullptr);
+  EXPECT_EQ(abstract->getTreeType(), "OcTree");
+  EXPECT_DOUBLE_EQ(abstract->getResolution(), kResolution);
+  auto* tree = dynamic_cast<octomap::OcTree*>(abstract.get());
+  ASSERT_NE(tree, nullptr);
+  octomap::OcTree bt(0.5);
+  ASSERT_TRUE(bt.readBinary((dir.path() / "m.bt").string()));
+  EXPECT_DOUBLE_EQ(bt.getResolution(), kResolution);
+
+  std::size_t cells = 0, beyond_clamps = 0;
+  view->forEachKnown([&](const VoxelKey& k, float v) {
+    ++cells;
+    const octomap::OcTreeKey key(k.x, k.y, k.z);
+    const octomap::OcTreeNode* node = tree->search(key);
+    ASSERT_NE(node, nullptr);
+    EXPECT_EQ(node->getLogOdds(), v);  // kernel maps: logit(p), so getOccupancy() is p
+    EXPECT_NEAR(node->getOccupancy(), 1.0 / (1.0 + std::exp(-static_cast<double>(v))), 1e-9);
+    if (v > model.clampMax() || v < model.clampMin()) ++beyond_clamps;
+    const octomap::OcTreeNode* binary = bt.search(key);
+    ASSERT_NE(binary, nullptr);
+    EXPECT_EQ(bt.isNodeOccupied(binary), v > 0.0F);
+  });
+  tree->expand();
+  EXPECT_EQ(tree->getNumLeafNodes(), cells);  // no cell more in the file
+  if (c.kind == "log_odds") {
+    EXPECT_EQ(beyond_clamps, 0U);
+  } else {
+    EXPECT_GT(beyond_clamps, 0U) << "expected kernel probabilities beyond OctoMap's clamps";
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Kinds, OctomapFilesOfEveryKind,
+    ::testing::Values(KindCase{"log_odds", Backend::kGrid}, KindCase{"log_odds", Backend::kOctree},
+                      KindCase{"akimap", Backend::kGrid}, KindCase{"bgk", Backend::kGrid},
+                      KindCase{"bgkl", Backend::kGrid}, KindCase{"akimap_rays", Backend::kGrid},
+                      KindCase{"akimap_rays", Backend::kOctree}),
+    [](const ::testing::TestParamInfo<KindCase>& info) {
+      return info.param.kind + (info.param.backend == Backend::kGrid ? "_grid" : "_octree");
+    });
+
+}  // namespace
+}  // namespace densemap
