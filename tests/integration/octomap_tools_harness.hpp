@@ -68,6 +68,9 @@ inline void expectSameTree(const fs::path& graph, const fs::path& densemap_input
   ASSERT_TRUE(b) << b.error().message;
   EXPECT_GE((*a)->knownCells(), min_cells);
   const MapDiff diff = diffMaps(**a, **b);
+  std::printf("graph2tree vs densemap-map: %s at %s m, range %s: %zu cells, %zu differing\n",
+              graph.filename().c_str(), number(resolution).c_str(), number(max_range).c_str(),
+              diff.union_cells, diff.differing());
   EXPECT_EQ(diff.differing(), 0U) << "only graph2tree: " << diff.only_in_a
                                   << ", only densemap: " << diff.only_in_b
                                   << ", other log-odds: " << diff.value_mismatch << " of "
