@@ -306,6 +306,16 @@ Expected<ServerStatus> Client::status() {
       out.uptime_s = s.uptime_s;
       out.rss_bytes = s.rss_bytes;
       out.cpu_s = s.cpu_s;
+      out.ros_enabled = s.ros_enabled;
+      out.ros_received = s.ros_received;
+      out.ros_submitted = s.ros_submitted;
+      out.ros_rejected = s.ros_rejected;
+      out.ros_no_transform = s.ros_no_transform;
+      out.ros_rejected_by_reason.assign(
+          s.ros_rejected_by_reason._buffer,
+          s.ros_rejected_by_reason._buffer + s.ros_rejected_by_reason._length);
+      out.ros_last_reject = s.ros_last_reject != nullptr ? s.ros_last_reject : "";
+      out.ros_maps_published = s.ros_maps_published;
       out.queries_answered = s.queries_answered;
       out.queries_rejected = s.queries_rejected;
       out.last_query_error = text(s.last_query_error);

@@ -14,9 +14,10 @@
 #include "densemap/io/octomap_export.hpp"
 #include "densemap/io/png_writer.hpp"
 #include "densemap/io/scan_source.hpp"
+#include "densemap/store/snapshot.hpp"
 #include "densemap/upsample/interpolation.hpp"
 #include "load_command.hpp"
-#include "densemap/store/snapshot.hpp"
+#include "ros_replay.hpp"
 
 namespace densemap::cli {
 namespace {
@@ -41,10 +42,17 @@ double percentile(std::vector<double> v, double q) {
   return v[std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size())))];
 }
 
+/// `replay --ros`: the scans go out as PointCloud2 + TF (ros_replay.hpp) instead.
+struct RosReplay {
+  std::string topic = "/points";
+  ros2::ReplayFrames frames;
+  bool reliable = true;
+};
+
 int replay(const ClientOptions& o, const std::string& data, double rate, std::size_t first,
            std::size_t limit, std::size_t query_points,
            const std::optional<upsample::UpsampleOptions>& densify, const std::string& csv_path,
-           double bbox_edge_m) {
+           double bbox_edge_m, const std::optional<RosReplay>& ros) {
   auto source = openScanSource(data);
   if (!source) return fail(source.error().message);
   if (densify) {
@@ -53,6 +61,27 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
   auto client = connect(o);
   if (!client) return fail(client.error().message);
   auto before = (*client)->status();
+  std::unique_ptr<RosReplayPublisher> ros_out;
+  if (ros) {
+    if (before && !before->ros_enabled) {
+      return fail("--ros: the server's ROS 2 face is off (config: ros2 { enabled: true })");
+    }
+    ros2::ReplayFrames frames = ros->frames;
+    if (frames.stamp_base_ns == 0) {
+      frames.stamp_base_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                 std::chrono::system_clock::now().time_since_epoch())
+                                 .count();
+    }
+    if (rate > 0) frames.period_ns = static_cast<std::int64_t>(1e9 / rate);
+    auto p = RosReplayPublisher::create(o.domain_id, o.network_interface, ros->topic, frames,
+                                        ros->reliable);
+    if (!p) return fail(p.error().message);
+    if (auto ok = (*p)->waitForReader(static_cast<int>(o.timeout.count())); !ok) {
+      return fail(ok.error().message);
+    }
+    ros_out = std::move(*p);
+  }
+  std::optional<RawScan> last_raw;
   const std::size_t end =
       limit == 0 ? (*source)->size() : std::min((*source)->size(), first + limit);
   std::map<std::uint64_t, Clock::time_point> sent_at;
@@ -132,7 +161,8 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
       scan->points = upsample::upsamplePoints(scan->points, *densify);
       scan->intensities.clear();
     }
-    const RawScan raw = toRawScan(*scan, i + 1, "replay");
+    // The server numbers ROS clouds per topic as they arrive (1, 2, ...): key events on that.
+    const RawScan raw = toRawScan(*scan, ros ? sent + 1 : i + 1, "replay");
     // Wait for the publish slot while watching events, so latencies are not quantised by it.
     while (Clock::now() < next) {
       collect();
@@ -140,7 +170,10 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
     }
     next += period;
     sent_at[raw.seq] = Clock::now();
-    if (auto ok = (*client)->publishScan(raw); !ok) return fail(ok.error().message);
+    if (auto ok = ros_out ? ros_out->publish(raw, sent) : (*client)->publishScan(raw); !ok) {
+      return fail(ok.error().message);
+    }
+    if (ros_out) last_raw = raw;
     ++sent;
     {
       const Point3f c = scan->originWorld();
@@ -164,6 +197,10 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
     }
     collect();
     progress.update(i - first + 1, std::to_string(latencies.size()) + " integrated");
+  }
+  // A cloud stamped after its pose's TF sample needs the next one.
+  if (ros_out && last_raw) {
+    if (auto ok = ros_out->finish(*last_raw, sent); !ok) return fail(ok.error().message);
   }
   // Wait for the last events: until every scan is seen or nothing new for 3 s.
   auto last_news = Clock::now();
@@ -339,6 +376,26 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   replay->add_option("--fov-top", fov_top, "The sensor's top beam, deg")->capture_default_str();
   replay->add_option("--fov-bottom", fov_bottom, "Its bottom beam, deg")->capture_default_str();
+  bool replay_ros = false;
+  cli::RosReplay ros_replay;
+  replay->add_flag("--ros", replay_ros,
+                   "Publish as a ROS 2 robot: sensor_msgs/PointCloud2 on --ros-topic and TF "
+                   "(map -> odom static, odom -> base_link per scan, base_link -> lidar static) "
+                   "on rt/tf and rt/tf_static; the server needs ros2 { enabled: true }");
+  replay->add_option("--ros-topic", ros_replay.topic, "ROS topic of the clouds")
+      ->capture_default_str();
+  replay
+      ->add_option("--ros-stamp-offset", ros_replay.frames.stamp_offset,
+                   "Stamp each cloud this fraction of a scan period after its pose's TF sample "
+                   "(0.5: the server interpolates between two samples and waits for the next)")
+      ->check(CLI::Range(0.0, 0.99))
+      ->capture_default_str();
+  replay
+      ->add_option("--ros-stamp-base-ns", ros_replay.frames.stamp_base_ns,
+                   "Stamp of the first scan, ns (0: now); the next are 1/rate apart")
+      ->capture_default_str();
+  replay->add_flag("!--ros-best-effort", ros_replay.reliable,
+                   "Publish clouds best effort, as LiDAR drivers do (default: reliable)");
 
   auto* query = app.add_subcommand("query", "Query the map");
   query->require_subcommand(1);
@@ -405,7 +462,8 @@ int main(int argc, char** argv) {
       if (!options) return cli::fail("--upsample: " + options.error().message);
       densify = std::move(*options);
     }
-    return cli::replay(o, data, rate, first, limit, query_points, densify, replay_csv, bbox_edge);
+    return cli::replay(o, data, rate, first, limit, query_points, densify, replay_csv, bbox_edge,
+                       replay_ros ? std::optional<cli::RosReplay>(ros_replay) : std::nullopt);
   }
   auto client = cli::connect(o);
   if (!client) return cli::fail(client.error().message);

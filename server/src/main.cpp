@@ -68,6 +68,9 @@ int main(int argc, char** argv) {
   service_options.autosave_period_s = config->snapshot().autosave_period_s();
   service_options.max_query_cells = config->pipeline().max_query_cells();
   service_options.query_threads = static_cast<int>(config->pipeline().query_threads());
+  auto ros2 = densemap::server::ros2Options(*config);
+  if (!ros2) return fail("config: " + ros2.error().message, 2);
+  service_options.ros2 = *ros2;
 
   std::unique_ptr<densemap::OccupancyMap> initial;
   std::uint64_t version = 0;

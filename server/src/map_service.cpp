@@ -13,11 +13,11 @@
 
 #include "densemap/dds/delta_wire.hpp"
 #include "densemap/dds/topics.hpp"
-#include "densemap/pipeline/map_queries.hpp"
 #include "densemap/io/process_usage.hpp"
+#include "densemap/pipeline/map_queries.hpp"
 #include "densemap/pipeline/version_delta.hpp"
-#include "densemap_msgs.h"
 #include "densemap/store/snapshot.hpp"
+#include "densemap_msgs.h"
 
 namespace densemap::server {
 
@@ -119,6 +119,11 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
   if (auto ok = d.ingest_waitset->attachReader(d.scan_reader, kScanTag); !ok) {
     return std::unexpected(ok.error());
   }
+  if (options.ros2) {
+    auto bridge = Ros2Bridge::create(pipeline, d.participant, *options.ros2);
+    if (!bridge) return std::unexpected(bridge.error());
+    service->ros2_ = std::move(*bridge);
+  }
   pipeline.setPublisher(
       [s = service.get()](const IntegrationResult& r, const std::shared_ptr<const MapView>& v) {
         s->onIntegrated(r, v);
@@ -143,10 +148,12 @@ void MapService::start() {
   ingest_ = std::thread([this] { ingestLoop(); });
   service_ = std::thread([this] { serviceLoop(); });
   publish_ = std::thread([this] { publishLoop(); });
+  if (ros2_) ros2_->start();
 }
 
 void MapService::stop() {
   if (!running_.exchange(false)) return;
+  if (ros2_) ros2_->stop();  // no more ROS clouds
   dds_->ingest_waitset->wake();
   dds_->service_waitset->wake();
   versions_cv_.notify_all();
@@ -219,6 +226,7 @@ void MapService::publishLoop() {
 void MapService::onIntegrated(const IntegrationResult& r,
                               const std::shared_ptr<const MapView>& view) {
   // On the pipeline's worker: a small event now, everything else on the publish thread.
+  if (ros2_) ros2_->onVersion(r, view);
   densemap_msgs_MapEvent event{};
   event.base_version = r.base_version;
   event.new_version = r.new_version;
@@ -548,6 +556,17 @@ void MapService::publishStatus() {
                        sc.dropped, sc.rejected, sc.seq_gaps});
   }
   s.sensors = dds::borrowSequence<dds_sequence_densemap_msgs_SensorStatus>(sensors);
+  const Ros2Counters ros = ros2_ ? ros2_->counters() : Ros2Counters{};
+  s.ros_enabled = ros2_ != nullptr;
+  s.ros_received = ros.received;
+  s.ros_submitted = ros.submitted;
+  s.ros_rejected = ros.rejected;
+  s.ros_no_transform = ros.no_transform;
+  std::vector<std::uint64_t> ros_by_reason(ros.rejected_by_reason.begin(),
+                                           ros.rejected_by_reason.end());
+  s.ros_rejected_by_reason = dds::borrowSequence<dds_sequence_unsigned_long_long>(ros_by_reason);
+  s.ros_last_reject = const_cast<char*>(ros.last_reject.c_str());
+  s.ros_maps_published = ros.maps_published;
   (void)dds::write(dds_->status_writer, &s);
 }
 

@@ -4,6 +4,7 @@
 
 #include "densemap/idl/text_format.hpp"
 #include "densemap/io/file_bytes.hpp"
+#include "densemap/ros2/names.hpp"
 
 namespace densemap::server {
 
@@ -89,6 +90,51 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
     return makeError("dds.network_interface must name an interface (default lo)");
   }
   return o;
+}
+
+Expected<std::optional<Ros2Options>> ros2Options(const proto::ServerConfig& config) {
+  const proto::Ros2Config& r = config.ros2();
+  if (!r.enabled()) return std::optional<Ros2Options>();
+  Ros2Options o;
+  if (r.clouds_size() > 0) o.clouds.assign(r.clouds().begin(), r.clouds().end());
+  for (const std::string& topic : o.clouds) {
+    if (ros2::ddsTopicName(topic).empty()) {
+      return makeError("ros2.clouds: '" + topic + "' is not a ROS topic name");
+    }
+  }
+  for (const std::string* topic : {&r.octomap_topic(), &r.grid_topic(), &r.centers_topic()}) {
+    if (!topic->empty() && ros2::ddsTopicName(*topic).empty()) {
+      return makeError("ros2: '" + *topic + "' is not a ROS topic name");
+    }
+  }
+  o.reliable_clouds = r.reliable_clouds();
+  o.world_frame = r.world_frame();
+  while (!o.world_frame.empty() && o.world_frame.front() == '/') o.world_frame.erase(0, 1);
+  if (o.world_frame.empty()) return makeError("ros2.world_frame must name a frame");
+  if (!(r.tf_wait_s() >= 0 && r.tf_wait_s() <= 60)) return makeError("ros2.tf_wait_s: 0 .. 60");
+  o.tf_wait = std::chrono::milliseconds(static_cast<std::int64_t>(r.tf_wait_s() * 1000));
+  if (r.max_waiting_clouds() < 1 || r.max_waiting_clouds() > 100) {
+    return makeError("ros2.max_waiting_clouds: 1 .. 100");
+  }
+  o.max_waiting = r.max_waiting_clouds();
+  if (!(r.tf_buffer_s() >= 1 && r.tf_buffer_s() <= 3600)) {
+    return makeError("ros2.tf_buffer_s: 1 .. 3600");
+  }
+  o.tf_buffer_ns = static_cast<std::int64_t>(r.tf_buffer_s() * 1e9);
+  if (!(r.publish_period_s() >= 0 && r.publish_period_s() <= 3600)) {
+    return makeError("ros2.publish_period_s: 0 .. 3600");
+  }
+  o.publish_period_s = r.publish_period_s();
+  o.octomap_topic = r.octomap_topic();
+  o.grid_topic = r.grid_topic();
+  o.centers_topic = r.centers_topic();
+  if (!(r.grid_min_z_m() <= r.grid_max_z_m())) {
+    return makeError("ros2.grid_min_z_m must be <= grid_max_z_m");
+  }
+  o.grid_min_z_m = r.grid_min_z_m();
+  o.grid_max_z_m = r.grid_max_z_m();
+  o.max_points = config.pipeline().max_points();
+  return std::optional<Ros2Options>(std::move(o));
 }
 
 }  // namespace densemap::server

@@ -54,6 +54,13 @@ struct ServerStatus {
   std::vector<SensorCounters> sensors;  // per sensor id (last_seq is not sent)
   std::uint64_t rss_bytes = 0;          // the server process's resident memory
   double cpu_s = 0;                     // and its CPU time since start
+  /// The ROS 2 face (server config ros2): PointCloud2 clouds received, submitted with their
+  /// transform, rejected as malformed (by reason), dropped for want of a transform.
+  bool ros_enabled = false;
+  std::uint64_t ros_received = 0, ros_submitted = 0, ros_rejected = 0, ros_no_transform = 0;
+  std::vector<std::uint64_t> ros_rejected_by_reason;
+  std::string ros_last_reject;
+  std::uint64_t ros_maps_published = 0;
 };
 
 struct DeltaInfo {

@@ -13,6 +13,7 @@
 
 #include "densemap/dds/dds.hpp"
 #include "densemap/pipeline/pipeline.hpp"
+#include "densemap/server/ros2_bridge.hpp"
 #include "densemap_msgs.h"
 
 namespace densemap::server {
@@ -24,6 +25,7 @@ struct ServiceOptions {
   double autosave_period_s = 0.0;       // 0: off
   std::size_t max_query_cells = 50'000'000;
   int query_threads = 2;  // the query task arena: requests are answered in parallel
+  std::optional<Ros2Options> ros2;  // the ROS 2 face (Ros2Bridge); none: off
 };
 
 /// densemap-server's DDS face (DESIGN.md topics), three threads and a task arena:
@@ -76,6 +78,7 @@ class MapService {
   Pipeline& pipeline_;
   ServiceOptions options_;
   std::unique_ptr<Dds> dds_;
+  std::unique_ptr<Ros2Bridge> ros2_;
   std::atomic<bool> running_{false};
   std::thread ingest_;
   std::thread service_;

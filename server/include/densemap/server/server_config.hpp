@@ -1,8 +1,11 @@
 #pragma once
 
+#include <optional>
+
 #include <filesystem>
 
 #include "densemap.pb.h"
+#include "densemap/server/ros2_bridge.hpp"
 #include "densemap/geometry/error.hpp"
 #include "densemap/pipeline/pipeline.hpp"
 
@@ -14,5 +17,8 @@ namespace densemap::server {
 
 /// Checks values and converts to the pipeline's options.
 [[nodiscard]] Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config);
+
+/// The ROS 2 face's options, or none when `ros2.enabled` is false. Errors name the field.
+[[nodiscard]] Expected<std::optional<Ros2Options>> ros2Options(const proto::ServerConfig& config);
 
 }  // namespace densemap::server

@@ -1,0 +1,38 @@
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "densemap/geometry/error.hpp"
+#include "densemap/pipeline/raw_scan.hpp"
+#include "densemap/ros2/replay_frames.hpp"
+
+namespace densemap::cli {
+
+/// `densemap replay --ros`: publishes scans as a ROS 2 robot would (ros2/replay_frames.hpp):
+/// sensor_msgs/PointCloud2 on `topic` and tf2_msgs/TFMessage on rt/tf and rt/tf_static.
+/// Loopback only, like every densemap participant (DESIGN.md).
+class RosReplayPublisher {
+ public:
+  [[nodiscard]] static Expected<std::unique_ptr<RosReplayPublisher>> create(
+      std::uint32_t domain_id, const std::string& interface_name, const std::string& topic,
+      const ros2::ReplayFrames& frames, bool reliable);
+  ~RosReplayPublisher();
+  /// Waits (up to `timeout_ms`) until a reader matches the cloud topic.
+  [[nodiscard]] Expected<void> waitForReader(int timeout_ms);
+  /// The transforms of scan k (odom -> base_link at stampOf(k)), then its cloud.
+  [[nodiscard]] Expected<void> publish(const RawScan& scan, std::size_t k);
+  /// The odom -> base_link sample after the last scan, so a cloud stamped after its pose's
+  /// sample can be interpolated.
+  [[nodiscard]] Expected<void> finish(const RawScan& last, std::size_t k_after);
+
+ private:
+  struct Dds;
+  RosReplayPublisher(const ros2::ReplayFrames& frames);
+  [[nodiscard]] Expected<void> publishTf(const ros2::TfSample& s, const std::string& parent,
+                                         const std::string& child, bool is_static);
+  ros2::ReplayFrames frames_;
+  std::unique_ptr<Dds> dds_;
+};
+
+}  // namespace densemap::cli

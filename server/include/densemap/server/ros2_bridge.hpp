@@ -1,0 +1,97 @@
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "densemap/dds/dds.hpp"
+#include "densemap/pipeline/pipeline.hpp"
+#include "densemap/ros2/point_cloud2.hpp"
+
+namespace densemap::server {
+
+struct Ros2Options {
+  std::vector<std::string> clouds{"/points"};  // ROS topic names
+  bool reliable_clouds = false;
+  std::string world_frame = "map";
+  std::chrono::milliseconds tf_wait{500};
+  std::size_t max_waiting = 5;
+  std::int64_t tf_buffer_ns = 10'000'000'000;
+  double publish_period_s = 1.0;  // 0: no map topics
+  std::string octomap_topic = "/octomap_binary", grid_topic = "/projected_map",
+              centers_topic = "/octomap_point_cloud_centers";
+  double grid_min_z_m = -1000.0, grid_max_z_m = 1000.0;
+  std::size_t max_points = 2'000'000;
+};
+
+struct Ros2Counters {
+  std::uint64_t received = 0;      // clouds taken from the rt/ topics
+  std::uint64_t submitted = 0;     // handed to the pipeline with their transform
+  std::uint64_t rejected = 0;      // malformed (by reason below)
+  std::uint64_t no_transform = 0;  // dropped: no transform within tf_wait (or never possible)
+  std::array<std::uint64_t, ros2::kCloudRejectCount> rejected_by_reason{};
+  std::uint64_t non_finite_points = 0;  // NaN/Inf points dropped from accepted clouds
+  std::uint64_t tf_rejected = 0;        // transforms refused (bad quaternion, cycle...)
+  std::uint64_t maps_published = 0;     // map-topic rounds written
+  std::string last_reject;
+};
+
+/// The server's ROS 2 face (README "ROS 2"), one thread on the server's participant:
+/// - sensor_msgs/PointCloud2 on each configured cloud topic, transformed into `world_frame`
+///   with the TF buffer (rt/tf, rt/tf_static) at the cloud's stamp and submitted to the
+///   pipeline as sensor-frame scans (sensor id = the topic name). A cloud whose transform is
+///   not there yet waits up to tf_wait (at most max_waiting clouds; the oldest goes first).
+/// - octomap_msgs/Octomap, nav_msgs/OccupancyGrid and sensor_msgs/PointCloud2 of occupied
+///   centres, transient-local, at most every publish_period_s and only after the map changed,
+///   from state kept current per version (O(changed cells)), never a walk of the map per scan.
+class Ros2Bridge {
+ public:
+  [[nodiscard]] static Expected<std::unique_ptr<Ros2Bridge>> create(Pipeline& pipeline,
+                                                                    const dds::Entity& participant,
+                                                                    const Ros2Options& options);
+  ~Ros2Bridge();
+  Ros2Bridge(const Ros2Bridge&) = delete;
+  Ros2Bridge& operator=(const Ros2Bridge&) = delete;
+
+  void start();
+  void stop();  // idempotent
+  /// Called for every published version (on the pipeline's worker: only records it).
+  void onVersion(const IntegrationResult& result, const std::shared_ptr<const MapView>& view);
+  [[nodiscard]] Ros2Counters counters() const;
+
+ private:
+  struct Dds;
+  struct Waiting;
+  struct Topics;
+  Ros2Bridge(Pipeline& pipeline, const Ros2Options& options);
+  void loop();
+  void takeTransforms();
+  void takeClouds(std::size_t topic);
+  /// Submits what can be transformed now; drops what waited too long. Returns true if any
+  /// cloud is still waiting.
+  void resolveWaiting(std::chrono::steady_clock::time_point now);
+  void publishMaps();
+  void reject(ros2::CloudReject reason);
+
+  Pipeline& pipeline_;
+  Ros2Options options_;
+  std::unique_ptr<Dds> dds_;
+  std::unique_ptr<Topics> state_;
+  std::atomic<bool> running_{false};
+  std::thread thread_;
+
+  std::mutex versions_mutex_;
+  std::vector<std::uint64_t> pending_blocks_;
+  std::shared_ptr<const MapView> latest_;
+
+  mutable std::mutex counters_mutex_;
+  Ros2Counters counters_;
+};
+
+}  // namespace densemap::server

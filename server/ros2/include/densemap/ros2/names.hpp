@@ -1,0 +1,26 @@
+#pragma once
+
+#include <Eigen/Geometry>
+
+#include <array>
+#include <string>
+#include <string_view>
+
+namespace densemap::ros2 {
+
+/// The DDS topic rmw_cyclonedds uses for a ROS 2 topic: "rt" + the fully qualified name
+/// ("/points" and "points" -> "rt/points"). Errors (empty string) for an empty name, a name
+/// ending in '/', or characters ROS does not allow (letters, digits, '_' and '/' only).
+[[nodiscard]] std::string ddsTopicName(std::string_view ros_name);
+
+/// A pose as densemap's RawScan carries it: translation and unit quaternion (w, x, y, z).
+struct ScanPose {
+  std::array<double, 3> t{};
+  std::array<double, 4> q{1, 0, 0, 0};
+};
+[[nodiscard]] ScanPose toScanPose(const Eigen::Isometry3d& T);
+/// The transform of a RawScan's pose (quaternion normalized).
+[[nodiscard]] Eigen::Isometry3d fromScanPose(const std::array<double, 3>& t,
+                                             const std::array<double, 4>& q);
+
+}  // namespace densemap::ros2

@@ -1,0 +1,29 @@
+#include "densemap/ros2/names.hpp"
+
+#include <cctype>
+
+namespace densemap::ros2 {
+
+std::string ddsTopicName(std::string_view ros_name) {
+  if (ros_name.empty() || ros_name.back() == '/') return {};
+  for (char c : ros_name) {
+    if (std::isalnum(static_cast<unsigned char>(c)) == 0 && c != '_' && c != '/') return {};
+  }
+  if (ros_name.find("//") != std::string_view::npos) return {};
+  return ros_name.front() == '/' ? "rt" + std::string(ros_name) : "rt/" + std::string(ros_name);
+}
+
+ScanPose toScanPose(const Eigen::Isometry3d& T) {
+  const Eigen::Quaterniond q(T.linear());
+  const Eigen::Vector3d t = T.translation();
+  return {{t.x(), t.y(), t.z()}, {q.w(), q.x(), q.y(), q.z()}};
+}
+
+Eigen::Isometry3d fromScanPose(const std::array<double, 3>& t, const std::array<double, 4>& q) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = Eigen::Quaterniond(q[0], q[1], q[2], q[3]).normalized().toRotationMatrix();
+  T.translation() = Eigen::Vector3d(t[0], t[1], t[2]);
+  return T;
+}
+
+}  // namespace densemap::ros2

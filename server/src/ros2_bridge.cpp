@@ -1,0 +1,380 @@
+#include "densemap/server/ros2_bridge.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <deque>
+
+#include "densemap/ros2/map_topics.hpp"
+#include "densemap/ros2/names.hpp"
+#include "densemap/ros2/tf_buffer.hpp"
+#include "nav_msgs.h"
+#include "octomap_msgs.h"
+#include "sensor_msgs.h"
+#include "tf2_msgs.h"
+
+namespace densemap::server {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+std::int64_t stampNs(const builtin_interfaces_msg_dds__Time_& t) {
+  return std::int64_t{t.sec} * 1'000'000'000 + t.nanosec;
+}
+
+builtin_interfaces_msg_dds__Time_ rosNow() {
+  const auto ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                      std::chrono::system_clock::now().time_since_epoch())
+                      .count();
+  return {static_cast<std::int32_t>(ns / 1'000'000'000),
+          static_cast<std::uint32_t>(ns % 1'000'000'000)};
+}
+
+constexpr dds_attach_t kTfTag = 1, kTfStaticTag = 2, kCloudTag0 = 16;
+
+}  // namespace
+
+struct Ros2Bridge::Dds {
+  std::vector<dds::Entity> cloud_topics, cloud_readers;
+  std::vector<std::string> cloud_names;  // ROS names, the scans' sensor ids
+  std::vector<std::uint64_t> cloud_seq;
+  dds::Entity tf_topic, tf_static_topic, tf_reader, tf_static_reader;
+  dds::Entity octomap_topic, grid_topic, centers_topic;
+  dds::Entity octomap_writer, grid_writer, centers_writer;
+  std::optional<dds::WaitSet> waitset;
+};
+
+struct Ros2Bridge::Waiting {
+  std::string frame, sensor_id;
+  std::int64_t stamp_ns = 0;
+  std::uint64_t seq = 0;
+  ros2::DecodedCloud cloud;
+  Clock::time_point received;
+};
+
+struct Ros2Bridge::Topics {
+  ros2::TfBuffer tf;
+  std::deque<Waiting> waiting;
+  std::unique_ptr<ros2::MapTopicsState> map;
+  std::shared_ptr<const MapView> published;  // the version `map` holds
+  Clock::time_point next_publish = Clock::now();
+};
+
+Ros2Bridge::Ros2Bridge(Pipeline& pipeline, const Ros2Options& options)
+    : pipeline_(pipeline),
+      options_(options),
+      dds_(std::make_unique<Dds>()),
+      state_(std::make_unique<Topics>()) {
+  state_->tf = ros2::TfBuffer(options.tf_buffer_ns);
+}
+
+Ros2Bridge::~Ros2Bridge() { stop(); }
+
+Expected<std::unique_ptr<Ros2Bridge>> Ros2Bridge::create(Pipeline& pipeline,
+                                                         const dds::Entity& participant,
+                                                         const Ros2Options& options) {
+  std::unique_ptr<Ros2Bridge> bridge(new Ros2Bridge(pipeline, options));
+  Dds& d = *bridge->dds_;
+  auto topic = [&](const dds_topic_descriptor_t& desc,
+                   const std::string& ros_name) -> Expected<dds::Entity> {
+    const std::string name = ros2::ddsTopicName(ros_name);
+    if (name.empty()) return makeError("ros2: '" + ros_name + "' is not a valid ROS topic name");
+    return dds::createTopic(participant, desc, name);
+  };
+  // ROS sensor data QoS (best effort, keep last 5) unless told otherwise; a best-effort reader
+  // also matches reliable writers.
+  const dds::QosSpec cloud_qos{.reliable = options.reliable_clouds, .depth = 5};
+  for (const std::string& name : options.clouds) {
+    auto t = topic(sensor_msgs_msg_dds__PointCloud2__desc, name);
+    if (!t) return std::unexpected(t.error());
+    auto r = dds::createReader(participant, *t, cloud_qos);
+    if (!r) return std::unexpected(r.error());
+    d.cloud_topics.push_back(std::move(*t));
+    d.cloud_readers.push_back(std::move(*r));
+    d.cloud_names.push_back(name);
+    d.cloud_seq.push_back(0);
+  }
+  auto tf = topic(tf2_msgs_msg_dds__TFMessage__desc, "/tf");
+  auto tf_static = topic(tf2_msgs_msg_dds__TFMessage__desc, "/tf_static");
+  if (!tf || !tf_static) return makeError("ros2: cannot create the TF topics");
+  d.tf_topic = std::move(*tf);
+  d.tf_static_topic = std::move(*tf_static);
+  auto tf_reader = dds::createReader(participant, d.tf_topic, {.depth = 100});
+  auto tf_static_reader =
+      dds::createReader(participant, d.tf_static_topic, {.depth = 100, .transient_local = true});
+  if (!tf_reader || !tf_static_reader) return makeError("ros2: cannot create the TF readers");
+  d.tf_reader = std::move(*tf_reader);
+  d.tf_static_reader = std::move(*tf_static_reader);
+  // Maps for late joiners (RViz, Nav2): reliable, transient-local, keep-last 1.
+  const dds::QosSpec latched{.depth = 1, .transient_local = true};
+  auto map_writer = [&](const dds_topic_descriptor_t& desc, const std::string& ros_name,
+                        dds::Entity& t_out, dds::Entity& w_out) -> Expected<void> {
+    if (ros_name.empty() || options.publish_period_s <= 0) return {};
+    auto t = topic(desc, ros_name);
+    if (!t) return std::unexpected(t.error());
+    auto w = dds::createWriter(participant, *t, latched);
+    if (!w) return std::unexpected(w.error());
+    t_out = std::move(*t);
+    w_out = std::move(*w);
+    return {};
+  };
+  for (auto ok : {map_writer(octomap_msgs_msg_dds__Octomap__desc, options.octomap_topic,
+                             d.octomap_topic, d.octomap_writer),
+                  map_writer(nav_msgs_msg_dds__OccupancyGrid__desc, options.grid_topic,
+                             d.grid_topic, d.grid_writer),
+                  map_writer(sensor_msgs_msg_dds__PointCloud2__desc, options.centers_topic,
+                             d.centers_topic, d.centers_writer)}) {
+    if (!ok) return std::unexpected(ok.error());
+  }
+  auto ws = dds::WaitSet::create(participant);
+  if (!ws) return std::unexpected(ws.error());
+  d.waitset.emplace(std::move(*ws));
+  if (auto ok = d.waitset->attachReader(d.tf_reader, kTfTag); !ok)
+    return std::unexpected(ok.error());
+  if (auto ok = d.waitset->attachReader(d.tf_static_reader, kTfStaticTag); !ok) {
+    return std::unexpected(ok.error());
+  }
+  for (std::size_t i = 0; i < d.cloud_readers.size(); ++i) {
+    if (auto ok = d.waitset->attachReader(d.cloud_readers[i], kCloudTag0 + i); !ok) {
+      return std::unexpected(ok.error());
+    }
+  }
+  const PipelineOptions& p = pipeline.options();
+  bridge->state_->map = std::make_unique<ros2::MapTopicsState>(
+      p.resolution_m, SensorModel(p.sensor), options.grid_min_z_m, options.grid_max_z_m);
+  bridge->latest_ = pipeline.view();
+  return bridge;
+}
+
+void Ros2Bridge::start() {
+  if (running_.exchange(true)) return;
+  thread_ = std::thread([this] { loop(); });
+}
+
+void Ros2Bridge::stop() {
+  if (!running_.exchange(false)) return;
+  dds_->waitset->wake();
+  if (thread_.joinable()) thread_.join();
+}
+
+void Ros2Bridge::onVersion(const IntegrationResult& result,
+                           const std::shared_ptr<const MapView>& view) {
+  std::lock_guard lock(versions_mutex_);
+  pending_blocks_.insert(pending_blocks_.end(), result.written_blocks.begin(),
+                         result.written_blocks.end());
+  latest_ = view;
+}
+
+Ros2Counters Ros2Bridge::counters() const {
+  std::lock_guard lock(counters_mutex_);
+  return counters_;
+}
+
+void Ros2Bridge::reject(ros2::CloudReject reason) {
+  std::lock_guard lock(counters_mutex_);
+  ++counters_.rejected;
+  ++counters_.rejected_by_reason[static_cast<std::size_t>(reason)];
+  counters_.last_reject = std::string(ros2::cloudRejectName(reason));
+}
+
+void Ros2Bridge::loop() {
+  while (running_.load()) {
+    const auto fired = dds_->waitset->wait(std::chrono::milliseconds(20));
+    if (!running_.load()) break;
+    takeTransforms();  // first: clouds taken below may need them
+    for (dds_attach_t tag : fired) {
+      if (tag >= kCloudTag0) takeClouds(static_cast<std::size_t>(tag - kCloudTag0));
+    }
+    const auto now = Clock::now();
+    resolveWaiting(now);
+    if (options_.publish_period_s > 0 && now >= state_->next_publish) {
+      publishMaps();
+      state_->next_publish = now + std::chrono::duration_cast<Clock::duration>(
+                                       std::chrono::duration<double>(options_.publish_period_s));
+    }
+  }
+}
+
+void Ros2Bridge::takeTransforms() {
+  std::uint64_t refused = 0;
+  for (const bool is_static : {true, false}) {
+    const dds::Entity& reader = is_static ? dds_->tf_static_reader : dds_->tf_reader;
+    dds::takeAll<tf2_msgs_msg_dds__TFMessage_>(reader, [&](const tf2_msgs_msg_dds__TFMessage_& m) {
+      for (std::uint32_t i = 0; i < m.transforms._length; ++i) {
+        const auto& ts = m.transforms._buffer[i];
+        const auto& tr = ts.transform;
+        ros2::TfSample s{
+            stampNs(ts.header.stamp),
+            {tr.translation.x, tr.translation.y, tr.translation.z},
+            Eigen::Quaterniond(tr.rotation.w, tr.rotation.x, tr.rotation.y, tr.rotation.z)};
+        const char* parent = ts.header.frame_id != nullptr ? ts.header.frame_id : "";
+        const char* child = ts.child_frame_id != nullptr ? ts.child_frame_id : "";
+        if (!state_->tf.set(parent, child, s, is_static)) ++refused;
+      }
+    });
+  }
+  if (refused > 0) {
+    std::lock_guard lock(counters_mutex_);
+    counters_.tf_rejected += refused;
+  }
+}
+
+void Ros2Bridge::takeClouds(std::size_t topic) {
+  dds::takeAll<sensor_msgs_msg_dds__PointCloud2_>(
+      dds_->cloud_readers[topic], [&](const sensor_msgs_msg_dds__PointCloud2_& m) {
+        const std::uint64_t seq = ++dds_->cloud_seq[topic];
+        {
+          std::lock_guard lock(counters_mutex_);
+          ++counters_.received;
+        }
+        std::vector<ros2::PointFieldView> fields;
+        fields.reserve(m.fields._length);
+        for (std::uint32_t i = 0; i < m.fields._length; ++i) {
+          const auto& f = m.fields._buffer[i];
+          fields.push_back({f.name != nullptr ? f.name : "", f.offset, f.datatype, f.count});
+        }
+        ros2::PointCloud2View v;
+        v.height = m.height;
+        v.width = m.width;
+        v.fields = fields;
+        v.is_bigendian = m.is_bigendian;
+        v.point_step = m.point_step;
+        v.row_step = m.row_step;
+        v.data = std::span<const std::uint8_t>(m.data._buffer, m.data._length);
+        v.is_dense = m.is_dense;
+        auto cloud = ros2::decodePointCloud2(v, options_.max_points);
+        if (!cloud) {
+          reject(cloud.error());
+          return;
+        }
+        {
+          std::lock_guard lock(counters_mutex_);
+          counters_.non_finite_points += cloud->non_finite;
+        }
+        if (cloud->xyz.empty()) {  // every point was NaN
+          reject(ros2::CloudReject::kEmpty);
+          return;
+        }
+        Waiting w;
+        w.frame = m.header.frame_id != nullptr ? m.header.frame_id : "";
+        w.sensor_id = dds_->cloud_names[topic];
+        w.stamp_ns = stampNs(m.header.stamp);
+        w.seq = seq;
+        w.cloud = std::move(*cloud);
+        w.received = Clock::now();
+        state_->waiting.push_back(std::move(w));
+        while (state_->waiting.size() > std::max<std::size_t>(options_.max_waiting, 1)) {
+          state_->waiting.pop_front();
+          std::lock_guard lock(counters_mutex_);
+          ++counters_.no_transform;
+        }
+      });
+}
+
+void Ros2Bridge::resolveWaiting(Clock::time_point now) {
+  auto& waiting = state_->waiting;
+  for (auto it = waiting.begin(); it != waiting.end();) {
+    auto T = state_->tf.lookup(options_.world_frame, it->frame, it->stamp_ns);
+    const bool expired = now - it->received > options_.tf_wait;
+    if (!T && !expired && T.error() != ros2::TfFailure::kTooOld) {
+      ++it;
+      continue;
+    }
+    if (!T) {
+      std::lock_guard lock(counters_mutex_);
+      ++counters_.no_transform;
+    } else {
+      RawScan raw;
+      raw.sensor_id = it->sensor_id;
+      raw.seq = it->seq;
+      raw.stamp_ns = it->stamp_ns;
+      const ros2::ScanPose pose = ros2::toScanPose(*T);
+      raw.t_world_sensor = pose.t;
+      raw.q_world_sensor = pose.q;
+      raw.xyz = std::move(it->cloud.xyz);
+      raw.intensity = std::move(it->cloud.intensity);
+      raw.received = it->received;
+      pipeline_.submit(std::move(raw));
+      std::lock_guard lock(counters_mutex_);
+      ++counters_.submitted;
+    }
+    it = waiting.erase(it);
+  }
+}
+
+void Ros2Bridge::publishMaps() {
+  std::vector<std::uint64_t> blocks;
+  std::shared_ptr<const MapView> latest;
+  {
+    std::lock_guard lock(versions_mutex_);
+    blocks.swap(pending_blocks_);
+    latest = latest_;
+  }
+  Topics& s = *state_;
+  if (latest == nullptr) return;
+  if (s.published != nullptr && latest->version() == s.published->version()) return;
+  std::sort(blocks.begin(), blocks.end());
+  blocks.erase(std::unique(blocks.begin(), blocks.end()), blocks.end());
+  s.map->update(s.published.get(), *latest, blocks);
+  s.published = latest;
+
+  const std::string frame = options_.world_frame;
+  std_msgs_msg_dds__Header_ header{rosNow(), const_cast<char*>(frame.c_str())};
+  const double resolution = latest->grid().resolution();
+  if (dds_->octomap_writer.get() > 0) {
+    std::string bytes = s.map->binaryData();
+    octomap_msgs_msg_dds__Octomap_ msg{};
+    msg.header = header;
+    msg.binary = true;
+    msg.id = const_cast<char*>("OcTree");
+    msg.resolution = resolution;
+    msg.data._length = msg.data._maximum = static_cast<std::uint32_t>(bytes.size());
+    msg.data._buffer = reinterpret_cast<std::int8_t*>(bytes.data());
+    msg.data._release = false;
+    (void)dds::write(dds_->octomap_writer, &msg);
+  }
+  if (dds_->grid_writer.get() > 0) {
+    ros2::GridImage grid = s.map->projectedGrid();
+    nav_msgs_msg_dds__OccupancyGrid_ msg{};
+    msg.header = header;
+    msg.info.map_load_time = header.stamp;
+    msg.info.resolution = static_cast<float>(grid.resolution);
+    msg.info.width = grid.width;
+    msg.info.height = grid.height;
+    msg.info.origin.position = {grid.origin_x, grid.origin_y, 0.0};
+    msg.info.origin.orientation = {0.0, 0.0, 0.0, 1.0};
+    msg.data._length = msg.data._maximum = static_cast<std::uint32_t>(grid.data.size());
+    msg.data._buffer = grid.data.data();
+    msg.data._release = false;
+    (void)dds::write(dds_->grid_writer, &msg);
+  }
+  if (dds_->centers_writer.get() > 0) {
+    const std::vector<Point3f> centers = s.map->occupiedCenters();
+    std::vector<std::uint8_t> data(centers.size() * 12);
+    for (std::size_t i = 0; i < centers.size(); ++i) {
+      std::memcpy(data.data() + 12 * i, centers[i].data(), 12);
+    }
+    sensor_msgs_msg_dds__PointField_ fields[3] = {{const_cast<char*>("x"), 0, 7, 1},
+                                                  {const_cast<char*>("y"), 4, 7, 1},
+                                                  {const_cast<char*>("z"), 8, 7, 1}};
+    sensor_msgs_msg_dds__PointCloud2_ msg{};
+    msg.header = header;
+    msg.height = 1;
+    msg.width = static_cast<std::uint32_t>(centers.size());
+    msg.fields._length = msg.fields._maximum = 3;
+    msg.fields._buffer = fields;
+    msg.fields._release = false;
+    msg.is_bigendian = false;
+    msg.point_step = 12;
+    msg.row_step = static_cast<std::uint32_t>(data.size());
+    msg.data._length = msg.data._maximum = static_cast<std::uint32_t>(data.size());
+    msg.data._buffer = data.data();
+    msg.data._release = false;
+    msg.is_dense = true;
+    (void)dds::write(dds_->centers_writer, &msg);
+  }
+  std::lock_guard lock(counters_mutex_);
+  ++counters_.maps_published;
+}
+
+}  // namespace densemap::server

@@ -1,0 +1,446 @@
+// densemap-server's ROS 2 face end to end, as separate processes on loopback (one DDS domain
+// per test): `densemap replay --ros` publishes simulated scans as PointCloud2 + TF with clouds
+// stamped between TF samples; the server's map equals the offline map of the same clouds at
+// the interpolated poses, cell for cell; its octomap_binary, projected_map and occupied-centre
+// messages equal the map; malformed clouds are counted by reason and the server stays up.
+#include <gtest/gtest.h>
+#include <octomap/OcTree.h>
+
+#include <cstring>
+#include <sstream>
+#include <thread>
+
+#include "densemap/client/client.hpp"
+#include "densemap/dds/dds.hpp"
+#include "densemap/io/scan_source.hpp"
+#include "densemap/map/map_diff.hpp"
+#include "densemap/pipeline/pipeline.hpp"
+#include "densemap/ros2/map_topics.hpp"
+#include "densemap/ros2/names.hpp"
+#include "densemap/ros2/point_cloud2.hpp"
+#include "densemap/ros2/replay_frames.hpp"
+#include "densemap/server/server_config.hpp"
+#include "densemap/sim/sequence.hpp"
+#include "densemap/test_support/data_dir.hpp"
+#include "densemap/test_support/server_process.hpp"
+#include "nav_msgs.h"
+#include "octomap_msgs.h"
+#include "sensor_msgs.h"
+#include "tf2_msgs.h"
+
+namespace densemap {
+namespace {
+
+using namespace std::chrono_literals;
+namespace fs = std::filesystem;
+
+constexpr std::int64_t kStampBase = 1'700'000'000'000'000'000;
+constexpr double kRate = 10.0;
+
+const char* kRosConfig =
+    "ros2 { enabled: true reliable_clouds: true world_frame: \"map\" tf_wait_s: 3\n"
+    "       max_waiting_clouds: 20 publish_period_s: 0.2 grid_min_z_m: -0.5 grid_max_z_m: 1.5 }\n";
+
+std::unique_ptr<Client> connect(std::uint32_t domain) {
+  auto client = Client::create({.domain_id = domain, .timeout = 10s});
+  EXPECT_TRUE(client) << client.error().message;
+  if (!client) return nullptr;
+  EXPECT_TRUE((*client)->waitForServer());
+  return std::move(*client);
+}
+
+int runCli(const std::string& args) {
+  const std::string command = std::string(DENSEMAP_CLI_BIN) + " " + args + " >/dev/null 2>&1";
+  return std::system(command.c_str());
+}
+
+/// Waits until the server's status satisfies `done`; returns the last status.
+ServerStatus waitForStatus(Client& client, const std::function<bool(const ServerStatus&)>& done) {
+  ServerStatus last;
+  const auto deadline = std::chrono::steady_clock::now() + 30s;
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (auto s = client.status(); s) {
+      last = *s;
+      if (done(last)) break;
+    }
+    std::this_thread::sleep_for(100ms);
+  }
+  return last;
+}
+
+/// The map the server must hold: the same clouds, at the poses a TF buffer fed the replay's
+/// transforms gives at the clouds' stamps, through a pipeline with the server's options.
+std::shared_ptr<const MapView> expectedMap(const fs::path& data, std::size_t scans,
+                                           const fs::path& config,
+                                           const ros2::ReplayFrames& frames) {
+  auto source = openScanSource(data);
+  EXPECT_TRUE(source);
+  std::vector<RawScan> raws;
+  for (std::size_t i = 0; i < std::min(scans, (*source)->size()); ++i) {
+    raws.push_back(toRawScan(*(*source)->load(i), i + 1, "/points"));
+  }
+  ros2::TfBuffer tf;
+  EXPECT_TRUE(tf.set(frames.map, frames.odom,
+                     {frames.stampOf(0), Eigen::Vector3d::Zero(), Eigen::Quaterniond::Identity()},
+                     true));
+  EXPECT_TRUE(tf.set(frames.base, frames.sensor, ros2::sensorMount(), true));
+  for (std::size_t k = 0; k <= raws.size(); ++k) {
+    const RawScan& r = raws[std::min(k, raws.size() - 1)];
+    EXPECT_TRUE(tf.set(
+        frames.odom, frames.base,
+        ros2::odomToBase(ros2::fromScanPose(r.t_world_sensor, r.q_world_sensor), frames.stampOf(k)),
+        false));
+  }
+  auto cfg = server::loadServerConfig(config);
+  EXPECT_TRUE(cfg) << cfg.error().message;
+  auto options = server::pipelineOptions(*cfg);
+  EXPECT_TRUE(options);
+  auto pipeline = Pipeline::create(*options);
+  EXPECT_TRUE(pipeline);
+  (*pipeline)->start();
+  for (std::size_t k = 0; k < raws.size(); ++k) {
+    auto T = tf.lookup(frames.map, frames.sensor, frames.cloudStamp(k));
+    EXPECT_TRUE(T);
+    RawScan raw = raws[k];
+    const ros2::ScanPose pose = ros2::toScanPose(*T);
+    raw.t_world_sensor = pose.t;
+    raw.q_world_sensor = pose.q;
+    (*pipeline)->submit(std::move(raw));
+    for (int i = 0; i < 3000 && (*pipeline)->counters().integrated <= k; ++i) {
+      std::this_thread::sleep_for(1ms);
+    }
+  }
+  (*pipeline)->stop();
+  return (*pipeline)->view();
+}
+
+/// The latest sample of a transient-local ROS topic, copied out by `copy`.
+template <class T>
+bool latestSample(const dds::Entity& reader, const std::function<void(const T&)>& copy) {
+  bool got = false;
+  dds::forEachSample<T>(reader, false, [&](const T& m) {
+    copy(m);
+    got = true;
+  });
+  return got;
+}
+
+/// Replays `scans` scans of `data` through the ROS path into a server on `domain` and checks
+/// the map and the map topics.
+void replayAndCompare(const fs::path& data, std::size_t scans, std::uint32_t kDomain,
+                      const fs::path& dir) {
+  test::ServerProcess server(dir, kDomain, kRosConfig);
+  auto client = connect(kDomain);
+  ASSERT_TRUE(client);
+
+  // A ROS tool's readers of the map topics (transient-local: they get the latest on joining).
+  auto participant = dds::createParticipant(kDomain, "lo");
+  ASSERT_TRUE(participant);
+  auto octomap_topic = dds::createTopic(*participant, octomap_msgs_msg_dds__Octomap__desc,
+                                        ros2::ddsTopicName("/octomap_binary"));
+  auto grid_topic = dds::createTopic(*participant, nav_msgs_msg_dds__OccupancyGrid__desc,
+                                     ros2::ddsTopicName("/projected_map"));
+  auto centers_topic = dds::createTopic(*participant, sensor_msgs_msg_dds__PointCloud2__desc,
+                                        ros2::ddsTopicName("/octomap_point_cloud_centers"));
+  ASSERT_TRUE(octomap_topic && grid_topic && centers_topic);
+  const dds::QosSpec latched{.depth = 1, .transient_local = true};
+  auto octomap_reader = dds::createReader(*participant, *octomap_topic, latched);
+  auto grid_reader = dds::createReader(*participant, *grid_topic, latched);
+  auto centers_reader = dds::createReader(*participant, *centers_topic, latched);
+  ASSERT_TRUE(octomap_reader && grid_reader && centers_reader);
+
+  ros2::ReplayFrames frames;
+  frames.stamp_base_ns = kStampBase;
+  frames.period_ns = static_cast<std::int64_t>(1e9 / kRate);
+  frames.stamp_offset = 0.5;  // between two TF samples: interpolated, and waits for the next
+  ASSERT_EQ(
+      runCli("--domain-id " + std::to_string(kDomain) + " replay --ros --data " + data.string() +
+             " --limit " + std::to_string(scans) +
+             " --rate 10 --ros-stamp-offset 0.5 --ros-stamp-base-ns " + std::to_string(kStampBase)),
+      0);
+  const ServerStatus status =
+      waitForStatus(*client, [&](const ServerStatus& s) { return s.integrated >= scans; });
+  EXPECT_TRUE(status.ros_enabled);
+  EXPECT_EQ(status.ros_received, scans);
+  EXPECT_EQ(status.ros_submitted, scans);
+  EXPECT_EQ(status.integrated, scans);
+  EXPECT_EQ(status.ros_no_transform, 0U);
+
+  auto fetched = client->fetchMap(scans);
+  ASSERT_TRUE(fetched) << fetched.error().message;
+  const GridMap& map = *fetched->first;
+  const auto expected = expectedMap(data, scans, dir / "server.textproto", frames);
+  ASSERT_GT(map.knownCells(), 10000U);
+  GridMap expected_map(map.resolution(), map.sensorModel());
+  expected->forEachKnown([&](const VoxelKey& k, float v) { expected_map.setLogOdds(k, v); });
+  const MapDiff diff = diffMaps(map, expected_map);
+  EXPECT_EQ(diff.differing(), 0U) << diff.only_in_a << " / " << diff.only_in_b << " / "
+                                  << diff.value_mismatch << " of " << diff.union_cells;
+
+  // The map topics, once they carry the final map (published at most every 0.2 s).
+  const auto view = MapView::fromMap(map, scans);
+  std::size_t occupied = 0;
+  map.forEachKnown([&](const VoxelKey&, float v) { occupied += SensorModel::isOccupied(v); });
+  std::string octomap_data, octomap_id;
+  double octomap_resolution = 0;
+  bool octomap_binary = false;
+  ros2::GridImage grid;
+  std::size_t centers = 0;
+  std::string frame_id;
+  const auto deadline = std::chrono::steady_clock::now() + 20s;
+  while (std::chrono::steady_clock::now() < deadline) {
+    latestSample<octomap_msgs_msg_dds__Octomap_>(*octomap_reader, [&](const auto& m) {
+      octomap_data.assign(reinterpret_cast<const char*>(m.data._buffer), m.data._length);
+      octomap_id = m.id;
+      octomap_resolution = m.resolution;
+      octomap_binary = m.binary;
+      frame_id = m.header.frame_id;
+    });
+    latestSample<nav_msgs_msg_dds__OccupancyGrid_>(*grid_reader, [&](const auto& m) {
+      grid.width = m.info.width;
+      grid.height = m.info.height;
+      grid.origin_x = m.info.origin.position.x;
+      grid.origin_y = m.info.origin.position.y;
+      grid.resolution = m.info.resolution;
+      grid.data.assign(m.data._buffer, m.data._buffer + m.data._length);
+    });
+    latestSample<sensor_msgs_msg_dds__PointCloud2_>(*centers_reader,
+                                                    [&](const auto& m) { centers = m.width; });
+    if (centers == occupied) break;
+    std::this_thread::sleep_for(100ms);
+  }
+  EXPECT_EQ(centers, occupied);
+  EXPECT_EQ(octomap_id, "OcTree");
+  EXPECT_TRUE(octomap_binary);
+  EXPECT_EQ(octomap_resolution, 0.2);
+  EXPECT_EQ(frame_id, "map");
+  octomap::OcTree tree(0.2);
+  std::istringstream in(octomap_data);
+  ASSERT_TRUE(tree.readBinaryData(in));
+  std::size_t cells = 0, agree = 0;
+  map.forEachKnown([&](const VoxelKey& k, float v) {
+    ++cells;
+    const octomap::OcTreeNode* n = tree.search(octomap::OcTreeKey(k.x, k.y, k.z));
+    if (n != nullptr && tree.isNodeOccupied(n) == SensorModel::isOccupied(v)) ++agree;
+  });
+  EXPECT_EQ(agree, cells);
+  tree.expand();
+  EXPECT_EQ(tree.getNumLeafNodes(), cells);
+  const ros2::GridImage reference = ros2::MapTopicsState::project(*view, -0.5, 1.5);
+  EXPECT_EQ(grid.width, reference.width);
+  EXPECT_EQ(grid.height, reference.height);
+  EXPECT_EQ(grid.origin_x, reference.origin_x);
+  EXPECT_EQ(grid.origin_y, reference.origin_y);
+  EXPECT_FLOAT_EQ(static_cast<float>(grid.resolution), 0.2F);
+  EXPECT_EQ(grid.data, reference.data);
+  EXPECT_EQ(server.stop(), 0);
+}
+
+#ifndef DENSEMAP_ROS2_REALDATA
+TEST(Ros2Wire, ReplayedPointCloud2AndTfGiveTheOfflineMapAndTheMapTopicsAgree) {
+  test::TempDir dir;
+  SequenceOptions o;
+  o.scene = "indoor";
+  o.sensor = "vlp16";
+  o.columns = 600;
+  o.scans = 6;
+  o.ground_truth_resolution_m = 0;
+  ASSERT_TRUE(writeSimulatedSequence(o, dir.path() / "data"));
+  replayAndCompare(dir.path() / "data", 6, 151, dir.path());
+}
+#else
+TEST(Ros2Wire, RealScansThroughPointCloud2AndTfGiveTheOfflineMap) {
+  DENSEMAP_REQUIRE_DATA(balm, "balm-realworld");
+  test::TempDir dir;
+  replayAndCompare(balm, 5, 153, dir.path());
+}
+#endif
+
+/// A PointCloud2 message from a layout and raw bytes.
+struct RawCloud {
+  std::vector<sensor_msgs_msg_dds__PointField_> fields;
+  std::vector<std::string> names;
+  std::vector<std::uint8_t> data;
+  std::uint32_t width = 0, height = 1, point_step = 12, row_step = 0;
+  bool big = false;
+  std::string frame = "map";
+};
+
+RawCloud xyzCloud(std::uint32_t n, std::uint8_t type = 7) {
+  RawCloud c;
+  const std::uint32_t size = type == 8 ? 8 : 4;
+  c.names = {"x", "y", "z"};
+  for (std::uint32_t a = 0; a < 3; ++a) c.fields.push_back({nullptr, a * size, type, 1});
+  c.width = n;
+  c.point_step = 3 * size;
+  c.row_step = n * c.point_step;
+  c.data.resize(c.row_step);
+  for (std::uint32_t i = 0; i < n; ++i) {
+    for (std::uint32_t a = 0; a < 3; ++a) {
+      const double v = a == 0 ? 2.0 + 0.01 * i : (a == 1 ? 0.02 * i : 0.5);
+      if (type == 8) {
+        std::memcpy(c.data.data() + i * c.point_step + a * 8, &v, 8);
+      } else {
+        const float f = static_cast<float>(v);
+        std::memcpy(c.data.data() + i * c.point_step + a * 4, &f, 4);
+      }
+    }
+  }
+  return c;
+}
+
+void publish(const dds::Entity& writer, RawCloud c) {
+  for (std::size_t i = 0; i < c.fields.size(); ++i) {
+    c.fields[i].name = const_cast<char*>(c.names[i].c_str());
+  }
+  sensor_msgs_msg_dds__PointCloud2_ m{};
+  m.header.stamp = {1, 0};
+  m.header.frame_id = const_cast<char*>(c.frame.c_str());
+  m.height = c.height;
+  m.width = c.width;
+  m.fields._length = m.fields._maximum = static_cast<std::uint32_t>(c.fields.size());
+  m.fields._buffer = c.fields.data();
+  m.is_bigendian = c.big;
+  m.point_step = c.point_step;
+  m.row_step = c.row_step;
+  m.data._length = m.data._maximum = static_cast<std::uint32_t>(c.data.size());
+  m.data._buffer = c.data.data();
+  m.is_dense = true;
+  ASSERT_TRUE(dds::write(writer, &m));
+}
+
+#ifndef DENSEMAP_ROS2_REALDATA
+TEST(Ros2Wire, MalformedCloudsAreCountedByReasonAndTheServerKeepsMapping) {
+  constexpr std::uint32_t kDomain = 152;
+  test::TempDir dir;
+  test::ServerProcess server(
+      dir.path(), kDomain,
+      "ros2 { enabled: true reliable_clouds: true tf_wait_s: 0.3 publish_period_s: 0 }\n");
+  auto client = connect(kDomain);
+  ASSERT_TRUE(client);
+  auto participant = dds::createParticipant(kDomain, "lo");
+  ASSERT_TRUE(participant);
+  auto topic = dds::createTopic(*participant, sensor_msgs_msg_dds__PointCloud2__desc, "rt/points");
+  ASSERT_TRUE(topic);
+  auto writer = dds::createWriter(*participant, *topic, {.depth = 0});
+  ASSERT_TRUE(writer);
+  // A static map -> odom transform makes "map" a known frame: clouds in it need no motion.
+  auto tf_topic = dds::createTopic(*participant, tf2_msgs_msg_dds__TFMessage__desc, "rt/tf_static");
+  ASSERT_TRUE(tf_topic);
+  auto tf_writer =
+      dds::createWriter(*participant, *tf_topic, {.depth = 1, .transient_local = true});
+  ASSERT_TRUE(tf_writer);
+  geometry_msgs_msg_dds__TransformStamped_ ts{};
+  ts.header.frame_id = const_cast<char*>("map");
+  ts.child_frame_id = const_cast<char*>("odom");
+  ts.transform.rotation.w = 1.0;
+  tf2_msgs_msg_dds__TFMessage_ tf_msg{};
+  tf_msg.transforms._length = tf_msg.transforms._maximum = 1;
+  tf_msg.transforms._buffer = &ts;
+  ASSERT_TRUE(dds::write(*tf_writer, &tf_msg));
+  for (int i = 0; i < 100; ++i) {
+    dds_publication_matched_status_t m{};
+    if (dds_get_publication_matched_status(writer->get(), &m) >= 0 && m.current_count > 0) break;
+    std::this_thread::sleep_for(20ms);
+  }
+  std::this_thread::sleep_for(300ms);  // the static transform reaches the server first
+
+  using ros2::CloudReject;
+  std::vector<std::pair<RawCloud, std::optional<CloudReject>>> cases;
+  cases.emplace_back(xyzCloud(50), std::nullopt);     // valid, float32
+  cases.emplace_back(xyzCloud(50, 8), std::nullopt);  // valid, float64
+  {
+    RawCloud c = xyzCloud(50);
+    c.point_step = 8;  // z ends past the point
+    c.row_step = 400;
+    cases.emplace_back(c, CloudReject::kFieldPastPoint);
+  }
+  {
+    RawCloud c = xyzCloud(50);
+    c.data.resize(c.data.size() - 1);
+    cases.emplace_back(c, CloudReject::kDataTooShort);
+  }
+  {
+    RawCloud c = xyzCloud(50);
+    c.fields[1].offset = 100;
+    cases.emplace_back(c, CloudReject::kFieldPastPoint);
+  }
+  {
+    RawCloud c = xyzCloud(50);
+    c.width = 0xFFFFFFFFU;
+    c.height = 0xFFFFFFFFU;
+    cases.emplace_back(c, CloudReject::kTooManyPoints);
+  }
+  {
+    RawCloud c = xyzCloud(50);
+    c.fields.pop_back();
+    c.names.pop_back();
+    cases.emplace_back(c, CloudReject::kMissingXyz);
+  }
+  {
+    RawCloud c = xyzCloud(50);
+    c.fields[0].datatype = 4;  // uint16 x
+    cases.emplace_back(c, CloudReject::kUnsupportedXyz);
+  }
+  {
+    RawCloud c = xyzCloud(50);  // big-endian float32: converted
+    c.big = true;
+    for (std::size_t i = 0; i < c.data.size(); i += 4) std::reverse(&c.data[i], &c.data[i + 4]);
+    cases.emplace_back(c, std::nullopt);
+  }
+  std::array<std::uint64_t, ros2::kCloudRejectCount> expected{};
+  std::size_t valid = 0;
+  for (auto& [cloud, reason] : cases) {
+    // At a sensor's pace: the server's reader keeps the last 5 clouds (ROS sensor QoS).
+    std::this_thread::sleep_for(30ms);
+    publish(*writer, cloud);
+    if (reason) {
+      ++expected[static_cast<std::size_t>(*reason)];
+    } else {
+      ++valid;
+    }
+  }
+  RawCloud lost = xyzCloud(10);
+  lost.frame = "nowhere";  // no transform ever: dropped after tf_wait
+  publish(*writer, lost);
+  const std::size_t total = cases.size() + 1;
+  const ServerStatus s = waitForStatus(*client, [&](const ServerStatus& st) {
+    return st.ros_received == total && st.ros_no_transform == 1 && st.integrated == valid;
+  });
+  EXPECT_EQ(s.ros_received, total);
+  EXPECT_EQ(s.ros_submitted, valid);
+  EXPECT_EQ(s.integrated, valid);
+  EXPECT_EQ(s.ros_rejected, total - valid - 1);
+  EXPECT_EQ(s.ros_no_transform, 1U);
+  ASSERT_EQ(s.ros_rejected_by_reason.size(), expected.size());
+  for (std::size_t r = 0; r < expected.size(); ++r) {
+    EXPECT_EQ(s.ros_rejected_by_reason[r], expected[r])
+        << ros2::cloudRejectName(static_cast<CloudReject>(r));
+  }
+  // Still answering, and the valid clouds are in the map: (2, 0, 0.5) was hit three times.
+  auto answer = client->queryPoints({Point3f(2.0F, 0.0F, 0.5F)});
+  ASSERT_TRUE(answer);
+  EXPECT_EQ(answer->states[0], CellState::kOccupied);
+  EXPECT_EQ(server.stop(), 0);
+}
+
+TEST(Ros2Wire, TopicAndTypeNamesFollowRmwCycloneddsConventions) {
+  EXPECT_EQ(ros2::ddsTopicName("/points"), "rt/points");
+  EXPECT_EQ(ros2::ddsTopicName("points"), "rt/points");
+  EXPECT_EQ(ros2::ddsTopicName("/robot1/points"), "rt/robot1/points");
+  EXPECT_EQ(ros2::ddsTopicName("/tf_static"), "rt/tf_static");
+  EXPECT_EQ(ros2::ddsTopicName(""), "");
+  EXPECT_EQ(ros2::ddsTopicName("/points/"), "");
+  EXPECT_EQ(ros2::ddsTopicName("/bad name"), "");
+  EXPECT_STREQ(sensor_msgs_msg_dds__PointCloud2__desc.m_typename,
+               "sensor_msgs::msg::dds_::PointCloud2_");
+  EXPECT_STREQ(tf2_msgs_msg_dds__TFMessage__desc.m_typename, "tf2_msgs::msg::dds_::TFMessage_");
+  EXPECT_STREQ(octomap_msgs_msg_dds__Octomap__desc.m_typename, "octomap_msgs::msg::dds_::Octomap_");
+  EXPECT_STREQ(nav_msgs_msg_dds__OccupancyGrid__desc.m_typename,
+               "nav_msgs::msg::dds_::OccupancyGrid_");
+}
+
+#endif
+
+}  // namespace
+}  // namespace densemap
