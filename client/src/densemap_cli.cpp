@@ -268,6 +268,16 @@ void printStatus(const ServerStatus& s) {
         static_cast<unsigned long long>(c.integrated), static_cast<unsigned long long>(c.dropped),
         static_cast<unsigned long long>(c.rejected), static_cast<unsigned long long>(c.seq_gaps));
   }
+  if (s.ros_enabled) {
+    std::printf(
+        "  ros2: clouds received %llu, submitted %llu, malformed %llu%s%s, no transform %llu; "
+        "map topics published %llu times\n",
+        static_cast<unsigned long long>(s.ros_received),
+        static_cast<unsigned long long>(s.ros_submitted),
+        static_cast<unsigned long long>(s.ros_rejected), s.ros_last_reject.empty() ? "" : ", last: ",
+        s.ros_last_reject.c_str(), static_cast<unsigned long long>(s.ros_no_transform),
+        static_cast<unsigned long long>(s.ros_maps_published));
+  }
 }
 
 Expected<std::unique_ptr<OccupancyMap>> loadMapFile(const std::string& file) {

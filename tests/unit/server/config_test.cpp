@@ -35,6 +35,40 @@ TEST(ServerConfig, TheShippedConfigIsValidAndEqualsTheDefaults) {
   EXPECT_FALSE(options->kernel) << "log-odds is the default map kind";
   EXPECT_FALSE(options->upsample) << "no upsampling unless enabled";
   EXPECT_EQ(config->dds().network_interface(), "lo");
+  auto ros2 = ros2Options(*config);
+  ASSERT_TRUE(ros2);
+  EXPECT_FALSE(*ros2) << "the ROS 2 face is off unless enabled";
+}
+
+TEST(ServerConfig, Ros2OptionsAndTheirErrors) {
+  test::TempDir dir;
+  auto options = [&](const std::string& text) {
+    auto config = loadServerConfig(writeConfig(dir, text));
+    EXPECT_TRUE(config) << config.error().message;
+    return ros2Options(*config);
+  };
+  auto on = options("ros2 { enabled: true }\n");
+  ASSERT_TRUE(on && *on);
+  EXPECT_EQ((*on)->clouds, std::vector<std::string>{"/points"});
+  EXPECT_EQ((*on)->world_frame, "map");
+  EXPECT_FALSE((*on)->reliable_clouds);
+  auto two = options(
+      "ros2 { enabled: true clouds: \"/front/points\" clouds: \"rear\" world_frame: \"/odom\" }\n");
+  ASSERT_TRUE(two && *two);
+  EXPECT_EQ((*two)->clouds.size(), 2U);
+  EXPECT_EQ((*two)->world_frame, "odom");
+  for (const char* bad : {"ros2 { enabled: true clouds: \"/bad topic\" }\n",
+                          "ros2 { enabled: true world_frame: \"\" }\n",
+                          "ros2 { enabled: true tf_wait_s: -1 }\n",
+                          "ros2 { enabled: true max_waiting_clouds: 0 }\n",
+                          "ros2 { enabled: true grid_min_z_m: 2 grid_max_z_m: 1 }\n",
+                          "ros2 { enabled: true octomap_topic: \"/a//b\" }\n"}) {
+    auto r = options(bad);
+    EXPECT_FALSE(r) << bad;
+    if (!r) {
+      EXPECT_NE(r.error().message.find("ros2"), std::string::npos) << r.error().message;
+    }
+  }
 }
 
 TEST(ServerConfig, ErrorsNameTheFileTheLineAndTheReason) {
