@@ -2,9 +2,17 @@
 # The main job, one command: install, build, simulate a short outdoor drive, run
 # densemap-server on loopback, replay the scans at 10 Hz, query the map, save .dmap and .bt
 # snapshots and a picture, stop the server cleanly, print a summary.
-# Usage: scripts/demo.sh [output dir, default /tmp/densemap-demo]
+# Usage: scripts/demo.sh [--ros] [output dir, default /tmp/densemap-demo]
+#   --ros: the scans go in as a ROS 2 robot sends them (sensor_msgs/PointCloud2 on rt/points,
+#   TF on rt/tf and rt/tf_static; densemap replay --ros) and the server also publishes
+#   octomap_binary, projected_map and octomap_point_cloud_centers (README "ROS 2").
 set -euo pipefail
 cd "$(dirname "$0")/.."
+ROS=0
+if [ "${1:-}" = "--ros" ]; then
+  ROS=1
+  shift
+fi
 OUT=${1:-/tmp/densemap-demo}
 DOMAIN=${DENSEMAP_DEMO_DOMAIN:-57}
 ./scripts/install-deps.sh
@@ -23,13 +31,18 @@ pipeline { threads: 2 queue_depth: 2 }
 snapshot { path: "$OUT/server.dmap" autosave_period_s: 0 }
 dds { domain_id: $DOMAIN network_interface: "lo" }
 CFG
+REPLAY_ROS=()
+if [ "$ROS" -eq 1 ]; then
+  echo 'ros2 { enabled: true reliable_clouds: true publish_period_s: 1 }' >> "$OUT/server.textproto"
+  REPLAY_ROS=(--ros)
+fi
 $BIN/densemap-server --config "$OUT/server.textproto" 2> "$OUT/server.log" &
 SERVER=$!
 trap 'kill $SERVER 2>/dev/null || true' EXIT
 CLI="$BIN/densemap --domain-id $DOMAIN"
 
-echo "== 3. replaying the scans at 10 Hz"
-$CLI replay --data "$OUT/outdoor" --rate 10 | tee "$OUT/replay.txt"
+echo "== 3. replaying the scans at 10 Hz${REPLAY_ROS:+ as ROS 2 PointCloud2 + TF}"
+$CLI replay --data "$OUT/outdoor" --rate 10 "${REPLAY_ROS[@]}" | tee "$OUT/replay.txt"
 
 echo "== 4. queries"
 $CLI query point 20 -1.5 1.8 20 12 3 60 -4.6 1.0

@@ -312,6 +312,19 @@ void Ros2Bridge::publishMaps() {
   }
   Topics& s = *state_;
   if (latest == nullptr) return;
+  // Like map/delta: while no ROS tool listens, no state is kept (an OcTree update per changed
+  // cell is the costly part); the first reader gets the map built once from the latest version.
+  const auto listened = [](const dds::Entity& w) {
+    dds_publication_matched_status_t m{};
+    return w.get() > 0 && dds_get_publication_matched_status(w.get(), &m) >= 0 &&
+           m.current_count > 0;
+  };
+  if (!listened(dds_->octomap_writer) && !listened(dds_->grid_writer) &&
+      !listened(dds_->centers_writer)) {
+    if (s.published != nullptr) s.map->clear();
+    s.published = nullptr;
+    return;
+  }
   if (s.published != nullptr && latest->version() == s.published->version()) return;
   std::sort(blocks.begin(), blocks.end());
   blocks.erase(std::unique(blocks.begin(), blocks.end()), blocks.end());

@@ -73,6 +73,12 @@ void MapTopicsState::update(const MapView* base, const MapView& next,
   tree_.updateInnerOccupancy();
 }
 
+void MapTopicsState::clear() {
+  tree_.clear();
+  columns_.clear();
+  cells_ = 0;
+}
+
 std::string MapTopicsState::binaryData() const {
   std::ostringstream out;
   tree_.writeBinaryData(out);

@@ -41,6 +41,9 @@ class MapTopicsState {
 
   /// OcTree::writeBinaryData of the map (occupied/free per leaf; a cell at log-odds exactly 0
   /// counts free, as densemap classifies it).
+  /// Forgets everything (the next update starts from an empty state).
+  void clear();
+
   [[nodiscard]] std::string binaryData() const;
   [[nodiscard]] std::vector<Point3f> occupiedCenters() const;
   [[nodiscard]] GridImage projectedGrid() const;
