@@ -140,8 +140,8 @@ Expected<std::unique_ptr<Ros2Bridge>> Ros2Bridge::create(Pipeline& pipeline,
     }
   }
   const PipelineOptions& p = pipeline.options();
-  bridge->state_->map = std::make_unique<ros2::MapTopicsState>(
-      p.resolution_m, SensorModel(p.sensor), options.grid_min_z_m, options.grid_max_z_m);
+  bridge->state_->map = std::make_unique<ros2::MapTopicsState>(p.resolution_m, options.grid_min_z_m,
+                                                               options.grid_max_z_m);
   bridge->latest_ = pipeline.view();
   return bridge;
 }

@@ -22,8 +22,7 @@ float binaryValue(float v) { return v == 0.0F ? -std::numeric_limits<float>::den
 
 }  // namespace
 
-MapTopicsState::MapTopicsState(double resolution_m, const SensorModel& model, double min_z_m,
-                               double max_z_m)
+MapTopicsState::MapTopicsState(double resolution_m, double min_z_m, double max_z_m)
     : tree_(resolution_m), resolution_(resolution_m) {
   const VoxelGrid grid(resolution_m);
   min_z_key_ = zKey(grid, min_z_m);
@@ -31,7 +30,6 @@ MapTopicsState::MapTopicsState(double resolution_m, const SensorModel& model, do
   // No clamping: kernel maps' logit(p) goes in as it is (only occupied/free is published).
   tree_.setClampingThresMin(1e-9);
   tree_.setClampingThresMax(1.0 - 1e-9);
-  (void)model;
 }
 
 void MapTopicsState::apply(const VoxelKey& key, std::optional<float> before,

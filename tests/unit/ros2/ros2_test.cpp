@@ -317,7 +317,7 @@ TEST(MapTopicsState, IncrementalUpdatesEqualTheWholeMapReference) {
   auto c = makeMap(1, 9);  // a different map: cells appear and disappear
   const auto va = MapView::fromMap(*a, 1), vb = MapView::fromMap(*b, 2),
              vc = MapView::fromMap(*c, 3);
-  MapTopicsState state(0.2, SensorModel{}, kLo, kHi);
+  MapTopicsState state(0.2, kLo, kHi);
   state.update(nullptr, *va, {});
   expectStateEquals(state, *va, kLo, kHi);
   state.update(va.get(), *vb, allBlocks(*va, *vb));

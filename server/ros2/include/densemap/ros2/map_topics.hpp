@@ -33,7 +33,7 @@ struct GridImage {
 /// Thread-safety: one thread at a time.
 class MapTopicsState {
  public:
-  MapTopicsState(double resolution_m, const SensorModel& model, double min_z_m, double max_z_m);
+  MapTopicsState(double resolution_m, double min_z_m, double max_z_m);
 
   /// Brings the state from version `base` (what it holds; null: empty) to `next`, given the
   /// blocks the versions between them wrote.
