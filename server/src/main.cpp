@@ -75,11 +75,23 @@ int main(int argc, char** argv) {
   std::unique_ptr<densemap::OccupancyMap> initial;
   std::uint64_t version = 0;
   const auto& snapshot = service_options.snapshot_path;
-  if (!snapshot.empty() && std::filesystem::exists(snapshot)) {
-    auto loaded = densemap::loadSnapshot(snapshot, options->backend, options->resolution_m);
-    if (!loaded) return fail("snapshot: " + loaded.error().message, check_only ? 2 : 1);
+  service_options.snapshot_keep = static_cast<int>(config->snapshot().keep());
+  if (service_options.snapshot_keep < 1 || service_options.snapshot_keep > 100) {
+    return fail("config: snapshot.keep must be 1 .. 100", 2);
+  }
+  auto resumed = snapshot.empty()
+                     ? densemap::Expected<std::optional<densemap::ResumedSnapshot>>(std::nullopt)
+                     : densemap::loadNewestSnapshot(snapshot, service_options.snapshot_keep,
+                                                    options->backend, options->resolution_m);
+  if (!resumed) return fail("snapshot: " + resumed.error().message, check_only ? 2 : 1);
+  if (*resumed) {
+    auto* loaded = &(*resumed)->snapshot;
+    for (const std::string& reason : (*resumed)->skipped) {
+      std::fprintf(stderr, "densemap-server: WARNING: skipping an unreadable snapshot: %s\n",
+                   reason.c_str());
+    }
     std::fprintf(stderr, "densemap-server: resumed %s (version %llu, %zu cells)\n",
-                 snapshot.c_str(), static_cast<unsigned long long>(loaded->version),
+                 (*resumed)->file.c_str(), static_cast<unsigned long long>(loaded->version),
                  loaded->map->knownCells());
     if (options->kernel) {
       std::fprintf(stderr,

@@ -194,11 +194,13 @@ void MapService::publishLoop() {
   const auto autosave_period = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
       std::chrono::duration<double>(options_.autosave_period_s));
   auto next_save = next_status + autosave_period;
+  const bool autosave = options_.autosave_period_s > 0 && !options_.snapshot_path.empty();
+  std::uint64_t saved_version = pipeline_.view()->version();  // what the file already holds
   std::deque<Version> versions;
   while (running_.load()) {
     {
       std::unique_lock lock(versions_mutex_);
-      versions_cv_.wait_until(lock, next_status,
+      versions_cv_.wait_until(lock, autosave ? std::min(next_status, next_save) : next_status,
                               [&] { return !versions_.empty() || !running_.load(); });
       versions.swap(versions_);
     }
@@ -209,8 +211,16 @@ void MapService::publishLoop() {
       publishManifest();
       next_status = now + std::chrono::seconds(1);
     }
-    if (options_.autosave_period_s > 0 && !options_.snapshot_path.empty() && now >= next_save) {
-      if (auto ok = save(); !ok) noteBadRequest("autosave: " + ok.error().message);
+    // Autosave only a changed map: a daemon idle for months does not rewrite the same file.
+    if (autosave && now >= next_save) {
+      const std::uint64_t version = pipeline_.view()->version();
+      if (version != saved_version) {
+        if (auto ok = save(); !ok) {
+          noteBadRequest("autosave: " + ok.error().message);
+        } else {
+          saved_version = version;
+        }
+      }
       next_save = now + autosave_period;
     }
   }
@@ -517,8 +527,12 @@ Expected<std::size_t> MapService::save(const std::filesystem::path& file) {
   const std::filesystem::path target = file.empty() ? options_.snapshot_path : file;
   if (target.empty()) return makeError("no snapshot path configured or given");
   const ReturnFreeMemory trim;  // the snapshot's buffers (about the file's size)
-  return saveSnapshot(*pipeline_.view(), SensorModel(pipeline_.options().sensor),
-                      pipeline_.options().backend, target);
+  const SensorModel model(pipeline_.options().sensor);
+  if (file.empty() || file == options_.snapshot_path) {
+    return saveSnapshotKeeping(*pipeline_.view(), model, pipeline_.options().backend, target,
+                               options_.snapshot_keep);
+  }
+  return saveSnapshot(*pipeline_.view(), model, pipeline_.options().backend, target);
 }
 
 void MapService::publishStatus() {

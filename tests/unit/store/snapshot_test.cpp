@@ -56,9 +56,89 @@ TEST(Snapshot, BrokenFilesAreClearErrors) {
   auto truncated = loadSnapshot(file, Backend::kGrid, 0.0);
   ASSERT_FALSE(truncated);
   EXPECT_NE(truncated.error().message.find("m.dmap"), std::string::npos);
+  // Every shorter cut of a snapshot is refused (no prefix of the file parses as a snapshot).
+  ASSERT_TRUE(saveSnapshot(*MapView::fromMap(map, 1), map.sensorModel(), Backend::kGrid, file));
+  std::string whole;
+  {
+    std::ifstream in(file, std::ios::binary);
+    whole.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  for (std::size_t cut = 0; cut < whole.size(); ++cut) {
+    std::ofstream(dir.path() / "cut.dmap", std::ios::binary) << whole.substr(0, cut);
+    EXPECT_FALSE(loadSnapshot(dir.path() / "cut.dmap", Backend::kGrid, 0.0)) << "cut at " << cut;
+  }
   std::ofstream(dir.path() / "junk.dmap") << "not a snapshot at all";
   EXPECT_FALSE(loadSnapshot(dir.path() / "junk.dmap", Backend::kGrid, 0.0));
   EXPECT_FALSE(loadSnapshot(dir.path() / "none.dmap", Backend::kGrid, 0.0));
+}
+
+/// A map with `cells` known cells valued by `version`, as a view at `version`.
+std::shared_ptr<const MapView> versionedView(std::uint64_t version, int cells = 50) {
+  GridMap map(0.1, SensorModel{});
+  for (int i = 0; i < cells; ++i) {
+    map.setLogOdds(VoxelKey{static_cast<std::uint16_t>(32768 + i), 32768, 32768},
+                   0.01F * static_cast<float>(version));
+  }
+  return MapView::fromMap(map, version);
+}
+
+TEST(SnapshotGenerations, SavesKeepTheLastKAndLoadingSkipsCorruptOnes) {
+  test::TempDir dir;
+  const auto path = dir.path() / "map.dmap";
+  auto none = loadNewestSnapshot(path, 3, Backend::kGrid, 0.0);
+  ASSERT_TRUE(none);
+  EXPECT_FALSE(*none);
+  for (std::uint64_t v = 1; v <= 4; ++v) {
+    ASSERT_TRUE(saveSnapshotKeeping(*versionedView(v), SensorModel{}, Backend::kGrid, path, 3));
+  }
+  // Generations: path = 4, path.1 = 3, path.2 = 2; nothing older, no path.new left behind.
+  for (int g = 0; g < 3; ++g) {
+    auto loaded = loadSnapshot(snapshotGeneration(path, g), Backend::kGrid, 0.1);
+    ASSERT_TRUE(loaded) << g;
+    EXPECT_EQ(loaded->version, 4U - static_cast<unsigned>(g));
+  }
+  EXPECT_FALSE(std::filesystem::exists(snapshotGeneration(path, 3)));
+  EXPECT_FALSE(std::filesystem::exists(snapshotGeneration(path, -1)));
+
+  // A truncated newest file: the one before is loaded, and the reason is given.
+  std::filesystem::resize_file(path, std::filesystem::file_size(path) - 7);
+  auto resumed = loadNewestSnapshot(path, 3, Backend::kGrid, 0.1);
+  ASSERT_TRUE(resumed && *resumed);
+  EXPECT_EQ((*resumed)->snapshot.version, 3U);
+  EXPECT_EQ((*resumed)->file, snapshotGeneration(path, 1));
+  ASSERT_EQ((*resumed)->skipped.size(), 1U);
+  EXPECT_NE((*resumed)->skipped[0].find("map.dmap"), std::string::npos);
+
+  // One flipped bit in a value: the CRC catches what the protobuf parser cannot.
+  {
+    std::fstream f(snapshotGeneration(path, 1), std::ios::in | std::ios::out | std::ios::binary);
+    f.seekg(-3, std::ios::end);
+    char c = 0;
+    f.get(c);
+    f.seekp(-3, std::ios::end);
+    f.put(static_cast<char>(c ^ 0x10));
+  }
+  auto crc = loadSnapshot(snapshotGeneration(path, 1), Backend::kGrid, 0.1);
+  ASSERT_FALSE(crc);
+  EXPECT_NE(crc.error().message.find("CRC"), std::string::npos) << crc.error().message;
+  resumed = loadNewestSnapshot(path, 3, Backend::kGrid, 0.1);
+  ASSERT_TRUE(resumed && *resumed);
+  EXPECT_EQ((*resumed)->snapshot.version, 2U);
+  EXPECT_EQ((*resumed)->skipped.size(), 2U);
+
+  // A complete save not yet rotated (a crash between writing and renaming) is the newest.
+  ASSERT_TRUE(
+      saveSnapshot(*versionedView(9), SensorModel{}, Backend::kGrid, snapshotGeneration(path, -1)));
+  resumed = loadNewestSnapshot(path, 3, Backend::kGrid, 0.1);
+  ASSERT_TRUE(resumed && *resumed);
+  EXPECT_EQ((*resumed)->snapshot.version, 9U);
+
+  // Nothing readable: an error naming every file.
+  for (int g = -1; g < 3; ++g) std::ofstream(snapshotGeneration(path, g)) << "junk";
+  auto broken = loadNewestSnapshot(path, 3, Backend::kGrid, 0.1);
+  ASSERT_FALSE(broken);
+  EXPECT_NE(broken.error().message.find("map.dmap.2"), std::string::npos);
+  EXPECT_FALSE(saveSnapshotKeeping(*versionedView(1), SensorModel{}, Backend::kGrid, path, 0));
 }
 
 struct KindCase {

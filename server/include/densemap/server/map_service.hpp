@@ -22,6 +22,7 @@ struct ServiceOptions {
   std::uint32_t domain_id = 0;
   std::string network_interface = "lo";
   std::filesystem::path snapshot_path;  // empty: no snapshots
+  int snapshot_keep = 3;                // files kept: path, path.1, ... (core/store)
   double autosave_period_s = 0.0;       // 0: off
   std::size_t max_query_cells = 50'000'000;
   int query_threads = 2;  // the query task arena: requests are answered in parallel

@@ -2,6 +2,9 @@
 
 #include <filesystem>
 #include <memory>
+#include <optional>
+#include <string>
+#include <vector>
 
 #include "densemap/geometry/error.hpp"
 #include "densemap/map/occupancy_map.hpp"
@@ -24,5 +27,30 @@ struct LoadedSnapshot {
 /// inconsistent files, and for a resolution other than `expected_resolution_m` (if > 0).
 [[nodiscard]] Expected<LoadedSnapshot> loadSnapshot(const std::filesystem::path& file,
                                                     Backend backend, double expected_resolution_m);
+
+/// Generation `g` of the snapshot files of `path`: 0 is `path` (the newest), g > 0 is
+/// `path.<g>` (older), -1 is `path.new` (a complete save not yet rotated into place).
+[[nodiscard]] std::filesystem::path snapshotGeneration(const std::filesystem::path& path, int g);
+
+/// Saves `view` keeping the last `keep` snapshots (1 .. 100): the new file is written atomically
+/// as `path.new`, then `path.<keep-2>` ... `path` move one generation older and `path.new`
+/// becomes `path`. A crash at any moment leaves every file complete (a temporary file aside);
+/// the newest complete save is `path.new` or `path`.
+[[nodiscard]] Expected<std::size_t> saveSnapshotKeeping(const MapView& view,
+                                                        const SensorModel& model, Backend backend,
+                                                        const std::filesystem::path& path,
+                                                        int keep);
+
+struct ResumedSnapshot {
+  LoadedSnapshot snapshot;
+  std::filesystem::path file;        // the generation loaded
+  std::vector<std::string> skipped;  // newer generations passed over, with the reason
+};
+
+/// Loads the newest readable generation of `path` (`path.new`, `path`, `path.1`, ...
+/// `path.<keep-1>`). No file at all: std::nullopt. Files but none readable: an error listing
+/// each file and its reason.
+[[nodiscard]] Expected<std::optional<ResumedSnapshot>> loadNewestSnapshot(
+    const std::filesystem::path& path, int keep, Backend backend, double expected_resolution_m);
 
 }  // namespace densemap

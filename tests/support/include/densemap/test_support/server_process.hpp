@@ -5,6 +5,8 @@
 #include <spawn.h>
 #include <sys/wait.h>
 
+#include <fcntl.h>
+
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
@@ -19,12 +21,15 @@ namespace densemap::test {
 /// DDS domain `domain`, plus `extra` config text. Stopped with SIGTERM when destroyed.
 class ServerProcess {
  public:
+  /// `capture_log`: the server's stderr goes to `dir/server.log` (appended; see log()).
+  /// `autosave_s` > 0: autosave that often, keeping 3 snapshot files.
   ServerProcess(const std::filesystem::path& dir, std::uint32_t domain,
-                const std::string& extra = "")
-      : dir_(dir) {
+                const std::string& extra = "", bool capture_log = false, double autosave_s = 0)
+      : dir_(dir), capture_log_(capture_log) {
     std::ofstream(dir / "server.textproto")
         << "map { resolution_m: 0.2 max_range_m: 25 }\n"
-        << "snapshot { path: \"" << (dir / "map.dmap").string() << "\" autosave_period_s: 0 }\n"
+        << "snapshot { path: \"" << (dir / "map.dmap").string()
+        << "\" autosave_period_s: " << autosave_s << " keep: 3 }\n"
         << "dds { domain_id: " << domain << " }\n"
         << extra;
     start();
@@ -36,9 +41,30 @@ class ServerProcess {
   void start() {
     const std::string config = (dir_ / "server.textproto").string();
     const char* argv[] = {DENSEMAP_SERVER_BIN, "--config", config.c_str(), nullptr};
-    ASSERT_EQ(posix_spawn(&pid_, DENSEMAP_SERVER_BIN, nullptr, nullptr, const_cast<char**>(argv),
-                          environ),
-              0);
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    const std::string log = (dir_ / "server.log").string();
+    if (capture_log_) {
+      posix_spawn_file_actions_addopen(&actions, 2, log.c_str(), O_WRONLY | O_CREAT | O_APPEND,
+                                       0644);
+    }
+    const int rc = posix_spawn(&pid_, DENSEMAP_SERVER_BIN, &actions, nullptr,
+                               const_cast<char**>(argv), environ);
+    posix_spawn_file_actions_destroy(&actions);
+    ASSERT_EQ(rc, 0);
+  }
+  /// What the server wrote to stderr so far (capture_log only).
+  [[nodiscard]] std::string log() const {
+    std::ifstream in(dir_ / "server.log");
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  }
+  /// SIGKILL: no shutdown snapshot, nothing flushed. Returns after the process is gone.
+  void kill9() {
+    if (pid_ <= 0) return;
+    kill(pid_, SIGKILL);
+    int status = 0;
+    waitpid(pid_, &status, 0);
+    pid_ = 0;
   }
   /// Resident memory of the server process, kB (0 if unknown).
   [[nodiscard]] long residentKb() const {
@@ -61,6 +87,7 @@ class ServerProcess {
 
  private:
   std::filesystem::path dir_;
+  bool capture_log_ = false;
   pid_t pid_ = 0;
 };
 
