@@ -27,7 +27,11 @@ echo "test.sh: tests took $((tested - built)) s"
 DENSEMAP_BIN="$BUILD_DIR/bin" SOAK_OUT=/tmp/densemap-soak-ci isolated ./scripts/soak.sh 2
 soaked=$(date +%s)
 echo "test.sh: soak took $((soaked - tested)) s"
+# libFuzzer, CI-sized: every parser of outside bytes for 10 s on its committed seeds.
+./scripts/fuzz.sh 10
+fuzzed=$(date +%s)
+echo "test.sh: fuzzing took $((fuzzed - soaked)) s"
 # The .debs (contents, lintian, dpkg -i as root), the SDK in a temporary prefix and the example
 # client built against it.
 isolated ./scripts/check-packages.sh
-echo "test.sh: packages took $(( $(date +%s) - soaked )) s; total $(( $(date +%s) - start )) s"
+echo "test.sh: packages took $(( $(date +%s) - fuzzed )) s; total $(( $(date +%s) - start )) s"
