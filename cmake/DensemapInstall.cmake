@@ -63,6 +63,12 @@ foreach(pair "path: \"densemap.dmap\"|path: \"${DENSEMAP_STATE_DIR}/densemap.dma
   string(REPLACE "${from}" "${to}" DENSEMAP_PACKAGED_CONFIG "${DENSEMAP_PACKAGED_CONFIG}")
 endforeach()
 file(WRITE ${PROJECT_BINARY_DIR}/packaging/densemap.textproto "${DENSEMAP_PACKAGED_CONFIG}")
+if(SYSTEMD_FOUND)
+  set(DENSEMAP_SERVICE_TYPE "Type=notify\nNotifyAccess=main\nWatchdogSec=30")
+else()
+  set(DENSEMAP_SERVICE_TYPE "Type=simple")
+endif()
+string(REPLACE "\\n" "\n" DENSEMAP_SERVICE_TYPE "${DENSEMAP_SERVICE_TYPE}")
 configure_file(${PROJECT_SOURCE_DIR}/config/densemap-server.service.in
                ${PROJECT_BINARY_DIR}/packaging/densemap-server.service @ONLY)
 install(FILES ${PROJECT_BINARY_DIR}/packaging/densemap.textproto

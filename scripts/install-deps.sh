@@ -16,7 +16,7 @@ PACKAGES=(
   libbz2-dev zlib1g-dev iproute2 util-linux
   clang-format clang-tidy
   dpkg-dev fakeroot lintian adduser
-  clang-16 libclang-rt-16-dev
+  clang-16 libclang-rt-16-dev libsystemd-dev
 )
 if [ "${1:-}" = "--iln" ]; then
   PACKAGES+=(python3-torch python3-protobuf libopenblas0-pthread)

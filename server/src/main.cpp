@@ -7,13 +7,27 @@
 
 #include <csignal>
 #include <cstdio>
+#include <ctime>
 #include <filesystem>
+
+#ifdef DENSEMAP_HAVE_SYSTEMD
+#include <systemd/sd-daemon.h>
+#endif
 
 #include "densemap/server/map_service.hpp"
 #include "densemap/server/server_config.hpp"
 #include "densemap/store/snapshot.hpp"
 
 namespace {
+
+/// A message to systemd's notify socket (no-op without libsystemd or outside systemd).
+void notifySystemd(const char* state) {
+#ifdef DENSEMAP_HAVE_SYSTEMD
+  sd_notify(0, state);
+#else
+  (void)state;
+#endif
+}
 
 int fail(const std::string& message, int code = 1) {
   std::fprintf(stderr, "densemap-server: error: %s\n", message.c_str());
@@ -136,8 +150,31 @@ int main(int argc, char** argv) {
                service_options.domain_id, service_options.network_interface.c_str(),
                config->map().backend().c_str(), options->resolution_m, options->threads);
 
+  // systemd (Type=notify): ready now; with WatchdogSec, a WATCHDOG=1 every half period while the
+  // publish thread goes round (a wedged server stops pinging and systemd restarts it).
+  notifySystemd("READY=1\nSTATUS=mapping");
+  std::uint64_t watchdog_us = 0;
+#ifdef DENSEMAP_HAVE_SYSTEMD
+  if (sd_watchdog_enabled(0, &watchdog_us) <= 0) watchdog_us = 0;
+#endif
   int received = 0;
-  sigwait(&signals, &received);
+  while (true) {
+    if (watchdog_us == 0) {
+      sigwait(&signals, &received);
+      break;
+    }
+    const std::uint64_t half = watchdog_us / 2;
+    const timespec timeout{static_cast<time_t>(half / 1'000'000),
+                           static_cast<long>(half % 1'000'000 * 1000)};
+    const int sig = sigtimedwait(&signals, nullptr, &timeout);
+    if (sig > 0) {
+      received = sig;
+      break;
+    }
+    const auto since = std::chrono::steady_clock::now() - (*service)->heartbeat();
+    if (since < std::chrono::seconds(5)) notifySystemd("WATCHDOG=1");
+  }
+  notifySystemd("STOPPING=1");
   std::fprintf(stderr, "densemap-server: %s: stopping\n",
                received == SIGINT ? "SIGINT" : "SIGTERM");
   (*service)->stop();   // no more scans or requests

@@ -206,6 +206,7 @@ void MapService::publishLoop() {
     }
     publishDeltas(versions);
     const auto now = std::chrono::steady_clock::now();
+    heartbeat_ = now.time_since_epoch().count();
     if (now >= next_status) {
       publishStatus();
       publishManifest();

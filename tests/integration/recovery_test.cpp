@@ -3,6 +3,9 @@
 // densemap-server as a separate process on loopback, one DDS domain per test.
 #include <gtest/gtest.h>
 
+#include <sys/socket.h>
+#include <sys/un.h>
+
 #include <random>
 #include <thread>
 
@@ -179,6 +182,53 @@ TEST(Recovery, ATruncatedNewestSnapshotFallsBackToThePreviousOneWithAWarning) {
   const std::string log = server.log();
   EXPECT_NE(log.find("WARNING: skipping an unreadable snapshot"), std::string::npos) << log;
   EXPECT_NE(log.find("map.dmap.1"), std::string::npos) << log;
+}
+
+/// systemd's notify protocol, as systemd runs the unit (Type=notify, WatchdogSec): a datagram
+/// socket in $NOTIFY_SOCKET, the period in $WATCHDOG_USEC.
+TEST(Daemon, TellsSystemdItIsReadyPingsTheWatchdogAndSaysWhenItStops) {
+#ifndef DENSEMAP_HAVE_SYSTEMD
+  GTEST_SKIP() << "built without libsystemd (libsystemd-dev): no notify protocol";
+#endif
+  test::TempDir dir;
+  const std::string socket_path = (dir.path() / "notify.sock").string();
+  const int fd = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  ASSERT_GE(fd, 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  ASSERT_LT(socket_path.size(), sizeof(addr.sun_path));
+  std::strcpy(addr.sun_path, socket_path.c_str());
+  ASSERT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)), 0);
+  const timeval wait{0, 200'000};
+  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &wait, sizeof(wait));
+  ::setenv("NOTIFY_SOCKET", socket_path.c_str(), 1);
+  ::setenv("WATCHDOG_USEC", "400000", 1);  // pings every 0.2 s
+  std::string messages;
+  {
+    test::ServerProcess server(dir.path(), 164);
+    ::unsetenv("NOTIFY_SOCKET");
+    ::unsetenv("WATCHDOG_USEC");
+    const auto until = std::chrono::steady_clock::now() + 3s;
+    char buffer[512];
+    while (std::chrono::steady_clock::now() < until) {
+      const ssize_t n = ::recv(fd, buffer, sizeof(buffer), 0);
+      if (n > 0) messages.append(buffer, static_cast<std::size_t>(n)).append("|");
+    }
+    EXPECT_EQ(server.stop(), 0);
+    for (int i = 0; i < 10; ++i) {
+      const ssize_t n = ::recv(fd, buffer, sizeof(buffer), 0);
+      if (n > 0) messages.append(buffer, static_cast<std::size_t>(n)).append("|");
+    }
+  }
+  ::close(fd);
+  EXPECT_NE(messages.find("READY=1"), std::string::npos) << messages;
+  std::size_t pings = 0;
+  for (std::size_t at = messages.find("WATCHDOG=1"); at != std::string::npos;
+       at = messages.find("WATCHDOG=1", at + 1)) {
+    ++pings;
+  }
+  EXPECT_GE(pings, 5U) << messages;  // about 3 s / 0.2 s, less start-up
+  EXPECT_NE(messages.find("STOPPING=1"), std::string::npos) << messages;
 }
 
 }  // namespace

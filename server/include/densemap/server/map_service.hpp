@@ -50,6 +50,12 @@ class MapService {
   void start();
   /// Stops taking scans and requests; finishes queries in flight; joins the threads. Idempotent.
   void stop();
+  /// When the publish thread last went round its loop (at least once a second while it runs):
+  /// the liveness the systemd watchdog reports.
+  [[nodiscard]] std::chrono::steady_clock::time_point heartbeat() const {
+    return std::chrono::steady_clock::time_point(
+        std::chrono::steady_clock::duration(heartbeat_.load()));
+  }
   /// Saves the latest map version to `file` (or the configured snapshot path).
   [[nodiscard]] Expected<std::size_t> save(const std::filesystem::path& file = {});
 
@@ -81,6 +87,7 @@ class MapService {
   std::unique_ptr<Dds> dds_;
   std::unique_ptr<Ros2Bridge> ros2_;
   std::atomic<bool> running_{false};
+  std::atomic<std::chrono::steady_clock::rep> heartbeat_{0};
   std::thread ingest_;
   std::thread service_;
   std::thread publish_;
