@@ -102,6 +102,10 @@ if [ "$(id -u)" -eq 0 ] && [ "${DENSEMAP_SKIP_DPKG_INSTALL:-0}" != 1 ]; then
   /usr/bin/densemap-server --check-config /etc/densemap/densemap.textproto ||
     die "the packaged config does not pass --check-config"
   [ "$(stat -c %U /var/lib/densemap)" = densemap ] || die "/var/lib/densemap is not owned by densemap"
+  if command -v systemd-analyze >/dev/null 2>&1; then
+    systemd-analyze verify /lib/systemd/system/densemap-server.service ||
+      die "systemd-analyze verify rejects the unit"
+  fi
   cmake -S client/examples/wall_scan -B "$work/example-usr" >"$work/example-usr.log" 2>&1 &&
     cmake --build "$work/example-usr" >>"$work/example-usr.log" 2>&1 ||
     { cat "$work/example-usr.log" >&2; die "example against the installed libdensemap-dev"; }
