@@ -79,14 +79,26 @@ Expected<PcdHeader> parseHeader(const std::filesystem::path& file, const std::st
   if (sizes.size() != h.fields.size() || types.size() != h.fields.size()) {
     return fileError(file, "PCD FIELDS, SIZE and TYPE have different lengths");
   }
-  if (!have_points) h.points = width * height;
+  if (!have_points) {
+    if (height != 0 && width > bytes.size() / height) {
+      return fileError(file, "PCD WIDTH x HEIGHT is more points than the file can hold");
+    }
+    h.points = width * height;
+  }
+  // Every point takes at least one byte of the file: reject absurd counts before reserving.
+  if (h.points > bytes.size()) {
+    return fileError(
+        file, "PCD claims " + std::to_string(h.points) + " points, more than the file can hold");
+  }
   std::size_t offset = 0;
   for (std::size_t i = 0; i < h.fields.size(); ++i) {
     PcdField& f = h.fields[i];
     f.size = std::atoi(sizes[i].c_str());
     f.type = types[i].empty() ? '?' : types[i][0];
     f.count = i < counts.size() ? std::atoi(counts[i].c_str()) : 1;
-    if (f.size <= 0 || f.size > 8 || f.count <= 0) return fileError(file, "bad PCD field size");
+    if (f.size <= 0 || f.size > 8 || f.count <= 0 || f.count > 65536) {
+      return fileError(file, "bad PCD field size or count");
+    }
     f.offset = offset;
     offset += static_cast<std::size_t>(f.size) * f.count;
   }
@@ -123,11 +135,11 @@ Expected<Scan> readPcd(const std::filesystem::path& file) {
   scan.T_world_sensor = h.viewpoint;
   scan.points.reserve(h.points);
   if (h.data == "binary") {
-    const std::size_t need = h.points * h.point_step;
     const std::size_t have = bytes->size() - h.data_offset;
-    if (have < need) {
-      return fileError(file, "truncated PCD: " + std::to_string(h.points) + " points need " +
-                                 std::to_string(need) + " bytes, file has " + std::to_string(have));
+    if (h.point_step == 0 || h.points > have / h.point_step) {  // no overflowing product
+      return fileError(file, "truncated PCD: " + std::to_string(h.points) + " points of " +
+                                 std::to_string(h.point_step) + " bytes, file has " +
+                                 std::to_string(have));
     }
     const char* base = bytes->data() + h.data_offset;
     auto get = [&](std::size_t i, const PcdField* f) {

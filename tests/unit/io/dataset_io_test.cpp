@@ -133,6 +133,15 @@ TEST(Pcd, TruncatedAndMalformedFilesAreClearErrors) {
   EXPECT_FALSE(readPcd(dir.path() / "n.pcd"));
   writeText(dir.path() / "a.pcd", pcdHeader("ascii", 2) + "1 2 3 9\n-4 5.5\n");
   EXPECT_FALSE(readPcd(dir.path() / "a.pcd"));
+  // Point counts no file could hold (found by fuzz_pcd: reserving them threw): clear errors.
+  for (const std::string& count : {std::string("11111110000001110001"), std::string("-1")}) {
+    std::string text = pcdHeader("ascii", 1);
+    text.replace(text.find("POINTS 1"), 8, "POINTS " + count);
+    writeText(dir.path() / "h.pcd", text + "1 2 3 4\n");
+    auto huge = readPcd(dir.path() / "h.pcd");
+    ASSERT_FALSE(huge) << count;
+    EXPECT_NE(huge.error().message.find("h.pcd"), std::string::npos);
+  }
 }
 
 std::string bzip2(const std::string& in) {
