@@ -82,6 +82,13 @@ int main(int argc, char** argv) {
   service_options.autosave_period_s = config->snapshot().autosave_period_s();
   service_options.max_query_cells = config->pipeline().max_query_cells();
   service_options.query_threads = static_cast<int>(config->pipeline().query_threads());
+  if (!densemap::server::isLoopbackInterface(service_options.network_interface)) {
+    std::fprintf(stderr,
+                 "densemap-server: WARNING: DDS on %s without security "
+                 "(dds.allow_insecure_remote): anyone on that network can send scans and "
+                 "commands and read the map\n",
+                 service_options.network_interface.c_str());
+  }
   auto ros2 = densemap::server::ros2Options(*config);
   if (!ros2) return fail("config: " + ros2.error().message, 2);
   service_options.ros2 = *ros2;

@@ -8,6 +8,10 @@
 
 namespace densemap::server {
 
+bool isLoopbackInterface(const std::string& name) {
+  return name == "lo" || name == "localhost" || name.rfind("127.", 0) == 0 || name == "::1";
+}
+
 Expected<proto::ServerConfig> loadServerConfig(const std::filesystem::path& file) {
   auto text = readFileBytes(file);
   if (!text) return std::unexpected(text.error());
@@ -88,6 +92,13 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
   if (config.dds().domain_id() > 232) return makeError("dds.domain_id must be in 0..232");
   if (config.dds().network_interface().empty()) {
     return makeError("dds.network_interface must name an interface (default lo)");
+  }
+  if (!isLoopbackInterface(config.dds().network_interface()) &&
+      !config.dds().allow_insecure_remote()) {
+    return makeError("dds.network_interface '" + config.dds().network_interface() +
+                     "' is not loopback, and densemap has no DDS Security yet: anyone on that "
+                     "network could send scans and commands and read the map. Set "
+                     "dds.allow_insecure_remote: true to accept that");
   }
   return o;
 }

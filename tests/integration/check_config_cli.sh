@@ -28,6 +28,12 @@ printf 'snapshot { path: "%s/bad.dmap" }\n' "$dir" >"$dir/badsnap.textproto"
 expect_fail "corrupt snapshot" "snapshot" "$dir/badsnap.textproto"
 printf 'upsample { enabled: true method: "iln" model: "%s/none.pb" }\n' "$dir" >"$dir/model.textproto"
 expect_fail "missing ILN model" "none.pb" "$dir/model.textproto"
+# A non-loopback interface without security: refused unless explicitly allowed (then valid).
+printf 'dds { network_interface: "eth0" }\n' >"$dir/remote.textproto"
+expect_fail "insecure remote" "allow_insecure_remote" "$dir/remote.textproto"
+printf 'dds { network_interface: "eth0" allow_insecure_remote: true }\nsnapshot { path: "" }\n' \
+  >"$dir/remote-ok.textproto"
+"$server" --check-config "$dir/remote-ok.textproto" >/dev/null
 # --config and --check-config together: a usage error.
 if "$server" --config "$src/config/densemap.textproto" --check-config "$src/config/densemap.textproto" \
   >/dev/null 2>&1; then

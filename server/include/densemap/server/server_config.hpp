@@ -18,6 +18,9 @@ namespace densemap::server {
 /// Checks values and converts to the pipeline's options.
 [[nodiscard]] Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config);
 
+/// Whether a dds.network_interface value names loopback ("lo", "localhost", 127.x.y.z, ::1).
+[[nodiscard]] bool isLoopbackInterface(const std::string& name);
+
 /// The ROS 2 face's options, or none when `ros2.enabled` is false. Errors name the field.
 [[nodiscard]] Expected<std::optional<Ros2Options>> ros2Options(const proto::ServerConfig& config);
 
