@@ -68,13 +68,12 @@ class Ros2Bridge {
  private:
   struct Dds;
   struct Waiting;
-  struct Topics;
+  struct Topics;  // the bridge thread's state: TF buffer, waiting clouds, map-topic state
   Ros2Bridge(Pipeline& pipeline, const Ros2Options& options);
   void loop();
   void takeTransforms();
   void takeClouds(std::size_t topic);
-  /// Submits what can be transformed now; drops what waited too long. Returns true if any
-  /// cloud is still waiting.
+  /// Submits what can be transformed now; drops what waited too long (or can never resolve).
   void resolveWaiting(std::chrono::steady_clock::time_point now);
   void publishMaps();
   void reject(ros2::CloudReject reason);
