@@ -1,5 +1,7 @@
 // densemap-server: the occupancy-mapping daemon (DESIGN.md). Scans in over DDS, map versions,
 // queries, commands, status, tiles and deltas out; snapshots on command, autosave and shutdown.
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
 #include <CLI/CLI.hpp>
 
@@ -30,7 +32,7 @@ void notifySystemd(const char* state) {
 }
 
 int fail(const std::string& message, int code = 1) {
-  std::fprintf(stderr, "densemap-server: error: %s\n", message.c_str());
+  spdlog::error("{}", message);
   return code;
 }
 
@@ -62,7 +64,17 @@ int main(int argc, char** argv) {
       ->excludes(config_option);
   app.add_option("--domain-id", domain_override, "DDS domain id (overrides the config)")
       ->check(CLI::Range(0, 232));
+  std::string log_level = "info";
+  app.add_option("--log-level", log_level,
+                 "Least severe message logged: trace, debug (also every refused scan, request "
+                 "and ROS cloud), info, warn, error, off")
+      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "off"}))
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
+  // One line per message on stderr (journald adds the time under systemd).
+  spdlog::set_default_logger(spdlog::stderr_color_mt("densemap-server"));
+  spdlog::set_pattern("densemap-server: %^%l%$: %v");
+  spdlog::set_level(spdlog::level::from_str(log_level));
   if (config_path.empty() && check_path.empty()) {
     return fail("--config FILE is required (or --check-config FILE)", 2);
   }
@@ -83,11 +95,10 @@ int main(int argc, char** argv) {
   service_options.max_query_cells = config->pipeline().max_query_cells();
   service_options.query_threads = static_cast<int>(config->pipeline().query_threads());
   if (!densemap::server::isLoopbackInterface(service_options.network_interface)) {
-    std::fprintf(stderr,
-                 "densemap-server: WARNING: DDS on %s without security "
-                 "(dds.allow_insecure_remote): anyone on that network can send scans and "
-                 "commands and read the map\n",
-                 service_options.network_interface.c_str());
+    spdlog::warn(
+        "DDS on {} without security (dds.allow_insecure_remote): anyone on that network can "
+        "send scans and commands and read the map",
+        service_options.network_interface);
   }
   auto ros2 = densemap::server::ros2Options(*config);
   if (!ros2) return fail("config: " + ros2.error().message, 2);
@@ -108,18 +119,15 @@ int main(int argc, char** argv) {
   if (*resumed) {
     auto* loaded = &(*resumed)->snapshot;
     for (const std::string& reason : (*resumed)->skipped) {
-      std::fprintf(stderr, "densemap-server: WARNING: skipping an unreadable snapshot: %s\n",
-                   reason.c_str());
+      spdlog::warn("skipping an unreadable snapshot: {}", reason);
     }
-    std::fprintf(stderr, "densemap-server: resumed %s (version %llu, %zu cells)\n",
-                 (*resumed)->file.c_str(), static_cast<unsigned long long>(loaded->version),
+    spdlog::info("resumed {} (version {}, {} cells)", (*resumed)->file.string(), loaded->version,
                  loaded->map->knownCells());
     if (options->kernel) {
-      std::fprintf(stderr,
-                   "densemap-server: note: map.kind %s keeps its kernel evidence in memory only; "
-                   "the snapshot's probabilities stand until new scans reach their cells, which "
-                   "then start again from the prior\n",
-                   std::string(densemap::kernel::kernelMethodName(*options->kernel)).c_str());
+      spdlog::info(
+          "map.kind {} keeps its kernel evidence in memory only; the snapshot's probabilities "
+          "stand until new scans reach their cells, which then start again from the prior",
+          densemap::kernel::kernelMethodName(*options->kernel));
     }
     initial = std::move(loaded->map);
     version = loaded->version;
@@ -151,11 +159,10 @@ int main(int argc, char** argv) {
   if (!service) return fail("DDS: " + service.error().message);
   (*pipeline)->start();
   (*service)->start();
-  std::fprintf(stderr,
-               "densemap-server: running on DDS domain %u, interface %s; %s backend at %g m, "
-               "%d threads\n",
-               service_options.domain_id, service_options.network_interface.c_str(),
-               config->map().backend().c_str(), options->resolution_m, options->threads);
+  spdlog::info("running on DDS domain {}, interface {}; {} backend at {} m, {} threads{}",
+               service_options.domain_id, service_options.network_interface,
+               config->map().backend(), options->resolution_m, options->threads,
+               service_options.ros2 ? "; ROS 2 face on" : "");
 
   // systemd (Type=notify): ready now; with WatchdogSec, a WATCHDOG=1 every half period while the
   // publish thread goes round (a wedged server stops pinging and systemd restarts it).
@@ -182,20 +189,17 @@ int main(int argc, char** argv) {
     if (since < std::chrono::seconds(5)) notifySystemd("WATCHDOG=1");
   }
   notifySystemd("STOPPING=1");
-  std::fprintf(stderr, "densemap-server: %s: stopping\n",
-               received == SIGINT ? "SIGINT" : "SIGTERM");
+  spdlog::info("{}: stopping", received == SIGINT ? "SIGINT" : "SIGTERM");
   (*service)->stop();   // no more scans or requests
   (*pipeline)->stop();  // finishes the scan in flight
   if (!snapshot.empty()) {
     auto saved = (*service)->save();
     if (!saved) return fail("shutdown snapshot: " + saved.error().message);
-    std::fprintf(stderr, "densemap-server: saved %s (%zu bytes, version %llu)\n", snapshot.c_str(),
-                 *saved, static_cast<unsigned long long>((*pipeline)->view()->version()));
+    spdlog::info("saved {} ({} bytes, version {})", snapshot.string(), *saved,
+                 (*pipeline)->view()->version());
   }
   const auto c = (*pipeline)->counters();
-  std::fprintf(
-      stderr, "densemap-server: received %llu, integrated %llu, dropped %llu, rejected %llu\n",
-      static_cast<unsigned long long>(c.received), static_cast<unsigned long long>(c.integrated),
-      static_cast<unsigned long long>(c.dropped), static_cast<unsigned long long>(c.rejected));
+  spdlog::info("received {}, integrated {}, dropped {}, rejected {}", c.received, c.integrated,
+               c.dropped, c.rejected);
   return 0;
 }

@@ -1,5 +1,7 @@
 #include "densemap/server/map_service.hpp"
 
+#include <spdlog/spdlog.h>
+
 #include <malloc.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -217,6 +219,7 @@ void MapService::publishLoop() {
       const std::uint64_t version = pipeline_.view()->version();
       if (version != saved_version) {
         if (auto ok = save(); !ok) {
+          spdlog::warn("autosave failed: {}", ok.error().message);
           noteBadRequest("autosave: " + ok.error().message);
         } else {
           saved_version = version;
@@ -303,6 +306,7 @@ void MapService::publishDeltas(std::deque<Version>& versions) {
 }
 
 void MapService::noteBadRequest(const std::string& error) {
+  spdlog::debug("refused request: {}", error);
   ++queries_rejected_;
   std::lock_guard lock(error_mutex_);
   last_query_error_ = error;

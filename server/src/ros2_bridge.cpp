@@ -1,5 +1,7 @@
 #include "densemap/server/ros2_bridge.hpp"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -171,6 +173,7 @@ Ros2Counters Ros2Bridge::counters() const {
 }
 
 void Ros2Bridge::reject(ros2::CloudReject reason) {
+  spdlog::debug("ros2: refused a PointCloud2: {}", ros2::cloudRejectName(reason));
   std::lock_guard lock(counters_mutex_);
   ++counters_.rejected;
   ++counters_.rejected_by_reason[static_cast<std::size_t>(reason)];
@@ -281,6 +284,8 @@ void Ros2Bridge::resolveWaiting(Clock::time_point now) {
       continue;
     }
     if (!T) {
+      spdlog::debug("ros2: no transform {} -> {} at {} ns for a cloud on {}: dropped",
+                    options_.world_frame, it->frame, it->stamp_ns, it->sensor_id);
       std::lock_guard lock(counters_mutex_);
       ++counters_.no_transform;
     } else {

@@ -180,7 +180,7 @@ TEST(Recovery, ATruncatedNewestSnapshotFallsBackToThePreviousOneWithAWarning) {
   EXPECT_EQ(fetched->second, 2U);
   EXPECT_EQ(diffMaps(*fetched->first, *previous->map).differing(), 0U);
   const std::string log = server.log();
-  EXPECT_NE(log.find("WARNING: skipping an unreadable snapshot"), std::string::npos) << log;
+  EXPECT_NE(log.find("warning: skipping an unreadable snapshot"), std::string::npos) << log;
   EXPECT_NE(log.find("map.dmap.1"), std::string::npos) << log;
 }
 
