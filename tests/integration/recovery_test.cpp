@@ -15,6 +15,7 @@
 #include "densemap/sim/sequence.hpp"
 #include "densemap/store/snapshot.hpp"
 #include "densemap/test_support/data_dir.hpp"
+#include "densemap/test_support/server_clients.hpp"
 #include "densemap/test_support/server_process.hpp"
 
 namespace densemap {
@@ -29,22 +30,10 @@ std::vector<RawScan> simulatedScans(const fs::path& dir, int n, const std::strin
   o.sensor = sensor;
   o.scans = n;
   o.ground_truth_resolution_m = 0;
-  EXPECT_TRUE(writeSimulatedSequence(o, dir / "data"));
-  auto source = openScanSource(dir / "data");
-  std::vector<RawScan> raws;
-  for (std::size_t i = 0; i < (*source)->size(); ++i) {
-    raws.push_back(toRawScan(*(*source)->load(i), i + 1, "lidar"));
-  }
-  return raws;
+  return test::simulatedRawScans(dir, o, "lidar");
 }
 
-std::unique_ptr<Client> connect(std::uint32_t domain) {
-  auto client = Client::create({.domain_id = domain, .timeout = 10s});
-  EXPECT_TRUE(client) << client.error().message;
-  if (!client) return nullptr;
-  EXPECT_TRUE((*client)->waitForServer());
-  return std::move(*client);
-}
+std::unique_ptr<Client> connect(std::uint32_t domain) { return test::connectClient(domain); }
 
 /// Publishes each scan and waits for its map event.
 void replay(Client& client, const std::vector<RawScan>& raws) {

@@ -22,6 +22,7 @@
 #include "densemap/server/server_config.hpp"
 #include "densemap/sim/sequence.hpp"
 #include "densemap/test_support/data_dir.hpp"
+#include "densemap/test_support/server_clients.hpp"
 #include "densemap/test_support/server_process.hpp"
 #include "nav_msgs.h"
 #include "octomap_msgs.h"
@@ -41,13 +42,7 @@ const char* kRosConfig =
     "ros2 { enabled: true reliable_clouds: true world_frame: \"map\" tf_wait_s: 3\n"
     "       max_waiting_clouds: 20 publish_period_s: 0.2 grid_min_z_m: -0.5 grid_max_z_m: 1.5 }\n";
 
-std::unique_ptr<Client> connect(std::uint32_t domain) {
-  auto client = Client::create({.domain_id = domain, .timeout = 10s});
-  EXPECT_TRUE(client) << client.error().message;
-  if (!client) return nullptr;
-  EXPECT_TRUE((*client)->waitForServer());
-  return std::move(*client);
-}
+std::unique_ptr<Client> connect(std::uint32_t domain) { return test::connectClient(domain); }
 
 int runCli(const std::string& args) {
   const std::string command = std::string(DENSEMAP_CLI_BIN) + " " + args + " >/dev/null 2>&1";
@@ -256,6 +251,7 @@ TEST(Ros2Wire, RealScansThroughPointCloud2AndTfGiveTheOfflineMap) {
 }
 #endif
 
+#ifndef DENSEMAP_ROS2_REALDATA
 /// A PointCloud2 message from a layout and raw bytes.
 struct RawCloud {
   std::vector<sensor_msgs_msg_dds__PointField_> fields;
@@ -309,7 +305,6 @@ void publish(const dds::Entity& writer, RawCloud c) {
   ASSERT_TRUE(dds::write(writer, &m));
 }
 
-#ifndef DENSEMAP_ROS2_REALDATA
 TEST(Ros2Wire, MalformedCloudsAreCountedByReasonAndTheServerKeepsMapping) {
   constexpr std::uint32_t kDomain = 152;
   test::TempDir dir;

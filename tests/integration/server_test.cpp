@@ -15,6 +15,7 @@
 #include "densemap/raycast/integrator.hpp"
 #include "densemap/sim/sequence.hpp"
 #include "densemap/test_support/data_dir.hpp"
+#include "densemap/test_support/server_clients.hpp"
 #include "densemap/test_support/server_process.hpp"
 #include "densemap/upsample/interpolation.hpp"
 
@@ -28,12 +29,7 @@ using namespace std::chrono_literals;
 using test::ServerProcess;
 
 std::unique_ptr<Client> connect(std::uint32_t domain) {
-  auto client = Client::create({.domain_id = domain, .timeout = 10s, .subscribe_deltas = true});
-  EXPECT_TRUE(client) << client.error().message;
-  if (!client) return nullptr;
-  auto ok = (*client)->waitForServer();
-  EXPECT_TRUE(ok) << ok.error().message;
-  return std::move(*client);
+  return test::connectClient(domain, /*subscribe_deltas=*/true);
 }
 
 std::vector<RawScan> simulatedScans(const std::filesystem::path& dir, int n) {
@@ -43,13 +39,7 @@ std::vector<RawScan> simulatedScans(const std::filesystem::path& dir, int n) {
   o.columns = 600;
   o.scans = n;
   o.ground_truth_resolution_m = 0;
-  EXPECT_TRUE(writeSimulatedSequence(o, dir / "data"));
-  auto source = openScanSource(dir / "data");
-  std::vector<RawScan> raws;
-  for (std::size_t i = 0; i < (*source)->size(); ++i) {
-    raws.push_back(toRawScan(*(*source)->load(i), i + 1, "test"));
-  }
-  return raws;
+  return test::simulatedRawScans(dir, o, "test");
 }
 
 /// What the server must hold after these scans: the offline map of the same validated scans,

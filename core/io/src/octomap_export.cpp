@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
 #include <memory>
 #include <sstream>
 
@@ -42,11 +41,8 @@ Expected<void> exportOctomap(const OccupancyMap& map, const std::filesystem::pat
       copy->setClampingThresMax(probability(highest + 1.0));
     }
     map.forEachKnown([&](const VoxelKey& k, float v) {
-      // A .bt keeps only occupied / free, by OctoMap's rule (log-odds >= 0: occupied); densemap
-      // calls a cell occupied when its log-odds is > 0. The two differ only at exactly 0 (a
-      // kernel map's p = 0.5): write such a cell as the nearest free value.
-      if (binary && v == 0.0F) v = -std::numeric_limits<float>::denorm_min();
-      copy->setNodeValue(octomap::OcTreeKey(k.x, k.y, k.z), v, /*lazy_eval=*/true);
+      copy->setNodeValue(octomap::OcTreeKey(k.x, k.y, k.z), binary ? octomapClassValue(v) : v,
+                         /*lazy_eval=*/true);
     });
     copy->updateInnerOccupancy();
     copy->prune();

@@ -2,10 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
 #include <sstream>
 
 #include "densemap/geometry/voxel_grid.hpp"
+#include "densemap/io/octomap_export.hpp"
 #include "densemap/pipeline/version_delta.hpp"
 
 namespace densemap::ros2 {
@@ -16,9 +16,6 @@ std::uint16_t zKey(const VoxelGrid& grid, double z_m) {
   const double cells = std::clamp(std::floor(z_m * grid.resolutionFactor()), -kLimit, kLimit);
   return static_cast<std::uint16_t>(static_cast<int>(cells) + 32768);
 }
-
-/// The value a .bt / binary stream needs for densemap's classification (> 0 occupied).
-float binaryValue(float v) { return v == 0.0F ? -std::numeric_limits<float>::denorm_min() : v; }
 
 }  // namespace
 
@@ -35,7 +32,7 @@ MapTopicsState::MapTopicsState(double resolution_m, double min_z_m, double max_z
 void MapTopicsState::apply(const VoxelKey& key, std::optional<float> before,
                            std::optional<float> after) {
   if (after) {
-    tree_.setNodeValue(octomap::OcTreeKey(key.x, key.y, key.z), binaryValue(*after),
+    tree_.setNodeValue(octomap::OcTreeKey(key.x, key.y, key.z), octomapClassValue(*after),
                        /*lazy_eval=*/true);
   }
   cells_ += (after ? 1 : 0);
@@ -65,7 +62,8 @@ void MapTopicsState::update(const MapView* base, const MapView& next,
     // 1.9.7's deleteNode can leave a child array behind that its destructor asserts on.
     tree_.clear();
     next.forEachKnown([&](const VoxelKey& k, float v) {
-      tree_.setNodeValue(octomap::OcTreeKey(k.x, k.y, k.z), binaryValue(v), /*lazy_eval=*/true);
+      tree_.setNodeValue(octomap::OcTreeKey(k.x, k.y, k.z), octomapClassValue(v),
+                         /*lazy_eval=*/true);
     });
   }
   tree_.updateInnerOccupancy();
