@@ -25,12 +25,19 @@ void copy3(float (&dst)[3], const Point3f& p) {
 
 std::string text(const char* s) { return s != nullptr ? s : ""; }
 
+/// An endpoint DDS Security did not grant is empty: the request fails here, clearly.
+Expected<void> permitted(const dds::Entity& endpoint, const std::string& what) {
+  if (endpoint.get() > 0) return {};
+  return makeError(what + ": not allowed by this client's DDS Security permissions");
+}
+
 }  // namespace
 
 struct Client::Dds {
   dds::Entity participant;
   dds::Topics topics;
-  dds::Entity scan_w, pq_w, bq_w, rq_w, cq_w;
+  // With DDS Security, an endpoint this identity may not use stays empty (0).
+  dds::Entity scan_w, pq_w, bq_w, rq_w, cq_w, mq_w;
   dds::Entity pr_r, br_r, rr_r, cr_r, man_r, delta_r, event_r, st_r;
   // One per reply reader: a request waits for data on its own reader, not by polling.
   std::optional<dds::WaitSet> pr_ws, br_ws, rr_ws, cr_ws;
@@ -46,7 +53,7 @@ Client::~Client() = default;
 Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
   std::unique_ptr<Client> c(new Client(options));
   auto& d = *c->dds_;
-  auto p = dds::createParticipant(options.domain_id, options.network_interface);
+  auto p = dds::createParticipant({options.domain_id, options.network_interface, options.security});
   if (!p) return std::unexpected(p.error());
   d.participant = std::move(*p);
   Expected<void> status;
@@ -57,10 +64,10 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
     if (!status) return;
     auto e =
         writer ? dds::createWriter(d.participant, t, q) : dds::createReader(d.participant, t, q);
-    if (!e)
-      status = std::unexpected(e.error());
-    else
+    if (e)
       out = std::move(*e);
+    else if (!dds::isNotAllowedBySecurity(e.error()))
+      status = std::unexpected(e.error());
   };
   const dds::QosSpec requests = dds::kRequestQos;
   make(d.scan_w, d.topics.scan, {.depth = 4}, true);
@@ -68,6 +75,7 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
   make(d.bq_w, d.topics.bbox_request, requests, true);
   make(d.rq_w, d.topics.ray_request, requests, true);
   make(d.cq_w, d.topics.command_request, dds::kCommandQos, true);
+  make(d.mq_w, d.topics.map_request, dds::kCommandQos, true);
   make(d.pr_r, d.topics.point_reply, requests, false);
   make(d.br_r, d.topics.bbox_reply, requests, false);
   make(d.rr_r, d.topics.ray_reply, requests, false);
@@ -79,6 +87,7 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
   if (!status) return std::unexpected(status.error());
   for (auto [ws, reader] : {std::pair{&d.pr_ws, &d.pr_r}, std::pair{&d.br_ws, &d.br_r},
                             std::pair{&d.rr_ws, &d.rr_r}, std::pair{&d.cr_ws, &d.cr_r}}) {
+    if (reader->get() <= 0) continue;
     auto w = dds::WaitSet::create(d.participant);
     if (!w) return std::unexpected(w.error());
     if (auto ok = w->attachReader(*reader, 1); !ok) return std::unexpected(ok.error());
@@ -91,14 +100,15 @@ Expected<void> Client::waitForServer() {
   const auto deadline = Clock::now() + options_.timeout;
   auto matched = [&] {
     for (const dds::Entity* w :
-         {&dds_->scan_w, &dds_->pq_w, &dds_->bq_w, &dds_->rq_w, &dds_->cq_w}) {
+         {&dds_->scan_w, &dds_->pq_w, &dds_->bq_w, &dds_->rq_w, &dds_->cq_w, &dds_->mq_w}) {
+      if (w->get() <= 0) continue;  // not granted by DDS Security
       dds_publication_matched_status_t s;
       if (dds_get_publication_matched_status(w->get(), &s) < 0 || s.current_count == 0)
         return false;
     }
     for (const dds::Entity* r :
          {&dds_->pr_r, &dds_->br_r, &dds_->rr_r, &dds_->cr_r, &dds_->event_r, &dds_->delta_r}) {
-      if (r->get() <= 0) continue;  // deltas not subscribed
+      if (r->get() <= 0) continue;  // deltas not subscribed, or not granted
       dds_subscription_matched_status_t s;
       if (dds_get_subscription_matched_status(r->get(), &s) < 0 || s.current_count == 0)
         return false;
@@ -132,6 +142,7 @@ Expected<void> Client::publishScan(const RawScan& scan) {
   auto& intensity = const_cast<std::vector<float>&>(scan.intensity);
   msg.points = dds::borrowSequence<dds_sequence_float>(xyz);
   msg.intensity = dds::borrowSequence<dds_sequence_float>(intensity);
+  if (auto ok = permitted(dds_->scan_w, "publishing scans"); !ok) return std::unexpected(ok.error());
   return dds::write(dds_->scan_w, &msg);
 }
 
@@ -178,6 +189,8 @@ Expected<PointQueryAnswer> Client::queryPointsRaw(const std::vector<float>& xyz)
   req.id = {client_id_, next_request_++};
   auto& mutable_xyz = const_cast<std::vector<float>&>(xyz);
   req.points = dds::borrowSequence<dds_sequence_float>(mutable_xyz);
+  if (auto ok = permitted(dds_->pq_w, "point queries"); !ok) return std::unexpected(ok.error());
+  if (auto ok = permitted(dds_->pr_r, "point queries"); !ok) return std::unexpected(ok.error());
   if (auto ok = dds::write(dds_->pq_w, &req); !ok) return std::unexpected(ok.error());
   PointQueryAnswer answer;
   std::string error;
@@ -207,6 +220,8 @@ Expected<BoxQueryAnswer> Client::queryBox(const Point3f& min, const Point3f& max
   copy3(req.min, min);
   copy3(req.max, max);
   req.max_centers = max_centers;
+  if (auto ok = permitted(dds_->bq_w, "box queries"); !ok) return std::unexpected(ok.error());
+  if (auto ok = permitted(dds_->br_r, "box queries"); !ok) return std::unexpected(ok.error());
   if (auto ok = dds::write(dds_->bq_w, &req); !ok) return std::unexpected(ok.error());
   BoxQueryAnswer answer;
   std::string error;
@@ -238,6 +253,8 @@ Expected<RayQueryAnswer> Client::castRay(const Point3f& origin, const Point3f& d
   copy3(req.origin, origin);
   copy3(req.direction, direction);
   req.max_range = max_range;
+  if (auto ok = permitted(dds_->rq_w, "ray queries"); !ok) return std::unexpected(ok.error());
+  if (auto ok = permitted(dds_->rr_r, "ray queries"); !ok) return std::unexpected(ok.error());
   if (auto ok = dds::write(dds_->rq_w, &req); !ok) return std::unexpected(ok.error());
   RayQueryAnswer answer;
   std::string error;
@@ -266,7 +283,11 @@ Expected<std::string> Client::command(CommandKind kind, const Point3f& min, cons
   copy3(req.min, min);
   copy3(req.max, max);
   req.path = const_cast<char*>(path.c_str());
-  if (auto ok = dds::write(dds_->cq_w, &req); !ok) return std::unexpected(ok.error());
+  // send-map has a topic of its own (DDS Security can grant it without the others).
+  const dds::Entity& writer = kind == CommandKind::kSendMap ? dds_->mq_w : dds_->cq_w;
+  if (auto ok = permitted(writer, "this command"); !ok) return std::unexpected(ok.error());
+  if (auto ok = permitted(dds_->cr_r, "command replies"); !ok) return std::unexpected(ok.error());
+  if (auto ok = dds::write(writer, &req); !ok) return std::unexpected(ok.error());
   std::string detail, error;
   // Commands wait for the scan in flight and may write large files: allow more time.
   auto ok =
@@ -281,6 +302,7 @@ Expected<std::string> Client::command(CommandKind kind, const Point3f& min, cons
 }
 
 Expected<ServerStatus> Client::status() {
+  if (auto ok = permitted(dds_->st_r, "status"); !ok) return std::unexpected(ok.error());
   const auto deadline = Clock::now() + options_.timeout;
   std::optional<ServerStatus> latest;
   while (true) {
@@ -370,6 +392,7 @@ std::size_t Client::pollEvents(const std::function<void(const MapEventInfo&)>& f
 
 Expected<std::pair<std::unique_ptr<GridMap>, std::uint64_t>> Client::fetchMap(
     std::uint64_t min_version) {
+  if (auto ok = permitted(dds_->man_r, "fetching the map"); !ok) return std::unexpected(ok.error());
   // 1. The manifest (1 Hz) says when the server's map has reached min_version.
   auto deadline = Clock::now() + options_.timeout;
   std::optional<densemap_msgs_MapManifest> manifest;

@@ -29,6 +29,32 @@ int fail(const std::string& message) {
   return 1;
 }
 
+/// --pki DIR --role R fills the six files; an explicit file flag replaces its one. Without any
+/// of them: no DDS Security.
+Expected<std::optional<dds::SecurityFiles>> securityOptions(const std::string& pki_dir,
+                                                            const std::string& role,
+                                                            const dds::SecurityFiles& explicit_files) {
+  if (!pki_dir.empty() && role.empty()) return makeError("--pki needs --role");
+  if (pki_dir.empty() && !role.empty()) return makeError("--role needs --pki");
+  dds::SecurityFiles files =
+      pki_dir.empty() ? dds::SecurityFiles{} : dds::SecurityFiles::fromPkiDir(pki_dir, role);
+  bool any = !pki_dir.empty();
+  for (auto [field, given] :
+       {std::pair{&files.identity_ca, &explicit_files.identity_ca},
+        std::pair{&files.identity_certificate, &explicit_files.identity_certificate},
+        std::pair{&files.private_key, &explicit_files.private_key},
+        std::pair{&files.permissions_ca, &explicit_files.permissions_ca},
+        std::pair{&files.governance, &explicit_files.governance},
+        std::pair{&files.permissions, &explicit_files.permissions}}) {
+    if (given->empty()) continue;
+    *field = *given;
+    any = true;
+  }
+  if (!any) return std::optional<dds::SecurityFiles>();
+  if (auto ok = dds::checkSecurityFiles(files); !ok) return std::unexpected(ok.error());
+  return std::optional<dds::SecurityFiles>(files);
+}
+
 Expected<std::unique_ptr<Client>> connect(const ClientOptions& o) {
   auto client = Client::create(o);
   if (!client) return client;
@@ -73,7 +99,7 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
                                  .count();
     }
     if (rate > 0) frames.period_ns = static_cast<std::int64_t>(1e9 / rate);
-    auto p = RosReplayPublisher::create(o.domain_id, o.network_interface, ros->topic, frames,
+    auto p = RosReplayPublisher::create({o.domain_id, o.network_interface, o.security}, ros->topic, frames,
                                         ros->reliable);
     if (!p) return fail(p.error().message);
     if (auto ok = (*p)->waitForReader(static_cast<int>(o.timeout.count())); !ok) {
@@ -345,6 +371,25 @@ int main(int argc, char** argv) {
       app.add_option("--interface", o.network_interface, "Network interface for DDS")
           ->capture_default_str();
   app.add_option("--timeout-ms", timeout_ms, "Request timeout")->capture_default_str();
+  std::string pki_dir, pki_role;
+  dds::SecurityFiles security;
+  app.add_option("--pki", pki_dir,
+                 "DDS Security: a directory made by scripts/make-pki.sh (with --role)")
+      ->group("DDS Security");
+  app.add_option("--role", pki_role, "DDS Security: the identity in --pki to use")
+      ->check(CLI::IsMember({"robot", "operator", "viewer", "server"}))
+      ->group("DDS Security");
+  const std::pair<const char*, std::string*> security_flags[] = {
+      {"--identity-ca", &security.identity_ca},
+      {"--identity-certificate", &security.identity_certificate},
+      {"--private-key", &security.private_key},
+      {"--permissions-ca", &security.permissions_ca},
+      {"--governance", &security.governance},
+      {"--permissions", &security.permissions}};
+  for (const auto& [flag, field] : security_flags) {
+    app.add_option(flag, *field, "DDS Security file (overrides the one from --pki)")
+        ->group("DDS Security");
+  }
 
   auto* replay = app.add_subcommand("replay", "Publish a dataset's scans to the server");
   std::string data;
@@ -458,6 +503,11 @@ int main(int argc, char** argv) {
   cli::LoadCommand load(app);
   CLI11_PARSE(app, argc, argv);
   o.timeout = std::chrono::milliseconds(timeout_ms);
+  if (auto files = cli::securityOptions(pki_dir, pki_role, security); !files) {
+    return cli::fail(files.error().message);
+  } else {
+    o.security = *files;
+  }
   if (load.parsed()) return load.run(o, interface_option->count() > 0);
 
   if (render->parsed()) return cli::render(render_in, render_out, z, scale, min_occupied);

@@ -34,13 +34,13 @@ RosReplayPublisher::RosReplayPublisher(const ros2::ReplayFrames& frames)
 RosReplayPublisher::~RosReplayPublisher() = default;
 
 Expected<std::unique_ptr<RosReplayPublisher>> RosReplayPublisher::create(
-    std::uint32_t domain_id, const std::string& interface_name, const std::string& topic,
+    const dds::ParticipantOptions& participant_options, const std::string& topic,
     const ros2::ReplayFrames& frames, bool reliable) {
   std::unique_ptr<RosReplayPublisher> p(new RosReplayPublisher(frames));
   Dds& d = *p->dds_;
   const std::string cloud_name = ros2::ddsTopicName(topic);
   if (cloud_name.empty()) return makeError("'" + topic + "' is not a ROS topic name");
-  auto participant = dds::createParticipant(domain_id, interface_name);
+  auto participant = dds::createParticipant(participant_options);
   if (!participant) return std::unexpected(participant.error());
   d.participant = std::move(*participant);
   auto ct = dds::createTopic(d.participant, sensor_msgs_msg_dds__PointCloud2__desc, cloud_name);

@@ -3,6 +3,7 @@
 #include <memory>
 #include <string>
 
+#include "densemap/dds/dds.hpp"
 #include "densemap/geometry/error.hpp"
 #include "densemap/pipeline/raw_scan.hpp"
 #include "densemap/ros2/replay_frames.hpp"
@@ -15,7 +16,7 @@ namespace densemap::cli {
 class RosReplayPublisher {
  public:
   [[nodiscard]] static Expected<std::unique_ptr<RosReplayPublisher>> create(
-      std::uint32_t domain_id, const std::string& interface_name, const std::string& topic,
+      const dds::ParticipantOptions& participant, const std::string& topic,
       const ros2::ReplayFrames& frames, bool reliable);
   ~RosReplayPublisher();
   /// Waits (up to `timeout_ms`) until a reader matches the cloud topic.

@@ -94,7 +94,13 @@ int main(int argc, char** argv) {
   service_options.autosave_period_s = config->snapshot().autosave_period_s();
   service_options.max_query_cells = config->pipeline().max_query_cells();
   service_options.query_threads = static_cast<int>(config->pipeline().query_threads());
-  if (!densemap::server::isLoopbackInterface(service_options.network_interface)) {
+  auto security = densemap::server::securityFiles(*config);
+  if (!security) return fail("config: " + security.error().message, 2);
+  service_options.security = *security;
+  if (*security) {
+    spdlog::info("DDS Security on: identity {}, permissions {}", (*security)->identity_certificate,
+                 (*security)->permissions);
+  } else if (!densemap::dds::isLoopbackInterface(service_options.network_interface)) {
     spdlog::warn(
         "DDS on {} without security (dds.allow_insecure_remote): anyone on that network can "
         "send scans and commands and read the map",
@@ -140,10 +146,10 @@ int main(int argc, char** argv) {
   if (check_only) {
     std::printf(
         "densemap-server: %s is valid: %s backend, %s map at %g m, %d threads, DDS domain "
-        "%u on %s, snapshot %s\n",
+        "%u on %s%s, snapshot %s\n",
         config_path.c_str(), config->map().backend().c_str(), config->map().kind().c_str(),
         options->resolution_m, options->threads, service_options.domain_id,
-        service_options.network_interface.c_str(),
+        service_options.network_interface.c_str(), *security ? " with DDS Security" : "",
         snapshot.empty() ? "off" : snapshot.string().c_str());
     return 0;
   }
@@ -159,9 +165,10 @@ int main(int argc, char** argv) {
   if (!service) return fail("DDS: " + service.error().message);
   (*pipeline)->start();
   (*service)->start();
-  spdlog::info("running on DDS domain {}, interface {}; {} backend at {} m, {} threads{}",
+  spdlog::info("running on DDS domain {}, interface {}{}; {} backend at {} m, {} threads{}",
                service_options.domain_id, service_options.network_interface,
-               config->map().backend(), options->resolution_m, options->threads,
+               service_options.security ? " with DDS Security" : "", config->map().backend(),
+               options->resolution_m, options->threads,
                service_options.ros2 ? "; ROS 2 face on" : "");
 
   // systemd (Type=notify): ready now; with WatchdogSec, a WATCHDOG=1 every half period while the

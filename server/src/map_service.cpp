@@ -28,7 +28,8 @@ namespace {
 constexpr std::int32_t kOk = 0, kInvalid = 1, kInternal = 2;
 
 // Attachment tags of the service waitset.
-constexpr dds_attach_t kPointTag = 1, kBboxTag = 2, kRayTag = 3, kCmdTag = 4, kScanTag = 5;
+constexpr dds_attach_t kPointTag = 1, kBboxTag = 2, kRayTag = 3, kCmdTag = 4, kScanTag = 5,
+                       kMapTag = 6;
 
 Point3f toPoint(const float (&v)[3]) { return {v[0], v[1], v[2]}; }
 
@@ -58,7 +59,7 @@ constexpr std::size_t kMaxPendingVersions = 8;
 struct MapService::Dds {
   dds::Entity participant;
   dds::Topics topics;
-  dds::Entity scan_reader, point_reader, bbox_reader, ray_reader, cmd_reader;
+  dds::Entity scan_reader, point_reader, bbox_reader, ray_reader, cmd_reader, map_reader;
   dds::Entity point_writer, bbox_writer, ray_writer, cmd_writer, manifest_writer, tile_writer,
       delta_writer, event_writer, status_writer;
   std::optional<dds::WaitSet> ingest_waitset;
@@ -69,7 +70,8 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
                                                          const ServiceOptions& options) {
   std::unique_ptr<MapService> service(new MapService(pipeline, options));
   auto& d = *service->dds_;
-  auto participant = dds::createParticipant(options.domain_id, options.network_interface);
+  auto participant = dds::createParticipant(
+      {options.domain_id, options.network_interface, options.security});
   if (!participant) return std::unexpected(participant.error());
   d.participant = std::move(*participant);
   Expected<void> status;
@@ -98,6 +100,7 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
   reader(d.bbox_reader, d.topics.bbox_request, requests);
   reader(d.ray_reader, d.topics.ray_request, requests);
   reader(d.cmd_reader, d.topics.command_request, dds::kCommandQos);
+  reader(d.map_reader, d.topics.map_request, dds::kCommandQos);
   writer(d.point_writer, d.topics.point_reply, requests);
   writer(d.bbox_writer, d.topics.bbox_reply, requests);
   writer(d.ray_writer, d.topics.ray_reply, requests);
@@ -115,7 +118,8 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
   d.ingest_waitset.emplace(std::move(*ingest_ws));
   d.service_waitset.emplace(std::move(*service_ws));
   for (auto [r, tag] : {std::pair{&d.point_reader, kPointTag}, std::pair{&d.bbox_reader, kBboxTag},
-                        std::pair{&d.ray_reader, kRayTag}, std::pair{&d.cmd_reader, kCmdTag}}) {
+                        std::pair{&d.ray_reader, kRayTag}, std::pair{&d.cmd_reader, kCmdTag},
+                        std::pair{&d.map_reader, kMapTag}}) {
     if (auto ok = d.service_waitset->attachReader(*r, tag); !ok) return std::unexpected(ok.error());
   }
   if (auto ok = d.ingest_waitset->attachReader(d.scan_reader, kScanTag); !ok) {
@@ -468,6 +472,16 @@ void MapService::takeQueries() {
 }
 
 void MapService::answerCommands() {
+  dds::takeAll<densemap_msgs_CommandRequest>(
+      dds_->map_reader, [&](const densemap_msgs_CommandRequest& req) {
+        if (req.kind == 3) {
+          runTask([this, id = req.id] { replyCommand(id, sendMap(id)); });
+        } else {
+          replyCommand(req.id, makeError("densemap/map/request takes send-map only; command " +
+                                         std::to_string(req.kind) +
+                                         " goes to densemap/cmd/request"));
+        }
+      });
   dds::takeAll<densemap_msgs_CommandRequest>(
       dds_->cmd_reader, [&](const densemap_msgs_CommandRequest& req) {
         if (req.kind == 3) {  // send-map: a task, so it does not hold up other commands

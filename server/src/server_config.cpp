@@ -8,10 +8,6 @@
 
 namespace densemap::server {
 
-bool isLoopbackInterface(const std::string& name) {
-  return name == "lo" || name == "localhost" || name.rfind("127.", 0) == 0 || name == "::1";
-}
-
 Expected<proto::ServerConfig> loadServerConfig(const std::filesystem::path& file) {
   auto text = readFileBytes(file);
   if (!text) return std::unexpected(text.error());
@@ -21,6 +17,9 @@ Expected<proto::ServerConfig> loadServerConfig(const std::filesystem::path& file
   }
   if (auto options = pipelineOptions(config); !options) {
     return fileError(file, options.error().message);
+  }
+  if (auto security = securityFiles(config); !security) {
+    return fileError(file, security.error().message);
   }
   return config;
 }
@@ -93,14 +92,24 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
   if (config.dds().network_interface().empty()) {
     return makeError("dds.network_interface must name an interface (default lo)");
   }
-  if (!isLoopbackInterface(config.dds().network_interface()) &&
+  if (!dds::isLoopbackInterface(config.dds().network_interface()) && !config.has_security() &&
       !config.dds().allow_insecure_remote()) {
     return makeError("dds.network_interface '" + config.dds().network_interface() +
-                     "' is not loopback, and densemap has no DDS Security yet: anyone on that "
-                     "network could send scans and commands and read the map. Set "
+                     "' is not loopback and there is no security block: anyone on that "
+                     "network could send scans and commands and read the map. Add a security "
+                     "block (scripts/make-pki.sh makes its files), or set "
                      "dds.allow_insecure_remote: true to accept that");
   }
   return o;
+}
+
+Expected<std::optional<dds::SecurityFiles>> securityFiles(const proto::ServerConfig& config) {
+  if (!config.has_security()) return std::optional<dds::SecurityFiles>();
+  const proto::SecurityConfig& s = config.security();
+  dds::SecurityFiles files{s.identity_ca(),    s.identity_certificate(), s.private_key(),
+                           s.permissions_ca(), s.governance(),           s.permissions()};
+  if (auto ok = dds::checkSecurityFiles(files); !ok) return std::unexpected(ok.error());
+  return std::optional<dds::SecurityFiles>(std::move(files));
 }
 
 Expected<std::optional<Ros2Options>> ros2Options(const proto::ServerConfig& config) {

@@ -129,7 +129,7 @@ void replayAndCompare(const fs::path& data, std::size_t scans, std::uint32_t kDo
   ASSERT_TRUE(client);
 
   // A ROS tool's readers of the map topics (transient-local: they get the latest on joining).
-  auto participant = dds::createParticipant(kDomain, "lo");
+  auto participant = dds::createParticipant({kDomain, "lo", std::nullopt});
   ASSERT_TRUE(participant);
   auto octomap_topic = dds::createTopic(*participant, octomap_msgs_msg_dds__Octomap__desc,
                                         ros2::ddsTopicName("/octomap_binary"));
@@ -313,7 +313,7 @@ TEST(Ros2Wire, MalformedCloudsAreCountedByReasonAndTheServerKeepsMapping) {
       "ros2 { enabled: true reliable_clouds: true tf_wait_s: 0.3 publish_period_s: 0 }\n");
   auto client = connect(kDomain);
   ASSERT_TRUE(client);
-  auto participant = dds::createParticipant(kDomain, "lo");
+  auto participant = dds::createParticipant({kDomain, "lo", std::nullopt});
   ASSERT_TRUE(participant);
   auto topic = dds::createTopic(*participant, sensor_msgs_msg_dds__PointCloud2__desc, "rt/points");
   ASSERT_TRUE(topic);

@@ -20,6 +20,7 @@ Expected<Topics> Topics::create(const Entity& participant) {
       {&t.ray_reply, &densemap_msgs_RayQueryReply_desc, "query/ray/reply"},
       {&t.command_request, &densemap_msgs_CommandRequest_desc, "cmd/request"},
       {&t.command_reply, &densemap_msgs_CommandReply_desc, "cmd/reply"},
+      {&t.map_request, &densemap_msgs_CommandRequest_desc, "map/request"},
       {&t.manifest, &densemap_msgs_MapManifest_desc, "map/manifest"},
       {&t.tiles, &densemap_msgs_MapTile_desc, "map/tiles"},
       {&t.delta, &densemap_msgs_MapDelta_desc, "map/delta"},
@@ -28,6 +29,9 @@ Expected<Topics> Topics::create(const Entity& participant) {
   };
   for (const auto& row : table) {
     auto topic = createTopic(participant, *row.descriptor, std::string("densemap/") + row.name);
+    // A topic this identity may neither publish nor subscribe stays empty; its readers and
+    // writers then fail with the same "not allowed" error.
+    if (!topic && isNotAllowedBySecurity(topic.error())) continue;
     if (!topic) return std::unexpected(topic.error());
     *row.topic = std::move(*topic);
   }

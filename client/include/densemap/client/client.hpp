@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "densemap/dds/security.hpp"
 #include "densemap/geometry/error.hpp"
 #include "densemap/map/grid_map.hpp"
 #include "densemap/pipeline/map_queries.hpp"
@@ -23,6 +24,9 @@ struct ClientOptions {
   /// Subscribe to map/delta (every changed cell of every version). Off by default: while no
   /// client subscribes, the server builds no deltas. map/events (small) is always read.
   bool subscribe_deltas = false;
+  /// DDS Security files of this client's identity (scripts/make-pki.sh); none: plain DDS. With
+  /// security, requests its permissions do not grant fail with a "not allowed" error.
+  std::optional<dds::SecurityFiles> security;
 };
 
 struct PointQueryAnswer {

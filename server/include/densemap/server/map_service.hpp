@@ -7,6 +7,7 @@
 #include <condition_variable>
 #include <deque>
 #include <filesystem>
+#include <optional>
 #include <memory>
 #include <mutex>
 #include <thread>
@@ -21,6 +22,7 @@ namespace densemap::server {
 struct ServiceOptions {
   std::uint32_t domain_id = 0;
   std::string network_interface = "lo";
+  std::optional<dds::SecurityFiles> security;  // DDS Security; none: plain DDS
   std::filesystem::path snapshot_path;  // empty: no snapshots
   int snapshot_keep = 3;                // files kept: path, path.1, ... (core/store)
   double autosave_period_s = 0.0;       // 0: off

@@ -6,6 +6,7 @@
 
 #include "densemap.pb.h"
 #include "densemap/server/ros2_bridge.hpp"
+#include "densemap/dds/security.hpp"
 #include "densemap/geometry/error.hpp"
 #include "densemap/pipeline/pipeline.hpp"
 
@@ -18,8 +19,9 @@ namespace densemap::server {
 /// Checks values and converts to the pipeline's options.
 [[nodiscard]] Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config);
 
-/// Whether a dds.network_interface value names loopback ("lo", "localhost", 127.x.y.z, ::1).
-[[nodiscard]] bool isLoopbackInterface(const std::string& name);
+/// The `security` block's files (each checked readable), or none when there is no block.
+[[nodiscard]] Expected<std::optional<dds::SecurityFiles>> securityFiles(
+    const proto::ServerConfig& config);
 
 /// The ROS 2 face's options, or none when `ros2.enabled` is false. Errors name the field.
 [[nodiscard]] Expected<std::optional<Ros2Options>> ros2Options(const proto::ServerConfig& config);

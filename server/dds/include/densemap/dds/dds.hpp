@@ -6,11 +6,13 @@
 #include <chrono>
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <utility>
 #include <vector>
 
+#include "densemap/dds/security.hpp"
 #include "densemap/geometry/error.hpp"
 
 namespace densemap::dds {
@@ -46,14 +48,26 @@ class Entity {
   dds_entity_t e_ = 0;
 };
 
-/// Cyclone configuration that keeps all traffic on one interface (DESIGN.md network safety):
-/// no multicast, unicast discovery to localhost, large receive buffers for big scans.
-[[nodiscard]] std::string loopbackConfig(const std::string& interface_name);
+/// Cyclone configuration for one interface. On loopback (DESIGN.md network safety): no
+/// multicast, unicast discovery to localhost. On any other interface: Cyclone's default
+/// multicast discovery there. Large receive buffers for big scans either way.
+[[nodiscard]] std::string domainConfig(const std::string& interface_name);
 
-/// A participant on `domain_id`. When CYCLONEDDS_URI is unset the domain is first created with
-/// loopbackConfig(interface_name), so nothing leaves the machine unless a user asks for it.
-[[nodiscard]] Expected<Entity> createParticipant(std::uint32_t domain_id,
-                                                 const std::string& interface_name);
+struct ParticipantOptions {
+  std::uint32_t domain_id = 0;
+  std::string network_interface = "lo";
+  /// DDS Security (authentication, access control, encryption); none: plain DDS.
+  std::optional<SecurityFiles> security;
+};
+
+/// A participant. When CYCLONEDDS_URI is unset the domain is first created with
+/// domainConfig(network_interface), so nothing leaves the machine unless a user asks for it.
+/// With `security`, the participant loads Cyclone's built-in security plugins with those files.
+[[nodiscard]] Expected<Entity> createParticipant(const ParticipantOptions& options);
+
+/// Whether an error from this module is DDS Security refusing an entity (a topic, reader or
+/// writer this identity's permissions do not grant).
+[[nodiscard]] bool isNotAllowedBySecurity(const Error& error);
 
 struct QosSpec {
   bool reliable = true;

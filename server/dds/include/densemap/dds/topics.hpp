@@ -5,13 +5,17 @@
 namespace densemap::dds {
 
 /// Every densemap topic (DESIGN.md), created once per participant; names and types live here
-/// only, for the server and the client alike.
+/// only, for the server and the client alike. With DDS Security, a topic the participant's
+/// permissions do not name is left empty (its readers and writers fail as "not allowed").
 struct Topics {
   Entity scan;
   Entity point_request, point_reply;
   Entity bbox_request, bbox_reply;
   Entity ray_request, ray_reply;
   Entity command_request, command_reply;
+  /// send-map requests (CommandRequest, kind 3 only; replies on command_reply): a topic of their
+  /// own so that DDS Security can grant map fetches without granting reset and clear-bbox.
+  Entity map_request;
   Entity manifest, tiles, delta, events, status;
 
   [[nodiscard]] static Expected<Topics> create(const Entity& participant);

@@ -1,0 +1,30 @@
+#pragma once
+
+#include <string>
+
+#include "densemap/geometry/error.hpp"
+
+namespace densemap::dds {
+
+/// The six files of DDS Security (OMG DDS Security 1.1) that Cyclone's built-in plugins need:
+/// PKI-DH authentication, signed governance and permissions, AES-GCM encryption. Paths are
+/// files on this machine; `scripts/make-pki.sh DIR` makes a complete set per role.
+struct SecurityFiles {
+  std::string identity_ca;           // the CA that signed every participant's certificate (PEM)
+  std::string identity_certificate;  // this participant's certificate (PEM)
+  std::string private_key;           // its private key (PEM, unencrypted)
+  std::string permissions_ca;        // the CA that signed governance and permissions (PEM)
+  std::string governance;            // signed governance document (S/MIME)
+  std::string permissions;           // signed permissions document with this identity's grant
+
+  /// Every file of make-pki.sh's layout for `role` (robot, operator, viewer or server).
+  [[nodiscard]] static SecurityFiles fromPkiDir(const std::string& dir, const std::string& role);
+};
+
+/// All six set and readable; the error names the first that is not.
+[[nodiscard]] Expected<void> checkSecurityFiles(const SecurityFiles& files);
+
+/// Whether a network interface name is loopback ("lo", "localhost", 127.x.y.z, ::1).
+[[nodiscard]] bool isLoopbackInterface(const std::string& name);
+
+}  // namespace densemap::dds
