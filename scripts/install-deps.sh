@@ -17,6 +17,7 @@ PACKAGES=(
   clang-format clang-tidy
   dpkg-dev fakeroot lintian adduser
   clang-16 libclang-rt-16-dev libsystemd-dev
+  openssl tcpdump
 )
 if [ "${1:-}" = "--iln" ]; then
   PACKAGES+=(python3-torch python3-protobuf libopenblas0-pthread)

@@ -98,29 +98,39 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
 
 Expected<void> Client::waitForServer() {
   const auto deadline = Clock::now() + options_.timeout;
-  auto matched = [&] {
+  // The topics whose server side has not matched yet (empty: found).
+  auto unmatched = [&] {
+    std::vector<std::string> names;
+    const auto topic_name = [](const dds::Entity& e) {
+      char name[256] = "";
+      (void)dds_get_name(dds_get_topic(e.get()), name, sizeof name);
+      return std::string(name);
+    };
     for (const dds::Entity* w :
          {&dds_->scan_w, &dds_->pq_w, &dds_->bq_w, &dds_->rq_w, &dds_->cq_w, &dds_->mq_w}) {
       if (w->get() <= 0) continue;  // not granted by DDS Security
       dds_publication_matched_status_t s;
       if (dds_get_publication_matched_status(w->get(), &s) < 0 || s.current_count == 0)
-        return false;
+        names.push_back(topic_name(*w));
     }
     for (const dds::Entity* r :
          {&dds_->pr_r, &dds_->br_r, &dds_->rr_r, &dds_->cr_r, &dds_->event_r, &dds_->delta_r}) {
       if (r->get() <= 0) continue;  // deltas not subscribed, or not granted
       dds_subscription_matched_status_t s;
       if (dds_get_subscription_matched_status(r->get(), &s) < 0 || s.current_count == 0)
-        return false;
+        names.push_back(topic_name(*r));
     }
-    return true;
+    return names;
   };
-  while (!matched()) {
+  for (auto missing = unmatched(); !missing.empty(); missing = unmatched()) {
     if (Clock::now() > deadline) {
+      std::string list;
+      for (const std::string& n : missing) list += (list.empty() ? "" : ", ") + n;
       return makeError("no densemap-server found on DDS domain " +
                        std::to_string(options_.domain_id) + " (interface " +
                        options_.network_interface + ") within " +
-                       std::to_string(options_.timeout.count()) + " ms");
+                       std::to_string(options_.timeout.count()) + " ms (unmatched: " + list +
+                       ")");
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }

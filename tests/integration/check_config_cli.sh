@@ -34,6 +34,17 @@ expect_fail "insecure remote" "allow_insecure_remote" "$dir/remote.textproto"
 printf 'dds { network_interface: "eth0" allow_insecure_remote: true }\nsnapshot { path: "" }\n' \
   >"$dir/remote-ok.textproto"
 "$server" --check-config "$dir/remote-ok.textproto" >/dev/null
+# A remote interface with a security block (make-pki.sh's server files): valid.
+if command -v openssl >/dev/null; then
+  "$src/scripts/make-pki.sh" --days 1 "$dir/pki" >/dev/null
+  p="$dir/pki"
+  printf 'dds { network_interface: "eth0" }\nsnapshot { path: "" }\nsecurity { identity_ca: "%s" identity_certificate: "%s" private_key: "%s" permissions_ca: "%s" governance: "%s" permissions: "%s" }\n' \
+    "$p/ca.pem" "$p/server.pem" "$p/server.key" "$p/ca.pem" "$p/governance.p7s" "$p/permissions.p7s" \
+    >"$dir/secure.textproto"
+  "$server" --check-config "$dir/secure.textproto" | grep -q "on eth0 with DDS Security"
+  sed 's#/server.key#/none.key#' "$dir/secure.textproto" >"$dir/nokey.textproto"
+  expect_fail "missing private key" "security.private_key" "$dir/nokey.textproto"
+fi
 # --config and --check-config together: a usage error.
 if "$server" --config "$src/config/densemap.textproto" --check-config "$src/config/densemap.textproto" \
   >/dev/null 2>&1; then

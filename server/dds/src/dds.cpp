@@ -2,6 +2,7 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <map>
 #include <mutex>
 #include <vector>
 
@@ -84,6 +85,33 @@ void stopCycloneBeforeOpenSslAtExit() {
   std::call_once(once, [] { std::atexit([] { dds_delete(DDS_CYCLONEDDS_HANDLE); }); });
 }
 
+/// Cyclone 0.10's access control plugin keeps one set of local permissions per domain in a
+/// process (ACCESS_CONTROL_USE_ONE_PERMISSION): a second identity there would be checked
+/// locally against the first's grants (and refused by its peers against its own), and a
+/// participant without security fails to validate. Both are refused here instead, clearly.
+Expected<void> claimIdentity(std::uint32_t domain_id, const std::optional<SecurityFiles>& files) {
+  static std::mutex mutex;
+  static std::map<std::uint32_t, std::string> identities;  // domain -> identity certificate
+  const std::lock_guard lock(mutex);
+  const auto it = identities.find(domain_id);
+  if (!files) {
+    if (it == identities.end()) return {};
+    return makeError("DDS domain " + std::to_string(domain_id) +
+                     " has DDS Security identity " + it->second +
+                     " in this process; Cyclone DDS cannot add a participant without security "
+                     "to it (use another process)");
+  }
+  const std::string identity = std::filesystem::absolute(files->identity_certificate).string();
+  if (it == identities.end()) {
+    identities.emplace(domain_id, identity);
+    return {};
+  }
+  if (it->second == identity) return {};
+  return makeError("DDS domain " + std::to_string(domain_id) + " already has DDS Security identity " +
+                   it->second + " in this process; Cyclone DDS allows one identity per domain " +
+                   "and process (use another process for " + identity + ")");
+}
+
 }  // namespace
 
 Expected<Entity> createParticipant(const ParticipantOptions& options) {
@@ -95,6 +123,9 @@ Expected<Entity> createParticipant(const ParticipantOptions& options) {
     if (domain < 0 && domain != DDS_RETCODE_PRECONDITION_NOT_MET) {
       return makeError(std::string("dds_create_domain failed: ") + dds_strretcode(domain));
     }
+  }
+  if (auto ok = claimIdentity(options.domain_id, options.security); !ok) {
+    return std::unexpected(ok.error());
   }
   dds_qos_t* qos = nullptr;
   if (options.security) {

@@ -2,6 +2,7 @@
 
 #include <fstream>
 
+#include "densemap/dds/dds.hpp"
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_diff.hpp"
 #include "densemap/raycast/integrator.hpp"
@@ -69,6 +70,58 @@ TEST(ServerConfig, Ros2OptionsAndTheirErrors) {
       EXPECT_NE(r.error().message.find("ros2"), std::string::npos) << r.error().message;
     }
   }
+}
+
+TEST(ServerConfig, SecurityBlockNeedsAllSixReadableFilesAndAllowsRemoteInterfaces) {
+  const test::TempDir dir;
+  const char* names[] = {"identity_ca", "identity_certificate", "private_key",
+                         "permissions_ca", "governance", "permissions"};
+  std::string block = "security {";
+  for (const char* name : names) {
+    std::ofstream(dir.path() / name) << "x";
+    block += std::string(" ") + name + ": \"" + (dir.path() / name).string() + "\"";
+  }
+  block += " }\n";
+  // Remote interface without security: refused, naming both ways out.
+  auto refused = loadServerConfig(writeConfig(dir, "dds { network_interface: \"eth0\" }\n"));
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.error().message.find("security block"), std::string::npos);
+  EXPECT_NE(refused.error().message.find("allow_insecure_remote"), std::string::npos);
+  // With security: accepted, and the files come through.
+  auto config =
+      loadServerConfig(writeConfig(dir, "dds { network_interface: \"eth0\" }\n" + block));
+  ASSERT_TRUE(config) << config.error().message;
+  auto files = securityFiles(*config);
+  ASSERT_TRUE(files && *files);
+  EXPECT_EQ((*files)->permissions, (dir.path() / "permissions").string());
+  EXPECT_EQ((*files)->identity_ca, (dir.path() / "identity_ca").string());
+  auto none = securityFiles(proto::ServerConfig{});
+  ASSERT_TRUE(none);
+  EXPECT_FALSE(*none);
+  // Each file missing in turn: the error names its field.
+  for (const char* name : names) {
+    std::filesystem::rename(dir.path() / name, dir.path() / "moved");
+    auto missing = loadServerConfig(writeConfig(dir, block));
+    ASSERT_FALSE(missing) << name;
+    EXPECT_NE(missing.error().message.find(std::string("security.") + name + ":"),
+              std::string::npos)
+        << missing.error().message;
+    std::filesystem::rename(dir.path() / "moved", dir.path() / name);
+  }
+}
+
+TEST(DdsConfig, LoopbackStaysOnLoopbackOtherInterfacesDiscoverByMulticast) {
+  for (const char* lo : {"lo", "127.0.0.1", "localhost", "::1"}) {
+    EXPECT_TRUE(dds::isLoopbackInterface(lo)) << lo;
+    const std::string xml = dds::domainConfig(lo);
+    EXPECT_NE(xml.find("<AllowMulticast>false</AllowMulticast>"), std::string::npos) << xml;
+    EXPECT_NE(xml.find("<Peer Address=\"127.0.0.1\"/>"), std::string::npos) << xml;
+  }
+  EXPECT_FALSE(dds::isLoopbackInterface("eth0"));
+  const std::string eth = dds::domainConfig("eth0");
+  EXPECT_NE(eth.find("<NetworkInterface name=\"eth0\"/>"), std::string::npos) << eth;
+  EXPECT_EQ(eth.find("AllowMulticast"), std::string::npos) << eth;
+  EXPECT_EQ(eth.find("127.0.0.1"), std::string::npos) << eth;
 }
 
 TEST(ServerConfig, ErrorsNameTheFileTheLineAndTheReason) {

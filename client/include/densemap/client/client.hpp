@@ -25,7 +25,8 @@ struct ClientOptions {
   /// client subscribes, the server builds no deltas. map/events (small) is always read.
   bool subscribe_deltas = false;
   /// DDS Security files of this client's identity (scripts/make-pki.sh); none: plain DDS. With
-  /// security, requests its permissions do not grant fail with a "not allowed" error.
+  /// security, requests its permissions do not grant fail with a "not allowed" error. One
+  /// identity per process and domain (Cyclone DDS): a Client with another is refused.
   std::optional<dds::SecurityFiles> security;
 };
 

@@ -62,7 +62,9 @@ struct ParticipantOptions {
 
 /// A participant. When CYCLONEDDS_URI is unset the domain is first created with
 /// domainConfig(network_interface), so nothing leaves the machine unless a user asks for it.
-/// With `security`, the participant loads Cyclone's built-in security plugins with those files.
+/// With `security`, the participant loads Cyclone's built-in security plugins with those files;
+/// a process can hold one security identity per domain (a second is refused: Cyclone 0.10
+/// checks every local participant of a domain against the first one's permissions).
 [[nodiscard]] Expected<Entity> createParticipant(const ParticipantOptions& options);
 
 /// Whether an error from this module is DDS Security refusing an entity (a topic, reader or
