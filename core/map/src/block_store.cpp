@@ -1,7 +1,11 @@
 #include "densemap/map/block_store.hpp"
 
+#include <sys/mman.h>
+
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
+#include <new>
 
 namespace densemap {
 namespace {
@@ -12,6 +16,12 @@ constexpr int kInitialTableBits = 10;
 constexpr std::size_t kSlabNodes = 256;
 
 }  // namespace
+
+/// Entries and tables replaced by a compaction, kept for readers that may still probe them.
+struct BlockStore::Garbage {
+  std::deque<BlockEntry> entries;
+  std::vector<std::unique_ptr<Table>> tables;
+};
 
 /// Keeps the nodes a version could read until nobody reads it or an older version.
 struct BlockStore::Pin {
@@ -30,10 +40,26 @@ struct BlockStore::Pin {
   }
 
   BlockStore* store;
-  // (node, successor): nodes readable up to this version, superseded by the next one.
-  std::vector<std::pair<BlockNode*, BlockNode*>> superseded;
+  // (link, successor): links readable up to this version, superseded by the next one
+  // (successor null: the entry's tombstone was retired).
+  std::vector<std::pair<ChainLink*, ChainLink*>> superseded;
+  std::shared_ptr<Garbage> garbage;
   std::shared_ptr<Pin> newer;
 };
+
+BlockStore::Slab::Slab(std::size_t nodes) : count(nodes) {
+  void* p = mmap(nullptr, nodes * sizeof(BlockNode), PROT_READ | PROT_WRITE,
+                 MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+  if (p == MAP_FAILED) throw std::bad_alloc();
+  this->nodes = static_cast<BlockNode*>(p);
+  // Constructing writes every node: the pages are faulted in now, not during a scan.
+  for (std::size_t i = 0; i < nodes; ++i) new (this->nodes + i) BlockNode();
+}
+
+BlockStore::Slab::~Slab() {
+  for (std::size_t i = 0; i < count; ++i) nodes[i].~BlockNode();
+  munmap(nodes, count * sizeof(BlockNode));
+}
 
 BlockStore::Table::Table(int bits)
     : shift(64 - bits),
@@ -52,6 +78,17 @@ BlockStore::~BlockStore() {
 
 std::size_t BlockStore::slotOf(const Table& t, std::uint64_t key) {
   return static_cast<std::size_t>((key * 0x9E3779B97F4A7C15ULL) >> t.shift);
+}
+
+BlockEntry* BlockStore::lookup(std::uint64_t block_key) const {
+  const Table* t = table_.load(std::memory_order_acquire);
+  std::size_t i = slotOf(*t, block_key);
+  for (BlockEntry* e = t->slots[i].load(std::memory_order_acquire); e != nullptr;
+       e = t->slots[i].load(std::memory_order_acquire)) {
+    if (e->key == block_key) return e;
+    i = (i + 1) & t->mask;
+  }
+  return nullptr;
 }
 
 BlockEntry& BlockStore::entry(std::uint64_t block_key) {
@@ -89,30 +126,25 @@ const BlockNode* BlockStore::latest(std::uint64_t block_key) const {
 }
 
 const BlockNode* BlockStore::find(std::uint64_t block_key, std::uint64_t version) const {
-  const Table* t = table_.load(std::memory_order_acquire);
-  std::size_t i = slotOf(*t, block_key);
-  for (const BlockEntry* e = t->slots[i].load(std::memory_order_acquire); e != nullptr;
-       e = t->slots[i].load(std::memory_order_acquire)) {
-    if (e->key == block_key) return nodeAt(*e, version);
-    i = (i + 1) & t->mask;
-  }
-  return nullptr;
+  const BlockEntry* e = lookup(block_key);
+  return e != nullptr ? nodeAt(*e, version) : nullptr;
 }
 
 const BlockNode* BlockStore::nodeAt(const BlockEntry& entry, std::uint64_t version) {
-  const BlockNode* n = entry.head.load(std::memory_order_acquire);
+  const ChainLink* n = entry.head.load(std::memory_order_acquire);
   while (n != nullptr && n->version > version) n = n->older.load(std::memory_order_acquire);
-  return n;
+  return contents(n);
 }
 
 void BlockStore::addSlab() {
-  slabs_.emplace_back(new BlockNode[kSlabNodes]);
-  BlockNode* slab = slabs_.back().get();
+  slabs_.push_back(std::make_unique<Slab>(kSlabNodes));
+  BlockNode* slab = slabs_.back()->nodes;
   for (std::size_t i = kSlabNodes; i-- > 0;) free_.push_back(slab + i);
 }
 
 void BlockStore::reserve(std::size_t nodes) {
   std::lock_guard lock(pool_mutex_);
+  reserve_nodes_ = std::max(reserve_nodes_, nodes);
   while (free_.size() < nodes) addSlab();
 }
 
@@ -124,9 +156,28 @@ BlockNode* BlockStore::allocate() {
   return n;
 }
 
+ChainLink* BlockStore::allocateTomb() {
+  if (free_tombs_.empty()) return &tombs_.emplace_back();
+  ChainLink* t = free_tombs_.back();
+  free_tombs_.pop_back();
+  return t;
+}
+
+void BlockStore::recycle(ChainLink* link) {
+  if (link->dropped) {
+    free_tombs_.push_back(link);
+  } else {
+    free_.push_back(static_cast<BlockNode*>(link));
+    live_nodes_.fetch_sub(1, std::memory_order_relaxed);
+  }
+}
+
 BlockNode& BlockStore::writable(BlockEntry& e) {
-  BlockNode* head = e.head.load(std::memory_order_relaxed);
-  if (head != nullptr && (!versioned_ || head->version == writing_)) return *head;
+  ChainLink* head = e.head.load(std::memory_order_relaxed);
+  const BlockNode* current = contents(head);
+  if (current != nullptr && (!versioned_ || head->version == writing_)) {
+    return *static_cast<BlockNode*>(head);
+  }
   BlockNode* node = nullptr;
   {
     std::lock_guard lock(pool_mutex_);
@@ -136,20 +187,141 @@ BlockNode& BlockStore::writable(BlockEntry& e) {
       if (head != nullptr) superseded_.emplace_back(head, node);
     }
   }
-  if (head != nullptr) {
-    node->voxels = head->voxels;
-    node->fully_free = head->fully_free;
+  if (current != nullptr) {
+    node->voxels = current->voxels;
+    node->fully_free = current->fully_free;
   } else {
     node->voxels = VoxelBlock{};
     node->fully_free = block::BlockMask{};
   }
   node->version = writing_;
+  node->dropped = false;
   node->older.store(versioned_ ? head : nullptr, std::memory_order_relaxed);
   e.head.store(node, std::memory_order_release);
   return *node;
 }
 
+bool BlockStore::drop(BlockEntry& e) {
+  ChainLink* head = e.head.load(std::memory_order_relaxed);
+  if (contents(head) == nullptr) return false;
+  std::lock_guard lock(pool_mutex_);
+  if (!versioned_) {  // nobody reads another version: free it now
+    e.head.store(nullptr, std::memory_order_release);
+    recycle(head);
+    return true;
+  }
+  // Readers of older versions walk past the tombstone to the contents they saw.
+  ChainLink* tomb = allocateTomb();
+  tomb->version = writing_;
+  tomb->dropped = true;
+  tomb->older.store(head, std::memory_order_relaxed);
+  e.head.store(tomb, std::memory_order_release);
+  superseded_.emplace_back(head, tomb);
+  written_.push_back(e.key);
+  pending_tombs_.push_back(e.key);
+  return true;
+}
+
+void BlockStore::retireTombstones() {
+  // A tombstone whose older contents are gone (no reader of an older version is left) is the
+  // last link: the entry's head becomes null, the tombstone goes when this version's readers do.
+  std::size_t kept = 0;
+  for (const std::uint64_t key : pending_tombs_) {
+    BlockEntry* e = lookup(key);
+    ChainLink* head = e != nullptr ? e->head.load(std::memory_order_relaxed) : nullptr;
+    if (head == nullptr || !head->dropped) continue;  // written again since: its chain frees it
+    if (head->older.load(std::memory_order_acquire) != nullptr) {
+      pending_tombs_[kept++] = key;
+      continue;
+    }
+    e->head.store(nullptr, std::memory_order_release);
+    superseded_.emplace_back(head, nullptr);
+    ++retired_since_compaction_;
+  }
+  pending_tombs_.resize(kept);
+}
+
+void BlockStore::compactIfWorthIt() {
+  if (retired_since_compaction_ < 4096 || retired_since_compaction_ * 4 < entries_.size()) return;
+  retired_since_compaction_ = 0;
+  std::size_t alive = 0;
+  for (const BlockEntry& e : entries_) alive += e.head.load(std::memory_order_relaxed) != nullptr;
+  if (alive * 4 > entries_.size() * 3) return;  // fewer than a quarter dead: not worth it
+  auto garbage = std::make_shared<Garbage>();
+  garbage->entries = std::move(entries_);
+  garbage->tables = std::move(tables_);
+  entries_ = std::deque<BlockEntry>();
+  int bits = kInitialTableBits;
+  while ((std::size_t{1} << bits) < alive * 2 + 2) ++bits;
+  auto table = std::make_unique<Table>(bits);
+  for (const BlockEntry& old : garbage->entries) {
+    ChainLink* head = old.head.load(std::memory_order_relaxed);
+    if (head == nullptr) continue;
+    BlockEntry& e = entries_.emplace_back(old.key);
+    e.head.store(head, std::memory_order_relaxed);
+    std::size_t i = slotOf(*table, e.key);
+    while (table->slots[i].load(std::memory_order_relaxed) != nullptr) i = (i + 1) & table->mask;
+    table->slots[i].store(&e, std::memory_order_relaxed);
+  }
+  // Readers that load the table from now on find the new entries (release); those probing the
+  // old ones hold the last published version's pin (or an older one), which keeps them.
+  table_.store(table.get(), std::memory_order_release);
+  tables_.push_back(std::move(table));
+  if (current_pin_) {
+    current_pin_->garbage = std::move(garbage);
+  }
+  ++compactions_;
+}
+
+std::size_t BlockStore::trim() {
+  std::lock_guard lock(pool_mutex_);
+  if (free_.size() <= reserve_nodes_ + kSlabNodes) return 0;
+  std::sort(free_.begin(), free_.end());
+  std::vector<bool> whole(slabs_.size(), false);
+  std::vector<std::pair<BlockNode*, std::size_t>> bases;  // slab start -> index
+  for (std::size_t s = 0; s < slabs_.size(); ++s) bases.emplace_back(slabs_[s]->nodes, s);
+  std::sort(bases.begin(), bases.end());
+  // Count free nodes per slab (both lists sorted by address).
+  std::vector<std::size_t> free_in(slabs_.size(), 0);
+  std::size_t b = 0;
+  for (BlockNode* n : free_) {
+    while (b + 1 < bases.size() && bases[b + 1].first <= n) ++b;
+    ++free_in[bases[b].second];
+  }
+  std::size_t spare = free_.size() - reserve_nodes_;
+  for (std::size_t s = 0; s < slabs_.size() && spare >= kSlabNodes; ++s) {
+    if (free_in[s] == slabs_[s]->count) {
+      whole[s] = true;
+      spare -= kSlabNodes;
+    }
+  }
+  std::size_t freed = 0;
+  std::vector<BlockNode*> kept_free;
+  kept_free.reserve(free_.size());
+  b = 0;
+  for (BlockNode* n : free_) {
+    while (b + 1 < bases.size() && bases[b + 1].first <= n) ++b;
+    if (!whole[bases[b].second]) kept_free.push_back(n);
+  }
+  free_.swap(kept_free);
+  std::vector<std::unique_ptr<Slab>> kept;
+  for (std::size_t s = 0; s < slabs_.size(); ++s) {
+    if (whole[s]) {
+      freed += slabs_[s]->count * sizeof(BlockNode);
+    } else {
+      kept.push_back(std::move(slabs_[s]));
+    }
+  }
+  slabs_.swap(kept);
+  free_.shrink_to_fit();
+  return freed;
+}
+
 BlockStore::Published BlockStore::publish() {
+  if (versioned_) {
+    retireTombstones();
+    compactIfWorthIt();
+  }
   auto pin = std::make_shared<Pin>(this);
   Published out;
   out.version = writing_;
@@ -168,6 +340,18 @@ BlockStore::Published BlockStore::publish() {
   out.pin = std::move(pin);
   versioned_ = true;
   ++writing_;
+  // Many free nodes (blocks dropped or cleared): give wholly free slabs back to the OS. The
+  // threshold then rises so a fragmented pool is not re-sorted every version.
+  std::size_t free_now = 0;
+  {
+    std::lock_guard lock(pool_mutex_);
+    free_now = free_.size();
+  }
+  if (free_now > std::max(trim_threshold_, reserve_nodes_ + 8 * kSlabNodes)) {
+    (void)trim();
+    std::lock_guard lock(pool_mutex_);
+    trim_threshold_ = free_.size() + 8 * kSlabNodes;
+  }
   return out;
 }
 
@@ -186,10 +370,7 @@ void BlockStore::clearUnversioned() {
   }
   std::lock_guard lock(pool_mutex_);
   for (BlockEntry& e : entries_) {
-    if (BlockNode* n = e.head.load(std::memory_order_relaxed); n != nullptr) {
-      free_.push_back(n);
-      live_nodes_.fetch_sub(1, std::memory_order_relaxed);
-    }
+    if (ChainLink* n = e.head.load(std::memory_order_relaxed); n != nullptr) recycle(n);
   }
   tables_.clear();
   tables_.push_back(std::make_unique<Table>(kInitialTableBits));
@@ -197,15 +378,14 @@ void BlockStore::clearUnversioned() {
   entries_.clear();
 }
 
-void BlockStore::release(const std::vector<std::pair<BlockNode*, BlockNode*>>& superseded) {
+void BlockStore::release(const std::vector<std::pair<ChainLink*, ChainLink*>>& superseded) {
   if (superseded.empty()) return;
   std::lock_guard lock(pool_mutex_);
-  for (auto [node, successor] : superseded) {
-    // No reader of a version older than the successor's is left: unlink the node.
-    successor->older.store(nullptr, std::memory_order_release);
-    free_.push_back(node);
+  for (auto [link, successor] : superseded) {
+    // No reader of a version older than the successor's is left: unlink the link.
+    if (successor != nullptr) successor->older.store(nullptr, std::memory_order_release);
+    recycle(link);
   }
-  live_nodes_.fetch_sub(superseded.size(), std::memory_order_relaxed);
 }
 
 std::size_t BlockStore::memoryBytes() const {
@@ -213,7 +393,8 @@ std::size_t BlockStore::memoryBytes() const {
   for (const auto& t : tables_) table_bytes += (t->mask + 1) * sizeof(void*);
   std::lock_guard lock(pool_mutex_);
   return slabs_.size() * kSlabNodes * sizeof(BlockNode) + table_bytes +
-         entries_.size() * sizeof(BlockEntry) + free_.capacity() * sizeof(void*);
+         entries_.size() * sizeof(BlockEntry) + free_.capacity() * sizeof(void*) +
+         tombs_.size() * sizeof(ChainLink);
 }
 
 }  // namespace densemap

@@ -42,7 +42,7 @@ ApplyStats GridMap::apply(const ScanUpdate& update, CellChanges* changes) {
         for (std::size_t j = range.begin(); j != range.end(); ++j) {
           // Read the latest contents; the first change takes the writable node (a copy when
           // a published version still reads the head).
-          const BlockNode* head = jobs[j].entry->head.load(std::memory_order_relaxed);
+          const BlockNode* head = BlockStore::latest(*jobs[j].entry);
           const BlockNode* read = head != nullptr ? head : &kEmpty;
           BlockNode* write = nullptr;
           CellChanges* out = changes != nullptr ? &job_changes[j] : nullptr;
@@ -91,12 +91,20 @@ std::size_t GridMap::clearBox(const VoxelKey& min, const VoxelKey& max, CellChan
                       static_cast<std::uint16_t>(max.z >> block::kShift)};
   std::size_t erased = 0;
   auto clearIn = [&](BlockEntry& e) {
-    const BlockNode* head = e.head.load(std::memory_order_relaxed);
+    const BlockNode* head = BlockStore::latest(e);
     if (head == nullptr) return;
     const VoxelKey corner = block::keyOf(e.key, 0);
     if ((corner.x >> block::kShift) < bmin.x || (corner.y >> block::kShift) < bmin.y ||
         (corner.z >> block::kShift) < bmin.z || (corner.x >> block::kShift) > bmax.x ||
         (corner.y >> block::kShift) > bmax.y || (corner.z >> block::kShift) > bmax.z) {
+      return;
+    }
+    const int edge = block::kEdge - 1;
+    const bool whole = corner.x >= min.x && corner.y >= min.y && corner.z >= min.z &&
+                       corner.x + edge <= max.x && corner.y + edge <= max.y &&
+                       corner.z + edge <= max.z;
+    if (whole) {  // every cell goes: drop the block (its memory returns to the pool)
+      erased += dropBlock(e, changes);
       return;
     }
     BlockNode* node = nullptr;
@@ -111,6 +119,7 @@ std::size_t GridMap::clearBox(const VoxelKey& min, const VoxelKey& max, CellChan
       ++erased;
       if (changes != nullptr) changes->push_back({k, 0.0F, false});
     });
+    if (node != nullptr && block::countBits(node->voxels.known) == 0) (void)store_->drop(e);
   };
   // Walk the box's blocks when there are fewer of them than blocks in the map.
   const double box_blocks =
@@ -134,6 +143,37 @@ std::size_t GridMap::clearBox(const VoxelKey& min, const VoxelKey& max, CellChan
   return erased;
 }
 
+std::size_t GridMap::dropBlock(BlockEntry& e, CellChanges* changes) {
+  const BlockNode* head = BlockStore::latest(e);
+  if (head == nullptr) return 0;
+  const std::size_t cells = block::countBits(head->voxels.known);
+  if (changes != nullptr) {
+    block::forEachSetBit(head->voxels.known,
+                         [&](int i) { changes->push_back({block::keyOf(e.key, i), 0.0F, false}); });
+  }
+  (void)store_->drop(e);
+  return cells;
+}
+
+EvictStats GridMap::evictBlocks(const std::function<bool(const Point3f&)>& keep,
+                                CellChanges* changes) {
+  EvictStats stats;
+  const double half = 0.5 * block::kEdge;
+  store_->forEachEntryWriter([&](BlockEntry& e) {
+    if (BlockStore::latest(e) == nullptr) return;
+    const VoxelKey corner = block::keyOf(e.key, 0);
+    // The block's centre: its corner cell's centre plus half a block less half a cell.
+    const Point3f centre = grid().keyToPoint(corner) + Point3f::Constant(static_cast<float>(
+                                                    (half - 0.5) * resolution()));
+    if (keep(centre)) return;
+    const std::size_t cells = dropBlock(e, changes);
+    known_cells_ -= cells;
+    stats.cells += cells;
+    ++stats.blocks;
+  });
+  return stats;
+}
+
 std::optional<float> GridMap::logOdds(const VoxelKey& key) const {
   const BlockNode* n = store_->latest(block::blockOf(key));
   if (n == nullptr) return std::nullopt;
@@ -144,7 +184,7 @@ std::optional<float> GridMap::logOdds(const VoxelKey& key) const {
 
 void GridMap::forEachKnown(const std::function<void(const VoxelKey&, float)>& f) const {
   store_->forEachEntryWriter([&](const BlockEntry& e) {
-    const BlockNode* n = e.head.load(std::memory_order_relaxed);
+    const BlockNode* n = BlockStore::latest(e);
     if (n == nullptr) return;
     block::forEachSetBit(n->voxels.known,
                          [&](int i) { f(block::keyOf(e.key, i), n->voxels.log_odds[i]); });
@@ -154,7 +194,7 @@ void GridMap::forEachKnown(const std::function<void(const VoxelKey&, float)>& f)
 void GridMap::forEachFullyFreeBlock(
     const std::function<void(std::uint64_t, const block::BlockMask&)>& f) const {
   store_->forEachEntryWriter([&](const BlockEntry& e) {
-    const BlockNode* n = e.head.load(std::memory_order_relaxed);
+    const BlockNode* n = BlockStore::latest(e);
     if (n != nullptr) f(e.key, n->fully_free);
   });
 }
@@ -196,8 +236,9 @@ void GridMap::clear() {
     known_cells_ = 0;
     return;
   }
-  // Readers keep their versions: erase cell by cell (copy on write).
-  clearBox({0, 0, 0}, {65535, 65535, 65535});
+  // Readers keep their versions: drop every block from the next one.
+  store_->forEachEntryWriter([&](BlockEntry& e) { (void)store_->drop(e); });
+  known_cells_ = 0;
 }
 
 }  // namespace densemap

@@ -4,7 +4,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
+#include <cstdio>
 #include <cstring>
 #include <functional>
 #include <map>
@@ -129,6 +131,119 @@ TEST(MapView, AnUnversionedMapWritesInPlace) {
   for (int v = 0; v < 5; ++v) randomVersion(sut, rng, 2000);
   EXPECT_EQ(sut.store()->liveNodes(), sut.store()->entryCount());
   EXPECT_FALSE(sut.store()->versioned());
+}
+
+/// Cells of `map` in a block-aligned window of `blocks`^3 blocks at block offset `at`, each with
+/// a value from `rng`.
+void fillWindow(GridMap& map, std::mt19937& rng, int at, int blocks, int cells_per_block) {
+  std::uniform_int_distribution<int> cell(0, block::kEdge - 1);
+  std::uniform_real_distribution<float> value(-2.0F, 3.5F);
+  for (int bx = at; bx < at + blocks; ++bx) {
+    for (int by = 0; by < blocks; ++by) {
+      for (int bz = 0; bz < 2; ++bz) {
+        for (int c = 0; c < cells_per_block; ++c) {
+          map.setLogOdds({static_cast<std::uint16_t>(32000 + bx * block::kEdge + cell(rng)),
+                          static_cast<std::uint16_t>(32000 + by * block::kEdge + cell(rng)),
+                          static_cast<std::uint16_t>(32000 + bz * block::kEdge + cell(rng))},
+                         value(rng));
+        }
+      }
+    }
+  }
+}
+
+TEST(MapView, DroppedBlocksLeaveNewVersionsAndStayInHeldOnesThroughCompaction) {
+  // A window of blocks slides along x; blocks behind it are evicted. Views held for a while
+  // must keep exactly their version's cells while tombstones retire and entries compact.
+  GridMap sut(0.1, SensorModel{});
+  std::mt19937 rng(11);
+  std::vector<std::pair<std::shared_ptr<const MapView>, Cells>> held;
+  std::size_t evicted_blocks = 0;
+  for (int v = 0; v < 160; ++v) {
+    fillWindow(sut, rng, v, 24, 3);
+    if (v % 10 == 5) randomVersion(sut, rng, 200);  // cells that come back in old blocks
+    const float x_min = static_cast<float>(sut.grid().keyToPoint({32000, 0, 0}).x() +
+                                           (v - 4) * block::kEdge * 0.1);
+    const std::size_t known_before = sut.knownCells();
+    const EvictStats stats =
+        sut.evictBlocks([&](const Point3f& centre) { return centre.x() >= x_min; });
+    evicted_blocks += stats.blocks;
+    EXPECT_EQ(sut.knownCells(), known_before - stats.cells);
+    auto view = MapView::publish(sut);
+    const Cells now = snapshotOf(sut);
+    EXPECT_EQ(view->knownCells(), now.size());
+    if (v % 9 == 0) held.emplace_back(view, now);
+    if (held.size() > 4) {  // let the oldest go: its nodes and tombstones can be freed
+      EXPECT_EQ(snapshotOf(*held.front().first), held.front().second);
+      held.erase(held.begin());
+    }
+  }
+  for (const auto& [view, cells] : held) {
+    EXPECT_EQ(snapshotOf(*view), cells) << "version " << view->version();
+  }
+  EXPECT_GT(evicted_blocks, 8000U);
+  EXPECT_GE(sut.store()->compactions(), 1U) << "thousands of dropped entries were compacted";
+  held.clear();
+  for (int v = 0; v < 3; ++v) (void)MapView::publish(sut);
+  // No reader left: one node per block with contents, no more entries than ~2x those.
+  std::size_t with_contents = 0;
+  sut.store()->forEachEntry([&](const BlockEntry& e) {
+    with_contents += BlockStore::latest(e) != nullptr;
+  });
+  EXPECT_EQ(sut.store()->liveNodes(), with_contents);
+  EXPECT_LE(sut.store()->entryCount(), 2 * with_contents + 4096);
+}
+
+TEST(MapView, AWindowedDriveKeepsMemoryFlat) {
+  GridMap sut(0.1, SensorModel{});
+  sut.reserveBlocks(2048);
+  std::mt19937 rng(13);
+  std::vector<std::size_t> bytes;
+  std::shared_ptr<const MapView> reader;  // a reader that holds each version for a while
+  for (int v = 0; v < 400; ++v) {
+    fillWindow(sut, rng, v, 16, 2);
+    const float x_min = static_cast<float>(sut.grid().keyToPoint({32000, 0, 0}).x() +
+                                           (v - 2) * block::kEdge * 0.1);
+    (void)sut.evictBlocks([&](const Point3f& c) { return c.x() >= x_min; });
+    auto view = MapView::publish(sut);
+    if (v % 5 == 0) reader = view;
+    if (v >= 100) bytes.push_back(sut.memoryBytes());
+  }
+  const auto [lo, hi] = std::minmax_element(bytes.begin(), bytes.end());
+  std::printf("windowed drive: map memory %zu .. %zu bytes over versions 100-399, %zu entries\n",
+              *lo, *hi, sut.store()->entryCount());
+  EXPECT_LE(static_cast<double>(*hi), 1.10 * static_cast<double>(*lo))
+      << "memory " << *lo << " .. " << *hi << " bytes over 300 versions";
+}
+
+TEST(MapView, ClearingAVersionedMapReturnsItsMemory) {
+  GridMap sut(0.1, SensorModel{});
+  std::mt19937 rng(17);
+  fillWindow(sut, rng, 0, 60, 4);  // 7200 blocks, about 16 MB
+  auto view = MapView::publish(sut);
+  const Cells cells = snapshotOf(*view);
+  const std::size_t full = sut.memoryBytes();
+  sut.clear();
+  EXPECT_EQ(sut.knownCells(), 0U);
+  (void)MapView::publish(sut);
+  EXPECT_EQ(snapshotOf(*view), cells) << "a held version keeps its cells";
+  view.reset();
+  for (int v = 0; v < 3; ++v) (void)MapView::publish(sut);
+  EXPECT_EQ(sut.store()->liveNodes(), 0U);
+  EXPECT_LT(sut.memoryBytes(), full / 4) << full << " bytes before the reset";
+  // clear-bbox: blocks wholly inside the box are dropped, the rest erased cell by cell.
+  fillWindow(sut, rng, 0, 8, 4);
+  (void)MapView::publish(sut);
+  const std::size_t blocks = sut.store()->liveNodes();
+  const VoxelKey lo{32000, 32000, 32000};
+  const VoxelKey hi{32000 + 4 * block::kEdge - 1, 32000 + 8 * block::kEdge - 1,
+                    32000 + 2 * block::kEdge - 3};  // z: the upper blocks only in part
+  CellChanges changes;
+  const std::size_t erased = sut.clearBox(lo, hi, &changes);
+  EXPECT_EQ(changes.size(), erased);
+  for (const CellChange& c : changes) EXPECT_FALSE(sut.logOdds(c.key));
+  for (int v = 0; v < 3; ++v) (void)MapView::publish(sut);
+  EXPECT_LT(sut.store()->liveNodes(), blocks - 4 * 8 + 1) << "the lower blocks were dropped";
 }
 
 TEST(MapView, ConcurrentReadersAlwaysSeeWholeVersions) {

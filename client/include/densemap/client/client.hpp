@@ -27,7 +27,7 @@ struct ClientOptions {
   /// DDS Security files of this client's identity (scripts/make-pki.sh); none: plain DDS. With
   /// security, requests its permissions do not grant fail with a "not allowed" error. One
   /// identity per process and domain (Cyclone DDS): a Client with another is refused.
-  std::optional<dds::SecurityFiles> security;
+  std::optional<dds::SecurityFiles> security{};
 };
 
 struct PointQueryAnswer {

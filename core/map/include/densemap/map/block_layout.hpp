@@ -2,6 +2,7 @@
 
 #include <array>
 #include <bit>
+#include <cstddef>
 #include <cstdint>
 
 #include "densemap/geometry/voxel_key.hpp"
@@ -24,6 +25,12 @@ inline void clearBit(BlockMask& m, int index) {
 }
 [[nodiscard]] inline bool testBit(const BlockMask& m, int index) {
   return ((m[index >> 6] >> (index & 63)) & 1U) != 0;
+}
+
+[[nodiscard]] inline std::size_t countBits(const BlockMask& m) {
+  std::size_t n = 0;
+  for (const std::uint64_t w : m) n += static_cast<std::size_t>(std::popcount(w));
+  return n;
 }
 
 /// Calls f(index) for every set bit of `m`, in increasing index order.

@@ -11,20 +11,25 @@
 
 namespace densemap {
 
-/// The contents of one block as one map version wrote them. Nodes of the same block form a
-/// chain from newest to oldest, so a reader of an older version finds the contents it saw.
-struct BlockNode {
-  std::uint64_t version = 0;               // the map version that wrote these contents
-  std::atomic<BlockNode*> older{nullptr};  // the contents before; null once nobody reads them
+/// One link of a block's chain, newest to oldest: the block's contents as one map version
+/// wrote them (a BlockNode), or a tombstone saying the block was dropped at that version.
+struct ChainLink {
+  std::uint64_t version = 0;               // the map version that wrote this link
+  std::atomic<ChainLink*> older{nullptr};  // the link before; null once nobody reads it
+  bool dropped = false;                    // a tombstone: no contents from `version` on
+};
+
+/// The contents of one block as one map version wrote them.
+struct BlockNode : ChainLink {
   VoxelBlock voxels;
   block::BlockMask fully_free{};  // known cells at the lower clamping bound
 };
 
-/// A block's place in the store: its key and its newest contents.
+/// A block's place in the store: its key and its newest link.
 struct BlockEntry {
   explicit BlockEntry(std::uint64_t block_key) : key(block_key) {}
   const std::uint64_t key;
-  std::atomic<BlockNode*> head{nullptr};
+  std::atomic<ChainLink*> head{nullptr};
 };
 
 /// The blocks of a GridMap: ONE copy of the map, readable at every published version while the
@@ -41,10 +46,14 @@ struct BlockEntry {
 /// Until the first publish() the store is unversioned: every write goes in place (the offline
 /// tools and benchmarks pay nothing for versioning).
 ///
-/// Block entries are never removed (a cleared block keeps its entry and an empty node). The
-/// hash table is open addressing, insert-only: readers probe it without locks while the writer
-/// inserts; a grown table replaces the old one, which is kept until the store dies (at most as
-/// large as the current one).
+/// drop() removes a block from the version being written (eviction, reset, a cleared block):
+/// a tombstone link goes on the chain so readers of older versions still find the contents;
+/// the contents return to the pool when those readers are gone, and the tombstone a little
+/// later. The hash table is open addressing, insert-only: readers probe it without locks while
+/// the writer inserts; a grown table replaces the old one. When many entries have no contents
+/// left, the writer rebuilds entries and table without them (compaction); the old ones live on
+/// with the pin of the last published version, for the readers that may still probe them.
+/// Slabs of the node pool that are wholly free beyond the reserve go back to the OS (trim).
 ///
 /// Thread-safety: writer methods from one thread at a time (`writable` may run in parallel
 /// tasks on distinct entries); reader methods (`find`, `forEachEntry`, `nodeAt`) from any thread
@@ -63,6 +72,14 @@ class BlockStore {
   BlockEntry& entry(std::uint64_t block_key);
   /// The latest contents of a block (the writer's view), or null.
   [[nodiscard]] const BlockNode* latest(std::uint64_t block_key) const;
+  /// The latest contents of an entry (writer), or null when it has none (never written, or
+  /// dropped).
+  [[nodiscard]] static const BlockNode* latest(const BlockEntry& entry) {
+    return contents(entry.head.load(std::memory_order_relaxed));
+  }
+  /// Removes the block's contents from the version being written (readers of older versions
+  /// keep them). Returns whether it had any.
+  bool drop(BlockEntry& entry);
   /// The node that writes of the current version go to: the head itself when this version
   /// already wrote it (or the store is unversioned), else a copy of the head (or an empty node)
   /// that becomes the new head. Safe from parallel tasks for distinct entries.
@@ -82,6 +99,8 @@ class BlockStore {
   void startAt(std::uint64_t version);
   /// Drops every block (only while unversioned, i.e. before the first publish).
   void clearUnversioned();
+  /// Returns wholly free slabs of the node pool beyond the reserve to the OS; the bytes freed.
+  std::size_t trim();
   /// Calls f(entry) for every entry (writer: its own insertion order).
   template <typename F>
   void forEachEntryWriter(F&& f) const {
@@ -98,6 +117,10 @@ class BlockStore {
   /// The contents of `block_key` at `version`, or null when the block had none then.
   [[nodiscard]] const BlockNode* find(std::uint64_t block_key, std::uint64_t version) const;
   [[nodiscard]] static const BlockNode* nodeAt(const BlockEntry& entry, std::uint64_t version);
+  /// A link's contents: null for a tombstone or no link.
+  [[nodiscard]] static const BlockNode* contents(const ChainLink* link) {
+    return link != nullptr && !link->dropped ? static_cast<const BlockNode*>(link) : nullptr;
+  }
   /// Calls f(entry) for every entry of the table (entries created after `version` have no node
   /// at it: nodeAt returns null).
   template <typename F>
@@ -112,6 +135,8 @@ class BlockStore {
   [[nodiscard]] std::size_t entryCount() const { return entries_.size(); }
   /// Nodes in use (heads + those kept for readers) and bytes held by nodes, pool and table.
   [[nodiscard]] std::size_t liveNodes() const { return live_nodes_.load(); }
+  /// Entries compacted away and slabs trimmed so far (for tests and status).
+  [[nodiscard]] std::size_t compactions() const { return compactions_; }
   [[nodiscard]] std::size_t memoryBytes() const;
 
  private:
@@ -121,13 +146,28 @@ class BlockStore {
     std::size_t mask;
     std::unique_ptr<std::atomic<BlockEntry*>[]> slots;
   };
+  /// A slab of nodes mapped from the OS (so a trimmed slab's pages really go back).
+  struct Slab {
+    explicit Slab(std::size_t nodes);
+    ~Slab();
+    Slab(const Slab&) = delete;
+    Slab& operator=(const Slab&) = delete;
+    BlockNode* nodes = nullptr;
+    std::size_t count = 0;
+  };
   struct Pin;
+  struct Garbage;
   friend struct Pin;
   [[nodiscard]] static std::size_t slotOf(const Table& t, std::uint64_t key);
+  [[nodiscard]] BlockEntry* lookup(std::uint64_t block_key) const;
   void grow();
   BlockNode* allocate();  // pool_mutex_ held
+  ChainLink* allocateTomb();  // pool_mutex_ held
+  void recycle(ChainLink* link);  // pool_mutex_ held
   void addSlab();         // pool_mutex_ held
-  void release(const std::vector<std::pair<BlockNode*, BlockNode*>>& superseded);
+  void release(const std::vector<std::pair<ChainLink*, ChainLink*>>& superseded);
+  void retireTombstones();  // writer, in publish()
+  void compactIfWorthIt();  // writer, in publish()
 
   std::uint64_t writing_ = 0;
   bool versioned_ = false;
@@ -136,12 +176,19 @@ class BlockStore {
   std::vector<std::unique_ptr<Table>> tables_;  // the current one last
 
   mutable std::mutex pool_mutex_;
-  std::vector<std::unique_ptr<BlockNode[]>> slabs_;
+  std::vector<std::unique_ptr<Slab>> slabs_;
   std::vector<BlockNode*> free_;
+  std::deque<ChainLink> tombs_;            // tombstone storage
+  std::vector<ChainLink*> free_tombs_;
   std::atomic<std::size_t> live_nodes_{0};
-  // Of the version being written: (old, new) node pairs and the blocks written.
-  std::vector<std::pair<BlockNode*, BlockNode*>> superseded_;
+  std::size_t reserve_nodes_ = 0;
+  std::size_t trim_threshold_ = 0;  // trim when more nodes than this are free
+  // Of the version being written: (old, new) link pairs and the blocks written.
+  std::vector<std::pair<ChainLink*, ChainLink*>> superseded_;
   std::vector<std::uint64_t> written_;
+  std::vector<std::uint64_t> pending_tombs_;  // dropped blocks whose tombstone is still needed
+  std::size_t retired_since_compaction_ = 0;
+  std::size_t compactions_ = 0;
   std::shared_ptr<Pin> current_pin_;  // the last published version's pin
 };
 

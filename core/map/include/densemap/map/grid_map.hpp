@@ -1,5 +1,6 @@
 #pragma once
 
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -14,6 +15,11 @@ namespace densemap {
 /// owned by one task, so the result is the same for any number of threads.
 /// Thread-safety: single writer (OccupancyMap); `publishVersion` hands readers a version they
 /// read through `store()` from any thread.
+struct EvictStats {
+  std::size_t blocks = 0;
+  std::size_t cells = 0;
+};
+
 class GridMap final : public OccupancyMap {
  public:
   GridMap(double resolution_m, const SensorModel& model)
@@ -32,6 +38,12 @@ class GridMap final : public OccupancyMap {
   [[nodiscard]] std::size_t memoryBytes() const override { return store_->memoryBytes(); }
   void clear() override;
 
+  /// Drops every block whose centre `keep` rejects (a bounded window or box around the robot):
+  /// their cells become unknown (appended to `changes` as erased) and their memory returns to
+  /// the pool once no reader holds an older version.
+  EvictStats evictBlocks(const std::function<bool(const Point3f&)>& keep,
+                         CellChanges* changes = nullptr);
+
   /// Forgets one cell (a no-op for an unknown cell).
   void erase(const VoxelKey& key);
   /// Applies a change list (values set, erased cells forgotten): how a mirror follows a map.
@@ -49,6 +61,8 @@ class GridMap final : public OccupancyMap {
 
  private:
   void store(BlockNode& node, int index, float log_odds) const;
+  /// Drops a block (BlockStore::drop); returns its known cells. known_cells_ is the caller's.
+  std::size_t dropBlock(BlockEntry& entry, CellChanges* changes);
 
   std::shared_ptr<BlockStore> store_;
   std::size_t known_cells_ = 0;
