@@ -337,6 +337,8 @@ Expected<ServerStatus> Client::status() {
       out.memory_bytes = s.memory_bytes;
       out.uptime_s = s.uptime_s;
       out.rss_bytes = s.rss_bytes;
+      out.evicted_blocks = s.evicted_blocks;
+      out.evicted_cells = s.evicted_cells;
       out.cpu_s = s.cpu_s;
       out.ros_enabled = s.ros_enabled;
       out.ros_received = s.ros_received;

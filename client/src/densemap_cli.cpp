@@ -294,6 +294,13 @@ void printStatus(const ServerStatus& s) {
         static_cast<unsigned long long>(c.integrated), static_cast<unsigned long long>(c.dropped),
         static_cast<unsigned long long>(c.rejected), static_cast<unsigned long long>(c.seq_gaps));
   }
+  std::printf("  memory: process RSS %.1f MiB", s.rss_bytes / 1048576.0);
+  if (s.evicted_blocks > 0) {
+    std::printf("; evicted %llu blocks (%llu cells) outside map.keep_radius_m / map.bounds",
+                static_cast<unsigned long long>(s.evicted_blocks),
+                static_cast<unsigned long long>(s.evicted_cells));
+  }
+  std::printf("\n");
   if (s.ros_enabled) {
     std::printf(
         "  ros2: clouds received %llu, submitted %llu, malformed %llu%s%s, no transform %llu; "

@@ -573,6 +573,8 @@ void MapService::publishStatus() {
   s.uptime_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count();
   const ProcessUsage usage = processUsage();
   s.rss_bytes = usage.rss_bytes;
+  s.evicted_blocks = c.evicted_blocks;
+  s.evicted_cells = c.evicted_cells;
   s.cpu_s = usage.cpu_s;
   s.queries_answered = queries_answered_.load();
   s.queries_rejected = queries_rejected_.load();

@@ -38,6 +38,26 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
     o.kernel = *kernel;
   }
   o.resolution_m = config.map().resolution_m();
+  const double keep = config.map().keep_radius_m();
+  if (!std::isfinite(keep) || keep < 0) return makeError("map.keep_radius_m must be >= 0");
+  o.keep_radius_m = keep;
+  if (config.map().has_bounds()) {
+    const proto::Box& b = config.map().bounds();
+    const Point3f lo(static_cast<float>(b.min_x()), static_cast<float>(b.min_y()),
+                     static_cast<float>(b.min_z()));
+    const Point3f hi(static_cast<float>(b.max_x()), static_cast<float>(b.max_y()),
+                     static_cast<float>(b.max_z()));
+    if (!lo.allFinite() || !hi.allFinite() || (lo.array() >= hi.array()).any()) {
+      return makeError("map.bounds needs finite min_x < max_x, min_y < max_y, min_z < max_z");
+    }
+    o.bounds = std::make_pair(lo, hi);
+  }
+  if ((o.keep_radius_m > 0 || o.bounds) &&
+      (config.map().backend() != "grid" || config.map().kind() != "log_odds")) {
+    return makeError(
+        "map.keep_radius_m and map.bounds (eviction) need backend \"grid\" and kind "
+        "\"log_odds\"");
+  }
   if (!(o.resolution_m >= 0.001 && o.resolution_m <= 100.0)) {
     return makeError("map.resolution_m must be in [0.001, 100], got " +
                      std::to_string(o.resolution_m));

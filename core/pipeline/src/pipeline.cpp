@@ -62,6 +62,7 @@ struct Pipeline::Graph {
                                                             job->result.changes)
                                         : p.integrator_.integrate(*p.map_, job->points_world,
                                                                   job->origin_world, changes);
+                      p.evict(job->origin_world, job->result, changes);
                     }
                     return job;
                   }),
@@ -99,6 +100,11 @@ Expected<std::unique_ptr<Pipeline>> Pipeline::create(const PipelineOptions& opti
   }
   if (options.upsample) {
     if (auto ok = options.upsample->validate(); !ok) return std::unexpected(ok.error());
+  }
+  if ((options.keep_radius_m > 0 || options.bounds) &&
+      (options.backend != Backend::kGrid || options.kernel)) {
+    return makeError(
+        "keep_radius_m and bounds (eviction) need the grid backend and the log_odds map kind");
   }
   if (!initial) {
     auto map = makeMap(options.backend, options.resolution_m, SensorModel(options.sensor));
@@ -227,6 +233,8 @@ void Pipeline::publish(IntegrationResult& result) {
   if (result.from_scan) {
     std::lock_guard lock(counters_mutex_);
     ++counters_.integrated;
+    counters_.evicted_blocks += result.evicted_blocks;
+    counters_.evicted_cells += result.evicted_cells;
     sensors_.integrated(result.sensor_id);
     if (latencies_.size() < 1024) {
       latencies_.push_back(result.latency_ms);
@@ -236,6 +244,27 @@ void Pipeline::publish(IntegrationResult& result) {
     }
   }
   if (publisher_) publisher_(result, next);
+}
+
+void Pipeline::evict(const Point3f& origin, IntegrationResult& result, CellChanges* changes) {
+  if (options_.keep_radius_m <= 0 && !options_.bounds) return;
+  auto* grid = dynamic_cast<GridMap*>(map_.get());
+  if (grid == nullptr || kernel_map_) return;  // refused at creation
+  const double r2 = options_.keep_radius_m * options_.keep_radius_m;
+  const EvictStats stats = grid->evictBlocks(
+      [&](const Point3f& centre) {
+        if (options_.keep_radius_m > 0 && (centre - origin).cast<double>().squaredNorm() > r2) {
+          return false;
+        }
+        if (const auto& box = options_.bounds) {
+          return (centre.array() >= box->first.array()).all() &&
+                 (centre.array() <= box->second.array()).all();
+        }
+        return true;
+      },
+      changes);
+  result.evicted_blocks = stats.blocks;
+  result.evicted_cells = stats.cells;
 }
 
 void Pipeline::warmUp() {

@@ -110,6 +110,32 @@ TEST(ServerConfig, SecurityBlockNeedsAllSixReadableFilesAndAllowsRemoteInterface
   }
 }
 
+TEST(ServerConfig, EvictionNeedsTheGridLogOddsMapAndAValidBox) {
+  const test::TempDir dir;
+  auto ok = loadServerConfig(writeConfig(
+      dir, "map { keep_radius_m: 40 bounds { min_x: -100 min_y: -100 min_z: -5 max_x: 100 "
+           "max_y: 100 max_z: 20 } }\n"));
+  ASSERT_TRUE(ok) << ok.error().message;
+  auto options = pipelineOptions(*ok);
+  ASSERT_TRUE(options);
+  EXPECT_EQ(options->keep_radius_m, 40.0);
+  ASSERT_TRUE(options->bounds);
+  EXPECT_EQ(options->bounds->first, Point3f(-100, -100, -5));
+  EXPECT_EQ(options->bounds->second, Point3f(100, 100, 20));
+  EXPECT_FALSE(pipelineOptions(proto::ServerConfig{})->bounds) << "no box unless configured";
+  for (const auto& [text, reason] : std::vector<std::pair<std::string, std::string>>{
+           {"map { keep_radius_m: -1 }", "keep_radius_m must be >= 0"},
+           {"map { keep_radius_m: 40 backend: \"octree\" }", "need backend \"grid\""},
+           {"map { keep_radius_m: 40 kind: \"akimap\" }", "kind \"log_odds\""},
+           {"map { bounds { min_x: 1 max_x: 1 max_y: 1 max_z: 1 } }", "map.bounds needs"},
+       }) {
+    auto refused = loadServerConfig(writeConfig(dir, text + "\n"));
+    ASSERT_FALSE(refused) << text;
+    EXPECT_NE(refused.error().message.find(reason), std::string::npos)
+        << refused.error().message;
+  }
+}
+
 TEST(DdsConfig, LoopbackStaysOnLoopbackOtherInterfacesDiscoverByMulticast) {
   for (const char* lo : {"lo", "127.0.0.1", "localhost", "::1"}) {
     EXPECT_TRUE(dds::isLoopbackInterface(lo)) << lo;
