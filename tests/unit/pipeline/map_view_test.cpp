@@ -287,6 +287,49 @@ TEST(MapView, ConcurrentReadersAlwaysSeeWholeVersions) {
   EXPECT_EQ(map.store()->liveNodes(), map.store()->entryCount());
 }
 
+TEST(MapView, ConcurrentReadersSeeWholeVersionsWhileBlocksAreEvictedAndEntriesCompacted) {
+  GridMap map(0.1, SensorModel{});
+  std::mutex sums_mutex;
+  std::unordered_map<std::uint64_t, std::uint64_t> sums;  // version -> checksum
+  std::atomic<std::shared_ptr<const MapView>> latest;
+  auto publish = [&] {
+    const std::uint64_t sum = checksum([&](const auto& f) { map.forEachKnown(f); });
+    {
+      std::lock_guard lock(sums_mutex);
+      sums[map.store()->writingVersion()] = sum;
+    }
+    latest.store(MapView::publish(map));
+  };
+  publish();
+  std::atomic<bool> done{false};
+  std::atomic<std::size_t> checked{0}, wrong{0};
+  std::vector<std::thread> readers;
+  for (int r = 0; r < 3; ++r) {
+    readers.emplace_back([&] {
+      while (!done.load()) {
+        const auto view = latest.load();
+        const std::uint64_t sum = checksum([&](const auto& f) { view->forEachKnown(f); });
+        std::lock_guard lock(sums_mutex);
+        wrong += sums.at(view->version()) != sum;
+        ++checked;
+      }
+    });
+  }
+  std::mt19937 rng(23);
+  for (int v = 0; v < 400; ++v) {
+    fillWindow(map, rng, v, 16, 2);
+    const float x_min = static_cast<float>(map.grid().keyToPoint({32000, 0, 0}).x() +
+                                           (v - 2) * block::kEdge * 0.1);
+    (void)map.evictBlocks([&](const Point3f& c) { return c.x() >= x_min; });
+    publish();
+  }
+  done = true;
+  for (auto& t : readers) t.join();
+  EXPECT_GT(checked.load(), 0U);
+  EXPECT_EQ(wrong.load(), 0U);
+  EXPECT_GE(map.store()->compactions(), 1U);
+}
+
 TEST(MapView, DiffOfTwoVersionsOverTheirWrittenBlocksTurnsOneIntoTheOther) {
   GridMap map(0.1, SensorModel{});
   std::mt19937 rng(13);
