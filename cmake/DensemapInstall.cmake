@@ -80,3 +80,6 @@ install(FILES ${PROJECT_SOURCE_DIR}/models/iln.pb DESTINATION share/densemap/mod
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/config/load ${PROJECT_SOURCE_DIR}/config/sensors
         DESTINATION share/densemap/config COMPONENT server)
 install(DIRECTORY DESTINATION ${DENSEMAP_STATE_DIR} COMPONENT server)
+# The DDS Security PKI maker (README "DDS Security: who may do what").
+install(PROGRAMS ${PROJECT_SOURCE_DIR}/scripts/make-pki.sh DESTINATION bin
+        RENAME densemap-make-pki COMPONENT server)

@@ -36,7 +36,7 @@ server_deb=$(ls "$BUILD_DIR"/packages/densemap-server_*.deb)
 dev_deb=$(ls "$BUILD_DIR"/packages/libdensemap-dev_*.deb)
 dpkg-deb -c "$server_deb" | awk '{print $6}' >"$work/server.txt"
 dpkg-deb -c "$dev_deb" | awk '{print $6}' >"$work/dev.txt"
-for f in ./usr/bin/densemap-server ./usr/bin/densemap ./usr/bin/densemap-map \
+for f in ./usr/bin/densemap-server ./usr/bin/densemap ./usr/bin/densemap-map ./usr/bin/densemap-make-pki \
   ./etc/densemap/densemap.textproto ./lib/systemd/system/densemap-server.service \
   ./var/lib/densemap/ ./usr/share/densemap/models/iln.pb \
   ./usr/share/doc/densemap-server/copyright ./usr/share/doc/densemap-server/changelog.Debian.gz; do

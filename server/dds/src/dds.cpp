@@ -88,28 +88,35 @@ void stopCycloneBeforeOpenSslAtExit() {
 /// Cyclone 0.10's access control plugin keeps one set of local permissions per domain in a
 /// process (ACCESS_CONTROL_USE_ONE_PERMISSION): a second identity there would be checked
 /// locally against the first's grants (and refused by its peers against its own), and a
-/// participant without security fails to validate. Both are refused here instead, clearly.
-Expected<void> claimIdentity(std::uint32_t domain_id, const std::optional<SecurityFiles>& files) {
-  static std::mutex mutex;
-  static std::map<std::uint32_t, std::string> identities;  // domain -> identity certificate
-  const std::lock_guard lock(mutex);
+/// participant without security fails to validate. Both are refused here instead, clearly
+/// (for the process's life: the domain and its plugins stay loaded).
+std::mutex identities_mutex;
+std::map<std::uint32_t, std::string> identities;  // domain -> identity certificate
+
+std::string identityOf(const SecurityFiles& files) {
+  return std::filesystem::absolute(files.identity_certificate).string();
+}
+
+/// Whether a participant with `files` (none: plain) may join `domain_id` in this process.
+Expected<void> checkIdentity(std::uint32_t domain_id, const std::optional<SecurityFiles>& files) {
+  const std::lock_guard lock(identities_mutex);
   const auto it = identities.find(domain_id);
+  if (it == identities.end()) return {};
   if (!files) {
-    if (it == identities.end()) return {};
-    return makeError("DDS domain " + std::to_string(domain_id) +
-                     " has DDS Security identity " + it->second +
+    return makeError("DDS domain " + std::to_string(domain_id) + " has DDS Security identity " +
+                     it->second +
                      " in this process; Cyclone DDS cannot add a participant without security "
                      "to it (use another process)");
   }
-  const std::string identity = std::filesystem::absolute(files->identity_certificate).string();
-  if (it == identities.end()) {
-    identities.emplace(domain_id, identity);
-    return {};
-  }
-  if (it->second == identity) return {};
+  if (it->second == identityOf(*files)) return {};
   return makeError("DDS domain " + std::to_string(domain_id) + " already has DDS Security identity " +
                    it->second + " in this process; Cyclone DDS allows one identity per domain " +
-                   "and process (use another process for " + identity + ")");
+                   "and process (use another process for " + identityOf(*files) + ")");
+}
+
+void recordIdentity(std::uint32_t domain_id, const SecurityFiles& files) {
+  const std::lock_guard lock(identities_mutex);
+  identities.emplace(domain_id, identityOf(files));
 }
 
 }  // namespace
@@ -124,12 +131,14 @@ Expected<Entity> createParticipant(const ParticipantOptions& options) {
       return makeError(std::string("dds_create_domain failed: ") + dds_strretcode(domain));
     }
   }
-  if (auto ok = claimIdentity(options.domain_id, options.security); !ok) {
+  if (options.security) {
+    if (auto ok = checkSecurityFiles(*options.security); !ok) return std::unexpected(ok.error());
+  }
+  if (auto ok = checkIdentity(options.domain_id, options.security); !ok) {
     return std::unexpected(ok.error());
   }
   dds_qos_t* qos = nullptr;
   if (options.security) {
-    if (auto ok = checkSecurityFiles(*options.security); !ok) return std::unexpected(ok.error());
     qos = dds_create_qos();
     setSecurityProperties(qos, *options.security);
   }
@@ -145,7 +154,10 @@ Expected<Entity> createParticipant(const ParticipantOptions& options) {
   }
   auto e = checkEntity(p, "dds_create_participant");
   if (!e) return std::unexpected(e.error());
-  if (options.security) stopCycloneBeforeOpenSslAtExit();
+  if (options.security) {
+    recordIdentity(options.domain_id, *options.security);
+    stopCycloneBeforeOpenSslAtExit();
+  }
   return Entity(*e);
 }
 
