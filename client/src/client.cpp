@@ -129,8 +129,7 @@ Expected<void> Client::waitForServer() {
       return makeError("no densemap-server found on DDS domain " +
                        std::to_string(options_.domain_id) + " (interface " +
                        options_.network_interface + ") within " +
-                       std::to_string(options_.timeout.count()) + " ms (unmatched: " + list +
-                       ")");
+                       std::to_string(options_.timeout.count()) + " ms (unmatched: " + list + ")");
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
@@ -152,7 +151,8 @@ Expected<void> Client::publishScan(const RawScan& scan) {
   auto& intensity = const_cast<std::vector<float>&>(scan.intensity);
   msg.points = dds::borrowSequence<dds_sequence_float>(xyz);
   msg.intensity = dds::borrowSequence<dds_sequence_float>(intensity);
-  if (auto ok = permitted(dds_->scan_w, "publishing scans"); !ok) return std::unexpected(ok.error());
+  if (auto ok = permitted(dds_->scan_w, "publishing scans"); !ok)
+    return std::unexpected(ok.error());
   return dds::write(dds_->scan_w, &msg);
 }
 

@@ -31,9 +31,8 @@ int fail(const std::string& message) {
 
 /// --pki DIR --role R fills the six files; an explicit file flag replaces its one. Without any
 /// of them: no DDS Security.
-Expected<std::optional<dds::SecurityFiles>> securityOptions(const std::string& pki_dir,
-                                                            const std::string& role,
-                                                            const dds::SecurityFiles& explicit_files) {
+Expected<std::optional<dds::SecurityFiles>> securityOptions(
+    const std::string& pki_dir, const std::string& role, const dds::SecurityFiles& explicit_files) {
   if (!pki_dir.empty() && role.empty()) return makeError("--pki needs --role");
   if (pki_dir.empty() && !role.empty()) return makeError("--role needs --pki");
   dds::SecurityFiles files =
@@ -99,8 +98,8 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
                                  .count();
     }
     if (rate > 0) frames.period_ns = static_cast<std::int64_t>(1e9 / rate);
-    auto p = RosReplayPublisher::create({o.domain_id, o.network_interface, o.security}, ros->topic, frames,
-                                        ros->reliable);
+    auto p = RosReplayPublisher::create({o.domain_id, o.network_interface, o.security}, ros->topic,
+                                        frames, ros->reliable);
     if (!p) return fail(p.error().message);
     if (auto ok = (*p)->waitForReader(static_cast<int>(o.timeout.count())); !ok) {
       return fail(ok.error().message);
@@ -307,8 +306,9 @@ void printStatus(const ServerStatus& s) {
         "map topics published %llu times\n",
         static_cast<unsigned long long>(s.ros_received),
         static_cast<unsigned long long>(s.ros_submitted),
-        static_cast<unsigned long long>(s.ros_rejected), s.ros_last_reject.empty() ? "" : ", last: ",
-        s.ros_last_reject.c_str(), static_cast<unsigned long long>(s.ros_no_transform),
+        static_cast<unsigned long long>(s.ros_rejected),
+        s.ros_last_reject.empty() ? "" : ", last: ", s.ros_last_reject.c_str(),
+        static_cast<unsigned long long>(s.ros_no_transform),
         static_cast<unsigned long long>(s.ros_maps_published));
   }
 }

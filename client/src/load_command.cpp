@@ -31,8 +31,8 @@ LoadCommand::LoadCommand(CLI::App& app) {
   command_->add_option("--out", out_dir_,
                        "Directory for report.md, load.json and load.png (ramp: ramp.json, "
                        "ramp.png); default WORK_DIR/NAME");
-  command_->add_option("--work-dir", work_dir_,
-                       "Simulated datasets and scratch files")->capture_default_str();
+  command_->add_option("--work-dir", work_dir_, "Simulated datasets and scratch files")
+      ->capture_default_str();
   command_->add_option("--duration", duration_s_, "Override the scenario's duration_s (s)")
       ->check(CLI::Range(1.0, load::kMaxDurationS));
   command_->add_flag("--ramp", ramp_,
@@ -54,8 +54,9 @@ int LoadCommand::run(const ClientOptions& options, bool interface_given) {
   // otherwise); a CYCLONEDDS_URI could point them anywhere, so it must be chosen explicitly.
   const char* uri = std::getenv("CYCLONEDDS_URI");
   if (uri != nullptr && *uri != '\0' && !interface_given) {
-    return fail("CYCLONEDDS_URI is set; the load tool uses loopback only unless --interface is "
-                "given explicitly (unset CYCLONEDDS_URI, or pass --interface)");
+    return fail(
+        "CYCLONEDDS_URI is set; the load tool uses loopback only unless --interface is "
+        "given explicitly (unset CYCLONEDDS_URI, or pass --interface)");
   }
   auto scenario = load::loadScenario(scenario_file_);
   if (!scenario) return fail(scenario.error().message);
@@ -67,16 +68,18 @@ int LoadCommand::run(const ClientOptions& options, bool interface_given) {
   run.processes = processes_;
   std::error_code ec;
   run.self_exe = std::filesystem::read_symlink("/proc/self/exe", ec);
-  run.child_args = {"--domain-id", std::to_string(options.domain_id), "--interface",
-                    options.network_interface, "--timeout-ms",
-                    std::to_string(options.timeout.count()), "load", "--scenario",
-                    scenario_file_, "--work-dir", work_dir_};
+  run.child_args = {"--domain-id",  std::to_string(options.domain_id),
+                    "--interface",  options.network_interface,
+                    "--timeout-ms", std::to_string(options.timeout.count()),
+                    "load",         "--scenario",
+                    scenario_file_, "--work-dir",
+                    work_dir_};
   if (const auto& s = options.security) {
-    run.child_args.insert(run.child_args.begin(),
-                          {"--identity-ca", s->identity_ca, "--identity-certificate",
-                           s->identity_certificate, "--private-key", s->private_key,
-                           "--permissions-ca", s->permissions_ca, "--governance", s->governance,
-                           "--permissions", s->permissions});
+    run.child_args.insert(
+        run.child_args.begin(),
+        {"--identity-ca", s->identity_ca, "--identity-certificate", s->identity_certificate,
+         "--private-key", s->private_key, "--permissions-ca", s->permissions_ca, "--governance",
+         s->governance, "--permissions", s->permissions});
   }
   if (duration_s_ > 0) {
     run.child_args.insert(run.child_args.end(), {"--duration", std::to_string(duration_s_)});
@@ -91,9 +94,9 @@ int LoadCommand::run(const ClientOptions& options, bool interface_given) {
                                 child_tracks_, child_out_, run);
   }
 
-  const std::filesystem::path out =
-      out_dir_.empty() ? std::filesystem::path(work_dir_) / scenario->name
-                       : std::filesystem::path(out_dir_);
+  const std::filesystem::path out = out_dir_.empty()
+                                        ? std::filesystem::path(work_dir_) / scenario->name
+                                        : std::filesystem::path(out_dir_);
   std::filesystem::create_directories(out, ec);
   if (ec) return fail("cannot create " + out.string() + ": " + ec.message());
   if (auto ok = load::prepareData(*scenario, work_dir_); !ok) return fail(ok.error().message);

@@ -70,8 +70,8 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
                                                          const ServiceOptions& options) {
   std::unique_ptr<MapService> service(new MapService(pipeline, options));
   auto& d = *service->dds_;
-  auto participant = dds::createParticipant(
-      {options.domain_id, options.network_interface, options.security});
+  auto participant =
+      dds::createParticipant({options.domain_id, options.network_interface, options.security});
   if (!participant) return std::unexpected(participant.error());
   d.participant = std::move(*participant);
   Expected<void> status;
@@ -477,9 +477,9 @@ void MapService::answerCommands() {
         if (req.kind == 3) {
           runTask([this, id = req.id] { replyCommand(id, sendMap(id)); });
         } else {
-          replyCommand(req.id, makeError("densemap/map/request takes send-map only; command " +
-                                         std::to_string(req.kind) +
-                                         " goes to densemap/cmd/request"));
+          replyCommand(req.id,
+                       makeError("densemap/map/request takes send-map only; command " +
+                                 std::to_string(req.kind) + " goes to densemap/cmd/request"));
         }
       });
   dds::takeAll<densemap_msgs_CommandRequest>(

@@ -41,8 +41,8 @@ std::vector<Sample> drive(Client& client, const std::vector<RawScan>& raws, std:
            std::chrono::steady_clock::now() < deadline;) {
         auto s = client.status();
         if (s && s->integrated >= raw.seq) {
-          samples.push_back({raw.seq, s->rss_bytes, s->memory_bytes, s->known_cells,
-                             s->evicted_blocks});
+          samples.push_back(
+              {raw.seq, s->rss_bytes, s->memory_bytes, s->known_cells, s->evicted_blocks});
           break;
         }
         std::this_thread::sleep_for(50ms);

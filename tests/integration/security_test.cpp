@@ -109,7 +109,8 @@ ServerStatus settledStatus(Client& c) {
   auto a = c.status();
   EXPECT_TRUE(a) << a.error().message;
   auto stable_since = std::chrono::steady_clock::now();
-  for (const auto deadline = stable_since + 20s; a && std::chrono::steady_clock::now() < deadline;) {
+  for (const auto deadline = stable_since + 20s;
+       a && std::chrono::steady_clock::now() < deadline;) {
     std::this_thread::sleep_for(100ms);
     auto b = c.status();
     EXPECT_TRUE(b);
@@ -123,8 +124,7 @@ ServerStatus settledStatus(Client& c) {
   return a ? *a : ServerStatus{};
 }
 
-[[maybe_unused]] ::testing::Environment* const kPki =
-    ::testing::AddGlobalTestEnvironment(new Pki);
+[[maybe_unused]] ::testing::Environment* const kPki = ::testing::AddGlobalTestEnvironment(new Pki);
 
 class Security : public ::testing::Test {
  protected:
@@ -195,9 +195,9 @@ TEST_F(Security, RobotScansIntegratedStrangersMatchNothingAndChangeNothing) {
   EXPECT_EQ(after.map_version, before.map_version);
   EXPECT_EQ(after.known_cells, before.known_cells);
   // One identity per process and domain: a second is refused clearly.
-  auto second = Client::create(
-      {.domain_id = kDomain,
-       .security = dds::SecurityFiles::fromPkiDir(Pki::dir().string(), "viewer")});
+  auto second =
+      Client::create({.domain_id = kDomain,
+                      .security = dds::SecurityFiles::fromPkiDir(Pki::dir().string(), "viewer")});
   ASSERT_FALSE(second);
   EXPECT_NE(second.error().message.find("one identity per domain"), std::string::npos)
       << second.error().message;
@@ -297,13 +297,12 @@ class Capture {
     const std::string out = file.string();
     // --immediate-mode: each packet is handed over at once, none is left in the kernel's ring
     // buffer when it stops; -U: each is written at once.
-    const char* argv[] = {"tcpdump", "-i",           "lo",        "--immediate-mode", "-U", "-s",
-                          "0",       "-w",           out.c_str(), "udp",              nullptr};
+    const char* argv[] = {"tcpdump",   "-i",  "lo",   "--immediate-mode", "-U", "-s", "0", "-w",
+                          out.c_str(), "udp", nullptr};
     posix_spawn_file_actions_t actions;
     posix_spawn_file_actions_init(&actions);
     posix_spawn_file_actions_addopen(&actions, 2, "/dev/null", O_WRONLY, 0);
-    ok_ = posix_spawnp(&pid_, "tcpdump", &actions, nullptr, const_cast<char**>(argv), environ) ==
-          0;
+    ok_ = posix_spawnp(&pid_, "tcpdump", &actions, nullptr, const_cast<char**>(argv), environ) == 0;
     posix_spawn_file_actions_destroy(&actions);
     // tcpdump writes the pcap header once it captures; it exits at once without permission.
     for (const auto deadline = std::chrono::steady_clock::now() + 10s;
@@ -383,4 +382,3 @@ TEST_F(Security, LoopbackCaptureHoldsNoPlaintextScan) {
 
 }  // namespace
 }  // namespace densemap
-

@@ -148,8 +148,9 @@ std::size_t GridMap::dropBlock(BlockEntry& e, CellChanges* changes) {
   if (head == nullptr) return 0;
   const std::size_t cells = block::countBits(head->voxels.known);
   if (changes != nullptr) {
-    block::forEachSetBit(head->voxels.known,
-                         [&](int i) { changes->push_back({block::keyOf(e.key, i), 0.0F, false}); });
+    block::forEachSetBit(head->voxels.known, [&](int i) {
+      changes->push_back({block::keyOf(e.key, i), 0.0F, false});
+    });
   }
   (void)store_->drop(e);
   return cells;
@@ -163,8 +164,8 @@ EvictStats GridMap::evictBlocks(const std::function<bool(const Point3f&)>& keep,
     if (BlockStore::latest(e) == nullptr) return;
     const VoxelKey corner = block::keyOf(e.key, 0);
     // The block's centre: its corner cell's centre plus half a block less half a cell.
-    const Point3f centre = grid().keyToPoint(corner) + Point3f::Constant(static_cast<float>(
-                                                    (half - 0.5) * resolution()));
+    const Point3f centre = grid().keyToPoint(corner) +
+                           Point3f::Constant(static_cast<float>((half - 0.5) * resolution()));
     if (keep(centre)) return;
     const std::size_t cells = dropBlock(e, changes);
     known_cells_ -= cells;

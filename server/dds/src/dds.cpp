@@ -33,9 +33,7 @@ bool isNotAllowedBySecurity(const Error& error) {
 
 std::string domainConfig(const std::string& interface_name) {
   const std::string discovery =
-      isLoopbackInterface(interface_name)
-          ? "<Peers><Peer Address=\"127.0.0.1\"/></Peers>"
-          : "";
+      isLoopbackInterface(interface_name) ? "<Peers><Peer Address=\"127.0.0.1\"/></Peers>" : "";
   const std::string multicast =
       isLoopbackInterface(interface_name) ? "<AllowMulticast>false</AllowMulticast>" : "";
   return "<CycloneDDS><Domain Id=\"any\"><General><Interfaces><NetworkInterface name=\"" +
@@ -67,8 +65,7 @@ void setSecurityProperties(dds_qos_t* qos, const SecurityFiles& files) {
     dds_qset_prop(qos, (prefix + "finalize").c_str(), p[3]);
   }
   dds_qset_prop(qos, "dds.sec.auth.identity_ca", file(files.identity_ca).c_str());
-  dds_qset_prop(qos, "dds.sec.auth.identity_certificate",
-                file(files.identity_certificate).c_str());
+  dds_qset_prop(qos, "dds.sec.auth.identity_certificate", file(files.identity_certificate).c_str());
   dds_qset_prop(qos, "dds.sec.auth.private_key", file(files.private_key).c_str());
   dds_qset_prop(qos, "dds.sec.access.permissions_ca", file(files.permissions_ca).c_str());
   dds_qset_prop(qos, "dds.sec.access.governance", file(files.governance).c_str());
@@ -109,8 +106,9 @@ Expected<void> checkIdentity(std::uint32_t domain_id, const std::optional<Securi
                      "to it (use another process)");
   }
   if (it->second == identityOf(*files)) return {};
-  return makeError("DDS domain " + std::to_string(domain_id) + " already has DDS Security identity " +
-                   it->second + " in this process; Cyclone DDS allows one identity per domain " +
+  return makeError("DDS domain " + std::to_string(domain_id) +
+                   " already has DDS Security identity " + it->second +
+                   " in this process; Cyclone DDS allows one identity per domain " +
                    "and process (use another process for " + identityOf(*files) + ")");
 }
 

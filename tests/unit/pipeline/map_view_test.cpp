@@ -162,8 +162,8 @@ TEST(MapView, DroppedBlocksLeaveNewVersionsAndStayInHeldOnesThroughCompaction) {
   for (int v = 0; v < 160; ++v) {
     fillWindow(sut, rng, v, 24, 3);
     if (v % 10 == 5) randomVersion(sut, rng, 200);  // cells that come back in old blocks
-    const float x_min = static_cast<float>(sut.grid().keyToPoint({32000, 0, 0}).x() +
-                                           (v - 4) * block::kEdge * 0.1);
+    const float x_min =
+        static_cast<float>(sut.grid().keyToPoint({32000, 0, 0}).x() + (v - 4) * block::kEdge * 0.1);
     const std::size_t known_before = sut.knownCells();
     const EvictStats stats =
         sut.evictBlocks([&](const Point3f& centre) { return centre.x() >= x_min; });
@@ -187,9 +187,8 @@ TEST(MapView, DroppedBlocksLeaveNewVersionsAndStayInHeldOnesThroughCompaction) {
   for (int v = 0; v < 3; ++v) (void)MapView::publish(sut);
   // No reader left: one node per block with contents, no more entries than ~2x those.
   std::size_t with_contents = 0;
-  sut.store()->forEachEntry([&](const BlockEntry& e) {
-    with_contents += BlockStore::latest(e) != nullptr;
-  });
+  sut.store()->forEachEntry(
+      [&](const BlockEntry& e) { with_contents += BlockStore::latest(e) != nullptr; });
   EXPECT_EQ(sut.store()->liveNodes(), with_contents);
   EXPECT_LE(sut.store()->entryCount(), 2 * with_contents + 4096);
 }
@@ -202,8 +201,8 @@ TEST(MapView, AWindowedDriveKeepsMemoryFlat) {
   std::shared_ptr<const MapView> reader;  // a reader that holds each version for a while
   for (int v = 0; v < 400; ++v) {
     fillWindow(sut, rng, v, 16, 2);
-    const float x_min = static_cast<float>(sut.grid().keyToPoint({32000, 0, 0}).x() +
-                                           (v - 2) * block::kEdge * 0.1);
+    const float x_min =
+        static_cast<float>(sut.grid().keyToPoint({32000, 0, 0}).x() + (v - 2) * block::kEdge * 0.1);
     (void)sut.evictBlocks([&](const Point3f& c) { return c.x() >= x_min; });
     auto view = MapView::publish(sut);
     if (v % 5 == 0) reader = view;
@@ -318,8 +317,8 @@ TEST(MapView, ConcurrentReadersSeeWholeVersionsWhileBlocksAreEvictedAndEntriesCo
   std::mt19937 rng(23);
   for (int v = 0; v < 400; ++v) {
     fillWindow(map, rng, v, 16, 2);
-    const float x_min = static_cast<float>(map.grid().keyToPoint({32000, 0, 0}).x() +
-                                           (v - 2) * block::kEdge * 0.1);
+    const float x_min =
+        static_cast<float>(map.grid().keyToPoint({32000, 0, 0}).x() + (v - 2) * block::kEdge * 0.1);
     (void)map.evictBlocks([&](const Point3f& c) { return c.x() >= x_min; });
     publish();
   }

@@ -127,9 +127,8 @@ TEST(Pipeline, AKeepRadiusEvictsExactlyWhatTheOfflineMapLosesAndDeltasFollow) {
     const Scan scan = *validateScan(raw, ScanLimits{});
     integrator.integrate(offline, scan.pointsWorld(), scan.originWorld());
     const Point3f origin = scan.originWorld();
-    evicted += offline
-                   .evictBlocks([&](const Point3f& c) { return (c - origin).norm() <= 3.0F; })
-                   .cells;
+    evicted +=
+        offline.evictBlocks([&](const Point3f& c) { return (c - origin).norm() <= 3.0F; }).cells;
   }
   (*sut)->stop();
   const auto view = (*sut)->view();

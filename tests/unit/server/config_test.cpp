@@ -58,12 +58,12 @@ TEST(ServerConfig, Ros2OptionsAndTheirErrors) {
   ASSERT_TRUE(two && *two);
   EXPECT_EQ((*two)->clouds.size(), 2U);
   EXPECT_EQ((*two)->world_frame, "odom");
-  for (const char* bad : {"ros2 { enabled: true clouds: \"/bad topic\" }\n",
-                          "ros2 { enabled: true world_frame: \"\" }\n",
-                          "ros2 { enabled: true tf_wait_s: -1 }\n",
-                          "ros2 { enabled: true max_waiting_clouds: 0 }\n",
-                          "ros2 { enabled: true grid_min_z_m: 2 grid_max_z_m: 1 }\n",
-                          "ros2 { enabled: true octomap_topic: \"/a//b\" }\n"}) {
+  for (const char* bad :
+       {"ros2 { enabled: true clouds: \"/bad topic\" }\n",
+        "ros2 { enabled: true world_frame: \"\" }\n", "ros2 { enabled: true tf_wait_s: -1 }\n",
+        "ros2 { enabled: true max_waiting_clouds: 0 }\n",
+        "ros2 { enabled: true grid_min_z_m: 2 grid_max_z_m: 1 }\n",
+        "ros2 { enabled: true octomap_topic: \"/a//b\" }\n"}) {
     auto r = options(bad);
     EXPECT_FALSE(r) << bad;
     if (!r) {
@@ -74,8 +74,8 @@ TEST(ServerConfig, Ros2OptionsAndTheirErrors) {
 
 TEST(ServerConfig, SecurityBlockNeedsAllSixReadableFilesAndAllowsRemoteInterfaces) {
   const test::TempDir dir;
-  const char* names[] = {"identity_ca", "identity_certificate", "private_key",
-                         "permissions_ca", "governance", "permissions"};
+  const char* names[] = {"identity_ca",    "identity_certificate", "private_key",
+                         "permissions_ca", "governance",           "permissions"};
   std::string block = "security {";
   for (const char* name : names) {
     std::ofstream(dir.path() / name) << "x";
@@ -88,8 +88,7 @@ TEST(ServerConfig, SecurityBlockNeedsAllSixReadableFilesAndAllowsRemoteInterface
   EXPECT_NE(refused.error().message.find("security block"), std::string::npos);
   EXPECT_NE(refused.error().message.find("allow_insecure_remote"), std::string::npos);
   // With security: accepted, and the files come through.
-  auto config =
-      loadServerConfig(writeConfig(dir, "dds { network_interface: \"eth0\" }\n" + block));
+  auto config = loadServerConfig(writeConfig(dir, "dds { network_interface: \"eth0\" }\n" + block));
   ASSERT_TRUE(config) << config.error().message;
   auto files = securityFiles(*config);
   ASSERT_TRUE(files && *files);
@@ -112,9 +111,10 @@ TEST(ServerConfig, SecurityBlockNeedsAllSixReadableFilesAndAllowsRemoteInterface
 
 TEST(ServerConfig, EvictionNeedsTheGridLogOddsMapAndAValidBox) {
   const test::TempDir dir;
-  auto ok = loadServerConfig(writeConfig(
-      dir, "map { keep_radius_m: 40 bounds { min_x: -100 min_y: -100 min_z: -5 max_x: 100 "
-           "max_y: 100 max_z: 20 } }\n"));
+  auto ok = loadServerConfig(
+      writeConfig(dir,
+                  "map { keep_radius_m: 40 bounds { min_x: -100 min_y: -100 min_z: -5 max_x: 100 "
+                  "max_y: 100 max_z: 20 } }\n"));
   ASSERT_TRUE(ok) << ok.error().message;
   auto options = pipelineOptions(*ok);
   ASSERT_TRUE(options);
@@ -131,8 +131,7 @@ TEST(ServerConfig, EvictionNeedsTheGridLogOddsMapAndAValidBox) {
        }) {
     auto refused = loadServerConfig(writeConfig(dir, text + "\n"));
     ASSERT_FALSE(refused) << text;
-    EXPECT_NE(refused.error().message.find(reason), std::string::npos)
-        << refused.error().message;
+    EXPECT_NE(refused.error().message.find(reason), std::string::npos) << refused.error().message;
   }
 }
 

@@ -60,7 +60,7 @@ struct ServerStatus {
   std::uint64_t rss_bytes = 0;          // the server process's resident memory
   std::uint64_t evicted_blocks = 0;     // dropped by map.keep_radius_m / map.bounds
   std::uint64_t evicted_cells = 0;
-  double cpu_s = 0;                     // and its CPU time since start
+  double cpu_s = 0;  // and its CPU time since start
   /// The ROS 2 face (server config ros2): PointCloud2 clouds received, submitted with their
   /// transform, rejected as malformed (by reason), dropped for want of a transform.
   bool ros_enabled = false;

@@ -7,9 +7,9 @@
 #include <condition_variable>
 #include <deque>
 #include <filesystem>
-#include <optional>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <thread>
 
 #include "densemap/dds/dds.hpp"
@@ -23,11 +23,11 @@ struct ServiceOptions {
   std::uint32_t domain_id = 0;
   std::string network_interface = "lo";
   std::optional<dds::SecurityFiles> security;  // DDS Security; none: plain DDS
-  std::filesystem::path snapshot_path;  // empty: no snapshots
-  int snapshot_keep = 3;                // files kept: path, path.1, ... (core/store)
-  double autosave_period_s = 0.0;       // 0: off
+  std::filesystem::path snapshot_path;         // empty: no snapshots
+  int snapshot_keep = 3;                       // files kept: path, path.1, ... (core/store)
+  double autosave_period_s = 0.0;              // 0: off
   std::size_t max_query_cells = 50'000'000;
-  int query_threads = 2;  // the query task arena: requests are answered in parallel
+  int query_threads = 2;            // the query task arena: requests are answered in parallel
   std::optional<Ros2Options> ros2;  // the ROS 2 face (Ros2Bridge); none: off
 };
 

@@ -5,10 +5,10 @@
 #include <filesystem>
 
 #include "densemap.pb.h"
-#include "densemap/server/ros2_bridge.hpp"
 #include "densemap/dds/security.hpp"
 #include "densemap/geometry/error.hpp"
 #include "densemap/pipeline/pipeline.hpp"
+#include "densemap/server/ros2_bridge.hpp"
 
 namespace densemap::server {
 

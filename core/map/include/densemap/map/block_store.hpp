@@ -161,10 +161,10 @@ class BlockStore {
   [[nodiscard]] static std::size_t slotOf(const Table& t, std::uint64_t key);
   [[nodiscard]] BlockEntry* lookup(std::uint64_t block_key) const;
   void grow();
-  BlockNode* allocate();  // pool_mutex_ held
-  ChainLink* allocateTomb();  // pool_mutex_ held
+  BlockNode* allocate();          // pool_mutex_ held
+  ChainLink* allocateTomb();      // pool_mutex_ held
   void recycle(ChainLink* link);  // pool_mutex_ held
-  void addSlab();         // pool_mutex_ held
+  void addSlab();                 // pool_mutex_ held
   void release(const std::vector<std::pair<ChainLink*, ChainLink*>>& superseded);
   void retireTombstones();  // writer, in publish()
   void compactIfWorthIt();  // writer, in publish()
@@ -178,7 +178,7 @@ class BlockStore {
   mutable std::mutex pool_mutex_;
   std::vector<std::unique_ptr<Slab>> slabs_;
   std::vector<BlockNode*> free_;
-  std::deque<ChainLink> tombs_;            // tombstone storage
+  std::deque<ChainLink> tombs_;  // tombstone storage
   std::vector<ChainLink*> free_tombs_;
   std::atomic<std::size_t> live_nodes_{0};
   std::size_t reserve_nodes_ = 0;

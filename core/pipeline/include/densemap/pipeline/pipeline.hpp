@@ -79,7 +79,7 @@ struct IntegrationResult {
   /// The changed cells: always for commands, for scans when `collect_changes` is set.
   CellChanges changes;
   ScanStats stats;
-  double latency_ms = 0.0;  // received -> published
+  double latency_ms = 0.0;         // received -> published
   std::size_t evicted_blocks = 0;  // dropped by keep_radius_m / bounds with this scan
   std::size_t evicted_cells = 0;
 };
