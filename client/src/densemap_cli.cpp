@@ -38,15 +38,10 @@ Expected<std::optional<dds::SecurityFiles>> securityOptions(
   dds::SecurityFiles files =
       pki_dir.empty() ? dds::SecurityFiles{} : dds::SecurityFiles::fromPkiDir(pki_dir, role);
   bool any = !pki_dir.empty();
-  for (auto [field, given] :
-       {std::pair{&files.identity_ca, &explicit_files.identity_ca},
-        std::pair{&files.identity_certificate, &explicit_files.identity_certificate},
-        std::pair{&files.private_key, &explicit_files.private_key},
-        std::pair{&files.permissions_ca, &explicit_files.permissions_ca},
-        std::pair{&files.governance, &explicit_files.governance},
-        std::pair{&files.permissions, &explicit_files.permissions}}) {
-    if (given->empty()) continue;
-    *field = *given;
+  for (const dds::SecurityFileField& f : dds::kSecurityFileFields) {
+    const std::string& given = explicit_files.*f.member;
+    if (given.empty()) continue;
+    files.*f.member = given;
     any = true;
   }
   if (!any) return std::optional<dds::SecurityFiles>();
@@ -386,15 +381,9 @@ int main(int argc, char** argv) {
   app.add_option("--role", pki_role, "DDS Security: the identity in --pki to use")
       ->check(CLI::IsMember({"robot", "operator", "viewer", "server"}))
       ->group("DDS Security");
-  const std::pair<const char*, std::string*> security_flags[] = {
-      {"--identity-ca", &security.identity_ca},
-      {"--identity-certificate", &security.identity_certificate},
-      {"--private-key", &security.private_key},
-      {"--permissions-ca", &security.permissions_ca},
-      {"--governance", &security.governance},
-      {"--permissions", &security.permissions}};
-  for (const auto& [flag, field] : security_flags) {
-    app.add_option(flag, *field, "DDS Security file (overrides the one from --pki)")
+  for (const dds::SecurityFileField& f : dds::kSecurityFileFields) {
+    app.add_option(dds::securityFlag(f), security.*f.member,
+                   "DDS Security file (overrides the one from --pki)")
         ->group("DDS Security");
   }
 

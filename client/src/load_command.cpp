@@ -75,11 +75,11 @@ int LoadCommand::run(const ClientOptions& options, bool interface_given) {
                     scenario_file_, "--work-dir",
                     work_dir_};
   if (const auto& s = options.security) {
-    run.child_args.insert(
-        run.child_args.begin(),
-        {"--identity-ca", s->identity_ca, "--identity-certificate", s->identity_certificate,
-         "--private-key", s->private_key, "--permissions-ca", s->permissions_ca, "--governance",
-         s->governance, "--permissions", s->permissions});
+    std::vector<std::string> flags;
+    for (const dds::SecurityFileField& f : dds::kSecurityFileFields) {
+      flags.insert(flags.end(), {dds::securityFlag(f), (*s).*f.member});
+    }
+    run.child_args.insert(run.child_args.begin(), flags.begin(), flags.end());
   }
   if (duration_s_ > 0) {
     run.child_args.insert(run.child_args.end(), {"--duration", std::to_string(duration_s_)});

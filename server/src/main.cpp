@@ -114,9 +114,6 @@ int main(int argc, char** argv) {
   std::uint64_t version = 0;
   const auto& snapshot = service_options.snapshot_path;
   service_options.snapshot_keep = static_cast<int>(config->snapshot().keep());
-  if (service_options.snapshot_keep < 1 || service_options.snapshot_keep > 100) {
-    return fail("config: snapshot.keep must be 1 .. 100", 2);
-  }
   auto resumed = snapshot.empty()
                      ? densemap::Expected<std::optional<densemap::ResumedSnapshot>>(std::nullopt)
                      : densemap::loadNewestSnapshot(snapshot, service_options.snapshot_keep,

@@ -472,10 +472,14 @@ void MapService::takeQueries() {
 }
 
 void MapService::answerCommands() {
+  // send-map: a task, so it does not hold up other commands.
+  const auto send_map = [this](const densemap_msgs_RequestId& id) {
+    runTask([this, id] { replyCommand(id, sendMap(id)); });
+  };
   dds::takeAll<densemap_msgs_CommandRequest>(
       dds_->map_reader, [&](const densemap_msgs_CommandRequest& req) {
         if (req.kind == 3) {
-          runTask([this, id = req.id] { replyCommand(id, sendMap(id)); });
+          send_map(req.id);
         } else {
           replyCommand(req.id,
                        makeError("densemap/map/request takes send-map only; command " +
@@ -484,8 +488,8 @@ void MapService::answerCommands() {
       });
   dds::takeAll<densemap_msgs_CommandRequest>(
       dds_->cmd_reader, [&](const densemap_msgs_CommandRequest& req) {
-        if (req.kind == 3) {  // send-map: a task, so it does not hold up other commands
-          runTask([this, id = req.id] { replyCommand(id, sendMap(id)); });
+        if (req.kind == 3) {
+          send_map(req.id);
           return;
         }
         Expected<std::string> outcome =

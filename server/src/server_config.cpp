@@ -105,6 +105,9 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
     if (!up) return makeError("upsample: " + up.error().message);
     o.upsample = std::move(*up);
   }
+  if (config.snapshot().keep() < 1 || config.snapshot().keep() > 100) {
+    return makeError("snapshot.keep must be 1 .. 100");
+  }
   if (config.snapshot().autosave_period_s() < 0) {
     return makeError("snapshot.autosave_period_s must be >= 0");
   }

@@ -27,12 +27,7 @@ std::vector<Sample> drive(Client& client, const std::vector<RawScan>& raws, std:
   std::vector<Sample> samples;
   for (const RawScan& raw : raws) {
     EXPECT_TRUE(client.publishScan(raw));
-    bool seen = false;
-    for (const auto deadline = std::chrono::steady_clock::now() + 20s;
-         !seen && std::chrono::steady_clock::now() < deadline;) {
-      client.pollEvents([&](const MapEventInfo& e) { seen = seen || e.scan_seq == raw.seq; });
-      std::this_thread::sleep_for(2ms);
-    }
+    const bool seen = test::waitForScanEvent(client, raw.seq);
     EXPECT_TRUE(seen) << "scan " << raw.seq;
     if (!seen) break;
     if (raw.seq % every == 0) {

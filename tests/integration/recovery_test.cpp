@@ -35,18 +35,20 @@ std::vector<RawScan> simulatedScans(const fs::path& dir, int n, const std::strin
 
 std::unique_ptr<Client> connect(std::uint32_t domain) { return test::connectClient(domain); }
 
-/// Publishes each scan and waits for its map event.
-void replay(Client& client, const std::vector<RawScan>& raws) {
-  for (const RawScan& raw : raws) {
-    ASSERT_TRUE(client.publishScan(raw));
-    bool seen = false;
-    const auto deadline = std::chrono::steady_clock::now() + 20s;
-    while (!seen && std::chrono::steady_clock::now() < deadline) {
-      client.pollEvents([&](const MapEventInfo& e) { seen = seen || e.scan_seq == raw.seq; });
-      std::this_thread::sleep_for(5ms);
-    }
-    ASSERT_TRUE(seen) << "scan " << raw.seq;
-  }
+/// Starts a server on `dir`; the map it resumes is `expected` at `version`, cell for cell.
+/// Returns the server's log.
+std::string expectRestartServes(const fs::path& dir, std::uint32_t domain, std::uint64_t version,
+                                const OccupancyMap& expected) {
+  test::ServerProcess server(dir, domain, "", true);
+  auto client = connect(domain);
+  EXPECT_TRUE(client);
+  if (!client) return server.log();
+  auto fetched = client->fetchMap(version);
+  EXPECT_TRUE(fetched) << fetched.error().message;
+  if (!fetched) return server.log();
+  EXPECT_EQ(fetched->second, version);
+  EXPECT_EQ(diffMaps(*fetched->first, expected).differing(), 0U);
+  return server.log();
 }
 
 /// Every snapshot file present is complete; returns the newest's version.
@@ -71,7 +73,7 @@ TEST(Recovery, KillNineAfterAnAutosaveLosesNothingAndTheRestartResumesIt) {
     test::ServerProcess server(dir.path(), kDomain, "", true, /*autosave_s=*/0.3);
     auto client = connect(kDomain);
     ASSERT_TRUE(client);
-    replay(*client, raws);
+    test::replayScans(*client, raws);
     std::this_thread::sleep_for(1000ms);  // at least one autosave after the last scan
     server.kill9();
   }
@@ -79,14 +81,8 @@ TEST(Recovery, KillNineAfterAnAutosaveLosesNothingAndTheRestartResumesIt) {
   auto saved = loadNewestSnapshot(path, 3, Backend::kGrid, 0.2);
   ASSERT_TRUE(saved && *saved);
 
-  test::ServerProcess server(dir.path(), kDomain, "", true);
-  auto client = connect(kDomain);
-  ASSERT_TRUE(client);
-  auto fetched = client->fetchMap(4);
-  ASSERT_TRUE(fetched) << fetched.error().message;
-  EXPECT_EQ(fetched->second, 4U);
-  EXPECT_EQ(diffMaps(*fetched->first, *(*saved)->snapshot.map).differing(), 0U);
-  EXPECT_NE(server.log().find("resumed"), std::string::npos) << server.log();
+  const std::string log = expectRestartServes(dir.path(), kDomain, 4, *(*saved)->snapshot.map);
+  EXPECT_NE(log.find("resumed"), std::string::npos) << log;
 }
 
 TEST(Recovery, KillNineAtRandomMomentsWhileMappingAndSavingLeavesNoCorruptFile) {
@@ -131,15 +127,10 @@ TEST(Recovery, KillNineAtRandomMomentsWhileMappingAndSavingLeavesNoCorruptFile) 
   // At 20 Hz, one autosave period (plus the save itself and the events in flight) is a handful
   // of scans; a lost autosave would show as many more.
   EXPECT_LE(worst_lost, 20U);
-  test::ServerProcess server(dir.path(), kDomain, "", true);
-  auto client = connect(kDomain);
-  ASSERT_TRUE(client);
   auto newest = loadNewestSnapshot(path, 3, Backend::kGrid, 0.2);
   ASSERT_TRUE(newest && *newest);
-  auto fetched = client->fetchMap((*newest)->snapshot.version);
-  ASSERT_TRUE(fetched) << fetched.error().message;
-  EXPECT_EQ(fetched->second, (*newest)->snapshot.version);
-  EXPECT_EQ(diffMaps(*fetched->first, *(*newest)->snapshot.map).differing(), 0U);
+  (void)expectRestartServes(dir.path(), kDomain, (*newest)->snapshot.version,
+                            *(*newest)->snapshot.map);
 }
 
 TEST(Recovery, ATruncatedNewestSnapshotFallsBackToThePreviousOneWithAWarning) {
@@ -151,9 +142,9 @@ TEST(Recovery, ATruncatedNewestSnapshotFallsBackToThePreviousOneWithAWarning) {
     test::ServerProcess server(dir.path(), kDomain, "", true);
     auto client = connect(kDomain);
     ASSERT_TRUE(client);
-    replay(*client, {raws[0], raws[1]});
+    test::replayScans(*client, {raws[0], raws[1]});
     ASSERT_TRUE(client->command(CommandKind::kSave));  // version 2
-    replay(*client, {raws[2], raws[3]});
+    test::replayScans(*client, {raws[2], raws[3]});
     EXPECT_EQ(server.stop(), 0);  // version 4, the newest
   }
   auto previous = loadSnapshot(snapshotGeneration(path, 1), Backend::kGrid, 0.2);
@@ -161,14 +152,7 @@ TEST(Recovery, ATruncatedNewestSnapshotFallsBackToThePreviousOneWithAWarning) {
   EXPECT_EQ(previous->version, 2U);
   fs::resize_file(path, fs::file_size(path) / 2);
 
-  test::ServerProcess server(dir.path(), kDomain, "", true);
-  auto client = connect(kDomain);
-  ASSERT_TRUE(client);
-  auto fetched = client->fetchMap(2);
-  ASSERT_TRUE(fetched) << fetched.error().message;
-  EXPECT_EQ(fetched->second, 2U);
-  EXPECT_EQ(diffMaps(*fetched->first, *previous->map).differing(), 0U);
-  const std::string log = server.log();
+  const std::string log = expectRestartServes(dir.path(), kDomain, 2, *previous->map);
   EXPECT_NE(log.find("warning: skipping an unreadable snapshot"), std::string::npos) << log;
   EXPECT_NE(log.find("map.dmap.1"), std::string::npos) << log;
 }

@@ -89,20 +89,6 @@ std::vector<RawScan> scans(const fs::path& dir, int n) {
   return test::simulatedRawScans(dir, o, "lidar");
 }
 
-/// Publishes each scan and waits for its map event (the robot may read map/events).
-void replay(Client& robot, const std::vector<RawScan>& raws) {
-  for (const RawScan& raw : raws) {
-    ASSERT_TRUE(robot.publishScan(raw));
-    bool seen = false;
-    for (const auto deadline = std::chrono::steady_clock::now() + 20s;
-         !seen && std::chrono::steady_clock::now() < deadline;) {
-      robot.pollEvents([&](const MapEventInfo& e) { seen = seen || e.scan_seq == raw.seq; });
-      std::this_thread::sleep_for(5ms);
-    }
-    ASSERT_TRUE(seen) << "scan " << raw.seq;
-  }
-}
-
 /// The server's status once it has stopped changing: the same counters for 1.5 s, longer than
 /// the 1 s between the server's status samples.
 ServerStatus settledStatus(Client& c) {
@@ -164,7 +150,7 @@ TEST_F(Security, RobotScansIntegratedStrangersMatchNothingAndChangeNothing) {
   auto found = robot->waitForServer();
   ASSERT_TRUE(found) << found.error().message;
   const auto raws = scans(dir_, 4);
-  replay(*robot, raws);
+  test::replayScans(*robot, raws);                    // a robot may read map/events
   const ServerStatus before = settledStatus(*robot);  // a robot may read status
   EXPECT_EQ(before.integrated, raws.size());
   EXPECT_GT(before.known_cells, 1000u);
@@ -364,7 +350,7 @@ TEST_F(Security, LoopbackCaptureHoldsNoPlaintextScan) {
     Capture capture(pcap);
     if (!capture.ok()) GTEST_SKIP() << "tcpdump cannot capture on lo here (needs CAP_NET_RAW)";
     std::string marker;
-    ASSERT_NO_FATAL_FAILURE(replay(*robot, {markerScan(1, &marker)}));
+    ASSERT_NO_FATAL_FAILURE(test::replayScans(*robot, {markerScan(1, &marker)}));
     std::this_thread::sleep_for(1s);
     capture.stop();
     const ServerStatus status = settledStatus(*robot);

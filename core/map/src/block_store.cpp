@@ -47,13 +47,13 @@ struct BlockStore::Pin {
   std::shared_ptr<Pin> newer;
 };
 
-BlockStore::Slab::Slab(std::size_t nodes) : count(nodes) {
-  void* p = mmap(nullptr, nodes * sizeof(BlockNode), PROT_READ | PROT_WRITE,
+BlockStore::Slab::Slab(std::size_t n) : count(n) {
+  void* p = mmap(nullptr, n * sizeof(BlockNode), PROT_READ | PROT_WRITE,
                  MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
   if (p == MAP_FAILED) throw std::bad_alloc();
-  this->nodes = static_cast<BlockNode*>(p);
+  nodes = static_cast<BlockNode*>(p);
   // Constructing writes every node: the pages are faulted in now, not during a scan.
-  for (std::size_t i = 0; i < nodes; ++i) new (this->nodes + i) BlockNode();
+  for (std::size_t i = 0; i < n; ++i) new (nodes + i) BlockNode();
 }
 
 BlockStore::Slab::~Slab() {
@@ -276,18 +276,20 @@ void BlockStore::compactIfWorthIt() {
 std::size_t BlockStore::trim() {
   std::lock_guard lock(pool_mutex_);
   if (free_.size() <= reserve_nodes_ + kSlabNodes) return 0;
-  std::sort(free_.begin(), free_.end());
-  std::vector<bool> whole(slabs_.size(), false);
-  std::vector<std::pair<BlockNode*, std::size_t>> bases;  // slab start -> index
+  // The slab of every free node (slabs sorted by address, free nodes too).
+  std::vector<std::pair<BlockNode*, std::size_t>> bases;  // slab start, index in slabs_
   for (std::size_t s = 0; s < slabs_.size(); ++s) bases.emplace_back(slabs_[s]->nodes, s);
   std::sort(bases.begin(), bases.end());
-  // Count free nodes per slab (both lists sorted by address).
+  std::sort(free_.begin(), free_.end());
+  std::vector<std::size_t> slab_of(free_.size());
   std::vector<std::size_t> free_in(slabs_.size(), 0);
-  std::size_t b = 0;
-  for (BlockNode* n : free_) {
-    while (b + 1 < bases.size() && bases[b + 1].first <= n) ++b;
-    ++free_in[bases[b].second];
+  for (std::size_t i = 0, b = 0; i < free_.size(); ++i) {
+    while (b + 1 < bases.size() && bases[b + 1].first <= free_[i]) ++b;
+    slab_of[i] = bases[b].second;
+    ++free_in[slab_of[i]];
   }
+  // Wholly free slabs go, as long as the reserve stays free.
+  std::vector<bool> whole(slabs_.size(), false);
   std::size_t spare = free_.size() - reserve_nodes_;
   for (std::size_t s = 0; s < slabs_.size() && spare >= kSlabNodes; ++s) {
     if (free_in[s] == slabs_[s]->count) {
@@ -295,25 +297,21 @@ std::size_t BlockStore::trim() {
       spare -= kSlabNodes;
     }
   }
-  std::size_t freed = 0;
-  std::vector<BlockNode*> kept_free;
-  kept_free.reserve(free_.size());
-  b = 0;
-  for (BlockNode* n : free_) {
-    while (b + 1 < bases.size() && bases[b + 1].first <= n) ++b;
-    if (!whole[bases[b].second]) kept_free.push_back(n);
+  std::size_t kept_nodes = 0;
+  for (std::size_t i = 0; i < free_.size(); ++i) {
+    if (!whole[slab_of[i]]) free_[kept_nodes++] = free_[i];
   }
-  free_.swap(kept_free);
-  std::vector<std::unique_ptr<Slab>> kept;
+  free_.resize(kept_nodes);
+  free_.shrink_to_fit();
+  std::size_t freed = 0, kept_slabs = 0;
   for (std::size_t s = 0; s < slabs_.size(); ++s) {
     if (whole[s]) {
       freed += slabs_[s]->count * sizeof(BlockNode);
     } else {
-      kept.push_back(std::move(slabs_[s]));
+      slabs_[kept_slabs++] = std::move(slabs_[s]);
     }
   }
-  slabs_.swap(kept);
-  free_.shrink_to_fit();
+  slabs_.resize(kept_slabs);
   return freed;
 }
 

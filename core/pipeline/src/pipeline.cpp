@@ -247,11 +247,10 @@ void Pipeline::publish(IntegrationResult& result) {
 }
 
 void Pipeline::evict(const Point3f& origin, IntegrationResult& result, CellChanges* changes) {
-  if (options_.keep_radius_m <= 0 && !options_.bounds) return;
-  auto* grid = dynamic_cast<GridMap*>(map_.get());
-  if (grid == nullptr || kernel_map_) return;  // refused at creation
+  // create() refuses eviction unless map_ is the GridMap itself (readable_, no mirror).
+  if ((options_.keep_radius_m <= 0 && !options_.bounds) || mirror_ || kernel_map_) return;
   const double r2 = options_.keep_radius_m * options_.keep_radius_m;
-  const EvictStats stats = grid->evictBlocks(
+  const EvictStats stats = readable_->evictBlocks(
       [&](const Point3f& centre) {
         if (options_.keep_radius_m > 0 && (centre - origin).cast<double>().squaredNorm() > r2) {
           return false;

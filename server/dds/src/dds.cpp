@@ -64,12 +64,9 @@ void setSecurityProperties(dds_qos_t* qos, const SecurityFiles& files) {
     dds_qset_prop(qos, (prefix + "init").c_str(), p[2]);
     dds_qset_prop(qos, (prefix + "finalize").c_str(), p[3]);
   }
-  dds_qset_prop(qos, "dds.sec.auth.identity_ca", file(files.identity_ca).c_str());
-  dds_qset_prop(qos, "dds.sec.auth.identity_certificate", file(files.identity_certificate).c_str());
-  dds_qset_prop(qos, "dds.sec.auth.private_key", file(files.private_key).c_str());
-  dds_qset_prop(qos, "dds.sec.access.permissions_ca", file(files.permissions_ca).c_str());
-  dds_qset_prop(qos, "dds.sec.access.governance", file(files.governance).c_str());
-  dds_qset_prop(qos, "dds.sec.access.permissions", file(files.permissions).c_str());
+  for (const SecurityFileField& f : kSecurityFileFields) {
+    dds_qset_prop(qos, f.property, file(files.*f.member).c_str());
+  }
 }
 
 /// With security, Cyclone's receive threads decrypt with OpenSSL until Cyclone is torn down,

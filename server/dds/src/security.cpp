@@ -1,7 +1,7 @@
 #include "densemap/dds/security.hpp"
 
+#include <algorithm>
 #include <fstream>
-#include <utility>
 
 namespace densemap::dds {
 
@@ -12,18 +12,20 @@ SecurityFiles SecurityFiles::fromPkiDir(const std::string& dir, const std::strin
 }
 
 Expected<void> checkSecurityFiles(const SecurityFiles& files) {
-  const std::pair<const char*, const std::string*> fields[] = {
-      {"identity_ca", &files.identity_ca}, {"identity_certificate", &files.identity_certificate},
-      {"private_key", &files.private_key}, {"permissions_ca", &files.permissions_ca},
-      {"governance", &files.governance},   {"permissions", &files.permissions},
-  };
-  for (const auto& [name, path] : fields) {
-    if (path->empty()) return makeError(std::string("security.") + name + " is not set");
-    if (!std::ifstream(*path).good()) {
-      return makeError(std::string("security.") + name + ": cannot read '" + *path + "'");
+  for (const SecurityFileField& f : kSecurityFileFields) {
+    const std::string& path = files.*f.member;
+    if (path.empty()) return makeError(std::string("security.") + f.name + " is not set");
+    if (!std::ifstream(path).good()) {
+      return makeError(std::string("security.") + f.name + ": cannot read '" + path + "'");
     }
   }
   return {};
+}
+
+std::string securityFlag(const SecurityFileField& field) {
+  std::string flag = std::string("--") + field.name;
+  std::replace(flag.begin(), flag.end(), '_', '-');
+  return flag;
 }
 
 bool isLoopbackInterface(const std::string& name) {

@@ -245,8 +245,11 @@ TEST(MapView, ClearingAVersionedMapReturnsItsMemory) {
   EXPECT_LT(sut.store()->liveNodes(), blocks - 4 * 8 + 1) << "the lower blocks were dropped";
 }
 
-TEST(MapView, ConcurrentReadersAlwaysSeeWholeVersions) {
-  GridMap map(0.1, SensorModel{});
+/// Three reader threads check whole versions (by checksum) while `write(v)` changes `map` for
+/// each of `versions` versions and publishes it. Returns how many reads were checked and how
+/// many saw a mixed version.
+std::pair<std::size_t, std::size_t> readWhileWriting(GridMap& map, int versions,
+                                                     const std::function<void(int)>& write) {
   std::mutex sums_mutex;
   std::unordered_map<std::uint64_t, std::uint64_t> sums;  // version -> checksum
   std::atomic<std::shared_ptr<const MapView>> latest;
@@ -273,59 +276,36 @@ TEST(MapView, ConcurrentReadersAlwaysSeeWholeVersions) {
       }
     });
   }
-  std::mt19937 rng(11);
-  for (int v = 0; v < 300; ++v) {
-    randomVersion(map, rng, 300);
+  for (int v = 0; v < versions; ++v) {
+    write(v);
     publish();
   }
   done = true;
   for (auto& t : readers) t.join();
-  EXPECT_GT(checked.load(), 0U);
-  EXPECT_EQ(wrong.load(), 0U);
-  latest.store(nullptr);
+  return {checked.load(), wrong.load()};
+}
+
+TEST(MapView, ConcurrentReadersAlwaysSeeWholeVersions) {
+  GridMap map(0.1, SensorModel{});
+  std::mt19937 rng(11);
+  const auto [checked, wrong] =
+      readWhileWriting(map, 300, [&](int) { randomVersion(map, rng, 300); });
+  EXPECT_GT(checked, 0U);
+  EXPECT_EQ(wrong, 0U);
   EXPECT_EQ(map.store()->liveNodes(), map.store()->entryCount());
 }
 
 TEST(MapView, ConcurrentReadersSeeWholeVersionsWhileBlocksAreEvictedAndEntriesCompacted) {
   GridMap map(0.1, SensorModel{});
-  std::mutex sums_mutex;
-  std::unordered_map<std::uint64_t, std::uint64_t> sums;  // version -> checksum
-  std::atomic<std::shared_ptr<const MapView>> latest;
-  auto publish = [&] {
-    const std::uint64_t sum = checksum([&](const auto& f) { map.forEachKnown(f); });
-    {
-      std::lock_guard lock(sums_mutex);
-      sums[map.store()->writingVersion()] = sum;
-    }
-    latest.store(MapView::publish(map));
-  };
-  publish();
-  std::atomic<bool> done{false};
-  std::atomic<std::size_t> checked{0}, wrong{0};
-  std::vector<std::thread> readers;
-  for (int r = 0; r < 3; ++r) {
-    readers.emplace_back([&] {
-      while (!done.load()) {
-        const auto view = latest.load();
-        const std::uint64_t sum = checksum([&](const auto& f) { view->forEachKnown(f); });
-        std::lock_guard lock(sums_mutex);
-        wrong += sums.at(view->version()) != sum;
-        ++checked;
-      }
-    });
-  }
   std::mt19937 rng(23);
-  for (int v = 0; v < 400; ++v) {
+  const auto [checked, wrong] = readWhileWriting(map, 400, [&](int v) {
     fillWindow(map, rng, v, 16, 2);
     const float x_min =
         static_cast<float>(map.grid().keyToPoint({32000, 0, 0}).x() + (v - 2) * block::kEdge * 0.1);
     (void)map.evictBlocks([&](const Point3f& c) { return c.x() >= x_min; });
-    publish();
-  }
-  done = true;
-  for (auto& t : readers) t.join();
-  EXPECT_GT(checked.load(), 0U);
-  EXPECT_EQ(wrong.load(), 0U);
+  });
+  EXPECT_GT(checked, 0U);
+  EXPECT_EQ(wrong, 0U);
   EXPECT_GE(map.store()->compactions(), 1U);
 }
 

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <map>
+#include <mutex>
 #include <thread>
 
 #include "densemap/map/grid_map.hpp"
@@ -34,6 +35,18 @@ bool waitFor(const std::function<bool()>& condition) {
   return false;
 }
 
+/// Every result and view a pipeline publishes, in order (read them after stop()).
+struct Published : std::vector<std::pair<IntegrationResult, std::shared_ptr<const MapView>>> {
+  explicit Published(Pipeline& pipeline) {
+    pipeline.setPublisher(
+        [this](const IntegrationResult& r, const std::shared_ptr<const MapView>& v) {
+          std::lock_guard lock(mutex);
+          emplace_back(r, v);
+        });
+  }
+  std::mutex mutex;
+};
+
 /// The map a plain offline integration of the same scans builds.
 std::unique_ptr<GridMap> offlineMap(const std::vector<RawScan>& raws, double max_range) {
   auto map = std::make_unique<GridMap>(0.2, SensorModel{});
@@ -50,12 +63,7 @@ TEST(Pipeline, PublishedViewEqualsTheOfflineMapAndDeltasReproduceEachVersion) {
   options.collect_changes = true;
   auto sut = Pipeline::create(options);
   ASSERT_TRUE(sut);
-  std::vector<std::pair<IntegrationResult, std::shared_ptr<const MapView>>> published;
-  std::mutex m;
-  (*sut)->setPublisher([&](const IntegrationResult& r, const std::shared_ptr<const MapView>& v) {
-    std::lock_guard lock(m);
-    published.emplace_back(r, v);
-  });
+  Published published(**sut);
   (*sut)->start();
   std::vector<RawScan> raws;
   for (std::uint64_t seq = 1; seq <= 5; ++seq) {
@@ -108,12 +116,7 @@ TEST(Pipeline, AKeepRadiusEvictsExactlyWhatTheOfflineMapLosesAndDeltasFollow) {
   options.collect_changes = true;
   auto sut = Pipeline::create(options);
   ASSERT_TRUE(sut);
-  std::vector<std::pair<IntegrationResult, std::shared_ptr<const MapView>>> published;
-  std::mutex m;
-  (*sut)->setPublisher([&](const IntegrationResult& r, const std::shared_ptr<const MapView>& v) {
-    std::lock_guard lock(m);
-    published.emplace_back(r, v);
-  });
+  Published published(**sut);
   (*sut)->start();
   // The plain path: integrate offline, then drop the same blocks.
   GridMap offline(0.2, SensorModel{});

@@ -135,7 +135,7 @@ class BlockStore {
   [[nodiscard]] std::size_t entryCount() const { return entries_.size(); }
   /// Nodes in use (heads + those kept for readers) and bytes held by nodes, pool and table.
   [[nodiscard]] std::size_t liveNodes() const { return live_nodes_.load(); }
-  /// Entries compacted away and slabs trimmed so far (for tests and status).
+  /// Compactions of the entry table so far (for tests).
   [[nodiscard]] std::size_t compactions() const { return compactions_; }
   [[nodiscard]] std::size_t memoryBytes() const;
 
@@ -148,7 +148,7 @@ class BlockStore {
   };
   /// A slab of nodes mapped from the OS (so a trimmed slab's pages really go back).
   struct Slab {
-    explicit Slab(std::size_t nodes);
+    explicit Slab(std::size_t n);
     ~Slab();
     Slab(const Slab&) = delete;
     Slab& operator=(const Slab&) = delete;

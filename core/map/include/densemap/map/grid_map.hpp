@@ -9,17 +9,18 @@
 
 namespace densemap {
 
+/// What GridMap::evictBlocks dropped.
+struct EvictStats {
+  std::size_t blocks = 0;
+  std::size_t cells = 0;
+};
+
 /// The fast backend: a sparse hash of 8^3 voxel blocks (Bonxai/voxblox style) kept in a
 /// BlockStore, so readers can hold published versions of this very map (no second copy).
 /// `apply` creates missing blocks serially, then updates blocks in parallel (TBB), each block
 /// owned by one task, so the result is the same for any number of threads.
 /// Thread-safety: single writer (OccupancyMap); `publishVersion` hands readers a version they
 /// read through `store()` from any thread.
-struct EvictStats {
-  std::size_t blocks = 0;
-  std::size_t cells = 0;
-};
-
 class GridMap final : public OccupancyMap {
  public:
   GridMap(double resolution_m, const SensorModel& model)

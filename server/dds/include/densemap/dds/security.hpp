@@ -1,5 +1,6 @@
 #pragma once
 
+#include <array>
 #include <string>
 
 #include "densemap/geometry/error.hpp"
@@ -20,6 +21,26 @@ struct SecurityFiles {
   /// Every file of make-pki.sh's layout for `role` (robot, operator, viewer or server).
   [[nodiscard]] static SecurityFiles fromPkiDir(const std::string& dir, const std::string& role);
 };
+
+/// The six files by name: the config field (`security.<name>`; the CLI flag is `--` + name
+/// with '-' for '_') and the Cyclone participant property that takes it.
+struct SecurityFileField {
+  const char* name;
+  const char* property;
+  std::string SecurityFiles::*member;
+};
+inline constexpr std::array<SecurityFileField, 6> kSecurityFileFields{{
+    {"identity_ca", "dds.sec.auth.identity_ca", &SecurityFiles::identity_ca},
+    {"identity_certificate", "dds.sec.auth.identity_certificate",
+     &SecurityFiles::identity_certificate},
+    {"private_key", "dds.sec.auth.private_key", &SecurityFiles::private_key},
+    {"permissions_ca", "dds.sec.access.permissions_ca", &SecurityFiles::permissions_ca},
+    {"governance", "dds.sec.access.governance", &SecurityFiles::governance},
+    {"permissions", "dds.sec.access.permissions", &SecurityFiles::permissions},
+}};
+
+/// A field's command-line flag: "--identity-ca" for identity_ca.
+[[nodiscard]] std::string securityFlag(const SecurityFileField& field);
 
 /// All six set and readable; the error names the first that is not.
 [[nodiscard]] Expected<void> checkSecurityFiles(const SecurityFiles& files);

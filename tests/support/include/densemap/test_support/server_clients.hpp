@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <memory>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "densemap/client/client.hpp"
@@ -25,6 +26,26 @@ inline std::unique_ptr<Client> connectClient(std::uint32_t domain, bool subscrib
   auto ok = (*client)->waitForServer();
   EXPECT_TRUE(ok) << ok.error().message;
   return std::move(*client);
+}
+
+/// Whether `client` sees the map event of scan `seq` within 20 s (it polls map/events).
+inline bool waitForScanEvent(Client& client, std::uint64_t seq) {
+  using namespace std::chrono_literals;
+  bool seen = false;
+  for (const auto deadline = std::chrono::steady_clock::now() + 20s;
+       !seen && std::chrono::steady_clock::now() < deadline;) {
+    client.pollEvents([&](const MapEventInfo& e) { seen = seen || e.scan_seq == seq; });
+    if (!seen) std::this_thread::sleep_for(2ms);
+  }
+  return seen;
+}
+
+/// Publishes each scan and waits for its map event (a test failure if one never comes).
+inline void replayScans(Client& client, const std::vector<RawScan>& raws) {
+  for (const RawScan& raw : raws) {
+    ASSERT_TRUE(client.publishScan(raw));
+    ASSERT_TRUE(waitForScanEvent(client, raw.seq)) << "scan " << raw.seq;
+  }
 }
 
 /// Writes a simulated sequence to `dir/data` and returns its scans as a sender publishes them
