@@ -18,6 +18,7 @@
 #include "densemap/upsample/interpolation.hpp"
 #include "load_command.hpp"
 #include "ros_replay.hpp"
+#include "densemap/cli/guarded_main.hpp"
 
 namespace densemap::cli {
 namespace {
@@ -362,7 +363,7 @@ int render(const std::string& in, const std::string& out, std::optional<double> 
 }  // namespace
 }  // namespace densemap::cli
 
-int main(int argc, char** argv) {
+static int runMain(int argc, char** argv) {
   using namespace densemap;
   CLI::App app{"densemap: client of densemap-server (DDS, loopback by default)"};
   app.require_subcommand(1);
@@ -472,7 +473,9 @@ int main(int argc, char** argv) {
   snapshot->add_option("--out", snapshot_out, "map.dmap, map.bt or map.ot")->required();
   auto* save = app.add_subcommand("save", "Ask the server to save a snapshot on its machine");
   std::string save_path;
-  save->add_option("--path", save_path, "Server-side path (default: its configured path)");
+  save->add_option("--path", save_path,
+                  "A file name (NAME.dmap, .bt or .ot, no directories) written into the "
+                  "server's snapshot.export_dir (default: its snapshot with generations)");
   auto* status = app.add_subcommand("status", "Server status");
   bool watch = false;
   status->add_flag("--watch", watch, "Print every second until interrupted");
@@ -594,4 +597,8 @@ int main(int argc, char** argv) {
     return 0;
   }
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return densemap::cli::guardedMain("densemap", [&] { return runMain(argc, argv); });
 }

@@ -16,9 +16,11 @@
 #include <systemd/sd-daemon.h>
 #endif
 
+#include "densemap/server/export_path.hpp"
 #include "densemap/server/map_service.hpp"
 #include "densemap/server/server_config.hpp"
 #include "densemap/store/snapshot.hpp"
+#include "densemap/cli/guarded_main.hpp"
 
 namespace {
 
@@ -38,7 +40,7 @@ int fail(const std::string& message, int code = 1) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int runMain(int argc, char** argv) {
   // Scans, their world-frame copies and DDS buffers are megabytes each, every scan: keep such
   // blocks in the heap for reuse instead of mmap/munmap per buffer (each fresh mapping costs a
   // page fault per 4 KiB; profiles of 64-beam replays showed 5% of the time there).
@@ -114,6 +116,8 @@ int main(int argc, char** argv) {
   std::uint64_t version = 0;
   const auto& snapshot = service_options.snapshot_path;
   service_options.snapshot_keep = static_cast<int>(config->snapshot().keep());
+  service_options.export_dir =
+      densemap::server::exportDirectory(config->snapshot().export_dir(), snapshot);
   auto resumed = snapshot.empty()
                      ? densemap::Expected<std::optional<densemap::ResumedSnapshot>>(std::nullopt)
                      : densemap::loadNewestSnapshot(snapshot, service_options.snapshot_keep,
@@ -134,11 +138,6 @@ int main(int argc, char** argv) {
     }
     initial = std::move(loaded->map);
     version = loaded->version;
-  } else if (const auto dir = std::filesystem::path(snapshot).parent_path();
-             !snapshot.empty() && !dir.empty() && !std::filesystem::is_directory(dir)) {
-    return fail(
-        "snapshot.path " + snapshot.string() + ": directory " + dir.string() + " does not exist",
-        check_only ? 2 : 1);
   }
   if (check_only) {
     std::printf(
@@ -206,4 +205,8 @@ int main(int argc, char** argv) {
   spdlog::info("received {}, integrated {}, dropped {}, rejected {}", c.received, c.integrated,
                c.dropped, c.rejected);
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return densemap::cli::guardedMain("densemap-server", [&] { return runMain(argc, argv); });
 }

@@ -1,5 +1,7 @@
 #include "densemap/server/map_service.hpp"
 
+#include "densemap/server/export_path.hpp"
+
 #include <spdlog/spdlog.h>
 
 #include <malloc.h>
@@ -221,15 +223,20 @@ void MapService::publishLoop() {
     // Autosave only a changed map: a daemon idle for months does not rewrite the same file.
     if (autosave && now >= next_save) {
       const std::uint64_t version = pipeline_.view()->version();
+      auto pause = autosave_period;
       if (version != saved_version) {
+        const auto began = std::chrono::steady_clock::now();
         if (auto ok = save(); !ok) {
           spdlog::warn("autosave failed: {}", ok.error().message);
           noteBadRequest("autosave: " + ok.error().message);
         } else {
           saved_version = version;
         }
+        // A short period on a large map would mean back-to-back full rewrites: saving takes
+        // at most a fifth of the time.
+        pause = std::max(pause, 4 * (std::chrono::steady_clock::now() - began));
       }
-      next_save = now + autosave_period;
+      next_save = std::chrono::steady_clock::now() + pause;
     }
   }
   {
@@ -521,10 +528,19 @@ void MapService::answerCommands() {
             outcome = future.get();
           }
         } else if (req.kind == 2) {
-          const std::string path = req.path != nullptr ? req.path : "";
-          auto saved = save(path);
+          // A named file goes into the configured export directory, never where the request
+          // says: a client must not overwrite what the server's user may write.
+          const std::string name = req.path != nullptr ? req.path : "";
+          Expected<std::filesystem::path> target = std::filesystem::path();
+          if (!name.empty()) {
+            target = confineExportPath(exportDirectory(options_.export_dir, options_.snapshot_path),
+                                       name);
+          }
+          auto saved =
+              target ? save(*target) : Expected<std::size_t>(std::unexpected(target.error()));
           if (saved)
-            outcome = "saved " + std::to_string(*saved) + " bytes";
+            outcome = "saved " + std::to_string(*saved) + " bytes" +
+                      (name.empty() ? "" : " to " + target->string());
           else
             outcome = std::unexpected(saved.error());
         }
@@ -552,6 +568,9 @@ Expected<std::size_t> MapService::save(const std::filesystem::path& file) {
   const ReturnFreeMemory trim;  // the snapshot's buffers (about the file's size)
   const SensorModel model(pipeline_.options().sensor);
   if (file.empty() || file == options_.snapshot_path) {
+    // One rotation at a time: a command's save and an autosave must not rotate generations
+    // under each other.
+    const std::lock_guard lock(save_mutex_);
     return saveSnapshotKeeping(*pipeline_.view(), model, pipeline_.options().backend, target,
                                options_.snapshot_keep);
   }

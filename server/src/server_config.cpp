@@ -1,12 +1,57 @@
 #include "densemap/server/server_config.hpp"
 
+#include <unistd.h>
+
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
 
 #include "densemap/idl/text_format.hpp"
 #include "densemap/io/file_bytes.hpp"
 #include "densemap/ros2/names.hpp"
 
 namespace densemap::server {
+namespace {
+
+constexpr double kMaxRangeM = 2000.0;
+constexpr double kMaxRayCells = 65536.0;
+constexpr std::uint64_t kMaxReserveBlocks = 1'000'000;
+constexpr std::uint64_t kBlockBytes = 2304;  // one 8^3 block of the grid store, with its entry
+constexpr std::uint64_t kMaxQueryCells = 200'000'000;
+
+/// A number as a person would write it: 1e-09, not 0.000000.
+std::string numberText(double v) {
+  char text[32];
+  std::snprintf(text, sizeof(text), "%g", v);
+  return text;
+}
+
+std::uint64_t physicalMemoryBytes() {
+  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGESIZE);
+  return pages > 0 && page > 0
+             ? static_cast<std::uint64_t>(pages) * static_cast<std::uint64_t>(page)
+             : std::uint64_t{1} << 34;
+}
+
+/// The snapshot file must be a file (or not exist yet) in an existing, writable directory: else
+/// the server would lose the map at its first save (or abort at start, as a directory did).
+Expected<void> snapshotPathProblem(const std::string& path) {
+  if (path.empty()) return {};
+  const std::filesystem::path file(path);
+  std::error_code ec;
+  if (std::filesystem::is_directory(file, ec)) return makeError("'" + path + "' is a directory");
+  const std::filesystem::path dir = file.parent_path().empty() ? "." : file.parent_path();
+  if (!std::filesystem::is_directory(dir, ec)) {
+    return makeError("directory " + dir.string() + " does not exist");
+  }
+  if (::access(dir.c_str(), W_OK | X_OK) != 0) {
+    return makeError("directory " + dir.string() +
+                     " is not writable by this user: the map could not be saved");
+  }
+  return {};
+}
+
+}  // namespace
 
 Expected<proto::ServerConfig> loadServerConfig(const std::filesystem::path& file) {
   auto text = readFileBytes(file);
@@ -59,11 +104,19 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
         "\"log_odds\"");
   }
   if (!(o.resolution_m >= 0.001 && o.resolution_m <= 100.0)) {
-    return makeError("map.resolution_m must be in [0.001, 100], got " +
-                     std::to_string(o.resolution_m));
+    return makeError("map.resolution_m must be in [0.001, 100], got " + numberText(o.resolution_m));
   }
   o.max_range_m = config.map().max_range_m();
-  if (!std::isfinite(o.max_range_m)) return makeError("map.max_range_m must be finite");
+  // A bound on every ray: with "unlimited" range one scan of far points built 102.7M cells.
+  if (!(o.max_range_m > 0 && o.max_range_m <= kMaxRangeM)) {
+    return makeError("map.max_range_m must be in (0, " + std::to_string(int(kMaxRangeM)) +
+                     "] m (no unlimited range in the server), got " + numberText(o.max_range_m));
+  }
+  if (o.max_range_m / o.resolution_m > kMaxRayCells) {
+    return makeError("map.max_range_m / map.resolution_m must be at most " +
+                     std::to_string(int(kMaxRayCells)) + " cells per ray, got " +
+                     numberText(o.max_range_m / o.resolution_m));
+  }
   const auto& s = config.map().sensor();
   o.sensor = {s.prob_hit(), s.prob_miss(), s.clamp_min(), s.clamp_max()};
   if (!SensorModel(o.sensor).isValid() || s.prob_hit() >= 1.0 || s.clamp_max() >= 1.0 ||
@@ -74,8 +127,18 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
   }
   const auto& p = config.pipeline();
   if (p.threads() < 1 || p.threads() > 256) return makeError("pipeline.threads must be in 1..256");
-  if (p.reserve_blocks() > 10'000'000) {
-    return makeError("pipeline.reserve_blocks must be at most 10000000");
+  // Faulted in at start: more than the machine can hold aborted with bad_alloc.
+  if (p.reserve_blocks() > kMaxReserveBlocks ||
+      p.reserve_blocks() * kBlockBytes > physicalMemoryBytes() / 4) {
+    return makeError(
+        "pipeline.reserve_blocks must be at most " + std::to_string(kMaxReserveBlocks) +
+        " and a quarter of this machine's memory (" +
+        std::to_string(physicalMemoryBytes() / 4 / kBlockBytes) + " blocks of " +
+        std::to_string(kBlockBytes) + " bytes), got " + std::to_string(p.reserve_blocks()));
+  }
+  if (p.max_query_cells() < 1 || p.max_query_cells() > kMaxQueryCells) {
+    return makeError("pipeline.max_query_cells must be in 1.." + std::to_string(kMaxQueryCells) +
+                     ", got " + std::to_string(p.max_query_cells()));
   }
   if (p.query_threads() < 1 || p.query_threads() > 64) {
     return makeError("pipeline.query_threads must be in 1..64");
@@ -108,8 +171,15 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
   if (config.snapshot().keep() < 1 || config.snapshot().keep() > 100) {
     return makeError("snapshot.keep must be 1 .. 100");
   }
-  if (config.snapshot().autosave_period_s() < 0) {
-    return makeError("snapshot.autosave_period_s must be >= 0");
+  if (const double period = config.snapshot().autosave_period_s();
+      !(period == 0 || (period >= 0.05 && period <= 1e7))) {
+    return makeError(
+        "snapshot.autosave_period_s must be 0 (off) or 0.05 .. 10000000 s (each autosave "
+        "rewrites the whole map), got " +
+        numberText(period));
+  }
+  if (auto dir = snapshotPathProblem(config.snapshot().path()); !dir) {
+    return makeError("snapshot.path: " + dir.error().message);
   }
   if (config.dds().domain_id() > 232) return makeError("dds.domain_id must be in 0..232");
   if (config.dds().network_interface().empty()) {

@@ -45,6 +45,26 @@ if command -v openssl >/dev/null; then
   sed 's#/server.key#/none.key#' "$dir/secure.textproto" >"$dir/nokey.textproto"
   expect_fail "missing private key" "security.private_key" "$dir/nokey.textproto"
 fi
+# Hostile-input issue 28, items 2, 3 and 5: a directory where a file is expected, values that
+# cannot work, and a snapshot directory the server could not write are refused with the reason.
+expect_fail "directory as config" "is a directory" "$dir"
+printf 'snapshot { path: "%s" }\n' "$dir" >"$dir/snapdir.textproto"
+expect_fail "directory as snapshot" "is a directory" "$dir/snapdir.textproto"
+printf 'pipeline { reserve_blocks: 10000000 }\n' >"$dir/reserve.textproto"
+expect_fail "huge reserve_blocks" "reserve_blocks must be at most" "$dir/reserve.textproto"
+printf 'pipeline { max_query_cells: 18446744073709551615 }\n' >"$dir/cells.textproto"
+expect_fail "unbounded max_query_cells" "max_query_cells must be in" "$dir/cells.textproto"
+printf 'snapshot { autosave_period_s: 1e-9 }\n' >"$dir/autosave.textproto"
+expect_fail "continuous autosave" "autosave_period_s must be 0" "$dir/autosave.textproto"
+printf 'map { max_range_m: -1 }\n' >"$dir/range.textproto"
+expect_fail "unlimited range" "no unlimited range" "$dir/range.textproto"
+printf 'map { resolution_m: 1e-9 }\n' >"$dir/tiny.textproto"
+expect_fail "tiny resolution" "got 1e-09" "$dir/tiny.textproto"
+if [ "$(id -u)" -ne 0 ]; then  # root may write anywhere: the check is for other users
+  mkdir -p "$dir/ro" && chmod 0555 "$dir/ro"
+  printf 'snapshot { path: "%s/ro/map.dmap" }\n' "$dir" >"$dir/ro.textproto"
+  expect_fail "unwritable snapshot directory" "not writable" "$dir/ro.textproto"
+fi
 # --config and --check-config together: a usage error.
 if "$server" --config "$src/config/densemap.textproto" --check-config "$src/config/densemap.textproto" \
   >/dev/null 2>&1; then

@@ -113,7 +113,11 @@ TEST(Recovery, KillNineAtRandomMomentsWhileMappingAndSavingLeavesNoCorruptFile) 
     }
     server.kill9();
     const fs::path fresh = snapshotGeneration(path, -1);
-    interrupted += fs::exists(fresh) || fs::exists(fresh.string() + ".tmp");
+    bool partial = false;  // a temporary file of a save (path.new.tmp.XXXXXX) left behind
+    for (const auto& entry : fs::directory_iterator(dir.path())) {
+      partial |= entry.path().filename().string().starts_with(fresh.filename().string() + ".tmp.");
+    }
+    interrupted += fs::exists(fresh) || partial;
     const std::uint64_t saved = expectSnapshotsIntact(path);
     EXPECT_GT(saved, 0U);
     worst_lost = std::max(worst_lost, last_version > saved ? last_version - saved : 0);

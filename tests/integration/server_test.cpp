@@ -14,6 +14,7 @@
 #include "densemap/pipeline/scan_validator.hpp"
 #include "densemap/raycast/integrator.hpp"
 #include "densemap/sim/sequence.hpp"
+#include "densemap/store/snapshot.hpp"
 #include "densemap/test_support/data_dir.hpp"
 #include "densemap/test_support/server_clients.hpp"
 #include "densemap/test_support/server_process.hpp"
@@ -290,6 +291,52 @@ TEST(Server, OverloadDropsScansKeepsLatencyBoundedAndMemoryFlat) {
   EXPECT_GT(rss_first, 0);
   EXPECT_LT(rss_second - rss_first, 32 * 1024)
       << "resident memory grew from " << rss_first << " kB to " << rss_second << " kB";
+  EXPECT_EQ(server.stop(), 0);
+}
+
+// Hostile-input issue 28, item 1: a client may not name where the server writes. Before, `save
+// --path FILE` replaced any file the server's user could write (a root-only 0600 file became a
+// world-readable .dmap).
+TEST(Server, SaveWritesOnlyPlainFileNamesIntoTheExportDirectory) {
+  test::TempDir dir;
+  const auto raws = simulatedScans(dir.path(), 1);
+  ServerProcess server(dir.path(), 146);
+  auto client = connect(146);
+  ASSERT_TRUE(client);
+  replay(*client, raws);
+  const auto secret = dir.path() / "secret";
+  std::ofstream(secret) << "root only";
+  std::filesystem::permissions(secret, std::filesystem::perms::owner_read |
+                                           std::filesystem::perms::owner_write);
+  for (const std::string& hostile : std::vector<std::string>{secret.string(), "../secret", "exports/../../secret", "..", ".hidden.dmap",
+        "map.dmap.1", "name with spaces.dmap", "x.txt", std::string(200, 'a') + ".dmap"}) {
+    SCOPED_TRACE(hostile);
+    auto saved = client->command(CommandKind::kSave, {0, 0, 0}, {0, 0, 0}, hostile);
+    EXPECT_FALSE(saved);
+  }
+  std::ifstream in(secret);
+  std::string content((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(content, "root only");
+  // A plain name goes to exports/ beside the snapshot, and is the map.
+  auto saved = client->command(CommandKind::kSave, {0, 0, 0}, {0, 0, 0}, "copy.dmap");
+  ASSERT_TRUE(saved) << saved.error().message;
+  const auto exported = dir.path() / "exports" / "copy.dmap";
+  EXPECT_NE(saved->find(exported.string()), std::string::npos) << *saved;
+  auto loaded = loadSnapshot(exported, Backend::kGrid, 0.2);
+  ASSERT_TRUE(loaded) << loaded.error().message;
+  auto fetched = client->fetchMap();
+  ASSERT_TRUE(fetched);
+  EXPECT_EQ(diffMaps(*loaded->map, *fetched->first).differing(), 0U);
+  // A link planted under the name is replaced, never followed.
+  const auto target = dir.path() / "target";
+  std::ofstream(target) << "keep";
+  std::filesystem::remove(exported);
+  std::filesystem::create_symlink(target, exported);
+  ASSERT_TRUE(client->command(CommandKind::kSave, {0, 0, 0}, {0, 0, 0}, "copy.dmap"));
+  EXPECT_FALSE(std::filesystem::is_symlink(exported));
+  std::ifstream kept(target);
+  std::string kept_content((std::istreambuf_iterator<char>(kept)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(kept_content, "keep");
   EXPECT_EQ(server.stop(), 0);
 }
 

@@ -20,6 +20,7 @@
 #include "densemap/map/octree_map.hpp"
 #include "densemap/map/update_rule.hpp"
 #include "densemap/raycast/integrator.hpp"
+#include "densemap/cli/guarded_main.hpp"
 
 namespace densemap::bench {
 namespace {
@@ -295,7 +296,7 @@ int run(const Options& o) {
 }  // namespace
 }  // namespace densemap::bench
 
-int main(int argc, char** argv) {
+static int runMain(int argc, char** argv) {
   densemap::bench::Options o;
   CLI::App app{"densemap-bench: integration speed and exactness against OctoMap, one run"};
   app.add_option("--data", o.data, "Dataset (directory, .graph, .pcd dir, scan.dat[.bz2])")
@@ -330,4 +331,8 @@ int main(int argc, char** argv) {
   app.add_option("--json", o.json, "Also write the results as JSON to this file");
   CLI11_PARSE(app, argc, argv);
   return densemap::bench::run(o);
+}
+
+int main(int argc, char** argv) {
+  return densemap::cli::guardedMain("densemap-bench", [&] { return runMain(argc, argv); });
 }

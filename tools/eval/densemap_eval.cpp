@@ -32,6 +32,7 @@
 #include "densemap/sim/oracle_labels.hpp"
 #include "densemap/upsample/interpolation.hpp"
 #include "plots.hpp"
+#include "densemap/cli/guarded_main.hpp"
 
 namespace {
 
@@ -110,7 +111,7 @@ Picture slicePicture(const SliceFrame& f, double resolution, double z, int scale
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int runMain(int argc, char** argv) {
   std::string data, methods_list = "akimap,bgk,bgkl,raycast,akimap_rays", protocol = "holdout",
                     json_path, roc_prefix;
   double resolution = 0.1, max_range = -1.0, akimap_free_step = 0.5;
@@ -457,4 +458,8 @@ int main(int argc, char** argv) {
     }
   }
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return densemap::cli::guardedMain("densemap-eval", [&] { return runMain(argc, argv); });
 }

@@ -12,8 +12,9 @@
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_factory.hpp"
 #include "densemap/raycast/integrator.hpp"
+#include "densemap/cli/guarded_main.hpp"
 
-int main(int argc, char** argv) {
+static int runMain(int argc, char** argv) {
   std::string data, out, graph_out, backend_name = "grid";
   std::size_t first = 0, limit = 0;
   double resolution = 0.1, max_range = -1.0;
@@ -76,4 +77,8 @@ int main(int argc, char** argv) {
   std::printf("wrote %s (%zu known cells, %.1f MiB in memory)\n", out.c_str(), (*map)->knownCells(),
               (*map)->memoryBytes() / 1048576.0);
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return densemap::cli::guardedMain("densemap-map", [&] { return runMain(argc, argv); });
 }

@@ -6,8 +6,9 @@
 
 #include "densemap/cli/progress.hpp"
 #include "densemap/sim/sequence.hpp"
+#include "densemap/cli/guarded_main.hpp"
 
-int main(int argc, char** argv) {
+static int runMain(int argc, char** argv) {
   CLI::App app{"densemap-sim: simulated LiDAR datasets (scans/*.bin, poses.txt, ground_truth.bt)"};
   densemap::SequenceOptions o;
   std::string out;
@@ -73,4 +74,8 @@ int main(int argc, char** argv) {
     std::printf("oracle labels %s\n", path.string().c_str());
   }
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return densemap::cli::guardedMain("densemap-sim", [&] { return runMain(argc, argv); });
 }

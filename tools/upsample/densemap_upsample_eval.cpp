@@ -30,6 +30,7 @@
 #include "densemap/sim/trajectory.hpp"
 #include "densemap/upsample/iln.hpp"
 #include "densemap/upsample/interpolation.hpp"
+#include "densemap/cli/guarded_main.hpp"
 
 namespace {
 
@@ -120,7 +121,7 @@ std::optional<Split> parseSplit(const std::string& text) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+static int runMain(int argc, char** argv) {
   std::string scenes_list = "outdoor,indoor", seeds_list = "101,102",
               methods_list = "bilinear,nearest", input_text = "16x1024",
               targets_list = "64x1024,128x2048,256x4096", json_path;
@@ -494,4 +495,8 @@ int main(int argc, char** argv) {
     }
   }
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return densemap::cli::guardedMain("densemap-upsample-eval", [&] { return runMain(argc, argv); });
 }

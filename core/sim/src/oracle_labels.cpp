@@ -78,11 +78,12 @@ std::filesystem::path oracleLabelsPath(const std::filesystem::path& dir, double 
 
 Expected<std::vector<LabelledVoxel>> readOracleLabels(const std::filesystem::path& path,
                                                       double resolution_m) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    return makeError("no oracle labels at " + path.string() +
+  auto bytes = readFileBytes(path);
+  if (!bytes) {
+    return makeError("no oracle labels: " + bytes.error().message +
                      " (write them with densemap-sim --oracle-factor F --oracle-resolutions R)");
   }
+  std::istringstream in(std::move(*bytes), std::ios::binary);
   octomap::OcTree tree(resolution_m);
   if (!tree.readBinary(in)) return makeError(path.string() + ": not a readable OctoMap .bt file");
   if (std::abs(tree.getResolution() - resolution_m) > 1e-9) {

@@ -1,5 +1,7 @@
 #include "densemap/upsample/iln.hpp"
 
+#include "densemap/io/file_bytes.hpp"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -127,20 +129,9 @@ std::vector<float> toVector(const RowMatrixD& m) {
 }  // namespace
 
 Expected<IlnModel> IlnModel::load(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return makeError("cannot open ILN weights file '" + path + "'");
-  in.seekg(0, std::ios::end);
-  const auto size = static_cast<std::size_t>(in.tellg());
-  if (size > kMaxFileBytes) {
-    return makeError("ILN weights file '" + path + "' is " + std::to_string(size) +
-                     " bytes; refusing more than " + std::to_string(kMaxFileBytes));
-  }
-  std::string bytes(size, '\0');
-  in.seekg(0);
-  if (!in.read(bytes.data(), static_cast<std::streamsize>(size))) {
-    return makeError("cannot read ILN weights file '" + path + "'");
-  }
-  return parse(bytes, "ILN weights file '" + path + "'");
+  auto bytes = readFileBytes(path, kMaxFileBytes);
+  if (!bytes) return makeError("ILN weights file: " + bytes.error().message);
+  return parse(*bytes, "ILN weights file '" + path + "'");
 }
 
 Expected<IlnModel> IlnModel::parse(std::string_view bytes, const std::string& what) {

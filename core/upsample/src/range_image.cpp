@@ -1,5 +1,7 @@
 #include "densemap/upsample/range_image.hpp"
 
+#include "densemap/io/file_bytes.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <fstream>
@@ -53,8 +55,9 @@ Expected<RangeLayout> withBeams(std::vector<double> beams_deg, int cols) {
 }
 
 Expected<std::vector<double>> readBeamTable(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return makeError("cannot read the beam table " + path);
+  auto text = readFileBytes(path, std::uint64_t{1} << 20);
+  if (!text) return makeError("beam table: " + text.error().message);
+  std::istringstream in(*text);
   std::vector<double> beams;
   std::string line;
   for (int number = 1; std::getline(in, line); ++number) {

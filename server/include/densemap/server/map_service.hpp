@@ -25,6 +25,7 @@ struct ServiceOptions {
   std::optional<dds::SecurityFiles> security;  // DDS Security; none: plain DDS
   std::filesystem::path snapshot_path;         // empty: no snapshots
   int snapshot_keep = 3;                       // files kept: path, path.1, ... (core/store)
+  std::filesystem::path export_dir;  // where `save --path NAME` writes (exportDirectory())
   double autosave_period_s = 0.0;              // 0: off
   std::size_t max_query_cells = 50'000'000;
   int query_threads = 2;            // the query task arena: requests are answered in parallel
@@ -108,6 +109,7 @@ class MapService {
   std::atomic<std::uint64_t> queries_answered_{0};
   std::atomic<std::uint64_t> queries_rejected_{0};
   std::mutex error_mutex_;
+  std::mutex save_mutex_;  // one snapshot rotation at a time (command save, autosave, shutdown)
   std::string last_query_error_;
 };
 
