@@ -6,9 +6,11 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <numbers>
 #include <vector>
 
+#include "densemap/geometry/ray_traversal.hpp"
 #include "densemap/kernel/bandwidth.hpp"
 #include "densemap/kernel/kernel_function.hpp"
 #include "densemap/kernel/kernel_map.hpp"
@@ -192,6 +194,22 @@ TEST_P(KernelMapMethods, ResultDoesNotDependOnTheThreadCount) {
   EXPECT_EQ(one, two);  // bit for bit
 }
 
+TEST(FreeTraversal, ResultDoesNotDependOnTheThreadCount) {
+  const auto build = [](int threads) {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
+    options.free_traversal = true;
+    options.max_range = 15.0;
+    KernelMap map(0.1, options);
+    map.integrate(roomScan(), Point3f(0, 0, 0));
+    map.integrate(roomScan(), Point3f(0.3F, 0.2F, 0.1F));
+    return cellsOf(map);
+  };
+  const auto one = build(1);
+  ASSERT_GT(one.size(), 1000U);
+  EXPECT_EQ(one, build(2));  // bit for bit: fixed-point sums do not depend on the order
+}
+
 TEST_P(KernelMapMethods, RowStretchesGiveTheWholeBoxesMapBitForBit) {
   for (const double resolution : {0.1, 0.07}) {
     KernelOptions options = KernelOptions::defaults(GetParam());
@@ -215,6 +233,82 @@ INSTANTIATE_TEST_SUITE_P(All, KernelMapMethods,
                          [](const auto& param_info) {
                            return std::string(kernelMethodName(param_info.param));
                          });
+
+// Issue 29: akimap_rays' free evidence by one traversal per ray. Rays cut at max range carry
+// free evidence only (no hit, no tip, no occupied kernel), so each voxel's beta is exactly the
+// traversal's sum: checked against a plain reference (traverseRay, sparseKernel, double sums).
+TEST(FreeTraversal, CutRaysGiveEachTraversedVoxelTheKernelOfItsDistance) {
+  KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
+  options.free_traversal = true;
+  options.max_range = 4.0;
+  const double resolution = 0.1;
+  KernelMap map(resolution, options);
+  PointCloud points;
+  for (int i = 0; i < 60; ++i) {  // directions over a cone, all ending beyond max range
+    const double a = 0.1 * i, b = 0.05 * (i % 7) - 0.15;
+    points.emplace_back(static_cast<float>(9.0 * std::cos(a)), static_cast<float>(9.0 * std::sin(a)),
+                        static_cast<float>(9.0 * b));
+  }
+  const Point3f origin(0.03F, -0.02F, 0.01F);
+  map.integrate(points, origin);
+  const double joints = 1.0 + 2.0 * options.length_scale / 3.0 / options.free_step;
+  std::map<std::uint64_t, double> beta;
+  const VoxelGrid& grid = map.grid();
+  for (const Point3f& p : points) {
+    const Eigen::Vector3d o = origin.cast<double>();
+    const Eigen::Vector3d dir = (p.cast<double>() - o).normalized();
+    const Eigen::Vector3d end = o + options.max_range * dir;
+    traverseRay(grid, origin, end.cast<float>(), [&](const VoxelKey& k) {
+      const Eigen::Vector3d c(grid.keyToCoord(k.x), grid.keyToCoord(k.y), grid.keyToCoord(k.z));
+      const Eigen::Vector3d seg = end - o;
+      const double t = std::clamp((c - o).dot(seg) / seg.squaredNorm(), 0.0, 1.0);
+      const double d = (c - (o + t * seg)).norm();
+      const double w = options.sf2 * joints * sparseKernel(d / options.length_scale);
+      if (w > 0.0) beta[k.packed()] += w;
+    });
+  }
+  ASSERT_GT(beta.size(), 500U);
+  std::size_t checked = 0;
+  map.forEachKnown([&](const VoxelKey& k, double p) {
+    const auto it = beta.find(k.packed());
+    ASSERT_NE(it, beta.end()) << "a voxel no ray traverses has evidence";
+    const double measured = options.prior / p - 2.0 * options.prior;  // p = a0 / (2 a0 + beta)
+    EXPECT_NEAR(measured, it->second, 1e-4 * std::max(1.0, it->second));
+    ++checked;
+  });
+  EXPECT_EQ(checked, beta.size());
+}
+
+// The fast path changes the model a little (no evidence off the traversed voxels; joints as a
+// mean): on a room with grazing rays it classifies as the segment kernels do almost everywhere.
+TEST(FreeTraversal, AgreesWithTheSegmentKernelsOnARoom) {
+  for (const double resolution : {0.2, 0.1}) {
+    KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
+    options.max_range = 15.0;
+    options.free_traversal = true;
+    KernelMap fast(resolution, options);
+    options.free_traversal = false;
+    KernelMap plain(resolution, options);
+    for (const Point3f& origin : {Point3f(0, 0, 0), Point3f(0.4F, -0.3F, 0.2F)}) {
+      fast.integrate(roomScan(), origin);
+      plain.integrate(roomScan(), origin);
+    }
+    std::size_t both = 0, agree = 0;
+    double sum_abs = 0.0;
+    plain.forEachKnown([&](const VoxelKey& k, double p) {
+      const auto q = fast.probability(k);
+      if (!q) return;
+      ++both;
+      agree += (p > 0.5) == (*q > 0.5);
+      sum_abs += std::abs(p - *q);
+    });
+    SCOPED_TRACE("resolution " + std::to_string(resolution));
+    ASSERT_GT(both, 1000U);
+    EXPECT_GT(static_cast<double>(both), 0.85 * static_cast<double>(plain.knownCells()));
+    EXPECT_GT(static_cast<double>(agree), 0.97 * static_cast<double>(both));
+    EXPECT_LT(sum_abs / static_cast<double>(both), 0.08);
+  }
+}
 
 TEST(KernelMethodNames, ParseAndReject) {
   EXPECT_EQ(*parseKernelMethod("bgkl"), KernelMethod::kBgkl);

@@ -3,6 +3,7 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -68,6 +69,10 @@ struct KernelOptions {
   /// on every axis. 0.1 m measured best of {1, 2, 3} voxels at 0.1 m and 0.05 m on the oracle
   /// scenes and the la3dm hold-out (issue 5 note).
   double min_thickness = 0.1;
+  /// kAkimapRays: free evidence by one voxel traversal per ray (FreeTraversal, issue 29: the
+  /// traversed voxels get the value the segment kernels give them) instead of a capsule kernel
+  /// per `free_step` piece of every ray; the tip stays a kernel. Setting free_traversal=0 (or 1).
+  bool free_traversal = false;
   std::uint64_t seed = 1;
   /// The plain path, for tests: visit every cell of each kernel's bounding box instead of
   /// only each row's stretch that the kernel can reach (the results are the same, bit for bit).
@@ -81,12 +86,13 @@ struct KernelOptions {
 /// Applies "NAME=VALUE" settings to `options`: any double field above by its name (free_step,
 /// length_scale, sf2, prior, free_margin, max_margin, tip_margin, tip_length_scale,
 /// occupied_weight, hit_weight, hit_kernel_weight, hit_length_voxels, negative_step,
-/// search_max, search_range, min_thickness); errors name the setting.
+/// search_max, search_range, min_thickness), and free_traversal=0|1; errors name the setting.
 [[nodiscard]] Expected<void> applySettings(KernelOptions& options,
                                            const std::vector<std::string>& settings);
 
 struct KernelScanStats {
   std::size_t samples = 0;
+  std::size_t free_visits = 0;  // voxel visits of the free traversal (free_traversal)
   std::size_t cell_updates = 0;  // (cell, kernel) pairs with a non-zero contribution
   double ms_samples = 0, ms_bandwidth = 0, ms_accumulate = 0;
 };
@@ -95,9 +101,14 @@ struct KernelScanStats {
 /// kernels of each scan's samples accumulated into alpha (occupied) and beta (free), Eq. 3.8-3.9.
 /// The result depends only on the scans and the seed, never on the thread count: each 8^3
 /// block sums its kernels in sample order.
+class FreeTraversal;
+
 class KernelMap {
  public:
   KernelMap(double resolution_m, const KernelOptions& options);
+  ~KernelMap();
+  KernelMap(KernelMap&&) noexcept;
+  KernelMap& operator=(KernelMap&&) noexcept;
 
   [[nodiscard]] const VoxelGrid& grid() const { return grid_; }
   [[nodiscard]] const KernelOptions& options() const { return options_; }
@@ -127,6 +138,7 @@ class KernelMap {
   KernelOptions options_;
   std::unordered_map<std::uint64_t, Block> blocks_;
   std::size_t scans_ = 0;
+  std::unique_ptr<FreeTraversal> free_;  // its buffers, kept between scans
 };
 
 }  // namespace densemap::kernel
