@@ -21,6 +21,7 @@ struct RunResult {
   std::vector<double> ms_per_scan;
   double total_s = 0;
   bool has_counts = false;  // visits/changed are measured for densemap's own methods only
+  bool dense = false;       // a kernel map (visits: kernel-cell updates + free-capsule voxels)
   double visits_per_scan = 0;
   double changed_cells_per_scan = 0;
   // Ray statistics (the dissertation's Tables 2.2-2.3), per scan.

@@ -1,6 +1,7 @@
 // densemap-bench: offline integration benchmark (no DDS). Every method integrates the same
 // scans in one run, the methods taking turns a few scans at a time; speed is reported as ratios
 // against OctoMap's insertPointCloud, and every map is compared with OctoMap's cell by cell.
+#include <malloc.h>
 #include <tbb/task_arena.h>
 #include <CLI/CLI.hpp>
 
@@ -19,6 +20,7 @@
 #include "densemap/map/map_factory.hpp"
 #include "densemap/map/octree_map.hpp"
 #include "densemap/map/update_rule.hpp"
+#include "densemap/kernel/kernel_map.hpp"
 #include "densemap/raycast/integrator.hpp"
 #include "densemap/cli/guarded_main.hpp"
 
@@ -43,7 +45,26 @@ struct Options {
   std::size_t limit = 0;
   std::size_t turn = 10;
   std::string json;
+  std::vector<std::string> kernel_settings;  // --kernel-set, for every dense method
 };
+
+/// A dense (kernel) method: `kind` or `kind@plain` (akimap_rays' earlier path: a segment kernel
+/// per piece of ray and an adaptive kernel per hit), with --kernel-set applied.
+Expected<kernel::KernelOptions> kernelOptions(const std::string& method, const Options& o) {
+  const auto at = method.find('@');
+  const std::string kind = method.substr(0, at);
+  auto parsed = kernel::parseKernelMethod(kind);
+  if (!parsed) return std::unexpected(parsed.error());
+  kernel::KernelOptions k = kernel::KernelOptions::defaults(*parsed);
+  k.max_range = o.max_range;
+  if (auto ok = kernel::applySettings(k, o.kernel_settings); !ok) return std::unexpected(ok.error());
+  if (at != std::string::npos) {  // after --kernel-set: the variant is what the name says
+    if (method.substr(at + 1) != "plain") return makeError("unknown variant in '" + method + "'");
+    k.free_traversal = false;
+    k.aggregate_hits = false;
+  }
+  return k;
+}
 
 std::string machineDescription() {
   std::ifstream cpuinfo("/proc/cpuinfo");
@@ -85,6 +106,9 @@ Expected<std::vector<WorldScan>> loadScans(const Options& o) {
 using Integrate = std::function<ScanStats(OccupancyMap&, const WorldScan&)>;
 
 Integrate makeIntegrator(const std::string& method, const Options& o) {
+  if (kernelOptions(method, o)) {  // a dense method: the Lane builds its kernel map
+    return [](OccupancyMap&, const WorldScan&) { return ScanStats{}; };
+  }
   if (method == "octomap") {
     return [range = o.max_range](OccupancyMap& map, const WorldScan& s) {
       static_cast<OctreeMap&>(map).insertWithOctomap(s.points, s.origin, range);
@@ -122,6 +146,19 @@ class Lane {
     r_.resolution = o.resolution;
     r_.max_range = o.max_range;
     r_.has_counts = method != "octomap";
+    if (auto k = kernelOptions(method, o); k) {
+      r_.dense = true;
+      r_.backend = "kernel";
+      kernel_ = std::make_shared<kernel::KernelMap>(o.resolution, *k);
+      integrate_ = [map = kernel_](OccupancyMap&, const WorldScan& s) {
+        const kernel::KernelScanStats k = map->integrate(s.points, s.origin);
+        ScanStats stats;
+        stats.points = s.points.size();
+        stats.visits = k.cell_updates + k.free_visits;
+        stats.updated = k.cell_updates;
+        return stats;
+      };
+    }
     name_ = method + "/" + r_.backend;
   }
 
@@ -155,7 +192,7 @@ class Lane {
     r_.culled_per_scan = sums_[4] / n;
     r_.region_voxels_per_scan = sums_[5] / n;
     for (int k = 0; k < 5; ++k) r_.ms_stage[k] = stage_sums_[k] / n;
-    r_.known_cells = map_->knownCells();
+    r_.known_cells = kernel_ ? kernel_->knownCells() : map_->knownCells();
     r_.memory_bytes = map_->memoryBytes();
     return r_;
   }
@@ -167,6 +204,7 @@ class Lane {
   RunResult r_;
   std::unique_ptr<OccupancyMap> map_;
   Integrate integrate_;
+  std::shared_ptr<kernel::KernelMap> kernel_;  // dense methods: the map they build
   tbb::task_arena arena_;
   double sums_[6] = {0, 0, 0, 0, 0, 0};
   double stage_sums_[5] = {0, 0, 0, 0, 0};
@@ -178,10 +216,16 @@ int run(const Options& o) {
     if (!makeIntegrator(m, o)) {
       std::fprintf(stderr,
                    "densemap-bench: unknown method '%s' or rule '%s' (methods: octomap, raycast, "
-                   "superray, culling, superray+culling; rules: set, per_ray)\n",
+                   "superray, culling, superray+culling, and the dense kinds akimap_rays, "
+                   "akimap_rays@plain, akimap, bgk, bgkl; rules: set, per_ray)\n",
                    m.c_str(), o.rule.c_str());
       return 2;
     }
+  }
+  if (auto ok = kernel::applySettings(*std::make_unique<kernel::KernelOptions>(), o.kernel_settings);
+      !ok) {
+    std::fprintf(stderr, "densemap-bench: --kernel-set: %s\n", ok.error().message.c_str());
+    return 2;
   }
   std::vector<Backend> backends;
   for (const auto& b : o.backends) {
@@ -214,7 +258,7 @@ int run(const Options& o) {
   std::stable_partition(order.begin(), order.end(), [](const auto& m) { return m == "octomap"; });
   std::vector<std::unique_ptr<Lane>> lanes;
   for (const auto& method : order) {
-    if (method == "octomap") {  // OctoMap's own octree, once
+    if (method == "octomap" || kernelOptions(method, o)) {  // OctoMap's octree, a kernel map: once
       lanes.push_back(std::make_unique<Lane>(method, Backend::kOctree, o));
       continue;
     }
@@ -246,6 +290,11 @@ int run(const Options& o) {
     RunResult r = lane->finish();
     const OccupancyMap& map = lane->map();
     if (r.method == "octomap") octomap_p50 = r.percentile(0.5);
+    if (r.dense) {  // a kernel map: no cell-by-cell comparison with a log-odds map
+      if (octomap_p50 > 0) r.speedup_vs_octomap = octomap_p50 / std::max(1e-9, r.percentile(0.5));
+      runs.push_back(std::move(r));
+      continue;
+    }
     if (r.method == reference_method || r.method == "octomap") {  // its own reference
       r.reference = r.method;
       r.diff_cells = 0;
@@ -297,6 +346,10 @@ int run(const Options& o) {
 }  // namespace densemap::bench
 
 static int runMain(int argc, char** argv) {
+  // As densemap-server does (server/src/main.cpp): per-scan buffers stay in the heap for reuse
+  // instead of fresh mappings (a page fault per 4 KiB), so the bench measures the server's path.
+  mallopt(M_MMAP_THRESHOLD, 64 << 20);
+  mallopt(M_TRIM_THRESHOLD, 256 << 20);
   densemap::bench::Options o;
   CLI::App app{"densemap-bench: integration speed and exactness against OctoMap, one run"};
   app.add_option("--data", o.data, "Dataset (directory, .graph, .pcd dir, scan.dat[.bz2])")
@@ -305,7 +358,9 @@ static int runMain(int argc, char** argv) {
   app.add_option("--max-range", o.max_range, "Rays are cut at this range, m (< 0: unlimited)")
       ->capture_default_str();
   app.add_option("--methods", o.methods,
-                 "Comma-separated: octomap, raycast, superray, culling, superray+culling")
+                 "Comma-separated: octomap, raycast, superray, culling, superray+culling; dense "
+                 "(kernel) maps: akimap_rays, akimap_rays@plain (its earlier path), akimap, "
+                 "bgk, bgkl")
       ->delimiter(',')
       ->capture_default_str();
   app.add_option("--rule", o.rule,
@@ -329,6 +384,9 @@ static int runMain(int argc, char** argv) {
                  "the same state (0: each method runs all scans in one go)")
       ->capture_default_str();
   app.add_option("--json", o.json, "Also write the results as JSON to this file");
+  app.add_option("--kernel-set", o.kernel_settings,
+                 "A dense method's setting NAME=VALUE (repeatable; densemap-eval --help lists "
+                 "them), for every dense method of the run");
   CLI11_PARSE(app, argc, argv);
   return densemap::bench::run(o);
 }

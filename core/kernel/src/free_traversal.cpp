@@ -10,7 +10,6 @@
 #include <atomic>
 #include <numeric>
 
-#include "densemap/geometry/ray_traversal.hpp"
 #include "densemap/kernel/kernel_function.hpp"
 
 namespace densemap::kernel {
@@ -75,6 +74,87 @@ struct ThreadBlocks {
   }
 };
 
+/// Calls visit(key, d2) once for every voxel whose centre lies within `radius` of the segment
+/// [a, b] (d2: that squared distance), slice by slice along the segment's dominant axis: per
+/// slice, the rows of the other two axes that the capsule reaches, per row the interval of the
+/// third axis inside the infinite cylinder around the segment's line (a superset of the
+/// capsule), each candidate then checked with its exact distance. Voxels outside the
+/// addressable range are skipped.
+template <class Visit>
+void forEachVoxelNear(const VoxelGrid& grid, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                      double radius, Visit&& visit) {
+  const Eigen::Vector3d seg = b - a;
+  const double len2 = seg.squaredNorm();
+  if (!(len2 > 0.0)) return;
+  const double inverse_len2 = 1.0 / len2;
+  const Eigen::Vector3d u = seg / std::sqrt(len2);
+  int ax = 0;
+  seg.cwiseAbs().maxCoeff(&ax);
+  const int bx = (ax + 1) % 3, cx = (ax + 2) % 3;
+  const double r2 = radius * radius;
+  const double res = grid.resolution();
+  // Key of a coordinate, clamped into the addressable range ([0, 65535] as ints).
+  const auto keyOf = [&](double v) {
+    const double k = std::floor(v / res) + 32768.0;
+    return static_cast<int>(std::clamp(k, 0.0, 65535.0));
+  };
+  const int i0 = keyOf(std::min(a[ax], b[ax]) - radius), i1 = keyOf(std::max(a[ax], b[ax]) + radius);
+  for (int i = i0; i <= i1; ++i) {
+    const double x = grid.keyToCoord(static_cast<std::uint16_t>(i));
+    // The part of the segment within `radius` of this slice along ax bounds its rows.
+    double t0 = (x - radius - a[ax]) / seg[ax], t1 = (x + radius - a[ax]) / seg[ax];
+    if (t0 > t1) std::swap(t0, t1);
+    // Every voxel of an interior slice has its nearest point of the line on the segment (the
+    // foot lies within `radius` of the slice along ax): the line's distance is the capsule's.
+    const bool interior = t0 > 0.0 && t1 < 1.0;
+    t0 = std::max(t0, 0.0);
+    t1 = std::min(t1, 1.0);
+    if (t0 > t1) continue;
+    const double yb0 = a[bx] + t0 * seg[bx], yb1 = a[bx] + t1 * seg[bx];
+    const int j0 = keyOf(std::min(yb0, yb1) - radius), j1 = keyOf(std::max(yb0, yb1) + radius);
+    const double wa = x - a[ax];
+    const double qa = 1.0 - u[cx] * u[cx];
+    for (int j = j0; j <= j1; ++j) {
+      const double y = grid.keyToCoord(static_cast<std::uint16_t>(j));
+      // The squared distance from the line is qa w_c^2 + 2 qb w_c + q0, w = q - a.
+      const double wb = y - a[bx];
+      const double p = wa * u[ax] + wb * u[bx];
+      const double qb = -u[cx] * p;
+      const double q0 = wa * wa + wb * wb - p * p;
+      const double disc = qb * qb - qa * (q0 - r2);
+      if (disc < 0.0) continue;
+      const double root = std::sqrt(disc);
+      const double slack = 1e-9;
+      const int k0 = keyOf(a[cx] + (-qb - root) / qa - slack);
+      const int k1 = keyOf(a[cx] + (-qb + root) / qa + slack);
+      for (int k = k0; k <= k1; ++k) {
+        const double z = grid.keyToCoord(static_cast<std::uint16_t>(k));
+        double d2 = 0.0;
+        if (interior) {
+          const double wc = z - a[cx];
+          d2 = std::max(0.0, (qa * wc + 2.0 * qb) * wc + q0);
+        } else {
+          Eigen::Vector3d c;
+          c[ax] = x;
+          c[bx] = y;
+          c[cx] = z;
+          const Eigen::Vector3d w = c - a;
+          const double t = std::clamp(w.dot(seg) * inverse_len2, 0.0, 1.0);
+          d2 = (w - t * seg).squaredNorm();
+        }
+        if (!(d2 < r2)) continue;
+        int key[3];
+        key[ax] = i;
+        key[bx] = j;
+        key[cx] = k;
+        visit(VoxelKey{static_cast<std::uint16_t>(key[0]), static_cast<std::uint16_t>(key[1]),
+                       static_cast<std::uint16_t>(key[2])},
+              d2);
+      }
+    }
+  }
+}
+
 }  // namespace
 
 struct FreeTraversal::Buffers {
@@ -84,12 +164,9 @@ struct FreeTraversal::Buffers {
 FreeTraversal::FreeTraversal() : buffers_(std::make_unique<Buffers>()) {}
 FreeTraversal::~FreeTraversal() = default;
 
-std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const FreeExtent> extents,
-                                      double sf2, double length_m) {
+std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const FreeExtent> extents) {
   for (ThreadBlocks& t : buffers_->threads) t.reset();
   const KernelTable& table = kernelTable();
-  const double inverse_length2 = 1.0 / (length_m * length_m);
-  const double scaled_sf2 = sf2 * kScale;
   std::atomic<std::size_t> visits{0};
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, extents.size(), 512),
@@ -97,23 +174,17 @@ std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const Fre
         ThreadBlocks& mine = buffers_->threads.local();
         std::size_t n = 0;
         for (std::size_t r = range.begin(); r != range.end(); ++r) {
-          const Eigen::Vector3d a = extents[r].from.cast<double>();
-          const Eigen::Vector3d seg = extents[r].to.cast<double>() - a;
-          const double len2 = seg.squaredNorm();
-          const double inverse_len2 = len2 > 0.0 ? 1.0 / len2 : 0.0;
-          traverseRay(grid, extents[r].from, extents[r].to, [&](const VoxelKey& key) {
+          const FreeExtent& e = extents[r];
+          const double inverse_length2 = 1.0 / (e.radius_m * e.radius_m);
+          const double scaled_weight = e.weight * kScale;
+          forEachVoxelNear(grid, e.from, e.to, e.radius_m, [&](const VoxelKey& key, double d2) {
             ++n;
-            const Eigen::Vector3d c(grid.keyToCoord(key.x), grid.keyToCoord(key.y),
-                                    grid.keyToCoord(key.z));
-            const Eigen::Vector3d ac = c - a;
-            const double t = std::clamp(ac.dot(seg) * inverse_len2, 0.0, 1.0);
-            const double d2 = (ac - t * seg).squaredNorm();
             const double w = table(d2 * inverse_length2);
             if (!(w > 0.0)) return;
-            Block& b = mine.blockFor(block::blockOf(key));
+            Block& blk = mine.blockFor(block::blockOf(key));
             const int cell = block::indexOf(key);
-            b.sum[static_cast<std::size_t>(cell)] += std::llround(w * scaled_sf2);
-            block::setBit(b.mask, cell);
+            blk.sum[static_cast<std::size_t>(cell)] += std::llround(w * scaled_weight);
+            block::setBit(blk.mask, cell);
           });
         }
         visits += n;

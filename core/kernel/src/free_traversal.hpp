@@ -7,23 +7,26 @@
 #include <unordered_map>
 #include <vector>
 
+#include <Eigen/Core>
+
 #include "densemap/geometry/voxel_grid.hpp"
 #include "densemap/map/block_layout.hpp"
 
 namespace densemap::kernel {
 
-/// A ray's free extent: free evidence for the voxels its traversal visits.
+/// A ray's free extent: free evidence for the voxels within the kernel's reach of it.
 struct FreeExtent {
-  Point3f from, to;
+  Eigen::Vector3d from, to;
+  double radius_m = 0.1;  // the kernel's support radius (length scale)
+  double weight = 1.0;    // its value on the extent (sf2)
 };
 
 /// kAkimapRays' fast free evidence (issue 29): instead of one capsule kernel per 0.3 m piece of
 /// every ray (millions per 64-beam scan, each scheduled, sorted and evaluated over its bounding
-/// box), each ray's free extent is walked once with the voxel traversal the log-odds map uses
-/// (Amanatides & Woo), and every voxel it visits gets sf2 * k(d / length), k the sparse kernel
-/// (Eq. 3.5) of d, the voxel centre's distance from the extent: the value the segment kernels
-/// give on the ray's own voxels. Voxels the traversal does not visit get none (at 0.2 m
-/// cells and a 0.15 m kernel those would weigh under 3% of sf2).
+/// box), each ray's free extent (and its tip) is one capsule, rasterised slice by slice (every
+/// voxel whose centre lies within `radius_m` of the extent is visited once per ray, no sort, no
+/// bounding box), and each such voxel gets weight * k(d / radius_m), k the sparse kernel
+/// (Eq. 3.5) of d, its centre's distance from the extent.
 ///
 /// Sums are fixed point (2^-30) in per-thread block buffers kept between scans: integer sums do
 /// not depend on the order of the rays, so the map does not depend on the thread count. Not
@@ -42,9 +45,8 @@ class FreeTraversal {
   FreeTraversal(const FreeTraversal&) = delete;
   FreeTraversal& operator=(const FreeTraversal&) = delete;
 
-  /// Walks every extent; returns the voxel visits. The result (blocks()) replaces the last scan's.
-  std::size_t accumulate(const VoxelGrid& grid, std::span<const FreeExtent> extents, double sf2,
-                         double length_m);
+  /// Rasterises every extent; returns the voxels visited (candidates checked). The result (blocks()) replaces the last scan's.
+  std::size_t accumulate(const VoxelGrid& grid, std::span<const FreeExtent> extents);
   /// The blocks reached by the last accumulate(), in ascending key order, sums merged.
   [[nodiscard]] const std::vector<Block>& blocks() const { return merged_; }
 

@@ -130,7 +130,7 @@ std::vector<float> toVector(const RowMatrixD& m) {
 
 Expected<IlnModel> IlnModel::load(const std::string& path) {
   auto bytes = readFileBytes(path, kMaxFileBytes);
-  if (!bytes) return makeError("ILN weights file: " + bytes.error().message);
+  if (!bytes) return makeError("cannot open ILN weights file " + bytes.error().message);
   return parse(*bytes, "ILN weights file '" + path + "'");
 }
 

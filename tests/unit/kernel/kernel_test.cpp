@@ -234,12 +234,13 @@ INSTANTIATE_TEST_SUITE_P(All, KernelMapMethods,
                            return std::string(kernelMethodName(param_info.param));
                          });
 
-// Issue 29: akimap_rays' free evidence by one traversal per ray. Rays cut at max range carry
-// free evidence only (no hit, no tip, no occupied kernel), so each voxel's beta is exactly the
-// traversal's sum: checked against a plain reference (traverseRay, sparseKernel, double sums).
-TEST(FreeTraversal, CutRaysGiveEachTraversedVoxelTheKernelOfItsDistance) {
+// Issue 29: akimap_rays' free evidence by one capsule per ray. Rays cut at max range carry free
+// evidence only (no hit, no tip, no occupied kernel), so each voxel's beta is exactly the sum of
+// its distances' kernels: checked against a plain reference (every voxel of each ray's box,
+// sparseKernel, double sums).
+TEST(FreeTraversal, CutRaysGiveEveryVoxelInReachTheKernelOfItsDistance) {
   KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
-  options.free_traversal = true;
+  ASSERT_TRUE(options.free_traversal);
   options.max_range = 4.0;
   const double resolution = 0.1;
   KernelMap map(resolution, options);
@@ -258,36 +259,49 @@ TEST(FreeTraversal, CutRaysGiveEachTraversedVoxelTheKernelOfItsDistance) {
     const Eigen::Vector3d o = origin.cast<double>();
     const Eigen::Vector3d dir = (p.cast<double>() - o).normalized();
     const Eigen::Vector3d end = o + options.max_range * dir;
-    traverseRay(grid, origin, end.cast<float>(), [&](const VoxelKey& k) {
-      const Eigen::Vector3d c(grid.keyToCoord(k.x), grid.keyToCoord(k.y), grid.keyToCoord(k.z));
-      const Eigen::Vector3d seg = end - o;
-      const double t = std::clamp((c - o).dot(seg) / seg.squaredNorm(), 0.0, 1.0);
-      const double d = (c - (o + t * seg)).norm();
-      const double w = options.sf2 * joints * sparseKernel(d / options.length_scale);
-      if (w > 0.0) beta[k.packed()] += w;
-    });
+    // Every voxel of the segment's bounding box, widened by the kernel's reach.
+    const Eigen::Vector3d lo = o.cwiseMin(end).array() - options.length_scale;
+    const Eigen::Vector3d hi = o.cwiseMax(end).array() + options.length_scale;
+    const VoxelKey klo = *grid.pointToKey(lo.cast<float>()), khi = *grid.pointToKey(hi.cast<float>());
+    for (int z = klo.z; z <= khi.z; ++z) {
+      for (int y = klo.y; y <= khi.y; ++y) {
+        for (int x = klo.x; x <= khi.x; ++x) {
+          const VoxelKey k{static_cast<std::uint16_t>(x), static_cast<std::uint16_t>(y),
+                           static_cast<std::uint16_t>(z)};
+          const Eigen::Vector3d c(grid.keyToCoord(k.x), grid.keyToCoord(k.y),
+                                  grid.keyToCoord(k.z));
+          const Eigen::Vector3d seg = end - o;
+          const double t = std::clamp((c - o).dot(seg) / seg.squaredNorm(), 0.0, 1.0);
+          const double d = (c - (o + t * seg)).norm();
+          const double w = options.sf2 * joints * sparseKernel(d / options.length_scale);
+          if (w > 0.0) beta[k.packed()] += w;
+        }
+      }
+    }
   }
   ASSERT_GT(beta.size(), 500U);
   std::size_t checked = 0;
   map.forEachKnown([&](const VoxelKey& k, double p) {
     const auto it = beta.find(k.packed());
-    ASSERT_NE(it, beta.end()) << "a voxel no ray traverses has evidence";
+    ASSERT_NE(it, beta.end()) << "a voxel no ray reaches has evidence";
     const double measured = options.prior / p - 2.0 * options.prior;  // p = a0 / (2 a0 + beta)
     EXPECT_NEAR(measured, it->second, 1e-4 * std::max(1.0, it->second));
     ++checked;
   });
-  EXPECT_EQ(checked, beta.size());
+  // Voxels at the very edge of the reach (kernel below the table's 2e-5 error) may differ.
+  EXPECT_GE(checked, beta.size() - beta.size() / 200);
+  EXPECT_LE(checked, beta.size());
 }
 
-// The fast path changes the model a little (no evidence off the traversed voxels; joints as a
-// mean): on a room with grazing rays it classifies as the segment kernels do almost everywhere.
+// The fast path changes the model a little (one capsule per ray, its joints as a mean; one
+// kernel per voxel of many hits): on a room with grazing rays it classifies as the segment kernels do almost everywhere.
 TEST(FreeTraversal, AgreesWithTheSegmentKernelsOnARoom) {
   for (const double resolution : {0.2, 0.1}) {
     KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
     options.max_range = 15.0;
-    options.free_traversal = true;
     KernelMap fast(resolution, options);
     options.free_traversal = false;
+    options.aggregate_hits = false;
     KernelMap plain(resolution, options);
     for (const Point3f& origin : {Point3f(0, 0, 0), Point3f(0.4F, -0.3F, 0.2F)}) {
       fast.integrate(roomScan(), origin);

@@ -69,10 +69,15 @@ struct KernelOptions {
   /// on every axis. 0.1 m measured best of {1, 2, 3} voxels at 0.1 m and 0.05 m on the oracle
   /// scenes and the la3dm hold-out (issue 5 note).
   double min_thickness = 0.1;
-  /// kAkimapRays: free evidence by one voxel traversal per ray (FreeTraversal, issue 29: the
-  /// traversed voxels get the value the segment kernels give them) instead of a capsule kernel
-  /// per `free_step` piece of every ray; the tip stays a kernel. Setting free_traversal=0 (or 1).
+  /// kAkimapRays: free evidence by one capsule per ray's free extent and one per tip, rasterised
+  /// voxel by voxel (FreeTraversal, issue 29) instead of a capsule kernel per `free_step` piece
+  /// of every ray scheduled through the kernel pairs. Setting free_traversal=0 (or 1).
   bool free_traversal = false;
+  /// kAkimapRays: one adaptive kernel per voxel of at least `aggregate_min_hits` hits (at their
+  /// mean, weighing their count, fitted to the neighbourhood outside the voxel; its normal sets
+  /// its rays' stops) instead of one per hit. Setting aggregate_hits=0 (or 1).
+  bool aggregate_hits = false;
+  double aggregate_min_hits = 4.0;
   std::uint64_t seed = 1;
   /// The plain path, for tests: visit every cell of each kernel's bounding box instead of
   /// only each row's stretch that the kernel can reach (the results are the same, bit for bit).
@@ -86,7 +91,9 @@ struct KernelOptions {
 /// Applies "NAME=VALUE" settings to `options`: any double field above by its name (free_step,
 /// length_scale, sf2, prior, free_margin, max_margin, tip_margin, tip_length_scale,
 /// occupied_weight, hit_weight, hit_kernel_weight, hit_length_voxels, negative_step,
-/// search_max, search_range, min_thickness), and free_traversal=0|1; errors name the setting.
+/// search_max, search_range, min_thickness, aggregate_min_hits), and free_traversal=0|1,
+/// aggregate_hits=0|1; errors
+/// name the setting.
 [[nodiscard]] Expected<void> applySettings(KernelOptions& options,
                                            const std::vector<std::string>& settings);
 
