@@ -9,7 +9,8 @@
 # bench, BBOX_EDGE=M adds a client sending M-metre bbox queries back to back, SNAPSHOT=1 times a
 # late joiner's fetch of the whole map, PERF=1 records `perf record -g` of the server into
 # $OUT/perf.data, WARM_UP=true turns the pipeline's warm-up on, LEGACY=1 drives a densemap
-# built before replay's --csv and --query-bbox-edge (before/after runs).
+# built before replay's --csv and --query-bbox-edge (before/after runs), KIND=K the server's
+# map.kind (default log_odds; a dense kind such as akimap_rays is benched as that kind).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DATA=$1 RES=$2 RANGE=$3 RATE=${4:-10} FIRST=${5:-0} LIMIT=${6:-0} QUERY=${7:-0}
@@ -17,7 +18,7 @@ BIN=${DENSEMAP_BIN:-build/bin}
 DOMAIN=${DENSEMAP_DOMAIN:-77}
 OUT=$(mktemp -d /tmp/densemap-rt.XXXXXX)
 cat > "$OUT/server.textproto" <<CFG
-map { backend: "grid" resolution_m: $RES max_range_m: $RANGE }
+map { backend: "grid" kind: "${KIND:-log_odds}" resolution_m: $RES max_range_m: $RANGE }
 pipeline { threads: 2 queue_depth: 2 integration: "superray+culling" max_abs_position_m: 10000
            ${WARM_UP:+warm_up: $WARM_UP} }
 snapshot { path: "" autosave_period_s: 0 }
@@ -51,8 +52,10 @@ kill -TERM $SERVER; wait $SERVER || true
 trap - EXIT
 echo "server peak RSS: $(sort -n "$OUT/rss.txt" | tail -1) KiB"
 if [ "${BENCH:-1}" = 1 ]; then
+  method=superray+culling
+  [ "${KIND:-log_odds}" != log_odds ] && method=$KIND
   "$BIN/densemap-bench" --data "$DATA" --resolution "$RES" --max-range "$RANGE" \
-    --methods superray+culling --backend grid --threads 2 --first "$FIRST" --limit "$LIMIT" \
+    --methods "$method" --backend grid --threads 2 --first "$FIRST" --limit "$LIMIT" \
     2> "$OUT/bench.log" | tee "$OUT/bench.txt" | head -3
 fi
 echo "outputs in $OUT"

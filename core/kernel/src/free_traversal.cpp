@@ -5,6 +5,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <deque>
 #include <bit>
 #include <cmath>
 #include <atomic>
@@ -43,34 +44,48 @@ const KernelTable& kernelTable() {
   return table;
 }
 
-/// One thread's blocks of one scan: a slot per block (kept between scans), a hash from block key
-/// to slot and a last-block cache (a ray stays in one block for several voxels).
+/// One thread's blocks of one scan: a slot per block (a deque: slots never move, and are kept
+/// between scans), a hash from block key to slot, and in front of it a small direct-mapped
+/// cache (a capsule's slices and rows alternate between a few neighbouring blocks).
 struct ThreadBlocks {
-  std::vector<FreeTraversal::Block> slots;
+  static constexpr int kCacheSize = 16;
+  std::deque<FreeTraversal::Block> slots;
   std::size_t used = 0;
-  std::unordered_map<std::uint64_t, std::uint32_t> index;
-  std::uint64_t last_key = ~std::uint64_t{0};
-  FreeTraversal::Block* last = nullptr;
+  std::unordered_map<std::uint64_t, FreeTraversal::Block*> index;
+  std::array<std::uint64_t, kCacheSize> cache_keys{};
+  std::array<FreeTraversal::Block*, kCacheSize> cache_blocks{};
 
+  ThreadBlocks() { cache_keys.fill(~std::uint64_t{0}); }
   void reset() {
     used = 0;
     index.clear();
+    cache_keys.fill(~std::uint64_t{0});
     last_key = ~std::uint64_t{0};
-    last = nullptr;
   }
+  std::uint64_t last_key = ~std::uint64_t{0};
+  FreeTraversal::Block* last = nullptr;
+
   FreeTraversal::Block& blockFor(std::uint64_t key) {
     if (key == last_key) return *last;
-    auto [it, fresh] = index.try_emplace(key, static_cast<std::uint32_t>(used));
+    last_key = key;
+    last = &lookup(key);
+    return *last;
+  }
+  FreeTraversal::Block& lookup(std::uint64_t key) {
+    const std::size_t line = (key ^ (key >> 13) ^ (key >> 26)) & (kCacheSize - 1);
+    if (cache_keys[line] == key) return *cache_blocks[line];
+    auto [it, fresh] = index.try_emplace(key, nullptr);
     if (fresh) {
       if (used == slots.size()) slots.emplace_back();
       FreeTraversal::Block& b = slots[used++];
       b.key = key;
       b.sum.fill(0);
       b.mask.fill(0);
+      it->second = &b;
     }
-    last_key = key;
-    last = &slots[it->second];
-    return *last;
+    cache_keys[line] = key;
+    cache_blocks[line] = it->second;
+    return *it->second;
   }
 };
 
@@ -94,15 +109,17 @@ void forEachVoxelNear(const VoxelGrid& grid, const Eigen::Vector3d& a, const Eig
   const double r2 = radius * radius;
   const double res = grid.resolution();
   // Key of a coordinate, clamped into the addressable range ([0, 65535] as ints).
-  const auto keyOf = [&](double v) {
-    const double k = std::floor(v / res) + 32768.0;
-    return static_cast<int>(std::clamp(k, 0.0, 65535.0));
+  const double inverse_res = 1.0 / res;  // a multiplication: the division was 22% of a scan
+  const auto keyOf = [&](double v) {  // clamped first, then truncation is floor (k >= 0)
+    const double k = std::clamp(v * inverse_res + 32768.0, 0.0, 65535.0);
+    return static_cast<int>(k);
   };
+  const double inverse_seg_ax = 1.0 / seg[ax];
   const int i0 = keyOf(std::min(a[ax], b[ax]) - radius), i1 = keyOf(std::max(a[ax], b[ax]) + radius);
   for (int i = i0; i <= i1; ++i) {
     const double x = grid.keyToCoord(static_cast<std::uint16_t>(i));
     // The part of the segment within `radius` of this slice along ax bounds its rows.
-    double t0 = (x - radius - a[ax]) / seg[ax], t1 = (x + radius - a[ax]) / seg[ax];
+    double t0 = (x - radius - a[ax]) * inverse_seg_ax, t1 = (x + radius - a[ax]) * inverse_seg_ax;
     if (t0 > t1) std::swap(t0, t1);
     // Every voxel of an interior slice has its nearest point of the line on the segment (the
     // foot lies within `radius` of the slice along ax): the line's distance is the capsule's.
@@ -114,6 +131,7 @@ void forEachVoxelNear(const VoxelGrid& grid, const Eigen::Vector3d& a, const Eig
     const int j0 = keyOf(std::min(yb0, yb1) - radius), j1 = keyOf(std::max(yb0, yb1) + radius);
     const double wa = x - a[ax];
     const double qa = 1.0 - u[cx] * u[cx];
+    const double inverse_qa = 1.0 / qa;
     for (int j = j0; j <= j1; ++j) {
       const double y = grid.keyToCoord(static_cast<std::uint16_t>(j));
       // The squared distance from the line is qa w_c^2 + 2 qb w_c + q0, w = q - a.
@@ -125,8 +143,8 @@ void forEachVoxelNear(const VoxelGrid& grid, const Eigen::Vector3d& a, const Eig
       if (disc < 0.0) continue;
       const double root = std::sqrt(disc);
       const double slack = 1e-9;
-      const int k0 = keyOf(a[cx] + (-qb - root) / qa - slack);
-      const int k1 = keyOf(a[cx] + (-qb + root) / qa + slack);
+      const int k0 = keyOf(a[cx] + (-qb - root) * inverse_qa - slack);
+      const int k1 = keyOf(a[cx] + (-qb + root) * inverse_qa + slack);
       for (int k = k0; k <= k1; ++k) {
         const double z = grid.keyToCoord(static_cast<std::uint16_t>(k));
         double d2 = 0.0;
@@ -183,7 +201,9 @@ std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const Fre
             if (!(w > 0.0)) return;
             Block& blk = mine.blockFor(block::blockOf(key));
             const int cell = block::indexOf(key);
-            blk.sum[static_cast<std::size_t>(cell)] += std::llround(w * scaled_weight);
+            // w >= 0: rounding half up without llround's call.
+            blk.sum[static_cast<std::size_t>(cell)] +=
+                static_cast<std::int64_t>(w * scaled_weight + 0.5);
             block::setBit(blk.mask, cell);
           });
         }

@@ -516,8 +516,8 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
                       std::max(options_.search_max, grid_.resolution()));
     keep_free = [&](const Eigen::Vector3d& x) { return (*near_hits)(x); };
   }
-  const std::vector<Sample> samples =
-      makeSamples(points_world, origin_world, sampling, scans_, keep_free);
+  makeSamples(points_world, origin_world, sampling, scans_, keep_free, samples_);
+  const std::vector<Sample>& samples = samples_;
   ++scans_;
   stats.ms_samples = msSince(t0);
 
@@ -564,9 +564,9 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
     // The fast path asks for one piece per ray (then walked by FreeTraversal) and its tip.
     const bool traverse = rays && options_.free_traversal;
     const double step = traverse ? 1e30 : options_.free_step;  // one piece: extent / step > 0
-    const std::vector<Sample> segments =
-        rays ? makeRaySegments(points_world, origin_world, step, options_.max_range, stops)
-             : std::vector<Sample>{};
+    segments_.clear();
+    if (rays) makeRaySegments(points_world, origin_world, step, options_.max_range, stops, segments_);
+    const std::vector<Sample>& segments = segments_;
     kernels.reserve(kernels.size() + 2 * (rays ? centres.size() : 0) + segments.size());
     if (rays) {
       appendHitKernels(hit_positions, aggregate ? &hit_counts : nullptr, options_,

@@ -19,6 +19,15 @@ std::vector<Sample> makeSamples(const PointCloud& points_world, const Point3f& o
                                 const SamplingOptions& options, std::uint64_t scan_index,
                                 const std::function<bool(const Eigen::Vector3d&)>& keep_free) {
   std::vector<Sample> samples;
+  makeSamples(points_world, origin_world, options, scan_index, keep_free, samples);
+  return samples;
+}
+
+void makeSamples(const PointCloud& points_world, const Point3f& origin_world,
+                 const SamplingOptions& options, std::uint64_t scan_index,
+                 const std::function<bool(const Eigen::Vector3d&)>& keep_free,
+                 std::vector<Sample>& samples) {
+  samples.clear();
   const Eigen::Vector3d origin = origin_world.cast<double>();
   const double step = options.free_step;
   std::uint64_t ray_index = 0;
@@ -62,7 +71,6 @@ std::vector<Sample> makeSamples(const PointCloud& points_world, const Point3f& o
       samples.push_back(s);
     }
   }
-  return samples;
 }
 
 NearHits::NearHits(const std::vector<Eigen::Vector3d>& hits, double reach) : cell_(reach) {
@@ -106,6 +114,14 @@ bool NearHits::operator()(const Eigen::Vector3d& x) const {
 std::vector<Sample> makeRaySegments(const PointCloud& points_world, const Point3f& origin_world,
                                     double step, double max_range, std::span<const RayStop> stops) {
   std::vector<Sample> segments;
+  makeRaySegments(points_world, origin_world, step, max_range, stops, segments);
+  return segments;
+}
+
+void makeRaySegments(const PointCloud& points_world, const Point3f& origin_world, double step,
+                     double max_range, std::span<const RayStop> stops,
+                     std::vector<Sample>& segments) {
+  segments.clear();
   const Eigen::Vector3d origin = origin_world.cast<double>();
   std::size_t hit = 0;
   for (const Point3f& p : points_world) {
@@ -143,7 +159,6 @@ std::vector<Sample> makeRaySegments(const PointCloud& points_world, const Point3
       segments.push_back(s);
     }
   }
-  return segments;
 }
 
 }  // namespace densemap::kernel

@@ -146,6 +146,7 @@ class KernelMap {
   std::unordered_map<std::uint64_t, Block> blocks_;
   std::size_t scans_ = 0;
   std::unique_ptr<FreeTraversal> free_;  // its buffers, kept between scans
+  std::vector<Sample> samples_, segments_;  // per-scan buffers, kept between scans
 };
 
 }  // namespace densemap::kernel

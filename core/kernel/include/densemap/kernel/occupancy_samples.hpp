@@ -44,6 +44,11 @@ struct SamplingOptions {
     const PointCloud& points_world, const Point3f& origin_world, const SamplingOptions& options,
     std::uint64_t scan_index,
     const std::function<bool(const Eigen::Vector3d&)>& keep_free = nullptr);
+/// The same into `out` (cleared; its capacity is kept, so a caller's buffer serves every scan).
+void makeSamples(const PointCloud& points_world, const Point3f& origin_world,
+                 const SamplingOptions& options, std::uint64_t scan_index,
+                 const std::function<bool(const Eigen::Vector3d&)>& keep_free,
+                 std::vector<Sample>& out);
 
 /// Whether a point lies within `reach` (per axis, a box) of a scan's hits, by a bitmap of
 /// cubes of `reach` over the hits' bounding box: a superset (it may say yes a little farther
@@ -76,6 +81,9 @@ struct RayStop {
 [[nodiscard]] std::vector<Sample> makeRaySegments(const PointCloud& points_world,
                                                   const Point3f& origin_world, double step,
                                                   double max_range, std::span<const RayStop> stops);
+/// The same into `out` (cleared, capacity kept).
+void makeRaySegments(const PointCloud& points_world, const Point3f& origin_world, double step,
+                     double max_range, std::span<const RayStop> stops, std::vector<Sample>& out);
 
 /// A uniform double in [0, 1) from a counter (SplitMix64): reproducible random numbers.
 [[nodiscard]] double uniformFromCounter(std::uint64_t counter);
