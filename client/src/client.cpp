@@ -320,6 +320,13 @@ Expected<ServerStatus> Client::status() {
     void* samples[1] = {nullptr};
     dds_sample_info_t info[1];
     const dds_return_t n = dds_read(dds_->st_r.get(), samples, info, 1, 1);
+    // The last status stays readable after its server stops: a gone writer is an error, not a
+    // status (`densemap status --watch` repeated the last one forever).
+    if (n > 0 && info[0].instance_state != DDS_IST_ALIVE) {
+      (void)dds_return_loan(dds_->st_r.get(), samples, n);
+      return makeError("the densemap-server on DDS domain " +
+                       std::to_string(options_.domain_id) + " has stopped (its status is gone)");
+    }
     if (n > 0 && info[0].valid_data) {
       const auto& s = *static_cast<const densemap_msgs_Status*>(samples[0]);
       ServerStatus out;

@@ -369,11 +369,15 @@ static int runMain(int argc, char** argv) {
   app.require_subcommand(1);
   ClientOptions o;
   int timeout_ms = 5000;
-  app.add_option("--domain-id", o.domain_id, "DDS domain id")->capture_default_str();
+  app.add_option("--domain-id", o.domain_id, "DDS domain id")
+      ->check(CLI::Range(0, 232))
+      ->capture_default_str();
   auto* interface_option =
       app.add_option("--interface", o.network_interface, "Network interface for DDS")
           ->capture_default_str();
-  app.add_option("--timeout-ms", timeout_ms, "Request timeout")->capture_default_str();
+  app.add_option("--timeout-ms", timeout_ms, "Request timeout")
+      ->check(CLI::Range(1, 3'600'000))
+      ->capture_default_str();
   std::string pki_dir, pki_role;
   dds::SecurityFiles security;
   app.add_option("--pki", pki_dir,
@@ -446,8 +450,10 @@ static int runMain(int argc, char** argv) {
       ->add_option("--ros-stamp-base-ns", ros_replay.frames.stamp_base_ns,
                    "Stamp of the first scan, ns (0: now); the next are 1/rate apart")
       ->capture_default_str();
-  replay->add_flag("!--ros-best-effort", ros_replay.reliable,
-                   "Publish clouds best effort, as LiDAR drivers do (default: reliable)");
+  replay
+      ->add_flag("!--ros-best-effort", ros_replay.reliable,
+                 "Publish clouds best effort, as LiDAR drivers do (default: reliable)")
+      ->default_str("");  // a negated flag: CLI11 would print its bool as {false}
 
   auto* query = app.add_subcommand("query", "Query the map");
   query->require_subcommand(1);
@@ -588,10 +594,21 @@ static int runMain(int argc, char** argv) {
     return 0;
   }
   if (status->parsed()) {
+    // --watch: a line every second, flushed (a pipe or file sees it at once); a server that
+    // stops (its status gone, or no new status for 5 s) ends the watch with an error.
+    double last_uptime = -1;
+    auto last_change = std::chrono::steady_clock::now();
     do {
       auto s = (*client)->status();
       if (!s) return cli::fail(s.error().message);
-      cli::printStatus(*s);
+      if (s->uptime_s != last_uptime) {
+        last_uptime = s->uptime_s;
+        last_change = std::chrono::steady_clock::now();
+        cli::printStatus(*s);
+        std::fflush(stdout);
+      } else if (std::chrono::steady_clock::now() - last_change > std::chrono::seconds(5)) {
+        return cli::fail("no new status from the server for 5 s: it has stopped or hangs");
+      }
       if (watch) std::this_thread::sleep_for(std::chrono::seconds(1));
     } while (watch);
     return 0;

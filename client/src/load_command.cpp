@@ -112,7 +112,7 @@ int LoadCommand::run(const ClientOptions& options, bool interface_given) {
     report += "\nSLO " + std::string(slo.kept ? "kept" : "broken: " + slo.broken) + "\n";
     int code = check_slo_ && !slo.kept ? 3 : 0;
     if (scenario->soak) {
-      const load::SoakVerdict soak = load::checkSoak(*result, *scenario->soak);
+      const load::SoakVerdict soak = load::checkSoak(*result, *scenario->soak, scenario->slo);
       report += "\n" + load::timelineTable(*result, *scenario) + "\n" + load::soakSummary(soak);
       if (!soak.passed) code = 3;
     }

@@ -7,6 +7,7 @@
 
 #include <malloc.h>
 
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <ctime>
@@ -127,6 +128,24 @@ static int runMain(int argc, char** argv) {
     auto* loaded = &(*resumed)->snapshot;
     for (const std::string& reason : (*resumed)->skipped) {
       spdlog::warn("skipping an unreadable snapshot: {}", reason);
+    }
+    // The snapshot's sensor model is the map's: a different one in the config would apply to
+    // new scans only, and the next snapshot would record it (issue 28, item 7). Refused, as a
+    // different resolution is.
+    const densemap::SensorProbabilities& was = loaded->map->sensorModel().probabilities();
+    const densemap::SensorProbabilities& now = options->sensor;
+    const auto same = [](double a, double b) { return std::abs(a - b) <= 1e-9; };
+    if (!same(was.hit, now.hit) || !same(was.miss, now.miss) ||
+        !same(was.clamp_min, now.clamp_min) || !same(was.clamp_max, now.clamp_max)) {
+      return fail(fmt::format(
+                      "snapshot {} was mapped with map.sensor {{ prob_hit: {} prob_miss: {} "
+                      "clamp_min: {} clamp_max: {} }} but the config says {{ prob_hit: {} "
+                      "prob_miss: {} clamp_min: {} clamp_max: {} }}: set map.sensor to the "
+                      "snapshot's values to resume it, or move the snapshot aside to start a "
+                      "new map",
+                      (*resumed)->file.string(), was.hit, was.miss, was.clamp_min, was.clamp_max,
+                      now.hit, now.miss, now.clamp_min, now.clamp_max),
+                  2);
     }
     spdlog::info("resumed {} (version {}, {} cells)", (*resumed)->file.string(), loaded->version,
                  loaded->map->knownCells());

@@ -53,6 +53,9 @@ struct RayRequest {
 
 // Beyond this many queries waiting for a task, requests stay in the DDS readers (keep-last).
 constexpr int kMaxQueriesInFlight = 64;
+// How long a reply waits for its writer to match the asker's reply reader (discovery of a new
+// client usually completes within milliseconds on loopback).
+constexpr std::chrono::milliseconds kAskerWait{2000};
 // Beyond this many versions waiting for the publish thread, their deltas are coalesced.
 constexpr std::size_t kMaxPendingVersions = 8;
 
@@ -450,31 +453,53 @@ void MapService::takeQueries() {
       ++queries_answered_;
     });
   };
-  // Take one request at a time from each reader in turn, so no kind starves the others.
+  // Take one request at a time from each reader in turn, so no kind starves the others. Each
+  // reply waits (at most kAskerWait) until its writer has matched the asker's reply reader:
+  // discovery is not symmetric, and a reply written before that match is lost (issue 28,
+  // item 4: 1-3% of one-shot queries timed out while the server had answered).
+  const auto asker = [](const dds::Entity& reader, const dds_sample_info_t& info) {
+    return dds::participantOfWriter(reader, info.publication_handle);
+  };
   bool took = true;
   while (took && queries_in_flight_.load() < kMaxQueriesInFlight) {
-    took = dds::takeOne<densemap_msgs_PointQueryRequest>(
-        dds_->point_reader, [&](const densemap_msgs_PointQueryRequest& m) {
+    took = dds::takeOneWithInfo<densemap_msgs_PointQueryRequest>(
+        dds_->point_reader,
+        [&](const densemap_msgs_PointQueryRequest& m, const dds_sample_info_t& info) {
           PointRequest req{
               m.id, std::vector<float>(m.points._buffer, m.points._buffer + m.points._length)};
-          spawn([this, req = std::move(req)](const MapView& view, std::string& error) {
+          spawn([this, req = std::move(req), who = asker(dds_->point_reader, info)](
+                    const MapView& view, std::string& error) {
+            awaitAsker(dds_->point_writer, who);
             answerPoints(dds_->point_writer, req, view, error);
           });
         });
-    took |= dds::takeOne<densemap_msgs_BboxQueryRequest>(
-        dds_->bbox_reader, [&](const densemap_msgs_BboxQueryRequest& m) {
+    took |= dds::takeOneWithInfo<densemap_msgs_BboxQueryRequest>(
+        dds_->bbox_reader,
+        [&](const densemap_msgs_BboxQueryRequest& m, const dds_sample_info_t& info) {
           BboxRequest req{m.id, toPoint(m.min), toPoint(m.max), m.max_centers};
-          spawn([this, req](const MapView& view, std::string& error) {
+          spawn([this, req, who = asker(dds_->bbox_reader, info)](const MapView& view,
+                                                                  std::string& error) {
+            awaitAsker(dds_->bbox_writer, who);
             answerBox(dds_->bbox_writer, req, view, options_.max_query_cells, error);
           });
         });
-    took |= dds::takeOne<densemap_msgs_RayQueryRequest>(
-        dds_->ray_reader, [&](const densemap_msgs_RayQueryRequest& m) {
+    took |= dds::takeOneWithInfo<densemap_msgs_RayQueryRequest>(
+        dds_->ray_reader,
+        [&](const densemap_msgs_RayQueryRequest& m, const dds_sample_info_t& info) {
           RayRequest req{m.id, toPoint(m.origin), toPoint(m.direction), m.max_range};
-          spawn([this, req](const MapView& view, std::string& error) {
+          spawn([this, req, who = asker(dds_->ray_reader, info)](const MapView& view,
+                                                                 std::string& error) {
+            awaitAsker(dds_->ray_writer, who);
             answerRay(dds_->ray_writer, req, view, error);
           });
         });
+  }
+}
+
+void MapService::awaitAsker(const dds::Entity& writer, const std::optional<dds_guid_t>& asker) {
+  if (asker && !dds::waitForReaderOf(writer, *asker, kAskerWait)) {
+    spdlog::debug("a reply goes out before its asker's reader matched (waited {} ms)",
+                  kAskerWait.count());
   }
 }
 
@@ -483,8 +508,9 @@ void MapService::answerCommands() {
   const auto send_map = [this](const densemap_msgs_RequestId& id) {
     runTask([this, id] { replyCommand(id, sendMap(id)); });
   };
-  dds::takeAll<densemap_msgs_CommandRequest>(
-      dds_->map_reader, [&](const densemap_msgs_CommandRequest& req) {
+  while (dds::takeOneWithInfo<densemap_msgs_CommandRequest>(
+      dds_->map_reader, [&](const densemap_msgs_CommandRequest& req, const dds_sample_info_t& info) {
+        awaitAsker(dds_->cmd_writer, dds::participantOfWriter(dds_->map_reader, info.publication_handle));
         if (req.kind == 3) {
           send_map(req.id);
         } else {
@@ -492,9 +518,11 @@ void MapService::answerCommands() {
                        makeError("densemap/map/request takes send-map only; command " +
                                  std::to_string(req.kind) + " goes to densemap/cmd/request"));
         }
-      });
-  dds::takeAll<densemap_msgs_CommandRequest>(
-      dds_->cmd_reader, [&](const densemap_msgs_CommandRequest& req) {
+      })) {
+  }
+  while (dds::takeOneWithInfo<densemap_msgs_CommandRequest>(
+      dds_->cmd_reader, [&](const densemap_msgs_CommandRequest& req, const dds_sample_info_t& info) {
+        awaitAsker(dds_->cmd_writer, dds::participantOfWriter(dds_->cmd_reader, info.publication_handle));
         if (req.kind == 3) {
           send_map(req.id);
           return;
@@ -545,7 +573,8 @@ void MapService::answerCommands() {
             outcome = std::unexpected(saved.error());
         }
         replyCommand(req.id, outcome);
-      });
+      })) {
+  }
 }
 
 void MapService::replyCommand(const densemap_msgs_RequestId& id,

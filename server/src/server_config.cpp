@@ -66,6 +66,7 @@ Expected<proto::ServerConfig> loadServerConfig(const std::filesystem::path& file
   if (auto security = securityFiles(config); !security) {
     return fileError(file, security.error().message);
   }
+  if (auto ros2 = ros2Options(config); !ros2) return fileError(file, ros2.error().message);
   return config;
 }
 

@@ -340,5 +340,39 @@ TEST(Server, SaveWritesOnlyPlainFileNamesIntoTheExportDirectory) {
   EXPECT_EQ(server.stop(), 0);
 }
 
+// Hostile-input issue 28, item 7: a snapshot resumed under another sensor model would apply the
+// new model to new scans only (and record it in the next snapshot): refused with the reason.
+TEST(Server, ASnapshotIsNotResumedUnderAnotherSensorModel) {
+  test::TempDir dir;
+  const auto raws = simulatedScans(dir.path(), 1);
+  {
+    ServerProcess server(dir.path(), 147);
+    auto client = connect(147);
+    ASSERT_TRUE(client);
+    replay(*client, raws);
+    ASSERT_EQ(server.stop(), 0);  // SIGTERM saves map.dmap with the default model
+  }
+  ASSERT_TRUE(std::filesystem::exists(dir.path() / "map.dmap"));
+  const auto check = [&](const std::string& sensor) {
+    const auto config = dir.path() / "check.textproto";
+    std::ofstream(config) << "map { resolution_m: 0.2 max_range_m: 25 " << sensor << " }\n"
+                          << "snapshot { path: \"" << (dir.path() / "map.dmap").string()
+                          << "\" }\n";
+    const std::string command = std::string(DENSEMAP_SERVER_BIN) + " --check-config " +
+                                config.string() + " > " + (dir.path() / "out.txt").string() +
+                                " 2>&1";
+    const int status = std::system(command.c_str());
+    std::ifstream in(dir.path() / "out.txt");
+    std::string out((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    return std::make_pair(WIFEXITED(status) ? WEXITSTATUS(status) : -1, out);
+  };
+  const auto same = check("");
+  EXPECT_EQ(same.first, 0) << same.second;
+  const auto other = check("sensor { prob_hit: 0.9 }");
+  EXPECT_EQ(other.first, 2) << other.second;
+  EXPECT_NE(other.second.find("prob_hit: 0.7"), std::string::npos) << other.second;
+  EXPECT_NE(other.second.find("prob_hit: 0.9"), std::string::npos) << other.second;
+}
+
 }  // namespace
 }  // namespace densemap

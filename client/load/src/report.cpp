@@ -271,6 +271,17 @@ SoakVerdict checkSoak(const RunResult& run, const SoakPlan& soak) {
   return v;
 }
 
+SoakVerdict checkSoak(const RunResult& run, const SoakPlan& soak, const Slo& slo) {
+  SoakVerdict v = checkSoak(run, soak);
+  // A trend that holds is not enough: a soak that drops scans or breaks the SLO in a window
+  // (a bad first window makes any later one look like an improvement) fails too.
+  if (const SloVerdict s = checkSlo(run, slo); !s.kept) {
+    v.why += (v.why.empty() ? "" : "; ") + std::string("SLO broken: ") + s.broken;
+    v.passed = false;
+  }
+  return v;
+}
+
 std::string tables(const RunResult& run) {
   std::string out;
   out += "| sensor stream | sent | received | integrated | dropped | rejected | seq gaps | "
@@ -422,7 +433,7 @@ Expected<void> writeJson(const std::filesystem::path& file, const RunResult& run
   j.open(nullptr, '{').str("scenario", run.scenario).num("duration_s", run.duration_s);
   sloJson(j, checkSlo(run, scenario.slo));
   if (scenario.soak) {
-    const SoakVerdict s = checkSoak(run, *scenario.soak);
+    const SoakVerdict s = checkSoak(run, *scenario.soak, scenario.slo);
     j.open("soak", '{').boolean("passed", s.passed).str("why", s.why);
     j.num("rss_at_warm_up_mib", s.rss_at_warm_up_mib).num("rss_max_after_mib", s.rss_max_after_mib);
     j.num("rss_growth", s.rss_growth).stats("first_window", s.first_window);

@@ -82,6 +82,7 @@ Expected<LoadedSnapshot> loadSnapshot(const std::filesystem::path& file, Backend
                                       double expected_resolution_m) {
   auto bytes = readFileBytes(file);
   if (!bytes) return std::unexpected(bytes.error());
+  if (bytes->empty()) return fileError(file, "empty file: not a densemap snapshot");
   proto::Snapshot s;
   if (!s.ParseFromString(*bytes))
     return fileError(file, "not a densemap snapshot (corrupt or truncated)");

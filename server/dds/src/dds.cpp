@@ -1,5 +1,7 @@
 #include "densemap/dds/dds.hpp"
 
+#include <thread>
+
 #include <cstdlib>
 #include <filesystem>
 #include <map>
@@ -244,6 +246,39 @@ std::vector<dds_attach_t> WaitSet::wait(std::chrono::milliseconds timeout) {
     tags.push_back(fired[i]);
   }
   return tags;
+}
+
+std::optional<dds_guid_t> participantOfWriter(const Entity& reader,
+                                              dds_instance_handle_t publication) {
+  dds_builtintopic_endpoint_t* e = dds_get_matched_publication_data(reader.get(), publication);
+  if (e == nullptr) return std::nullopt;
+  const dds_guid_t participant = e->participant_key;
+  dds_builtintopic_free_endpoint(e);
+  return participant;
+}
+
+bool waitForReaderOf(const Entity& writer, const dds_guid_t& participant,
+                     std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  std::vector<dds_instance_handle_t> handles(64);
+  while (true) {
+    const dds_return_t n =
+        dds_get_matched_subscriptions(writer.get(), handles.data(), handles.size());
+    if (n > static_cast<dds_return_t>(handles.size())) {  // more than room: grow and ask again
+      handles.resize(static_cast<std::size_t>(n) * 2);
+      continue;
+    }
+    for (dds_return_t i = 0; i < n; ++i) {
+      dds_builtintopic_endpoint_t* e = dds_get_matched_subscription_data(writer.get(), handles[i]);
+      if (e == nullptr) continue;
+      const bool same = std::equal(std::begin(e->participant_key.v),
+                                   std::end(e->participant_key.v), std::begin(participant.v));
+      dds_builtintopic_free_endpoint(e);
+      if (same) return true;
+    }
+    if (std::chrono::steady_clock::now() >= deadline) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
 }
 
 }  // namespace densemap::dds

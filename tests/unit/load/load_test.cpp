@@ -159,6 +159,27 @@ TEST(LoadReport, SloCountsLossAndLatency) {
   EXPECT_NE(checkSlo(r, slo).broken.find("query p99"), std::string::npos);
 }
 
+// Hostile-input issue 28, item 14: the CI soak passed while it dropped 20 scans (a bad first
+// window makes a good-looking trend). Drops and the SLO fail the soak too.
+TEST(LoadReport, SoakFailsWhenScansAreDroppedOrTheSloBreaksWhateverTheTrend) {
+  const SoakPlan plan{.warm_up_s = 20, .window_s = 30};
+  RunResult r = syntheticRun();
+  for (auto& u : r.usage) u.server_rss = 80 << 20;
+  const Slo slo{.e2e_p99_ms = 200};
+  ASSERT_TRUE(checkSoak(r, plan, slo).passed) << checkSoak(r, plan, slo).why;
+  r.sensors[0].server.dropped = 20;
+  EXPECT_TRUE(checkSoak(r, plan).passed);  // the trend alone does not see drops
+  auto v = checkSoak(r, plan, slo);
+  EXPECT_FALSE(v.passed);
+  EXPECT_NE(v.why.find("20 scans dropped"), std::string::npos) << v.why;
+  r.sensors[0].server.dropped = 0;
+  for (auto& e : r.sensors[0].e2e) {
+    if (e.t_s < 50) e.ms = 1279;  // a slow first window: the trend improves, the SLO breaks
+  }
+  EXPECT_TRUE(checkSoak(r, plan).passed);
+  EXPECT_FALSE(checkSoak(r, plan, slo).passed);
+}
+
 TEST(LoadReport, CpuUseIsPercentOfACoreAndOfTheMachine) {
   const auto c = cpuUse(syntheticRun().usage, 10, 60);
   EXPECT_NEAR(c.server_pct, 50, 1e-9);

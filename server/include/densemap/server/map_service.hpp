@@ -78,6 +78,8 @@ class MapService {
   void takeQueries();
   void answerCommands();
   void replyCommand(const densemap_msgs_RequestId& id, const Expected<std::string>& outcome);
+  /// Waits until `writer` has matched a reader of `asker` (see kAskerWait in the .cpp).
+  static void awaitAsker(const dds::Entity& writer, const std::optional<dds_guid_t>& asker);
   void publishDeltas(std::deque<Version>& versions);
   void publishStatus();
   void publishManifest();

@@ -55,6 +55,9 @@ struct SoakVerdict {
   double p99_drift = 0;
 };
 [[nodiscard]] SoakVerdict checkSoak(const RunResult& run, const SoakPlan& soak);
+/// The soak's verdict as a gate: the trend (above) and the scenario's SLO over the whole run
+/// (drops, rejections, e2e and query p99, failed queries).
+[[nodiscard]] SoakVerdict checkSoak(const RunResult& run, const SoakPlan& soak, const Slo& slo);
 
 /// The timeline as a table (soak reports: one row per sample period).
 [[nodiscard]] std::string timelineTable(const RunResult& run, const Scenario& scenario);

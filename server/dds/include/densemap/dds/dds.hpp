@@ -130,6 +130,28 @@ bool takeOne(const Entity& reader, F&& f) {
   return true;
 }
 
+/// As takeOne, with the sample's info (who wrote it: info.publication_handle).
+template <class T, class F>
+bool takeOneWithInfo(const Entity& reader, F&& f) {
+  void* sample = nullptr;
+  dds_sample_info_t info;
+  if (dds_take(reader.get(), &sample, &info, 1, 1) <= 0) return false;
+  if (info.valid_data) f(*static_cast<const T*>(sample), info);
+  dds_return_loan(reader.get(), &sample, 1);
+  return true;
+}
+
+/// The participant of the writer that wrote a sample `reader` received (its publication
+/// handle from the sample info), or nothing if that writer is no longer matched.
+[[nodiscard]] std::optional<dds_guid_t> participantOfWriter(const Entity& reader,
+                                                            dds_instance_handle_t publication);
+
+/// Waits until `writer` has matched a reader of `participant` (a reply written earlier could
+/// be lost: discovery is not symmetric, a client may have matched the server's reply writer
+/// before the server has matched the client's reply reader). False after `timeout`.
+[[nodiscard]] bool waitForReaderOf(const Entity& writer, const dds_guid_t& participant,
+                                   std::chrono::milliseconds timeout);
+
 [[nodiscard]] inline Expected<void> write(const Entity& writer, const void* sample) {
   return check(dds_write(writer.get(), sample), "dds_write");
 }
