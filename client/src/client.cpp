@@ -346,6 +346,8 @@ Expected<ServerStatus> Client::status() {
       out.rss_bytes = s.rss_bytes;
       out.evicted_blocks = s.evicted_blocks;
       out.evicted_cells = s.evicted_cells;
+      out.snapshot_failures = s.snapshot_failures;
+      out.last_snapshot_error = text(s.last_snapshot_error);
       out.cpu_s = s.cpu_s;
       out.ros_enabled = s.ros_enabled;
       out.ros_received = s.ros_received;

@@ -296,6 +296,14 @@ void printStatus(const ServerStatus& s) {
                 static_cast<unsigned long long>(s.evicted_cells));
   }
   std::printf("\n");
+  if (!s.last_query_error.empty()) {
+    std::printf("  last refused request: %s\n", s.last_query_error.c_str());
+  }
+  if (s.snapshot_failures > 0) {
+    std::printf("  SNAPSHOTS FAILING: %llu failed saves, last: %s\n",
+                static_cast<unsigned long long>(s.snapshot_failures),
+                s.last_snapshot_error.c_str());
+  }
   if (s.ros_enabled) {
     std::printf(
         "  ros2: clouds received %llu, submitted %llu, malformed %llu%s%s, no transform %llu; "

@@ -6,6 +6,7 @@
 #include <CLI/CLI.hpp>
 
 #include <malloc.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <csignal>
@@ -216,7 +217,25 @@ static int runMain(int argc, char** argv) {
   (*pipeline)->stop();  // finishes the scan in flight
   if (!snapshot.empty()) {
     auto saved = (*service)->save();
-    if (!saved) return fail("shutdown snapshot: " + saved.error().message);
+    if (!saved) {
+      // The map must not be lost with the process (issue 28, item 5): a rescue copy goes to the
+      // first place that takes it, and the log says where.
+      spdlog::error("shutdown snapshot: {}", saved.error().message);
+      const std::string name = "densemap-rescue-" + std::to_string(::getpid()) + ".dmap";
+      for (const std::filesystem::path& dir :
+           {service_options.export_dir, std::filesystem::current_path(),
+            std::filesystem::path("/var/tmp")}) {
+        if (dir.empty()) continue;
+        std::error_code ec;
+        std::filesystem::create_directories(dir, ec);
+        if (auto rescued = (*service)->save(dir / name); rescued) {
+          return fail("the map (version " + std::to_string((*pipeline)->view()->version()) +
+                      ") was saved to " + (dir / name).string() + " instead: move it to " +
+                      snapshot.string() + " to resume it");
+        }
+      }
+      return fail("shutdown snapshot: no rescue copy could be written either: the map is lost");
+    }
     spdlog::info("saved {} ({} bytes, version {})", snapshot.string(), *saved,
                  (*pipeline)->view()->version());
   }

@@ -230,8 +230,7 @@ void MapService::publishLoop() {
       if (version != saved_version) {
         const auto began = std::chrono::steady_clock::now();
         if (auto ok = save(); !ok) {
-          spdlog::warn("autosave failed: {}", ok.error().message);
-          noteBadRequest("autosave: " + ok.error().message);
+          spdlog::warn("autosave failed: {}", ok.error().message);  // counted by save()
         } else {
           saved_version = version;
         }
@@ -592,6 +591,16 @@ void MapService::replyCommand(const densemap_msgs_RequestId& id,
 }
 
 Expected<std::size_t> MapService::save(const std::filesystem::path& file) {
+  auto saved = saveUncounted(file);
+  if (!saved) {
+    ++snapshot_failures_;
+    std::lock_guard lock(error_mutex_);
+    last_snapshot_error_ = saved.error().message;
+  }
+  return saved;
+}
+
+Expected<std::size_t> MapService::saveUncounted(const std::filesystem::path& file) {
   const std::filesystem::path target = file.empty() ? options_.snapshot_path : file;
   if (target.empty()) return makeError("no snapshot path configured or given");
   const ReturnFreeMemory trim;  // the snapshot's buffers (about the file's size)
@@ -627,6 +636,13 @@ void MapService::publishStatus() {
   s.rss_bytes = usage.rss_bytes;
   s.evicted_blocks = c.evicted_blocks;
   s.evicted_cells = c.evicted_cells;
+  s.snapshot_failures = snapshot_failures_.load();
+  std::string last_snapshot_error;
+  {
+    std::lock_guard lock(error_mutex_);
+    last_snapshot_error = last_snapshot_error_;
+  }
+  s.last_snapshot_error = const_cast<char*>(last_snapshot_error.c_str());
   s.cpu_s = usage.cpu_s;
   s.queries_answered = queries_answered_.load();
   s.queries_rejected = queries_rejected_.load();

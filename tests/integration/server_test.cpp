@@ -374,5 +374,36 @@ TEST(Server, ASnapshotIsNotResumedUnderAnotherSensorModel) {
   EXPECT_NE(other.second.find("prob_hit: 0.9"), std::string::npos) << other.second;
 }
 
+// Hostile-input issue 28, item 5: a snapshot directory that stops working loses no map. Failed
+// saves show in the status (not as refused queries), and at SIGTERM a rescue copy is written.
+TEST(Server, ASnapshotDirectoryThatDisappearsLosesNoMap) {
+  test::TempDir top;
+  const auto raws = simulatedScans(top.path(), 1);
+  const auto dir = top.path() / "state";
+  std::filesystem::create_directories(dir);
+  ServerProcess server(dir, 148, "", false, /*autosave_s=*/0.05);
+  auto client = connect(148);
+  ASSERT_TRUE(client);
+  std::filesystem::remove_all(dir);  // the disk goes away under the daemon
+  replay(*client, raws);
+  std::optional<ServerStatus> status;
+  for (int i = 0; i < 50 && !status; ++i) {
+    std::this_thread::sleep_for(100ms);
+    if (auto s = client->status(); s && s->snapshot_failures > 0) status = *s;
+  }
+  ASSERT_TRUE(status) << "failed autosaves never showed in the status";
+  EXPECT_NE(status->last_snapshot_error.find("map.dmap"), std::string::npos);
+  EXPECT_EQ(status->queries_rejected, 0U);  // a failed save is not a refused request
+  auto fetched = client->fetchMap();
+  ASSERT_TRUE(fetched);
+  const pid_t pid = server.pid();
+  EXPECT_EQ(server.stop(), 1);  // the configured save failed ...
+  // ... but the map is in the rescue copy (the export directory, recreated).
+  const auto rescue = dir / "exports" / ("densemap-rescue-" + std::to_string(pid) + ".dmap");
+  auto loaded = loadSnapshot(rescue, Backend::kGrid, 0.2);
+  ASSERT_TRUE(loaded) << loaded.error().message;
+  EXPECT_EQ(diffMaps(*loaded->map, *fetched->first).differing(), 0U);
+}
+
 }  // namespace
 }  // namespace densemap

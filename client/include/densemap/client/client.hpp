@@ -60,6 +60,8 @@ struct ServerStatus {
   std::uint64_t rss_bytes = 0;          // the server process's resident memory
   std::uint64_t evicted_blocks = 0;     // dropped by map.keep_radius_m / map.bounds
   std::uint64_t evicted_cells = 0;
+  std::uint64_t snapshot_failures = 0;  // saves that failed (command, autosave, shutdown)
+  std::string last_snapshot_error;
   double cpu_s = 0;  // and its CPU time since start
   /// The ROS 2 face (server config ros2): PointCloud2 clouds received, submitted with their
   /// transform, rejected as malformed (by reason), dropped for want of a transform.

@@ -59,7 +59,8 @@ class MapService {
     return std::chrono::steady_clock::time_point(
         std::chrono::steady_clock::duration(heartbeat_.load()));
   }
-  /// Saves the latest map version to `file` (or the configured snapshot path).
+  /// Saves the latest map version to `file` (or the configured snapshot path). A failure is
+  /// counted in the status (snapshot_failures, last_snapshot_error).
   [[nodiscard]] Expected<std::size_t> save(const std::filesystem::path& file = {});
 
  private:
@@ -78,6 +79,7 @@ class MapService {
   void takeQueries();
   void answerCommands();
   void replyCommand(const densemap_msgs_RequestId& id, const Expected<std::string>& outcome);
+  [[nodiscard]] Expected<std::size_t> saveUncounted(const std::filesystem::path& file);
   /// Waits until `writer` has matched a reader of `asker` (see kAskerWait in the .cpp).
   static void awaitAsker(const dds::Entity& writer, const std::optional<dds_guid_t>& asker);
   void publishDeltas(std::deque<Version>& versions);
@@ -112,6 +114,8 @@ class MapService {
   std::atomic<std::uint64_t> queries_rejected_{0};
   std::mutex error_mutex_;
   std::mutex save_mutex_;  // one snapshot rotation at a time (command save, autosave, shutdown)
+  std::atomic<std::uint64_t> snapshot_failures_{0};
+  std::string last_snapshot_error_;  // error_mutex_
   std::string last_query_error_;
 };
 

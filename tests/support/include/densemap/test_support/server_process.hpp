@@ -77,6 +77,7 @@ class ServerProcess {
     }
     return 0;
   }
+  [[nodiscard]] pid_t pid() const { return pid_; }
   /// SIGTERM; returns the exit status (-1 if it did not exit normally).
   int stop() {
     if (pid_ <= 0) return -1;
