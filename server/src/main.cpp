@@ -179,6 +179,11 @@ static int runMain(int argc, char** argv) {
   if (!pipeline) return fail(pipeline.error().message);
   auto service = densemap::server::MapService::create(**pipeline, service_options);
   if (!service) return fail("DDS: " + service.error().message);
+  // Discovery on loopback takes milliseconds; a second server must not start (exit 2: systemd's
+  // RestartPreventExitStatus keeps it from retrying).
+  if (auto alone = (*service)->checkAlone(std::chrono::milliseconds(1000)); !alone) {
+    return fail(alone.error().message, 2);
+  }
   (*pipeline)->start();
   (*service)->start();
   spdlog::info("running on DDS domain {}, interface {}{}; {} backend at {} m, {} threads{}",

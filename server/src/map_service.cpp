@@ -9,6 +9,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <thread>
 #include <bit>
 #include <cmath>
 #include <limits>
@@ -69,6 +70,7 @@ struct MapService::Dds {
       delta_writer, event_writer, status_writer;
   std::optional<dds::WaitSet> ingest_waitset;
   std::optional<dds::WaitSet> service_waitset;
+  dds::Entity status_probe;  // reads densemap/status: matches every server's status writer
 };
 
 Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
@@ -115,6 +117,7 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
   writer(d.delta_writer, d.topics.delta, {.depth = 32});
   writer(d.event_writer, d.topics.events, {.depth = 64});
   writer(d.status_writer, d.topics.status, dds::kLatestStateQos);
+  reader(d.status_probe, d.topics.status, dds::kLatestStateQos);
   if (!status) return std::unexpected(status.error());
 
   auto ingest_ws = dds::WaitSet::create(d.participant);
@@ -142,6 +145,49 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
   // The map loaded from a snapshot is published as tiles right away.
   service->delta_base_ = pipeline.view();
   return service;
+}
+
+std::vector<std::string> MapService::otherServers() const {
+  dds_guid_t own{};
+  (void)dds_get_guid(dds_->participant.get(), &own);
+  std::vector<dds_instance_handle_t> handles(16);
+  dds_return_t n = dds_get_matched_publications(dds_->status_probe.get(), handles.data(),
+                                                handles.size());
+  if (n > static_cast<dds_return_t>(handles.size())) {
+    handles.resize(static_cast<std::size_t>(n));
+    n = dds_get_matched_publications(dds_->status_probe.get(), handles.data(), handles.size());
+  }
+  std::vector<std::string> others;
+  for (dds_return_t i = 0; i < std::min<dds_return_t>(n, handles.size()); ++i) {
+    dds_builtintopic_endpoint_t* e =
+        dds_get_matched_publication_data(dds_->status_probe.get(), handles[i]);
+    if (e == nullptr) continue;
+    const bool mine = std::equal(std::begin(e->participant_key.v), std::end(e->participant_key.v),
+                                 std::begin(own.v));
+    if (!mine) {
+      char guid[40];
+      const auto& v = e->participant_key.v;
+      std::snprintf(guid, sizeof guid, "%02x%02x%02x%02x:%02x%02x%02x%02x:%02x%02x%02x%02x", v[0],
+                    v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9], v[10], v[11]);
+      others.emplace_back(guid);
+    }
+    dds_builtintopic_free_endpoint(e);
+  }
+  return others;
+}
+
+Expected<void> MapService::checkAlone(std::chrono::milliseconds discovery) const {
+  const auto deadline = std::chrono::steady_clock::now() + discovery;
+  while (true) {
+    if (const auto others = otherServers(); !others.empty()) {
+      return makeError("another densemap-server (participant " + others.front() +
+                       ") already runs on DDS domain " + std::to_string(options_.domain_id) +
+                       ": two servers on one domain would answer the same clients with two "
+                       "maps; stop it, or give this one another dds.domain_id / --domain-id");
+    }
+    if (std::chrono::steady_clock::now() >= deadline) return {};
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
 }
 
 MapService::MapService(Pipeline& pipeline, const ServiceOptions& options)
@@ -616,6 +662,15 @@ Expected<std::size_t> MapService::saveUncounted(const std::filesystem::path& fil
 }
 
 void MapService::publishStatus() {
+  // A server that appears later (a network partition healed, a second one started with checks
+  // bypassed): said in the log once a minute; clients would see two maps.
+  if (const auto now = std::chrono::steady_clock::now(); now >= next_alone_check_) {
+    next_alone_check_ = now + std::chrono::seconds(60);
+    if (const auto others = otherServers(); !others.empty()) {
+      spdlog::error("another densemap-server (participant {}) runs on DDS domain {}", others.front(),
+                    options_.domain_id);
+    }
+  }
   const PipelineCounters c = pipeline_.counters();
   const auto view = pipeline_.view();
   densemap_msgs_Status s{};

@@ -405,5 +405,34 @@ TEST(Server, ASnapshotDirectoryThatDisappearsLosesNoMap) {
   EXPECT_EQ(diffMaps(*loaded->map, *fetched->first).differing(), 0U);
 }
 
+// Hostile-input issue 28, item 8: two servers on one domain flipped clients between two maps.
+// The second refuses to start (exit 2, the reason); the first keeps its map and answers.
+TEST(Server, ASecondServerOnTheSameDomainRefusesToStart) {
+  test::TempDir first_dir, second_dir;
+  const auto raws = simulatedScans(first_dir.path(), 1);
+  ServerProcess first(first_dir.path(), 149);
+  auto client = connect(149);
+  ASSERT_TRUE(client);
+  replay(*client, raws);
+  ServerProcess second(second_dir.path(), 149, "", /*capture_log=*/true);
+  for (int i = 0; i < 100 && kill(second.pid(), 0) == 0; ++i) {
+    int status = 0;
+    if (waitpid(second.pid(), &status, WNOHANG) == second.pid()) {
+      EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 2);
+      break;
+    }
+    std::this_thread::sleep_for(50ms);
+  }
+  EXPECT_NE(second.log().find("another densemap-server"), std::string::npos) << second.log();
+  std::uint64_t integrated = 0;  // the first server's status (1 Hz) still counts its scan
+  for (int i = 0; i < 40 && integrated == 0; ++i) {
+    if (auto s = client->status(); s) integrated = s->integrated;
+    std::this_thread::sleep_for(100ms);
+  }
+  EXPECT_EQ(integrated, 1U);
+  EXPECT_TRUE(client->queryPoints({Point3f(1, 1, 1)}));
+  EXPECT_EQ(first.stop(), 0);
+}
+
 }  // namespace
 }  // namespace densemap

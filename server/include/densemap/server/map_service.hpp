@@ -59,6 +59,9 @@ class MapService {
     return std::chrono::steady_clock::time_point(
         std::chrono::steady_clock::duration(heartbeat_.load()));
   }
+  /// Fails when another densemap-server's status writer is discovered on the domain within
+  /// `discovery` (DESIGN.md: two servers on one domain are detected, not merged).
+  [[nodiscard]] Expected<void> checkAlone(std::chrono::milliseconds discovery) const;
   /// Saves the latest map version to `file` (or the configured snapshot path). A failure is
   /// counted in the status (snapshot_failures, last_snapshot_error).
   [[nodiscard]] Expected<std::size_t> save(const std::filesystem::path& file = {});
@@ -80,6 +83,8 @@ class MapService {
   void answerCommands();
   void replyCommand(const densemap_msgs_RequestId& id, const Expected<std::string>& outcome);
   [[nodiscard]] Expected<std::size_t> saveUncounted(const std::filesystem::path& file);
+  /// Participants other than this one that write densemap/status (other servers).
+  [[nodiscard]] std::vector<std::string> otherServers() const;
   /// Waits until `writer` has matched a reader of `asker` (see kAskerWait in the .cpp).
   static void awaitAsker(const dds::Entity& writer, const std::optional<dds_guid_t>& asker);
   void publishDeltas(std::deque<Version>& versions);
@@ -115,6 +120,7 @@ class MapService {
   std::mutex error_mutex_;
   std::mutex save_mutex_;  // one snapshot rotation at a time (command save, autosave, shutdown)
   std::atomic<std::uint64_t> snapshot_failures_{0};
+  std::chrono::steady_clock::time_point next_alone_check_{};  // publish thread only
   std::string last_snapshot_error_;  // error_mutex_
   std::string last_query_error_;
 };
