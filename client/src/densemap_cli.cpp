@@ -103,6 +103,7 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
     ros_out = std::move(*p);
   }
   std::optional<RawScan> last_raw;
+  std::size_t dropped_points = 0;
   const std::size_t end =
       limit == 0 ? (*source)->size() : std::min((*source)->size(), first + limit);
   std::map<std::uint64_t, Clock::time_point> sent_at;
@@ -175,6 +176,9 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
   for (std::size_t i = first; i < end; ++i) {
     auto scan = (*source)->load(i);
     if (!scan) return fail(scan.error().message);
+    // A sensor's missing returns are dropped here, as the ROS path and the offline tools do:
+    // the server refuses a whole scan with one NaN (from a broken or hostile publisher).
+    dropped_points += scan->removeNonFinitePoints();
     if (densify) {
       if (scan->frame != PointFrame::kSensor) {
         return fail("--upsample needs sensor-frame scans; " + data + " stores world-frame points");
@@ -237,6 +241,9 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
   std::this_thread::sleep_for(std::chrono::milliseconds(1100));  // one more status period
   auto after = (*client)->status();
   std::printf("replay: sent %zu scans from %s\n", sent, (*source)->describe().c_str());
+  if (dropped_points > 0) {
+    std::printf("replay: dropped %zu NaN/Inf points before sending\n", dropped_points);
+  }
   if (before && after) {
     std::printf("replay: server integrated %llu, dropped %llu, rejected %llu (last reason: %s)\n",
                 static_cast<unsigned long long>(after->integrated - before->integrated),
@@ -266,6 +273,12 @@ int replay(const ClientOptions& o, const std::string& data, double rate, std::si
         "p50 %.1f ms, p99 %.1f ms\n",
         bbox_edge_m, bbox_ms.size(), bbox_failed, percentile(bbox_ms, 0.5),
         percentile(bbox_ms, 0.99));
+  }
+  // A replay none of whose scans reached the map failed, whatever the reason.
+  if (sent > 0 && before && after && after->integrated == before->integrated) {
+    return fail("no scan of " + std::to_string(sent) + " was integrated (rejected " +
+                std::to_string(after->rejected - before->rejected) + ", last reason: " +
+                (after->last_reject_reason.empty() ? "-" : after->last_reject_reason) + ")");
   }
   return 0;
 }

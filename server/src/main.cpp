@@ -97,6 +97,7 @@ static int runMain(int argc, char** argv) {
   service_options.snapshot_path = config->snapshot().path();
   service_options.autosave_period_s = config->snapshot().autosave_period_s();
   service_options.max_query_cells = config->pipeline().max_query_cells();
+  service_options.request_budget_bytes = std::size_t{config->pipeline().request_budget_mb()} << 20;
   service_options.query_threads = static_cast<int>(config->pipeline().query_threads());
   auto security = densemap::server::securityFiles(*config);
   if (!security) return fail("config: " + security.error().message, 2);
@@ -178,12 +179,13 @@ static int runMain(int argc, char** argv) {
   auto pipeline = densemap::Pipeline::create(*options, std::move(initial), version);
   if (!pipeline) return fail(pipeline.error().message);
   auto service = densemap::server::MapService::create(**pipeline, service_options);
-  if (!service) return fail("DDS: " + service.error().message);
-  // Discovery on loopback takes milliseconds; a second server must not start (exit 2: systemd's
-  // RestartPreventExitStatus keeps it from retrying).
-  if (auto alone = (*service)->checkAlone(std::chrono::milliseconds(1000)); !alone) {
-    return fail(alone.error().message, 2);
+  // A second server must not start (exit 2: systemd's RestartPreventExitStatus keeps it from
+  // retrying); other DDS errors may pass (an interface not up yet at boot): exit 1.
+  if (!service && service.error().message.starts_with(
+                      densemap::server::MapService::kAnotherServer)) {
+    return fail(service.error().message, 2);
   }
+  if (!service) return fail("DDS: " + service.error().message);
   (*pipeline)->start();
   (*service)->start();
   spdlog::info("running on DDS domain {}, interface {}{}; {} backend at {} m, {} threads{}",

@@ -54,6 +54,8 @@ struct RayRequest {
 
 // Beyond this many queries waiting for a task, requests stay in the DDS readers (keep-last).
 constexpr int kMaxQueriesInFlight = 64;
+// A request this large hands the heap's free memory back to the OS when it is done.
+constexpr std::size_t kTrimAfterBytes = std::size_t{16} << 20;
 // How long a reply waits for its writer to match the asker's reply reader (discovery of a new
 // client usually completes within milliseconds on loopback).
 constexpr std::chrono::milliseconds kAskerWait{2000};
@@ -101,6 +103,13 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
     else
       out = std::move(*w);
   };
+  // Another server on the domain? Checked before any endpoint a client or robot would match
+  // (scans and requests sent meanwhile would wait unread in this server's readers).
+  reader(d.status_probe, d.topics.status, dds::kLatestStateQos);
+  if (!status) return std::unexpected(status.error());
+  if (auto alone = service->checkAlone(options.alone_discovery); !alone) {
+    return std::unexpected(alone.error());
+  }
   const dds::QosSpec requests = dds::kRequestQos;
   reader(d.scan_reader, d.topics.scan, {.depth = 4});
   reader(d.point_reader, d.topics.point_request, requests);
@@ -117,7 +126,6 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
   writer(d.delta_writer, d.topics.delta, {.depth = 32});
   writer(d.event_writer, d.topics.events, {.depth = 64});
   writer(d.status_writer, d.topics.status, dds::kLatestStateQos);
-  reader(d.status_probe, d.topics.status, dds::kLatestStateQos);
   if (!status) return std::unexpected(status.error());
 
   auto ingest_ws = dds::WaitSet::create(d.participant);
@@ -180,7 +188,7 @@ Expected<void> MapService::checkAlone(std::chrono::milliseconds discovery) const
   const auto deadline = std::chrono::steady_clock::now() + discovery;
   while (true) {
     if (const auto others = otherServers(); !others.empty()) {
-      return makeError("another densemap-server (participant " + others.front() +
+      return makeError(std::string(kAnotherServer) + " (participant " + others.front() +
                        ") already runs on DDS domain " + std::to_string(options_.domain_id) +
                        ": two servers on one domain would answer the same clients with two "
                        "maps; stop it, or give this one another dds.domain_id / --domain-id");
@@ -477,26 +485,38 @@ struct ReturnFreeMemory {
 
 }  // namespace
 
-void MapService::runTask(std::function<void()> task) {
+void MapService::runTask(std::function<void()> task, std::size_t bytes) {
   ++queries_in_flight_;
+  request_bytes_ += bytes;
   query_arena_.execute([&] {
-    queries_.run([this, task = std::move(task)] {
+    queries_.run([this, bytes, task = std::move(task)] {
       task();
+      // The last large request out hands its memory back to the OS (RSS stayed ~850 MB after a
+      // flood until a save trimmed the heap).
+      if (request_bytes_.fetch_sub(bytes) == bytes && bytes > kTrimAfterBytes) malloc_trim(0);
       --queries_in_flight_;
     });
   });
 }
 
+std::size_t MapService::pointRequestBytes(std::size_t coordinates) {
+  // The request's copy (12 bytes a point), the reply's values and states (5 bytes a point) and
+  // the DDS sample written (about as much again).
+  return coordinates * sizeof(float) + coordinates / 3 * 2 * (sizeof(float) + 1);
+}
+
 void MapService::takeQueries() {
   // Each request becomes a task answered from the latest version when it runs; the task reads
   // one view throughout, so a multi-cell answer is one consistent version.
-  auto spawn = [this](auto answer) {
-    runTask([this, answer = std::move(answer)] {
-      std::string error;
-      answer(*pipeline_.view(), error);
-      if (!error.empty()) noteBadRequest(error);
-      ++queries_answered_;
-    });
+  auto spawn = [this](auto answer, std::size_t bytes = 0) {
+    runTask(
+        [this, answer = std::move(answer)] {
+          std::string error;
+          answer(*pipeline_.view(), error);
+          if (!error.empty()) noteBadRequest(error);
+          ++queries_answered_;
+        },
+        bytes);
   };
   // Take one request at a time from each reader in turn, so no kind starves the others. Each
   // reply waits (at most kAskerWait) until its writer has matched the asker's reply reader:
@@ -505,18 +525,39 @@ void MapService::takeQueries() {
   const auto asker = [](const dds::Entity& reader, const dds_sample_info_t& info) {
     return dds::participantOfWriter(reader, info.publication_handle);
   };
+  // Requests in flight share one memory budget (pipeline.request_budget_mb): while it is spent,
+  // new requests wait in DDS (bounded by the readers' depth); one that could never fit is refused.
   bool took = true;
-  while (took && queries_in_flight_.load() < kMaxQueriesInFlight) {
+  while (took && queries_in_flight_.load() < kMaxQueriesInFlight &&
+         request_bytes_.load() < options_.request_budget_bytes) {
     took = dds::takeOneWithInfo<densemap_msgs_PointQueryRequest>(
         dds_->point_reader,
         [&](const densemap_msgs_PointQueryRequest& m, const dds_sample_info_t& info) {
+          const std::size_t bytes = pointRequestBytes(m.points._length);
+          if (bytes > options_.request_budget_bytes) {
+            const std::string error =
+                std::to_string(m.points._length / 3) + " query points need " +
+                std::to_string(bytes >> 20) + " MiB, over the server's request budget of " +
+                std::to_string(options_.request_budget_bytes >> 20) +
+                " MiB (pipeline.request_budget_mb): send smaller batches";
+            densemap_msgs_PointQueryReply rep{};
+            rep.id = m.id;
+            rep.status = kInvalid;
+            rep.error = const_cast<char*>(error.c_str());
+            awaitAsker(dds_->point_writer, asker(dds_->point_reader, info));
+            (void)dds::write(dds_->point_writer, &rep);
+            noteBadRequest(error);
+            return;
+          }
           PointRequest req{
               m.id, std::vector<float>(m.points._buffer, m.points._buffer + m.points._length)};
-          spawn([this, req = std::move(req), who = asker(dds_->point_reader, info)](
-                    const MapView& view, std::string& error) {
-            awaitAsker(dds_->point_writer, who);
-            answerPoints(dds_->point_writer, req, view, error);
-          });
+          spawn(
+              [this, req = std::move(req), who = asker(dds_->point_reader, info)](
+                  const MapView& view, std::string& error) {
+                awaitAsker(dds_->point_writer, who);
+                answerPoints(dds_->point_writer, req, view, error);
+              },
+              bytes);
         });
     took |= dds::takeOneWithInfo<densemap_msgs_BboxQueryRequest>(
         dds_->bbox_reader,

@@ -98,11 +98,8 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
     }
     o.bounds = std::make_pair(lo, hi);
   }
-  if ((o.keep_radius_m > 0 || o.bounds) &&
-      (config.map().backend() != "grid" || config.map().kind() != "log_odds")) {
-    return makeError(
-        "map.keep_radius_m and map.bounds (eviction) need backend \"grid\" and kind "
-        "\"log_odds\"");
+  if ((o.keep_radius_m > 0 || o.bounds) && config.map().backend() != "grid") {
+    return makeError("map.keep_radius_m and map.bounds (eviction) need backend \"grid\"");
   }
   if (!(o.resolution_m >= 0.001 && o.resolution_m <= 100.0)) {
     return makeError("map.resolution_m must be in [0.001, 100], got " + numberText(o.resolution_m));
@@ -136,6 +133,10 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
         " and a quarter of this machine's memory (" +
         std::to_string(physicalMemoryBytes() / 4 / kBlockBytes) + " blocks of " +
         std::to_string(kBlockBytes) + " bytes), got " + std::to_string(p.reserve_blocks()));
+  }
+  if (p.request_budget_mb() < 16 || p.request_budget_mb() > 65536) {
+    return makeError("pipeline.request_budget_mb must be in 16..65536, got " +
+                     std::to_string(p.request_budget_mb()));
   }
   if (p.max_query_cells() < 1 || p.max_query_cells() > kMaxQueryCells) {
     return makeError("pipeline.max_query_cells must be in 1.." + std::to_string(kMaxQueryCells) +

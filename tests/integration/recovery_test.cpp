@@ -74,7 +74,13 @@ TEST(Recovery, KillNineAfterAnAutosaveLosesNothingAndTheRestartResumesIt) {
     auto client = connect(kDomain);
     ASSERT_TRUE(client);
     test::replayScans(*client, raws);
-    std::this_thread::sleep_for(1000ms);  // at least one autosave after the last scan
+    // At least one autosave after the last scan: the period stretches with the save's own
+    // duration (4x), so on a loaded machine it can take longer than a fixed wait.
+    for (int i = 0; i < 100; ++i) {
+      std::this_thread::sleep_for(100ms);
+      auto newest = loadNewestSnapshot(path, 3, Backend::kGrid, 0.2);
+      if (newest && *newest && (*newest)->snapshot.version == 4) break;
+    }
     server.kill9();
   }
   EXPECT_EQ(expectSnapshotsIntact(path), 4U);

@@ -434,5 +434,23 @@ TEST(Server, ASecondServerOnTheSameDomainRefusesToStart) {
   EXPECT_EQ(first.stop(), 0);
 }
 
+// Hostile-input issue 28, item 9: query requests in flight share one memory budget; a request
+// larger than all of it is refused with the reason, smaller ones are answered.
+TEST(Server, PointQueriesLargerThanTheRequestBudgetAreRefused) {
+  test::TempDir dir;
+  ServerProcess server(dir.path(), 150, "pipeline { request_budget_mb: 16 }\n");
+  auto client = connect(150);
+  ASSERT_TRUE(client);
+  std::vector<Point3f> many(2'000'000, Point3f(1, 1, 1));  // about 44 MiB in flight
+  auto refused = client->queryPoints(many);
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.error().message.find("request budget"), std::string::npos)
+      << refused.error().message;
+  many.resize(100'000);
+  auto answered = client->queryPoints(many);
+  ASSERT_TRUE(answered) << answered.error().message;
+  EXPECT_EQ(server.stop(), 0);
+}
+
 }  // namespace
 }  // namespace densemap

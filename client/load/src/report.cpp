@@ -201,10 +201,15 @@ SloVerdict checkSlo(const RunResult& run, const Slo& slo) {
   v.query = latencyStats(allQueries(run));
   std::uint64_t sent = 0;
   for (const auto& s : run.sensors) v.dropped += lostScans(s), sent += s.sent;
+  std::uint64_t not_started = 0;
   for (const auto& c : run.clients) {
     for (const auto f : c.failed) v.failed_queries += f;
+    not_started += c.started ? 0 : 1;
   }
   std::vector<std::string> broken;
+  if (not_started > 0) {
+    broken.push_back(format("%llu query clients failed to start", ull(not_started)));
+  }
   if (sent > 0 && v.e2e.n == 0) broken.push_back("no scan reached the map");
   if (v.e2e.p99 > slo.e2e_p99_ms) {
     broken.push_back(format("e2e p99 %.1f ms > %.0f ms", v.e2e.p99, slo.e2e_p99_ms));

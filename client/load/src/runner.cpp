@@ -378,7 +378,18 @@ class Children {
         }
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
       }
+      // A client whose process failed (exit status, or no result file: it never got to
+      // write one) did not run: counted, never reported as "failed 0".
+      const bool wrote = std::filesystem::exists(outs_[i]);
       readChildResult(outs_[i], results[i]);
+      const bool ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
+      if (!wrote || !ok) {
+        results[i].started = false;
+        if (results[i].last_error.empty()) {
+          results[i].last_error = "the client process failed to start or run (" +
+                                  std::string(!wrote ? "no result" : "exit status") + ")";
+        }
+      }
     }
     pids_.clear();
   }

@@ -31,4 +31,20 @@ Transform transformFromTranslationQuaternion(const Eigen::Vector3d& t, double qw
   return T;
 }
 
+Expected<void> checkRigidPose(const Transform& T) {
+  const Eigen::Matrix4d& m = T.matrix();
+  if (!m.allFinite()) return makeError("the pose has a NaN or infinite entry");
+  if (T.translation().cwiseAbs().maxCoeff() > kMaxPoseTranslationM) {
+    return makeError("the pose's translation is beyond +-1e6 m");
+  }
+  const Eigen::Matrix3d r = T.linear();
+  const double off = (r.transpose() * r - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+  if (off > 1e-3) {
+    return makeError("the pose's rotation is not orthonormal (scaled, sheared or zero: "
+                     "|R^T R - I| = " + std::to_string(off) + ")");
+  }
+  if (r.determinant() < 0) return makeError("the pose's rotation is a reflection (det R < 0)");
+  return {};
+}
+
 }  // namespace densemap

@@ -31,7 +31,11 @@ Expected<std::vector<Transform>> readPoses(const std::filesystem::path& file) {
     if (fields >> extra) {
       return fileError(file, "line " + std::to_string(line_no) + ": more than 12 numbers");
     }
-    poses.push_back(transformFromRows(v));
+    const Transform pose = transformFromRows(v);
+    if (auto ok = checkRigidPose(pose); !ok) {
+      return fileError(file, "line " + std::to_string(line_no) + ": " + ok.error().message);
+    }
+    poses.push_back(pose);
   }
   if (poses.empty()) return fileError(file, "no poses");
   return poses;

@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <sstream>
 
@@ -65,6 +66,9 @@ Expected<PcdHeader> parseHeader(const std::filesystem::path& file, const std::st
         for (int i = 0; i < 7; ++i) v[i] = std::stod(values[i]);
         h.viewpoint =
             transformFromTranslationQuaternion({v[0], v[1], v[2]}, v[3], v[4], v[5], v[6]);
+        if (auto ok = checkRigidPose(h.viewpoint); !ok) {
+          return fileError(file, "VIEWPOINT: " + ok.error().message);
+        }
       } else if (key == "DATA") {
         h.data = values.empty() ? "" : values[0];
         h.data_offset = pos;
@@ -166,9 +170,18 @@ Expected<Scan> readPcd(const std::filesystem::path& file) {
     };
     for (std::size_t i = 0; i < h.points; ++i) {
       for (auto& v : row) {
-        if (!(in >> v)) {
+        // strtod, not >>: "nan" and "inf" are numbers here (a sensor's missing returns), which
+        // the mapping tools drop; only a missing or malformed field is an error.
+        std::string token;
+        if (!(in >> token)) {
           return fileError(file, "truncated ASCII PCD: point " + std::to_string(i) + " of " +
                                      std::to_string(h.points) + " is incomplete");
+        }
+        char* end = nullptr;
+        v = std::strtod(token.c_str(), &end);
+        if (end == token.c_str() || *end != '\0') {
+          return fileError(file, "ASCII PCD point " + std::to_string(i) + ": '" + token +
+                                     "' is not a number");
         }
       }
       scan.points.emplace_back(static_cast<float>(row[column_of(fx)]),

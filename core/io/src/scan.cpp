@@ -26,6 +26,21 @@ PointCloud Scan::pointsWorld() const {
   return world;
 }
 
+std::size_t Scan::removeNonFinitePoints() {
+  const bool with_intensity = intensities.size() == points.size();
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    if (!points[i].allFinite()) continue;
+    points[kept] = points[i];
+    if (with_intensity) intensities[kept] = intensities[i];
+    ++kept;
+  }
+  const std::size_t removed = points.size() - kept;
+  points.resize(kept);
+  if (with_intensity) intensities.resize(kept);
+  return removed;
+}
+
 Point3f Scan::originWorld() const {
   if (frame == PointFrame::kWorld || !octomap_pose) return sensorOrigin(T_world_sensor);
   // graph2tree takes the sensor origin into the scan frame and back: not always the float

@@ -82,6 +82,9 @@ Expected<std::vector<Scan>> readScanGraph(const std::filesystem::path& file) {
                     {static_cast<float>(q[0]), static_cast<float>(q[1]), static_cast<float>(q[2]),
                      static_cast<float>(q[3])}};
     scan.T_world_sensor = transformFromOctomapPose(*scan.octomap_pose);
+    if (auto ok = checkRigidPose(scan.T_world_sensor); !ok) {
+      return broken("node " + std::to_string(scans.size()) + ": " + ok.error().message);
+    }
     std::uint32_t id = 0;
     if (!in.read(id)) return broken("missing node id");
     scan.id = id;

@@ -742,6 +742,12 @@ void KernelMap::erase(const VoxelKey& key) {
   it->second.beta[cell] = 0.0;
 }
 
+std::size_t KernelMap::evictBlocks(const std::function<bool(const Point3f&)>& keep) {
+  const std::size_t before = blocks_.size();
+  std::erase_if(blocks_, [&](const auto& entry) { return !keep(block::centreOf(grid_, entry.first)); });
+  return before - blocks_.size();
+}
+
 std::optional<double> KernelMap::probability(const VoxelKey& key) const {
   const auto it = blocks_.find(block::blockOf(key));
   if (it == blocks_.end()) return std::nullopt;

@@ -159,14 +159,9 @@ std::size_t GridMap::dropBlock(BlockEntry& e, CellChanges* changes) {
 EvictStats GridMap::evictBlocks(const std::function<bool(const Point3f&)>& keep,
                                 CellChanges* changes) {
   EvictStats stats;
-  const double half = 0.5 * block::kEdge;
   store_->forEachEntryWriter([&](BlockEntry& e) {
     if (BlockStore::latest(e) == nullptr) return;
-    const VoxelKey corner = block::keyOf(e.key, 0);
-    // The block's centre: its corner cell's centre plus half a block less half a cell.
-    const Point3f centre = grid().keyToPoint(corner) +
-                           Point3f::Constant(static_cast<float>((half - 0.5) * resolution()));
-    if (keep(centre)) return;
+    if (keep(block::centreOf(grid(), e.key))) return;
     const std::size_t cells = dropBlock(e, changes);
     known_cells_ -= cells;
     stats.cells += cells;

@@ -101,10 +101,8 @@ Expected<std::unique_ptr<Pipeline>> Pipeline::create(const PipelineOptions& opti
   if (options.upsample) {
     if (auto ok = options.upsample->validate(); !ok) return std::unexpected(ok.error());
   }
-  if ((options.keep_radius_m > 0 || options.bounds) &&
-      (options.backend != Backend::kGrid || options.kernel)) {
-    return makeError(
-        "keep_radius_m and bounds (eviction) need the grid backend and the log_odds map kind");
+  if ((options.keep_radius_m > 0 || options.bounds) && options.backend != Backend::kGrid) {
+    return makeError("keep_radius_m and bounds (eviction) need the grid backend");
   }
   if (!initial) {
     auto map = makeMap(options.backend, options.resolution_m, SensorModel(options.sensor));
@@ -248,20 +246,22 @@ void Pipeline::publish(IntegrationResult& result) {
 
 void Pipeline::evict(const Point3f& origin, IntegrationResult& result, CellChanges* changes) {
   // create() refuses eviction unless map_ is the GridMap itself (readable_, no mirror).
-  if ((options_.keep_radius_m <= 0 && !options_.bounds) || mirror_ || kernel_map_) return;
+  if ((options_.keep_radius_m <= 0 && !options_.bounds) || mirror_) return;
   const double r2 = options_.keep_radius_m * options_.keep_radius_m;
-  const EvictStats stats = readable_->evictBlocks(
-      [&](const Point3f& centre) {
-        if (options_.keep_radius_m > 0 && (centre - origin).cast<double>().squaredNorm() > r2) {
-          return false;
-        }
-        if (const auto& box = options_.bounds) {
-          return (centre.array() >= box->first.array()).all() &&
-                 (centre.array() <= box->second.array()).all();
-        }
-        return true;
-      },
-      changes);
+  const auto keep = [&](const Point3f& centre) {
+    if (options_.keep_radius_m > 0 && (centre - origin).cast<double>().squaredNorm() > r2) {
+      return false;
+    }
+    if (const auto& box = options_.bounds) {
+      return (centre.array() >= box->first.array()).all() &&
+             (centre.array() <= box->second.array()).all();
+    }
+    return true;
+  };
+  const EvictStats stats = readable_->evictBlocks(keep, changes);
+  // A kernel map drops the same blocks (its evidence and memory); its published map is the
+  // grid above, whose changes say which cells became unknown.
+  if (kernel_map_) kernel_map_->evictBlocks(keep);
   result.evicted_blocks = stats.blocks;
   result.evicted_cells = stats.cells;
 }

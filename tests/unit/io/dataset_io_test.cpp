@@ -77,6 +77,24 @@ TEST(DatasetDirectory, MissingOrBrokenPosesAreClearErrors) {
   writeText(dir.path() / "poses.txt", "1 0 0 nan 0 1 0 0 0 0 1 0\n");
   EXPECT_FALSE(openScanSource(dir.path()));
 
+  // Hostile-input issue 28, item 13: a scaled, zero or reflected rotation is a file:line error
+  // (before, every scan was then refused by the server: "pose quaternion norm 27.39").
+  const std::string good = "1 0 0 0 0 1 0 0 0 0 1 0\n";
+  std::string lines;
+  for (int i = 0; i < 5; ++i) lines += good;
+  for (const auto& [pose, reason] :
+       std::vector<std::pair<std::string, std::string>>{
+           {"3 0 0 0 0 3 0 0 0 0 3 0\n", "orthonormal"},
+           {"0 0 0 0 0 0 0 0 0 0 0 0\n", "orthonormal"},
+           {"-1 0 0 0 0 1 0 0 0 0 1 0\n", "reflection"},
+           {"1 0 0 1e30 0 1 0 0 0 0 1 0\n", "translation"}}) {
+    writeText(dir.path() / "poses.txt", lines + pose);
+    auto bad = openScanSource(dir.path());
+    ASSERT_FALSE(bad) << pose;
+    EXPECT_NE(bad.error().message.find("line 6"), std::string::npos) << bad.error().message;
+    EXPECT_NE(bad.error().message.find(reason), std::string::npos) << bad.error().message;
+  }
+
   std::filesystem::remove(dir.path() / "poses.txt");
   auto none = openScanSource(dir.path());
   ASSERT_FALSE(none);
@@ -117,6 +135,35 @@ TEST(Pcd, BinaryAndAsciiReadTheSamePointsAndViewpoint) {
   EXPECT_EQ(a->frame, PointFrame::kWorld);
   EXPECT_EQ(a->originWorld(), Point3f(1, 2, 3));
   EXPECT_EQ(a->pointsWorld(), a->points);  // world-frame points are not transformed again
+}
+
+// Hostile-input issue 28, item 13: "nan" in an ASCII PCD is a missing return (a point the
+// mapping tools drop), not a truncated file; a NaN VIEWPOINT is an error, not an empty map.
+TEST(Pcd, NanPointsAreReadAndANanViewpointIsAnError) {
+  test::TempDir dir;
+  writeText(dir.path() / "a_1.pcd", pcdHeader("ascii", 2) + "nan nan nan 0\n-4 5.5 6 8\n");
+  auto source = openScanSource(dir.path());
+  ASSERT_TRUE(source) << source.error().message;
+  auto scan = (*source)->load(0);
+  ASSERT_TRUE(scan) << scan.error().message;
+  ASSERT_EQ(scan->points.size(), 2U);
+  EXPECT_FALSE(scan->points[0].allFinite());
+  EXPECT_EQ(scan->removeNonFinitePoints(), 1U);
+  EXPECT_EQ(scan->points[0], Point3f(-4, 5.5F, 6));
+  EXPECT_EQ(scan->intensities, std::vector<float>{8});
+
+  test::TempDir other;
+  std::string header = pcdHeader("ascii", 1);
+  header.replace(header.find("VIEWPOINT 1 2 3"), 15, "VIEWPOINT nan 2 3");
+  writeText(other.path() / "b_1.pcd", header + "1 2 3 4\n");
+  auto bad = openScanSource(other.path());
+  std::string message = bad ? "" : bad.error().message;
+  if (bad) {
+    auto loaded = (*bad)->load(0);
+    ASSERT_FALSE(loaded);
+    message = loaded.error().message;
+  }
+  EXPECT_NE(message.find("VIEWPOINT"), std::string::npos) << message;
 }
 
 TEST(Pcd, TruncatedAndMalformedFilesAreClearErrors) {

@@ -101,6 +101,20 @@ TEST(ScanGraph, WrittenGraphsAreReadByOctomapWithTheSameWorldPoints) {
   EXPECT_FALSE(writeScanGraph(source, 3, 1, dir.path() / "none.graph"));
 }
 
+// Hostile-input issue 28, item 13: a node 1e30 m away wrote an empty map with exit 0.
+TEST(ScanGraph, APoseBeyondAnyMapIsAClearError) {
+  test::TempDir dir;
+  octomap::ScanGraph graph;
+  auto* cloud = new octomap::Pointcloud();
+  cloud->push_back(1, 2, 3);
+  graph.addNode(cloud, octomap::pose6d(1e30, 0, 0, 0, 0, 0));
+  const auto path = dir.path() / "far.graph";
+  ASSERT_TRUE(graph.writeBinary(path.string()));
+  auto scans = readScanGraph(path);
+  ASSERT_FALSE(scans);
+  EXPECT_NE(scans.error().message.find("node 0"), std::string::npos) << scans.error().message;
+}
+
 TEST(ScanGraph, TruncatedFilesAreClearErrorsAtEveryLength) {
   test::TempDir dir;
   const auto path = writeGraph(dir.path());

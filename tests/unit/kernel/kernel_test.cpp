@@ -324,6 +324,25 @@ TEST(FreeTraversal, AgreesWithTheSegmentKernelsOnARoom) {
   }
 }
 
+// Issue 29: a kernel map evicts whole blocks (evidence and memory); what stays is the map
+// without those blocks, bit for bit.
+TEST(KernelMapEviction, KeepsExactlyTheBlocksItIsToldToKeep) {
+  KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
+  options.max_range = 15.0;
+  KernelMap evicted(0.1, options), whole(0.1, options);
+  for (KernelMap* m : {&evicted, &whole}) m->integrate(roomScan(), Point3f(0, 0, 0));
+  const auto keep = [](const Point3f& centre) { return centre.x() < 2.0F; };
+  EXPECT_GT(evicted.evictBlocks(keep), 0U);
+  std::vector<std::pair<std::uint64_t, double>> expected;
+  whole.forEachKnown([&](const VoxelKey& k, double p) {
+    if (keep(block::centreOf(whole.grid(), block::blockOf(k)))) expected.emplace_back(k.packed(), p);
+  });
+  std::sort(expected.begin(), expected.end());
+  ASSERT_GT(expected.size(), 1000U);
+  EXPECT_EQ(cellsOf(evicted), expected);
+  EXPECT_LT(evicted.knownCells(), whole.knownCells());
+}
+
 TEST(KernelMethodNames, ParseAndReject) {
   EXPECT_EQ(*parseKernelMethod("bgkl"), KernelMethod::kBgkl);
   EXPECT_EQ(*parseKernelMethod("akimap_rays"), KernelMethod::kAkimapRays);

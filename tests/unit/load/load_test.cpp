@@ -180,6 +180,18 @@ TEST(LoadReport, SoakFailsWhenScansAreDroppedOrTheSloBreaksWhateverTheTrend) {
   EXPECT_FALSE(checkSoak(r, plan, slo).passed);
 }
 
+// Hostile-input issue 28, item 10: 7 of 45 client processes never started and the report said
+// "failed 0". A client that did not start breaks the SLO.
+TEST(LoadReport, QueryClientsThatNeverStartedBreakTheSlo) {
+  RunResult r = syntheticRun();
+  const Slo slo{.e2e_p99_ms = 1000};
+  ASSERT_TRUE(checkSlo(r, slo).kept) << checkSlo(r, slo).broken;
+  r.clients.push_back(QueryResult{.name = "viewer", .started = false});
+  const auto v = checkSlo(r, slo);
+  EXPECT_FALSE(v.kept);
+  EXPECT_NE(v.broken.find("1 query clients failed to start"), std::string::npos) << v.broken;
+}
+
 TEST(LoadReport, CpuUseIsPercentOfACoreAndOfTheMachine) {
   const auto c = cpuUse(syntheticRun().usage, 10, 60);
   EXPECT_NEAR(c.server_pct, 50, 1e-9);

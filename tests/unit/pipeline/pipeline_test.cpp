@@ -251,6 +251,46 @@ TEST(Pipeline, CommandsRunBetweenScansAndPublishTheirChanges) {
   EXPECT_EQ(after.wait_for(1s), std::future_status::ready);
 }
 
+// Issue 29: a kernel map evicts with the published grid: the pipeline's map equals an offline
+// kernel map that evicts the same blocks after each scan (keep radius around each scan's origin).
+TEST(Pipeline, KernelMapEvictionEqualsTheOfflineMapMinusTheEvictedBlocks) {
+  const auto method = kernel::KernelMethod::kAkimapRays;
+  constexpr double kRadius = 3.0;
+  auto sut = Pipeline::create(
+      {.resolution_m = 0.2, .max_range_m = 5.0, .kernel = method, .threads = 2,
+       .keep_radius_m = kRadius});
+  ASSERT_TRUE(sut) << sut.error().message;
+  (*sut)->start();
+  std::vector<RawScan> raws = {rawScan(1, 1500), rawScan(30, 1500)};  // origins 3 m apart
+  for (std::uint64_t i = 0; i < raws.size(); ++i) {
+    (*sut)->submit(raws[i]);
+    ASSERT_TRUE(waitFor([&] { return (*sut)->counters().integrated == i + 1; }));
+  }
+  auto options = kernel::KernelOptions::defaults(method);
+  options.max_range = 5.0;
+  kernel::KernelMap offline(0.2, options), unbounded(0.2, options);
+  for (const RawScan& raw : raws) {
+    const Scan scan = *validateScan(raw, ScanLimits{});
+    offline.integrate(scan.pointsWorld(), scan.originWorld());
+    unbounded.integrate(scan.pointsWorld(), scan.originWorld());
+    const Point3f origin = scan.originWorld();
+    offline.evictBlocks([&](const Point3f& centre) {
+      return (centre - origin).cast<double>().squaredNorm() <= kRadius * kRadius;
+    });
+  }
+  const auto view = (*sut)->view();
+  EXPECT_LT(offline.knownCells(), unbounded.knownCells());  // something was evicted
+  ASSERT_EQ(view->knownCells(), offline.knownCells());
+  std::size_t mismatches = 0;
+  offline.forEachKnown([&](const VoxelKey& k, double p) {
+    const auto l = view->logOdds(k);
+    mismatches += !l || *l != static_cast<float>(std::log(p / (1.0 - p)));
+  });
+  EXPECT_EQ(mismatches, 0U);
+  EXPECT_GT((*sut)->counters().evicted_blocks, 0U);
+  (*sut)->stop();
+}
+
 TEST(Pipeline, KernelMapKindsPublishLogitOfTheOfflineKernelMapAndClearBothStores) {
   for (const auto method : {kernel::KernelMethod::kAkimap, kernel::KernelMethod::kBgk,
                             kernel::KernelMethod::kBgkl, kernel::KernelMethod::kAkimapRays}) {

@@ -64,10 +64,13 @@ TEST(ServerConfig, Ros2OptionsAndTheirErrors) {
         "ros2 { enabled: true max_waiting_clouds: 0 }\n",
         "ros2 { enabled: true grid_min_z_m: 2 grid_max_z_m: 1 }\n",
         "ros2 { enabled: true octomap_topic: \"/a//b\" }\n"}) {
-    auto r = options(bad);
+    // Refused at load, with the file's name (issue 28, item 15: ros2 errors had none).
+    const auto file = writeConfig(dir, bad);
+    auto r = loadServerConfig(file);
     EXPECT_FALSE(r) << bad;
     if (!r) {
       EXPECT_NE(r.error().message.find("ros2"), std::string::npos) << r.error().message;
+      EXPECT_NE(r.error().message.find(file.string()), std::string::npos) << r.error().message;
     }
   }
 }
@@ -123,10 +126,11 @@ TEST(ServerConfig, EvictionNeedsTheGridLogOddsMapAndAValidBox) {
   EXPECT_EQ(options->bounds->first, Point3f(-100, -100, -5));
   EXPECT_EQ(options->bounds->second, Point3f(100, 100, 20));
   EXPECT_FALSE(pipelineOptions(proto::ServerConfig{})->bounds) << "no box unless configured";
+  // Issue 29: kernel maps evict too (their evidence blocks with the published grid's).
+  EXPECT_TRUE(loadServerConfig(writeConfig(dir, "map { keep_radius_m: 40 kind: \"akimap_rays\" }\n")));
   for (const auto& [text, reason] : std::vector<std::pair<std::string, std::string>>{
            {"map { keep_radius_m: -1 }", "keep_radius_m must be >= 0"},
            {"map { keep_radius_m: 40 backend: \"octree\" }", "need backend \"grid\""},
-           {"map { keep_radius_m: 40 kind: \"akimap\" }", "kind \"log_odds\""},
            {"map { bounds { min_x: 1 max_x: 1 max_y: 1 max_z: 1 } }", "map.bounds needs"},
        }) {
     auto refused = loadServerConfig(writeConfig(dir, text + "\n"));

@@ -10,6 +10,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <string_view>
 #include <thread>
 
 #include "densemap/dds/dds.hpp"
@@ -28,8 +29,14 @@ struct ServiceOptions {
   std::filesystem::path export_dir;  // where `save --path NAME` writes (exportDirectory())
   double autosave_period_s = 0.0;              // 0: off
   std::size_t max_query_cells = 50'000'000;
+  /// Memory for query requests in flight (their copies and replies); beyond it new requests
+  /// wait in DDS, and one larger than all of it is refused.
+  std::size_t request_budget_bytes = std::size_t{256} << 20;
   int query_threads = 2;            // the query task arena: requests are answered in parallel
   std::optional<Ros2Options> ros2;  // the ROS 2 face (Ros2Bridge); none: off
+  /// How long create() listens for another server's status writer before it creates the
+  /// endpoints clients match (DESIGN.md: two servers on one domain are detected).
+  std::chrono::milliseconds alone_discovery{1000};
 };
 
 /// densemap-server's DDS face (DESIGN.md topics), three threads and a task arena:
@@ -59,9 +66,8 @@ class MapService {
     return std::chrono::steady_clock::time_point(
         std::chrono::steady_clock::duration(heartbeat_.load()));
   }
-  /// Fails when another densemap-server's status writer is discovered on the domain within
-  /// `discovery` (DESIGN.md: two servers on one domain are detected, not merged).
-  [[nodiscard]] Expected<void> checkAlone(std::chrono::milliseconds discovery) const;
+  /// The start of create()'s error when another server runs on the domain.
+  static constexpr std::string_view kAnotherServer = "another densemap-server";
   /// Saves the latest map version to `file` (or the configured snapshot path). A failure is
   /// counted in the status (snapshot_failures, last_snapshot_error).
   [[nodiscard]] Expected<std::size_t> save(const std::filesystem::path& file = {});
@@ -78,11 +84,18 @@ class MapService {
   void publishLoop();
   void onIntegrated(const IntegrationResult& result, const std::shared_ptr<const MapView>& view);
   /// Runs `task` in the query arena, counted in queries_in_flight_ until it ends.
-  void runTask(std::function<void()> task);
+  /// Runs a request's task in the query arena; `bytes` is charged to the request budget while
+  /// it runs.
+  void runTask(std::function<void()> task, std::size_t bytes = 0);
+  /// The memory a point request of `coordinates` floats holds while it is answered.
+  [[nodiscard]] static std::size_t pointRequestBytes(std::size_t coordinates);
   void takeQueries();
   void answerCommands();
   void replyCommand(const densemap_msgs_RequestId& id, const Expected<std::string>& outcome);
   [[nodiscard]] Expected<std::size_t> saveUncounted(const std::filesystem::path& file);
+  /// Fails when another densemap-server's status writer is discovered on the domain within
+  /// `discovery` (DESIGN.md: two servers on one domain are detected, not merged).
+  [[nodiscard]] Expected<void> checkAlone(std::chrono::milliseconds discovery) const;
   /// Participants other than this one that write densemap/status (other servers).
   [[nodiscard]] std::vector<std::string> otherServers() const;
   /// Waits until `writer` has matched a reader of `asker` (see kAskerWait in the .cpp).
@@ -108,6 +121,7 @@ class MapService {
   tbb::task_arena query_arena_;
   tbb::task_group queries_;
   std::atomic<int> queries_in_flight_{0};
+  std::atomic<std::size_t> request_bytes_{0};  // charged to options_.request_budget_bytes
 
   std::mutex versions_mutex_;
   std::condition_variable versions_cv_;

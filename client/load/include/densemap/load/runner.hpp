@@ -37,6 +37,7 @@ struct QueryResult {
   std::uint64_t late_ticks = 0;              // target-rate ticks skipped because a reply was slow
   double cpu_s = 0;                          // its process's CPU (with --processes)
   std::string last_error;
+  bool started = true;  // false: its process never ran its queries (no DDS participant, ...)
 };
 
 struct JoinerResult {

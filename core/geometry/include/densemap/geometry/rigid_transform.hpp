@@ -2,6 +2,7 @@
 
 #include <Eigen/Geometry>
 
+#include "densemap/geometry/error.hpp"
 #include "densemap/geometry/point_cloud.hpp"
 
 namespace densemap {
@@ -23,5 +24,14 @@ using Transform = Eigen::Isometry3d;
 /// Builds a transform from translation and unit quaternion (w, x, y, z).
 [[nodiscard]] Transform transformFromTranslationQuaternion(const Eigen::Vector3d& t, double qw,
                                                            double qx, double qy, double qz);
+
+/// The largest sensor position a file may give (m): the map's keys cover +-32768 voxels, and
+/// nothing a robot maps lies farther (a 1e30 translation wrote an empty map, issue 28).
+inline constexpr double kMaxPoseTranslationM = 1e6;
+
+/// The one rule for a pose read from outside (files; scans have their own quaternion and
+/// position limits): finite, translation within kMaxPoseTranslationM, rotation orthonormal
+/// (|R^T R - I| <= 1e-3 per entry) and proper (det R > 0: no reflection). The error says which.
+[[nodiscard]] Expected<void> checkRigidPose(const Transform& T);
 
 }  // namespace densemap

@@ -38,6 +38,8 @@ struct Scan {
   [[nodiscard]] PointCloud pointsWorld() const;
   /// The ray origin in the world frame.
   [[nodiscard]] Point3f originWorld() const;
+  /// Drops NaN/Inf points (a sensor's missing returns) with their intensities; returns how many.
+  std::size_t removeNonFinitePoints();
 };
 
 /// The same pose in double (for consumers that take sensor-frame scans with a pose).

@@ -127,6 +127,9 @@ class KernelMap {
                             std::vector<VoxelKey>* touched = nullptr);
   /// Forgets a cell's evidence (it becomes unknown).
   void erase(const VoxelKey& key);
+  /// Drops every block whose centre (block::centreOf) `keep` refuses, with its evidence and
+  /// memory (bounded memory: map.keep_radius_m, map.bounds). Returns the blocks dropped.
+  std::size_t evictBlocks(const std::function<bool(const Point3f&)>& keep);
 
   /// alpha / (alpha + beta); std::nullopt where no kernel reached the cell (unknown).
   [[nodiscard]] std::optional<double> probability(const VoxelKey& key) const;

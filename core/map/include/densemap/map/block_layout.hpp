@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <cstdint>
 
+#include "densemap/geometry/voxel_grid.hpp"
 #include "densemap/geometry/voxel_key.hpp"
 
 namespace densemap::block {
@@ -59,6 +60,14 @@ void forEachSetBit(const BlockMask& m, F&& f) {
       static_cast<std::uint16_t>((((block >> 13) & 0x1fff) << kShift) | ((index >> kShift) & m)),
       static_cast<std::uint16_t>((((block >> 26) & 0x1fff) << kShift) |
                                  ((index >> (2 * kShift)) & m))};
+}
+
+/// A block's centre: its corner cell's centre plus half a block less half a cell. The one
+/// definition eviction uses (every map kind evicts the same blocks).
+[[nodiscard]] inline Point3f centreOf(const VoxelGrid& grid, std::uint64_t block) {
+  const double half = 0.5 * kEdge;
+  return grid.keyToPoint(keyOf(block, 0)) +
+         Point3f::Constant(static_cast<float>((half - 0.5) * grid.resolution()));
 }
 
 }  // namespace densemap::block
