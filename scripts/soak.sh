@@ -3,7 +3,8 @@
 # (a robot replaying a drive in a loop, two viewers, a late joiner every 30 s). Every 10 s the
 # load tool records latency, throughput, drops, server CPU and RSS, and this script records the
 # server's RSS and its autosaved snapshot's size (soak-samples.csv). Fails (exit 3) when the
-# server's RSS grows more than 10% after warm-up or the end-to-end p99 drifts more than 20%;
+# server's RSS grows more than 10% after warm-up, the end-to-end p99 drifts more than 20%, or the
+# scenario's SLO breaks (a scan dropped, e2e p99 over 200 ms);
 # fails (exit 1) when the server dies, does not stop cleanly or leaves no snapshot.
 # Usage: scripts/soak.sh [MINUTES]   (default 2; env DENSEMAP_BIN, DENSEMAP_DOMAIN, SOAK_OUT)
 set -euo pipefail
