@@ -324,8 +324,8 @@ Expected<ServerStatus> Client::status() {
     // status (`densemap status --watch` repeated the last one forever).
     if (n > 0 && info[0].instance_state != DDS_IST_ALIVE) {
       (void)dds_return_loan(dds_->st_r.get(), samples, n);
-      return makeError("the densemap-server on DDS domain " +
-                       std::to_string(options_.domain_id) + " has stopped (its status is gone)");
+      return makeError("the densemap-server on DDS domain " + std::to_string(options_.domain_id) +
+                       " has stopped (its status is gone)");
     }
     if (n > 0 && info[0].valid_data) {
       const auto& s = *static_cast<const densemap_msgs_Status*>(samples[0]);

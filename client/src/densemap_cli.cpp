@@ -9,6 +9,7 @@
 #include <map>
 #include <thread>
 
+#include "densemap/cli/guarded_main.hpp"
 #include "densemap/cli/progress.hpp"
 #include "densemap/client/client.hpp"
 #include "densemap/io/octomap_export.hpp"
@@ -18,7 +19,6 @@
 #include "densemap/upsample/interpolation.hpp"
 #include "load_command.hpp"
 #include "ros_replay.hpp"
-#include "densemap/cli/guarded_main.hpp"
 
 namespace densemap::cli {
 namespace {
@@ -501,8 +501,8 @@ static int runMain(int argc, char** argv) {
   auto* save = app.add_subcommand("save", "Ask the server to save a snapshot on its machine");
   std::string save_path;
   save->add_option("--path", save_path,
-                  "A file name (NAME.dmap, .bt or .ot, no directories) written into the "
-                  "server's snapshot.export_dir (default: its snapshot with generations)");
+                   "A file name (NAME.dmap, .bt or .ot, no directories) written into the "
+                   "server's snapshot.export_dir (default: its snapshot with generations)");
   auto* status = app.add_subcommand("status", "Server status");
   bool watch = false;
   status->add_flag("--watch", watch, "Print every second until interrupted");

@@ -18,11 +18,11 @@
 #include <systemd/sd-daemon.h>
 #endif
 
+#include "densemap/cli/guarded_main.hpp"
 #include "densemap/server/export_path.hpp"
 #include "densemap/server/map_service.hpp"
 #include "densemap/server/server_config.hpp"
 #include "densemap/store/snapshot.hpp"
-#include "densemap/cli/guarded_main.hpp"
 
 namespace {
 
@@ -139,15 +139,15 @@ static int runMain(int argc, char** argv) {
     const auto same = [](double a, double b) { return std::abs(a - b) <= 1e-9; };
     if (!same(was.hit, now.hit) || !same(was.miss, now.miss) ||
         !same(was.clamp_min, now.clamp_min) || !same(was.clamp_max, now.clamp_max)) {
-      return fail(fmt::format(
-                      "snapshot {} was mapped with map.sensor {{ prob_hit: {} prob_miss: {} "
+      return fail(
+          fmt::format("snapshot {} was mapped with map.sensor {{ prob_hit: {} prob_miss: {} "
                       "clamp_min: {} clamp_max: {} }} but the config says {{ prob_hit: {} "
                       "prob_miss: {} clamp_min: {} clamp_max: {} }}: set map.sensor to the "
                       "snapshot's values to resume it, or move the snapshot aside to start a "
                       "new map",
                       (*resumed)->file.string(), was.hit, was.miss, was.clamp_min, was.clamp_max,
                       now.hit, now.miss, now.clamp_min, now.clamp_max),
-                  2);
+          2);
     }
     spdlog::info("resumed {} (version {}, {} cells)", (*resumed)->file.string(), loaded->version,
                  loaded->map->knownCells());
@@ -181,8 +181,8 @@ static int runMain(int argc, char** argv) {
   auto service = densemap::server::MapService::create(**pipeline, service_options);
   // A second server must not start (exit 2: systemd's RestartPreventExitStatus keeps it from
   // retrying); other DDS errors may pass (an interface not up yet at boot): exit 1.
-  if (!service && service.error().message.starts_with(
-                      densemap::server::MapService::kAnotherServer)) {
+  if (!service &&
+      service.error().message.starts_with(densemap::server::MapService::kAnotherServer)) {
     return fail(service.error().message, 2);
   }
   if (!service) return fail("DDS: " + service.error().message);

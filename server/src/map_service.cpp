@@ -9,10 +9,10 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <thread>
 #include <bit>
 #include <cmath>
 #include <limits>
+#include <thread>
 #include <unordered_map>
 #include <vector>
 
@@ -159,8 +159,8 @@ std::vector<std::string> MapService::otherServers() const {
   dds_guid_t own{};
   (void)dds_get_guid(dds_->participant.get(), &own);
   std::vector<dds_instance_handle_t> handles(16);
-  dds_return_t n = dds_get_matched_publications(dds_->status_probe.get(), handles.data(),
-                                                handles.size());
+  dds_return_t n =
+      dds_get_matched_publications(dds_->status_probe.get(), handles.data(), handles.size());
   if (n > static_cast<dds_return_t>(handles.size())) {
     handles.resize(static_cast<std::size_t>(n));
     n = dds_get_matched_publications(dds_->status_probe.get(), handles.data(), handles.size());
@@ -535,11 +535,11 @@ void MapService::takeQueries() {
         [&](const densemap_msgs_PointQueryRequest& m, const dds_sample_info_t& info) {
           const std::size_t bytes = pointRequestBytes(m.points._length);
           if (bytes > options_.request_budget_bytes) {
-            const std::string error =
-                std::to_string(m.points._length / 3) + " query points need " +
-                std::to_string(bytes >> 20) + " MiB, over the server's request budget of " +
-                std::to_string(options_.request_budget_bytes >> 20) +
-                " MiB (pipeline.request_budget_mb): send smaller batches";
+            const std::string error = std::to_string(m.points._length / 3) + " query points need " +
+                                      std::to_string(bytes >> 20) +
+                                      " MiB, over the server's request budget of " +
+                                      std::to_string(options_.request_budget_bytes >> 20) +
+                                      " MiB (pipeline.request_budget_mb): send smaller batches";
             densemap_msgs_PointQueryReply rep{};
             rep.id = m.id;
             rep.status = kInvalid;
@@ -595,8 +595,10 @@ void MapService::answerCommands() {
     runTask([this, id] { replyCommand(id, sendMap(id)); });
   };
   while (dds::takeOneWithInfo<densemap_msgs_CommandRequest>(
-      dds_->map_reader, [&](const densemap_msgs_CommandRequest& req, const dds_sample_info_t& info) {
-        awaitAsker(dds_->cmd_writer, dds::participantOfWriter(dds_->map_reader, info.publication_handle));
+      dds_->map_reader,
+      [&](const densemap_msgs_CommandRequest& req, const dds_sample_info_t& info) {
+        awaitAsker(dds_->cmd_writer,
+                   dds::participantOfWriter(dds_->map_reader, info.publication_handle));
         if (req.kind == 3) {
           send_map(req.id);
         } else {
@@ -607,8 +609,10 @@ void MapService::answerCommands() {
       })) {
   }
   while (dds::takeOneWithInfo<densemap_msgs_CommandRequest>(
-      dds_->cmd_reader, [&](const densemap_msgs_CommandRequest& req, const dds_sample_info_t& info) {
-        awaitAsker(dds_->cmd_writer, dds::participantOfWriter(dds_->cmd_reader, info.publication_handle));
+      dds_->cmd_reader,
+      [&](const densemap_msgs_CommandRequest& req, const dds_sample_info_t& info) {
+        awaitAsker(dds_->cmd_writer,
+                   dds::participantOfWriter(dds_->cmd_reader, info.publication_handle));
         if (req.kind == 3) {
           send_map(req.id);
           return;
@@ -708,8 +712,8 @@ void MapService::publishStatus() {
   if (const auto now = std::chrono::steady_clock::now(); now >= next_alone_check_) {
     next_alone_check_ = now + std::chrono::seconds(60);
     if (const auto others = otherServers(); !others.empty()) {
-      spdlog::error("another densemap-server (participant {}) runs on DDS domain {}", others.front(),
-                    options_.domain_id);
+      spdlog::error("another densemap-server (participant {}) runs on DDS domain {}",
+                    others.front(), options_.domain_id);
     }
   }
   const PipelineCounters c = pipeline_.counters();

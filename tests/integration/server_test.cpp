@@ -306,10 +306,11 @@ TEST(Server, SaveWritesOnlyPlainFileNamesIntoTheExportDirectory) {
   replay(*client, raws);
   const auto secret = dir.path() / "secret";
   std::ofstream(secret) << "root only";
-  std::filesystem::permissions(secret, std::filesystem::perms::owner_read |
-                                           std::filesystem::perms::owner_write);
-  for (const std::string& hostile : std::vector<std::string>{secret.string(), "../secret", "exports/../../secret", "..", ".hidden.dmap",
-        "map.dmap.1", "name with spaces.dmap", "x.txt", std::string(200, 'a') + ".dmap"}) {
+  std::filesystem::permissions(
+      secret, std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
+  for (const std::string& hostile : std::vector<std::string>{
+           secret.string(), "../secret", "exports/../../secret", "..", ".hidden.dmap", "map.dmap.1",
+           "name with spaces.dmap", "x.txt", std::string(200, 'a') + ".dmap"}) {
     SCOPED_TRACE(hostile);
     auto saved = client->command(CommandKind::kSave, {0, 0, 0}, {0, 0, 0}, hostile);
     EXPECT_FALSE(saved);
@@ -335,7 +336,8 @@ TEST(Server, SaveWritesOnlyPlainFileNamesIntoTheExportDirectory) {
   ASSERT_TRUE(client->command(CommandKind::kSave, {0, 0, 0}, {0, 0, 0}, "copy.dmap"));
   EXPECT_FALSE(std::filesystem::is_symlink(exported));
   std::ifstream kept(target);
-  std::string kept_content((std::istreambuf_iterator<char>(kept)), std::istreambuf_iterator<char>());
+  std::string kept_content((std::istreambuf_iterator<char>(kept)),
+                           std::istreambuf_iterator<char>());
   EXPECT_EQ(kept_content, "keep");
   EXPECT_EQ(server.stop(), 0);
 }

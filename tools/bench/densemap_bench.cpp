@@ -13,16 +13,16 @@
 #include <sstream>
 #include <thread>
 
-#include "densemap/cli/progress.hpp"
 #include "bench_report.hpp"
+#include "densemap/cli/guarded_main.hpp"
+#include "densemap/cli/progress.hpp"
 #include "densemap/io/scan_source.hpp"
+#include "densemap/kernel/kernel_map.hpp"
 #include "densemap/map/map_diff.hpp"
 #include "densemap/map/map_factory.hpp"
 #include "densemap/map/octree_map.hpp"
 #include "densemap/map/update_rule.hpp"
-#include "densemap/kernel/kernel_map.hpp"
 #include "densemap/raycast/integrator.hpp"
-#include "densemap/cli/guarded_main.hpp"
 
 namespace densemap::bench {
 namespace {
@@ -57,7 +57,8 @@ Expected<kernel::KernelOptions> kernelOptions(const std::string& method, const O
   if (!parsed) return std::unexpected(parsed.error());
   kernel::KernelOptions k = kernel::KernelOptions::defaults(*parsed);
   k.max_range = o.max_range;
-  if (auto ok = kernel::applySettings(k, o.kernel_settings); !ok) return std::unexpected(ok.error());
+  if (auto ok = kernel::applySettings(k, o.kernel_settings); !ok)
+    return std::unexpected(ok.error());
   if (at != std::string::npos) {  // after --kernel-set: the variant is what the name says
     if (method.substr(at + 1) != "plain") return makeError("unknown variant in '" + method + "'");
     k.free_traversal = false;
@@ -222,7 +223,8 @@ int run(const Options& o) {
       return 2;
     }
   }
-  if (auto ok = kernel::applySettings(*std::make_unique<kernel::KernelOptions>(), o.kernel_settings);
+  if (auto ok =
+          kernel::applySettings(*std::make_unique<kernel::KernelOptions>(), o.kernel_settings);
       !ok) {
     std::fprintf(stderr, "densemap-bench: --kernel-set: %s\n", ok.error().message.c_str());
     return 2;

@@ -20,6 +20,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "densemap/cli/guarded_main.hpp"
 #include "densemap/cli/lists.hpp"
 #include "densemap/cli/progress.hpp"
 #include "densemap/eval/metrics.hpp"
@@ -32,7 +33,6 @@
 #include "densemap/sim/oracle_labels.hpp"
 #include "densemap/upsample/interpolation.hpp"
 #include "plots.hpp"
-#include "densemap/cli/guarded_main.hpp"
 
 namespace {
 

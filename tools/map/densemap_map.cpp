@@ -7,12 +7,12 @@
 
 #include <cstdio>
 
+#include "densemap/cli/guarded_main.hpp"
 #include "densemap/cli/progress.hpp"
 #include "densemap/io/octomap_export.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_factory.hpp"
 #include "densemap/raycast/integrator.hpp"
-#include "densemap/cli/guarded_main.hpp"
 
 static int runMain(int argc, char** argv) {
   std::string data, out, graph_out, backend_name = "grid";

@@ -4,9 +4,9 @@
 
 #include <cstdio>
 
+#include "densemap/cli/guarded_main.hpp"
 #include "densemap/cli/progress.hpp"
 #include "densemap/sim/sequence.hpp"
-#include "densemap/cli/guarded_main.hpp"
 
 static int runMain(int argc, char** argv) {
   CLI::App app{"densemap-sim: simulated LiDAR datasets (scans/*.bin, poses.txt, ground_truth.bt)"};

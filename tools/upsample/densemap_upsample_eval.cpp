@@ -20,6 +20,7 @@
 #include <tuple>
 #include <vector>
 
+#include "densemap/cli/guarded_main.hpp"
 #include "densemap/cli/lists.hpp"
 #include "densemap/cli/progress.hpp"
 #include "densemap/eval/point_set_metrics.hpp"
@@ -30,7 +31,6 @@
 #include "densemap/sim/trajectory.hpp"
 #include "densemap/upsample/iln.hpp"
 #include "densemap/upsample/interpolation.hpp"
-#include "densemap/cli/guarded_main.hpp"
 
 namespace {
 

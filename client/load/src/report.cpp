@@ -43,7 +43,8 @@ std::vector<Timed> between(const std::vector<Timed>& v, double from_s, double to
 }
 
 std::uint64_t lostScans(const SensorResult& s) {
-  return s.server.dropped + s.server.rejected + (s.sent > s.server.received ? s.sent - s.server.received : 0);
+  return s.server.dropped + s.server.rejected +
+         (s.sent > s.server.received ? s.sent - s.server.received : 0);
 }
 
 /// A minimal JSON writer: objects and arrays opened and closed in order, commas handled.
@@ -215,15 +216,15 @@ SloVerdict checkSlo(const RunResult& run, const Slo& slo) {
     broken.push_back(format("e2e p99 %.1f ms > %.0f ms", v.e2e.p99, slo.e2e_p99_ms));
   }
   if (v.dropped > slo.max_dropped) {
-    broken.push_back(format("%llu scans dropped or rejected > %llu", ull(v.dropped),
-                            ull(slo.max_dropped)));
+    broken.push_back(
+        format("%llu scans dropped or rejected > %llu", ull(v.dropped), ull(slo.max_dropped)));
   }
   if (slo.query_p99_ms > 0 && v.query.p99 > slo.query_p99_ms) {
     broken.push_back(format("query p99 %.1f ms > %.0f ms", v.query.p99, slo.query_p99_ms));
   }
   if (v.failed_queries > slo.max_failed_queries) {
-    broken.push_back(format("%llu queries failed > %llu", ull(v.failed_queries),
-                            ull(slo.max_failed_queries)));
+    broken.push_back(
+        format("%llu queries failed > %llu", ull(v.failed_queries), ull(slo.max_failed_queries)));
   }
   for (const auto& b : broken) v.broken += (v.broken.empty() ? "" : "; ") + b;
   v.kept = broken.empty();
@@ -289,26 +290,30 @@ SoakVerdict checkSoak(const RunResult& run, const SoakPlan& soak, const Slo& slo
 
 std::string tables(const RunResult& run) {
   std::string out;
-  out += "| sensor stream | sent | received | integrated | dropped | rejected | seq gaps | "
-         "late sends | e2e p50 ms | p99 | p99.9 | max |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  out +=
+      "| sensor stream | sent | received | integrated | dropped | rejected | seq gaps | "
+      "late sends | e2e p50 ms | p99 | p99.9 | max "
+      "|\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& s : run.sensors) {
     const auto l = latencyStats(s.e2e);
-    out += format("| %s | %llu | %llu | %llu | %llu | %llu | %llu | %llu | %.1f | %.1f | %.1f | %.1f |\n",
-                  s.sensor_id.c_str(), ull(s.sent), ull(s.server.received),
-                  ull(s.server.integrated), ull(s.server.dropped), ull(s.server.rejected),
-                  ull(s.server.seq_gaps), ull(s.late_sends), l.p50, l.p99, l.p999, l.max);
+    out += format(
+        "| %s | %llu | %llu | %llu | %llu | %llu | %llu | %llu | %.1f | %.1f | %.1f | %.1f |\n",
+        s.sensor_id.c_str(), ull(s.sent), ull(s.server.received), ull(s.server.integrated),
+        ull(s.server.dropped), ull(s.server.rejected), ull(s.server.seq_gaps), ull(s.late_sends),
+        l.p50, l.p99, l.p999, l.max);
   }
   if (!run.clients.empty()) {
-    out += "\n| query client | kind | answered | failed | timeouts | per s | p50 ms | p99 | p99.9 | "
-           "max |\n|---|---|---|---|---|---|---|---|---|---|\n";
+    out +=
+        "\n| query client | kind | answered | failed | timeouts | per s | p50 ms | p99 | p99.9 | "
+        "max |\n|---|---|---|---|---|---|---|---|---|---|\n";
     std::vector<Timed> all[kQueryKinds];
     std::uint64_t answered[kQueryKinds] = {}, failed[kQueryKinds] = {}, timeouts[kQueryKinds] = {};
     auto row = [&](const std::string& name, int k, std::uint64_t a, std::uint64_t f,
                    std::uint64_t t, const std::vector<Timed>& lat) {
       const auto l = latencyStats(lat);
       out += format("| %s | %s | %llu | %llu | %llu | %.1f | %.1f | %.1f | %.1f | %.1f |\n",
-                    name.c_str(), queryKindName(static_cast<QueryKind>(k)), ull(a), ull(f),
-                    ull(t), static_cast<double>(a) / run.duration_s, l.p50, l.p99, l.p999, l.max);
+                    name.c_str(), queryKindName(static_cast<QueryKind>(k)), ull(a), ull(f), ull(t),
+                    static_cast<double>(a) / run.duration_s, l.p50, l.p99, l.p999, l.max);
     };
     for (const auto& c : run.clients) {
       for (int k = 0; k < kQueryKinds; ++k) {
@@ -328,8 +333,9 @@ std::string tables(const RunResult& run) {
     }
   }
   if (!run.joiners.empty()) {
-    out += "\n| late joiner | at s | seconds to map | cells | version | versions behind | error |\n"
-           "|---|---|---|---|---|---|---|\n";
+    out +=
+        "\n| late joiner | at s | seconds to map | cells | version | versions behind | error |\n"
+        "|---|---|---|---|---|---|---|\n";
     for (std::size_t i = 0; i < run.joiners.size(); ++i) {
       const auto& j = run.joiners[i];
       out += format("| %zu | %.1f | %.2f | %llu | %llu | %llu | %s |\n", i + 1, j.at_s, j.seconds,
@@ -340,14 +346,17 @@ std::string tables(const RunResult& run) {
   const CpuUse cpu = cpuUse(run.usage, 0, run.duration_s);
   double rss_max = 0;
   for (const auto& u : run.usage) rss_max = std::max(rss_max, static_cast<double>(u.server_rss));
-  const double rss_first = run.usage.empty() ? 0 : static_cast<double>(run.usage.front().server_rss);
+  const double rss_first =
+      run.usage.empty() ? 0 : static_cast<double>(run.usage.front().server_rss);
   const double rss_last = run.usage.empty() ? 0 : static_cast<double>(run.usage.back().server_rss);
-  out += "\n| server CPU % (of one core) | load tool CPU % | machine busy % | server RSS MiB "
-         "start / end / max | known cells at end | map versions |\n|---|---|---|---|---|---|\n";
-  out += format("| %.0f | %.0f | %.0f | %.0f / %.0f / %.0f | %llu | %llu |\n", cpu.server_pct,
-                cpu.load_pct, cpu.machine_busy_pct, rss_first / 1048576.0, rss_last / 1048576.0,
-                rss_max / 1048576.0, ull(run.after.known_cells),
-                ull(run.after.map_version - std::min(run.after.map_version, run.before.map_version)));
+  out +=
+      "\n| server CPU % (of one core) | load tool CPU % | machine busy % | server RSS MiB "
+      "start / end / max | known cells at end | map versions |\n|---|---|---|---|---|---|\n";
+  out +=
+      format("| %.0f | %.0f | %.0f | %.0f / %.0f / %.0f | %llu | %llu |\n", cpu.server_pct,
+             cpu.load_pct, cpu.machine_busy_pct, rss_first / 1048576.0, rss_last / 1048576.0,
+             rss_max / 1048576.0, ull(run.after.known_cells),
+             ull(run.after.map_version - std::min(run.after.map_version, run.before.map_version)));
   return out;
 }
 
@@ -357,8 +366,8 @@ std::string timelineTable(const RunResult& run, const Scenario& scenario) {
       "server CPU % | server RSS MiB |\n|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& b : timeline(run, scenario.sample_period_s)) {
     out += format("| %.0f | %.1f | %.1f | %.1f | %.1f | %.1f | %llu | %.0f | %.0f |\n", b.t_s,
-                  b.e2e.p50, b.e2e.p99, b.scans_per_s, b.queries_per_s, b.query.p99,
-                  ull(b.dropped), b.cpu.server_pct, b.server_rss_mib);
+                  b.e2e.p50, b.e2e.p99, b.scans_per_s, b.queries_per_s, b.query.p99, ull(b.dropped),
+                  b.cpu.server_pct, b.server_rss_mib);
   }
   return out;
 }
@@ -367,9 +376,9 @@ std::string soakSummary(const SoakVerdict& v) {
   return format(
       "soak %s: server RSS peak %.0f MiB in the first window after warm-up, %.0f MiB in the last "
       "(%+.1f%%); e2e p99 %.1f ms in the first window, %.1f ms in the last (%+.1f%%)%s%s\n",
-      v.passed ? "passed" : "FAILED", v.rss_at_warm_up_mib, v.rss_max_after_mib,
-      100 * v.rss_growth, v.first_window.p99, v.last_window.p99, 100 * v.p99_drift,
-      v.why.empty() ? "" : ": ", v.why.c_str());
+      v.passed ? "passed" : "FAILED", v.rss_at_warm_up_mib, v.rss_max_after_mib, 100 * v.rss_growth,
+      v.first_window.p99, v.last_window.p99, 100 * v.p99_drift, v.why.empty() ? "" : ": ",
+      v.why.c_str());
 }
 
 std::string rampTable(const std::vector<RampStepResult>& steps, bool vary_sensors) {
@@ -379,11 +388,11 @@ std::string rampTable(const std::vector<RampStepResult>& steps, bool vary_sensor
       "|---|---|---|---|---|---|---|---|---|---|---|---|\n",
       vary_sensors ? "sensors" : "clients");
   for (const auto& s : steps) {
-    out += format("| %u | %.1f | %.1f | %.1f | %llu | %.1f | %.1f | %llu | %.0f | %.0f | %.0f | %s |\n",
-                  s.count, s.scans_per_s, s.slo.e2e.p50, s.slo.e2e.p99, ull(s.slo.dropped),
-                  s.queries_per_s, s.slo.query.p99, ull(s.slo.failed_queries), s.cpu.server_pct,
-                  s.cpu.load_pct, s.cpu.machine_busy_pct,
-                  s.slo.kept ? "kept" : s.slo.broken.c_str());
+    out += format(
+        "| %u | %.1f | %.1f | %.1f | %llu | %.1f | %.1f | %llu | %.0f | %.0f | %.0f | %s |\n",
+        s.count, s.scans_per_s, s.slo.e2e.p50, s.slo.e2e.p99, ull(s.slo.dropped), s.queries_per_s,
+        s.slo.query.p99, ull(s.slo.failed_queries), s.cpu.server_pct, s.cpu.load_pct,
+        s.cpu.machine_busy_pct, s.slo.kept ? "kept" : s.slo.broken.c_str());
   }
   return out;
 }
@@ -391,10 +400,10 @@ std::string rampTable(const std::vector<RampStepResult>& steps, bool vary_sensor
 std::string kneeSummary(const std::vector<RampStepResult>& steps, bool vary_sensors,
                         const Slo& slo) {
   const char* what = vary_sensors ? "sensors" : "query clients";
-  const std::string slo_text =
-      format("e2e p99 <= %.0f ms, at most %llu dropped, %llu failed queries%s", slo.e2e_p99_ms,
-             ull(slo.max_dropped), ull(slo.max_failed_queries),
-             slo.query_p99_ms > 0 ? format(", query p99 <= %.0f ms", slo.query_p99_ms).c_str() : "");
+  const std::string slo_text = format(
+      "e2e p99 <= %.0f ms, at most %llu dropped, %llu failed queries%s", slo.e2e_p99_ms,
+      ull(slo.max_dropped), ull(slo.max_failed_queries),
+      slo.query_p99_ms > 0 ? format(", query p99 <= %.0f ms", slo.query_p99_ms).c_str() : "");
   const RampStepResult* last_kept = nullptr;
   const RampStepResult* first_broken = nullptr;
   for (const auto& s : steps) {
@@ -406,28 +415,30 @@ std::string kneeSummary(const std::vector<RampStepResult>& steps, bool vary_sens
     return out + format("knee: not reached; the SLO held up to %u %s (the ramp's last step)\n",
                         steps.empty() ? 0U : steps.back().count, what);
   }
-  out += last_kept != nullptr ? format("knee: %u %s keep the SLO; %u break it (%s)\n",
-                                       last_kept->count, what, first_broken->count,
-                                       first_broken->slo.broken.c_str())
-                              : format("knee: below the first step; %u %s already break the SLO (%s)\n",
-                                       first_broken->count, what,
-                                       first_broken->slo.broken.c_str());
+  out += last_kept != nullptr
+             ? format("knee: %u %s keep the SLO; %u break it (%s)\n", last_kept->count, what,
+                      first_broken->count, first_broken->slo.broken.c_str())
+             : format("knee: below the first step; %u %s already break the SLO (%s)\n",
+                      first_broken->count, what, first_broken->slo.broken.c_str());
   const CpuUse& c = first_broken->cpu;
   std::string saturated;
   if (c.machine_busy_pct >= 90) {
-    saturated = format("the machine's CPU (%.0f%% busy: server %.0f%%, load tool %.0f%% of one core)",
-                       c.machine_busy_pct, c.server_pct, c.load_pct);
+    saturated =
+        format("the machine's CPU (%.0f%% busy: server %.0f%%, load tool %.0f%% of one core)",
+               c.machine_busy_pct, c.server_pct, c.load_pct);
   } else if (c.machine_busy_pct >= 75) {
-    saturated = format("nearly the machine's CPU (%.0f%% busy: server %.0f%%, load tool %.0f%% of one "
-                       "core; scheduling delays start before 100%%)",
-                       c.machine_busy_pct, c.server_pct, c.load_pct);
+    saturated = format(
+        "nearly the machine's CPU (%.0f%% busy: server %.0f%%, load tool %.0f%% of one "
+        "core; scheduling delays start before 100%%)",
+        c.machine_busy_pct, c.server_pct, c.load_pct);
   } else if (c.server_pct >= 90) {
     saturated = format("the server's integration (%.0f%% of a core, machine %.0f%% busy)",
                        c.server_pct, c.machine_busy_pct);
   } else {
-    saturated = format("neither CPU (machine %.0f%% busy, server %.0f%%, load tool %.0f%%): "
-                       "latency from scheduling or DDS",
-                       c.machine_busy_pct, c.server_pct, c.load_pct);
+    saturated = format(
+        "neither CPU (machine %.0f%% busy, server %.0f%%, load tool %.0f%%): "
+        "latency from scheduling or DDS",
+        c.machine_busy_pct, c.server_pct, c.load_pct);
   }
   return out + "at the knee the saturated resource is " + saturated + "\n";
 }
@@ -516,7 +527,8 @@ Expected<void> writeRunChart(const std::filesystem::path& file, const RunResult&
   std::vector<double> x;
   Series e50{"e2e p50", kBlue, {}}, e99{"e2e p99", kRed, {}}, q99{"query p99", kGreen, {}};
   Series scans{"scans/s", kBlue, {}}, queries{"queries/s", kGreen, {}};
-  Series server{"server", kRed, {}}, tool{"load tool", kGreen, {}}, busy{"machine busy", kBlack, {}};
+  Series server{"server", kRed, {}}, tool{"load tool", kGreen, {}},
+      busy{"machine busy", kBlack, {}};
   Series rss{"server RSS", kOrange, {}};
   const double nan = std::nan("");
   for (const auto& b : bins) {
@@ -528,10 +540,13 @@ Expected<void> writeRunChart(const std::filesystem::path& file, const RunResult&
     queries.y.push_back(b.queries_per_s);
     server.y.push_back(b.cpu.server_pct);
     tool.y.push_back(b.cpu.load_pct);
-    busy.y.push_back(b.cpu.machine_busy_pct * static_cast<double>(std::max(1U, std::thread::hardware_concurrency())));
+    busy.y.push_back(b.cpu.machine_busy_pct *
+                     static_cast<double>(std::max(1U, std::thread::hardware_concurrency())));
     rss.y.push_back(b.server_rss_mib);
   }
-  std::vector<Panel> panels = {{"latency ms", {e50, e99, q99}}, {"", {scans}}, {"", {queries}},
+  std::vector<Panel> panels = {{"latency ms", {e50, e99, q99}},
+                               {"", {scans}},
+                               {"", {queries}},
                                {"cpu % of a core", {server, tool, busy}},
                                {"mib", {rss}}};
   return writeChart(file, run.scenario, "time s", x, panels);
@@ -542,7 +557,8 @@ Expected<void> writeRampChart(const std::filesystem::path& file,
   std::vector<double> x;
   Series e50{"e2e p50", kBlue, {}}, e99{"e2e p99", kRed, {}}, q99{"query p99", kGreen, {}};
   Series scans{"scans/s", kBlue, {}}, queries{"queries/s", kGreen, {}};
-  Series server{"server", kRed, {}}, tool{"load tool", kGreen, {}}, busy{"machine busy", kBlack, {}};
+  Series server{"server", kRed, {}}, tool{"load tool", kGreen, {}},
+      busy{"machine busy", kBlack, {}};
   for (const auto& s : steps) {
     x.push_back(s.count);
     e50.y.push_back(s.slo.e2e.p50);
@@ -552,12 +568,16 @@ Expected<void> writeRampChart(const std::filesystem::path& file,
     queries.y.push_back(s.queries_per_s);
     server.y.push_back(s.cpu.server_pct);
     tool.y.push_back(s.cpu.load_pct);
-    busy.y.push_back(s.cpu.machine_busy_pct * static_cast<double>(std::max(1U, std::thread::hardware_concurrency())));
+    busy.y.push_back(s.cpu.machine_busy_pct *
+                     static_cast<double>(std::max(1U, std::thread::hardware_concurrency())));
   }
   const bool sensors = !scenario.ramp || scenario.ramp->vary_sensors;
-  std::vector<Panel> panels = {{"latency ms", {e50, e99, q99}}, {"", {scans}}, {"", {queries}},
+  std::vector<Panel> panels = {{"latency ms", {e50, e99, q99}},
+                               {"", {scans}},
+                               {"", {queries}},
                                {"cpu % of a core", {server, tool, busy}}};
-  return writeChart(file, scenario.name + " ramp", sensors ? "sensors" : "query clients", x, panels);
+  return writeChart(file, scenario.name + " ramp", sensors ? "sensors" : "query clients", x,
+                    panels);
 }
 
 }  // namespace densemap::load

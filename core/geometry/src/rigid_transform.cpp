@@ -40,8 +40,10 @@ Expected<void> checkRigidPose(const Transform& T) {
   const Eigen::Matrix3d r = T.linear();
   const double off = (r.transpose() * r - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
   if (off > 1e-3) {
-    return makeError("the pose's rotation is not orthonormal (scaled, sheared or zero: "
-                     "|R^T R - I| = " + std::to_string(off) + ")");
+    return makeError(
+        "the pose's rotation is not orthonormal (scaled, sheared or zero: "
+        "|R^T R - I| = " +
+        std::to_string(off) + ")");
   }
   if (r.determinant() < 0) return makeError("the pose's rotation is a reflection (det R < 0)");
   return {};

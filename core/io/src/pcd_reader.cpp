@@ -180,8 +180,8 @@ Expected<Scan> readPcd(const std::filesystem::path& file) {
         char* end = nullptr;
         v = std::strtod(token.c_str(), &end);
         if (end == token.c_str() || *end != '\0') {
-          return fileError(file, "ASCII PCD point " + std::to_string(i) + ": '" + token +
-                                     "' is not a number");
+          return fileError(
+              file, "ASCII PCD point " + std::to_string(i) + ": '" + token + "' is not a number");
         }
       }
       scan.points.emplace_back(static_cast<float>(row[column_of(fx)]),

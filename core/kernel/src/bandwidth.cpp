@@ -31,36 +31,6 @@ Eigen::Matrix3d neighbourCovariance(const Eigen::Vector3d& centre,
 
 namespace {
 
-/// sparseKernel(sqrt(u)) for u = r^2 in [0, 1], tabulated for the scale search, which evaluates
-/// it some thousand times per sample: linear interpolation in u is within 1e-8 of the exact
-/// value (the kernel is smooth in r^2: its derivative in r vanishes at 0), and saves a sqrt and
-/// a sincos per term.
-class SquaredKernelTable {
- public:
-  static constexpr int kSize = 4096;
-  SquaredKernelTable() {
-    for (int i = 0; i <= kSize; ++i) {
-      values_[static_cast<std::size_t>(i)] =
-          sparseKernel(std::sqrt(static_cast<double>(i) / kSize));
-    }
-  }
-  [[nodiscard]] double operator()(double u) const {
-    if (!(u < 1.0)) return 0.0;
-    const double x = std::max(u, 0.0) * kSize;
-    const auto i = static_cast<std::size_t>(x);
-    const double f = x - static_cast<double>(i);
-    return values_[i] + f * (values_[i + 1] - values_[i]);
-  }
-
- private:
-  std::array<double, kSize + 1> values_{};
-};
-
-const SquaredKernelTable& squaredKernel() {
-  static const SquaredKernelTable table;
-  return table;
-}
-
 /// Squared Mahalanobis distances q_j = d^T Sigma^-1 d; k(x_j; s Sigma) = kernel(sqrt(q_j / s)).
 struct Prepared {
   std::vector<double> q;

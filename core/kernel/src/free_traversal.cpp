@@ -5,44 +5,16 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <deque>
+#include <atomic>
 #include <bit>
 #include <cmath>
-#include <atomic>
+#include <deque>
 #include <numeric>
 
 #include "densemap/kernel/kernel_function.hpp"
 
 namespace densemap::kernel {
 namespace {
-
-/// The sparse kernel as a table of r^2 (no sqrt, sin or cos per visit), linear between entries:
-/// within 2e-5 of sparseKernel.
-class KernelTable {
- public:
-  static constexpr int kEntries = 4096;
-  KernelTable() {
-    for (int i = 0; i <= kEntries; ++i) {
-      values_[static_cast<std::size_t>(i)] = sparseKernel(std::sqrt(double(i) / kEntries));
-    }
-  }
-  [[nodiscard]] double operator()(double r2) const {
-    if (!(r2 < 1.0)) return 0.0;
-    const double x = r2 * kEntries;
-    const int i = static_cast<int>(x);
-    const double f = x - i;
-    return values_[static_cast<std::size_t>(i)] * (1.0 - f) +
-           values_[static_cast<std::size_t>(i) + 1] * f;
-  }
-
- private:
-  std::array<double, kEntries + 1> values_{};
-};
-
-const KernelTable& kernelTable() {
-  static const KernelTable table;
-  return table;
-}
 
 /// One thread's blocks of one scan: a slot per block (a deque: slots never move, and are kept
 /// between scans), a hash from block key to slot, and in front of it a small direct-mapped
@@ -110,12 +82,13 @@ void forEachVoxelNear(const VoxelGrid& grid, const Eigen::Vector3d& a, const Eig
   const double res = grid.resolution();
   // Key of a coordinate, clamped into the addressable range ([0, 65535] as ints).
   const double inverse_res = 1.0 / res;  // a multiplication: the division was 22% of a scan
-  const auto keyOf = [&](double v) {  // clamped first, then truncation is floor (k >= 0)
+  const auto keyOf = [&](double v) {     // clamped first, then truncation is floor (k >= 0)
     const double k = std::clamp(v * inverse_res + 32768.0, 0.0, 65535.0);
     return static_cast<int>(k);
   };
   const double inverse_seg_ax = 1.0 / seg[ax];
-  const int i0 = keyOf(std::min(a[ax], b[ax]) - radius), i1 = keyOf(std::max(a[ax], b[ax]) + radius);
+  const int i0 = keyOf(std::min(a[ax], b[ax]) - radius),
+            i1 = keyOf(std::max(a[ax], b[ax]) + radius);
   for (int i = i0; i <= i1; ++i) {
     const double x = grid.keyToCoord(static_cast<std::uint16_t>(i));
     // The part of the segment within `radius` of this slice along ax bounds its rows.
@@ -184,31 +157,31 @@ FreeTraversal::~FreeTraversal() = default;
 
 std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const FreeExtent> extents) {
   for (ThreadBlocks& t : buffers_->threads) t.reset();
-  const KernelTable& table = kernelTable();
+  const SquaredKernelTable& table = squaredKernel();
   std::atomic<std::size_t> visits{0};
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, extents.size(), 512),
-      [&](const tbb::blocked_range<std::size_t>& range) {
-        ThreadBlocks& mine = buffers_->threads.local();
-        std::size_t n = 0;
-        for (std::size_t r = range.begin(); r != range.end(); ++r) {
-          const FreeExtent& e = extents[r];
-          const double inverse_length2 = 1.0 / (e.radius_m * e.radius_m);
-          const double scaled_weight = e.weight * kScale;
-          forEachVoxelNear(grid, e.from, e.to, e.radius_m, [&](const VoxelKey& key, double d2) {
-            ++n;
-            const double w = table(d2 * inverse_length2);
-            if (!(w > 0.0)) return;
-            Block& blk = mine.blockFor(block::blockOf(key));
-            const int cell = block::indexOf(key);
-            // w >= 0: rounding half up without llround's call.
-            blk.sum[static_cast<std::size_t>(cell)] +=
-                static_cast<std::int64_t>(w * scaled_weight + 0.5);
-            block::setBit(blk.mask, cell);
-          });
-        }
-        visits += n;
-      });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, extents.size(), 512),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      ThreadBlocks& mine = buffers_->threads.local();
+                      std::size_t n = 0;
+                      for (std::size_t r = range.begin(); r != range.end(); ++r) {
+                        const FreeExtent& e = extents[r];
+                        const double inverse_length2 = 1.0 / (e.radius_m * e.radius_m);
+                        const double scaled_weight = e.weight * kScale;
+                        forEachVoxelNear(grid, e.from, e.to, e.radius_m,
+                                         [&](const VoxelKey& key, double d2) {
+                                           ++n;
+                                           const double w = table(d2 * inverse_length2);
+                                           if (!(w > 0.0)) return;
+                                           Block& blk = mine.blockFor(block::blockOf(key));
+                                           const int cell = block::indexOf(key);
+                                           // w >= 0: rounding half up without llround's call.
+                                           blk.sum[static_cast<std::size_t>(cell)] +=
+                                               static_cast<std::int64_t>(w * scaled_weight + 0.5);
+                                           block::setBit(blk.mask, cell);
+                                         });
+                      }
+                      visits += n;
+                    });
   // Merge: every thread's blocks by key (ascending), integer sums (exact in any order).
   std::vector<const Block*> all;
   for (const ThreadBlocks& t : buffers_->threads) {
@@ -223,8 +196,10 @@ std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const Fre
     Block& m = merged_[out++];
     m = *all[i];
     for (++i; i < all.size() && all[i]->key == m.key; ++i) {
-      for (int c = 0; c < block::kVoxels; ++c) m.sum[static_cast<std::size_t>(c)] += all[i]->sum[static_cast<std::size_t>(c)];
-      for (int w = 0; w < block::kMaskWords; ++w) m.mask[static_cast<std::size_t>(w)] |= all[i]->mask[static_cast<std::size_t>(w)];
+      for (int c = 0; c < block::kVoxels; ++c)
+        m.sum[static_cast<std::size_t>(c)] += all[i]->sum[static_cast<std::size_t>(c)];
+      for (int w = 0; w < block::kMaskWords; ++w)
+        m.mask[static_cast<std::size_t>(w)] |= all[i]->mask[static_cast<std::size_t>(w)];
     }
   }
   return visits.load();

@@ -45,7 +45,8 @@ class FreeTraversal {
   FreeTraversal(const FreeTraversal&) = delete;
   FreeTraversal& operator=(const FreeTraversal&) = delete;
 
-  /// Rasterises every extent; returns the voxels visited (candidates checked). The result (blocks()) replaces the last scan's.
+  /// Rasterises every extent; returns the voxels visited (candidates checked). The result
+  /// (blocks()) replaces the last scan's.
   std::size_t accumulate(const VoxelGrid& grid, std::span<const FreeExtent> extents);
   /// The blocks reached by the last accumulate(), in ascending key order, sums merged.
   [[nodiscard]] const std::vector<Block>& blocks() const { return merged_; }

@@ -381,8 +381,8 @@ RayStop rayStop(const Eigen::Vector3d& ray, const Eigen::Vector3d& normal, const
 /// hit_length_voxels (hit_kernel_weight); with `counts`, `positions` are voxels' mean hits, each
 /// standing for that many hits (the cell's evidence is then exactly the hits' sum).
 void appendHitKernels(const std::vector<Eigen::Vector3d>& positions,
-                      const std::vector<double>* counts, const KernelOptions& o,
-                      double resolution, std::vector<Kernel>& kernels) {
+                      const std::vector<double>* counts, const KernelOptions& o, double resolution,
+                      std::vector<Kernel>& kernels) {
   const double radius = o.hit_length_voxels * resolution;
   for (std::size_t i = 0; i < positions.size(); ++i) {
     const double count = counts != nullptr ? (*counts)[i] : 1.0;
@@ -412,10 +412,11 @@ void appendHitKernels(const std::vector<Eigen::Vector3d>& positions,
 /// mean would lose the spread of a few hits, which is their shape: a grazing floor's).
 /// `means` and `counts`: where the direct hit evidence goes and how many hits it stands for.
 void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
-                          const std::vector<Sample>& samples, const std::vector<std::uint32_t>& hits,
-                          const SampleIndex& index, const Eigen::Vector3d& origin,
-                          std::vector<Kernel>& kernels, std::vector<RayStop>& stops,
-                          std::vector<Eigen::Vector3d>& means, std::vector<double>& counts) {
+                          const std::vector<Sample>& samples,
+                          const std::vector<std::uint32_t>& hits, const SampleIndex& index,
+                          const Eigen::Vector3d& origin, std::vector<Kernel>& kernels,
+                          std::vector<RayStop>& stops, std::vector<Eigen::Vector3d>& means,
+                          std::vector<double>& counts) {
   std::vector<std::pair<std::uint64_t, std::uint32_t>> by_voxel(hits.size());
   std::vector<std::uint64_t> hit_voxel(samples.size(), ~std::uint64_t{0});  // free: none
   for (std::uint32_t h = 0; h < hits.size(); ++h) {
@@ -473,8 +474,8 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
           centre.range /= count;
           const std::uint64_t own = by_voxel[first].first;
           Kernel k = adaptiveKernel(
-              centre, [&](std::uint32_t j) { return hit_voxel[j] == own; }, samples, index,
-              options, grid.resolution(), neighbours, &normal);
+              centre, [&](std::uint32_t j) { return hit_voxel[j] == own; }, samples, index, options,
+              grid.resolution(), neighbours, &normal);
           k.weight *= count;
           kernels[out] = k;
           means[out] = centre.x;
@@ -545,27 +546,28 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
         for (const std::uint32_t i : centres) hit_positions.push_back(samples[i].x);
       }
       kernels.resize(centres.size());
-      tbb::parallel_for(
-          tbb::blocked_range<std::size_t>(0, centres.size(), 256),
-          [&](const tbb::blocked_range<std::size_t>& range) {
-            std::vector<Neighbour> neighbours;
-            Eigen::Vector3d normal;
-            for (std::size_t c = range.begin(); c != range.end(); ++c) {
-              const std::uint32_t i = centres[c];
-              kernels[c] = adaptiveKernel(
-                  samples[i], [i](std::uint32_t j) { return j == i; }, samples, index, options_,
-                  grid_.resolution(), neighbours, rays ? &normal : nullptr);
-              if (rays) {
-                stops[c] = rayStop((samples[centres[c]].x - origin).normalized(), normal, options_);
-              }
-            }
-          });
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, centres.size(), 256),
+                        [&](const tbb::blocked_range<std::size_t>& range) {
+                          std::vector<Neighbour> neighbours;
+                          Eigen::Vector3d normal;
+                          for (std::size_t c = range.begin(); c != range.end(); ++c) {
+                            const std::uint32_t i = centres[c];
+                            kernels[c] = adaptiveKernel(
+                                samples[i], [i](std::uint32_t j) { return j == i; }, samples, index,
+                                options_, grid_.resolution(), neighbours, rays ? &normal : nullptr);
+                            if (rays) {
+                              stops[c] = rayStop((samples[centres[c]].x - origin).normalized(),
+                                                 normal, options_);
+                            }
+                          }
+                        });
     }
     // The fast path asks for one piece per ray (then walked by FreeTraversal) and its tip.
     const bool traverse = rays && options_.free_traversal;
     const double step = traverse ? 1e30 : options_.free_step;  // one piece: extent / step > 0
     segments_.clear();
-    if (rays) makeRaySegments(points_world, origin_world, step, options_.max_range, stops, segments_);
+    if (rays)
+      makeRaySegments(points_world, origin_world, step, options_.max_range, stops, segments_);
     const std::vector<Sample>& segments = segments_;
     kernels.reserve(kernels.size() + 2 * (rays ? centres.size() : 0) + segments.size());
     if (rays) {
@@ -744,7 +746,8 @@ void KernelMap::erase(const VoxelKey& key) {
 
 std::size_t KernelMap::evictBlocks(const std::function<bool(const Point3f&)>& keep) {
   const std::size_t before = blocks_.size();
-  std::erase_if(blocks_, [&](const auto& entry) { return !keep(block::centreOf(grid_, entry.first)); });
+  std::erase_if(blocks_,
+                [&](const auto& entry) { return !keep(block::centreOf(grid_, entry.first)); });
   return before - blocks_.size();
 }
 

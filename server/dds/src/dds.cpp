@@ -274,8 +274,8 @@ bool waitForReaderOf(const Entity& writer, const dds_guid_t& participant,
     for (dds_return_t i = 0; i < n; ++i) {
       dds_builtintopic_endpoint_t* e = dds_get_matched_subscription_data(writer.get(), handles[i]);
       if (e == nullptr) continue;
-      const bool same = std::equal(std::begin(e->participant_key.v),
-                                   std::end(e->participant_key.v), std::begin(participant.v));
+      const bool same = std::equal(std::begin(e->participant_key.v), std::end(e->participant_key.v),
+                                   std::begin(participant.v));
       dds_builtintopic_free_endpoint(e);
       if (same) return true;
     }

@@ -82,8 +82,7 @@ TEST(DatasetDirectory, MissingOrBrokenPosesAreClearErrors) {
   const std::string good = "1 0 0 0 0 1 0 0 0 0 1 0\n";
   std::string lines;
   for (int i = 0; i < 5; ++i) lines += good;
-  for (const auto& [pose, reason] :
-       std::vector<std::pair<std::string, std::string>>{
+  for (const auto& [pose, reason] : std::vector<std::pair<std::string, std::string>>{
            {"3 0 0 0 0 3 0 0 0 0 3 0\n", "orthonormal"},
            {"0 0 0 0 0 0 0 0 0 0 0 0\n", "orthonormal"},
            {"-1 0 0 0 0 1 0 0 0 0 1 0\n", "reflection"},

@@ -50,8 +50,7 @@ TEST(ScanGraph, ReadsWhatOctomapWrites) {
     for (std::size_t i = 0; i < world.size(); ++i) {
       EXPECT_EQ(ours[i], Point3f(world[i].x(), world[i].y(), world[i].z()));
     }
-    const octomap::point3d o =
-        node->pose.transform(node->pose.inv().transform(node->pose.trans()));
+    const octomap::point3d o = node->pose.transform(node->pose.inv().transform(node->pose.trans()));
     EXPECT_EQ((*scans)[n].originWorld(), Point3f(o.x(), o.y(), o.z()));
     // The double pose is the same one.
     const octomap::point3d q = node->pose.transform(octomap::point3d(1, 2, 3));
@@ -75,8 +74,8 @@ TEST(ScanGraph, WrittenGraphsAreReadByOctomapWithTheSameWorldPoints) {
   }
   const MemoryScanSource source(scans, "test scans");
   std::size_t reported = 0;
-  ASSERT_TRUE(writeScanGraph(source, 0, 10, dir.path() / "w.graph",
-                             [&](std::size_t k) { reported = k; }));
+  ASSERT_TRUE(
+      writeScanGraph(source, 0, 10, dir.path() / "w.graph", [&](std::size_t k) { reported = k; }));
   EXPECT_EQ(reported, 3U);
   octomap::ScanGraph graph;
   ASSERT_TRUE(graph.readBinary((dir.path() / "w.graph").string()));

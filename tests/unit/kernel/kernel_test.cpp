@@ -247,8 +247,8 @@ TEST(FreeTraversal, CutRaysGiveEveryVoxelInReachTheKernelOfItsDistance) {
   PointCloud points;
   for (int i = 0; i < 60; ++i) {  // directions over a cone, all ending beyond max range
     const double a = 0.1 * i, b = 0.05 * (i % 7) - 0.15;
-    points.emplace_back(static_cast<float>(9.0 * std::cos(a)), static_cast<float>(9.0 * std::sin(a)),
-                        static_cast<float>(9.0 * b));
+    points.emplace_back(static_cast<float>(9.0 * std::cos(a)),
+                        static_cast<float>(9.0 * std::sin(a)), static_cast<float>(9.0 * b));
   }
   const Point3f origin(0.03F, -0.02F, 0.01F);
   map.integrate(points, origin);
@@ -262,14 +262,14 @@ TEST(FreeTraversal, CutRaysGiveEveryVoxelInReachTheKernelOfItsDistance) {
     // Every voxel of the segment's bounding box, widened by the kernel's reach.
     const Eigen::Vector3d lo = o.cwiseMin(end).array() - options.length_scale;
     const Eigen::Vector3d hi = o.cwiseMax(end).array() + options.length_scale;
-    const VoxelKey klo = *grid.pointToKey(lo.cast<float>()), khi = *grid.pointToKey(hi.cast<float>());
+    const VoxelKey klo = *grid.pointToKey(lo.cast<float>()),
+                   khi = *grid.pointToKey(hi.cast<float>());
     for (int z = klo.z; z <= khi.z; ++z) {
       for (int y = klo.y; y <= khi.y; ++y) {
         for (int x = klo.x; x <= khi.x; ++x) {
           const VoxelKey k{static_cast<std::uint16_t>(x), static_cast<std::uint16_t>(y),
                            static_cast<std::uint16_t>(z)};
-          const Eigen::Vector3d c(grid.keyToCoord(k.x), grid.keyToCoord(k.y),
-                                  grid.keyToCoord(k.z));
+          const Eigen::Vector3d c(grid.keyToCoord(k.x), grid.keyToCoord(k.y), grid.keyToCoord(k.z));
           const Eigen::Vector3d seg = end - o;
           const double t = std::clamp((c - o).dot(seg) / seg.squaredNorm(), 0.0, 1.0);
           const double d = (c - (o + t * seg)).norm();
@@ -294,7 +294,8 @@ TEST(FreeTraversal, CutRaysGiveEveryVoxelInReachTheKernelOfItsDistance) {
 }
 
 // The fast path changes the model a little (one capsule per ray, its joints as a mean; one
-// kernel per voxel of many hits): on a room with grazing rays it classifies as the segment kernels do almost everywhere.
+// kernel per voxel of many hits): on a room with grazing rays it classifies as the segment kernels
+// do almost everywhere.
 TEST(FreeTraversal, AgreesWithTheSegmentKernelsOnARoom) {
   for (const double resolution : {0.2, 0.1}) {
     KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
@@ -335,7 +336,8 @@ TEST(KernelMapEviction, KeepsExactlyTheBlocksItIsToldToKeep) {
   EXPECT_GT(evicted.evictBlocks(keep), 0U);
   std::vector<std::pair<std::uint64_t, double>> expected;
   whole.forEachKnown([&](const VoxelKey& k, double p) {
-    if (keep(block::centreOf(whole.grid(), block::blockOf(k)))) expected.emplace_back(k.packed(), p);
+    if (keep(block::centreOf(whole.grid(), block::blockOf(k))))
+      expected.emplace_back(k.packed(), p);
   });
   std::sort(expected.begin(), expected.end());
   ASSERT_GT(expected.size(), 1000U);

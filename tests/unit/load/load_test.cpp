@@ -128,7 +128,7 @@ RunResult syntheticRun() {
   for (int t = 0; t <= 100; ++t) {
     UsageSample u;
     u.t_s = t;
-    u.server_cpu_s = 0.5 * t;    // half a core
+    u.server_cpu_s = 0.5 * t;  // half a core
     u.load_cpu_s = 0.25 * t;
     u.machine_busy_s = 1.0 * t;  // of 2 s per second: 50% busy
     u.machine_total_s = 2.0 * t;
@@ -252,14 +252,14 @@ TEST(LoadReport, JsonTimelineAndChartAreWritten) {
   const RunResult r = syntheticRun();
   const auto bins = timeline(r, 10);
   ASSERT_EQ(bins.size(), 10U);
-  EXPECT_DOUBLE_EQ(bins[3].scans_per_s, 10.0);  // 1000 scans over 100 s
+  EXPECT_DOUBLE_EQ(bins[3].scans_per_s, 10.0);    // 1000 scans over 100 s
   EXPECT_DOUBLE_EQ(bins[3].queries_per_s, 10.0);  // 500 queries in the first 50 s
   EXPECT_DOUBLE_EQ(bins[7].queries_per_s, 0.0);
   ASSERT_TRUE(writeJson(dir.path() / "load.json", r, s));
   std::ifstream in(dir.path() / "load.json");
   const std::string json((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  for (const char* key : {"\"scenario\":\"synthetic\"", "\"soak\":{\"passed\":true", "\"timeline\":[",
-                          "\"sensors\":[{\"sensor_id\":\"a\",\"sent\":1000"}) {
+  for (const char* key : {"\"scenario\":\"synthetic\"", "\"soak\":{\"passed\":true",
+                          "\"timeline\":[", "\"sensors\":[{\"sensor_id\":\"a\",\"sent\":1000"}) {
     EXPECT_NE(json.find(key), std::string::npos) << key;
   }
   ASSERT_TRUE(writeRunChart(dir.path() / "load.png", r, s));

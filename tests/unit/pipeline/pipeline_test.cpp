@@ -256,9 +256,11 @@ TEST(Pipeline, CommandsRunBetweenScansAndPublishTheirChanges) {
 TEST(Pipeline, KernelMapEvictionEqualsTheOfflineMapMinusTheEvictedBlocks) {
   const auto method = kernel::KernelMethod::kAkimapRays;
   constexpr double kRadius = 3.0;
-  auto sut = Pipeline::create(
-      {.resolution_m = 0.2, .max_range_m = 5.0, .kernel = method, .threads = 2,
-       .keep_radius_m = kRadius});
+  auto sut = Pipeline::create({.resolution_m = 0.2,
+                               .max_range_m = 5.0,
+                               .kernel = method,
+                               .threads = 2,
+                               .keep_radius_m = kRadius});
   ASSERT_TRUE(sut) << sut.error().message;
   (*sut)->start();
   std::vector<RawScan> raws = {rawScan(1, 1500), rawScan(30, 1500)};  // origins 3 m apart

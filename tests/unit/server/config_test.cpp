@@ -127,7 +127,8 @@ TEST(ServerConfig, EvictionNeedsTheGridLogOddsMapAndAValidBox) {
   EXPECT_EQ(options->bounds->second, Point3f(100, 100, 20));
   EXPECT_FALSE(pipelineOptions(proto::ServerConfig{})->bounds) << "no box unless configured";
   // Issue 29: kernel maps evict too (their evidence blocks with the published grid's).
-  EXPECT_TRUE(loadServerConfig(writeConfig(dir, "map { keep_radius_m: 40 kind: \"akimap_rays\" }\n")));
+  EXPECT_TRUE(
+      loadServerConfig(writeConfig(dir, "map { keep_radius_m: 40 kind: \"akimap_rays\" }\n")));
   for (const auto& [text, reason] : std::vector<std::pair<std::string, std::string>>{
            {"map { keep_radius_m: -1 }", "keep_radius_m must be >= 0"},
            {"map { keep_radius_m: 40 backend: \"octree\" }", "need backend \"grid\""},

@@ -27,7 +27,7 @@ struct ServiceOptions {
   std::filesystem::path snapshot_path;         // empty: no snapshots
   int snapshot_keep = 3;                       // files kept: path, path.1, ... (core/store)
   std::filesystem::path export_dir;  // where `save --path NAME` writes (exportDirectory())
-  double autosave_period_s = 0.0;              // 0: off
+  double autosave_period_s = 0.0;    // 0: off
   std::size_t max_query_cells = 50'000'000;
   /// Memory for query requests in flight (their copies and replies); beyond it new requests
   /// wait in DDS, and one larger than all of it is refused.
@@ -135,7 +135,7 @@ class MapService {
   std::mutex save_mutex_;  // one snapshot rotation at a time (command save, autosave, shutdown)
   std::atomic<std::uint64_t> snapshot_failures_{0};
   std::chrono::steady_clock::time_point next_alone_check_{};  // publish thread only
-  std::string last_snapshot_error_;  // error_mutex_
+  std::string last_snapshot_error_;                           // error_mutex_
   std::string last_query_error_;
 };
 

@@ -25,13 +25,13 @@ struct CpuUse {
 /// One bin of the timeline (JSON and PNG).
 struct TimelineBin {
   double t_s = 0;
-  LatencyStats e2e;                  // scans sent in this bin, every sensor
-  double scans_per_s = 0;            // integrated and seen
-  double queries_per_s = 0;          // answered, every kind
-  LatencyStats query;                // every kind
+  LatencyStats e2e;          // scans sent in this bin, every sensor
+  double scans_per_s = 0;    // integrated and seen
+  double queries_per_s = 0;  // answered, every kind
+  LatencyStats query;        // every kind
   CpuUse cpu;
   double server_rss_mib = 0;
-  std::uint64_t dropped = 0;         // scans dropped or rejected by the server since the start
+  std::uint64_t dropped = 0;  // scans dropped or rejected by the server since the start
 };
 [[nodiscard]] std::vector<TimelineBin> timeline(const RunResult& run, double period_s);
 

@@ -22,30 +22,30 @@ struct Timed {
 struct SensorResult {
   std::string sensor_id;
   std::uint64_t sent = 0;
-  std::uint64_t seen = 0;            // scans whose map event this tool saw
-  std::uint64_t late_sends = 0;      // sends more than a period behind schedule (sender slow)
-  SensorCounters server;             // the server's counts for this id during the run
-  std::vector<Timed> e2e;            // publish -> map event seen
+  std::uint64_t seen = 0;        // scans whose map event this tool saw
+  std::uint64_t late_sends = 0;  // sends more than a period behind schedule (sender slow)
+  SensorCounters server;         // the server's counts for this id during the run
+  std::vector<Timed> e2e;        // publish -> map event seen
 };
 
 struct QueryResult {
   std::string name;
   std::uint64_t answered[kQueryKinds] = {};
-  std::uint64_t failed[kQueryKinds] = {};    // errors, timeouts included
+  std::uint64_t failed[kQueryKinds] = {};  // errors, timeouts included
   std::uint64_t timeouts[kQueryKinds] = {};
-  std::vector<Timed> latency[kQueryKinds];   // round trip of each answered request
-  std::uint64_t late_ticks = 0;              // target-rate ticks skipped because a reply was slow
-  double cpu_s = 0;                          // its process's CPU (with --processes)
+  std::vector<Timed> latency[kQueryKinds];  // round trip of each answered request
+  std::uint64_t late_ticks = 0;             // target-rate ticks skipped because a reply was slow
+  double cpu_s = 0;                         // its process's CPU (with --processes)
   std::string last_error;
   bool started = true;  // false: its process never ran its queries (no DDS participant, ...)
 };
 
 struct JoinerResult {
-  double at_s = 0;          // started
-  double seconds = 0;       // connect + fetch the whole map
+  double at_s = 0;     // started
+  double seconds = 0;  // connect + fetch the whole map
   std::uint64_t cells = 0, version = 0;
   std::uint64_t versions_behind = 0;  // the newest version seen when it finished minus its own
-  std::string error;        // empty when it got the map
+  std::string error;                  // empty when it got the map
 };
 
 /// The server's status and the machine's CPU, sampled about once a second.

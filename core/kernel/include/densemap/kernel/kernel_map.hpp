@@ -99,7 +99,7 @@ struct KernelOptions {
 
 struct KernelScanStats {
   std::size_t samples = 0;
-  std::size_t free_visits = 0;  // voxel visits of the free traversal (free_traversal)
+  std::size_t free_visits = 0;   // voxel visits of the free traversal (free_traversal)
   std::size_t cell_updates = 0;  // (cell, kernel) pairs with a non-zero contribution
   double ms_samples = 0, ms_bandwidth = 0, ms_accumulate = 0;
 };
@@ -148,7 +148,7 @@ class KernelMap {
   KernelOptions options_;
   std::unordered_map<std::uint64_t, Block> blocks_;
   std::size_t scans_ = 0;
-  std::unique_ptr<FreeTraversal> free_;  // its buffers, kept between scans
+  std::unique_ptr<FreeTraversal> free_;     // its buffers, kept between scans
   std::vector<Sample> samples_, segments_;  // per-scan buffers, kept between scans
 };
 
