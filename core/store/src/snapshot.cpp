@@ -1,5 +1,8 @@
 #include "densemap/store/snapshot.hpp"
 
+#include <cmath>
+#include <cstdio>
+
 #include <zlib.h>
 
 #include <algorithm>
@@ -157,7 +160,18 @@ Expected<std::optional<ResumedSnapshot>> loadNewestSnapshot(const std::filesyste
     const auto file = snapshotGeneration(path, g);
     std::error_code ec;
     if (!std::filesystem::exists(file, ec)) continue;
-    auto loaded = loadSnapshot(file, backend, expected_resolution_m);
+    auto loaded = loadSnapshot(file, backend, 0.0);
+    // A readable snapshot at another resolution is not corrupt: it is the map, and resuming an
+    // older generation instead (or none) would silently lose it. Refused with the way out.
+    if (loaded && expected_resolution_m > 0 &&
+        std::abs(loaded->map->resolution() - expected_resolution_m) > 1e-12) {
+      char text[160];
+      std::snprintf(text, sizeof text, "was mapped at %g m but map.resolution_m is %g m",
+                    loaded->map->resolution(), expected_resolution_m);
+      return fileError(file, std::string(text) +
+                                 ": set it back to resume this map, or move the snapshot files "
+                                 "aside to start a new one");
+    }
     if (loaded) {
       return std::optional<ResumedSnapshot>(
           ResumedSnapshot{std::move(*loaded), file, std::move(skipped)});

@@ -143,6 +143,25 @@ TEST(SnapshotGenerations, SavesKeepTheLastKAndLoadingSkipsCorruptOnes) {
   EXPECT_FALSE(saveSnapshotKeeping(*versionedView(1), SensorModel{}, Backend::kGrid, path, 0));
 }
 
+// Hostile-input issue 28, item 15: a snapshot at another resolution is the map, not a corrupt
+// file: resuming stops with the way out (before: "no readable snapshot", or worse an older
+// generation silently resumed).
+TEST(SnapshotGenerations, AnotherResolutionIsRefusedNotSkipped) {
+  test::TempDir dir;
+  const auto path = dir.path() / "map.dmap";
+  for (std::uint64_t v = 1; v <= 2; ++v) {
+    ASSERT_TRUE(saveSnapshotKeeping(*versionedView(v), SensorModel{}, Backend::kGrid, path, 3));
+  }
+  auto refused = loadNewestSnapshot(path, 3, Backend::kGrid, 0.2);  // saved at 0.1 m
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.error().message.find("map.resolution_m is 0.2"), std::string::npos)
+      << refused.error().message;
+  EXPECT_NE(refused.error().message.find("mapped at 0.1"), std::string::npos);
+  auto resumed = loadNewestSnapshot(path, 3, Backend::kGrid, 0.1);
+  ASSERT_TRUE(resumed && *resumed);
+  EXPECT_EQ((*resumed)->snapshot.version, 2U);
+}
+
 struct KindCase {
   std::string kind;  // "log_odds" or a kernel method name
   Backend backend;
