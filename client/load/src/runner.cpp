@@ -358,10 +358,15 @@ class Children {
     return {};
   }
   /// Their CPU time so far, from /proc (while they run; their own final figure comes in their
-  /// result files).
-  double cpuSeconds() const {
+  /// result files). Each child's figure never goes back: a child that has exited reads as 0 in
+  /// /proc, which made the load tool's CPU share negative (issue 28, item 10: "-115 %").
+  double cpuSeconds() {
+    last_cpu_s_.resize(pids_.size(), 0.0);
     double s = 0;
-    for (const pid_t pid : pids_) s += processUsage(pid).cpu_s;
+    for (std::size_t i = 0; i < pids_.size(); ++i) {
+      last_cpu_s_[i] = std::max(last_cpu_s_[i], processUsage(pids_[i]).cpu_s);
+      s += last_cpu_s_[i];
+    }
     return s;
   }
   /// Waits for every child (killing those still running `grace` later) and reads results.
@@ -392,6 +397,7 @@ class Children {
       }
     }
     pids_.clear();
+    last_cpu_s_.clear();
   }
   void stop() {
     for (const pid_t pid : pids_) {
@@ -405,6 +411,7 @@ class Children {
  private:
   std::vector<pid_t> pids_;
   std::vector<std::filesystem::path> outs_;
+  std::vector<double> last_cpu_s_;  // per child, the most CPU seen
 };
 
 }  // namespace
