@@ -229,11 +229,11 @@ static int runMain(int argc, char** argv) {
       // first place that takes it, and the log says where.
       spdlog::error("shutdown snapshot: {}", saved.error().message);
       const std::string name = "densemap-rescue-" + std::to_string(::getpid()) + ".dmap";
+      std::error_code ec;  // current_path() throws when the working directory is gone
       for (const std::filesystem::path& dir :
-           {service_options.export_dir, std::filesystem::current_path(),
+           {service_options.export_dir, std::filesystem::current_path(ec),
             std::filesystem::path("/var/tmp")}) {
         if (dir.empty()) continue;
-        std::error_code ec;
         std::filesystem::create_directories(dir, ec);
         if (auto rescued = (*service)->save(dir / name); rescued) {
           return fail("the map (version " + std::to_string((*pipeline)->view()->version()) +

@@ -59,6 +59,8 @@ constexpr std::size_t kTrimAfterBytes = std::size_t{16} << 20;
 // How long a reply waits for its writer to match the asker's reply reader (discovery of a new
 // client usually completes within milliseconds on loopback).
 constexpr std::chrono::milliseconds kAskerWait{2000};
+// Participants tracked for the asker wait (beyond it, entries past their wait are dropped).
+constexpr std::size_t kMaxAskersTracked = 4096;
 // Beyond this many versions waiting for the publish thread, their deltas are coalesced.
 constexpr std::size_t kMaxPendingVersions = 8;
 
@@ -583,10 +585,31 @@ void MapService::takeQueries() {
 }
 
 void MapService::awaitAsker(const dds::Entity& writer, const std::optional<dds_guid_t>& asker) {
-  if (asker && !dds::waitForReaderOf(writer, *asker, kAskerWait)) {
-    spdlog::debug("a reply goes out before its asker's reader matched (waited {} ms)",
-                  kAskerWait.count());
+  if (!asker) return;
+  const std::string who(reinterpret_cast<const char*>(asker->v), sizeof asker->v);
+  const std::string pair = std::to_string(writer.get()) + ":" + who;
+  std::chrono::steady_clock::duration left{};
+  {
+    // Seen matched before: no lookup (the matched list is O(clients) per reply). Else the wait
+    // is what is left of kAskerWait since this participant's first request, so a participant
+    // that never creates a reply reader holds a query thread once, not once per request.
+    std::lock_guard lock(askers_mutex_);
+    if (askers_matched_.contains(pair)) return;
+    const auto now = std::chrono::steady_clock::now();
+    if (asker_first_seen_.size() > kMaxAskersTracked) {
+      std::erase_if(asker_first_seen_, [&](const auto& e) { return now - e.second > kAskerWait; });
+    }
+    const auto first = asker_first_seen_.try_emplace(who, now).first->second;
+    left = std::max(std::chrono::steady_clock::duration::zero(), kAskerWait - (now - first));
   }
+  if (!dds::waitForReaderOf(writer, *asker,
+                            std::chrono::duration_cast<std::chrono::milliseconds>(left))) {
+    spdlog::debug("a reply goes out before its asker's reader matched");
+    return;
+  }
+  std::lock_guard lock(askers_mutex_);
+  if (askers_matched_.size() > kMaxAskersTracked) askers_matched_.clear();  // a cache only
+  askers_matched_.insert(pair);
 }
 
 void MapService::answerCommands() {

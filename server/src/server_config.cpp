@@ -54,7 +54,7 @@ Expected<void> snapshotPathProblem(const std::string& path) {
 }  // namespace
 
 Expected<proto::ServerConfig> loadServerConfig(const std::filesystem::path& file) {
-  auto text = readFileBytes(file);
+  auto text = readFileBytes(file, std::uint64_t{16} << 20);  // a config is kilobytes
   if (!text) return std::unexpected(text.error());
   proto::ServerConfig config;
   if (auto parsed = parseTextFormat(*text, config); !parsed) {

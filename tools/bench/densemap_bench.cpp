@@ -107,9 +107,6 @@ Expected<std::vector<WorldScan>> loadScans(const Options& o) {
 using Integrate = std::function<ScanStats(OccupancyMap&, const WorldScan&)>;
 
 Integrate makeIntegrator(const std::string& method, const Options& o) {
-  if (kernelOptions(method, o)) {  // a dense method: the Lane builds its kernel map
-    return [](OccupancyMap&, const WorldScan&) { return ScanStats{}; };
-  }
   if (method == "octomap") {
     return [range = o.max_range](OccupancyMap& map, const WorldScan& s) {
       static_cast<OctreeMap&>(map).insertWithOctomap(s.points, s.origin, range);
@@ -155,7 +152,7 @@ class Lane {
         const kernel::KernelScanStats k = map->integrate(s.points, s.origin);
         ScanStats stats;
         stats.points = s.points.size();
-        stats.visits = k.cell_updates + k.free_visits;
+        stats.visits = k.cell_updates + k.free_visits;  // kernel cell updates + capsule voxels
         stats.updated = k.cell_updates;
         return stats;
       };
@@ -213,8 +210,14 @@ class Lane {
 };
 
 int run(const Options& o) {
+  // Settings first: a bad --kernel-set would otherwise read as an unknown dense method.
+  if (kernel::KernelOptions probe; !kernel::applySettings(probe, o.kernel_settings)) {
+    std::fprintf(stderr, "densemap-bench: --kernel-set: %s\n",
+                 kernel::applySettings(probe, o.kernel_settings).error().message.c_str());
+    return 2;
+  }
   for (const auto& m : o.methods) {
-    if (!makeIntegrator(m, o)) {
+    if (!makeIntegrator(m, o) && !kernelOptions(m, o)) {
       std::fprintf(stderr,
                    "densemap-bench: unknown method '%s' or rule '%s' (methods: octomap, raycast, "
                    "superray, culling, superray+culling, and the dense kinds akimap_rays, "
@@ -222,12 +225,6 @@ int run(const Options& o) {
                    m.c_str(), o.rule.c_str());
       return 2;
     }
-  }
-  if (auto ok =
-          kernel::applySettings(*std::make_unique<kernel::KernelOptions>(), o.kernel_settings);
-      !ok) {
-    std::fprintf(stderr, "densemap-bench: --kernel-set: %s\n", ok.error().message.c_str());
-    return 2;
   }
   std::vector<Backend> backends;
   for (const auto& b : o.backends) {

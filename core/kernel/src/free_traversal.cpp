@@ -9,7 +9,6 @@
 #include <bit>
 #include <cmath>
 #include <deque>
-#include <numeric>
 
 #include "densemap/kernel/kernel_function.hpp"
 
@@ -65,8 +64,8 @@ struct ThreadBlocks {
 /// [a, b] (d2: that squared distance), slice by slice along the segment's dominant axis: per
 /// slice, the rows of the other two axes that the capsule reaches, per row the interval of the
 /// third axis inside the infinite cylinder around the segment's line (a superset of the
-/// capsule), each candidate then checked with its exact distance. Voxels outside the
-/// addressable range are skipped.
+/// capsule), each candidate then checked with its exact distance. Keys are clamped to the
+/// addressable range (a clamped candidate lies farther than `radius` and is not visited).
 template <class Visit>
 void forEachVoxelNear(const VoxelGrid& grid, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
                       double radius, Visit&& visit) {

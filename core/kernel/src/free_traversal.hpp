@@ -45,7 +45,7 @@ class FreeTraversal {
   FreeTraversal(const FreeTraversal&) = delete;
   FreeTraversal& operator=(const FreeTraversal&) = delete;
 
-  /// Rasterises every extent; returns the voxels visited (candidates checked). The result
+  /// Rasterises every extent; returns the (extent, voxel) pairs that got evidence. The result
   /// (blocks()) replaces the last scan's.
   std::size_t accumulate(const VoxelGrid& grid, std::span<const FreeExtent> extents);
   /// The blocks reached by the last accumulate(), in ascending key order, sums merged.

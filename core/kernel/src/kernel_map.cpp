@@ -687,7 +687,7 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
         cell_updates += updates;
       });
   stats.cell_updates = cell_updates;
-  // Blocks reached (kernels' and free traversal's), in key order.
+  // Blocks reached by the kernels and by the free capsules; in key order, a block's masks merged.
   std::vector<std::pair<std::uint64_t, block::BlockMask>> reached_blocks;
   if (touched != nullptr) {
     for (std::size_t g = 0; g + 1 < starts.size(); ++g) {
@@ -696,39 +696,26 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
   }
   if (!free_extents.empty()) {
     stats.free_visits = free_->accumulate(grid_, free_extents);
-    std::vector<std::pair<std::uint64_t, block::BlockMask>> from_kernels;
-    from_kernels.swap(reached_blocks);
-    std::size_t k = 0;
     for (const FreeTraversal::Block& f : free_->blocks()) {
       Block& b = blocks_[f.key];
-      for (int w = 0; w < block::kMaskWords; ++w) {
-        for (std::uint64_t bits = f.mask[w]; bits != 0; bits &= bits - 1) {
-          const int cell = w * 64 + std::countr_zero(bits);
-          b.beta[cell] += static_cast<double>(f.sum[cell]) / FreeTraversal::kScale;
-          block::setBit(b.known, cell);
-          ++stats.cell_updates;
-        }
-      }
-      if (touched == nullptr) continue;
-      for (; k < from_kernels.size() && from_kernels[k].first < f.key; ++k) {
-        reached_blocks.push_back(from_kernels[k]);
-      }
-      block::BlockMask mask = f.mask;
-      if (k < from_kernels.size() && from_kernels[k].first == f.key) {
-        for (int w = 0; w < block::kMaskWords; ++w) mask[w] |= from_kernels[k].second[w];
-        ++k;
-      }
-      reached_blocks.emplace_back(f.key, mask);
+      block::forEachSetBit(f.mask, [&](int cell) {
+        b.beta[cell] += static_cast<double>(f.sum[cell]) / FreeTraversal::kScale;
+        block::setBit(b.known, cell);
+      });
+      if (touched != nullptr) reached_blocks.emplace_back(f.key, f.mask);
     }
-    for (; k < from_kernels.size(); ++k) reached_blocks.push_back(from_kernels[k]);
   }
   if (touched != nullptr) {
-    for (const auto& [block_key, mask] : reached_blocks) {
-      for (int w = 0; w < block::kMaskWords; ++w) {
-        for (std::uint64_t bits = mask[w]; bits != 0; bits &= bits - 1) {
-          touched->push_back(block::keyOf(block_key, w * 64 + std::countr_zero(bits)));
-        }
+    std::stable_sort(reached_blocks.begin(), reached_blocks.end(),
+                     [](const auto& x, const auto& y) { return x.first < y.first; });
+    for (std::size_t i = 0; i < reached_blocks.size();) {
+      const std::uint64_t block_key = reached_blocks[i].first;
+      block::BlockMask mask{};
+      for (; i < reached_blocks.size() && reached_blocks[i].first == block_key; ++i) {
+        for (int w = 0; w < block::kMaskWords; ++w) mask[w] |= reached_blocks[i].second[w];
       }
+      block::forEachSetBit(mask,
+                           [&](int cell) { touched->push_back(block::keyOf(block_key, cell)); });
     }
   }
   stats.ms_accumulate = msSince(t0);

@@ -288,7 +288,7 @@ TEST(FreeTraversal, CutRaysGiveEveryVoxelInReachTheKernelOfItsDistance) {
     EXPECT_NEAR(measured, it->second, 1e-4 * std::max(1.0, it->second));
     ++checked;
   });
-  // Voxels at the very edge of the reach (kernel below the table's 2e-5 error) may differ.
+  // Voxels at the very edge of the reach (d within rounding of the radius) may differ.
   EXPECT_GE(checked, beta.size() - beta.size() / 200);
   EXPECT_LE(checked, beta.size());
 }

@@ -12,6 +12,8 @@
 #include <optional>
 #include <string_view>
 #include <thread>
+#include <unordered_map>
+#include <unordered_set>
 
 #include "densemap/dds/dds.hpp"
 #include "densemap/pipeline/pipeline.hpp"
@@ -98,8 +100,9 @@ class MapService {
   [[nodiscard]] Expected<void> checkAlone(std::chrono::milliseconds discovery) const;
   /// Participants other than this one that write densemap/status (other servers).
   [[nodiscard]] std::vector<std::string> otherServers() const;
-  /// Waits until `writer` has matched a reader of `asker` (see kAskerWait in the .cpp).
-  static void awaitAsker(const dds::Entity& writer, const std::optional<dds_guid_t>& asker);
+  /// Waits until `writer` has matched a reader of `asker`, at most what is left of kAskerWait
+  /// (in the .cpp) since the asker's first request. Thread-safe.
+  void awaitAsker(const dds::Entity& writer, const std::optional<dds_guid_t>& asker);
   void publishDeltas(std::deque<Version>& versions);
   void publishStatus();
   void publishManifest();
@@ -122,6 +125,9 @@ class MapService {
   tbb::task_group queries_;
   std::atomic<int> queries_in_flight_{0};
   std::atomic<std::size_t> request_bytes_{0};  // charged to options_.request_budget_bytes
+  std::mutex askers_mutex_;
+  std::unordered_set<std::string> askers_matched_;  // "writer:participant" seen matched
+  std::unordered_map<std::string, std::chrono::steady_clock::time_point> asker_first_seen_;
 
   std::mutex versions_mutex_;
   std::condition_variable versions_cv_;

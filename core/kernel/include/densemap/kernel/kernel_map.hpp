@@ -92,14 +92,13 @@ struct KernelOptions {
 /// length_scale, sf2, prior, free_margin, max_margin, tip_margin, tip_length_scale,
 /// occupied_weight, hit_weight, hit_kernel_weight, hit_length_voxels, negative_step,
 /// search_max, search_range, min_thickness, aggregate_min_hits), and free_traversal=0|1,
-/// aggregate_hits=0|1; errors
-/// name the setting.
+/// aggregate_hits=0|1; errors name the setting.
 [[nodiscard]] Expected<void> applySettings(KernelOptions& options,
                                            const std::vector<std::string>& settings);
 
 struct KernelScanStats {
   std::size_t samples = 0;
-  std::size_t free_visits = 0;   // voxel visits of the free traversal (free_traversal)
+  std::size_t free_visits = 0;   // (capsule, voxel) pairs with free evidence (free_traversal)
   std::size_t cell_updates = 0;  // (cell, kernel) pairs with a non-zero contribution
   double ms_samples = 0, ms_bandwidth = 0, ms_accumulate = 0;
 };
