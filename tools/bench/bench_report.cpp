@@ -54,11 +54,12 @@ std::string formatRayTable(const std::vector<RunResult>& runs) {
     const double points_per_scan = r.scans > 0 ? static_cast<double>(r.points) / r.scans : 0;
     std::snprintf(
         line, sizeof(line),
-        "%-16s %-7s %11.0f %11.0f %8.2f %11.0f %12.0f %12.0f   %.1f %.1f %.1f %.1f %.1f\n",
+        "%-16s %-7s %11.0f %11.0f %8.2f %11.0f %12.0f %12.0f   %.1f %.1f %.1f %.1f %.1f%s\n",
         r.method.c_str(), r.backend.c_str(), r.rays_per_scan, r.super_rays_per_scan,
         r.rays_per_scan > 0 ? points_per_scan / r.rays_per_scan : 0.0, r.visits_per_scan,
         r.culled_per_scan, r.region_voxels_per_scan, r.ms_stage[0], r.ms_stage[1], r.ms_stage[2],
-        r.ms_stage[3], r.ms_stage[4]);
+        r.ms_stage[3], r.ms_stage[4],
+        r.dense ? "  (dense: samples kernels occupied free apply)" : "");
     out << line;
   }
   return out.str();

@@ -154,6 +154,12 @@ class Lane {
         stats.points = s.points.size();
         stats.visits = k.cell_updates + k.free_visits;  // kernel cell updates + capsule voxels
         stats.updated = k.cell_updates;
+        // The dense stages in the stage columns (bench_report names them for dense lanes).
+        stats.ms_rays = k.ms_samples;
+        stats.ms_region = k.ms_kernels;
+        stats.ms_mark = k.ms_occupied;
+        stats.ms_merge = k.ms_free;
+        stats.ms_apply = k.ms_apply;
         return stats;
       };
     }

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 
 #include "densemap/kernel/kernel_function.hpp"
 
@@ -32,15 +33,20 @@ Eigen::Matrix3d neighbourCovariance(const Eigen::Vector3d& centre,
 namespace {
 
 /// Squared Mahalanobis distances q_j = d^T Sigma^-1 d; k(x_j; s Sigma) = kernel(sqrt(q_j / s)).
+/// A neighbour with q_j >= s_max lies outside k(.; s Sigma) for every s <= s_max: its term is
+/// the constant target_j^2 (0 for a positive one, whose target is 0 there too), summed once
+/// into `outside` instead of evaluated at every s of the search.
 struct Prepared {
   std::vector<double> q;
   std::vector<double> target;
+  double outside = 0.0;
   double det = 1.0;
 };
 
 template <class KernelOfSquared>
 Prepared prepare(const Eigen::Matrix3d& sigma, const Eigen::Vector3d& centre,
-                 std::span<const Neighbour> neighbours, const KernelOfSquared& kernel) {
+                 std::span<const Neighbour> neighbours, const KernelOfSquared& kernel,
+                 double s_max = std::numeric_limits<double>::infinity()) {
   Prepared p;
   const Eigen::Matrix3d inverse = sigma.inverse();
   p.det = sigma.determinant();
@@ -49,8 +55,13 @@ Prepared prepare(const Eigen::Matrix3d& sigma, const Eigen::Vector3d& centre,
   for (const Neighbour& n : neighbours) {
     const Eigen::Vector3d d = n.x - centre;
     const double q = d.dot(inverse * d);
+    const double target = n.same_label ? kernel(q) : 0.0;
+    if (q >= s_max) {
+      p.outside += target * target;
+      continue;
+    }
     p.q.push_back(q);
-    p.target.push_back(n.same_label ? kernel(q) : 0.0);
+    p.target.push_back(target);
   }
   return p;
 }
@@ -59,7 +70,7 @@ Prepared prepare(const Eigen::Matrix3d& sigma, const Eigen::Vector3d& centre,
 template <class KernelOfSquared>
 double objective(double s, const Prepared& p, const KernelOfSquared& kernel) {
   const double inverse_s = 1.0 / s;
-  double error = 0.0;
+  double error = p.outside;
   for (std::size_t j = 0; j < p.q.size(); ++j) {
     const double e = p.target[j] - kernel(p.q[j] * inverse_s);
     error += e * e;
@@ -79,7 +90,7 @@ double scaleObjective(double s, const Eigen::Matrix3d& sigma, const Eigen::Vecto
 
 double fitScale(const Eigen::Matrix3d& sigma, const Eigen::Vector3d& centre,
                 std::span<const Neighbour> neighbours, double s_min, double s_max) {
-  const Prepared p = prepare(sigma, centre, neighbours, squaredKernel());
+  const Prepared p = prepare(sigma, centre, neighbours, squaredKernel(), s_max);
   constexpr double kPerDoubling = 8.0;
   const int i_min = static_cast<int>(std::ceil(std::log2(s_min) * kPerDoubling));
   const int i_max = static_cast<int>(std::floor(std::log2(s_max) * kPerDoubling));
@@ -87,15 +98,20 @@ double fitScale(const Eigen::Matrix3d& sigma, const Eigen::Vector3d& centre,
   const auto at = [&](int i) { return std::exp2(i / kPerDoubling); };
   int i = std::clamp(0, i_min, i_max);
   double f = objective(at(i), p);
+  // The walk keeps both neighbours' values: a step re-evaluates only the new far one.
+  double down = i > i_min ? objective(at(i - 1), p) : f;
+  double up = i < i_max ? objective(at(i + 1), p) : f;
   while (true) {
-    const double down = i > i_min ? objective(at(i - 1), p) : f;
-    const double up = i < i_max ? objective(at(i + 1), p) : f;
     if (down < f && down <= up) {
       --i;
+      up = f;
       f = down;
+      down = i > i_min ? objective(at(i - 1), p) : f;
     } else if (up < f) {
       ++i;
+      down = f;
       f = up;
+      up = i < i_max ? objective(at(i + 1), p) : f;
     } else {
       break;
     }
@@ -106,7 +122,9 @@ double fitScale(const Eigen::Matrix3d& sigma, const Eigen::Vector3d& centre,
   constexpr double kInvPhi = 0.6180339887498949;
   double a = hi - kInvPhi * (hi - lo), b = lo + kInvPhi * (hi - lo);
   double fa = objective(std::exp2(a), p), fb = objective(std::exp2(b), p);
-  for (int iteration = 0; iteration < 12; ++iteration) {
+  // 8 iterations narrow the bracket (a quarter of a doubling) to 0.5% of a doubling: s within
+  // 0.4% (12 gave 0.02%, with no measurable change in the maps; issue 29).
+  for (int iteration = 0; iteration < 8; ++iteration) {
     if (fa <= fb) {
       hi = b;
       b = a;

@@ -9,6 +9,9 @@
 #include <bit>
 #include <cmath>
 #include <deque>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
 
 #include "densemap/kernel/kernel_function.hpp"
 
@@ -19,7 +22,7 @@ namespace {
 /// between scans), a hash from block key to slot, and in front of it a small direct-mapped
 /// cache (a capsule's slices and rows alternate between a few neighbouring blocks).
 struct ThreadBlocks {
-  static constexpr int kCacheSize = 16;
+  static constexpr int kCacheSize = 1024;
   std::deque<FreeTraversal::Block> slots;
   std::size_t used = 0;
   std::unordered_map<std::uint64_t, FreeTraversal::Block*> index;
@@ -60,15 +63,17 @@ struct ThreadBlocks {
   }
 };
 
-/// Calls visit(key, d2) once for every voxel whose centre lies within `radius` of the segment
-/// [a, b] (d2: that squared distance), slice by slice along the segment's dominant axis: per
-/// slice, the rows of the other two axes that the capsule reaches, per row the interval of the
-/// third axis inside the infinite cylinder around the segment's line (a superset of the
-/// capsule), each candidate then checked with its exact distance. Keys are clamped to the
-/// addressable range (a clamped candidate lies farther than `radius` and is not visited).
+/// Calls visit(key, d2, true) once for every voxel whose centre lies within `reach` of the
+/// segment [a, b] (d2: that squared distance), slice by slice along the segment's dominant axis. In an
+/// interior slice (every point of it within `reach` has its nearest point of the line on the
+/// segment) the distance is the line's: a quadratic form in the centre's offset from where the
+/// line crosses the slice, fixed per segment, tested over the window of rows and columns the
+/// ellipse it bounds can reach (no square root, no division per row). The few end slices test
+/// every candidate of the capsule's box with the segment's distance. Keys are clamped to the
+/// addressable range (a clamped candidate lies farther than `reach` and is not visited).
 template <class Visit>
 void forEachVoxelNear(const VoxelGrid& grid, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
-                      double radius, Visit&& visit) {
+                      double reach, Visit&& visit) {
   const Eigen::Vector3d seg = b - a;
   const double len2 = seg.squaredNorm();
   if (!(len2 > 0.0)) return;
@@ -77,69 +82,79 @@ void forEachVoxelNear(const VoxelGrid& grid, const Eigen::Vector3d& a, const Eig
   int ax = 0;
   seg.cwiseAbs().maxCoeff(&ax);
   const int bx = (ax + 1) % 3, cx = (ax + 2) % 3;
-  const double r2 = radius * radius;
-  const double res = grid.resolution();
-  // Key of a coordinate, clamped into the addressable range ([0, 65535] as ints).
-  const double inverse_res = 1.0 / res;  // a multiplication: the division was 22% of a scan
-  const auto keyOf = [&](double v) {     // clamped first, then truncation is floor (k >= 0)
+  const double r2 = reach * reach;
+  const double inverse_res = 1.0 / grid.resolution();
+  // Key of a coordinate, clamped into the addressable range ([0, 65535] as ints): clamped
+  // first, then truncation is floor (k >= 0).
+  const auto keyOf = [&](double v) {
     const double k = std::clamp(v * inverse_res + 32768.0, 0.0, 65535.0);
     return static_cast<int>(k);
   };
+  // The keys of the first centre at or after v and of the last at or before it (clamped).
+  const auto firstCentre = [&](double v) {
+    return static_cast<int>(std::ceil(std::clamp(v * inverse_res + 32767.5, 0.0, 65535.0)));
+  };
+  const auto lastCentre = [&](double v) {
+    return static_cast<int>(std::clamp(v * inverse_res + 32767.5, 0.0, 65535.0));
+  };
+  const auto emit = [&](int i, int j, int k, double d2, bool inside) {
+    int key[3];
+    key[ax] = i;
+    key[bx] = j;
+    key[cx] = k;
+    visit(VoxelKey{static_cast<std::uint16_t>(key[0]), static_cast<std::uint16_t>(key[1]),
+                   static_cast<std::uint16_t>(key[2])},
+          d2, inside);
+  };
+  // The squared distance from the line of a centre offset (0, ob, oc) from the line's crossing
+  // of its slice: |o|^2 - (o.u)^2 = qbb ob^2 + 2 qbc ob oc + qcc oc^2; the ellipse qform < r2
+  // spans reach * sqrt(1 + u_b^2 / u_a^2) along b (and likewise c) around the crossing.
+  const double qbb = 1.0 - u[bx] * u[bx], qcc = 1.0 - u[cx] * u[cx], qbc = -u[bx] * u[cx];
+  const double inverse_ua2 = 1.0 / (u[ax] * u[ax]);
+  const double half_b = reach * std::sqrt(1.0 + u[bx] * u[bx] * inverse_ua2) + 1e-9;
+  const double half_c = reach * std::sqrt(1.0 + u[cx] * u[cx] * inverse_ua2) + 1e-9;
+  const double slope_b = seg[bx] / seg[ax], slope_c = seg[cx] / seg[ax];
   const double inverse_seg_ax = 1.0 / seg[ax];
-  const int i0 = keyOf(std::min(a[ax], b[ax]) - radius),
-            i1 = keyOf(std::max(a[ax], b[ax]) + radius);
+  const int i0 = keyOf(std::min(a[ax], b[ax]) - reach), i1 = keyOf(std::max(a[ax], b[ax]) + reach);
   for (int i = i0; i <= i1; ++i) {
     const double x = grid.keyToCoord(static_cast<std::uint16_t>(i));
-    // The part of the segment within `radius` of this slice along ax bounds its rows.
-    double t0 = (x - radius - a[ax]) * inverse_seg_ax, t1 = (x + radius - a[ax]) * inverse_seg_ax;
+    // The part of the segment within `reach` of this slice along ax.
+    double t0 = (x - reach - a[ax]) * inverse_seg_ax, t1 = (x + reach - a[ax]) * inverse_seg_ax;
     if (t0 > t1) std::swap(t0, t1);
-    // Every voxel of an interior slice has its nearest point of the line on the segment (the
-    // foot lies within `radius` of the slice along ax): the line's distance is the capsule's.
-    const bool interior = t0 > 0.0 && t1 < 1.0;
+    if (t0 > 0.0 && t1 < 1.0) {
+      const double pb = a[bx] + (x - a[ax]) * slope_b, pc = a[cx] + (x - a[ax]) * slope_c;
+      // Only the rows and columns whose centres lie inside the ellipse's box.
+      const int j0 = firstCentre(pb - half_b), j1 = lastCentre(pb + half_b);
+      const int k0 = firstCentre(pc - half_c), k1 = lastCentre(pc + half_c);
+      const double oc0 = grid.keyToCoord(static_cast<std::uint16_t>(k0)) - pc;
+      for (int j = j0; j <= j1; ++j) {
+        const double ob = grid.keyToCoord(static_cast<std::uint16_t>(j)) - pb;
+        const double row = qbb * ob * ob, cross = 2.0 * qbc * ob;
+        double oc = oc0;
+        for (int k = k0; k <= k1; ++k, oc += grid.resolution()) {
+          const double d2 = row + (cross + qcc * oc) * oc;
+          if (d2 < r2) emit(i, j, k, std::max(d2, 0.0), true);
+        }
+      }
+      continue;
+    }
     t0 = std::max(t0, 0.0);
     t1 = std::min(t1, 1.0);
     if (t0 > t1) continue;
     const double yb0 = a[bx] + t0 * seg[bx], yb1 = a[bx] + t1 * seg[bx];
-    const int j0 = keyOf(std::min(yb0, yb1) - radius), j1 = keyOf(std::max(yb0, yb1) + radius);
-    const double wa = x - a[ax];
-    const double qa = 1.0 - u[cx] * u[cx];
-    const double inverse_qa = 1.0 / qa;
+    const double zc0 = a[cx] + t0 * seg[cx], zc1 = a[cx] + t1 * seg[cx];
+    const int j0 = keyOf(std::min(yb0, yb1) - reach), j1 = keyOf(std::max(yb0, yb1) + reach);
+    const int k0 = keyOf(std::min(zc0, zc1) - reach), k1 = keyOf(std::max(zc0, zc1) + reach);
     for (int j = j0; j <= j1; ++j) {
-      const double y = grid.keyToCoord(static_cast<std::uint16_t>(j));
-      // The squared distance from the line is qa w_c^2 + 2 qb w_c + q0, w = q - a.
-      const double wb = y - a[bx];
-      const double p = wa * u[ax] + wb * u[bx];
-      const double qb = -u[cx] * p;
-      const double q0 = wa * wa + wb * wb - p * p;
-      const double disc = qb * qb - qa * (q0 - r2);
-      if (disc < 0.0) continue;
-      const double root = std::sqrt(disc);
-      const double slack = 1e-9;
-      const int k0 = keyOf(a[cx] + (-qb - root) * inverse_qa - slack);
-      const int k1 = keyOf(a[cx] + (-qb + root) * inverse_qa + slack);
       for (int k = k0; k <= k1; ++k) {
-        const double z = grid.keyToCoord(static_cast<std::uint16_t>(k));
-        double d2 = 0.0;
-        if (interior) {
-          const double wc = z - a[cx];
-          d2 = std::max(0.0, (qa * wc + 2.0 * qb) * wc + q0);
-        } else {
-          Eigen::Vector3d c;
-          c[ax] = x;
-          c[bx] = y;
-          c[cx] = z;
-          const Eigen::Vector3d w = c - a;
-          const double t = std::clamp(w.dot(seg) * inverse_len2, 0.0, 1.0);
-          d2 = (w - t * seg).squaredNorm();
-        }
-        if (!(d2 < r2)) continue;
-        int key[3];
-        key[ax] = i;
-        key[bx] = j;
-        key[cx] = k;
-        visit(VoxelKey{static_cast<std::uint16_t>(key[0]), static_cast<std::uint16_t>(key[1]),
-                       static_cast<std::uint16_t>(key[2])},
-              d2);
+        Eigen::Vector3d c;
+        c[ax] = x;
+        c[bx] = grid.keyToCoord(static_cast<std::uint16_t>(j));
+        c[cx] = grid.keyToCoord(static_cast<std::uint16_t>(k));
+        const Eigen::Vector3d w = c - a;
+        const double t = std::clamp(w.dot(seg) * inverse_len2, 0.0, 1.0);
+        const double d2 = (w - t * seg).squaredNorm();
+        if (d2 < r2) emit(i, j, k, d2, true);
       }
     }
   }
@@ -154,9 +169,27 @@ struct FreeTraversal::Buffers {
 FreeTraversal::FreeTraversal() : buffers_(std::make_unique<Buffers>()) {}
 FreeTraversal::~FreeTraversal() = default;
 
-std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const FreeExtent> extents) {
+double FreeTraversal::evidenceShare(double reach) {
+  if (!(reach < 1.0)) return 1.0;
+  // Midpoint rule on k(x) x over [0, 1]: 10^4 steps, within 1e-6 of the integral.
+  constexpr int kSteps = 10000;
+  double inside = 0.0, all = 0.0;
+  for (int s = 0; s < kSteps; ++s) {
+    const double x = (s + 0.5) / kSteps;
+    const double v = sparseKernel(x) * x;
+    all += v;
+    if (x < reach) inside += v;
+  }
+  return inside / all;
+}
+
+std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const FreeExtent> extents,
+                                      double reach) {
+  const auto t_start = std::chrono::steady_clock::now();
   for (ThreadBlocks& t : buffers_->threads) t.reset();
   const SquaredKernelTable& table = squaredKernel();
+  reach = std::clamp(reach, 1e-3, 1.0);
+  const double compensation = 1.0 / evidenceShare(reach);
   std::atomic<std::size_t> visits{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, extents.size(), 512),
                     [&](const tbb::blocked_range<std::size_t>& range) {
@@ -165,12 +198,13 @@ std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const Fre
                       for (std::size_t r = range.begin(); r != range.end(); ++r) {
                         const FreeExtent& e = extents[r];
                         const double inverse_length2 = 1.0 / (e.radius_m * e.radius_m);
-                        const double scaled_weight = e.weight * kScale;
-                        forEachVoxelNear(grid, e.from, e.to, e.radius_m,
-                                         [&](const VoxelKey& key, double d2) {
-                                           ++n;
+                        const double scaled_weight = e.weight * compensation * kScale;
+                        forEachVoxelNear(grid, e.from, e.to, reach * e.radius_m,
+                                         [&](const VoxelKey& key, double d2, bool inside) {
+                                           if (!inside) return;
                                            const double w = table(d2 * inverse_length2);
                                            if (!(w > 0.0)) return;
+                                           ++n;
                                            Block& blk = mine.blockFor(block::blockOf(key));
                                            const int cell = block::indexOf(key);
                                            // w >= 0: rounding half up without llround's call.
@@ -181,6 +215,7 @@ std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const Fre
                       }
                       visits += n;
                     });
+  const auto tm = std::chrono::steady_clock::now();
   // Merge: every thread's blocks by key (ascending), integer sums (exact in any order).
   std::vector<const Block*> all;
   for (const ThreadBlocks& t : buffers_->threads) {
@@ -201,6 +236,7 @@ std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const Fre
         m.mask[static_cast<std::size_t>(w)] |= all[i]->mask[static_cast<std::size_t>(w)];
     }
   }
+  if (getenv("FT_DEBUG")) fprintf(stderr, "ft: raster %.1f merge %.1f blocks %zu merged %zu\n", std::chrono::duration<double, std::milli>(tm - t_start).count(), std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - tm).count(), all.size(), merged_.size());
   return visits.load();
 }
 

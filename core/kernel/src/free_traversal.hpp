@@ -46,8 +46,15 @@ class FreeTraversal {
   FreeTraversal& operator=(const FreeTraversal&) = delete;
 
   /// Rasterises every extent; returns the (extent, voxel) pairs that got evidence. The result
-  /// (blocks()) replaces the last scan's.
-  std::size_t accumulate(const VoxelGrid& grid, std::span<const FreeExtent> extents);
+  /// (blocks()) replaces the last scan's. `reach` (0, 1]: only voxels within reach * radius_m
+  /// of an extent are visited, and the weights are scaled by 1 / evidenceShare(reach), so a
+  /// ray leaves the same evidence per metre: the kernel's outer part holds little of it (0.7:
+  /// 1.0% in 51% of the voxels).
+  std::size_t accumulate(const VoxelGrid& grid, std::span<const FreeExtent> extents,
+                         double reach = 1.0);
+  /// The share of a capsule's free evidence (per metre of ray, the kernel integrated over the
+  /// disc across it) within `reach` of its axis (a fraction of its radius): 1 at reach >= 1.
+  [[nodiscard]] static double evidenceShare(double reach);
   /// The blocks reached by the last accumulate(), in ascending key order, sums merged.
   [[nodiscard]] const std::vector<Block>& blocks() const { return merged_; }
 

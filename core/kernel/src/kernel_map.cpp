@@ -73,6 +73,9 @@ KernelOptions KernelOptions::defaults(KernelMethod method) {
     // kernel per ray piece and per hit (free_traversal=0, aggregate_hits=0), about 15x faster.
     o.free_traversal = true;
     o.aggregate_hits = true;
+    // The capsules' outer 30% of radius hold 1.0% of the evidence in 51% of the voxels: la3dm's
+    // hold-out (3 seeds) AUC -0.0008 / -0.0003, MSE +0.3% / +0.2%; free evidence 1.8x faster.
+    o.free_reach = 0.7;
   }
   return o;
 }
@@ -95,7 +98,8 @@ Expected<void> applySettings(KernelOptions& options, const std::vector<std::stri
       {"search_max", &KernelOptions::search_max},
       {"search_range", &KernelOptions::search_range},
       {"min_thickness", &KernelOptions::min_thickness},
-      {"aggregate_min_hits", &KernelOptions::aggregate_min_hits}};
+      {"aggregate_min_hits", &KernelOptions::aggregate_min_hits},
+      {"free_reach", &KernelOptions::free_reach}};
   for (const std::string& setting : settings) {
     const auto eq = setting.find('=');
     const std::string name = setting.substr(0, eq);
@@ -122,7 +126,7 @@ Expected<void> applySettings(KernelOptions& options, const std::vector<std::stri
     if (!std::isfinite(value) || value < 0.0 ||
         (value == 0.0 && name != "free_margin" && name != "tip_margin" && name != "hit_weight" &&
          name != "hit_kernel_weight") ||
-        value > 1000.0) {
+        value > (name == "free_reach" ? 1.0 : 1000.0)) {
       return makeError("'" + setting + "': out of range");
     }
     options.*(field->second) = value;
@@ -145,18 +149,19 @@ struct Kernel {
   bool occupied = false;
   bool cell = false;  // `weight` on the one cell [key_min, key_max] (a hit's cell)
 
-  [[nodiscard]] double at(const Eigen::Vector3d& c) const {
+  /// The kernel's value at c, from the r^2 table (squaredKernel: no sqrt, no sincos).
+  [[nodiscard]] double at(const Eigen::Vector3d& c, const SquaredKernelTable& table) const {
     if (cell) return weight;
     if (inverse_length == 0.0) {
       const Eigen::Vector3d d = c - x;
-      return weight * sparseKernel(std::sqrt(std::max(0.0, d.dot(h_inverse * d))));
+      return weight * table(d.dot(h_inverse * d));
     }
     // Distance to the point, or to the segment [x, to].
     const Eigen::Vector3d seg = to - x;
     const double len2 = seg.squaredNorm();
     double t = len2 > 0.0 ? (c - x).dot(seg) / len2 : 0.0;
     t = std::clamp(t, 0.0, 1.0);
-    return weight * sparseKernel((c - (x + t * seg)).norm() * inverse_length);
+    return weight * table((c - (x + t * seg)).squaredNorm() * inverse_length * inverse_length);
   }
 
   /// The x interval [lo, hi] (m) of the row at (y, z) outside which the kernel is 0: exact for
@@ -217,8 +222,7 @@ class SampleIndex {
  public:
   /// Buckets of `cell` metres, made coarser when the samples' box would need more than
   /// `max_cells` of them.
-  SampleIndex(const std::vector<Sample>& samples, double cell, std::size_t max_cells)
-      : samples_(samples) {
+  SampleIndex(const std::vector<Sample>& samples, double cell, std::size_t max_cells) {
     Eigen::AlignedBox3d box;
     for (const Sample& s : samples) {
       if (!s.segment) box.extend(s.x);
@@ -238,17 +242,26 @@ class SampleIndex {
       ++starts_[bucket[i] + 1];
     }
     for (std::size_t b = 1; b < starts_.size(); ++b) starts_[b] += starts_[b - 1];
-    order_.resize(starts_.back());
+    entries_.resize(starts_.back());
     std::vector<std::uint32_t> next(starts_.begin(), starts_.end() - 1);
     for (std::uint32_t i = 0; i < samples.size(); ++i) {
-      if (!samples[i].segment) order_[next[bucket[i]]++] = i;  // stable: ascending per bucket
+      if (!samples[i].segment)  // stable: ascending per bucket
+        entries_[next[bucket[i]]++] = {samples[i].x, i, samples[i].occupied};
     }
   }
 
-  /// Calls f(index) for every point sample in the box centre +- half, in a fixed order.
+  /// A point sample as the index holds it: its position and label beside its index, so that a
+  /// search reads one contiguous run per row of buckets (not the samples, scattered).
+  struct Entry {
+    Eigen::Vector3d x;
+    std::uint32_t index = 0;
+    bool occupied = false;
+  };
+
+  /// Calls f(entry) for every point sample in the box centre +- half, in a fixed order.
   template <class F>
   void forEachInBox(const Eigen::Vector3d& centre, double half, F&& f) const {
-    if (order_.empty()) return;
+    if (entries_.empty()) return;
     const auto lo = cellOf(centre.array() - half);
     const auto hi = cellOf(centre.array() + half);
     for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
@@ -257,8 +270,8 @@ class SampleIndex {
         const std::uint32_t from = starts_[static_cast<std::size_t>(row + lo[0])];
         const std::uint32_t to = starts_[static_cast<std::size_t>(row + hi[0] + 1)];
         for (std::uint32_t o = from; o < to; ++o) {
-          const std::uint32_t i = order_[o];
-          if (((samples_[i].x - centre).array().abs() <= half).all()) f(i);
+          const Entry& e = entries_[o];
+          if (((e.x - centre).array().abs() <= half).all()) f(e);
         }
       }
     }
@@ -281,12 +294,11 @@ class SampleIndex {
     return c;
   }
 
-  const std::vector<Sample>& samples_;
   double cell_ = 1.0;
   Eigen::Vector3d min_ = Eigen::Vector3d::Zero();
   std::int64_t n_[3] = {1, 1, 1};
-  std::vector<std::uint32_t> starts_;  // per bucket, into order_; one extra at the end
-  std::vector<std::uint32_t> order_;   // point-sample indices by bucket
+  std::vector<std::uint32_t> starts_;  // per bucket, into entries_; one extra at the end
+  std::vector<Entry> entries_;         // the point samples by bucket
 };
 
 Kernel isotropicKernel(const Sample& s, const KernelOptions& o) {
@@ -316,8 +328,8 @@ Kernel adaptiveKernel(const Sample& s, LeftOut&& left_out, const std::vector<Sam
   const double half =
       resolution + (o.search_max - resolution) * std::clamp(s.range / range_ref, 0.0, 1.0);
   neighbours.clear();
-  index.forEachInBox(s.x, half, [&](std::uint32_t j) {
-    if (!left_out(j)) neighbours.push_back({samples[j].x, samples[j].occupied == s.occupied});
+  index.forEachInBox(s.x, half, [&](const SampleIndex::Entry& e) {
+    if (!left_out(e.index)) neighbours.push_back({e.x, e.occupied == s.occupied});
   });
   // The regulariser keeps flat kernels at least `min_thickness` (and a voxel) thick, one
   // standard deviation, so a surface's samples reach the centres of the cells they lie in; the
@@ -521,6 +533,7 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
   const std::vector<Sample>& samples = samples_;
   ++scans_;
   stats.ms_samples = msSince(t0);
+  t0 = std::chrono::steady_clock::now();
 
   std::vector<Kernel> kernels;
   std::vector<FreeExtent> free_extents;
@@ -593,7 +606,8 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
     for (const Sample& s : samples) kernels.push_back(isotropicKernel(s, options_));
   }
   stats.samples = kernels.size();
-  stats.ms_bandwidth = msSince(t0);
+  stats.ms_kernels = msSince(t0);
+  t0 = std::chrono::steady_clock::now();
 
   // (block, kernel) pairs, sorted: each block then sums its kernels in sample order, whatever
   // the thread that runs it.
@@ -628,6 +642,7 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
   }
   starts.push_back(pairs.size());
   std::atomic<std::size_t> cell_updates{0};
+  const SquaredKernelTable& table = squaredKernel();
   std::vector<block::BlockMask> reached(touched != nullptr ? starts.size() - 1 : 0);
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, starts.size() - 1, 4),
@@ -672,7 +687,7 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
                                      static_cast<std::uint16_t>(z)};
                   const Eigen::Vector3d c(grid_.keyToCoord(key.x), grid_.keyToCoord(key.y),
                                           grid_.keyToCoord(key.z));
-                  const double v = k.at(c);
+                  const double v = k.at(c, table);
                   if (!(v > 0.0)) continue;
                   const int cell = block::indexOf(key);
                   (k.occupied ? b.alpha : b.beta)[cell] += v;
@@ -694,8 +709,12 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
       reached_blocks.emplace_back(pairs[starts[g]].first, reached[g]);
     }
   }
+  stats.ms_occupied = msSince(t0);
   if (!free_extents.empty()) {
-    stats.free_visits = free_->accumulate(grid_, free_extents);
+    t0 = std::chrono::steady_clock::now();
+    stats.free_visits = free_->accumulate(grid_, free_extents, options_.free_reach);
+    stats.ms_free = msSince(t0);
+    t0 = std::chrono::steady_clock::now();
     for (const FreeTraversal::Block& f : free_->blocks()) {
       Block& b = blocks_[f.key];
       block::forEachSetBit(f.mask, [&](int cell) {
@@ -718,7 +737,7 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
                            [&](int cell) { touched->push_back(block::keyOf(block_key, cell)); });
     }
   }
-  stats.ms_accumulate = msSince(t0);
+  if (!free_extents.empty()) stats.ms_apply = msSince(t0);
   return stats;
 }
 

@@ -1,5 +1,7 @@
 #include "densemap/kernel/occupancy_samples.hpp"
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 
@@ -23,18 +25,20 @@ std::vector<Sample> makeSamples(const PointCloud& points_world, const Point3f& o
   return samples;
 }
 
-void makeSamples(const PointCloud& points_world, const Point3f& origin_world,
-                 const SamplingOptions& options, std::uint64_t scan_index,
-                 const std::function<bool(const Eigen::Vector3d&)>& keep_free,
-                 std::vector<Sample>& samples) {
-  samples.clear();
-  const Eigen::Vector3d origin = origin_world.cast<double>();
+namespace {
+
+/// The samples of points [first, last) of a scan, appended to `samples`.
+void samplesOfRays(const PointCloud& points_world, std::size_t first, std::size_t last,
+                   const Eigen::Vector3d& origin, const SamplingOptions& options,
+                   std::uint64_t scan_index,
+                   const std::function<bool(const Eigen::Vector3d&)>& keep_free,
+                   std::vector<Sample>& samples) {
   const double step = options.free_step;
-  std::uint64_t ray_index = 0;
-  for (const Point3f& p : points_world) {
+  for (std::size_t ray_index = first; ray_index < last; ++ray_index) {
     const std::uint64_t ray_key = options.seed * 0xD1B54A32D192ED03ULL ^
-                                  scan_index * 0x8CB92BA72F3D8DD7ULL ^ (ray_index++ << 20);
-    const Eigen::Vector3d point = p.cast<double>();
+                                  scan_index * 0x8CB92BA72F3D8DD7ULL ^
+                                  (std::uint64_t{ray_index} << 20);
+    const Eigen::Vector3d point = points_world[ray_index].cast<double>();
     Eigen::Vector3d direction = point - origin;
     double length = direction.norm();
     if (!(length > 0.0)) continue;
@@ -71,6 +75,34 @@ void makeSamples(const PointCloud& points_world, const Point3f& origin_world,
       samples.push_back(s);
     }
   }
+}
+
+}  // namespace
+
+void makeSamples(const PointCloud& points_world, const Point3f& origin_world,
+                 const SamplingOptions& options, std::uint64_t scan_index,
+                 const std::function<bool(const Eigen::Vector3d&)>& keep_free,
+                 std::vector<Sample>& samples) {
+  samples.clear();
+  const Eigen::Vector3d origin = origin_world.cast<double>();
+  // Fixed chunks of rays in parallel, concatenated in ray order: the same samples, in the same
+  // order, whatever the thread count.
+  constexpr std::size_t kChunk = 4096;
+  const std::size_t chunks = (points_world.size() + kChunk - 1) / kChunk;
+  if (chunks <= 1) {
+    samplesOfRays(points_world, 0, points_world.size(), origin, options, scan_index, keep_free,
+                  samples);
+    return;
+  }
+  std::vector<std::vector<Sample>> parts(chunks);
+  tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+    samplesOfRays(points_world, c * kChunk, std::min(points_world.size(), (c + 1) * kChunk),
+                  origin, options, scan_index, keep_free, parts[c]);
+  });
+  std::size_t total = 0;
+  for (const auto& part : parts) total += part.size();
+  samples.reserve(total);
+  for (const auto& part : parts) samples.insert(samples.end(), part.begin(), part.end());
 }
 
 NearHits::NearHits(const std::vector<Eigen::Vector3d>& hits, double reach) : cell_(reach) {

@@ -253,6 +253,18 @@ TEST(FreeTraversal, CutRaysGiveEveryVoxelInReachTheKernelOfItsDistance) {
   const Point3f origin(0.03F, -0.02F, 0.01F);
   map.integrate(points, origin);
   const double joints = 1.0 + 2.0 * options.length_scale / 3.0 / options.free_step;
+  // Capsules reach free_reach of their radius, their weight scaled by the evidence share there
+  // (the midpoint rule's integral of k(x) x, as FreeTraversal states it).
+  ASSERT_LT(options.free_reach, 1.0);
+  double inside = 0.0, all = 0.0;
+  for (int s = 0; s < 100000; ++s) {
+    const double x = (s + 0.5) / 100000;
+    all += sparseKernel(x) * x;
+    if (x < options.free_reach) inside += sparseKernel(x) * x;
+  }
+  const double compensation = all / inside;
+  EXPECT_GT(compensation, 1.005);
+  EXPECT_LT(compensation, 1.02);
   std::map<std::uint64_t, double> beta;
   const VoxelGrid& grid = map.grid();
   for (const Point3f& p : points) {
@@ -273,7 +285,9 @@ TEST(FreeTraversal, CutRaysGiveEveryVoxelInReachTheKernelOfItsDistance) {
           const Eigen::Vector3d seg = end - o;
           const double t = std::clamp((c - o).dot(seg) / seg.squaredNorm(), 0.0, 1.0);
           const double d = (c - (o + t * seg)).norm();
-          const double w = options.sf2 * joints * sparseKernel(d / options.length_scale);
+          if (d >= options.free_reach * options.length_scale) continue;
+          const double w =
+              options.sf2 * joints * compensation * sparseKernel(d / options.length_scale);
           if (w > 0.0) beta[k.packed()] += w;
         }
       }
@@ -435,7 +449,10 @@ TEST(KernelSettings, ApplyKnownNamesAndRejectTheRest) {
   EXPECT_DOUBLE_EQ(o.sf2, 0.7);
   EXPECT_DOUBLE_EQ(o.free_margin, 0.0);
   EXPECT_DOUBLE_EQ(o.hit_weight, 2.0);
-  for (const char* bad : {"sf2", "nope=1", "sf2=abc", "sf2=1x", "sf2=-1", "sf2=0", "sf2=nan"}) {
+  ASSERT_TRUE(applySettings(o, {"free_reach=1"}));
+  EXPECT_DOUBLE_EQ(o.free_reach, 1.0);
+  for (const char* bad : {"sf2", "nope=1", "sf2=abc", "sf2=1x", "sf2=-1", "sf2=0", "sf2=nan",
+                          "free_reach=0", "free_reach=1.01"}) {
     EXPECT_FALSE(applySettings(o, {bad})) << bad;
   }
   EXPECT_DOUBLE_EQ(o.sf2, 0.7);

@@ -73,6 +73,10 @@ struct KernelOptions {
   /// voxel by voxel (FreeTraversal, issue 29) instead of a capsule kernel per `free_step` piece
   /// of every ray scheduled through the kernel pairs. Setting free_traversal=0 (or 1).
   bool free_traversal = false;
+  /// kAkimapRays with free_traversal: capsules visit the voxels within this fraction of their
+  /// radius (the rest of the kernel holds 1.0% of the evidence at 0.7, in half the voxels), their
+  /// weight scaled so that a ray leaves the same evidence per metre. (0, 1].
+  double free_reach = 1.0;
   /// kAkimapRays: one adaptive kernel per voxel of at least `aggregate_min_hits` hits (at their
   /// mean, weighing their count, fitted to the neighbourhood outside the voxel; its normal sets
   /// its rays' stops) instead of one per hit. Setting aggregate_hits=0 (or 1).
@@ -91,7 +95,7 @@ struct KernelOptions {
 /// Applies "NAME=VALUE" settings to `options`: any double field above by its name (free_step,
 /// length_scale, sf2, prior, free_margin, max_margin, tip_margin, tip_length_scale,
 /// occupied_weight, hit_weight, hit_kernel_weight, hit_length_voxels, negative_step,
-/// search_max, search_range, min_thickness, aggregate_min_hits), and free_traversal=0|1,
+/// search_max, search_range, min_thickness, aggregate_min_hits, free_reach), and free_traversal=0|1,
 /// aggregate_hits=0|1; errors name the setting.
 [[nodiscard]] Expected<void> applySettings(KernelOptions& options,
                                            const std::vector<std::string>& settings);
@@ -100,7 +104,9 @@ struct KernelScanStats {
   std::size_t samples = 0;
   std::size_t free_visits = 0;   // (capsule, voxel) pairs with free evidence (free_traversal)
   std::size_t cell_updates = 0;  // (cell, kernel) pairs with a non-zero contribution
-  double ms_samples = 0, ms_bandwidth = 0, ms_accumulate = 0;
+  /// Stage times, ms: samples, occupied kernels (fitting), occupied accumulation (scheduling and
+  /// summing the kernels), free evidence (capsules), applying the free sums to the blocks.
+  double ms_samples = 0, ms_kernels = 0, ms_occupied = 0, ms_free = 0, ms_apply = 0;
 };
 
 /// A dense occupancy map by Bayesian kernel inference: per cell Beta(alpha, beta), with the
