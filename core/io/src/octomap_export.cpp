@@ -13,6 +13,19 @@
 
 namespace densemap {
 
+bool writeOctomapBinary(const octomap::OcTree& tree, std::ostream& out) {
+  // AbstractOccupancyOcTree::writeBinaryConst's header (binaryFileHeader is protected), then
+  // the same node data.
+  out << "# Octomap OcTree binary file\n"
+      << "# (feel free to add / change comments, but leave the first line as it is!)\n#\n";
+  out << "id " << tree.getTreeType() << '\n';
+  out << "size " << tree.size() << '\n';
+  out << "res " << tree.getResolution() << '\n';
+  out << "data\n";
+  tree.writeBinaryData(out);
+  return out.good();
+}
+
 Expected<void> exportOctomap(const OccupancyMap& map, const std::filesystem::path& file) {
   const std::string ext = file.extension().string();
   if (ext != ".bt" && ext != ".ot") return fileError(file, "export needs a .bt or .ot name");
@@ -49,7 +62,7 @@ Expected<void> exportOctomap(const OccupancyMap& map, const std::filesystem::pat
     tree = copy.get();
   }
   std::ostringstream out;
-  const bool ok = ext == ".bt" ? tree->writeBinaryConst(out) : tree->write(out);
+  const bool ok = ext == ".bt" ? writeOctomapBinary(*tree, out) : tree->write(out);
   if (!ok) return fileError(file, "OctoMap failed to serialise the tree");
   return writeFileAtomically(file, out.str());
 }

@@ -11,6 +11,7 @@
 
 #include "densemap/geometry/ray_traversal.hpp"
 #include "densemap/io/file_bytes.hpp"
+#include "densemap/io/octomap_export.hpp"
 #include "densemap/map/octree_map.hpp"
 
 namespace densemap {
@@ -66,7 +67,7 @@ Expected<void> OracleLabeller::write(const std::filesystem::path& path) const {
   });
   tree.updateInnerOccupancy();
   std::ostringstream out;
-  if (!tree.writeBinaryConst(out)) return makeError("cannot serialise oracle labels");
+  if (!writeOctomapBinary(tree, out)) return makeError("cannot serialise oracle labels");
   return writeFileAtomically(path, out.str());
 }
 

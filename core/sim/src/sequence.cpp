@@ -7,6 +7,7 @@
 
 #include "densemap/io/dataset_writer.hpp"
 #include "densemap/io/file_bytes.hpp"
+#include "densemap/io/octomap_export.hpp"
 #include "densemap/sim/ground_truth.hpp"
 #include "densemap/sim/lidar_simulator.hpp"
 #include "densemap/sim/octree_scene.hpp"
@@ -124,7 +125,7 @@ Expected<SequenceSummary> writeSimulatedSequence(
                                 scene->scene->bounds());
     }
     std::ostringstream out;
-    if (!truth->writeBinaryConst(out)) return makeError("cannot serialise ground truth");
+    if (!writeOctomapBinary(*truth, out)) return makeError("cannot serialise ground truth");
     summary.ground_truth = dir / "ground_truth.bt";
     if (auto ok = writeFileAtomically(summary.ground_truth, out.str()); !ok) {
       return std::unexpected(ok.error());

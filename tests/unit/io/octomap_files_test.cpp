@@ -1,7 +1,9 @@
 #include <gtest/gtest.h>
+#include <octomap/OcTree.h>
 #include <octomap/ScanGraph.h>
 
 #include <fstream>
+#include <sstream>
 
 #include "densemap/io/octomap_export.hpp"
 #include "densemap/io/scan_source.hpp"
@@ -134,6 +136,28 @@ TEST(ScanGraph, TruncatedFilesAreClearErrorsAtEveryLength) {
   std::ofstream(dir.path() / "a.graph", std::ios::binary)
       << std::string(reinterpret_cast<const char*>(&absurd), 4) << std::string(100, '\0');
   EXPECT_FALSE(readScanGraph(dir.path() / "a.graph"));
+}
+
+// Issue 28, item 15: liboctomap's writeBinaryConst prints "Writing N nodes ... done." on stderr
+// (a bare " done." in the server's log after every .bt save); ours writes the same bytes quietly.
+TEST(OctomapExport, BinaryFilesAreOctomapsBytesWithNothingOnStderr) {
+  octomap::OcTree tree(0.1);
+  for (int i = 0; i < 200; ++i) {
+    tree.updateNode(octomap::point3d(0.05F * i, -0.1F * (i % 13), 0.2F * (i % 5)), i % 3 != 0);
+  }
+  std::ostringstream theirs, ours;
+  testing::internal::CaptureStderr();
+  ASSERT_TRUE(tree.writeBinaryConst(theirs));
+  (void)testing::internal::GetCapturedStderr();  // whatever this liboctomap prints
+  testing::internal::CaptureStderr();
+  ASSERT_TRUE(writeOctomapBinary(tree, ours));
+  EXPECT_EQ(testing::internal::GetCapturedStderr(), "");
+  ASSERT_GT(ours.str().size(), 100U);
+  EXPECT_EQ(ours.str(), theirs.str());
+  std::istringstream in(ours.str());
+  octomap::OcTree read(0.2);
+  ASSERT_TRUE(read.readBinary(in));
+  EXPECT_EQ(read.size(), tree.size());
 }
 
 TEST(OctomapExport, OtRoundTripsLogOddsAndBtRoundTripsOccupancy) {

@@ -1,12 +1,22 @@
 #pragma once
 
 #include <filesystem>
+#include <iosfwd>
 #include <limits>
 
 #include "densemap/geometry/error.hpp"
 #include "densemap/map/occupancy_map.hpp"
 
+namespace octomap {
+class OcTree;
+}
+
 namespace densemap {
+
+/// OctoMap's binary file (`.bt`) of `tree`, byte for byte what OcTree::writeBinaryConst writes,
+/// without its debug lines on stderr (Debian's liboctomap prints "Writing N nodes to output
+/// stream... done." on every call: a bare " done." in a daemon's log). False when `out` fails.
+[[nodiscard]] bool writeOctomapBinary(const octomap::OcTree& tree, std::ostream& out);
 
 /// Writes any backend as an OctoMap file for OctoMap's tools (octovis, binvox...): `.bt`
 /// (binary, maximum-likelihood free/occupied) or `.ot` (full log-odds). Written atomically.
