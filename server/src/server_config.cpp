@@ -57,16 +57,17 @@ Expected<proto::ServerConfig> loadServerConfig(const std::filesystem::path& file
   auto text = readFileBytes(file, std::uint64_t{16} << 20);  // a config is kilobytes
   if (!text) return std::unexpected(text.error());
   proto::ServerConfig config;
-  if (auto parsed = parseTextFormat(*text, config); !parsed) {
+  TextLocations where;
+  if (auto parsed = parseTextFormat(*text, config, &where); !parsed) {
     return fileError(file, parsed.error().message);
   }
-  if (auto options = pipelineOptions(config); !options) {
-    return fileError(file, options.error().message);
-  }
-  if (auto security = securityFiles(config); !security) {
-    return fileError(file, security.error().message);
-  }
-  if (auto ros2 = ros2Options(config); !ros2) return fileError(file, ros2.error().message);
+  // Errors found after parsing name the field they are about: file, line and reason.
+  const auto refused = [&](const Error& e) {
+    return fileError(file, locatedError(where, e.message));
+  };
+  if (auto options = pipelineOptions(config); !options) return refused(options.error());
+  if (auto security = securityFiles(config); !security) return refused(security.error());
+  if (auto ros2 = ros2Options(config); !ros2) return refused(ros2.error());
   return config;
 }
 

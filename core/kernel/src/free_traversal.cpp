@@ -7,11 +7,11 @@
 #include <algorithm>
 #include <atomic>
 #include <bit>
-#include <cmath>
-#include <deque>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <deque>
 
 #include "densemap/kernel/kernel_function.hpp"
 
@@ -64,8 +64,8 @@ struct ThreadBlocks {
 };
 
 /// Calls visit(key, d2, true) once for every voxel whose centre lies within `reach` of the
-/// segment [a, b] (d2: that squared distance), slice by slice along the segment's dominant axis. In an
-/// interior slice (every point of it within `reach` has its nearest point of the line on the
+/// segment [a, b] (d2: that squared distance), slice by slice along the segment's dominant axis. In
+/// an interior slice (every point of it within `reach` has its nearest point of the line on the
 /// segment) the distance is the line's: a quadratic form in the centre's offset from where the
 /// line crosses the slice, fixed per segment, tested over the window of rows and columns the
 /// ellipse it bounds can reach (no square root, no division per row). The few end slices test
@@ -236,7 +236,12 @@ std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const Fre
         m.mask[static_cast<std::size_t>(w)] |= all[i]->mask[static_cast<std::size_t>(w)];
     }
   }
-  if (getenv("FT_DEBUG")) fprintf(stderr, "ft: raster %.1f merge %.1f blocks %zu merged %zu\n", std::chrono::duration<double, std::milli>(tm - t_start).count(), std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - tm).count(), all.size(), merged_.size());
+  if (getenv("FT_DEBUG"))
+    fprintf(
+        stderr, "ft: raster %.1f merge %.1f blocks %zu merged %zu\n",
+        std::chrono::duration<double, std::milli>(tm - t_start).count(),
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - tm).count(),
+        all.size(), merged_.size());
   return visits.load();
 }
 

@@ -96,8 +96,8 @@ void makeSamples(const PointCloud& points_world, const Point3f& origin_world,
   }
   std::vector<std::vector<Sample>> parts(chunks);
   tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
-    samplesOfRays(points_world, c * kChunk, std::min(points_world.size(), (c + 1) * kChunk),
-                  origin, options, scan_index, keep_free, parts[c]);
+    samplesOfRays(points_world, c * kChunk, std::min(points_world.size(), (c + 1) * kChunk), origin,
+                  options, scan_index, keep_free, parts[c]);
   });
   std::size_t total = 0;
   for (const auto& part : parts) total += part.size();

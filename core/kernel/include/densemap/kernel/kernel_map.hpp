@@ -95,8 +95,8 @@ struct KernelOptions {
 /// Applies "NAME=VALUE" settings to `options`: any double field above by its name (free_step,
 /// length_scale, sf2, prior, free_margin, max_margin, tip_margin, tip_length_scale,
 /// occupied_weight, hit_weight, hit_kernel_weight, hit_length_voxels, negative_step,
-/// search_max, search_range, min_thickness, aggregate_min_hits, free_reach), and free_traversal=0|1,
-/// aggregate_hits=0|1; errors name the setting.
+/// search_max, search_range, min_thickness, aggregate_min_hits, free_reach), and
+/// free_traversal=0|1, aggregate_hits=0|1; errors name the setting.
 [[nodiscard]] Expected<void> applySettings(KernelOptions& options,
                                            const std::vector<std::string>& settings);
 
