@@ -84,13 +84,8 @@ void forEachVoxelNear(const VoxelGrid& grid, const Eigen::Vector3d& a, const Eig
   const int bx = (ax + 1) % 3, cx = (ax + 2) % 3;
   const double r2 = reach * reach;
   const double inverse_res = 1.0 / grid.resolution();
-  // Key of a coordinate, clamped into the addressable range ([0, 65535] as ints): clamped
-  // first, then truncation is floor (k >= 0).
-  const auto keyOf = [&](double v) {
-    const double k = std::clamp(v * inverse_res + 32768.0, 0.0, 65535.0);
-    return static_cast<int>(k);
-  };
-  // The keys of the first centre at or after v and of the last at or before it (clamped).
+  // The keys of the first voxel centre at or after v and of the last at or before it, clamped
+  // into the addressable range ([0, 65535]; a clamped candidate lies farther than `reach`).
   const auto firstCentre = [&](double v) {
     return static_cast<int>(std::ceil(std::clamp(v * inverse_res + 32767.5, 0.0, 65535.0)));
   };
@@ -115,7 +110,8 @@ void forEachVoxelNear(const VoxelGrid& grid, const Eigen::Vector3d& a, const Eig
   const double half_c = reach * std::sqrt(1.0 + u[cx] * u[cx] * inverse_ua2) + 1e-9;
   const double slope_b = seg[bx] / seg[ax], slope_c = seg[cx] / seg[ax];
   const double inverse_seg_ax = 1.0 / seg[ax];
-  const int i0 = keyOf(std::min(a[ax], b[ax]) - reach), i1 = keyOf(std::max(a[ax], b[ax]) + reach);
+  const int i0 = firstCentre(std::min(a[ax], b[ax]) - reach),
+            i1 = lastCentre(std::max(a[ax], b[ax]) + reach);
   for (int i = i0; i <= i1; ++i) {
     const double x = grid.keyToCoord(static_cast<std::uint16_t>(i));
     // The part of the segment within `reach` of this slice along ax.
@@ -143,8 +139,10 @@ void forEachVoxelNear(const VoxelGrid& grid, const Eigen::Vector3d& a, const Eig
     if (t0 > t1) continue;
     const double yb0 = a[bx] + t0 * seg[bx], yb1 = a[bx] + t1 * seg[bx];
     const double zc0 = a[cx] + t0 * seg[cx], zc1 = a[cx] + t1 * seg[cx];
-    const int j0 = keyOf(std::min(yb0, yb1) - reach), j1 = keyOf(std::max(yb0, yb1) + reach);
-    const int k0 = keyOf(std::min(zc0, zc1) - reach), k1 = keyOf(std::max(zc0, zc1) + reach);
+    const int j0 = firstCentre(std::min(yb0, yb1) - reach),
+              j1 = lastCentre(std::max(yb0, yb1) + reach);
+    const int k0 = firstCentre(std::min(zc0, zc1) - reach),
+              k1 = lastCentre(std::max(zc0, zc1) + reach);
     for (int j = j0; j <= j1; ++j) {
       for (int k = k0; k <= k1; ++k) {
         Eigen::Vector3d c;

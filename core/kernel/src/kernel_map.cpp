@@ -538,9 +538,10 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
   std::vector<Kernel> kernels;
   std::vector<FreeExtent> free_extents;
   if (options_.method == KernelMethod::kAkimap || rays) {
-    // Buckets about the smallest search box (a voxel) at most 2^23 of them.
+    // Buckets about the smallest search box (a voxel), at most 2^21 of them (coarser over a
+    // large scan: the counting sort clears, sums and copies every bucket each scan).
     const SampleIndex index(samples, std::max(grid_.resolution(), 0.25 * options_.search_max),
-                            std::size_t{1} << 23);
+                            std::size_t{1} << 21);
     // kAkimapRays: kernels for the occupied samples only (then the free segments).
     std::vector<std::uint32_t> centres;
     for (std::uint32_t i = 0; i < samples.size(); ++i) {
@@ -582,7 +583,10 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
     if (rays)
       makeRaySegments(points_world, origin_world, step, options_.max_range, stops, segments_);
     const std::vector<Sample>& segments = segments_;
-    kernels.reserve(kernels.size() + 2 * (rays ? centres.size() : 0) + segments.size());
+    // Segments become kernels only without the traversal (which takes them as extents).
+    kernels.reserve(kernels.size() + 2 * (rays ? centres.size() : 0) +
+                    (traverse ? 0 : segments.size()));
+    if (traverse) free_extents.reserve(segments.size());
     if (rays) {
       appendHitKernels(hit_positions, aggregate ? &hit_counts : nullptr, options_,
                        grid_.resolution(), kernels);
