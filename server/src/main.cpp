@@ -117,6 +117,7 @@ static int runMain(int argc, char** argv) {
 
   std::unique_ptr<densemap::OccupancyMap> initial;
   std::uint64_t version = 0;
+  std::optional<densemap::kernel::KernelEvidence> kernel_evidence;
   const auto& snapshot = service_options.snapshot_path;
   service_options.snapshot_keep = static_cast<int>(config->snapshot().keep());
   service_options.export_dir =
@@ -151,14 +152,31 @@ static int runMain(int argc, char** argv) {
     }
     spdlog::info("resumed {} (version {}, {} cells)", (*resumed)->file.string(), loaded->version,
                  loaded->map->knownCells());
-    if (options->kernel) {
-      spdlog::info(
-          "map.kind {} keeps its kernel evidence in memory only; the snapshot's probabilities "
-          "stand until new scans reach their cells, which then start again from the prior",
-          densemap::kernel::kernelMethodName(*options->kernel));
+    // A dense map resumes its kernel evidence (issue 29); a snapshot without it (a log-odds
+    // map's, or one saved before) leaves the probabilities standing until new scans reach
+    // their cells, which then start again from the prior.
+    if (options->kernel && loaded->kernel && loaded->kernel->method != *options->kernel) {
+      spdlog::warn("snapshot {} holds {} evidence, map.kind is {}: its probabilities stand, "
+                   "its evidence is not resumed",
+                   (*resumed)->file.string(),
+                   densemap::kernel::kernelMethodName(loaded->kernel->method),
+                   densemap::kernel::kernelMethodName(*options->kernel));
+      loaded->kernel.reset();
+    } else if (options->kernel && !loaded->kernel) {
+      spdlog::warn("snapshot {} holds no {} evidence: its probabilities stand until new scans "
+                   "reach their cells, which then start again from the prior",
+                   (*resumed)->file.string(),
+                   densemap::kernel::kernelMethodName(*options->kernel));
+    } else if (!options->kernel && loaded->kernel) {
+      spdlog::warn("snapshot {} holds {} evidence, map.kind is log_odds: its probabilities go "
+                   "on as log-odds, the evidence is dropped at the next save",
+                   (*resumed)->file.string(),
+                   densemap::kernel::kernelMethodName(loaded->kernel->method));
+      loaded->kernel.reset();
     }
     initial = std::move(loaded->map);
     version = loaded->version;
+    kernel_evidence = std::move(loaded->kernel);
   }
   if (check_only) {
     std::printf(
@@ -178,6 +196,15 @@ static int runMain(int argc, char** argv) {
       static_cast<std::size_t>(options->threads + service_options.query_threads));
   auto pipeline = densemap::Pipeline::create(*options, std::move(initial), version);
   if (!pipeline) return fail(pipeline.error().message);
+  if (kernel_evidence) {
+    if (auto restored = (*pipeline)->restoreKernelEvidence(*kernel_evidence); !restored) {
+      return fail("snapshot: " + restored.error().message, 2);
+    }
+    spdlog::info("resumed the {} evidence of {} cells ({} scans)",
+                 densemap::kernel::kernelMethodName(kernel_evidence->method),
+                 kernel_evidence->keys.size(), kernel_evidence->scans);
+    kernel_evidence.reset();  // its memory
+  }
   auto service = densemap::server::MapService::create(**pipeline, service_options);
   // A second server must not start (exit 2: systemd's RestartPreventExitStatus keeps it from
   // retrying); other DDS errors may pass (an interface not up yet at boot): exit 1.

@@ -723,10 +723,13 @@ Expected<std::size_t> MapService::saveUncounted(const std::filesystem::path& fil
     // One rotation at a time: a command's save and an autosave must not rotate generations
     // under each other.
     const std::lock_guard lock(save_mutex_);
-    return saveSnapshotKeeping(*pipeline_.view(), model, pipeline_.options().backend, target,
-                               options_.snapshot_keep);
+    const Pipeline::SavedState state = pipeline_.savedState();
+    return saveSnapshotKeeping(*state.view, model, pipeline_.options().backend, target,
+                               options_.snapshot_keep, state.kernel ? &*state.kernel : nullptr);
   }
-  return saveSnapshot(*pipeline_.view(), model, pipeline_.options().backend, target);
+  const Pipeline::SavedState state = pipeline_.savedState();
+  return saveSnapshot(*state.view, model, pipeline_.options().backend, target,
+                      state.kernel ? &*state.kernel : nullptr);
 }
 
 void MapService::publishStatus() {

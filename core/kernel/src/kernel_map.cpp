@@ -782,6 +782,60 @@ void KernelMap::forEachKnown(const std::function<void(const VoxelKey&, double)>&
   }
 }
 
+KernelEvidence KernelMap::evidence() const {
+  KernelEvidence e;
+  e.method = options_.method;
+  e.resolution_m = grid_.resolution();
+  e.scans = scans_;
+  std::vector<std::uint64_t> order;
+  order.reserve(blocks_.size());
+  for (const auto& entry : blocks_) order.push_back(entry.first);
+  std::sort(order.begin(), order.end());  // a file does not depend on the hash's order
+  const std::size_t n = knownCells();
+  e.keys.reserve(n);
+  e.alpha.reserve(n);
+  e.beta.reserve(n);
+  for (const std::uint64_t block_key : order) {
+    const Block& b = blocks_.at(block_key);
+    block::forEachSetBit(b.known, [&](int cell) {
+      e.keys.push_back(block::keyOf(block_key, cell));
+      e.alpha.push_back(b.alpha[static_cast<std::size_t>(cell)]);
+      e.beta.push_back(b.beta[static_cast<std::size_t>(cell)]);
+    });
+  }
+  return e;
+}
+
+Expected<void> KernelMap::restore(const KernelEvidence& e) {
+  if (e.method != options_.method) {
+    return makeError("kernel evidence of " + std::string(kernelMethodName(e.method)) +
+                     ", not " + std::string(kernelMethodName(options_.method)));
+  }
+  if (e.resolution_m != grid_.resolution()) {
+    return makeError("kernel evidence at " + std::to_string(e.resolution_m) + " m, not " +
+                     std::to_string(grid_.resolution()) + " m");
+  }
+  if (e.alpha.size() != e.keys.size() || e.beta.size() != e.keys.size()) {
+    return makeError("kernel evidence arrays differ in length");
+  }
+  const auto valid = [](double v) { return std::isfinite(v) && v >= 0.0; };
+  for (std::size_t i = 0; i < e.keys.size(); ++i) {
+    if (!valid(e.alpha[i]) || !valid(e.beta[i])) {
+      return makeError("kernel evidence has a negative or non-finite value");
+    }
+  }
+  blocks_.clear();
+  for (std::size_t i = 0; i < e.keys.size(); ++i) {
+    Block& b = blocks_[block::blockOf(e.keys[i])];
+    const int cell = block::indexOf(e.keys[i]);
+    b.alpha[static_cast<std::size_t>(cell)] = e.alpha[i];
+    b.beta[static_cast<std::size_t>(cell)] = e.beta[i];
+    block::setBit(b.known, cell);
+  }
+  scans_ = e.scans;
+  return {};
+}
+
 std::size_t KernelMap::knownCells() const {
   std::size_t n = 0;
   for (const auto& [block_key, b] : blocks_) {

@@ -183,6 +183,28 @@ std::future<Expected<std::string>> Pipeline::command(Command command) {
   return future;
 }
 
+Pipeline::SavedState Pipeline::savedState() {
+  SavedState state;
+  // A command with no changes publishes nothing: the view it reads is the latest published,
+  // the one the kernel map's evidence stands behind.
+  auto done = command([&](OccupancyMap&, CellChanges&) -> Expected<std::string> {
+    state.view = view_.load();
+    if (kernel_map_) state.kernel = kernel_map_->evidence();
+    return std::string();
+  });
+  done.wait();
+  return state;
+}
+
+Expected<void> Pipeline::restoreKernelEvidence(const kernel::KernelEvidence& evidence) {
+  if (running_.load()) return makeError("kernel evidence is restored before start()");
+  if (!kernel_map_) {
+    return makeError("the map kind is log_odds: kernel evidence of " +
+                     std::string(kernel::kernelMethodName(evidence.method)) + " has no place");
+  }
+  return kernel_map_->restore(evidence);
+}
+
 void Pipeline::run() {
   while (running_.load()) {
     runCommands();

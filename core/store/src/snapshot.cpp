@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <initializer_list>
 
 #include "densemap/io/file_bytes.hpp"
 #include "densemap/io/octomap_export.hpp"
@@ -24,10 +25,10 @@ Expected<std::unique_ptr<OccupancyMap>> toMap(const MapView& view, const SensorM
   return map;
 }
 
-/// CRC-32 of the keys then the values (zlib's).
-std::uint32_t cellsCrc(const std::string& keys, const std::string& values) {
+/// CRC-32 of the parts in order (zlib's): keys then values.
+std::uint32_t cellsCrc(std::initializer_list<const std::string*> parts) {
   uLong crc = crc32(0L, Z_NULL, 0);
-  for (const std::string* part : {&keys, &values}) {
+  for (const std::string* part : parts) {
     const auto* data = reinterpret_cast<const Bytef*>(part->data());
     std::size_t left = part->size();
     while (left > 0) {  // crc32 takes at most a uInt at a time
@@ -40,10 +41,73 @@ std::uint32_t cellsCrc(const std::string& keys, const std::string& values) {
   return static_cast<std::uint32_t>(crc);
 }
 
+template <class T>
+void appendRaw(std::string& out, const T& value) {
+  out.append(reinterpret_cast<const char*>(&value), sizeof(T));
+}
+
+void putKernelEvidence(const kernel::KernelEvidence& e, proto::Snapshot& s) {
+  std::string keys, alpha, beta;
+  keys.reserve(e.keys.size() * 6);
+  alpha.reserve(e.alpha.size() * 8);
+  beta.reserve(e.beta.size() * 8);
+  for (std::size_t i = 0; i < e.keys.size(); ++i) {
+    const std::uint16_t xyz[3] = {e.keys[i].x, e.keys[i].y, e.keys[i].z};
+    appendRaw(keys, xyz);
+    appendRaw(alpha, e.alpha[i]);
+    appendRaw(beta, e.beta[i]);
+  }
+  s.set_kernel_method(std::string(kernel::kernelMethodName(e.method)));
+  s.set_kernel_scans(e.scans);
+  s.set_kernel_cell_count(e.keys.size());
+  s.set_kernel_crc32(cellsCrc({&keys, &alpha, &beta}));
+  s.set_kernel_keys(std::move(keys));
+  s.set_kernel_alpha(std::move(alpha));
+  s.set_kernel_beta(std::move(beta));
+}
+
+/// The kernel evidence of `s`, checked (lengths, CRC, method); std::nullopt when it has none.
+Expected<std::optional<kernel::KernelEvidence>> kernelEvidenceOf(const proto::Snapshot& s) {
+  if (s.format_version() < 3) return std::optional<kernel::KernelEvidence>();
+  if (!s.has_kernel_method()) return makeError("snapshot lacks its kernel evidence (truncated)");
+  auto method = kernel::parseKernelMethod(s.kernel_method());
+  if (!method) return makeError("snapshot kernel evidence: " + method.error().message);
+  const std::uint64_t n = s.kernel_cell_count();
+  // Lengths first (no allocation from an unchecked count), then the CRC, serialised last.
+  if (n > s.kernel_keys().size() / 6 || s.kernel_keys().size() != n * 6 ||
+      s.kernel_alpha().size() != n * 8 || s.kernel_beta().size() != n * 8) {
+    return makeError("snapshot kernel evidence arrays do not match its cell count (truncated?)");
+  }
+  if (!s.has_kernel_crc32() ||
+      s.kernel_crc32() != cellsCrc({&s.kernel_keys(), &s.kernel_alpha(), &s.kernel_beta()})) {
+    return makeError("snapshot kernel evidence fails its CRC-32 (corrupt or truncated)");
+  }
+  kernel::KernelEvidence e;
+  e.method = *method;
+  e.resolution_m = s.resolution_m();
+  e.scans = s.kernel_scans();
+  e.keys.resize(n);
+  e.alpha.resize(n);
+  e.beta.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    std::uint16_t xyz[3];
+    std::memcpy(xyz, s.kernel_keys().data() + i * 6, 6);
+    e.keys[i] = VoxelKey{xyz[0], xyz[1], xyz[2]};
+    std::memcpy(&e.alpha[i], s.kernel_alpha().data() + i * 8, 8);
+    std::memcpy(&e.beta[i], s.kernel_beta().data() + i * 8, 8);
+    if (!(std::isfinite(e.alpha[i]) && e.alpha[i] >= 0.0 && std::isfinite(e.beta[i]) &&
+          e.beta[i] >= 0.0)) {
+      return makeError("snapshot kernel evidence has a negative or non-finite value");
+    }
+  }
+  return std::optional<kernel::KernelEvidence>(std::move(e));
+}
+
 }  // namespace
 
 Expected<std::size_t> saveSnapshot(const MapView& view, const SensorModel& model, Backend backend,
-                                   const std::filesystem::path& file) {
+                                   const std::filesystem::path& file,
+                                   const kernel::KernelEvidence* kernel) {
   const std::string ext = file.extension().string();
   if (ext == ".bt" || ext == ".ot") {
     auto map = toMap(view, model, Backend::kGrid);
@@ -72,9 +136,15 @@ Expected<std::size_t> saveSnapshot(const MapView& view, const SensorModel& model
     ++n;
   });
   s.set_cell_count(n);
-  s.set_cells_crc32(cellsCrc(keys, values));
+  s.set_cells_crc32(cellsCrc({&keys, &values}));
   s.set_keys(std::move(keys));
   s.set_log_odds(std::move(values));
+  if (kernel != nullptr) {
+    // Format 3: the kernel evidence is required. Fields are written in number order, so a file
+    // cut before the evidence's CRC (field 16, last) is refused, never read as a log-odds map.
+    s.set_format_version(3);
+    putKernelEvidence(*kernel, s);
+  }
   std::string bytes;
   if (!s.SerializeToString(&bytes)) return fileError(file, "cannot serialise snapshot");
   if (auto ok = writeFileAtomically(file, bytes); !ok) return std::unexpected(ok.error());
@@ -89,7 +159,7 @@ Expected<LoadedSnapshot> loadSnapshot(const std::filesystem::path& file, Backend
   proto::Snapshot s;
   if (!s.ParseFromString(*bytes))
     return fileError(file, "not a densemap snapshot (corrupt or truncated)");
-  if (s.format_version() != 1 && s.format_version() != 2) {
+  if (s.format_version() < 1 || s.format_version() > 3) {
     return fileError(file, "unsupported snapshot format " + std::to_string(s.format_version()));
   }
   const std::size_t n = s.cell_count();
@@ -97,10 +167,10 @@ Expected<LoadedSnapshot> loadSnapshot(const std::filesystem::path& file, Backend
     return fileError(file, "snapshot arrays do not match its cell count (truncated?)");
   }
   // The CRC is serialised last: a file cut just before it would parse, so version 2 needs it.
-  if (s.format_version() == 2 && !s.has_cells_crc32()) {
+  if (s.format_version() >= 2 && !s.has_cells_crc32()) {
     return fileError(file, "snapshot lacks its CRC-32 (truncated)");
   }
-  if (s.has_cells_crc32() && s.cells_crc32() != cellsCrc(s.keys(), s.log_odds())) {
+  if (s.has_cells_crc32() && s.cells_crc32() != cellsCrc({&s.keys(), &s.log_odds()})) {
     return fileError(file, "snapshot cells fail their CRC-32 (corrupt)");
   }
   if (expected_resolution_m > 0 && s.resolution_m() != expected_resolution_m) {
@@ -119,7 +189,9 @@ Expected<LoadedSnapshot> loadSnapshot(const std::filesystem::path& file, Backend
     std::memcpy(&v, s.log_odds().data() + i * 4, 4);
     (*map)->setLogOdds(VoxelKey{xyz[0], xyz[1], xyz[2]}, v);
   }
-  return LoadedSnapshot{std::move(*map), s.map_version()};
+  auto evidence = kernelEvidenceOf(s);
+  if (!evidence) return fileError(file, evidence.error().message);
+  return LoadedSnapshot{std::move(*map), s.map_version(), std::move(*evidence)};
 }
 
 std::filesystem::path snapshotGeneration(const std::filesystem::path& path, int g) {
@@ -129,15 +201,15 @@ std::filesystem::path snapshotGeneration(const std::filesystem::path& path, int 
 
 Expected<std::size_t> saveSnapshotKeeping(const MapView& view, const SensorModel& model,
                                           Backend backend, const std::filesystem::path& path,
-                                          int keep) {
+                                          int keep, const kernel::KernelEvidence* kernel) {
   if (keep < 1 || keep > 100) return makeError("snapshot.keep must be 1 .. 100");
   // The extension decides the format: write `path.new` as `path` would be written.
   const std::string ext = path.extension().string();
   if (ext == ".bt" || ext == ".ot") {
-    return saveSnapshot(view, model, backend, path);  // OctoMap files: no generations
+    return saveSnapshot(view, model, backend, path, kernel);  // OctoMap files: no generations
   }
   const std::filesystem::path fresh = snapshotGeneration(path, -1);
-  auto size = saveSnapshot(view, model, backend, fresh);
+  auto size = saveSnapshot(view, model, backend, fresh, kernel);
   if (!size) return size;
   std::error_code ec;
   for (int g = keep - 1; g >= 1; --g) {

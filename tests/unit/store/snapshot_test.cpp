@@ -254,5 +254,130 @@ INSTANTIATE_TEST_SUITE_P(
       return info.param.kind + (info.param.backend == Backend::kGrid ? "_grid" : "_octree");
     });
 
+// Issue 29: a dense map's snapshot keeps its kernel evidence, so a restart resumes the kernel
+// map itself: the resumed pipeline's map, and its update by the next scan, equal the original's
+// bit for bit. A restart from the probabilities alone (the control) does not.
+RawScan kernelScan(std::uint64_t seq) {
+  const Point3f origin(0.1F * static_cast<float>(seq), 0.05F, 0.3F);
+  const PointCloud cloud = test::adversarialScan(0.2, Point3f::Zero(), 1500, 6.0, 1000 + seq);
+  RawScan raw;
+  raw.seq = seq;
+  raw.t_world_sensor = {origin.x(), origin.y(), origin.z()};
+  for (const auto& p : cloud) raw.xyz.insert(raw.xyz.end(), {p.x(), p.y(), p.z()});
+  return raw;
+}
+
+void integrateAll(Pipeline& pipeline, const std::vector<RawScan>& raws) {
+  const std::uint64_t before = pipeline.counters().integrated;
+  for (const RawScan& raw : raws) pipeline.submit(raw);
+  for (int i = 0; i < 1000 && pipeline.counters().integrated < before + raws.size(); ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ASSERT_EQ(pipeline.counters().integrated, before + raws.size());
+}
+
+void expectSameEvidence(const kernel::KernelEvidence& a, const kernel::KernelEvidence& b) {
+  EXPECT_EQ(a.scans, b.scans);
+  ASSERT_EQ(a.keys.size(), b.keys.size());
+  EXPECT_TRUE(std::equal(a.keys.begin(), a.keys.end(), b.keys.begin()));
+  EXPECT_EQ(a.alpha, b.alpha);  // bit for bit
+  EXPECT_EQ(a.beta, b.beta);
+}
+
+TEST(Snapshot, ADenseMapResumesItsKernelEvidenceAndTheNextScanUpdatesItAlike) {
+  test::TempDir dir;
+  const PipelineOptions options{.resolution_m = 0.2,
+                                .max_range_m = 5.0,
+                                .kernel = kernel::KernelMethod::kAkimapRays,
+                                .threads = 2};
+  auto original = Pipeline::create(options);
+  ASSERT_TRUE(original) << original.error().message;
+  (*original)->start();
+  integrateAll(**original, {kernelScan(1), kernelScan(2)});
+  const Pipeline::SavedState saved = (*original)->savedState();
+  ASSERT_TRUE(saved.kernel);
+  ASSERT_GT(saved.kernel->keys.size(), 1000U);
+  EXPECT_EQ(saved.kernel->scans, 2U);
+  const auto file = dir.path() / "dense.dmap";
+  const SensorModel model(options.sensor);
+  ASSERT_TRUE(saveSnapshot(*saved.view, model, Backend::kGrid, file, &*saved.kernel));
+
+  auto loaded = loadSnapshot(file, Backend::kGrid, 0.2);
+  ASSERT_TRUE(loaded) << loaded.error().message;
+  ASSERT_TRUE(loaded->kernel);
+  expectSameEvidence(*loaded->kernel, *saved.kernel);
+  EXPECT_EQ(loaded->version, saved.view->version());
+
+  // The same file without its evidence: the control.
+  auto plain = loadSnapshot(file, Backend::kGrid, 0.2);
+  ASSERT_TRUE(plain);
+  auto resumed = Pipeline::create(options, std::move(loaded->map), loaded->version);
+  auto control = Pipeline::create(options, std::move(plain->map), plain->version);
+  ASSERT_TRUE(resumed && control);
+  ASSERT_TRUE((*resumed)->restoreKernelEvidence(*loaded->kernel));
+  expectSameEvidence(*(*resumed)->savedState().kernel, *saved.kernel);
+  (*resumed)->start();
+  (*control)->start();
+  for (Pipeline* p : {original->get(), resumed->get(), control->get()}) {
+    integrateAll(*p, {kernelScan(3)});
+  }
+  const auto a = (*original)->savedState(), b = (*resumed)->savedState(),
+             c = (*control)->savedState();
+  expectSameEvidence(*b.kernel, *a.kernel);
+  EXPECT_EQ(b.view->version(), a.view->version());
+  EXPECT_EQ(b.view->knownCells(), a.view->knownCells());
+  std::size_t differ = 0, control_differ = 0;
+  a.view->forEachKnown([&](const VoxelKey& k, float v) {
+    differ += b.view->logOdds(k) != v;
+    control_differ += c.view->logOdds(k) != v;
+  });
+  EXPECT_EQ(differ, 0U);
+  EXPECT_GT(control_differ, 100U);  // without the evidence the next scan's update differs
+
+  // Evidence of another kind, or for a log-odds map, is refused.
+  auto other = *loaded->kernel;
+  other.method = kernel::KernelMethod::kBgk;
+  auto fresh = Pipeline::create(options);
+  EXPECT_FALSE((*fresh)->restoreKernelEvidence(other));
+  auto log_odds = Pipeline::create({.resolution_m = 0.2, .max_range_m = 5.0});
+  EXPECT_FALSE((*log_odds)->restoreKernelEvidence(*loaded->kernel));
+  for (Pipeline* p : {original->get(), resumed->get(), control->get()}) p->stop();
+}
+
+TEST(Snapshot, KernelEvidenceCutOrCorruptedIsRefused) {
+  test::TempDir dir;
+  GridMap map(0.2, SensorModel{});
+  map.setLogOdds(VoxelKey{1, 2, 3}, 1.0F);
+  kernel::KernelEvidence e;
+  e.resolution_m = 0.2;
+  e.scans = 7;
+  e.keys = {VoxelKey{1, 2, 3}, VoxelKey{9, 9, 9}};
+  e.alpha = {0.5, 0.0};
+  e.beta = {0.25, 3.0};
+  const auto file = dir.path() / "k.dmap";
+  ASSERT_TRUE(saveSnapshot(*MapView::fromMap(map, 4), map.sensorModel(), Backend::kGrid, file, &e));
+  auto loaded = loadSnapshot(file, Backend::kGrid, 0.2);
+  ASSERT_TRUE(loaded && loaded->kernel);
+  expectSameEvidence(*loaded->kernel, e);
+  std::string whole;
+  {
+    std::ifstream in(file, std::ios::binary);
+    whole.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  // No prefix parses, not even one that ends where the log-odds cells do.
+  for (std::size_t cut = 0; cut < whole.size(); ++cut) {
+    std::ofstream(dir.path() / "cut.dmap", std::ios::binary) << whole.substr(0, cut);
+    EXPECT_FALSE(loadSnapshot(dir.path() / "cut.dmap", Backend::kGrid, 0.0)) << "cut at " << cut;
+  }
+  // A flipped bit in a beta value (the last 8 bytes before the CRC field's 5) fails the CRC.
+  std::string flipped = whole;
+  flipped[flipped.size() - 7] = static_cast<char>(flipped[flipped.size() - 7] ^ 0x10);
+  std::ofstream(dir.path() / "flip.dmap", std::ios::binary) << flipped;
+  auto corrupt = loadSnapshot(dir.path() / "flip.dmap", Backend::kGrid, 0.0);
+  ASSERT_FALSE(corrupt);
+  EXPECT_NE(corrupt.error().message.find("kernel evidence"), std::string::npos)
+      << corrupt.error().message;
+}
+
 }  // namespace
 }  // namespace densemap

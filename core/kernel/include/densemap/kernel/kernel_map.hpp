@@ -109,6 +109,17 @@ struct KernelScanStats {
   double ms_samples = 0, ms_kernels = 0, ms_occupied = 0, ms_free = 0, ms_apply = 0;
 };
 
+/// A kernel map's evidence, for snapshots (issue 29): per known cell its alpha and beta (the
+/// prior not included), in block order, and the scans integrated (the random free samples'
+/// counter, so that a restored map's next scan draws what the original's would).
+struct KernelEvidence {
+  KernelMethod method = KernelMethod::kAkimapRays;
+  double resolution_m = 0.0;
+  std::uint64_t scans = 0;
+  std::vector<VoxelKey> keys;
+  std::vector<double> alpha, beta;
+};
+
 /// A dense occupancy map by Bayesian kernel inference: per cell Beta(alpha, beta), with the
 /// kernels of each scan's samples accumulated into alpha (occupied) and beta (free), Eq. 3.8-3.9.
 /// The result depends only on the scans and the seed, never on the thread count: each 8^3
@@ -141,6 +152,13 @@ class KernelMap {
   void forEachKnown(const std::function<void(const VoxelKey&, double)>& f) const;
   [[nodiscard]] std::size_t knownCells() const;
   [[nodiscard]] std::size_t scans() const { return scans_; }
+
+  /// A copy of the evidence (snapshots).
+  [[nodiscard]] KernelEvidence evidence() const;
+  /// Replaces the map's evidence with `evidence`: an error (and the map unchanged) when it is
+  /// another method's or resolution's, its arrays differ in length, or a value is not finite
+  /// and >= 0. Restored, the map integrates its next scan exactly as the one saved would.
+  [[nodiscard]] Expected<void> restore(const KernelEvidence& evidence);
 
  private:
   struct Block {

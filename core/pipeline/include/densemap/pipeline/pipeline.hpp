@@ -136,6 +136,19 @@ class Pipeline {
   [[nodiscard]] std::future<Expected<std::string>> command(Command command);
 
   [[nodiscard]] std::shared_ptr<const MapView> view() const { return view_.load(); }
+
+  /// What a snapshot saves: the latest view and, for kernel map kinds, the kernel evidence of
+  /// the same version (taken on the worker between scans, so the two agree).
+  struct SavedState {
+    std::shared_ptr<const MapView> view;
+    std::optional<kernel::KernelEvidence> kernel;
+  };
+  /// Waits for the worker (at most one scan) unless the pipeline is stopped. Not from a
+  /// Command (the worker would wait for itself).
+  [[nodiscard]] SavedState savedState();
+  /// Before start(): resumes a kernel map kind's evidence from a snapshot (issue 29). An error
+  /// (and nothing changed) for a log-odds kind or another kernel kind's evidence.
+  [[nodiscard]] Expected<void> restoreKernelEvidence(const kernel::KernelEvidence& evidence);
   [[nodiscard]] PipelineCounters counters() const;
   [[nodiscard]] const PipelineOptions& options() const { return options_; }
 

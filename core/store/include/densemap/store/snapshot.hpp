@@ -1,5 +1,7 @@
 #pragma once
 
+#include "densemap/kernel/kernel_map.hpp"
+
 #include <filesystem>
 #include <memory>
 #include <optional>
@@ -15,13 +17,16 @@ namespace densemap {
 struct LoadedSnapshot {
   std::unique_ptr<OccupancyMap> map;
   std::uint64_t version = 0;
+  std::optional<kernel::KernelEvidence> kernel;  // a dense map's evidence, when saved with it
 };
 
 /// Writes `view` as a protobuf snapshot (`.dmap`) atomically (temp file, fsync, rename), or as
-/// an OctoMap `.bt`/`.ot` when the name says so.
+/// an OctoMap `.bt`/`.ot` when the name says so. `kernel`: a dense map's evidence, of the same
+/// version as `view`, saved with it in a .dmap (OctoMap files take the probabilities only).
 [[nodiscard]] Expected<std::size_t> saveSnapshot(const MapView& view, const SensorModel& model,
                                                  Backend backend,
-                                                 const std::filesystem::path& file);
+                                                 const std::filesystem::path& file,
+                                                 const kernel::KernelEvidence* kernel = nullptr);
 
 /// Reads a `.dmap` snapshot into a map of `backend`. Errors for unreadable, truncated or
 /// inconsistent files, and for a resolution other than `expected_resolution_m` (if > 0).
@@ -36,10 +41,9 @@ struct LoadedSnapshot {
 /// as `path.new`, then `path.<keep-2>` ... `path` move one generation older and `path.new`
 /// becomes `path`. A crash at any moment leaves every file complete (a temporary file aside);
 /// the newest complete save is `path.new` or `path`.
-[[nodiscard]] Expected<std::size_t> saveSnapshotKeeping(const MapView& view,
-                                                        const SensorModel& model, Backend backend,
-                                                        const std::filesystem::path& path,
-                                                        int keep);
+[[nodiscard]] Expected<std::size_t> saveSnapshotKeeping(
+    const MapView& view, const SensorModel& model, Backend backend,
+    const std::filesystem::path& path, int keep, const kernel::KernelEvidence* kernel = nullptr);
 
 struct ResumedSnapshot {
   LoadedSnapshot snapshot;
