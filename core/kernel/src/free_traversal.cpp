@@ -7,16 +7,19 @@
 #include <algorithm>
 #include <atomic>
 #include <bit>
-#include <chrono>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <deque>
 
 #include "densemap/kernel/kernel_function.hpp"
 
 namespace densemap::kernel {
 namespace {
+
+/// A voxel within reach of a capsule: its key and squared distance from the capsule's axis.
+struct Near {
+  VoxelKey key;
+  double d2 = 0.0;
+};
 
 /// One thread's blocks of one scan: a slot per block (a deque: slots never move, and are kept
 /// between scans), a hash from block key to slot, and in front of it a small direct-mapped
@@ -38,6 +41,7 @@ struct ThreadBlocks {
   }
   std::uint64_t last_key = ~std::uint64_t{0};
   FreeTraversal::Block* last = nullptr;
+  std::vector<Near> near;  // one capsule's voxels (collectVoxelsNear), kept
 
   FreeTraversal::Block& blockFor(std::uint64_t key) {
     if (key == last_key) return *last;
@@ -63,27 +67,27 @@ struct ThreadBlocks {
   }
 };
 
-/// Calls visit(key, d2, true) once for every voxel whose centre lies within `reach` of the
-/// segment [a, b] (d2: that squared distance), slice by slice along the segment's dominant axis. In
-/// an interior slice (every point of it within `reach` has its nearest point of the line on the
-/// segment) the distance is the line's: a quadratic form in the centre's offset from where the
-/// line crosses the slice, fixed per segment, tested over the window of rows and columns the
-/// ellipse it bounds can reach (no square root, no division per row). The few end slices test
-/// every candidate of the capsule's box with the segment's distance. Keys are clamped to the
-/// addressable range (a clamped candidate lies farther than `reach` and is not visited).
-template <class Visit>
-void forEachVoxelNear(const VoxelGrid& grid, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
-                      double reach, Visit&& visit) {
+/// Writes into `out` from index 0 every voxel whose centre lies within `reach` of the segment
+/// [a, b], once, and returns how many (`out` only grows: no element is constructed twice),
+/// slice by slice along the segment's dominant axis. In an interior slice (every point of it
+/// within `reach` has its nearest point of the line on the segment) the distance is the
+/// line's: a quadratic form in the centre's offset from where the line crosses the slice, fixed
+/// per segment, tested over a fixed window of rows and columns (as many voxel centres as the
+/// ellipse's box can hold) without a branch per candidate: a candidate is written, and kept
+/// when inside. The few end slices test the capsule's box with the segment's distance.
+std::size_t collectVoxelsNear(const VoxelGrid& grid, const Eigen::Vector3d& a,
+                              const Eigen::Vector3d& b, double reach, std::vector<Near>& out) {
   const Eigen::Vector3d seg = b - a;
   const double len2 = seg.squaredNorm();
-  if (!(len2 > 0.0)) return;
+  if (!(len2 > 0.0)) return 0;
   const double inverse_len2 = 1.0 / len2;
   const Eigen::Vector3d u = seg / std::sqrt(len2);
   int ax = 0;
   seg.cwiseAbs().maxCoeff(&ax);
   const int bx = (ax + 1) % 3, cx = (ax + 2) % 3;
   const double r2 = reach * reach;
-  const double inverse_res = 1.0 / grid.resolution();
+  const double res = grid.resolution();
+  const double inverse_res = 1.0 / res;
   // The keys of the first voxel centre at or after v and of the last at or before it, clamped
   // into the addressable range ([0, 65535]; a clamped candidate lies farther than `reach`).
   const auto firstCentre = [&](double v) {
@@ -92,14 +96,13 @@ void forEachVoxelNear(const VoxelGrid& grid, const Eigen::Vector3d& a, const Eig
   const auto lastCentre = [&](double v) {
     return static_cast<int>(std::clamp(v * inverse_res + 32767.5, 0.0, 65535.0));
   };
-  const auto emit = [&](int i, int j, int k, double d2, bool inside) {
+  const auto keyOf = [&](int i, int j, int k) {
     int key[3];
     key[ax] = i;
     key[bx] = j;
     key[cx] = k;
-    visit(VoxelKey{static_cast<std::uint16_t>(key[0]), static_cast<std::uint16_t>(key[1]),
-                   static_cast<std::uint16_t>(key[2])},
-          d2, inside);
+    return VoxelKey{static_cast<std::uint16_t>(key[0]), static_cast<std::uint16_t>(key[1]),
+                    static_cast<std::uint16_t>(key[2])};
   };
   // The squared distance from the line of a centre offset (0, ob, oc) from the line's crossing
   // of its slice: |o|^2 - (o.u)^2 = qbb ob^2 + 2 qbc ob oc + qcc oc^2; the ellipse qform < r2
@@ -108,10 +111,18 @@ void forEachVoxelNear(const VoxelGrid& grid, const Eigen::Vector3d& a, const Eig
   const double inverse_ua2 = 1.0 / (u[ax] * u[ax]);
   const double half_b = reach * std::sqrt(1.0 + u[bx] * u[bx] * inverse_ua2) + 1e-9;
   const double half_c = reach * std::sqrt(1.0 + u[cx] * u[cx] * inverse_ua2) + 1e-9;
+  // The most voxel centres an interval of 2 * half holds.
+  const int span_b = static_cast<int>(2.0 * half_b * inverse_res) + 1;
+  const int span_c = static_cast<int>(2.0 * half_c * inverse_res) + 1;
   const double slope_b = seg[bx] / seg[ax], slope_c = seg[cx] / seg[ax];
   const double inverse_seg_ax = 1.0 / seg[ax];
   const int i0 = firstCentre(std::min(a[ax], b[ax]) - reach),
             i1 = lastCentre(std::max(a[ax], b[ax]) + reach);
+  // Room for every interior window (written before being kept) and the end slices' visits.
+  std::size_t n = 0;
+  const std::size_t room =
+      static_cast<std::size_t>(i1 - i0 + 1) * static_cast<std::size_t>(span_b * span_c);
+  if (out.size() < room) out.resize(room);
   for (int i = i0; i <= i1; ++i) {
     const double x = grid.keyToCoord(static_cast<std::uint16_t>(i));
     // The part of the segment within `reach` of this slice along ax.
@@ -119,17 +130,18 @@ void forEachVoxelNear(const VoxelGrid& grid, const Eigen::Vector3d& a, const Eig
     if (t0 > t1) std::swap(t0, t1);
     if (t0 > 0.0 && t1 < 1.0) {
       const double pb = a[bx] + (x - a[ax]) * slope_b, pc = a[cx] + (x - a[ax]) * slope_c;
-      // Only the rows and columns whose centres lie inside the ellipse's box.
-      const int j0 = firstCentre(pb - half_b), j1 = lastCentre(pb + half_b);
-      const int k0 = firstCentre(pc - half_c), k1 = lastCentre(pc + half_c);
+      const int j0 = firstCentre(pb - half_b), k0 = firstCentre(pc - half_c);
+      if (j0 + span_b > 65536 || k0 + span_c > 65536) continue;  // the addressable range's edge
+      const double ob0 = grid.keyToCoord(static_cast<std::uint16_t>(j0)) - pb;
       const double oc0 = grid.keyToCoord(static_cast<std::uint16_t>(k0)) - pc;
-      for (int j = j0; j <= j1; ++j) {
-        const double ob = grid.keyToCoord(static_cast<std::uint16_t>(j)) - pb;
+      for (int dj = 0; dj < span_b; ++dj) {
+        const double ob = ob0 + dj * res;
         const double row = qbb * ob * ob, cross = 2.0 * qbc * ob;
-        double oc = oc0;
-        for (int k = k0; k <= k1; ++k, oc += grid.resolution()) {
+        for (int dk = 0; dk < span_c; ++dk) {
+          const double oc = oc0 + dk * res;
           const double d2 = row + (cross + qcc * oc) * oc;
-          if (d2 < r2) emit(i, j, k, std::max(d2, 0.0), true);
+          out[n] = {keyOf(i, j0 + dj, k0 + dk), std::max(d2, 0.0)};
+          n += d2 < r2;
         }
       }
       continue;
@@ -152,10 +164,13 @@ void forEachVoxelNear(const VoxelGrid& grid, const Eigen::Vector3d& a, const Eig
         const Eigen::Vector3d w = c - a;
         const double t = std::clamp(w.dot(seg) * inverse_len2, 0.0, 1.0);
         const double d2 = (w - t * seg).squaredNorm();
-        if (d2 < r2) emit(i, j, k, d2, true);
+        if (!(d2 < r2)) continue;
+        if (n == out.size()) out.resize(2 * n + 16);
+        out[n++] = {keyOf(i, j, k), d2};
       }
     }
   }
+  return n;
 }
 
 }  // namespace
@@ -183,7 +198,6 @@ double FreeTraversal::evidenceShare(double reach) {
 
 std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const FreeExtent> extents,
                                       double reach) {
-  const auto t_start = std::chrono::steady_clock::now();
   for (ThreadBlocks& t : buffers_->threads) t.reset();
   const SquaredKernelTable& table = squaredKernel();
   reach = std::clamp(reach, 1e-3, 1.0);
@@ -192,28 +206,29 @@ std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const Fre
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, extents.size(), 512),
                     [&](const tbb::blocked_range<std::size_t>& range) {
                       ThreadBlocks& mine = buffers_->threads.local();
+                      std::vector<Near>& near = mine.near;
                       std::size_t n = 0;
                       for (std::size_t r = range.begin(); r != range.end(); ++r) {
                         const FreeExtent& e = extents[r];
                         const double inverse_length2 = 1.0 / (e.radius_m * e.radius_m);
                         const double scaled_weight = e.weight * compensation * kScale;
-                        forEachVoxelNear(grid, e.from, e.to, reach * e.radius_m,
-                                         [&](const VoxelKey& key, double d2, bool inside) {
-                                           if (!inside) return;
-                                           const double w = table(d2 * inverse_length2);
-                                           if (!(w > 0.0)) return;
-                                           ++n;
-                                           Block& blk = mine.blockFor(block::blockOf(key));
-                                           const int cell = block::indexOf(key);
-                                           // w >= 0: rounding half up without llround's call.
-                                           blk.sum[static_cast<std::size_t>(cell)] +=
-                                               static_cast<std::int64_t>(w * scaled_weight + 0.5);
-                                           block::setBit(blk.mask, cell);
-                                         });
+                        const std::size_t count =
+                            collectVoxelsNear(grid, e.from, e.to, reach * e.radius_m, near);
+                        for (std::size_t q = 0; q < count; ++q) {
+                          const Near& v = near[q];
+                          const double w = table(v.d2 * inverse_length2);
+                          if (!(w > 0.0)) continue;
+                          ++n;
+                          Block& blk = mine.blockFor(block::blockOf(v.key));
+                          const int cell = block::indexOf(v.key);
+                          // w >= 0: rounding half up without llround's call.
+                          blk.sum[static_cast<std::size_t>(cell)] +=
+                              static_cast<std::int64_t>(w * scaled_weight + 0.5);
+                          block::setBit(blk.mask, cell);
+                        }
                       }
                       visits += n;
                     });
-  const auto tm = std::chrono::steady_clock::now();
   // Merge: every thread's blocks by key (ascending), integer sums (exact in any order).
   std::vector<const Block*> all;
   for (const ThreadBlocks& t : buffers_->threads) {
@@ -234,12 +249,6 @@ std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const Fre
         m.mask[static_cast<std::size_t>(w)] |= all[i]->mask[static_cast<std::size_t>(w)];
     }
   }
-  if (getenv("FT_DEBUG"))
-    fprintf(
-        stderr, "ft: raster %.1f merge %.1f blocks %zu merged %zu\n",
-        std::chrono::duration<double, std::milli>(tm - t_start).count(),
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - tm).count(),
-        all.size(), merged_.size());
   return visits.load();
 }
 

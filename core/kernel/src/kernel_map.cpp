@@ -2,6 +2,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 #include <tbb/parallel_sort.h>
 
 #include <Eigen/Dense>
@@ -220,36 +221,6 @@ struct Kernel {
 /// x fastest): a box search reads one contiguous run of samples per (y, z) row of buckets.
 class SampleIndex {
  public:
-  /// Buckets of `cell` metres, made coarser when the samples' box would need more than
-  /// `max_cells` of them.
-  SampleIndex(const std::vector<Sample>& samples, double cell, std::size_t max_cells) {
-    Eigen::AlignedBox3d box;
-    for (const Sample& s : samples) {
-      if (!s.segment) box.extend(s.x);
-    }
-    if (box.isEmpty()) return;
-    const Eigen::Vector3d size = box.sizes();
-    cell_ = cell;
-    while (cellCount(size) > max_cells) cell_ *= 1.5;
-    min_ = box.min();
-    for (int a = 0; a < 3; ++a) n_[a] = static_cast<std::int64_t>(size[a] / cell_) + 1;
-    starts_.assign(static_cast<std::size_t>(n_[0] * n_[1] * n_[2]) + 1, 0);
-    std::vector<std::uint32_t> bucket(samples.size(), 0);
-    for (std::uint32_t i = 0; i < samples.size(); ++i) {
-      if (samples[i].segment) continue;
-      const auto c = cellOf(samples[i].x.array());
-      bucket[i] = static_cast<std::uint32_t>((c[2] * n_[1] + c[1]) * n_[0] + c[0]);
-      ++starts_[bucket[i] + 1];
-    }
-    for (std::size_t b = 1; b < starts_.size(); ++b) starts_[b] += starts_[b - 1];
-    entries_.resize(starts_.back());
-    std::vector<std::uint32_t> next(starts_.begin(), starts_.end() - 1);
-    for (std::uint32_t i = 0; i < samples.size(); ++i) {
-      if (!samples[i].segment)  // stable: ascending per bucket
-        entries_[next[bucket[i]]++] = {samples[i].x, i, samples[i].occupied};
-    }
-  }
-
   /// A point sample as the index holds it: its position and label beside its index, so that a
   /// search reads one contiguous run per row of buckets (not the samples, scattered).
   struct Entry {
@@ -257,6 +228,59 @@ class SampleIndex {
     std::uint32_t index = 0;
     bool occupied = false;
   };
+  /// The index's arrays, kept by the caller between scans (no fresh pages every scan).
+  struct Storage {
+    std::vector<std::uint32_t> starts;  // per bucket, into entries; see the constructor
+    std::vector<Entry> entries;         // the point samples by bucket
+    std::vector<std::uint32_t> bucket;  // per sample
+  };
+
+  /// Buckets of `cell` metres, made coarser when the samples' box would need more than
+  /// `max_cells` of them.
+  SampleIndex(const std::vector<Sample>& samples, double cell, std::size_t max_cells,
+              Storage& storage)
+      : starts_(storage.starts), entries_(storage.entries) {
+    entries_.clear();
+    const Eigen::AlignedBox3d box = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, samples.size(), 16384), Eigen::AlignedBox3d(),
+        [&](const tbb::blocked_range<std::size_t>& r, Eigen::AlignedBox3d b) {
+          for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            if (!samples[i].segment) b.extend(samples[i].x);
+          }
+          return b;
+        },
+        [](Eigen::AlignedBox3d a, const Eigen::AlignedBox3d& b) { return a.extend(b); });
+    if (box.isEmpty()) return;
+    const Eigen::Vector3d size = box.sizes();
+    cell_ = cell;
+    while (cellCount(size) > max_cells) cell_ *= 1.5;
+    min_ = box.min();
+    for (int a = 0; a < 3; ++a) n_[a] = static_cast<std::int64_t>(size[a] / cell_) + 1;
+    const auto buckets = static_cast<std::size_t>(n_[0] * n_[1] * n_[2]);
+    // Counts at [b + 2], summed: starts[b + 1] is then bucket b's start, the cursor of the
+    // forward scatter, which leaves starts[b] = start of b and starts[b + 1] = its end.
+    starts_.assign(buckets + 2, 0);
+    std::vector<std::uint32_t>& bucket = storage.bucket;
+    bucket.resize(samples.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, samples.size(), 16384),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                          if (samples[i].segment) continue;
+                          const auto c = cellOf(samples[i].x.array());
+                          bucket[i] =
+                              static_cast<std::uint32_t>((c[2] * n_[1] + c[1]) * n_[0] + c[0]);
+                        }
+                      });
+    for (std::uint32_t i = 0; i < samples.size(); ++i) {
+      if (!samples[i].segment) ++starts_[bucket[i] + 2];
+    }
+    for (std::size_t b = 2; b < starts_.size(); ++b) starts_[b] += starts_[b - 1];
+    entries_.resize(starts_.back());
+    for (std::uint32_t i = 0; i < samples.size(); ++i) {
+      if (!samples[i].segment)  // stable: ascending per bucket
+        entries_[starts_[bucket[i] + 1]++] = {samples[i].x, i, samples[i].occupied};
+    }
+  }
 
   /// Calls f(entry) for every point sample in the box centre +- half, in a fixed order.
   template <class F>
@@ -294,11 +318,11 @@ class SampleIndex {
     return c;
   }
 
+  std::vector<std::uint32_t>& starts_;
+  std::vector<Entry>& entries_;
   double cell_ = 1.0;
   Eigen::Vector3d min_ = Eigen::Vector3d::Zero();
   std::int64_t n_[3] = {1, 1, 1};
-  std::vector<std::uint32_t> starts_;  // per bucket, into entries_; one extra at the end
-  std::vector<Entry> entries_;         // the point samples by bucket
 };
 
 Kernel isotropicKernel(const Sample& s, const KernelOptions& o) {
@@ -501,8 +525,21 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
 }
 }  // namespace
 
+/// A scan's buffers, kept between scans: a fresh vector per scan costs a page fault per 4 KiB
+/// (about 7% of a BALM scan's time was the kernel's fault handler).
+struct KernelMap::Scratch {
+  std::vector<std::vector<Sample>> sample_parts;
+  SampleIndex::Storage index;
+  std::vector<Kernel> kernels;
+  std::vector<FreeExtent> free_extents;
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> pairs;
+};
+
 KernelMap::KernelMap(double resolution_m, const KernelOptions& options)
-    : grid_(resolution_m), options_(options), free_(std::make_unique<FreeTraversal>()) {}
+    : grid_(resolution_m),
+      options_(options),
+      free_(std::make_unique<FreeTraversal>()),
+      scratch_(std::make_unique<Scratch>()) {}
 KernelMap::~KernelMap() = default;
 KernelMap::KernelMap(KernelMap&&) noexcept = default;
 KernelMap& KernelMap::operator=(KernelMap&&) noexcept = default;
@@ -529,19 +566,22 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
                       std::max(options_.search_max, grid_.resolution()));
     keep_free = [&](const Eigen::Vector3d& x) { return (*near_hits)(x); };
   }
-  makeSamples(points_world, origin_world, sampling, scans_, keep_free, samples_);
+  makeSamples(points_world, origin_world, sampling, scans_, keep_free, samples_,
+              scratch_->sample_parts);
   const std::vector<Sample>& samples = samples_;
   ++scans_;
   stats.ms_samples = msSince(t0);
   t0 = std::chrono::steady_clock::now();
 
-  std::vector<Kernel> kernels;
-  std::vector<FreeExtent> free_extents;
+  std::vector<Kernel>& kernels = scratch_->kernels;
+  std::vector<FreeExtent>& free_extents = scratch_->free_extents;
+  kernels.clear();
+  free_extents.clear();
   if (options_.method == KernelMethod::kAkimap || rays) {
     // Buckets about the smallest search box (a voxel), at most 2^21 of them (coarser over a
     // large scan: the counting sort clears, sums and copies every bucket each scan).
     const SampleIndex index(samples, std::max(grid_.resolution(), 0.25 * options_.search_max),
-                            std::size_t{1} << 21);
+                            std::size_t{1} << 21, scratch_->index);
     // kAkimapRays: kernels for the occupied samples only (then the free segments).
     std::vector<std::uint32_t> centres;
     for (std::uint32_t i = 0; i < samples.size(); ++i) {
@@ -615,7 +655,8 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
 
   // (block, kernel) pairs, sorted: each block then sums its kernels in sample order, whatever
   // the thread that runs it.
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> pairs;
+  std::vector<std::pair<std::uint64_t, std::uint32_t>>& pairs = scratch_->pairs;
+  pairs.clear();
   for (std::uint32_t i = 0; i < kernels.size(); ++i) {
     Kernel& k = kernels[i];
     const Eigen::Vector3d lo = k.x.cwiseMin(k.to) - k.half_extent;  // a cell kernel: x itself
@@ -808,8 +849,8 @@ KernelEvidence KernelMap::evidence() const {
 
 Expected<void> KernelMap::restore(const KernelEvidence& e) {
   if (e.method != options_.method) {
-    return makeError("kernel evidence of " + std::string(kernelMethodName(e.method)) +
-                     ", not " + std::string(kernelMethodName(options_.method)));
+    return makeError("kernel evidence of " + std::string(kernelMethodName(e.method)) + ", not " +
+                     std::string(kernelMethodName(options_.method)));
   }
   if (e.resolution_m != grid_.resolution()) {
     return makeError("kernel evidence at " + std::to_string(e.resolution_m) + " m, not " +

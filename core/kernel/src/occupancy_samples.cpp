@@ -83,6 +83,14 @@ void makeSamples(const PointCloud& points_world, const Point3f& origin_world,
                  const SamplingOptions& options, std::uint64_t scan_index,
                  const std::function<bool(const Eigen::Vector3d&)>& keep_free,
                  std::vector<Sample>& samples) {
+  std::vector<std::vector<Sample>> parts;
+  makeSamples(points_world, origin_world, options, scan_index, keep_free, samples, parts);
+}
+
+void makeSamples(const PointCloud& points_world, const Point3f& origin_world,
+                 const SamplingOptions& options, std::uint64_t scan_index,
+                 const std::function<bool(const Eigen::Vector3d&)>& keep_free,
+                 std::vector<Sample>& samples, std::vector<std::vector<Sample>>& parts) {
   samples.clear();
   const Eigen::Vector3d origin = origin_world.cast<double>();
   // Fixed chunks of rays in parallel, concatenated in ray order: the same samples, in the same
@@ -94,15 +102,17 @@ void makeSamples(const PointCloud& points_world, const Point3f& origin_world,
                   samples);
     return;
   }
-  std::vector<std::vector<Sample>> parts(chunks);
+  if (parts.size() < chunks) parts.resize(chunks);
   tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+    parts[c].clear();
     samplesOfRays(points_world, c * kChunk, std::min(points_world.size(), (c + 1) * kChunk), origin,
                   options, scan_index, keep_free, parts[c]);
   });
   std::size_t total = 0;
-  for (const auto& part : parts) total += part.size();
+  for (std::size_t c = 0; c < chunks; ++c) total += parts[c].size();
   samples.reserve(total);
-  for (const auto& part : parts) samples.insert(samples.end(), part.begin(), part.end());
+  for (std::size_t c = 0; c < chunks; ++c)
+    samples.insert(samples.end(), parts[c].begin(), parts[c].end());
 }
 
 NearHits::NearHits(const std::vector<Eigen::Vector3d>& hits, double reach) : cell_(reach) {
@@ -119,10 +129,11 @@ NearHits::NearHits(const std::vector<Eigen::Vector3d>& hits, double reach) : cel
     min_ = box.min().array() - cell_;
     for (int a = 0; a < 3; ++a) n_[a] = static_cast<std::int64_t>(box.sizes()[a] / cell_) + 3;
   }
+  inverse_cell_ = 1.0 / cell_;
   marks_.assign(static_cast<std::size_t>(n_[0] * n_[1] * n_[2]), false);
   for (const Eigen::Vector3d& h : hits) {
     std::int64_t c[3];
-    for (int a = 0; a < 3; ++a) c[a] = static_cast<std::int64_t>((h[a] - min_[a]) / cell_);
+    for (int a = 0; a < 3; ++a) c[a] = static_cast<std::int64_t>((h[a] - min_[a]) * inverse_cell_);
     for (std::int64_t z = c[2] - 1; z <= c[2] + 1; ++z) {
       for (std::int64_t y = c[1] - 1; y <= c[1] + 1; ++y) {
         for (std::int64_t x = c[0] - 1; x <= c[0] + 1; ++x) {
@@ -136,7 +147,9 @@ NearHits::NearHits(const std::vector<Eigen::Vector3d>& hits, double reach) : cel
 bool NearHits::operator()(const Eigen::Vector3d& x) const {
   std::int64_t c[3];
   for (int a = 0; a < 3; ++a) {
-    const double v = std::floor((x[a] - min_[a]) / cell_);
+    // The hits' cubes came from the same product: a point within `reach` of a hit lands at
+    // most one cube from it (a multiplication, not a division: 1.2M tests a BALM scan).
+    const double v = std::floor((x[a] - min_[a]) * inverse_cell_);
     if (!(v >= 0.0 && v < static_cast<double>(n_[a]))) return false;
     c[a] = static_cast<std::int64_t>(v);
   }

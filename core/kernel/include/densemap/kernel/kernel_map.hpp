@@ -173,6 +173,8 @@ class KernelMap {
   std::size_t scans_ = 0;
   std::unique_ptr<FreeTraversal> free_;     // its buffers, kept between scans
   std::vector<Sample> samples_, segments_;  // per-scan buffers, kept between scans
+  struct Scratch;                           // the other per-scan buffers (kernel_map.cpp)
+  std::unique_ptr<Scratch> scratch_;
 };
 
 }  // namespace densemap::kernel

@@ -49,6 +49,11 @@ void makeSamples(const PointCloud& points_world, const Point3f& origin_world,
                  const SamplingOptions& options, std::uint64_t scan_index,
                  const std::function<bool(const Eigen::Vector3d&)>& keep_free,
                  std::vector<Sample>& out);
+/// The same with the per-chunk buffers of the parallel draw kept by the caller too.
+void makeSamples(const PointCloud& points_world, const Point3f& origin_world,
+                 const SamplingOptions& options, std::uint64_t scan_index,
+                 const std::function<bool(const Eigen::Vector3d&)>& keep_free,
+                 std::vector<Sample>& out, std::vector<std::vector<Sample>>& parts);
 
 /// Whether a point lies within `reach` (per axis, a box) of a scan's hits, by a bitmap of
 /// cubes of `reach` over the hits' bounding box: a superset (it may say yes a little farther
@@ -60,7 +65,7 @@ class NearHits {
   [[nodiscard]] bool operator()(const Eigen::Vector3d& x) const;
 
  private:
-  double cell_ = 1.0;
+  double cell_ = 1.0, inverse_cell_ = 1.0;
   Eigen::Vector3d min_ = Eigen::Vector3d::Zero();
   std::int64_t n_[3] = {0, 0, 0};
   std::vector<bool> marks_;
