@@ -342,7 +342,7 @@ Kernel isotropicKernel(const Sample& s, const KernelOptions& o) {
 /// When `normal` is given, it is set to the surface normal at the sample (the covariance's
 /// least axis) where the same-label neighbourhood is flat (least spread under a quarter of
 /// the middle one, regulariser aside), else to zero.
-/// `s` is a sample or a voxel's mean hit; `left_out(j)` says which samples are not its
+/// `s` is a sample or a voxel's mean hit; `left_out(entry)` says which samples are not its
 /// neighbours (the sample itself, or the voxel's own hits).
 template <class LeftOut>
 Kernel adaptiveKernel(const Sample& s, LeftOut&& left_out, const std::vector<Sample>& samples,
@@ -353,7 +353,7 @@ Kernel adaptiveKernel(const Sample& s, LeftOut&& left_out, const std::vector<Sam
       resolution + (o.search_max - resolution) * std::clamp(s.range / range_ref, 0.0, 1.0);
   neighbours.clear();
   index.forEachInBox(s.x, half, [&](const SampleIndex::Entry& e) {
-    if (!left_out(e.index)) neighbours.push_back({e.x, e.occupied == s.occupied});
+    if (!left_out(e)) neighbours.push_back({e.x, e.occupied == s.occupied});
   });
   // The regulariser keeps flat kernels at least `min_thickness` (and a voxel) thick, one
   // standard deviation, so a surface's samples reach the centres of the cells they lie in; the
@@ -454,12 +454,12 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
                           std::vector<RayStop>& stops, std::vector<Eigen::Vector3d>& means,
                           std::vector<double>& counts) {
   std::vector<std::pair<std::uint64_t, std::uint32_t>> by_voxel(hits.size());
-  std::vector<std::uint64_t> hit_voxel(samples.size(), ~std::uint64_t{0});  // free: none
-  for (std::uint32_t h = 0; h < hits.size(); ++h) {
-    const auto key = grid.pointToKey(samples[hits[h]].x.cast<float>());
-    by_voxel[h] = {key ? key->packed() : ~std::uint64_t{0} - 1, h};
-    hit_voxel[hits[h]] = by_voxel[h].first;
-  }
+  // A hit's voxel, packed (outside the addressable range: one reserved value).
+  const auto voxelOf = [&grid](const Eigen::Vector3d& x) {
+    const auto key = grid.pointToKey(x.cast<float>());
+    return key ? key->packed() : ~std::uint64_t{0} - 1;
+  };
+  for (std::uint32_t h = 0; h < hits.size(); ++h) by_voxel[h] = {voxelOf(samples[hits[h]].x), h};
   tbb::parallel_sort(by_voxel.begin(), by_voxel.end());
   // Groups of hits by voxel, and where each group's kernels go (one, or one per hit).
   const auto min_hits = static_cast<std::uint32_t>(std::max(1.0, options.aggregate_min_hits));
@@ -489,8 +489,8 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
             for (std::uint32_t p = first; p < last; ++p, ++out) {
               const std::uint32_t h = by_voxel[p].second, i = hits[h];
               kernels[out] = adaptiveKernel(
-                  samples[i], [i](std::uint32_t j) { return j == i; }, samples, index, options,
-                  grid.resolution(), neighbours, &normal);
+                  samples[i], [i](const SampleIndex::Entry& e) { return e.index == i; }, samples,
+                  index, options, grid.resolution(), neighbours, &normal);
               means[out] = samples[i].x;
               counts[out] = 1.0;
               stops[h] = rayStop((samples[i].x - origin).normalized(), normal, options);
@@ -510,8 +510,10 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
           centre.range /= count;
           const std::uint64_t own = by_voxel[first].first;
           Kernel k = adaptiveKernel(
-              centre, [&](std::uint32_t j) { return hit_voxel[j] == own; }, samples, index, options,
-              grid.resolution(), neighbours, &normal);
+              centre,
+              // The voxel's own hits, recognised by their position (no lookup per neighbour).
+              [&](const SampleIndex::Entry& e) { return e.occupied && voxelOf(e.x) == own; },
+              samples, index, options, grid.resolution(), neighbours, &normal);
           k.weight *= count;
           kernels[out] = k;
           means[out] = centre.x;
@@ -600,21 +602,21 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
         for (const std::uint32_t i : centres) hit_positions.push_back(samples[i].x);
       }
       kernels.resize(centres.size());
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, centres.size(), 256),
-                        [&](const tbb::blocked_range<std::size_t>& range) {
-                          std::vector<Neighbour> neighbours;
-                          Eigen::Vector3d normal;
-                          for (std::size_t c = range.begin(); c != range.end(); ++c) {
-                            const std::uint32_t i = centres[c];
-                            kernels[c] = adaptiveKernel(
-                                samples[i], [i](std::uint32_t j) { return j == i; }, samples, index,
-                                options_, grid_.resolution(), neighbours, rays ? &normal : nullptr);
-                            if (rays) {
-                              stops[c] = rayStop((samples[centres[c]].x - origin).normalized(),
-                                                 normal, options_);
-                            }
-                          }
-                        });
+      tbb::parallel_for(
+          tbb::blocked_range<std::size_t>(0, centres.size(), 256),
+          [&](const tbb::blocked_range<std::size_t>& range) {
+            std::vector<Neighbour> neighbours;
+            Eigen::Vector3d normal;
+            for (std::size_t c = range.begin(); c != range.end(); ++c) {
+              const std::uint32_t i = centres[c];
+              kernels[c] = adaptiveKernel(
+                  samples[i], [i](const SampleIndex::Entry& e) { return e.index == i; }, samples,
+                  index, options_, grid_.resolution(), neighbours, rays ? &normal : nullptr);
+              if (rays) {
+                stops[c] = rayStop((samples[centres[c]].x - origin).normalized(), normal, options_);
+              }
+            }
+          });
     }
     // The fast path asks for one piece per ray (then walked by FreeTraversal) and its tip.
     const bool traverse = rays && options_.free_traversal;
