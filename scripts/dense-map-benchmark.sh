@@ -10,12 +10,13 @@
 # Methods: akimap, bgk, bgkl, raycast and akimap_rays. Writes per case a table (.txt), JSON,
 # ROC curves and reliability diagrams (SVG + CSV) into OUT_DIR, and OUT_DIR/summary.md.
 # Usage: scripts/dense-map-benchmark.sh OUT_DIR [RUNS [DATA]]   (after scripts/build.sh)
-#   RUNS: seeds per oracle case (default 1); BENCH_SKIP_BALM=1 leaves BALM out.
+#   RUNS: seeds per case (default 3: every table prints the mean and spread), except BALM's
+#   (BALM_RUNS, default 1: slow); BENCH_SKIP_BALM=1 leaves BALM out.
 balm_scans=${BALM_SCANS:-40}
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:?usage: scripts/dense-map-benchmark.sh OUT_DIR [RUNS [DATA]]}
-runs=${2:-1}
+runs=${2:-3}
 data=${3:-${DENSEMAP_DATA_DIR:-../shared/data}}
 bin=${DENSEMAP_BUILD_DIR:-build}/bin
 methods=akimap,bgk,bgkl,raycast,akimap_rays
@@ -44,21 +45,21 @@ done
 for scene in structured unstructured; do
   if [ -d "$data/la3dm/sim_$scene" ]; then
     score "holdout_la3dm_$scene" --data "$data/la3dm/sim_$scene" --protocol holdout \
-      --resolution 0.1 --max-range 8
+      --resolution 0.1 --max-range 8 --runs "$runs"
   else
     echo "dense-map-benchmark: $data/la3dm/sim_$scene is absent: skipped"
   fi
 done
 if [ -f "$data/akimap-sample/akimap_sample.graph" ]; then
   score holdout_akimap_sample --data "$data/akimap-sample/akimap_sample.graph" \
-    --protocol holdout --resolution 0.1
+    --protocol holdout --resolution 0.1 --runs "$runs"
 else
   echo "dense-map-benchmark: $data/akimap-sample is absent: skipped"
 fi
 if [ -d "$data/balm-realworld" ] && [ -z "${BENCH_SKIP_BALM:-}" ]; then
   score "holdout_balm_20-$((19 + balm_scans))" --data "$data/balm-realworld" --first 0 \
     --limit "$balm_scans" \
-    --protocol holdout --resolution 0.2 --max-range 15
+    --protocol holdout --resolution 0.2 --max-range 15 --runs "${BALM_RUNS:-1}"
 else
   echo "dense-map-benchmark: BALM skipped (absent, or BENCH_SKIP_BALM set)"
 fi
