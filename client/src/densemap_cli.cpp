@@ -3,6 +3,8 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <chrono>
+#include <random>
 #include <atomic>
 #include <cmath>
 #include <cstdio>
@@ -480,7 +482,18 @@ static int runMain(int argc, char** argv) {
   query->require_subcommand(1);
   auto* qpoint = query->add_subcommand("point", "Occupancy at points");
   std::vector<float> coords;
-  qpoint->add_option("xyz", coords, "x y z [x y z ...]")->required();
+  qpoint->add_option("xyz", coords, "x y z [x y z ...]");
+  std::uint32_t random_points = 0;
+  float random_spread = 20.0F;
+  qpoint
+      ->add_option("--random", random_points,
+                   "Instead of xyz: N points drawn uniformly (fixed seed) within --spread of the "
+                   "origin on each axis, in one request; prints the counts per state (load and "
+                   "request-budget tests)")
+      ->check(CLI::Range(1U, 50'000'000U));
+  qpoint->add_option("--spread", random_spread, "Half-size of --random's cube, m")
+      ->check(CLI::Range(0.0F, 10000.0F))
+      ->capture_default_str();
   auto* qbox = query->add_subcommand("bbox", "Cell counts in a box");
   std::vector<float> bmin, bmax;
   std::uint32_t centers = 0;
@@ -555,7 +568,26 @@ static int runMain(int argc, char** argv) {
   if (!client) return cli::fail(client.error().message);
   auto p3 = [](const std::vector<float>& v) { return Point3f(v[0], v[1], v[2]); };
   if (qpoint->parsed()) {
-    if (coords.size() % 3 != 0) return cli::fail("point coordinates come in threes");
+    if (random_points > 0) {
+      if (!coords.empty()) return cli::fail("give xyz or --random, not both");
+      std::mt19937 generator(42);
+      std::uniform_real_distribution<float> axis(-random_spread, random_spread);
+      coords.resize(std::size_t{random_points} * 3);
+      for (float& c : coords) c = axis(generator);
+      const auto t0 = std::chrono::steady_clock::now();
+      auto answer = (*client)->queryPointsRaw(coords);
+      if (!answer) return cli::fail(answer.error().message);
+      std::size_t counts[3] = {0, 0, 0};
+      for (const auto state : answer->states) ++counts[std::min(2, static_cast<int>(state))];
+      std::printf("%u points: unknown %zu, free %zu, occupied %zu (map version %llu) in %.0f ms\n",
+                  random_points, counts[0], counts[1], counts[2],
+                  static_cast<unsigned long long>(answer->map_version),
+                  std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                      .count());
+      return 0;
+    }
+    if (coords.empty() || coords.size() % 3 != 0)
+      return cli::fail("point coordinates come in threes (or give --random N)");
     auto answer = (*client)->queryPointsRaw(coords);
     if (!answer) return cli::fail(answer.error().message);
     const char* names[] = {"unknown", "free", "occupied"};
