@@ -3,17 +3,18 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
-#include <chrono>
-#include <random>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <random>
 #include <thread>
 
 #include "densemap/cli/guarded_main.hpp"
 #include "densemap/cli/progress.hpp"
 #include "densemap/client/client.hpp"
+#include "densemap/geometry/percentile.hpp"
 #include "densemap/io/octomap_export.hpp"
 #include "densemap/io/png_writer.hpp"
 #include "densemap/io/scan_source.hpp"
@@ -57,12 +58,6 @@ Expected<std::unique_ptr<Client>> connect(const ClientOptions& o) {
   if (!client) return client;
   if (auto ok = (*client)->waitForServer(); !ok) return std::unexpected(ok.error());
   return client;
-}
-
-double percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size())))];
 }
 
 /// `replay --ros`: the scans go out as PointCloud2 + TF (ros_replay.hpp) instead.
@@ -579,11 +574,11 @@ static int runMain(int argc, char** argv) {
       if (!answer) return cli::fail(answer.error().message);
       std::size_t counts[3] = {0, 0, 0};
       for (const auto state : answer->states) ++counts[std::min(2, static_cast<int>(state))];
-      std::printf("%u points: unknown %zu, free %zu, occupied %zu (map version %llu) in %.0f ms\n",
-                  random_points, counts[0], counts[1], counts[2],
-                  static_cast<unsigned long long>(answer->map_version),
-                  std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
-                      .count());
+      std::printf(
+          "%u points: unknown %zu, free %zu, occupied %zu (map version %llu) in %.0f ms\n",
+          random_points, counts[0], counts[1], counts[2],
+          static_cast<unsigned long long>(answer->map_version),
+          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
       return 0;
     }
     if (coords.empty() || coords.size() % 3 != 0)

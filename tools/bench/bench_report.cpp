@@ -1,5 +1,7 @@
 #include "bench_report.hpp"
 
+#include "densemap/geometry/percentile.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -7,14 +9,7 @@
 
 namespace densemap::bench {
 
-double RunResult::percentile(double q) const {
-  if (ms_per_scan.empty()) return 0;
-  std::vector<double> v = ms_per_scan;
-  std::sort(v.begin(), v.end());
-  // Nearest rank: the smallest value with at least q of the samples at or below it.
-  const auto rank = static_cast<std::size_t>(std::ceil(q * static_cast<double>(v.size())));
-  return v[std::clamp<std::size_t>(rank, 1, v.size()) - 1];
-}
+double RunResult::percentile(double q) const { return densemap::percentile(ms_per_scan, q); }
 
 std::string formatTable(const std::vector<RunResult>& runs) {
   std::ostringstream out;

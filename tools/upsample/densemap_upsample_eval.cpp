@@ -24,6 +24,7 @@
 #include "densemap/cli/lists.hpp"
 #include "densemap/cli/progress.hpp"
 #include "densemap/eval/point_set_metrics.hpp"
+#include "densemap/geometry/percentile.hpp"
 #include "densemap/io/file_bytes.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/sim/lidar_simulator.hpp"
@@ -77,10 +78,7 @@ struct Sum {
   int scans = 0;
   std::vector<double> ms_each;
 
-  [[nodiscard]] double msP50() {
-    std::sort(ms_each.begin(), ms_each.end());
-    return ms_each.empty() ? 0.0 : ms_each[ms_each.size() / 2];
-  }
+  [[nodiscard]] double msP50() const { return densemap::percentile(ms_each, 0.5); }
 
   void add(const Score& s) {
     mae += s.range.mae;

@@ -7,6 +7,7 @@
 #include <sstream>
 #include <thread>
 
+#include "densemap/geometry/percentile.hpp"
 #include "densemap/load/chart.hpp"
 
 namespace densemap::load {
@@ -137,13 +138,9 @@ LatencyStats latencyStats(const std::vector<Timed>& samples) {
   v.reserve(samples.size());
   for (const Timed& t : samples) v.push_back(t.ms);
   std::sort(v.begin(), v.end());
-  auto rank = [&](double q) {
-    const auto i = static_cast<std::size_t>(std::ceil(q * static_cast<double>(v.size())));
-    return v[std::clamp<std::size_t>(i, 1, v.size()) - 1];
-  };
-  s.p50 = rank(0.5);
-  s.p99 = rank(0.99);
-  s.p999 = rank(0.999);
+  s.p50 = nearestRank(v, 0.5);
+  s.p99 = nearestRank(v, 0.99);
+  s.p999 = nearestRank(v, 0.999);
   s.max = v.back();
   return s;
 }

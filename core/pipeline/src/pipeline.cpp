@@ -1,5 +1,7 @@
 #include "densemap/pipeline/pipeline.hpp"
 
+#include "densemap/geometry/percentile.hpp"
+
 #include <tbb/flow_graph.h>
 
 #include <algorithm>
@@ -345,11 +347,8 @@ PipelineCounters Pipeline::counters() const {
   if (!latencies_.empty()) {
     std::vector<double> v = latencies_;
     std::sort(v.begin(), v.end());
-    auto at = [&](double q) {
-      return v[std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size())))];
-    };
-    c.latency_p50_ms = at(0.5);
-    c.latency_p99_ms = at(0.99);
+    c.latency_p50_ms = nearestRank(v, 0.5);
+    c.latency_p99_ms = nearestRank(v, 0.99);
   }
   return c;
 }
