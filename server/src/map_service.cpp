@@ -622,7 +622,7 @@ void MapService::answerCommands() {
       [&](const densemap_msgs_CommandRequest& req, const dds_sample_info_t& info) {
         awaitAsker(dds_->cmd_writer,
                    dds::participantOfWriter(dds_->map_reader, info.publication_handle));
-        if (req.kind == 3) {
+        if (static_cast<dds::CommandKind>(req.kind) == dds::CommandKind::kSendMap) {
           send_map(req.id);
         } else {
           replyCommand(req.id,
@@ -636,17 +636,18 @@ void MapService::answerCommands() {
       [&](const densemap_msgs_CommandRequest& req, const dds_sample_info_t& info) {
         awaitAsker(dds_->cmd_writer,
                    dds::participantOfWriter(dds_->cmd_reader, info.publication_handle));
-        if (req.kind == 3) {
+        const auto kind = static_cast<dds::CommandKind>(req.kind);
+        if (kind == dds::CommandKind::kSendMap) {
           send_map(req.id);
           return;
         }
         Expected<std::string> outcome =
             makeError("unknown command kind " + std::to_string(req.kind));
         const VoxelGrid& grid = pipeline_.view()->grid();
-        if (req.kind == 0 || req.kind == 1) {
+        if (kind == dds::CommandKind::kReset || kind == dds::CommandKind::kClearBox) {
           VoxelKey lo{0, 0, 0}, hi{65535, 65535, 65535};
           bool valid = true;
-          if (req.kind == 1) {
+          if (kind == dds::CommandKind::kClearBox) {
             const Point3f mn = toPoint(req.min), mx = toPoint(req.max);
             const auto klo = mn.allFinite() ? grid.pointToKey(mn) : std::nullopt;
             const auto khi = mx.allFinite() ? grid.pointToKey(mx) : std::nullopt;
@@ -668,7 +669,7 @@ void MapService::answerCommands() {
                 });
             outcome = future.get();
           }
-        } else if (req.kind == 2) {
+        } else if (kind == dds::CommandKind::kSave) {
           // A named file goes into the configured export directory, never where the request
           // says: a client must not overwrite what the server's user may write.
           const std::string name = req.path != nullptr ? req.path : "";

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "densemap/dds/security.hpp"
+#include "densemap/dds/topics.hpp"
 #include "densemap/geometry/error.hpp"
 #include "densemap/map/grid_map.hpp"
 #include "densemap/pipeline/map_queries.hpp"
@@ -91,7 +92,7 @@ struct MapEventInfo {
   double latency_ms = 0.0;  // the server's receive -> published
 };
 
-enum class CommandKind { kReset = 0, kClearBox = 1, kSave = 2, kSendMap = 3 };
+using CommandKind = dds::CommandKind;  // the wire's, shared with the server
 
 /// A densemap-server client over DDS (loopback by default). Requests carry a random client id
 /// and an increasing request id; replies are matched on both. Every call has a timeout.

@@ -1,5 +1,7 @@
 #pragma once
 
+#include <cstdint>
+
 #include "densemap/dds/dds.hpp"
 
 namespace densemap::dds {
@@ -20,6 +22,9 @@ struct Topics {
 
   [[nodiscard]] static Expected<Topics> create(const Entity& participant);
 };
+
+/// CommandRequest.kind on the wire (densemap_msgs.idl), for the server and the client alike.
+enum class CommandKind : std::int32_t { kReset = 0, kClearBox = 1, kSave = 2, kSendMap = 3 };
 
 /// QoS of the request/reply topics (DESIGN.md: reliable, keep-last 16-64).
 inline constexpr QosSpec kRequestQos{.depth = 64};
