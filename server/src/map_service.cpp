@@ -13,6 +13,7 @@
 #include <cmath>
 #include <limits>
 #include <thread>
+#include <tuple>
 #include <unordered_map>
 #include <vector>
 
@@ -648,18 +649,12 @@ void MapService::answerCommands() {
           VoxelKey lo{0, 0, 0}, hi{65535, 65535, 65535};
           bool valid = true;
           if (kind == dds::CommandKind::kClearBox) {
-            const Point3f mn = toPoint(req.min), mx = toPoint(req.max);
-            const auto klo = mn.allFinite() ? grid.pointToKey(mn) : std::nullopt;
-            const auto khi = mx.allFinite() ? grid.pointToKey(mx) : std::nullopt;
-            if (!klo || !khi) {
-              outcome = makeError("clear-bbox corner is NaN/Inf or outside the map");
-              valid = false;
-            } else if ((mn.array() > mx.array()).any()) {
-              outcome = makeError("inverted box: min > max on some axis");
+            const auto keys = boxKeys(grid, toPoint(req.min), toPoint(req.max));
+            if (!keys) {
+              outcome = makeError("clear-bbox: " + keys.error().message);
               valid = false;
             } else {
-              lo = *klo;
-              hi = *khi;
+              std::tie(lo, hi) = *keys;
             }
           }
           if (valid) {

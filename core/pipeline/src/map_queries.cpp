@@ -8,13 +8,22 @@
 
 namespace densemap {
 
-Expected<BoxQueryResult> queryBox(const MapView& view, const Point3f& min, const Point3f& max,
-                                  std::size_t max_cells, std::size_t max_centers) {
+Expected<std::pair<VoxelKey, VoxelKey>> boxKeys(const VoxelGrid& grid, const Point3f& min,
+                                                const Point3f& max) {
   if (!min.allFinite() || !max.allFinite()) return makeError("box corner is NaN or Inf");
   if ((min.array() > max.array()).any()) return makeError("inverted box: min > max on some axis");
-  const auto lo = view.grid().pointToKey(min);
-  const auto hi = view.grid().pointToKey(max);
+  const auto lo = grid.pointToKey(min);
+  const auto hi = grid.pointToKey(max);
   if (!lo || !hi) return makeError("box outside the map's addressable range");
+  return std::pair(*lo, *hi);
+}
+
+Expected<BoxQueryResult> queryBox(const MapView& view, const Point3f& min, const Point3f& max,
+                                  std::size_t max_cells, std::size_t max_centers) {
+  const auto keys = boxKeys(view.grid(), min, max);
+  if (!keys) return std::unexpected(keys.error());
+  const VoxelKey* lo = &keys->first;
+  const VoxelKey* hi = &keys->second;
   const double cells = (static_cast<double>(hi->x) - lo->x + 1) *
                        (static_cast<double>(hi->y) - lo->y + 1) *
                        (static_cast<double>(hi->z) - lo->z + 1);

@@ -167,23 +167,18 @@ TEST(ServerConfig, ErrorsNameTheFileTheLineAndTheReason) {
   EXPECT_NE(bad_value.error().message.find("resolution_m"), std::string::npos);
   // Issue 28, item 15: errors found after parsing carry the field's line too, or the line of
   // the nearest enclosing block the file sets (a value left at its default).
-  auto range = loadServerConfig(
-      writeConfig(dir, "# a comment\nmap {\n  resolution_m: 0.2\n  max_range_m: 5000\n}\n"));
-  ASSERT_FALSE(range);
-  EXPECT_NE(range.error().message.find("c.textproto: line 4, column 3: map.max_range_m"),
-            std::string::npos)
-      << range.error().message;
-  auto ros2 = loadServerConfig(
-      writeConfig(dir, "map { resolution_m: 0.2 }\nros2 {\n  enabled: true\n  tf_wait_s: -4\n}\n"));
-  ASSERT_FALSE(ros2);
-  EXPECT_NE(ros2.error().message.find("c.textproto: line 4, column 3: ros2.tf_wait_s"),
-            std::string::npos)
-      << ros2.error().message;
-  auto evict =
-      loadServerConfig(writeConfig(dir, "\n\nmap { keep_radius_m: 5 backend: \"octree\" }\n"));
-  ASSERT_FALSE(evict);
-  EXPECT_NE(evict.error().message.find("line 3, column 7: map.keep_radius_m"), std::string::npos)
-      << evict.error().message;
+  const std::pair<const char*, const char*> located[] = {
+      {"# a comment\nmap {\n  resolution_m: 0.2\n  max_range_m: 5000\n}\n",
+       "c.textproto: line 4, column 3: map.max_range_m"},
+      {"map { resolution_m: 0.2 }\nros2 {\n  enabled: true\n  tf_wait_s: -4\n}\n",
+       "c.textproto: line 4, column 3: ros2.tf_wait_s"},
+      {"\n\nmap { keep_radius_m: 5 backend: \"octree\" }\n",
+       "line 3, column 7: map.keep_radius_m"}};
+  for (const auto& [text, expected] : located) {
+    auto refused = loadServerConfig(writeConfig(dir, text));
+    ASSERT_FALSE(refused) << text;
+    EXPECT_NE(refused.error().message.find(expected), std::string::npos) << refused.error().message;
+  }
   EXPECT_FALSE(loadServerConfig(writeConfig(dir, "map { backend: \"voxels\" }\n")));
   EXPECT_FALSE(loadServerConfig(writeConfig(dir, "pipeline { threads: 0 }\n")));
   auto bad_method = loadServerConfig(writeConfig(dir, "pipeline { integration: \"fast\" }\n"));

@@ -47,6 +47,22 @@ TEST(Snapshot, SaveThenLoadIsTheSameMapAndVersionOnBothBackends) {
   EXPECT_FALSE(loadSnapshot(file, Backend::kGrid, 0.2));  // resolution mismatch
 }
 
+/// Every shorter cut of `file` (written into `dir`) is refused by loadSnapshot (no prefix of a
+/// snapshot parses as one); returns the file's bytes.
+std::string expectEveryCutRefused(const std::filesystem::path& file,
+                                  const std::filesystem::path& dir) {
+  std::string whole;
+  {
+    std::ifstream in(file, std::ios::binary);
+    whole.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  for (std::size_t cut = 0; cut < whole.size(); ++cut) {
+    std::ofstream(dir / "cut.dmap", std::ios::binary) << whole.substr(0, cut);
+    EXPECT_FALSE(loadSnapshot(dir / "cut.dmap", Backend::kGrid, 0.0)) << "cut at " << cut;
+  }
+  return whole;
+}
+
 TEST(Snapshot, BrokenFilesAreClearErrors) {
   test::TempDir dir;
   GridMap map(0.2, SensorModel{});
@@ -60,15 +76,7 @@ TEST(Snapshot, BrokenFilesAreClearErrors) {
   EXPECT_NE(truncated.error().message.find("m.dmap"), std::string::npos);
   // Every shorter cut of a snapshot is refused (no prefix of the file parses as a snapshot).
   ASSERT_TRUE(saveSnapshot(*MapView::fromMap(map, 1), map.sensorModel(), Backend::kGrid, file));
-  std::string whole;
-  {
-    std::ifstream in(file, std::ios::binary);
-    whole.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-  }
-  for (std::size_t cut = 0; cut < whole.size(); ++cut) {
-    std::ofstream(dir.path() / "cut.dmap", std::ios::binary) << whole.substr(0, cut);
-    EXPECT_FALSE(loadSnapshot(dir.path() / "cut.dmap", Backend::kGrid, 0.0)) << "cut at " << cut;
-  }
+  expectEveryCutRefused(file, dir.path());
   std::ofstream(dir.path() / "junk.dmap") << "not a snapshot at all";
   EXPECT_FALSE(loadSnapshot(dir.path() / "junk.dmap", Backend::kGrid, 0.0));
   EXPECT_FALSE(loadSnapshot(dir.path() / "none.dmap", Backend::kGrid, 0.0));
@@ -359,16 +367,8 @@ TEST(Snapshot, KernelEvidenceCutOrCorruptedIsRefused) {
   auto loaded = loadSnapshot(file, Backend::kGrid, 0.2);
   ASSERT_TRUE(loaded && loaded->kernel);
   expectSameEvidence(*loaded->kernel, e);
-  std::string whole;
-  {
-    std::ifstream in(file, std::ios::binary);
-    whole.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-  }
   // No prefix parses, not even one that ends where the log-odds cells do.
-  for (std::size_t cut = 0; cut < whole.size(); ++cut) {
-    std::ofstream(dir.path() / "cut.dmap", std::ios::binary) << whole.substr(0, cut);
-    EXPECT_FALSE(loadSnapshot(dir.path() / "cut.dmap", Backend::kGrid, 0.0)) << "cut at " << cut;
-  }
+  const std::string whole = expectEveryCutRefused(file, dir.path());
   // A flipped bit in a beta value (the last 8 bytes before the CRC field's 5) fails the CRC.
   std::string flipped = whole;
   flipped[flipped.size() - 7] = static_cast<char>(flipped[flipped.size() - 7] ^ 0x10);

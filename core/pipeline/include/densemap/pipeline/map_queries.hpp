@@ -1,6 +1,7 @@
 #pragma once
 
 #include <optional>
+#include <utility>
 #include <vector>
 
 #include "densemap/geometry/error.hpp"
@@ -21,6 +22,13 @@ struct BoxQueryResult {
   std::size_t unknown = 0;
   std::vector<Point3f> occupied_centers;  // at most `max_centers`
 };
+
+/// The keys of the box [min, max] (metres): the one check of a box from the wire (bbox queries,
+/// clear-bbox commands): errors for a non-finite corner, an inverted box, or a corner outside
+/// the addressable range.
+[[nodiscard]] Expected<std::pair<VoxelKey, VoxelKey>> boxKeys(const VoxelGrid& grid,
+                                                              const Point3f& min,
+                                                              const Point3f& max);
 
 /// Counts the cells of the box [min, max] (metres) by state. Errors for an inverted box, a
 /// non-finite corner, or a box of more than `max_cells` cells.
