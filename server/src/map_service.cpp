@@ -388,45 +388,16 @@ void answerPoints(const dds::Entity& writer, const PointRequest& req, const MapV
                   std::string& error) {
   densemap_msgs_PointQueryReply rep{};
   rep.id = req.id;
-  std::vector<float> values;
-  std::vector<std::uint8_t> states;
   rep.map_version = view.version();
-  if (req.xyz.size() % 3 != 0) {
-    error = "point query length is not a multiple of 3";
-  } else if (req.xyz.size() / 3 > 10'000'000) {
-    error = "more than 10 million query points";
-  } else {
-    const std::size_t n = req.xyz.size() / 3;
-    values.resize(n, std::numeric_limits<float>::quiet_NaN());
-    states.resize(n, 0);
-    // Chunks in parallel (this task's arena); within a chunk, neighbouring points mostly share
-    // a block, so the last block found is tried first.
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
-                      [&](const tbb::blocked_range<std::size_t>& range) {
-                        std::uint64_t cached_key = ~std::uint64_t{0};
-                        const VoxelBlock* cached = nullptr;
-                        for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                          const Point3f p(req.xyz[3 * i], req.xyz[3 * i + 1], req.xyz[3 * i + 2]);
-                          const auto key = p.allFinite() ? view.grid().pointToKey(p) : std::nullopt;
-                          std::optional<float> v;
-                          if (key) {
-                            const std::uint64_t bk = block::blockOf(*key);
-                            if (bk != cached_key) {
-                              cached_key = bk;
-                              cached = view.block(bk);
-                            }
-                            const int c = block::indexOf(*key);
-                            if (cached != nullptr && cached->isKnown(c)) v = cached->log_odds[c];
-                          }
-                          if (v) values[i] = *v;
-                          states[i] = static_cast<std::uint8_t>(cellState(v));
-                        }
-                      });
+  auto result = queryPoints(view, req.xyz);
+  if (!result) {
+    error = result.error().message;
+    result = PointQueryResult{};
   }
   rep.status = error.empty() ? kOk : kInvalid;
   rep.error = const_cast<char*>(error.c_str());
-  rep.log_odds = dds::borrowSequence<dds_sequence_float>(values);
-  rep.state = dds::borrowSequence<dds_sequence_octet>(states);
+  rep.log_odds = dds::borrowSequence<dds_sequence_float>(result->log_odds);
+  rep.state = dds::borrowSequence<dds_sequence_octet>(result->states);
   (void)dds::write(writer, &rep);
 }
 

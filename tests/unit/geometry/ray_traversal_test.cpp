@@ -67,6 +67,21 @@ TEST(RayTraversal, LongRaysMatchOctomap) {
   expectSameAsOctomap(0.2, 100.0, RayKind::kOnFaces, 20000, 98);
 }
 
+// Issue 28 (found by fuzzing the queries): a ray of ~1e-23 m across a voxel border has a float
+// length of 0; OctoMap's loop never ends on it (tDelta 0). It visits nothing, as a ray inside
+// one voxel, forward and backward.
+TEST(RayTraversal, ARayTooShortForAFloatLengthAcrossABorderVisitsNothing) {
+  const VoxelGrid sut(0.1);
+  const Point3f origin(1.2e-7F, 1.7e-38F, 1.7e-38F);
+  const Point3f end(1.2e-7F, -4.9e-32F, -6.6e-24F);
+  ASSERT_NE(sut.pointToKey(origin), sut.pointToKey(end));  // two voxels
+  std::vector<VoxelKey> keys;
+  EXPECT_TRUE(computeRayKeys(sut, origin, end, keys));
+  EXPECT_TRUE(keys.empty());
+  TraversalStart start;
+  EXPECT_EQ(startTraversal(sut, origin, end, start), TraversalKind::kSameVoxel);
+}
+
 TEST(RayTraversal, OutOfRangeEndsVisitNothingAndFail) {
   const VoxelGrid sut(0.1);
   std::vector<VoxelKey> keys;

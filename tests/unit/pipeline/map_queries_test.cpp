@@ -2,6 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <limits>
+
 #include "densemap/map/grid_map.hpp"
 
 namespace densemap {
@@ -44,6 +47,40 @@ TEST(MapQueries, BoxCountsCellsByStateAndRefusesBadBoxes) {
   EXPECT_FALSE(queryBox(*view, Point3f(1, 1, 1), Point3f(0, 2, 2), 1000, 10));  // inverted
   EXPECT_FALSE(queryBox(*view, Point3f(-100, -100, -100), Point3f(100, 100, 100), 1000000, 10));
   EXPECT_FALSE(queryBox(*view, Point3f(0, 0, 0), Point3f(1, 1, std::nanf("")), 1000, 10));
+}
+
+// Issue 28 (found by fuzz_queries): a ray request whose tiny range crosses voxel borders at
+// denormal coordinates must end (it hung a query thread).
+TEST(MapQueries, ATinyRayAcrossVoxelBordersEnds) {
+  const auto view = wallView();
+  auto r = castRay(*view, Point3f(1.2432865e-07F, 1.7622532e-38F, 1.7540580e-38F),
+                   Point3f(0.0F, -0.5F, -67161704.0F), 6.6298237e-24F);
+  ASSERT_TRUE(r) << r.error().message;  // it ends: the ray has no voxel to walk
+  EXPECT_FALSE(r->hit);
+}
+
+// Issue 30: the point query lives with the box and ray queries (the server only wraps it).
+TEST(MapQueries, PointsGetTheirCellsAndUnknownForNonFiniteOrFarPoints) {
+  const auto view = wallView();
+  const float inf = std::numeric_limits<float>::infinity();
+  const std::vector<float> xyz = {0.55F, 0.05F, 0.05F, 2.05F,         0.05F, 0.05F,
+                                  5.0F,  5.0F,  5.0F,  std::nanf(""), 0,     0,
+                                  inf,   0,     0,     1e30F,         0,     0};
+  auto r = queryPoints(*view, xyz);
+  ASSERT_TRUE(r) << r.error().message;
+  ASSERT_EQ(r->states.size(), 6U);
+  EXPECT_EQ(r->log_odds[0], -1.0F);
+  EXPECT_EQ(r->states[0], static_cast<std::uint8_t>(CellState::kFree));
+  EXPECT_EQ(r->log_odds[1], 2.0F);
+  EXPECT_EQ(r->states[1], static_cast<std::uint8_t>(CellState::kOccupied));
+  for (std::size_t i = 2; i < 6; ++i) {
+    EXPECT_TRUE(std::isnan(r->log_odds[i])) << i;
+    EXPECT_EQ(r->states[i], static_cast<std::uint8_t>(CellState::kUnknown)) << i;
+  }
+  EXPECT_FALSE(queryPoints(*view, std::vector<float>{1, 2}));
+  auto many = queryPoints(*view, std::vector<float>(30, 0.5F), 9);
+  ASSERT_FALSE(many);
+  EXPECT_NE(many.error().message.find("more than 9"), std::string::npos);
 }
 
 }  // namespace

@@ -9,7 +9,9 @@
 #include "densemap/geometry/ray_traversal.hpp"
 #include "densemap/map/dense_free_marks.hpp"
 #include "densemap/map/grid_map.hpp"
+#include "densemap/map/map_diff.hpp"
 #include "densemap/raycast/culling_region.hpp"
+#include "densemap/raycast/integrator.hpp"
 #include "densemap/test_support/random_rays.hpp"
 
 namespace densemap {
@@ -182,6 +184,31 @@ TEST(CullingRegion, IsEmptyWhenTheSensorsVoxelIsNotFullyFreeAndBoxesFitTheBudget
   }
   EXPECT_LE(voxels, 1'000'000U);
   EXPECT_GT(voxels, 500'000U);
+}
+
+// Issue 28: a scan with a return ~1e-30 m from the sensor, across a voxel border (a sensor at a
+// grid plane), integrates with every method instead of hanging the pipeline (OctoMap itself
+// loops forever on it, so the methods are compared with each other).
+TEST(AllMethods, AReturnTooCloseForAFloatLengthDoesNotHang) {
+  const double resolution = 0.1;
+  const Point3f origin(0.0F, 0.0F, 0.0F);  // on the grid planes x, y, z = 0
+  PointCloud cloud = test::adversarialScan(resolution, origin, 500, 3.0, 77);
+  cloud.emplace_back(-1e-30F, -1e-30F, 0.0F);
+  cloud.emplace_back(0.0F, -3e-24F, 0.0F);
+  GridMap reference(resolution, SensorModel{});
+  (void)Integrator({.method = IntegrationMethod::kRaycast}).integrate(reference, cloud, origin);
+  ASSERT_GT(reference.knownCells(), 100U);
+  for (const auto method : {IntegrationMethod::kSuperRay, IntegrationMethod::kCulling,
+                            IntegrationMethod::kSuperRayCulling}) {
+    GridMap map(resolution, SensorModel{});
+    for (int scan = 0; scan < 2; ++scan) {
+      (void)Integrator({.method = method}).integrate(map, cloud, origin);
+      if (scan == 0) {
+        const MapDiff diff = diffMaps(map, reference);
+        EXPECT_EQ(diff.differing(), 0U) << methodName(method);
+      }
+    }
+  }
 }
 
 }  // namespace

@@ -41,6 +41,10 @@ inline TraversalKind startTraversal(const VoxelGrid& grid, const Point3f& origin
   float dir[3] = {end.x() - origin.x(), end.y() - origin.y(), end.z() - origin.z()};
   const float norm_sq = dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2];
   start.length = static_cast<float>(std::sqrt(static_cast<double>(norm_sq)));
+  // Two voxels but no length: a ray shorter than ~1e-19 m across a border (its float squared
+  // length underflows to 0). OctoMap then divides by zero and loops forever (steps of tDelta 0);
+  // it has no voxel to visit, as a ray inside one voxel (issue 28: one query hung a thread).
+  if (!(start.length > 0.0F)) return TraversalKind::kSameVoxel;
   for (float& d : dir) d /= start.length;
 
   const double resolution = grid.resolution();

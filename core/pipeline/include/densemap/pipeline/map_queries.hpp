@@ -1,6 +1,7 @@
 #pragma once
 
 #include <optional>
+#include <span>
 #include <utility>
 #include <vector>
 
@@ -22,6 +23,19 @@ struct BoxQueryResult {
   std::size_t unknown = 0;
   std::vector<Point3f> occupied_centers;  // at most `max_centers`
 };
+
+/// Each query point's cell: its log-odds (NaN where unknown) and state (CellState as a byte).
+struct PointQueryResult {
+  std::vector<float> log_odds;
+  std::vector<std::uint8_t> states;
+};
+
+/// The cells of the points `xyz` (x y z per point, metres; a non-finite or out-of-range point is
+/// unknown). Errors for a length that is not a multiple of 3 or more than `max_points` points.
+/// Chunks run in parallel (in the caller's arena).
+[[nodiscard]] Expected<PointQueryResult> queryPoints(const MapView& view,
+                                                     std::span<const float> xyz,
+                                                     std::size_t max_points = 10'000'000);
 
 /// The keys of the box [min, max] (metres): the one check of a box from the wire (bbox queries,
 /// clear-bbox commands): errors for a non-finite corner, an inverted box, or a corner outside
