@@ -197,7 +197,7 @@ class Lane {
     r_.region_voxels_per_scan = sums_[5] / n;
     for (int k = 0; k < 5; ++k) r_.ms_stage[k] = stage_sums_[k] / n;
     r_.known_cells = kernel_ ? kernel_->knownCells() : map_->knownCells();
-    r_.memory_bytes = map_->memoryBytes();
+    r_.memory_bytes = kernel_ ? kernel_->memoryBytes() : map_->memoryBytes();
     return r_;
   }
 

@@ -182,6 +182,15 @@ struct FreeTraversal::Buffers {
 FreeTraversal::FreeTraversal() : buffers_(std::make_unique<Buffers>()) {}
 FreeTraversal::~FreeTraversal() = default;
 
+std::size_t FreeTraversal::memoryBytes() const {
+  std::size_t bytes = merged_.capacity() * sizeof(Block);
+  for (const ThreadBlocks& t : buffers_->threads) {
+    bytes += t.slots.size() * sizeof(Block) + t.near.capacity() * sizeof(Near) +
+             t.index.size() * (sizeof(std::uint64_t) + 3 * sizeof(void*));
+  }
+  return bytes;
+}
+
 double FreeTraversal::evidenceShare(double reach) {
   if (!(reach < 1.0)) return 1.0;
   // Midpoint rule on k(x) x over [0, 1]: 10^4 steps, within 1e-6 of the integral.

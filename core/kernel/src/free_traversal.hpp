@@ -55,6 +55,8 @@ class FreeTraversal {
   /// The share of a capsule's free evidence (per metre of ray, the kernel integrated over the
   /// disc across it) within `reach` of its axis (a fraction of its radius): 1 at reach >= 1.
   [[nodiscard]] static double evidenceShare(double reach);
+  /// Bytes its buffers hold (kept between scans).
+  [[nodiscard]] std::size_t memoryBytes() const;
   /// The blocks reached by the last accumulate(), in ascending key order, sums merged.
   [[nodiscard]] const std::vector<Block>& blocks() const { return merged_; }
 

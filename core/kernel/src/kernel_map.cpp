@@ -628,8 +628,8 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
       makeRaySegments(points_world, origin_world, step, options_.max_range, stops, segments_);
     const std::vector<Sample>& segments = segments_;
     // Segments become kernels only without the traversal (which takes them as extents).
-    kernels.reserve(kernels.size() + 2 * (rays ? centres.size() : 0) +
-                    (traverse ? 0 : segments.size()));
+    // Two hit kernels per position (a voxel's mean when aggregated: far fewer than the hits).
+    kernels.reserve(kernels.size() + 2 * hit_positions.size() + (traverse ? 0 : segments.size()));
     if (traverse) free_extents.reserve(segments.size());
     if (rays) {
       appendHitKernels(hit_positions, aggregate ? &hit_counts : nullptr, options_,
@@ -879,6 +879,21 @@ Expected<void> KernelMap::restore(const KernelEvidence& e) {
   }
   scans_ = e.scans;
   return {};
+}
+
+std::size_t KernelMap::memoryBytes() const {
+  // A node of the hash (the block, its key, the next pointer) and a bucket per block.
+  std::size_t bytes = blocks_.size() * (sizeof(Block) + 2 * sizeof(void*) + sizeof(std::uint64_t)) +
+                      blocks_.bucket_count() * sizeof(void*);
+  bytes += (samples_.capacity() + segments_.capacity()) * sizeof(Sample);
+  for (const auto& part : scratch_->sample_parts) bytes += part.capacity() * sizeof(Sample);
+  bytes += scratch_->index.starts.capacity() * sizeof(std::uint32_t) +
+           scratch_->index.entries.capacity() * sizeof(SampleIndex::Entry) +
+           scratch_->index.bucket.capacity() * sizeof(std::uint32_t);
+  bytes += scratch_->kernels.capacity() * sizeof(Kernel) +
+           scratch_->free_extents.capacity() * sizeof(FreeExtent) +
+           scratch_->pairs.capacity() * sizeof(std::pair<std::uint64_t, std::uint32_t>);
+  return bytes + free_->memoryBytes();
 }
 
 std::size_t KernelMap::knownCells() const {

@@ -151,6 +151,8 @@ class KernelMap {
   [[nodiscard]] std::optional<double> probability(const VoxelKey& key) const;
   void forEachKnown(const std::function<void(const VoxelKey&, double)>& f) const;
   [[nodiscard]] std::size_t knownCells() const;
+  /// Bytes held: the evidence blocks (with the hash's nodes) and the per-scan buffers kept.
+  [[nodiscard]] std::size_t memoryBytes() const;
   [[nodiscard]] std::size_t scans() const { return scans_; }
 
   /// A copy of the evidence (snapshots).
