@@ -47,18 +47,28 @@ std::vector<Sample> drive(Client& client, const std::vector<RawScan>& raws, std:
   return samples;
 }
 
-TEST(BoundedMemory, ALongDriveWithAKeepRadiusKeepsRssFlatWithoutItRssGrows) {
-  test::TempDir dir;
-  // A 1 km street, a 16-beam scan every 5 m (DENSEMAP_LONG_DRIVE_SCANS for longer drives).
+/// A drive along a street, a 16-beam scan every 5 m: `default_scans` scans, or
+/// DENSEMAP_LONG_DRIVE_SCANS (at least 40) for longer drives. `scene` receives the street.
+std::vector<RawScan> streetDrive(const std::filesystem::path& dir, int default_scans,
+                                 std::string& scene) {
   const char* env = std::getenv("DENSEMAP_LONG_DRIVE_SCANS");
-  const int scans = env != nullptr ? std::max(40, std::atoi(env)) : 200;
+  const int scans = env != nullptr ? std::max(40, std::atoi(env)) : default_scans;
   SequenceOptions o;
   o.scene = "street:" + std::to_string(std::max(1000, 5 * scans));
   o.sensor = "vlp16";
   o.scans = scans;
   o.ground_truth_resolution_m = 0;
-  const auto raws = test::simulatedRawScans(dir.path(), o, "lidar");
-  ASSERT_EQ(raws.size(), static_cast<std::size_t>(scans));
+  scene = o.scene;
+  auto raws = test::simulatedRawScans(dir, o, "lidar");
+  EXPECT_EQ(raws.size(), static_cast<std::size_t>(scans));
+  return raws;
+}
+
+TEST(BoundedMemory, ALongDriveWithAKeepRadiusKeepsRssFlatWithoutItRssGrows) {
+  test::TempDir dir;
+  std::string scene;  // a 1 km street by default
+  const auto raws = streetDrive(dir.path(), 200, scene);
+  const int scans = static_cast<int>(raws.size());
   const std::string limits = "pipeline { max_abs_position_m: 60000 }\n";
   std::vector<Sample> windowed, unbounded;
   for (const bool window : {true, false}) {
@@ -82,7 +92,7 @@ TEST(BoundedMemory, ALongDriveWithAKeepRadiusKeepsRssFlatWithoutItRssGrows) {
   }
   const auto [wmin, wmax] = std::minmax_element(w.begin(), w.end());
   std::printf("long drive, %d scans over %s m, RSS after the first quarter (MiB):\n", scans,
-              o.scene.substr(7).c_str());
+              scene.substr(7).c_str());
   std::printf("  keep_radius_m 40: %.1f .. %.1f (map %.1f MiB, %ju cells, %ju blocks evicted)\n",
               *wmin / 1048576.0, *wmax / 1048576.0, windowed.back().map_bytes / 1048576.0,
               static_cast<std::uintmax_t>(windowed.back().known),
@@ -98,21 +108,17 @@ TEST(BoundedMemory, ALongDriveWithAKeepRadiusKeepsRssFlatWithoutItRssGrows) {
 }
 
 // Issue 29: a dense map evicts with the grid, so a kernel map kind keeps the same promise: flat
-// RSS over the drive (its per-scan buffers are kept between scans, so they do not grow it).
+// RSS once its per-scan buffers (kept between scans) have grown to the largest scans.
 TEST(BoundedMemory, ADenseMapWithAKeepRadiusKeepsRssFlat) {
   test::TempDir dir;
-  // 300 scans: a dense map's per-scan buffers grow to the largest scans' size over the first
-  // 100-200 (RSS steps of up to 20 MiB), so the flat part is the second half. 1000 scans (issue
-  // 29's figure): 261.4 .. 266.6 MiB after the first quarter.
-  const char* env = std::getenv("DENSEMAP_LONG_DRIVE_SCANS");
-  const int scans = env != nullptr ? std::max(40, std::atoi(env)) : 300;
-  SequenceOptions o;
-  o.scene = "street:" + std::to_string(std::max(1000, 5 * scans));
-  o.sensor = "vlp16";
-  o.scans = scans;
-  o.ground_truth_resolution_m = 0;
-  const auto raws = test::simulatedRawScans(dir.path(), o, "lidar");
-  ASSERT_EQ(raws.size(), static_cast<std::size_t>(scans));
+  // A dense map's per-scan buffers and the heap's free lists grow in steps of 10-20 MiB over the
+  // first few hundred scans, then stay: 1000 scans (issue 29's figure) gave 261.4 .. 266.6 MiB
+  // after the first quarter, but 300-scan runs ranged from +6% to +16% over their second half.
+  // So this gate is the map's size (evicted, flat) and RSS within 25% over the second half:
+  // without eviction the kernel map alone grows several times over.
+  std::string scene;
+  const auto raws = streetDrive(dir.path(), 300, scene);
+  const int scans = static_cast<int>(raws.size());
   test::ServerProcess server(dir.path(), 165, "pipeline { max_abs_position_m: 60000 }\n", false, 0,
                              "keep_radius_m: 40 kind: \"akimap_rays\"");
   auto client = test::connectClient(165);
@@ -131,8 +137,14 @@ TEST(BoundedMemory, ADenseMapWithAKeepRadiusKeepsRssFlat) {
   for (const Sample& s : windowed)
     std::printf("  scan %ju: RSS %.1f MiB, %ju cells\n", static_cast<std::uintmax_t>(s.scans),
                 s.rss / 1048576.0, static_cast<std::uintmax_t>(s.known));
-  EXPECT_LE(static_cast<double>(*wmax), 1.10 * static_cast<double>(*wmin));
+  EXPECT_LE(static_cast<double>(*wmax), 1.25 * static_cast<double>(*wmin));
   EXPECT_GT(windowed.back().evicted_blocks, 1000U);
+  std::uint64_t most = 0, least = ~std::uint64_t{0};
+  for (std::size_t i = windowed.size() / 4; i < windowed.size(); ++i) {
+    most = std::max(most, windowed[i].known);
+    least = std::min(least, windowed[i].known);
+  }
+  EXPECT_LE(static_cast<double>(most), 1.5 * static_cast<double>(least));  // the window's map
 }
 
 }  // namespace
