@@ -25,7 +25,7 @@ struct Near {
 /// between scans), a hash from block key to slot, and in front of it a small direct-mapped
 /// cache (a capsule's slices and rows alternate between a few neighbouring blocks).
 struct ThreadBlocks {
-  static constexpr int kCacheSize = 1024;
+  static constexpr int kCacheSize = 16;
   std::deque<FreeTraversal::Block> slots;
   std::size_t used = 0;
   std::unordered_map<std::uint64_t, FreeTraversal::Block*> index;
@@ -132,6 +132,9 @@ std::size_t collectVoxelsNear(const VoxelGrid& grid, const Eigen::Vector3d& a,
       const double pb = a[bx] + (x - a[ax]) * slope_b, pc = a[cx] + (x - a[ax]) * slope_c;
       const int j0 = firstCentre(pb - half_b), k0 = firstCentre(pc - half_c);
       if (j0 + span_b > 65536 || k0 + span_c > 65536) continue;  // the addressable range's edge
+      // End slices may have taken more than their share of `room`: keep a window's worth.
+      const auto window = static_cast<std::size_t>(span_b * span_c);
+      if (n + window > out.size()) out.resize(2 * (n + window));
       const double ob0 = grid.keyToCoord(static_cast<std::uint16_t>(j0)) - pb;
       const double oc0 = grid.keyToCoord(static_cast<std::uint16_t>(k0)) - pc;
       for (int dj = 0; dj < span_b; ++dj) {
