@@ -1,6 +1,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -36,6 +37,8 @@ struct RunResult {
   double speedup_vs_octomap = 0;         // octomap p50 / this p50; 0 when unknown
   std::size_t known_cells = 0;
   std::size_t memory_bytes = 0;
+  /// Dense methods: FNV-1a of the evidence (keys, alpha, beta), to compare builds bit for bit.
+  std::uint64_t evidence_digest = 0;
 
   [[nodiscard]] double percentile(double q) const;
   [[nodiscard]] double pointsPerSecond() const { return total_s > 0 ? points / total_s : 0; }

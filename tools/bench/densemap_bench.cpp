@@ -50,6 +50,23 @@ struct Options {
 
 /// A dense (kernel) method: `kind` or `kind@plain` (akimap_rays' earlier path: a segment kernel
 /// per piece of ray and an adaptive kernel per hit), with --kernel-set applied.
+/// FNV-1a over a kernel map's evidence (keys, alpha, beta, in block order): equal digests mean
+/// the same map bit for bit (a fast path against an earlier build, on the same scans).
+std::uint64_t evidenceDigest(const kernel::KernelEvidence& e) {
+  std::uint64_t h = 0xcbf29ce484222325ULL;
+  const auto mix = [&h](const void* data, std::size_t bytes) {
+    const auto* p = static_cast<const unsigned char*>(data);
+    for (std::size_t i = 0; i < bytes; ++i) h = (h ^ p[i]) * 0x100000001b3ULL;
+  };
+  for (std::size_t i = 0; i < e.keys.size(); ++i) {
+    const std::uint64_t key = e.keys[i].packed();
+    mix(&key, sizeof key);
+    mix(&e.alpha[i], sizeof(double));
+    mix(&e.beta[i], sizeof(double));
+  }
+  return h;
+}
+
 Expected<kernel::KernelOptions> kernelOptions(const std::string& method, const Options& o) {
   const auto at = method.find('@');
   const std::string kind = method.substr(0, at);
@@ -198,6 +215,7 @@ class Lane {
     for (int k = 0; k < 5; ++k) r_.ms_stage[k] = stage_sums_[k] / n;
     r_.known_cells = kernel_ ? kernel_->knownCells() : map_->knownCells();
     r_.memory_bytes = kernel_ ? kernel_->memoryBytes() : map_->memoryBytes();
+    if (kernel_) r_.evidence_digest = evidenceDigest(kernel_->evidence());
     return r_;
   }
 
@@ -332,9 +350,11 @@ int run(const Options& o) {
   std::printf("%s\n", formatTable(runs).c_str());
   std::printf("%s", formatRayTable(runs).c_str());
   for (const RunResult& r : runs) {
-    std::printf("%s/%s: %zu known cells, %.1f MiB (%.1f MiB per million cells)\n", r.method.c_str(),
+    std::printf("%s/%s: %zu known cells, %.1f MiB (%.1f MiB per million cells)", r.method.c_str(),
                 r.backend.c_str(), r.known_cells, r.memory_bytes / 1048576.0,
                 r.known_cells ? r.memory_bytes / 1048576.0 / (r.known_cells / 1e6) : 0.0);
+    if (r.dense) std::printf(", evidence digest %016llx", static_cast<unsigned long long>(r.evidence_digest));
+    std::printf("\n");
   }
   if (!o.json.empty()) {
     std::ofstream out(o.json);

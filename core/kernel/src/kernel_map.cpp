@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 #include <tbb/parallel_sort.h>
+#include <tbb/task_arena.h>
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -259,29 +260,48 @@ class SampleIndex {
     min_ = box.min();
     for (int a = 0; a < 3; ++a) n_[a] = static_cast<std::int64_t>(size[a] / cell_) + 1;
     const auto buckets = static_cast<std::size_t>(n_[0] * n_[1] * n_[2]);
-    // Counts at [b + 2], summed: starts[b + 1] is then bucket b's start, the cursor of the
-    // forward scatter, which leaves starts[b] = start of b and starts[b + 1] = its end.
-    starts_.assign(buckets + 2, 0);
     std::vector<std::uint32_t>& bucket = storage.bucket;
     bucket.resize(samples.size());
+    constexpr std::uint32_t kNone = ~std::uint32_t{0};  // a segment: not indexed
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, samples.size(), 16384),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                          if (samples[i].segment) continue;
+                          if (samples[i].segment) {
+                            bucket[i] = kNone;
+                            continue;
+                          }
                           const auto c = cellOf(samples[i].x.array());
                           bucket[i] =
                               static_cast<std::uint32_t>((c[2] * n_[1] + c[1]) * n_[0] + c[0]);
                         }
                       });
-    for (std::uint32_t i = 0; i < samples.size(); ++i) {
-      if (!samples[i].segment) ++starts_[bucket[i] + 2];
-    }
+    // Counting sort by bucket, in parallel by ranges of buckets: each range's task reads every
+    // sample's bucket in index order and counts (then places) only its own, so a bucket holds
+    // its samples in ascending index order whatever the thread count (as a serial sort would).
+    // starts[b + 2] counts bucket b; summed, starts[b + 1] is bucket b's start, the cursor of the
+    // scatter, which leaves starts[b] = start of b and starts[b + 1] = its end.
+    starts_.resize(buckets + 2);
+    const std::size_t ranges = std::min<std::size_t>(
+        2 * static_cast<std::size_t>(tbb::this_task_arena::max_concurrency()), buckets);
+    const auto range_begin = [&](std::size_t r) { return buckets * r / ranges; };
+    tbb::parallel_for(std::size_t{0}, ranges, [&](std::size_t r) {
+      const std::size_t lo = range_begin(r), hi = range_begin(r + 1);
+      std::fill(starts_.begin() + static_cast<std::ptrdiff_t>(lo + 2),
+                starts_.begin() + static_cast<std::ptrdiff_t>(hi + 2), 0U);
+      for (const std::uint32_t b : bucket) {
+        if (b >= lo && b < hi) ++starts_[b + 2];
+      }
+    });
+    starts_[0] = starts_[1] = 0;
     for (std::size_t b = 2; b < starts_.size(); ++b) starts_[b] += starts_[b - 1];
     entries_.resize(starts_.back());
-    for (std::uint32_t i = 0; i < samples.size(); ++i) {
-      if (!samples[i].segment)  // stable: ascending per bucket
-        entries_[starts_[bucket[i] + 1]++] = {samples[i].x, i, samples[i].occupied};
-    }
+    tbb::parallel_for(std::size_t{0}, ranges, [&](std::size_t r) {
+      const std::size_t lo = range_begin(r), hi = range_begin(r + 1);
+      for (std::uint32_t i = 0; i < samples.size(); ++i) {
+        const std::uint32_t b = bucket[i];
+        if (b >= lo && b < hi) entries_[starts_[b + 1]++] = {samples[i].x, i, samples[i].occupied};
+      }
+    });
   }
 
   /// Calls f(entry) for every point sample in the box centre +- half, in a fixed order.
@@ -511,10 +531,21 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
           centre.to = centre.x;
           centre.range /= count;
           const std::uint64_t own = by_voxel[first].first;
+          // The voxel's own hits, recognised by their position (no lookup per neighbour): a
+          // point clearly outside the voxel's cube (by more than a float's rounding) is not
+          // one; only points near its faces take the key's own test.
+          const VoxelKey own_key = VoxelKey::fromPacked(own);
+          const Eigen::Vector3d own_centre(grid.keyToCoord(own_key.x),
+                                           grid.keyToCoord(own_key.y),
+                                           grid.keyToCoord(own_key.z));
+          const double clearly_out = 0.5 * grid.resolution() + 1e-3;
           Kernel k = adaptiveKernel(
               centre,
-              // The voxel's own hits, recognised by their position (no lookup per neighbour).
-              [&](const SampleIndex::Entry& e) { return e.occupied && voxelOf(e.x) == own; },
+              [&](const SampleIndex::Entry& e) {
+                if (!e.occupied) return false;
+                if (((e.x - own_centre).array().abs() > clearly_out).any()) return false;
+                return voxelOf(e.x) == own;
+              },
               samples, index, options, grid.resolution(), neighbours, &normal);
           k.weight *= count;
           kernels[out] = k;
@@ -537,6 +568,7 @@ struct KernelMap::Scratch {
   std::vector<Kernel> kernels;
   std::vector<FreeExtent> free_extents;
   std::vector<std::pair<std::uint64_t, std::uint32_t>> pairs;
+  std::vector<std::size_t> pair_offsets;
 };
 
 KernelMap::KernelMap(double resolution_m, const KernelOptions& options)
@@ -660,27 +692,51 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
   // (block, kernel) pairs, sorted: each block then sums its kernels in sample order, whatever
   // the thread that runs it.
   std::vector<std::pair<std::uint64_t, std::uint32_t>>& pairs = scratch_->pairs;
-  pairs.clear();
-  for (std::uint32_t i = 0; i < kernels.size(); ++i) {
-    Kernel& k = kernels[i];
-    const Eigen::Vector3d lo = k.x.cwiseMin(k.to) - k.half_extent;  // a cell kernel: x itself
-    const Eigen::Vector3d hi = k.x.cwiseMax(k.to) + k.half_extent;
-    const auto klo = grid_.pointToKey(lo.cast<float>());
-    const auto khi = grid_.pointToKey(hi.cast<float>());
-    if (!klo || !khi) continue;  // outside the addressable range
-    k.key_min = *klo;
-    k.key_max = *khi;
-    for (int bz = klo->z >> block::kShift; bz <= khi->z >> block::kShift; ++bz) {
-      for (int by = klo->y >> block::kShift; by <= khi->y >> block::kShift; ++by) {
-        for (int bx = klo->x >> block::kShift; bx <= khi->x >> block::kShift; ++bx) {
-          const VoxelKey corner{static_cast<std::uint16_t>(bx << block::kShift),
-                                static_cast<std::uint16_t>(by << block::kShift),
-                                static_cast<std::uint16_t>(bz << block::kShift)};
-          pairs.emplace_back(block::blockOf(corner), i);
+  // Each kernel's box of blocks (in parallel: counts, offsets, then the pairs in place).
+  std::vector<std::size_t>& pair_offsets = scratch_->pair_offsets;
+  pair_offsets.assign(kernels.size() + 1, 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, kernels.size(), 1024),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                        Kernel& k = kernels[i];
+                        // a cell kernel: x itself
+                        const Eigen::Vector3d lo = k.x.cwiseMin(k.to) - k.half_extent;
+                        const Eigen::Vector3d hi = k.x.cwiseMax(k.to) + k.half_extent;
+                        const auto klo = grid_.pointToKey(lo.cast<float>());
+                        const auto khi = grid_.pointToKey(hi.cast<float>());
+                        if (!klo || !khi) continue;  // outside the addressable range
+                        k.key_min = *klo;
+                        k.key_max = *khi;
+                        std::size_t n = 1;
+                        for (int a = 0; a < 3; ++a) {
+                          n *= static_cast<std::size_t>(((*khi)[a] >> block::kShift) -
+                                                        ((*klo)[a] >> block::kShift) + 1);
+                        }
+                        pair_offsets[i + 1] = n;
+                      }
+                    });
+  for (std::size_t i = 0; i < kernels.size(); ++i) pair_offsets[i + 1] += pair_offsets[i];
+  pairs.resize(pair_offsets.back());
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, kernels.size(), 1024),
+      [&](const tbb::blocked_range<std::size_t>& range) {
+        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+          std::size_t out = pair_offsets[i];
+          if (out == pair_offsets[i + 1]) continue;
+          const VoxelKey& klo = kernels[i].key_min;
+          const VoxelKey& khi = kernels[i].key_max;
+          for (int bz = klo.z >> block::kShift; bz <= khi.z >> block::kShift; ++bz) {
+            for (int by = klo.y >> block::kShift; by <= khi.y >> block::kShift; ++by) {
+              for (int bx = klo.x >> block::kShift; bx <= khi.x >> block::kShift; ++bx) {
+                const VoxelKey corner{static_cast<std::uint16_t>(bx << block::kShift),
+                                      static_cast<std::uint16_t>(by << block::kShift),
+                                      static_cast<std::uint16_t>(bz << block::kShift)};
+                pairs[out++] = {block::blockOf(corner), static_cast<std::uint32_t>(i)};
+              }
+            }
+          }
         }
-      }
-    }
-  }
+      });
   tbb::parallel_sort(pairs.begin(), pairs.end());
   std::vector<std::size_t> starts;
   for (std::size_t p = 0; p < pairs.size(); ++p) {

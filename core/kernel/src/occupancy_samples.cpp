@@ -108,11 +108,15 @@ void makeSamples(const PointCloud& points_world, const Point3f& origin_world,
     samplesOfRays(points_world, c * kChunk, std::min(points_world.size(), (c + 1) * kChunk), origin,
                   options, scan_index, keep_free, parts[c]);
   });
-  std::size_t total = 0;
-  for (std::size_t c = 0; c < chunks; ++c) total += parts[c].size();
-  samples.reserve(total);
-  for (std::size_t c = 0; c < chunks; ++c)
-    samples.insert(samples.end(), parts[c].begin(), parts[c].end());
+  // Concatenated in parallel, each part copied to its offset (a serial copy of ~30 MB was a
+  // quarter of this stage on a 64-beam scan).
+  std::vector<std::size_t> offsets(chunks + 1, 0);
+  for (std::size_t c = 0; c < chunks; ++c) offsets[c + 1] = offsets[c] + parts[c].size();
+  samples.resize(offsets[chunks]);
+  tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+    std::copy(parts[c].begin(), parts[c].end(),
+              samples.begin() + static_cast<std::ptrdiff_t>(offsets[c]));
+  });
 }
 
 NearHits::NearHits(const std::vector<Eigen::Vector3d>& hits, double reach) : cell_(reach) {
@@ -163,14 +167,15 @@ std::vector<Sample> makeRaySegments(const PointCloud& points_world, const Point3
   return segments;
 }
 
-void makeRaySegments(const PointCloud& points_world, const Point3f& origin_world, double step,
-                     double max_range, std::span<const RayStop> stops,
-                     std::vector<Sample>& segments) {
-  segments.clear();
-  const Eigen::Vector3d origin = origin_world.cast<double>();
-  std::size_t hit = 0;
-  for (const Point3f& p : points_world) {
-    Eigen::Vector3d direction = p.cast<double>() - origin;
+namespace {
+
+/// The segments of points [first, last) (their first hit's stop is stops[hit]), appended.
+void raySegmentsOf(const PointCloud& points_world, std::size_t first, std::size_t last,
+                   const Eigen::Vector3d& origin, double step, double max_range,
+                   std::span<const RayStop> stops, std::size_t hit,
+                   std::vector<Sample>& segments) {
+  for (std::size_t i = first; i < last; ++i) {
+    Eigen::Vector3d direction = points_world[i].cast<double>() - origin;
     double length = direction.norm();
     if (!(length > 0.0)) continue;
     direction /= length;
@@ -204,6 +209,47 @@ void makeRaySegments(const PointCloud& points_world, const Point3f& origin_world
       segments.push_back(s);
     }
   }
+}
+
+}  // namespace
+
+void makeRaySegments(const PointCloud& points_world, const Point3f& origin_world, double step,
+                     double max_range, std::span<const RayStop> stops,
+                     std::vector<Sample>& segments) {
+  segments.clear();
+  const Eigen::Vector3d origin = origin_world.cast<double>();
+  // Fixed chunks of rays in parallel (each starting at its first hit's stop), concatenated in
+  // ray order: the same segments in the same order whatever the thread count.
+  constexpr std::size_t kChunk = 4096;
+  const std::size_t chunks = (points_world.size() + kChunk - 1) / kChunk;
+  if (chunks <= 1) {
+    raySegmentsOf(points_world, 0, points_world.size(), origin, step, max_range, stops, 0,
+                  segments);
+    return;
+  }
+  // A ray takes a stop when it has a length and is not cut (as raySegmentsOf counts them).
+  std::vector<std::size_t> first_hit(chunks + 1, 0);
+  tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+    std::size_t n = 0;
+    for (std::size_t i = c * kChunk; i < std::min(points_world.size(), (c + 1) * kChunk); ++i) {
+      const double length = (points_world[i].cast<double>() - origin).norm();
+      n += length > 0.0 && !(max_range >= 0.0 && length > max_range);
+    }
+    first_hit[c + 1] = n;
+  });
+  for (std::size_t c = 0; c < chunks; ++c) first_hit[c + 1] += first_hit[c];
+  std::vector<std::vector<Sample>> parts(chunks);
+  tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+    raySegmentsOf(points_world, c * kChunk, std::min(points_world.size(), (c + 1) * kChunk),
+                  origin, step, max_range, stops, first_hit[c], parts[c]);
+  });
+  std::vector<std::size_t> offsets(chunks + 1, 0);
+  for (std::size_t c = 0; c < chunks; ++c) offsets[c + 1] = offsets[c] + parts[c].size();
+  segments.resize(offsets[chunks]);
+  tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+    std::copy(parts[c].begin(), parts[c].end(),
+              segments.begin() + static_cast<std::ptrdiff_t>(offsets[c]));
+  });
 }
 
 }  // namespace densemap::kernel
