@@ -435,6 +435,38 @@ TEST(LatestWinsQueue, PerKeyTheLatestWinsWithinItsOwnKeyAndTheTotalIsBounded) {
   for (const char* expected : {"a2", "b2", "a3", "c1", "d1"}) EXPECT_EQ(sut.pop(0ms), expected);
 }
 
+TEST(LatestWinsQueue, ManySensorsWithAScanEachLoseNoneAndTheFullestSensorGivesWay) {
+  // Issue 28, item 11: 24 sensors with one scan each against a total of 16 (8 x depth 2) lost
+  // 7 scans to the total cap. Items are "KEY:N"; the key is before the colon.
+  std::vector<std::string> keys;
+  LatestWinsQueue<std::string> sut(
+      2, 16,
+      [&keys](const std::string& s) -> const std::string& {
+        const std::string key = s.substr(0, s.find(':'));
+        for (const std::string& k : keys)
+          if (k == key) return k;
+        throw std::logic_error("unknown key " + key);
+      },
+      /*max_keys=*/30);
+  for (int i = 0; i < 40; ++i) keys.push_back("s" + std::to_string(i));
+  std::optional<std::string> dropped;
+  for (int i = 0; i < 24; ++i) sut.push("s" + std::to_string(i) + ":1", &dropped);
+  EXPECT_FALSE(dropped.has_value());
+  EXPECT_EQ(sut.size(), 24U);
+  sut.push("s0:2", &dropped);  // s0 may hold 2: fits (every other sensor holds 1)
+  EXPECT_FALSE(dropped.has_value());
+  sut.push("s1:2", &dropped);  // beyond the total: the fullest sensor (s0) gives its oldest
+  EXPECT_EQ(dropped, "s0:1");
+  dropped.reset();
+  // Beyond max_keys sensors at once, a sensor's only scan goes: the oldest of all.
+  for (int i = 24; i < 30; ++i) sut.push("s" + std::to_string(i) + ":1", &dropped);
+  EXPECT_EQ(dropped, "s1:1");  // s1 held two: it gave way first
+  dropped.reset();
+  sut.push("s30:1", &dropped);  // 31 keys > 30, every key holds one: the oldest of all goes
+  EXPECT_EQ(dropped, "s2:1");
+  EXPECT_EQ(sut.dropped(), 3U);
+}
+
 TEST(SensorTally, CountsGapsWithinEachSensorsIncreasingSequence) {
   SensorTally sut;
   for (std::uint64_t seq : {1, 2, 5, 6, 10}) sut.received("a", seq);  // 2 + 3 skipped

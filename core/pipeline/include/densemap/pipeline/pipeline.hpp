@@ -23,7 +23,9 @@
 
 namespace densemap {
 
-/// The waiting scans of all sensors together: at most this many times `queue_depth`.
+/// The waiting scans of all sensors together: this many times `queue_depth`, beyond which the
+/// sensor with the most scans waiting gives up its oldest; one scan per sensor always fits, up
+/// to SensorTally::kMaxSensors sensors at once (LatestWinsQueue).
 inline constexpr std::size_t kQueueSensorShare = 8;
 
 struct PipelineOptions {
@@ -42,7 +44,7 @@ struct PipelineOptions {
   std::optional<upsample::UpsampleOptions> upsample;
   int threads = 2;  // size of the task arena the pipeline owns
   /// Scans waiting per sensor id (latest wins per sensor: a full sensor's oldest is dropped);
-  /// all sensors together hold at most kQueueSensorShare times as many.
+  /// all sensors together kQueueSensorShare times as many, one scan per sensor always fitting.
   std::size_t queue_depth = 2;
   ScanLimits limits;
   /// Fill IntegrationResult::changes for scans (cell by cell: costs O(changed cells) per
