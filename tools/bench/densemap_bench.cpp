@@ -353,7 +353,8 @@ int run(const Options& o) {
     std::printf("%s/%s: %zu known cells, %.1f MiB (%.1f MiB per million cells)", r.method.c_str(),
                 r.backend.c_str(), r.known_cells, r.memory_bytes / 1048576.0,
                 r.known_cells ? r.memory_bytes / 1048576.0 / (r.known_cells / 1e6) : 0.0);
-    if (r.dense) std::printf(", evidence digest %016llx", static_cast<unsigned long long>(r.evidence_digest));
+    if (r.dense)
+      std::printf(", evidence digest %016llx", static_cast<unsigned long long>(r.evidence_digest));
     std::printf("\n");
   }
   if (!o.json.empty()) {

@@ -76,10 +76,7 @@ struct ThreadBlocks {
 /// per segment, tested over a fixed window of rows and columns (as many voxel centres as the
 /// ellipse's box can hold) without a branch per candidate: a candidate is written, and kept
 /// when inside. The few end slices test the capsule's box with the segment's distance.
-// SSE4.1 where the processor has it (runtime dispatch): std::ceil in one instruction instead of
-// a sequence; no FMA, so every value is the same, bit for bit.
-[[gnu::target_clones("sse4.1", "default")]] std::size_t collectVoxelsNear(
-    const VoxelGrid& grid, const Eigen::Vector3d& a,
+std::size_t collectVoxelsNear(const VoxelGrid& grid, const Eigen::Vector3d& a,
                               const Eigen::Vector3d& b, double reach, std::vector<Near>& out) {
   const Eigen::Vector3d seg = b - a;
   const double len2 = seg.squaredNorm();

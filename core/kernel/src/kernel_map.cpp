@@ -535,8 +535,7 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
           // point clearly outside the voxel's cube (by more than a float's rounding) is not
           // one; only points near its faces take the key's own test.
           const VoxelKey own_key = VoxelKey::fromPacked(own);
-          const Eigen::Vector3d own_centre(grid.keyToCoord(own_key.x),
-                                           grid.keyToCoord(own_key.y),
+          const Eigen::Vector3d own_centre(grid.keyToCoord(own_key.x), grid.keyToCoord(own_key.y),
                                            grid.keyToCoord(own_key.z));
           const double clearly_out = 0.5 * grid.resolution() + 1e-3;
           Kernel k = adaptiveKernel(

@@ -177,8 +177,7 @@ namespace {
 /// The segments of points [first, last) (their first hit's stop is stops[hit]), appended.
 void raySegmentsOf(const PointCloud& points_world, std::size_t first, std::size_t last,
                    const Eigen::Vector3d& origin, double step, double max_range,
-                   std::span<const RayStop> stops, std::size_t hit,
-                   std::vector<Sample>& segments) {
+                   std::span<const RayStop> stops, std::size_t hit, std::vector<Sample>& segments) {
   for (std::size_t i = first; i < last; ++i) {
     Eigen::Vector3d direction = points_world[i].cast<double>() - origin;
     double length = direction.norm();
@@ -245,8 +244,8 @@ void makeRaySegments(const PointCloud& points_world, const Point3f& origin_world
   for (std::size_t c = 0; c < chunks; ++c) first_hit[c + 1] += first_hit[c];
   std::vector<std::vector<Sample>> parts(chunks);
   tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
-    raySegmentsOf(points_world, c * kChunk, std::min(points_world.size(), (c + 1) * kChunk),
-                  origin, step, max_range, stops, first_hit[c], parts[c]);
+    raySegmentsOf(points_world, c * kChunk, std::min(points_world.size(), (c + 1) * kChunk), origin,
+                  step, max_range, stops, first_hit[c], parts[c]);
   });
   concatenate(parts, chunks, segments);
 }

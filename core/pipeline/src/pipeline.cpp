@@ -121,9 +121,10 @@ Pipeline::Pipeline(const PipelineOptions& options, std::unique_ptr<OccupancyMap>
       integrator_(
           {.method = options.method, .rule = options.rule, .max_range_m = options.max_range_m}),
       arena_(options.threads),
-      queue_(options.queue_depth, options.queue_depth * kQueueSensorShare,
-             [](const RawScan& scan) -> const std::string& { return scan.sensor_id; },
-             SensorTally::kMaxSensors) {
+      queue_(
+          options.queue_depth, options.queue_depth * kQueueSensorShare,
+          [](const RawScan& scan) -> const std::string& { return scan.sensor_id; },
+          SensorTally::kMaxSensors) {
   if (options.kernel) {
     auto kernel_options = kernel::KernelOptions::defaults(*options.kernel);
     kernel_options.max_range = options.max_range_m;

@@ -110,8 +110,8 @@ class LatestWinsQueue {
     std::vector<typename std::deque<T>::iterator> oldest;
     for (auto it = items_.begin(); it != items_.end(); ++it) {
       const std::string& k = key_(*it);
-      auto found = std::find_if(counts.begin(), counts.end(),
-                                [&](const auto& c) { return *c.first == k; });
+      auto found =
+          std::find_if(counts.begin(), counts.end(), [&](const auto& c) { return *c.first == k; });
       if (found == counts.end()) {
         counts.emplace_back(&k, 1);
         oldest.push_back(it);
