@@ -19,6 +19,7 @@
 #include "densemap/geometry/stopwatch.hpp"
 #include "densemap/kernel/bandwidth.hpp"
 #include "densemap/kernel/kernel_function.hpp"
+#include "free_bundles.hpp"
 #include "free_traversal.hpp"
 
 namespace densemap::kernel {
@@ -80,6 +81,7 @@ KernelOptions KernelOptions::defaults(KernelMethod method) {
     // the oracle scenes' MSE rose 3.5-9% (cells left unknown); at 0.85 within 0.4% of the whole
     // kernel, la3dm's hold-out AUC within 0.0001 (3 seeds), with 72% of the voxel visits.
     o.free_reach = 0.85;
+    o.free_bundles = true;
   }
   return o;
 }
@@ -107,10 +109,12 @@ Expected<void> applySettings(KernelOptions& options, const std::vector<std::stri
   for (const std::string& setting : settings) {
     const auto eq = setting.find('=');
     const std::string name = setting.substr(0, eq);
-    if (name == "free_traversal" || name == "aggregate_hits") {
+    if (name == "free_traversal" || name == "aggregate_hits" || name == "free_bundles") {
       const std::string value = eq == std::string::npos ? "" : setting.substr(eq + 1);
       if (value != "0" && value != "1") return makeError("'" + setting + "': expected 0 or 1");
-      (name == "free_traversal" ? options.free_traversal : options.aggregate_hits) = value == "1";
+      (name == "free_traversal"   ? options.free_traversal
+       : name == "aggregate_hits" ? options.aggregate_hits
+                                  : options.free_bundles) = value == "1";
       continue;
     }
     const auto field = std::find_if(std::begin(fields), std::end(fields),
@@ -651,34 +655,34 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
             }
           });
     }
-    // The fast path asks for one piece per ray (then walked by FreeTraversal) and its tip.
+    // The fast path takes one capsule per ray (or per bundle of rays ending in one voxel),
+    // walked by FreeTraversal, and its tip; the plain path a segment kernel per piece of ray.
     const bool traverse = rays && options_.free_traversal;
-    const double step = traverse ? 1e30 : options_.free_step;  // one piece: extent / step > 0
     segments_.clear();
-    if (rays)
-      makeRaySegments(points_world, origin_world, step, options_.max_range, stops, segments_);
+    if (rays && !traverse) {
+      makeRaySegments(points_world, origin_world, options_.free_step, options_.max_range, stops,
+                      segments_);
+    }
     const std::vector<Sample>& segments = segments_;
-    // Segments become kernels only without the traversal (which takes them as extents).
     // Two hit kernels per position (a voxel's mean when aggregated: far fewer than the hits).
-    kernels.reserve(kernels.size() + 2 * hit_positions.size() + (traverse ? 0 : segments.size()));
-    if (traverse) free_extents.reserve(segments.size());
+    kernels.reserve(kernels.size() + 2 * hit_positions.size() + segments.size());
     if (rays) {
       appendHitKernels(hit_positions, aggregate ? &hit_counts : nullptr, options_,
                        grid_.resolution(), kernels);
     }
-    // The segment kernels overlap where consecutive pieces meet: within `length_scale` of each
-    // joint a voxel on the ray gets a second value, on average 2 * length_scale * (integral of
-    // k over [0, 1] = 1/3) more evidence per `free_step` of ray. One extent per ray has no
-    // joints, so its weight carries that mean; a tip is one piece, as before.
-    const double joints = 1.0 + 2.0 * options_.length_scale / 3.0 / options_.free_step;
-    for (const Sample& s : segments) {
-      if (!traverse) {
-        kernels.push_back(isotropicKernel(s, options_));
-      } else if (s.tip) {
-        free_extents.push_back({s.x, s.to, options_.tip_length_scale, options_.sf2});
-      } else {
-        free_extents.push_back({s.x, s.to, options_.length_scale, options_.sf2 * joints});
-      }
+    for (const Sample& s : segments) kernels.push_back(isotropicKernel(s, options_));
+    if (traverse) {
+      // The segment kernels overlap where consecutive pieces meet: within `length_scale` of each
+      // joint a voxel on the ray gets a second value, on average 2 * length_scale * (integral
+      // of k over [0, 1] = 1/3) more evidence per `free_step` of ray. One extent per ray has no
+      // joints, so its weight carries that mean; a tip is one piece, as before.
+      const double joints = 1.0 + 2.0 * options_.length_scale / 3.0 / options_.free_step;
+      const CapsuleShape shape{.free_radius_m = options_.length_scale,
+                               .free_weight = options_.sf2 * joints,
+                               .tip_radius_m = options_.tip_length_scale,
+                               .tip_weight = options_.sf2};
+      freeExtents(points_world, origin, options_.max_range, stops, grid_, shape,
+                  options_.free_bundles, free_extents);
     }
   } else {
     kernels.reserve(samples.size());

@@ -77,6 +77,11 @@ struct KernelOptions {
   /// radius (the rest of the kernel holds 0.02% of the evidence at 0.85, in 28% of the voxels),
   /// their weight scaled so that a ray leaves the same evidence per metre. (0, 1].
   double free_reach = 1.0;
+  /// kAkimapRays with free_traversal: the rays whose hits share a voxel give one free capsule
+  /// (to the mean of their free ends, weighing their count) instead of one each; tips stay one
+  /// per ray (free_bundles.hpp). A voxel hit by one ray gives that ray's own capsule. Setting
+  /// free_bundles=0 (or 1).
+  bool free_bundles = false;
   /// kAkimapRays: one adaptive kernel per voxel of at least `aggregate_min_hits` hits (at their
   /// mean, weighing their count, fitted to the neighbourhood outside the voxel; its normal sets
   /// its rays' stops) instead of one per hit. Setting aggregate_hits=0 (or 1).
@@ -96,7 +101,7 @@ struct KernelOptions {
 /// length_scale, sf2, prior, free_margin, max_margin, tip_margin, tip_length_scale,
 /// occupied_weight, hit_weight, hit_kernel_weight, hit_length_voxels, negative_step,
 /// search_max, search_range, min_thickness, aggregate_min_hits, free_reach), and
-/// free_traversal=0|1, aggregate_hits=0|1; errors name the setting.
+/// free_traversal=0|1, aggregate_hits=0|1, free_bundles=0|1; errors name the setting.
 [[nodiscard]] Expected<void> applySettings(KernelOptions& options,
                                            const std::vector<std::string>& settings);
 

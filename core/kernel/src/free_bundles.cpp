@@ -1,0 +1,117 @@
+#include "free_bundles.hpp"
+
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
+#include <algorithm>
+#include <cstdint>
+#include <limits>
+#include <utility>
+
+namespace densemap::kernel {
+namespace {
+
+/// One ray's free parts: the free extent's end (when it has one) and the tip's ends (when it
+/// has one), from the origin, as makeRaySegments computes them.
+struct RayParts {
+  Eigen::Vector3d free_end = Eigen::Vector3d::Zero();
+  Eigen::Vector3d tip_from = Eigen::Vector3d::Zero(), tip_to = Eigen::Vector3d::Zero();
+  bool has_free = false, has_tip = false, cut = false;
+};
+
+RayParts partsOf(const Point3f& point, const Eigen::Vector3d& origin, double max_range,
+                 const RayStop* stop_or_null) {
+  RayParts parts;
+  Eigen::Vector3d direction = point.cast<double>() - origin;
+  double length = direction.norm();
+  direction /= length;
+  parts.cut = max_range >= 0.0 && length > max_range;
+  RayStop stop;
+  if (parts.cut) {
+    length = max_range;
+  } else if (stop_or_null != nullptr) {
+    stop = *stop_or_null;
+  }
+  const double extent = length - stop.free;
+  if (extent > 0.0) {  // one piece: [origin + 0 * extent, origin + 1 * extent] along the ray
+    parts.has_free = true;
+    parts.free_end = origin + (1.0 * extent) * direction;
+  }
+  if (!parts.cut && stop.tip >= 0.0 && stop.tip < stop.free && length - stop.tip > 0.0) {
+    parts.has_tip = true;
+    parts.tip_from = origin + std::max(0.0, extent) * direction;
+    parts.tip_to = origin + (length - stop.tip) * direction;
+  }
+  return parts;
+}
+
+}  // namespace
+
+void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, double max_range,
+                 std::span<const RayStop> stops, const VoxelGrid& grid, const CapsuleShape& shape,
+                 bool bundle, std::vector<FreeExtent>& out) {
+  out.clear();
+  const std::size_t n = points_world.size();
+  // Each ray's hit number (the stop it takes: rays with a length that are not cut, in order).
+  std::vector<std::uint32_t> hit_of(n + 1, 0);
+  tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
+    const double length = (points_world[i].cast<double>() - origin).norm();
+    hit_of[i + 1] = length > 0.0 && !(max_range >= 0.0 && length > max_range) ? 1 : 0;
+  });
+  std::vector<std::uint32_t> takes(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    takes[i] = hit_of[i + 1];
+    hit_of[i + 1] += hit_of[i];
+  }
+  // Rays by the voxel of their hit (a cut ray, or one without a voxel, alone: its own key).
+  constexpr std::uint64_t kAlone = std::uint64_t{1} << 63;
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> rays(n);
+  tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
+    std::uint64_t key = kAlone | i;
+    if (bundle && takes[i] != 0) {
+      if (const auto voxel = grid.pointToKey(points_world[i])) key = voxel->packed();
+    }
+    rays[i] = {key, static_cast<std::uint32_t>(i)};
+  });
+  if (bundle) tbb::parallel_sort(rays.begin(), rays.end());
+  std::vector<std::size_t> group_starts;
+  for (std::size_t p = 0; p < n; ++p) {
+    if (p == 0 || rays[p].first != rays[p - 1].first || (rays[p].first & kAlone) != 0) {
+      group_starts.push_back(p);
+    }
+  }
+  group_starts.push_back(n);
+  const std::size_t groups = group_starts.size() - 1;
+  // A slot per group (its free capsule) and one per ray (its own tip), compacted afterwards.
+  std::vector<FreeExtent> slots(groups + n);
+  std::vector<std::uint8_t> used(groups + n, 0);
+  tbb::parallel_for(std::size_t{0}, groups, [&](std::size_t g) {
+    Eigen::Vector3d free_sum = Eigen::Vector3d::Zero();
+    double frees = 0.0;
+    for (std::size_t p = group_starts[g]; p < group_starts[g + 1]; ++p) {
+      const std::uint32_t i = rays[p].second;
+      if (!((points_world[i].cast<double>() - origin).norm() > 0.0)) continue;
+      const std::uint32_t hit = hit_of[i];
+      const RayParts parts = partsOf(points_world[i], origin, max_range,
+                                     takes[i] != 0 && hit < stops.size() ? &stops[hit] : nullptr);
+      if (parts.has_free) {
+        free_sum += parts.free_end;
+        frees += 1.0;
+      }
+      if (parts.has_tip) {
+        slots[groups + i] = {parts.tip_from, parts.tip_to, shape.tip_radius_m, shape.tip_weight};
+        used[groups + i] = 1;
+      }
+    }
+    if (frees > 0.0) {
+      slots[g] = {origin, free_sum / frees, shape.free_radius_m, shape.free_weight * frees};
+      used[g] = 1;
+    }
+  });
+  out.reserve(groups + n);
+  for (std::size_t s = 0; s < slots.size(); ++s) {
+    if (used[s] != 0) out.push_back(slots[s]);
+  }
+}
+
+}  // namespace densemap::kernel
