@@ -210,6 +210,51 @@ TEST(FreeTraversal, ResultDoesNotDependOnTheThreadCount) {
   EXPECT_EQ(one, build(2));  // bit for bit: fixed-point sums do not depend on the order
 }
 
+// Issue 29: rays whose hits share a voxel give one free capsule (free_bundles).
+KernelMap mapOf(const PointCloud& points, bool bundles, double resolution = 0.1) {
+  KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
+  options.max_range = 15.0;
+  options.free_bundles = bundles;
+  KernelMap map(resolution, options);
+  map.integrate(points, Point3f(0, 0, 0));
+  map.integrate(points, Point3f(0.3F, 0.2F, 0.1F));
+  return map;
+}
+
+double totalBeta(const KernelMap& map) {
+  double sum = 0.0;
+  for (const double b : map.evidence().beta) sum += b;
+  return sum;
+}
+
+TEST(FreeBundles, AVoxelHitByOneRayGivesThatRaysCapsuleBitForBit) {
+  // The wall's hits 4 cm apart at 0.02 m voxels: one hit per voxel, nothing to bundle.
+  const auto bundled = cellsOf(mapOf(wallScan(), true, 0.02));
+  ASSERT_GT(bundled.size(), 1000U);
+  EXPECT_EQ(bundled, cellsOf(mapOf(wallScan(), false, 0.02)));
+}
+
+TEST(FreeBundles, RaysEndingInOneVoxelKeepTheirEvidenceAndTheMapsShape) {
+  // The room's floor and wall at 0.2 m: several hits per voxel, bundled.
+  const KernelMap bundled = mapOf(roomScan(), true, 0.2);
+  const KernelMap each = mapOf(roomScan(), false, 0.2);
+  EXPECT_NE(cellsOf(bundled), cellsOf(each));  // bundling happened
+  // The same evidence per metre of ray: the total free evidence within 3%.
+  EXPECT_NEAR(totalBeta(bundled) / totalBeta(each), 1.0, 0.03);
+  // Cells that are clearly free or occupied in one map are so in the other.
+  const auto a = cellsOf(bundled), b = cellsOf(each);
+  std::map<std::uint64_t, double> other(b.begin(), b.end());
+  std::size_t compared = 0, flipped = 0;
+  for (const auto& [key, p] : a) {
+    const auto it = other.find(key);
+    if (it == other.end() || std::abs(it->second - 0.5) < 0.3) continue;
+    ++compared;
+    flipped += (p > 0.5) != (it->second > 0.5);
+  }
+  ASSERT_GT(compared, 500U);
+  EXPECT_LT(static_cast<double>(flipped), 0.01 * static_cast<double>(compared));
+}
+
 TEST_P(KernelMapMethods, RowStretchesGiveTheWholeBoxesMapBitForBit) {
   for (const double resolution : {0.1, 0.07}) {
     KernelOptions options = KernelOptions::defaults(GetParam());
