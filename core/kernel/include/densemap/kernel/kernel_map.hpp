@@ -82,7 +82,8 @@ struct KernelOptions {
   /// per ray (free_bundles.hpp). A voxel hit by one ray gives that ray's own capsule. Setting
   /// free_bundles=0 (or 1).
   bool free_bundles = false;
-  /// kAkimapRays: one adaptive kernel per voxel of at least `aggregate_min_hits` hits (at their
+  /// kAkimapRays: one adaptive kernel per voxel of at least `aggregate_min_hits` hits (3 in
+  /// KernelOptions::defaults) (at their
   /// mean, weighing their count, fitted to the neighbourhood outside the voxel; its normal sets
   /// its rays' stops) instead of one per hit. Setting aggregate_hits=0 (or 1).
   bool aggregate_hits = false;
