@@ -600,18 +600,18 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
                   : options_.method == KernelMethod::kBgkl ? FreeSampling::kSegments
                                                            : FreeSampling::kRandomPerInterval;
   const bool rays = options_.method == KernelMethod::kAkimapRays;
-  std::function<bool(const Eigen::Vector3d&)> keep_free;
-  std::optional<NearHits> near_hits;
   if (rays) {
     // Free samples only shape the occupied kernels, through the search boxes around hits:
     // the others are never drawn (the same kernels, far fewer samples on long rays).
     sampling.free_step = options_.negative_step;
-    near_hits.emplace(hitsOf(points_world, origin_world.cast<double>(), options_.max_range),
-                      std::max(options_.search_max, grid_.resolution()));
-    keep_free = [&](const Eigen::Vector3d& x) { return (*near_hits)(x); };
+    const NearHits near_hits(hitsOf(points_world, origin_world.cast<double>(), options_.max_range),
+                             std::max(options_.search_max, grid_.resolution()));
+    makeSamples(points_world, origin_world, sampling, scans_, near_hits, samples_,
+                scratch_->sample_parts);
+  } else {
+    makeSamples(points_world, origin_world, sampling, scans_, nullptr, samples_,
+                scratch_->sample_parts);
   }
-  makeSamples(points_world, origin_world, sampling, scans_, keep_free, samples_,
-              scratch_->sample_parts);
   const std::vector<Sample>& samples = samples_;
   ++scans_;
   stats.ms_samples = msSince(t0);

@@ -1,6 +1,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <span>
@@ -62,7 +63,17 @@ void makeSamples(const PointCloud& points_world, const Point3f& origin_world,
 class NearHits {
  public:
   NearHits(const std::vector<Eigen::Vector3d>& hits, double reach);
-  [[nodiscard]] bool operator()(const Eigen::Vector3d& x) const;
+  [[nodiscard]] bool operator()(const Eigen::Vector3d& x) const {
+    std::int64_t c[3];
+    for (int a = 0; a < 3; ++a) {
+      // The hits' cubes came from the same product: a point within `reach` of a hit lands at
+      // most one cube from it (a multiplication, not a division: 1.2M tests a BALM scan).
+      const double v = std::floor((x[a] - min_[a]) * inverse_cell_);
+      if (!(v >= 0.0 && v < static_cast<double>(n_[a]))) return false;
+      c[a] = static_cast<std::int64_t>(v);
+    }
+    return marks_[static_cast<std::size_t>((c[2] * n_[1] + c[1]) * n_[0] + c[0])];
+  }
 
  private:
   double cell_ = 1.0, inverse_cell_ = 1.0;
@@ -70,6 +81,11 @@ class NearHits {
   std::int64_t n_[3] = {0, 0, 0};
   std::vector<bool> marks_;
 };
+
+/// makeSamples keeping only the free samples `near` says yes to (the filter inlined).
+void makeSamples(const PointCloud& points_world, const Point3f& origin_world,
+                 const SamplingOptions& options, std::uint64_t scan_index, const NearHits& near,
+                 std::vector<Sample>& out, std::vector<std::vector<Sample>>& parts);
 
 /// How far short of its hit a ray's free evidence stops, m along the ray: its segments end
 /// `free` short of the hit, then a tip segment (Sample::tip) runs on to `tip` short of it
