@@ -577,6 +577,7 @@ struct KernelMap::Scratch {
   std::vector<FreeExtent> free_extents;
   std::vector<std::pair<std::uint64_t, std::uint32_t>> pairs;
   std::vector<std::size_t> pair_offsets;
+  std::vector<Block*> free_targets;
 };
 
 KernelMap::KernelMap(double resolution_m, const KernelOptions& options)
@@ -828,14 +829,22 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
     stats.free_visits = free_->accumulate(grid_, free_extents, options_.free_reach);
     stats.ms_free = msSince(t0);
     t0 = std::chrono::steady_clock::now();
-    for (const FreeTraversal::Block& f : free_->blocks()) {
-      Block& b = blocks_[f.key];
+    // The blocks found (or made) one by one, then filled in parallel: one block per task.
+    const std::vector<FreeTraversal::Block>& free_blocks = free_->blocks();
+    std::vector<Block*>& targets = scratch_->free_targets;
+    targets.resize(free_blocks.size());
+    for (std::size_t i = 0; i < free_blocks.size(); ++i) {
+      targets[i] = &blocks_[free_blocks[i].key];
+      if (touched != nullptr) reached_blocks.emplace_back(free_blocks[i].key, free_blocks[i].mask);
+    }
+    tbb::parallel_for(std::size_t{0}, free_blocks.size(), [&](std::size_t i) {
+      const FreeTraversal::Block& f = free_blocks[i];
+      Block& b = *targets[i];
       block::forEachSetBit(f.mask, [&](int cell) {
         b.beta[cell] += static_cast<double>(f.sum[cell]) / FreeTraversal::kScale;
         block::setBit(b.known, cell);
       });
-      if (touched != nullptr) reached_blocks.emplace_back(f.key, f.mask);
-    }
+    });
   }
   if (touched != nullptr) {
     std::stable_sort(reached_blocks.begin(), reached_blocks.end(),

@@ -227,11 +227,17 @@ double totalBeta(const KernelMap& map) {
   return sum;
 }
 
-TEST(FreeBundles, AVoxelHitByOneRayGivesThatRaysCapsuleBitForBit) {
-  // The wall's hits 4 cm apart at 0.02 m voxels: one hit per voxel, nothing to bundle.
-  const auto bundled = cellsOf(mapOf(wallScan(), true, 0.02));
+TEST(FreeBundles, ACubeHitByOneRayGivesThatRaysCapsuleBitForBit) {
+  // A wall's hits 0.31 m apart: one hit per bundling cube (0.15 m), nothing to bundle.
+  PointCloud sparse;
+  for (double y = -1.5; y <= 1.5; y += 0.31) {
+    for (double z = -0.9; z <= 0.9; z += 0.31) {
+      sparse.emplace_back(3.0F, static_cast<float>(y), static_cast<float>(z));
+    }
+  }
+  const auto bundled = cellsOf(mapOf(sparse, true, 0.05));
   ASSERT_GT(bundled.size(), 1000U);
-  EXPECT_EQ(bundled, cellsOf(mapOf(wallScan(), false, 0.02)));
+  EXPECT_EQ(bundled, cellsOf(mapOf(sparse, false, 0.05)));
 }
 
 TEST(FreeBundles, RaysEndingInOneVoxelKeepTheirEvidenceAndTheMapsShape) {
