@@ -245,6 +245,8 @@ class SampleIndex {
     std::vector<std::uint32_t> starts;  // per bucket, into entries; see the constructor
     std::vector<Entry> entries;         // the point samples by bucket
     std::vector<std::uint32_t> bucket;  // per sample
+    std::vector<std::uint64_t> keys, keys_other;  // (bucket, index), sorted by the radix sort
+    std::vector<std::uint32_t> counts;            // the radix sort's per-chunk counts
   };
 
   /// Buckets of `cell` metres, made coarser when the samples' box would need more than
@@ -284,33 +286,66 @@ class SampleIndex {
                               static_cast<std::uint32_t>((c[2] * n_[1] + c[1]) * n_[0] + c[0]);
                         }
                       });
-    // Counting sort by bucket, in parallel by ranges of buckets: each range's task reads every
-    // sample's bucket in index order and counts (then places) only its own, so a bucket holds
-    // its samples in ascending index order whatever the thread count (as a serial sort would).
-    // starts[b + 2] counts bucket b; summed, starts[b + 1] is bucket b's start, the cursor of the
-    // scatter, which leaves starts[b] = start of b and starts[b + 1] = its end.
+    // The indexed samples sorted by (bucket, index): a stable radix sort of (bucket, index)
+    // pairs, 11 bits of the bucket a pass (buckets < 2^22), each pass counted and placed in
+    // parallel by fixed chunks of the pairs (the order does not depend on the thread count).
+    std::vector<std::uint64_t>& keys = storage.keys;
+    std::vector<std::uint64_t>& other = storage.keys_other;
+    keys.clear();
+    for (std::uint32_t i = 0; i < samples.size(); ++i) {
+      if (bucket[i] != kNone) keys.push_back((std::uint64_t{bucket[i]} << 32) | i);
+    }
+    other.resize(keys.size());
+    constexpr int kBits = 11;
+    constexpr std::size_t kBins = std::size_t{1} << kBits;
+    constexpr std::size_t kChunk = 32768;
+    const std::size_t chunks = (keys.size() + kChunk - 1) / kChunk;
+    std::vector<std::uint32_t>& counts = storage.counts;
+    for (int shift = 32; shift < 32 + 2 * kBits; shift += kBits) {
+      counts.assign(chunks * kBins, 0);
+      const auto digit = [shift](std::uint64_t k) { return (k >> shift) & (kBins - 1); };
+      tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+        std::uint32_t* mine = counts.data() + c * kBins;
+        for (std::size_t i = c * kChunk; i < std::min(keys.size(), (c + 1) * kChunk); ++i) {
+          ++mine[digit(keys[i])];
+        }
+      });
+      // Exclusive offsets, digit major, chunk minor: stable.
+      std::uint32_t sum = 0;
+      for (std::size_t d = 0; d < kBins; ++d) {
+        for (std::size_t c = 0; c < chunks; ++c) {
+          const std::uint32_t n = counts[c * kBins + d];
+          counts[c * kBins + d] = sum;
+          sum += n;
+        }
+      }
+      tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+        std::uint32_t* mine = counts.data() + c * kBins;
+        for (std::size_t i = c * kChunk; i < std::min(keys.size(), (c + 1) * kChunk); ++i) {
+          other[mine[digit(keys[i])]++] = keys[i];
+        }
+      });
+      keys.swap(other);
+    }
+    // starts[b]: the entries of buckets below b (b = 0 .. buckets), so bucket b is
+    // [starts[b], starts[b + 1]); each written once, in parallel by the sorted entries.
     starts_.resize(buckets + 2);
-    const std::size_t ranges = std::min<std::size_t>(
-        2 * static_cast<std::size_t>(tbb::this_task_arena::max_concurrency()), buckets);
-    const auto range_begin = [&](std::size_t r) { return buckets * r / ranges; };
-    tbb::parallel_for(std::size_t{0}, ranges, [&](std::size_t r) {
-      const std::size_t lo = range_begin(r), hi = range_begin(r + 1);
-      std::fill(starts_.begin() + static_cast<std::ptrdiff_t>(lo + 2),
-                starts_.begin() + static_cast<std::ptrdiff_t>(hi + 2), 0U);
-      for (const std::uint32_t b : bucket) {
-        if (b >= lo && b < hi) ++starts_[b + 2];
-      }
-    });
-    starts_[0] = starts_[1] = 0;
-    for (std::size_t b = 2; b < starts_.size(); ++b) starts_[b] += starts_[b - 1];
-    entries_.resize(starts_.back());
-    tbb::parallel_for(std::size_t{0}, ranges, [&](std::size_t r) {
-      const std::size_t lo = range_begin(r), hi = range_begin(r + 1);
-      for (std::uint32_t i = 0; i < samples.size(); ++i) {
-        const std::uint32_t b = bucket[i];
-        if (b >= lo && b < hi) entries_[starts_[b + 1]++] = {samples[i].x, i, samples[i].occupied};
-      }
-    });
+    entries_.resize(keys.size());
+    const auto bucketAt = [&keys](std::size_t i) { return static_cast<std::size_t>(keys[i] >> 32); };
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, keys.size(), 8192),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                          const auto index = static_cast<std::uint32_t>(keys[i]);
+                          entries_[i] = {samples[index].x, index, samples[index].occupied};
+                          const std::size_t from = i == 0 ? 0 : bucketAt(i - 1) + 1;
+                          for (std::size_t b = from; b <= bucketAt(i); ++b) {
+                            starts_[b] = static_cast<std::uint32_t>(i);
+                          }
+                        }
+                      });
+    const std::size_t after = keys.empty() ? 0 : bucketAt(keys.size() - 1) + 1;
+    std::fill(starts_.begin() + static_cast<std::ptrdiff_t>(after), starts_.end(),
+              static_cast<std::uint32_t>(keys.size()));
   }
 
   /// Calls f(entry) for every point sample in the box centre +- half, in a fixed order.
@@ -962,7 +997,10 @@ std::size_t KernelMap::memoryBytes() const {
   for (const auto& part : scratch_->sample_parts) bytes += part.capacity() * sizeof(Sample);
   bytes += scratch_->index.starts.capacity() * sizeof(std::uint32_t) +
            scratch_->index.entries.capacity() * sizeof(SampleIndex::Entry) +
-           scratch_->index.bucket.capacity() * sizeof(std::uint32_t);
+           scratch_->index.bucket.capacity() * sizeof(std::uint32_t) +
+           (scratch_->index.keys.capacity() + scratch_->index.keys_other.capacity()) *
+               sizeof(std::uint64_t) +
+           scratch_->index.counts.capacity() * sizeof(std::uint32_t);
   bytes += scratch_->kernels.capacity() * sizeof(Kernel) +
            scratch_->free_extents.capacity() * sizeof(FreeExtent) +
            scratch_->pairs.capacity() * sizeof(std::pair<std::uint64_t, std::uint32_t>);
