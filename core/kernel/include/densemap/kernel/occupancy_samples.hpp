@@ -68,7 +68,9 @@ class NearHits {
     for (int a = 0; a < 3; ++a) {
       // The hits' cubes came from the same product: a point within `reach` of a hit lands at
       // most one cube from it (a multiplication, not a division: 1.2M tests a BALM scan).
-      const double v = std::floor((x[a] - min_[a]) * inverse_cell_);
+      // In [0, n) the floor is the truncation (std::floor without SSE4.1 costs ~25
+      // instructions); outside it the point is refused either way.
+      const double v = (x[a] - min_[a]) * inverse_cell_;
       if (!(v >= 0.0 && v < static_cast<double>(n_[a]))) return false;
       c[a] = static_cast<std::int64_t>(v);
     }
