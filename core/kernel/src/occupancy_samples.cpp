@@ -62,27 +62,31 @@ void samplesOfRays(const PointCloud& points_world, std::size_t first, std::size_
       samples.push_back({point, point, length, true, false});
     }
     const auto intervals = static_cast<std::uint64_t>(std::floor(length / step));
+    if (options.free == FreeSampling::kRandomPerInterval) {
+      // The common case in a tight loop: the point drawn, tested, and only then a sample.
+      for (std::uint64_t k = 0; k < intervals; ++k) {
+        const double start = static_cast<double>(k) * step;
+        const double range = start + uniformFromCounter(ray_key + k) * step;
+        const Eigen::Vector3d x = origin + range * direction;
+        if (!keep_free(x)) continue;
+        samples.push_back({x, x, range, false, false, false});
+      }
+      continue;
+    }
     for (std::uint64_t k = 0; k < intervals; ++k) {
       const double start = static_cast<double>(k) * step;
       Sample s;
       s.occupied = false;
-      switch (options.free) {
-        case FreeSampling::kRandomPerInterval:
-          s.range = start + uniformFromCounter(ray_key + k) * step;
-          s.x = origin + s.range * direction;
-          break;
-        case FreeSampling::kRegular:
-          s.range = start + 0.5 * step;
-          s.x = origin + s.range * direction;
-          break;
-        case FreeSampling::kSegments:
-          s.range = start;
-          s.x = origin + start * direction;
-          s.to = origin + (start + step) * direction;
-          s.segment = true;
-          break;
+      if (options.free == FreeSampling::kRegular) {
+        s.range = start + 0.5 * step;
+        s.x = origin + s.range * direction;
+        s.to = s.x;
+      } else {  // kSegments
+        s.range = start;
+        s.x = origin + start * direction;
+        s.to = origin + (start + step) * direction;
+        s.segment = true;
       }
-      if (!s.segment) s.to = s.x;
       if (!keep_free(s.x)) continue;
       samples.push_back(s);
     }
