@@ -110,10 +110,24 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
       used[g] = 1;
     }
   });
-  out.reserve(groups + n);
-  for (std::size_t s = 0; s < slots.size(); ++s) {
-    if (used[s] != 0) out.push_back(slots[s]);
+  // Compacted in parallel: each chunk of slots copies its used ones to its offset.
+  constexpr std::size_t kChunk = 8192;
+  const std::size_t chunks = (slots.size() + kChunk - 1) / kChunk;
+  std::vector<std::size_t> offsets(chunks + 1, 0);
+  for (std::size_t c = 0; c < chunks; ++c) {
+    std::size_t k = 0;
+    for (std::size_t s = c * kChunk; s < std::min(slots.size(), (c + 1) * kChunk); ++s) {
+      k += used[s];
+    }
+    offsets[c + 1] = offsets[c] + k;
   }
+  out.resize(offsets[chunks]);
+  tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+    std::size_t o = offsets[c];
+    for (std::size_t s = c * kChunk; s < std::min(slots.size(), (c + 1) * kChunk); ++s) {
+      if (used[s] != 0) out[o++] = slots[s];
+    }
+  });
 }
 
 }  // namespace densemap::kernel
