@@ -242,9 +242,9 @@ class SampleIndex {
   };
   /// The index's arrays, kept by the caller between scans (no fresh pages every scan).
   struct Storage {
-    std::vector<std::uint32_t> starts;  // per bucket, into entries; see the constructor
-    std::vector<Entry> entries;         // the point samples by bucket
-    std::vector<std::uint32_t> bucket;  // per sample
+    std::vector<std::uint32_t> starts;            // per bucket, into entries; see the constructor
+    std::vector<Entry> entries;                   // the point samples by bucket
+    std::vector<std::uint32_t> bucket;            // per sample
     std::vector<std::uint64_t> keys, keys_other;  // (bucket, index), sorted by the radix sort
     std::vector<std::uint32_t> counts;            // the radix sort's per-chunk counts
   };
@@ -335,7 +335,9 @@ class SampleIndex {
     // [starts[b], starts[b + 1]); each written once, in parallel by the sorted entries.
     starts_.resize(buckets + 2);
     entries_.resize(keys.size());
-    const auto bucketAt = [&keys](std::size_t i) { return static_cast<std::size_t>(keys[i] >> 32); };
+    const auto bucketAt = [&keys](std::size_t i) {
+      return static_cast<std::size_t>(keys[i] >> 32);
+    };
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, keys.size(), 8192),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         for (std::size_t i = r.begin(); i != r.end(); ++i) {

@@ -189,7 +189,6 @@ NearHits::NearHits(const std::vector<Eigen::Vector3d>& hits, double reach) : cel
   }
 }
 
-
 std::vector<Sample> makeRaySegments(const PointCloud& points_world, const Point3f& origin_world,
                                     double step, double max_range, std::span<const RayStop> stops) {
   std::vector<Sample> segments;
