@@ -49,16 +49,18 @@ RayParts partsOf(const Point3f& point, const Eigen::Vector3d& origin, double max
 
 void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, double max_range,
                  std::span<const RayStop> stops, const VoxelGrid& grid, const CapsuleShape& shape,
-                 bool bundle, std::vector<FreeExtent>& out) {
+                 bool bundle, FreeBundleBuffers& buffers, std::vector<FreeExtent>& out) {
   out.clear();
   const std::size_t n = points_world.size();
   // Each ray's hit number (the stop it takes: rays with a length that are not cut, in order).
-  std::vector<std::uint32_t> hit_of(n + 1, 0);
+  std::vector<std::uint32_t>& hit_of = buffers.hit_of;
+  hit_of.assign(n + 1, 0);
   tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
     const double length = (points_world[i].cast<double>() - origin).norm();
     hit_of[i + 1] = length > 0.0 && !(max_range >= 0.0 && length > max_range) ? 1 : 0;
   });
-  std::vector<std::uint32_t> takes(n);
+  std::vector<std::uint32_t>& takes = buffers.takes;
+  takes.resize(n);
   for (std::size_t i = 0; i < n; ++i) {
     takes[i] = hit_of[i + 1];
     hit_of[i + 1] += hit_of[i];
@@ -66,7 +68,8 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
   // Rays by the cube of their hit, a voxel or the free capsule's radius if larger (a cut ray,
   // or one outside the addressable range, alone: its own key).
   constexpr std::uint64_t kAlone = std::uint64_t{1} << 63;
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> rays(n);
+  std::vector<std::pair<std::uint64_t, std::uint32_t>>& rays = buffers.rays;
+  rays.resize(n);
   const VoxelGrid cells(std::max(grid.resolution(), shape.free_radius_m));
   tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
     std::uint64_t key = kAlone | i;
@@ -76,7 +79,8 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
     rays[i] = {key, static_cast<std::uint32_t>(i)};
   });
   if (bundle) tbb::parallel_sort(rays.begin(), rays.end());
-  std::vector<std::size_t> group_starts;
+  std::vector<std::size_t>& group_starts = buffers.group_starts;
+  group_starts.clear();
   for (std::size_t p = 0; p < n; ++p) {
     if (p == 0 || rays[p].first != rays[p - 1].first || (rays[p].first & kAlone) != 0) {
       group_starts.push_back(p);
@@ -85,8 +89,10 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
   group_starts.push_back(n);
   const std::size_t groups = group_starts.size() - 1;
   // A slot per group (its free capsule) and one per ray (its own tip), compacted afterwards.
-  std::vector<FreeExtent> slots(groups + n);
-  std::vector<std::uint8_t> used(groups + n, 0);
+  std::vector<FreeExtent>& slots = buffers.slots;
+  slots.resize(groups + n);
+  std::vector<std::uint8_t>& used = buffers.used;
+  used.assign(groups + n, 0);
   tbb::parallel_for(std::size_t{0}, groups, [&](std::size_t g) {
     Eigen::Vector3d free_sum = Eigen::Vector3d::Zero();
     double frees = 0.0;
@@ -113,7 +119,8 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
   // Compacted in parallel: each chunk of slots copies its used ones to its offset.
   constexpr std::size_t kChunk = 8192;
   const std::size_t chunks = (slots.size() + kChunk - 1) / kChunk;
-  std::vector<std::size_t> offsets(chunks + 1, 0);
+  std::vector<std::size_t>& offsets = buffers.offsets;
+  offsets.assign(chunks + 1, 0);
   for (std::size_t c = 0; c < chunks; ++c) {
     std::size_t k = 0;
     for (std::size_t s = c * kChunk; s < std::min(slots.size(), (c + 1) * kChunk); ++s) {

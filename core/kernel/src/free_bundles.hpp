@@ -1,6 +1,8 @@
 #pragma once
 
+#include <cstdint>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -28,8 +30,17 @@ struct CapsuleShape {
 /// hold-out MSE rose 3.8% against 0.9%). A cube hit by one ray gives that ray's own capsule,
 /// bit for bit; cut rays are never bundled. The extents come in a fixed order (by cube, then
 /// ray) whatever the thread count.
+/// freeExtents' per-scan arrays, kept by the caller between scans (no fresh pages a scan).
+struct FreeBundleBuffers {
+  std::vector<std::uint32_t> hit_of, takes;
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> rays;
+  std::vector<std::size_t> group_starts, offsets;
+  std::vector<FreeExtent> slots;
+  std::vector<std::uint8_t> used;
+};
+
 void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, double max_range,
                  std::span<const RayStop> stops, const VoxelGrid& grid, const CapsuleShape& shape,
-                 bool bundle, std::vector<FreeExtent>& out);
+                 bool bundle, FreeBundleBuffers& buffers, std::vector<FreeExtent>& out);
 
 }  // namespace densemap::kernel

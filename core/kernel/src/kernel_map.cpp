@@ -621,6 +621,7 @@ struct KernelMap::Scratch {
   std::vector<std::pair<std::uint64_t, std::uint32_t>> pairs;
   std::vector<std::size_t> pair_offsets;
   std::vector<Block*> free_targets;
+  FreeBundleBuffers bundles;
 };
 
 KernelMap::KernelMap(double resolution_m, const KernelOptions& options)
@@ -731,7 +732,7 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
                                .tip_radius_m = options_.tip_length_scale,
                                .tip_weight = options_.sf2};
       freeExtents(points_world, origin, options_.max_range, stops, grid_, shape,
-                  options_.free_bundles, free_extents);
+                  options_.free_bundles, scratch_->bundles, free_extents);
     }
   } else {
     kernels.reserve(samples.size());
@@ -1015,6 +1016,11 @@ std::size_t KernelMap::memoryBytes() const {
            (scratch_->index.keys.capacity() + scratch_->index.keys_other.capacity()) *
                sizeof(std::uint64_t) +
            scratch_->index.counts.capacity() * sizeof(std::uint32_t);
+  const FreeBundleBuffers& fb = scratch_->bundles;
+  bytes += (fb.hit_of.capacity() + fb.takes.capacity()) * sizeof(std::uint32_t) +
+           fb.rays.capacity() * sizeof(std::pair<std::uint64_t, std::uint32_t>) +
+           (fb.group_starts.capacity() + fb.offsets.capacity()) * sizeof(std::size_t) +
+           fb.slots.capacity() * sizeof(FreeExtent) + fb.used.capacity();
   bytes += scratch_->kernels.capacity() * sizeof(Kernel) +
            scratch_->free_extents.capacity() * sizeof(FreeExtent) +
            scratch_->pairs.capacity() * sizeof(std::pair<std::uint64_t, std::uint32_t>);
