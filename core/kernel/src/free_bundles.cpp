@@ -65,16 +65,15 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
     takes[i] = hit_of[i + 1];
     hit_of[i + 1] += hit_of[i];
   }
-  // Rays by the cube of their hit, a voxel or the free capsule's radius if larger (a cut ray,
-  // or one outside the addressable range, alone: its own key).
+  // Rays by the voxel of their hit (a cut ray, or one outside the addressable range, alone:
+  // its own key).
   constexpr std::uint64_t kAlone = std::uint64_t{1} << 63;
   std::vector<std::pair<std::uint64_t, std::uint32_t>>& rays = buffers.rays;
   rays.resize(n);
-  const VoxelGrid cells(std::max(grid.resolution(), shape.free_radius_m));
   tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
     std::uint64_t key = kAlone | i;
     if (bundle && takes[i] != 0) {
-      if (const auto cell = cells.pointToKey(points_world[i])) key = cell->packed();
+      if (const auto voxel = grid.pointToKey(points_world[i])) key = voxel->packed();
     }
     rays[i] = {key, static_cast<std::uint32_t>(i)};
   });

@@ -22,14 +22,15 @@ struct CapsuleShape {
 /// kAkimapRays' free extents (issue 29): each ray's free extent [origin, hit - stop.free] and
 /// tip [.., hit - stop.tip] (as makeRaySegments with one piece per ray; a ray cut at
 /// `max_range` is free to there, without a tip). With `bundle`, the rays whose hits share a
-/// cube (a voxel, or of the free capsule's radius where that is larger) give one free capsule
-/// from the origin to the mean of their free ends, weighing their count: such rays run within
-/// a capsule's radius of each other all the way, and a dense 64-beam scan has several per
-/// cube (BALM at 0.2 m: about 3), each costing a whole capsule. Tips stay one per ray: they lie
-/// near the surface, where the rays of a cube spread the most against it (bundled too, BALM's
-/// hold-out MSE rose 3.8% against 0.9%). A cube hit by one ray gives that ray's own capsule,
-/// bit for bit; cut rays are never bundled. The extents come in a fixed order (by cube, then
-/// ray) whatever the thread count.
+/// voxel give one free capsule from the origin to the mean of their free ends, weighing their
+/// count: such rays run within a voxel of each other all the way, and a dense 64-beam scan has
+/// several per voxel (BALM at 0.2 m: about 3), each costing a whole capsule. Tips stay one per
+/// ray: they lie near the surface, where the rays of a voxel spread the most against it
+/// (bundled too, BALM's hold-out MSE rose 3.8% against 0.9%). Cubes of the capsule's radius
+/// (0.15 m) at 0.1 m maps were 17% faster there but cost the oracle scenes 1.2-1.7% MSE (the
+/// unstructured scene's lead over BGKOctoMap-L). A voxel hit by one ray gives that ray's own
+/// capsule, bit for bit; cut rays are never bundled. The extents come in a fixed order (by
+/// voxel, then ray) whatever the thread count.
 /// freeExtents' per-scan arrays, kept by the caller between scans (no fresh pages a scan).
 struct FreeBundleBuffers {
   std::vector<std::uint32_t> hit_of, takes;

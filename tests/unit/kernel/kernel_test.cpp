@@ -227,8 +227,8 @@ double totalBeta(const KernelMap& map) {
   return sum;
 }
 
-TEST(FreeBundles, ACubeHitByOneRayGivesThatRaysCapsuleBitForBit) {
-  // A wall's hits 0.31 m apart: one hit per bundling cube (0.15 m), nothing to bundle.
+TEST(FreeBundles, AVoxelHitByOneRayGivesThatRaysCapsuleBitForBit) {
+  // A wall's hits 0.31 m apart: one hit per voxel, nothing to bundle.
   PointCloud sparse;
   for (double y = -1.5; y <= 1.5; y += 0.31) {
     for (double z = -0.9; z <= 0.9; z += 0.31) {

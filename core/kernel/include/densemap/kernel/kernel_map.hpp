@@ -77,10 +77,10 @@ struct KernelOptions {
   /// radius (the rest of the kernel holds 0.02% of the evidence at 0.85, in 28% of the voxels),
   /// their weight scaled so that a ray leaves the same evidence per metre. (0, 1].
   double free_reach = 1.0;
-  /// kAkimapRays with free_traversal: the rays whose hits share a cube (a voxel, at least
-  /// `length_scale` wide) give one free capsule (to the mean of their free ends, weighing their
-  /// count) instead of one each; tips stay one per ray (free_bundles.hpp). A cube hit by one
-  /// ray gives that ray's own capsule. Setting free_bundles=0 (or 1).
+  /// kAkimapRays with free_traversal: the rays whose hits share a voxel give one free capsule
+  /// (to the mean of their free ends, weighing their count) instead of one each; tips stay one
+  /// per ray (free_bundles.hpp). A voxel hit by one ray gives that ray's own capsule. Setting
+  /// free_bundles=0 (or 1).
   bool free_bundles = false;
   /// kAkimapRays: one adaptive kernel per voxel of at least `aggregate_min_hits` hits (3 in
   /// KernelOptions::defaults) (at their
