@@ -1,7 +1,7 @@
 #include "free_bundles.hpp"
+#include "radix_sort.hpp"
 
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <cstdint>
@@ -67,21 +67,26 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
   }
   // Rays by the voxel of their hit (a cut ray, or one outside the addressable range, alone:
   // its own key).
-  constexpr std::uint64_t kAlone = std::uint64_t{1} << 63;
+  constexpr std::uint64_t kAlone = std::uint64_t{1} << 48;  // above every packed voxel
   std::vector<std::pair<std::uint64_t, std::uint32_t>>& rays = buffers.rays;
   rays.resize(n);
   tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
-    std::uint64_t key = kAlone | i;
+    std::uint64_t key = kAlone;
     if (bundle && takes[i] != 0) {
       if (const auto voxel = grid.pointToKey(points_world[i])) key = voxel->packed();
     }
     rays[i] = {key, static_cast<std::uint32_t>(i)};
   });
-  if (bundle) tbb::parallel_sort(rays.begin(), rays.end());
+  // By voxel, rays in order within each (stable; made in ray order); lone rays last.
+  if (bundle) {
+    radixSort(
+        rays, buffers.rays_other, 49, [](const auto& ray) { return ray.first; },
+        buffers.radix_counts);
+  }
   std::vector<std::size_t>& group_starts = buffers.group_starts;
   group_starts.clear();
   for (std::size_t p = 0; p < n; ++p) {
-    if (p == 0 || rays[p].first != rays[p - 1].first || (rays[p].first & kAlone) != 0) {
+    if (p == 0 || rays[p].first != rays[p - 1].first || rays[p].first == kAlone) {
       group_starts.push_back(p);
     }
   }

@@ -34,7 +34,8 @@ struct CapsuleShape {
 /// freeExtents' per-scan arrays, kept by the caller between scans (no fresh pages a scan).
 struct FreeBundleBuffers {
   std::vector<std::uint32_t> hit_of, takes;
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> rays;
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> rays, rays_other;
+  std::vector<std::uint32_t> radix_counts;
   std::vector<std::size_t> group_starts, offsets;
   std::vector<FreeExtent> slots;
   std::vector<std::uint8_t> used;

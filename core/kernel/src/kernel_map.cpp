@@ -21,6 +21,7 @@
 #include "densemap/kernel/kernel_function.hpp"
 #include "free_bundles.hpp"
 #include "free_traversal.hpp"
+#include "radix_sort.hpp"
 
 namespace densemap::kernel {
 
@@ -291,46 +292,14 @@ class SampleIndex {
                         }
                       });
     // The indexed samples sorted by (bucket, index): a stable radix sort of (bucket, index)
-    // pairs, 11 bits of the bucket a pass (buckets < 2^22), each pass counted and placed in
-    // parallel by fixed chunks of the pairs (the order does not depend on the thread count).
+    // pairs in index order (buckets < 2^22; the order does not depend on the thread count).
     std::vector<std::uint64_t>& keys = storage.keys;
-    std::vector<std::uint64_t>& other = storage.keys_other;
     keys.clear();
     for (std::uint32_t i = 0; i < samples.size(); ++i) {
       if (bucket[i] != kNone) keys.push_back((std::uint64_t{bucket[i]} << 32) | i);
     }
-    other.resize(keys.size());
-    constexpr int kBits = 11;
-    constexpr std::size_t kBins = std::size_t{1} << kBits;
-    constexpr std::size_t kChunk = 32768;
-    const std::size_t chunks = (keys.size() + kChunk - 1) / kChunk;
-    std::vector<std::uint32_t>& counts = storage.counts;
-    for (int shift = 32; shift < 32 + 2 * kBits; shift += kBits) {
-      counts.assign(chunks * kBins, 0);
-      const auto digit = [shift](std::uint64_t k) { return (k >> shift) & (kBins - 1); };
-      tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
-        std::uint32_t* mine = counts.data() + c * kBins;
-        for (std::size_t i = c * kChunk; i < std::min(keys.size(), (c + 1) * kChunk); ++i) {
-          ++mine[digit(keys[i])];
-        }
-      });
-      // Exclusive offsets, digit major, chunk minor: stable.
-      std::uint32_t sum = 0;
-      for (std::size_t d = 0; d < kBins; ++d) {
-        for (std::size_t c = 0; c < chunks; ++c) {
-          const std::uint32_t n = counts[c * kBins + d];
-          counts[c * kBins + d] = sum;
-          sum += n;
-        }
-      }
-      tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
-        std::uint32_t* mine = counts.data() + c * kBins;
-        for (std::size_t i = c * kChunk; i < std::min(keys.size(), (c + 1) * kChunk); ++i) {
-          other[mine[digit(keys[i])]++] = keys[i];
-        }
-      });
-      keys.swap(other);
-    }
+    radixSort(
+        keys, storage.keys_other, 22, [](std::uint64_t k) { return k >> 32; }, storage.counts);
     // starts[b]: the entries of buckets below b (b = 0 .. buckets), so bucket b is
     // [starts[b], starts[b + 1]); each written once, in parallel by the sorted entries.
     starts_.resize(buckets + 2);
@@ -528,13 +497,18 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
                           std::vector<RayStop>& stops, std::vector<Eigen::Vector3d>& means,
                           std::vector<double>& counts) {
   std::vector<std::pair<std::uint64_t, std::uint32_t>> by_voxel(hits.size());
-  // A hit's voxel, packed (outside the addressable range: one reserved value).
+  // A hit's voxel, packed in 48 bits (outside the addressable range: one reserved value
+  // above them, so such hits sort last).
   const auto voxelOf = [&grid](const Eigen::Vector3d& x) {
     const auto key = grid.pointToKey(x.cast<float>());
-    return key ? key->packed() : ~std::uint64_t{0} - 1;
+    return key ? key->packed() : std::uint64_t{1} << 48;
   };
   for (std::uint32_t h = 0; h < hits.size(); ++h) by_voxel[h] = {voxelOf(samples[hits[h]].x), h};
-  tbb::parallel_sort(by_voxel.begin(), by_voxel.end());
+  // By voxel, hits in order within each (stable; made in hit order).
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> by_voxel_other;
+  std::vector<std::uint32_t> radix_counts;
+  radixSort(
+      by_voxel, by_voxel_other, 49, [](const auto& pair) { return pair.first; }, radix_counts);
   // Groups of hits by voxel, and where each group's kernels go (one, or one per hit).
   const auto min_hits = static_cast<std::uint32_t>(std::max(1.0, options.aggregate_min_hits));
   std::vector<std::uint32_t> group_starts, outputs{0};
@@ -620,6 +594,8 @@ struct KernelMap::Scratch {
   std::vector<FreeExtent> free_extents;
   std::vector<std::pair<std::uint64_t, std::uint32_t>> pairs;
   std::vector<std::size_t> pair_offsets;
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> pairs_other;
+  std::vector<std::uint32_t> radix_counts;
   std::vector<Block*> free_targets;
   FreeBundleBuffers bundles;
 };
@@ -790,7 +766,11 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
           }
         }
       });
-  tbb::parallel_sort(pairs.begin(), pairs.end());
+  // By block, kernels in order within each (the pairs were made in kernel order): block keys
+  // are 39 bits.
+  radixSort(
+      pairs, scratch_->pairs_other, 39, [](const auto& pair) { return pair.first; },
+      scratch_->radix_counts);
   std::vector<std::size_t> starts;
   for (std::size_t p = 0; p < pairs.size(); ++p) {
     if (p == 0 || pairs[p].first != pairs[p - 1].first) {
@@ -1018,12 +998,16 @@ std::size_t KernelMap::memoryBytes() const {
            scratch_->index.counts.capacity() * sizeof(std::uint32_t);
   const FreeBundleBuffers& fb = scratch_->bundles;
   bytes += (fb.hit_of.capacity() + fb.takes.capacity()) * sizeof(std::uint32_t) +
-           fb.rays.capacity() * sizeof(std::pair<std::uint64_t, std::uint32_t>) +
+           (fb.rays.capacity() + fb.rays_other.capacity()) *
+               sizeof(std::pair<std::uint64_t, std::uint32_t>) +
+           fb.radix_counts.capacity() * sizeof(std::uint32_t) +
            (fb.group_starts.capacity() + fb.offsets.capacity()) * sizeof(std::size_t) +
            fb.slots.capacity() * sizeof(FreeExtent) + fb.used.capacity();
   bytes += scratch_->kernels.capacity() * sizeof(Kernel) +
            scratch_->free_extents.capacity() * sizeof(FreeExtent) +
-           scratch_->pairs.capacity() * sizeof(std::pair<std::uint64_t, std::uint32_t>);
+           (scratch_->pairs.capacity() + scratch_->pairs_other.capacity()) *
+               sizeof(std::pair<std::uint64_t, std::uint32_t>) +
+           scratch_->radix_counts.capacity() * sizeof(std::uint32_t);
   return bytes + free_->memoryBytes();
 }
 
