@@ -292,14 +292,15 @@ class SampleIndex {
                         }
                       });
     // The indexed samples sorted by (bucket, index): a stable radix sort of (bucket, index)
-    // pairs in index order (buckets < 2^22; the order does not depend on the thread count).
+    // pairs in index order (the order does not depend on the thread count).
     std::vector<std::uint64_t>& keys = storage.keys;
     keys.clear();
     for (std::uint32_t i = 0; i < samples.size(); ++i) {
       if (bucket[i] != kNone) keys.push_back((std::uint64_t{bucket[i]} << 32) | i);
     }
     radixSort(
-        keys, storage.keys_other, 22, [](std::uint64_t k) { return k >> 32; }, storage.counts);
+        keys, storage.keys_other, static_cast<int>(std::bit_width(buckets)),
+        [](std::uint64_t k) { return k >> 32; }, storage.counts);
     // starts[b]: the entries of buckets below b (b = 0 .. buckets), so bucket b is
     // [starts[b], starts[b + 1]); each written once, in parallel by the sorted entries.
     starts_.resize(buckets + 2);
@@ -558,12 +559,14 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
           centre.range /= count;
           const std::uint64_t own = by_voxel[first].first;
           // The voxel's own hits, recognised by their position (no lookup per neighbour): a
-          // point clearly outside the voxel's cube (by more than a float's rounding) is not
-          // one; only points near its faces take the key's own test.
+          // point clearly outside the voxel's cube (by more than a millimetre and a float's
+          // rounding at that distance from the origin) is not one; only points near its faces
+          // take the key's own test.
           const VoxelKey own_key = VoxelKey::fromPacked(own);
           const Eigen::Vector3d own_centre(grid.keyToCoord(own_key.x), grid.keyToCoord(own_key.y),
                                            grid.keyToCoord(own_key.z));
-          const double clearly_out = 0.5 * grid.resolution() + 1e-3;
+          const double clearly_out = 0.5 * grid.resolution() + 1e-3 +
+                                     2e-7 * own_centre.cwiseAbs().maxCoeff();  // float's step
           Kernel k = adaptiveKernel(
               centre,
               [&](const SampleIndex::Entry& e) {
