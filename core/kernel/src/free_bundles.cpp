@@ -9,44 +9,6 @@
 #include <utility>
 
 namespace densemap::kernel {
-namespace {
-
-/// One ray's free parts: the free extent's end (when it has one) and the tip's ends (when it
-/// has one), from the origin, as makeRaySegments computes them.
-struct RayParts {
-  Eigen::Vector3d free_end = Eigen::Vector3d::Zero();
-  Eigen::Vector3d tip_from = Eigen::Vector3d::Zero(), tip_to = Eigen::Vector3d::Zero();
-  bool has_free = false, has_tip = false, cut = false;
-};
-
-RayParts partsOf(const Point3f& point, const Eigen::Vector3d& origin, double max_range,
-                 const RayStop* stop_or_null) {
-  RayParts parts;
-  Eigen::Vector3d direction = point.cast<double>() - origin;
-  double length = direction.norm();
-  direction /= length;
-  parts.cut = max_range >= 0.0 && length > max_range;
-  RayStop stop;
-  if (parts.cut) {
-    length = max_range;
-  } else if (stop_or_null != nullptr) {
-    stop = *stop_or_null;
-  }
-  const double extent = length - stop.free;
-  if (extent > 0.0) {  // one piece: [origin + 0 * extent, origin + 1 * extent] along the ray
-    parts.has_free = true;
-    parts.free_end = origin + (1.0 * extent) * direction;
-  }
-  if (!parts.cut && stop.tip >= 0.0 && stop.tip < stop.free && length - stop.tip > 0.0) {
-    parts.has_tip = true;
-    parts.tip_from = origin + std::max(0.0, extent) * direction;
-    parts.tip_to = origin + (length - stop.tip) * direction;
-  }
-  return parts;
-}
-
-}  // namespace
-
 void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, double max_range,
                  std::span<const RayStop> stops, const VoxelGrid& grid, const CapsuleShape& shape,
                  bool bundle, FreeBundleBuffers& buffers, std::vector<FreeExtent>& out) {
@@ -56,8 +18,7 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
   std::vector<std::uint32_t>& hit_of = buffers.hit_of;
   hit_of.assign(n + 1, 0);
   tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
-    const double length = (points_world[i].cast<double>() - origin).norm();
-    hit_of[i + 1] = length > 0.0 && !(max_range >= 0.0 && length > max_range) ? 1 : 0;
+    hit_of[i + 1] = takesStop(points_world[i], origin, max_range) ? 1 : 0;
   });
   std::vector<std::uint32_t>& takes = buffers.takes;
   takes.resize(n);
@@ -100,18 +61,19 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
   tbb::parallel_for(std::size_t{0}, groups, [&](std::size_t g) {
     Eigen::Vector3d free_sum = Eigen::Vector3d::Zero();
     double frees = 0.0;
+    RayFreeSpace ray;
     for (std::size_t p = group_starts[g]; p < group_starts[g + 1]; ++p) {
       const std::uint32_t i = rays[p].second;
-      if (!((points_world[i].cast<double>() - origin).norm() > 0.0)) continue;
-      const std::uint32_t hit = hit_of[i];
-      const RayParts parts = partsOf(points_world[i], origin, max_range,
-                                     takes[i] != 0 && hit < stops.size() ? &stops[hit] : nullptr);
-      if (parts.has_free) {
-        free_sum += parts.free_end;
+      std::size_t hit = hit_of[i];
+      if (!rayFreeSpace(points_world[i], origin, max_range, stops, hit, ray)) continue;
+      if (ray.extent > 0.0) {  // one piece, [origin, origin + extent along the ray]
+        free_sum += origin + ray.extent * ray.direction;
         frees += 1.0;
       }
-      if (parts.has_tip) {
-        slots[groups + i] = {parts.tip_from, parts.tip_to, shape.tip_radius_m, shape.tip_weight};
+      if (ray.has_tip) {
+        slots[groups + i] = {origin + ray.tip_from * ray.direction,
+                             origin + ray.tip_to * ray.direction, shape.tip_radius_m,
+                             shape.tip_weight};
         used[groups + i] = 1;
       }
     }

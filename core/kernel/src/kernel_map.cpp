@@ -3,8 +3,6 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
-#include <tbb/parallel_sort.h>
-#include <tbb/task_arena.h>
 
 #include <Eigen/Dense>
 #include <algorithm>

@@ -198,40 +198,62 @@ std::vector<Sample> makeRaySegments(const PointCloud& points_world, const Point3
 
 namespace {
 
+/// A ray of this length is cut at max_range (>= 0; < 0: never).
+bool isCut(double length, double max_range) { return max_range >= 0.0 && length > max_range; }
+
+}  // namespace
+
+bool takesStop(const Point3f& point, const Eigen::Vector3d& origin, double max_range) {
+  const double length = (point.cast<double>() - origin).norm();
+  return length > 0.0 && !isCut(length, max_range);
+}
+
+bool rayFreeSpace(const Point3f& point, const Eigen::Vector3d& origin, double max_range,
+                  std::span<const RayStop> stops, std::size_t& hit, RayFreeSpace& out) {
+  Eigen::Vector3d direction = point.cast<double>() - origin;
+  double length = direction.norm();
+  if (!(length > 0.0)) return false;
+  out.direction = direction / length;
+  out.cut = isCut(length, max_range);
+  RayStop stop;
+  if (out.cut) {
+    length = max_range;
+  } else if (hit < stops.size()) {
+    stop = stops[hit++];
+  }
+  out.extent = length - stop.free;
+  out.has_tip = !out.cut && stop.tip >= 0.0 && stop.tip < stop.free && length - stop.tip > 0.0;
+  out.tip_from = std::max(0.0, out.extent);
+  out.tip_to = length - stop.tip;
+  return true;
+}
+
+namespace {
+
 /// The segments of points [first, last) (their first hit's stop is stops[hit]), appended.
 void raySegmentsOf(const PointCloud& points_world, std::size_t first, std::size_t last,
                    const Eigen::Vector3d& origin, double step, double max_range,
                    std::span<const RayStop> stops, std::size_t hit, std::vector<Sample>& segments) {
+  RayFreeSpace ray;
   for (std::size_t i = first; i < last; ++i) {
-    Eigen::Vector3d direction = points_world[i].cast<double>() - origin;
-    double length = direction.norm();
-    if (!(length > 0.0)) continue;
-    direction /= length;
-    const bool cut = max_range >= 0.0 && length > max_range;
-    RayStop stop;
-    if (cut) {
-      length = max_range;
-    } else if (hit < stops.size()) {
-      stop = stops[hit++];
-    }
-    const double extent = length - stop.free;
-    if (extent > 0.0) {
-      const double pieces = std::ceil(extent / step);
-      const double piece = extent / pieces;
+    if (!rayFreeSpace(points_world[i], origin, max_range, stops, hit, ray)) continue;
+    if (ray.extent > 0.0) {
+      const double pieces = std::ceil(ray.extent / step);
+      const double piece = ray.extent / pieces;
       for (double k = 0.0; k < pieces; k += 1.0) {
         Sample s;
-        s.x = origin + k * piece * direction;
-        s.to = origin + (k + 1.0) * piece * direction;
+        s.x = origin + k * piece * ray.direction;
+        s.to = origin + (k + 1.0) * piece * ray.direction;
         s.range = k * piece;
         s.segment = true;
         segments.push_back(s);
       }
     }
-    if (!cut && stop.tip >= 0.0 && stop.tip < stop.free && length - stop.tip > 0.0) {
+    if (ray.has_tip) {
       Sample s;
-      s.range = std::max(0.0, extent);
-      s.x = origin + s.range * direction;
-      s.to = origin + (length - stop.tip) * direction;
+      s.range = ray.tip_from;
+      s.x = origin + s.range * ray.direction;
+      s.to = origin + ray.tip_to * ray.direction;
       s.segment = true;
       s.tip = true;
       segments.push_back(s);
@@ -255,13 +277,12 @@ void makeRaySegments(const PointCloud& points_world, const Point3f& origin_world
                   segments);
     return;
   }
-  // A ray takes a stop when it has a length and is not cut (as raySegmentsOf counts them).
+  // Each chunk's first stop: the rays before it that take one.
   std::vector<std::size_t> first_hit(chunks + 1, 0);
   tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
     std::size_t n = 0;
     for (std::size_t i = c * kChunk; i < std::min(points_world.size(), (c + 1) * kChunk); ++i) {
-      const double length = (points_world[i].cast<double>() - origin).norm();
-      n += length > 0.0 && !(max_range >= 0.0 && length > max_range);
+      n += takesStop(points_world[i], origin, max_range) ? 1 : 0;
     }
     first_hit[c + 1] = n;
   });

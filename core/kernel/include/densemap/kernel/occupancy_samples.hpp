@@ -97,6 +97,25 @@ struct RayStop {
   double tip = -1.0;
 };
 
+/// One ray's free space: the one rule makeRaySegments and the free capsules (free_bundles)
+/// share. From the origin along `direction` the ray is free to `extent` m (nothing when
+/// extent <= 0), then its tip over [tip_from, tip_to] m (when has_tip). A ray longer than
+/// max_range (>= 0) is cut there: free to max_range, without a stop or a tip.
+struct RayFreeSpace {
+  Eigen::Vector3d direction = Eigen::Vector3d::Zero();
+  double extent = 0.0, tip_from = 0.0, tip_to = 0.0;
+  bool cut = false, has_tip = false;
+};
+/// Whether the ray to `point` takes a stop: it has a length and is not cut (the hits of
+/// makeSamples, in order).
+[[nodiscard]] bool takesStop(const Point3f& point, const Eigen::Vector3d& origin, double max_range);
+/// The free space of the ray to `point`; false for a ray of no length (it takes no stop). A ray
+/// that takes a stop takes stops[hit] and moves `hit` on (none, and the cursor stays, once
+/// past the end of `stops`).
+[[nodiscard]] bool rayFreeSpace(const Point3f& point, const Eigen::Vector3d& origin,
+                                double max_range, std::span<const RayStop> stops, std::size_t& hit,
+                                RayFreeSpace& out);
+
 /// The free segments of a scan's rays (every ray of makeSamples, in the same order; a cut ray
 /// is free all the way to max_range): [origin, hit - stop.free] split into equal segments of
 /// at most `step`, then the tip. `stops` holds one entry per hit, in the order of the
