@@ -611,7 +611,7 @@ KernelMap::KernelMap(KernelMap&&) noexcept = default;
 KernelMap& KernelMap::operator=(KernelMap&&) noexcept = default;
 
 KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point3f& origin_world,
-                                     std::vector<VoxelKey>* touched) {
+                                     std::vector<BlockCells>* touched) {
   KernelScanStats stats;
   auto t0 = std::chrono::steady_clock::now();
   SamplingOptions sampling;
@@ -882,12 +882,10 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
                      [](const auto& x, const auto& y) { return x.first < y.first; });
     for (std::size_t i = 0; i < reached_blocks.size();) {
       const std::uint64_t block_key = reached_blocks[i].first;
-      block::BlockMask mask{};
+      BlockCells& merged = touched->emplace_back(BlockCells{.key = block_key});
       for (; i < reached_blocks.size() && reached_blocks[i].first == block_key; ++i) {
-        for (int w = 0; w < block::kMaskWords; ++w) mask[w] |= reached_blocks[i].second[w];
+        for (int w = 0; w < block::kMaskWords; ++w) merged.cells[w] |= reached_blocks[i].second[w];
       }
-      block::forEachSetBit(mask,
-                           [&](int cell) { touched->push_back(block::keyOf(block_key, cell)); });
     }
   }
   if (!free_extents.empty()) stats.ms_apply = msSince(t0);
@@ -918,6 +916,21 @@ std::optional<double> KernelMap::probability(const VoxelKey& key) const {
   const double alpha = options_.prior + it->second.alpha[cell];
   const double beta = options_.prior + it->second.beta[cell];
   return alpha / (alpha + beta);
+}
+
+void KernelMap::blockLogOdds(std::uint64_t block_key, const block::BlockMask& cells,
+                             std::array<float, block::kVoxels>& log_odds) const {
+  const auto it = blocks_.find(block_key);
+  block::forEachSetBit(cells, [&](int cell) {
+    // probability(), cell by cell: unknown is p = 0.5
+    double p = 0.5;
+    if (it != blocks_.end() && block::testBit(it->second.known, cell)) {
+      const double alpha = options_.prior + it->second.alpha[cell];
+      const double beta = options_.prior + it->second.beta[cell];
+      p = alpha / (alpha + beta);
+    }
+    log_odds[cell] = static_cast<float>(std::log(p / (1.0 - p)));
+  });
 }
 
 void KernelMap::forEachKnown(const std::function<void(const VoxelKey&, double)>& f) const {

@@ -226,6 +226,57 @@ void GridMap::applyChanges(const CellChanges& changes) {
   }
 }
 
+ApplyStats GridMap::assignBlocks(std::span<const BlockCells> blocks, const BlockValues& values_of,
+                                 CellChanges* changes) {
+  std::vector<BlockEntry*> entries(blocks.size());
+  for (std::size_t j = 0; j < blocks.size(); ++j) entries[j] = &store_->entry(blocks[j].key);
+  std::vector<CellChanges> block_changes(changes != nullptr ? blocks.size() : 0);
+  struct Counts {
+    std::size_t updated = 0, changed = 0, newly_known = 0;
+  };
+  static const BlockNode kEmpty{};
+  const Counts total = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, blocks.size(), 16), Counts{},
+      [&](const tbb::blocked_range<std::size_t>& range, Counts c) {
+        std::array<float, block::kVoxels> values{};
+        for (std::size_t j = range.begin(); j != range.end(); ++j) {
+          const BlockCells& b = blocks[j];
+          values_of(b.key, b.cells, values);
+          const BlockNode* head = BlockStore::latest(*entries[j]);
+          const BlockNode* read = head != nullptr ? head : &kEmpty;
+          BlockNode* write = nullptr;  // the first change takes the writable node
+          block::forEachSetBit(b.cells, [&](int i) {
+            ++c.updated;
+            const bool known = read->voxels.isKnown(i);
+            if (known && read->voxels.log_odds[i] == values[i]) return;
+            if (write == nullptr) {
+              write = &store_->writable(*entries[j]);
+              read = write;
+            }
+            if (!known) {
+              write->voxels.markKnown(i);
+              ++c.newly_known;
+            }
+            ++c.changed;
+            store(*write, i, values[i]);
+            if (changes != nullptr) block_changes[j].push_back({block::keyOf(b.key, i), values[i]});
+          });
+        }
+        return c;
+      },
+      [](Counts a, const Counts& b) {
+        a.updated += b.updated;
+        a.changed += b.changed;
+        a.newly_known += b.newly_known;
+        return a;
+      });
+  known_cells_ += total.newly_known;
+  if (changes != nullptr) {
+    for (auto& part : block_changes) changes->insert(changes->end(), part.begin(), part.end());
+  }
+  return {total.updated, total.changed};
+}
+
 void GridMap::clear() {
   if (!store_->versioned()) {  // nobody reads older versions: drop everything at once
     store_->clearUnversioned();

@@ -321,21 +321,34 @@ void Pipeline::warmUp() {
 ScanStats Pipeline::integrateKernel(const PointCloud& points_world, const Point3f& origin_world,
                                     CellChanges& changes) {
   auto t0 = std::chrono::steady_clock::now();
-  std::vector<VoxelKey> touched;
+  std::vector<BlockCells> touched;
   kernel_map_->integrate(points_world, origin_world, &touched);
   ScanStats stats;
   stats.points = points_world.size();
   stats.rays = points_world.size();
   stats.ms_mark = msSince(t0);
-  for (const VoxelKey& key : touched) {
-    const double p = kernel_map_->probability(key).value_or(0.5);
-    const auto log_odds = static_cast<float>(std::log(p / (1.0 - p)));
-    if (map_->logOdds(key) != log_odds) {
-      map_->setLogOdds(key, log_odds);
-      changes.push_back({key, log_odds, true});
+  // The published map follows the evidence of the cells this scan reached: block by block, in
+  // parallel, on the grid; cell by cell on another backend.
+  const auto values = [this](std::uint64_t block_key, const block::BlockMask& cells,
+                             std::array<float, block::kVoxels>& log_odds) {
+    kernel_map_->blockLogOdds(block_key, cells, log_odds);
+  };
+  if (auto* grid = dynamic_cast<GridMap*>(map_.get())) {
+    stats.updated = grid->assignBlocks(touched, values, &changes).updated_cells;
+  } else {
+    std::array<float, block::kVoxels> log_odds{};
+    for (const BlockCells& b : touched) {
+      values(b.key, b.cells, log_odds);
+      block::forEachSetBit(b.cells, [&](int cell) {
+        const VoxelKey key = block::keyOf(b.key, cell);
+        ++stats.updated;
+        if (map_->logOdds(key) != log_odds[cell]) {
+          map_->setLogOdds(key, log_odds[cell]);
+          changes.push_back({key, log_odds[cell], true});
+        }
+      });
     }
   }
-  stats.updated = touched.size();
   stats.changed = changes.size();
   stats.ms_apply = msSince(t0);
   return stats;

@@ -4,6 +4,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <map>
 #include <random>
 
 #include "densemap/map/map_diff.hpp"
@@ -142,6 +143,70 @@ TEST(GridMap, OneAndTwoThreadsGiveTheSameMap) {
     arena2.execute([&] { two.apply(ub); });
   }
   EXPECT_EQ(diffMaps(one, two).differing(), 0U);
+}
+
+// assignBlocks (how a dense map's grid follows its evidence) against setLogOdds cell by cell:
+// the same map and the same changes, on 1 and 2 threads; an unchanged cell is neither written
+// nor reported, so a version whose values did not change writes no block.
+TEST(GridMap, AssignBlocksEqualsSettingCellByCellAndSkipsUnchangedCells) {
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<int> coord(32700, 32790);
+  std::uniform_real_distribution<float> value(-3.0F, 3.0F);
+  GridMap plain(0.2, SensorModel{});
+  std::array<GridMap, 2> maps{GridMap(0.2, SensorModel{}), GridMap(0.2, SensorModel{})};
+  std::map<std::uint64_t, BlockCells> by_block;
+  std::map<std::uint64_t, float> wanted;  // packed key -> value
+  for (int round = 0; round < 4; ++round) {
+    if (round < 3) {  // round 3 repeats round 2's cells and values: nothing changes
+      by_block.clear();
+      wanted.clear();
+      for (int i = 0; i < 3000; ++i) {
+        const VoxelKey k{static_cast<std::uint16_t>(coord(rng)),
+                         static_cast<std::uint16_t>(coord(rng)),
+                         static_cast<std::uint16_t>(coord(rng))};
+        BlockCells& b = by_block[block::blockOf(k)];
+        b.key = block::blockOf(k);
+        block::setBit(b.cells, block::indexOf(k));
+        wanted[k.packed()] = value(rng);
+      }
+    }
+    std::vector<BlockCells> blocks;
+    for (const auto& [key, b] : by_block) blocks.push_back(b);
+    CellChanges expected;
+    for (const BlockCells& b : blocks) {
+      block::forEachSetBit(b.cells, [&](int cell) {
+        const VoxelKey k = block::keyOf(b.key, cell);
+        const float v = wanted.at(k.packed());
+        if (plain.logOdds(k) != v) {
+          plain.setLogOdds(k, v);
+          expected.push_back({k, v, true});
+        }
+      });
+    }
+    const auto values = [&](std::uint64_t key, const block::BlockMask& cells,
+                            std::array<float, block::kVoxels>& out) {
+      block::forEachSetBit(cells,
+                           [&](int cell) { out[cell] = wanted.at(block::keyOf(key, cell).packed()); });
+    };
+    for (std::size_t t = 0; t < maps.size(); ++t) {
+      tbb::task_arena arena(static_cast<int>(t) + 1);
+      CellChanges changes;
+      std::size_t updated = 0;
+      arena.execute([&] { updated = maps[t].assignBlocks(blocks, values, &changes).updated_cells; });
+      EXPECT_EQ(updated, wanted.size());
+      ASSERT_EQ(changes.size(), expected.size()) << "round " << round;
+      for (std::size_t i = 0; i < changes.size(); ++i) {
+        EXPECT_EQ(changes[i].key, expected[i].key);
+        EXPECT_EQ(changes[i].log_odds, expected[i].log_odds);
+      }
+      EXPECT_EQ(diffMaps(maps[t], plain).differing(), 0U);
+      EXPECT_EQ(maps[t].knownCells(), plain.knownCells());
+      const auto published = maps[t].publishVersion();
+      if (round == 3) EXPECT_TRUE(published.written_blocks.empty());
+    }
+    if (round == 3) EXPECT_TRUE(expected.empty());
+  }
+  expectFullyFreeMasksMatchValues(maps[1]);
 }
 
 TEST(GridMap, QueriesByKeyAndPointAgreeAndUnknownIsEmpty) {

@@ -143,10 +143,10 @@ class KernelMap {
   [[nodiscard]] const KernelOptions& options() const { return options_; }
 
   /// Integrates one scan (finite points, world frame) taken from `origin_world`. When `touched`
-  /// is given, the cells this scan's kernels reached are appended to it (block by block, in
-  /// block-key order).
+  /// is given, the cells this scan's kernels reached are appended to it, a block each, in
+  /// block-key order.
   KernelScanStats integrate(const PointCloud& points_world, const Point3f& origin_world,
-                            std::vector<VoxelKey>* touched = nullptr);
+                            std::vector<BlockCells>* touched = nullptr);
   /// Forgets a cell's evidence (it becomes unknown).
   void erase(const VoxelKey& key);
   /// Drops every block whose centre (block::centreOf) `keep` refuses, with its evidence and
@@ -155,6 +155,10 @@ class KernelMap {
 
   /// alpha / (alpha + beta); std::nullopt where no kernel reached the cell (unknown).
   [[nodiscard]] std::optional<double> probability(const VoxelKey& key) const;
+  /// The log-odds log(p / (1 - p)) of the cells of `cells` in block `block_key` (0 where
+  /// unknown, p = 0.5), into log_odds[cell]. Safe from parallel tasks between scans.
+  void blockLogOdds(std::uint64_t block_key, const block::BlockMask& cells,
+                    std::array<float, block::kVoxels>& log_odds) const;
   void forEachKnown(const std::function<void(const VoxelKey&, double)>& f) const;
   [[nodiscard]] std::size_t knownCells() const;
   /// Bytes held: the evidence blocks (with the hash's nodes) and the per-scan buffers kept.

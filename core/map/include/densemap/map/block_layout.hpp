@@ -71,3 +71,14 @@ void forEachSetBit(const BlockMask& m, F&& f) {
 }
 
 }  // namespace densemap::block
+
+namespace densemap {
+
+/// Some cells of one block: a dense map's cells reached by a scan (GridMap::assignBlocks).
+struct BlockCells {
+  std::uint64_t key = 0;
+  block::BlockMask cells{};
+};
+
+}  // namespace densemap
+

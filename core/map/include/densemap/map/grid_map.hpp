@@ -2,6 +2,7 @@
 
 #include <functional>
 #include <memory>
+#include <span>
 #include <vector>
 
 #include "densemap/map/block_store.hpp"
@@ -49,6 +50,16 @@ class GridMap final : public OccupancyMap {
   void erase(const VoxelKey& key);
   /// Applies a change list (values set, erased cells forgotten): how a mirror follows a map.
   void applyChanges(const CellChanges& changes);
+  /// Fills `values[cell]` for the cells of a block's mask (assignBlocks); called from parallel
+  /// tasks, one block at a time each.
+  using BlockValues = std::function<void(std::uint64_t block_key, const block::BlockMask& cells,
+                                         std::array<float, block::kVoxels>& values)>;
+  /// Sets each block's cells to the values `values_of` gives them, in parallel, a block per
+  /// task (missing blocks created first, serially, so the result is the same for any number
+  /// of threads); a known cell whose value is unchanged is not written. `blocks` has each block
+  /// once; changes come in its order. How a dense map's published grid follows its evidence.
+  ApplyStats assignBlocks(std::span<const BlockCells> blocks, const BlockValues& values_of,
+                          CellChanges* changes = nullptr);
 
   [[nodiscard]] std::size_t blockCount() const { return store_->entryCount(); }
 
