@@ -61,6 +61,7 @@ void samplesOfRays(const PointCloud& points_world, std::size_t first, std::size_
     } else {
       samples.push_back({point, point, length, true, false});
     }
+    if (options.free == FreeSampling::kNone) continue;
     const auto intervals = static_cast<std::uint64_t>(std::floor(length / step));
     if (options.free == FreeSampling::kRandomPerInterval) {
       // The common case in a tight loop: the point drawn, tested, and only then a sample.

@@ -22,8 +22,9 @@ enum class KernelMethod {
   kAkimap,  // adaptive anisotropic kernels, random free samples
   kBgk,     // BGKOctoMap: isotropic kernels on points, regular free points
   kBgkl,    // BGKOctoMap-L: isotropic kernels on points, free ray segments
-  /// AKIMap's adaptive kernels for occupied evidence (their scale fitted against AKIMap's
-  /// random free samples, which add no evidence themselves) and free evidence from segment
+  /// AKIMap's adaptive kernels for occupied evidence (their scale fitted to the neighbouring
+  /// hits; with negative_step > 0 also against AKIMap's random free samples, which add no
+  /// evidence themselves) and free evidence from segment
   /// kernels that cover every ray up to `free_margin` short of its hit: the rays' free space
   /// is covered as by BGKOctoMap-L, without blurring free evidence into the surfaces.
   kAkimapRays,
@@ -59,7 +60,8 @@ struct KernelOptions {
   /// every resolution), weighing `hit_kernel_weight` at its centre (0: none).
   double hit_kernel_weight = 0.0;
   double hit_length_voxels = 2.0;
-  /// kAkimapRays: the spacing of AKIMap's random free samples that shape the occupied kernels.
+  /// kAkimapRays: the spacing of AKIMap's random free samples that shape the occupied kernels
+  /// (<= 0: none, the occupied kernels fitted to the hits alone; 0 in defaults()).
   double negative_step = 0.5;
   // kAkimap, kAkimapRays: the neighbour search box's half-size grows linearly from the voxel size
   // at the sensor to `search_max` at `search_range` (max_range when set).

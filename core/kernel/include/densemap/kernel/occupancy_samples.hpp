@@ -27,6 +27,7 @@ enum class FreeSampling {
   kRandomPerInterval,  // AKIMap: one point drawn uniformly in each interval of `free_step`
   kRegular,            // BGKOctoMap: one point at the middle of each interval
   kSegments,           // BGKOctoMap-L: each interval is a free segment
+  kNone,               // no free samples: the hits only
 };
 
 struct SamplingOptions {
