@@ -195,10 +195,29 @@ Expected<PointQueryAnswer> Client::queryPoints(const std::vector<Point3f>& point
 }
 
 Expected<PointQueryAnswer> Client::queryPointsRaw(const std::vector<float>& xyz) {
+  // At most kMaxQueryPoints a request (whole points; a stray coordinate goes with the last
+  // part, for the server to refuse).
+  constexpr std::size_t kPart = std::size_t{dds::kMaxQueryPoints} * 3;
+  if (xyz.size() <= kPart + 2) return queryPointsOnce(xyz);
+  PointQueryAnswer answer;
+  answer.log_odds.reserve(xyz.size() / 3);
+  answer.states.reserve(xyz.size() / 3);
+  for (std::size_t from = 0; from < xyz.size(); from += kPart) {
+    const std::size_t n = xyz.size() - from <= kPart + 2 ? xyz.size() - from : kPart;
+    auto part = queryPointsOnce(std::span<const float>(xyz).subspan(from, n));
+    if (!part) return part;
+    answer.map_version = part->map_version;
+    answer.log_odds.insert(answer.log_odds.end(), part->log_odds.begin(), part->log_odds.end());
+    answer.states.insert(answer.states.end(), part->states.begin(), part->states.end());
+    if (n != kPart) break;
+  }
+  return answer;
+}
+
+Expected<PointQueryAnswer> Client::queryPointsOnce(std::span<const float> xyz) {
   densemap_msgs_PointQueryRequest req{};
   req.id = {client_id_, next_request_++};
-  auto& mutable_xyz = const_cast<std::vector<float>&>(xyz);
-  req.points = dds::borrowSequence<dds_sequence_float>(mutable_xyz);
+  req.points = dds::borrowSequence<dds_sequence_float>(xyz);
   if (auto ok = permitted(dds_->pq_w, "point queries"); !ok) return std::unexpected(ok.error());
   if (auto ok = permitted(dds_->pr_r, "point queries"); !ok) return std::unexpected(ok.error());
   if (auto ok = dds::write(dds_->pq_w, &req); !ok) return std::unexpected(ok.error());

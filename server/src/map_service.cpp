@@ -279,6 +279,14 @@ void MapService::publishLoop() {
       publishStatus();
       publishManifest();
       next_status = now + std::chrono::seconds(1);
+      // Requests served and none in flight: the heap goes back to the OS (RSS stayed ~850 MB
+      // after a flood until a save trimmed it). At the status tick, a second or so after the
+      // last reply: its serialised copy leaves DDS's writer history once the asker acknowledged
+      // it.
+      if (request_bytes_.load() == 0 && served_since_trim_.load() > kTrimAfterBytes) {
+        served_since_trim_ = 0;
+        malloc_trim(0);
+      }
     }
     // Autosave only a changed map: a daemon idle for months does not rewrite the same file.
     if (autosave && now >= next_save) {
@@ -465,9 +473,8 @@ void MapService::runTask(std::function<void()> task, std::size_t bytes) {
   query_arena_.execute([&] {
     queries_.run([this, bytes, task = std::move(task)] {
       task();
-      // The last large request out hands its memory back to the OS (RSS stayed ~850 MB after a
-      // flood until a save trimmed the heap).
-      if (request_bytes_.fetch_sub(bytes) == bytes && bytes > kTrimAfterBytes) malloc_trim(0);
+      request_bytes_ -= bytes;
+      served_since_trim_ += bytes;
       --queries_in_flight_;
     });
   });
@@ -508,19 +515,26 @@ void MapService::takeQueries() {
         dds_->point_reader,
         [&](const densemap_msgs_PointQueryRequest& m, const dds_sample_info_t& info) {
           const std::size_t bytes = pointRequestBytes(m.points._length);
-          if (bytes > options_.request_budget_bytes) {
-            const std::string error = std::to_string(m.points._length / 3) + " query points need " +
-                                      std::to_string(bytes >> 20) +
-                                      " MiB, over the server's request budget of " +
-                                      std::to_string(options_.request_budget_bytes >> 20) +
-                                      " MiB (pipeline.request_budget_mb): send smaller batches";
+          std::string refusal;
+          if (m.points._length / 3 > dds::kMaxQueryPoints) {
+            refusal = std::to_string(m.points._length / 3) +
+                      " query points in one request: at most " +
+                      std::to_string(dds::kMaxQueryPoints) +
+                      " (densemap's client library splits larger batches)";
+          } else if (bytes > options_.request_budget_bytes) {
+            refusal = std::to_string(m.points._length / 3) + " query points need " +
+                      std::to_string(bytes >> 20) + " MiB, over the server's request budget of " +
+                      std::to_string(options_.request_budget_bytes >> 20) +
+                      " MiB (pipeline.request_budget_mb): send smaller batches";
+          }
+          if (!refusal.empty()) {
             densemap_msgs_PointQueryReply rep{};
             rep.id = m.id;
             rep.status = kInvalid;
-            rep.error = const_cast<char*>(error.c_str());
+            rep.error = const_cast<char*>(refusal.c_str());
             awaitAsker(dds_->point_writer, asker(dds_->point_reader, info));
             (void)dds::write(dds_->point_writer, &rep);
-            noteBadRequest(error);
+            noteBadRequest(refusal);
             return;
           }
           PointRequest req{

@@ -185,14 +185,15 @@ TEST(GridMap, AssignBlocksEqualsSettingCellByCellAndSkipsUnchangedCells) {
     }
     const auto values = [&](std::uint64_t key, const block::BlockMask& cells,
                             std::array<float, block::kVoxels>& out) {
-      block::forEachSetBit(cells,
-                           [&](int cell) { out[cell] = wanted.at(block::keyOf(key, cell).packed()); });
+      block::forEachSetBit(
+          cells, [&](int cell) { out[cell] = wanted.at(block::keyOf(key, cell).packed()); });
     };
     for (std::size_t t = 0; t < maps.size(); ++t) {
       tbb::task_arena arena(static_cast<int>(t) + 1);
       CellChanges changes;
       std::size_t updated = 0;
-      arena.execute([&] { updated = maps[t].assignBlocks(blocks, values, &changes).updated_cells; });
+      arena.execute(
+          [&] { updated = maps[t].assignBlocks(blocks, values, &changes).updated_cells; });
       EXPECT_EQ(updated, wanted.size());
       ASSERT_EQ(changes.size(), expected.size()) << "round " << round;
       for (std::size_t i = 0; i < changes.size(); ++i) {

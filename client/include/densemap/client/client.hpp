@@ -5,6 +5,7 @@
 #include <functional>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -107,9 +108,14 @@ class Client {
   /// Waits until a server's scan reader and request readers are matched.
   [[nodiscard]] Expected<void> waitForServer();
   [[nodiscard]] Expected<void> publishScan(const RawScan& scan);
+  /// A batch of more than dds::kMaxQueryPoints points goes as several requests, one after
+  /// another, each answered from one map version; map_version is then the last part's.
   [[nodiscard]] Expected<PointQueryAnswer> queryPoints(const std::vector<Point3f>& points_world);
-  /// Sends raw coordinates unchecked (the server validates): for tests of bad input.
+  /// Sends raw coordinates unchecked (the server validates; split as queryPoints): for tests of
+  /// bad input.
   [[nodiscard]] Expected<PointQueryAnswer> queryPointsRaw(const std::vector<float>& xyz);
+  /// One request of raw coordinates, unsplit (tests of the server's limit).
+  [[nodiscard]] Expected<PointQueryAnswer> queryPointsOnce(std::span<const float> xyz);
   [[nodiscard]] Expected<BoxQueryAnswer> queryBox(const Point3f& min, const Point3f& max,
                                                   std::uint32_t max_centers = 0);
   [[nodiscard]] Expected<RayQueryAnswer> castRay(const Point3f& origin, const Point3f& direction,

@@ -125,6 +125,7 @@ class MapService {
   tbb::task_group queries_;
   std::atomic<int> queries_in_flight_{0};
   std::atomic<std::size_t> request_bytes_{0};  // charged to options_.request_budget_bytes
+  std::atomic<std::size_t> served_since_trim_{0};  // request bytes answered since the last trim
   std::mutex askers_mutex_;
   std::unordered_set<std::string> askers_matched_;  // "writer:participant" seen matched
   std::unordered_map<std::string, std::chrono::steady_clock::time_point> asker_first_seen_;

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <functional>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -163,6 +164,17 @@ Seq borrowSequence(V& v) {
   s._maximum = static_cast<std::uint32_t>(v.size());
   s._length = static_cast<std::uint32_t>(v.size());
   s._buffer = v.data();
+  s._release = false;
+  return s;
+}
+/// The same for a read-only span: lent for a write (DDS serialises it and never writes through
+/// the buffer).
+template <class Seq, class T>
+Seq borrowSequence(std::span<const T> v) {
+  Seq s{};
+  s._maximum = static_cast<std::uint32_t>(v.size());
+  s._length = static_cast<std::uint32_t>(v.size());
+  s._buffer = const_cast<T*>(v.data());
   s._release = false;
   return s;
 }

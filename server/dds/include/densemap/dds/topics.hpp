@@ -26,6 +26,11 @@ struct Topics {
 /// CommandRequest.kind on the wire (densemap_msgs.idl), for the server and the client alike.
 enum class CommandKind : std::int32_t { kReset = 0, kClearBox = 1, kSave = 2, kSendMap = 3 };
 
+/// The most points one PointQueryRequest may carry (3 MB of coordinates, a 1.25 MB reply): the
+/// server refuses more, the client library splits a larger batch into requests of this size,
+/// sent one after another, so a client has one request's worth of memory in flight at a time.
+inline constexpr std::uint32_t kMaxQueryPoints = 250'000;
+
 /// QoS of the request/reply topics (DESIGN.md: reliable, keep-last 16-64).
 inline constexpr QosSpec kRequestQos{.depth = 64};
 inline constexpr QosSpec kCommandQos{.depth = 16};
