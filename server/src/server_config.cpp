@@ -149,6 +149,10 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
   if (p.queue_depth() < 1 || p.queue_depth() > 1024) {
     return makeError("pipeline.queue_depth must be in 1..1024");
   }
+  if (p.queue_budget_mb() < 16 || p.queue_budget_mb() > 65536) {
+    return makeError("pipeline.queue_budget_mb must be in 16..65536, got " +
+                     std::to_string(p.queue_budget_mb()));
+  }
   if (p.max_points() < 1) return makeError("pipeline.max_points must be >= 1");
   auto method = parseIntegrationMethod(p.integration());
   if (!method) return makeError("pipeline.integration: " + method.error().message);
@@ -158,6 +162,7 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
   o.rule = *rule;
   o.threads = static_cast<int>(p.threads());
   o.queue_depth = p.queue_depth();
+  o.queue_budget_bytes = std::size_t{p.queue_budget_mb()} << 20;
   o.warm_up = p.warm_up();
   o.reserve_blocks = p.reserve_blocks();
   o.limits.max_points = p.max_points();

@@ -124,7 +124,7 @@ Pipeline::Pipeline(const PipelineOptions& options, std::unique_ptr<OccupancyMap>
       queue_(
           options.queue_depth, options.queue_depth * kQueueSensorShare,
           [](const RawScan& scan) -> const std::string& { return scan.sensor_id; },
-          SensorTally::kMaxSensors) {
+          SensorTally::kMaxSensors, rawScanBytes, options.queue_budget_bytes) {
   if (options.kernel) {
     auto kernel_options = kernel::KernelOptions::defaults(*options.kernel);
     kernel_options.max_range = options.max_range_m;
@@ -168,11 +168,11 @@ void Pipeline::submit(RawScan scan) {
     ++counters_.received;
     sensors_.received(scan.sensor_id, scan.seq);
   }
-  std::optional<RawScan> dropped;
+  std::vector<RawScan> dropped;
   queue_.push(std::move(scan), &dropped);
-  if (dropped) {
+  if (!dropped.empty()) {
     std::lock_guard lock(counters_mutex_);
-    sensors_.dropped(dropped->sensor_id);
+    for (const RawScan& d : dropped) sensors_.dropped(d.sensor_id);
   }
 }
 

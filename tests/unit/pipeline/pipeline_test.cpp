@@ -397,12 +397,12 @@ TEST(Pipeline, RejectsAnUpsampleStageWithMismatchedFieldsOfView) {
 
 TEST(LatestWinsQueue, DropsTheOldestWhenFullAndCountsIt) {
   LatestWinsQueue<int> sut(2);
-  std::optional<int> dropped;
+  std::vector<int> dropped;
   sut.push(1, &dropped);
   sut.push(2, &dropped);
-  EXPECT_FALSE(dropped.has_value());
+  EXPECT_TRUE(dropped.empty());
   sut.push(3, &dropped);
-  EXPECT_EQ(dropped, 1);  // handed back, so the caller knows whose item it was
+  EXPECT_EQ(dropped, std::vector<int>{1});  // handed back, so the caller knows whose it was
   EXPECT_EQ(sut.dropped(), 1U);
   EXPECT_EQ(sut.pop(0ms), 2);
   EXPECT_EQ(sut.pop(0ms), 3);
@@ -421,16 +421,16 @@ TEST(LatestWinsQueue, PerKeyTheLatestWinsWithinItsOwnKeyAndTheTotalIsBounded) {
       {"a1", "a"}, {"a2", "a"}, {"a3", "a"}, {"b1", "b"}, {"b2", "b"}, {"c1", "c"}, {"d1", "d"}};
   LatestWinsQueue<std::string> sut(
       2, 5, [&](const std::string& s) -> const std::string& { return letter.at(s); });
-  std::optional<std::string> dropped;
+  std::vector<std::string> dropped;
   for (const char* item : {"a1", "b1", "a2", "b2"}) sut.push(item, &dropped);
-  EXPECT_FALSE(dropped.has_value());
+  EXPECT_TRUE(dropped.empty());
   sut.push("a3", &dropped);  // a is full: its oldest goes, b keeps both
-  EXPECT_EQ(dropped, "a1");
-  dropped.reset();
+  EXPECT_EQ(dropped, std::vector<std::string>{"a1"});
+  dropped.clear();
   sut.push("c1", &dropped);  // 5 in all: fits
-  EXPECT_FALSE(dropped.has_value());
+  EXPECT_TRUE(dropped.empty());
   sut.push("d1", &dropped);  // beyond the total: the oldest of any key goes
-  EXPECT_EQ(dropped, "b1");
+  EXPECT_EQ(dropped, std::vector<std::string>{"b1"});
   EXPECT_EQ(sut.dropped(), 2U);
   for (const char* expected : {"a2", "b2", "a3", "c1", "d1"}) EXPECT_EQ(sut.pop(0ms), expected);
 }
@@ -449,22 +449,57 @@ TEST(LatestWinsQueue, ManySensorsWithAScanEachLoseNoneAndTheFullestSensorGivesWa
       },
       /*max_keys=*/30);
   for (int i = 0; i < 40; ++i) keys.push_back("s" + std::to_string(i));
-  std::optional<std::string> dropped;
+  std::vector<std::string> dropped;
   for (int i = 0; i < 24; ++i) sut.push("s" + std::to_string(i) + ":1", &dropped);
-  EXPECT_FALSE(dropped.has_value());
+  EXPECT_TRUE(dropped.empty());
   EXPECT_EQ(sut.size(), 24U);
   sut.push("s0:2", &dropped);  // s0 may hold 2: fits (every other sensor holds 1)
-  EXPECT_FALSE(dropped.has_value());
+  EXPECT_TRUE(dropped.empty());
   sut.push("s1:2", &dropped);  // beyond the total: the fullest sensor (s0) gives its oldest
-  EXPECT_EQ(dropped, "s0:1");
-  dropped.reset();
+  EXPECT_EQ(dropped, std::vector<std::string>{"s0:1"});
+  dropped.clear();
   // Beyond max_keys sensors at once, a sensor's only scan goes: the oldest of all.
   for (int i = 24; i < 30; ++i) sut.push("s" + std::to_string(i) + ":1", &dropped);
-  EXPECT_EQ(dropped, "s1:1");  // s1 held two: it gave way first
-  dropped.reset();
+  EXPECT_EQ(dropped, std::vector<std::string>{"s1:1"});  // s1 held two: it gave way first
+  dropped.clear();
   sut.push("s30:1", &dropped);  // 31 keys > 30, every key holds one: the oldest of all goes
-  EXPECT_EQ(dropped, "s2:1");
+  EXPECT_EQ(dropped, std::vector<std::string>{"s2:1"});
   EXPECT_EQ(sut.dropped(), 3U);
+}
+
+// Issue 28 (item 11's trade-off): one scan per sensor always fitting let 64 sensor ids hold
+// 65 scans (1.5 GB at 2M points each); waiting scans now also share a byte budget: beyond it
+// the sensor with the most waiting gives up its oldest, else the oldest scan goes, and the
+// bytes waiting never exceed the budget (one item larger than all of it waits alone).
+TEST(LatestWinsQueue, WaitingItemsStayWithinTheByteBudgetTheFullestKeyGivingWayFirst) {
+  // Items "KEY:BYTES".
+  const auto key_of = [](const std::string& s) -> const std::string& {
+    static thread_local std::string key;
+    key = s.substr(0, s.find(':'));
+    return key;
+  };
+  const auto bytes_of = [](const std::string& s) -> std::size_t {
+    return std::stoul(s.substr(s.find(':') + 1));
+  };
+  LatestWinsQueue<std::string> sut(4, 64, key_of, 64, bytes_of, 100);
+  std::vector<std::string> dropped;
+  for (const char* item : {"a:30", "b:20", "a:30"}) sut.push(item, &dropped);
+  EXPECT_TRUE(dropped.empty());
+  EXPECT_EQ(sut.bytes(), 80U);
+  sut.push("c:30", &dropped);  // 110 > 100: a (two waiting) gives its oldest
+  EXPECT_EQ(dropped, std::vector<std::string>{"a:30"});
+  EXPECT_EQ(sut.bytes(), 80U);
+  dropped.clear();
+  sut.push("d:60", &dropped);  // one each: the oldest of all go until it fits (b, then a)
+  EXPECT_EQ(dropped, (std::vector<std::string>{"b:20", "a:30"}));
+  EXPECT_EQ(sut.bytes(), 90U);
+  dropped.clear();
+  sut.push("e:500", &dropped);  // larger than the budget: waits alone
+  EXPECT_EQ(dropped, (std::vector<std::string>{"c:30", "d:60"}));
+  EXPECT_EQ(sut.bytes(), 500U);
+  EXPECT_EQ(sut.pop(0ms), "e:500");
+  EXPECT_EQ(sut.bytes(), 0U);
+  EXPECT_EQ(sut.dropped(), 5U);
 }
 
 TEST(SensorTally, CountsGapsWithinEachSensorsIncreasingSequence) {

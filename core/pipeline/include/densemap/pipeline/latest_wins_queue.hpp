@@ -21,26 +21,39 @@ namespace densemap {
 /// scans. All keys together hold `total_capacity` items; beyond it the key with the most items
 /// waiting gives up its oldest (so every key keeps its latest), and while every waiting key
 /// holds one item the queue grows to one item per key, up to `max_keys` keys: only beyond that
-/// many keys at once does a key lose its only item (the oldest of all). Items are taken in
-/// arrival order. Thread-safe: any number of producers and consumers.
+/// many keys at once does a key lose its only item (the oldest of all). With a byte budget
+/// (`size_of` gives an item's bytes), the items waiting never hold more than `byte_budget`
+/// bytes (one item larger than all of it still waits alone): beyond it, the key with the most
+/// items waiting gives up its oldest, else the oldest of all goes. Items are taken in arrival
+/// order. Thread-safe: any number of producers and consumers.
 template <class T>
 class LatestWinsQueue {
  public:
   using KeyOf = std::function<const std::string&(const T&)>;
+  using SizeOf = std::function<std::size_t(const T&)>;
   explicit LatestWinsQueue(std::size_t capacity, std::size_t total_capacity = 0, KeyOf key = {},
-                           std::size_t max_keys = 64)
+                           std::size_t max_keys = 64, SizeOf size_of = {},
+                           std::size_t byte_budget = 0)
       : capacity_(capacity == 0 ? 1 : capacity),
         total_capacity_(std::max(capacity_, total_capacity)),
         max_keys_(max_keys),
-        key_(std::move(key)) {}
+        key_(std::move(key)),
+        size_of_(std::move(size_of)),
+        byte_budget_(size_of_ ? byte_budget : 0) {}
 
   /// Returns false if the queue was closed (the item is discarded). When the queue (or the
-  /// item's key) was full, the oldest item (of that key) is dropped and, if `dropped` is given,
-  /// moved there.
-  bool push(T item, std::optional<T>* dropped = nullptr) {
+  /// item's key, or the byte budget) was full, the oldest items (of that key) are dropped and,
+  /// if `dropped` is given, appended to it.
+  bool push(T item, std::vector<T>* dropped = nullptr) {
     {
       std::lock_guard lock(mutex_);
       if (closed_) return false;
+      const auto drop = [&](typename std::deque<T>::iterator victim) {
+        if (size_of_) bytes_ -= size_of_(*victim);
+        if (dropped != nullptr) dropped->push_back(std::move(*victim));
+        items_.erase(victim);
+        ++dropped_;
+      };
       auto victim = items_.end();
       if (key_) {
         const std::string& key = key_(item);
@@ -56,11 +69,13 @@ class LatestWinsQueue {
       } else if (items_.size() >= total_capacity_) {
         victim = items_.begin();
       }
-      if (victim != items_.end()) {
-        if (dropped != nullptr) *dropped = std::move(*victim);
-        items_.erase(victim);
-        ++dropped_;
+      if (victim != items_.end()) drop(victim);
+      const std::size_t item_bytes = size_of_ ? size_of_(item) : 0;
+      while (byte_budget_ > 0 && !items_.empty() && bytes_ + item_bytes > byte_budget_) {
+        const auto [oldest, count] = fullestKey();
+        drop(count >= 2 ? oldest : items_.begin());
       }
+      bytes_ += item_bytes;
       items_.push_back(std::move(item));
     }
     ready_.notify_one();
@@ -75,6 +90,7 @@ class LatestWinsQueue {
     if (items_.empty()) return std::nullopt;
     T item = std::move(items_.front());
     items_.pop_front();
+    if (size_of_) bytes_ -= size_of_(item);
     return item;
   }
 
@@ -87,6 +103,7 @@ class LatestWinsQueue {
       closed_ = true;
       dropped_ += items_.size();
       discarded.swap(items_);
+      bytes_ = 0;
     }
     ready_.notify_all();
     return discarded;
@@ -100,12 +117,17 @@ class LatestWinsQueue {
     std::lock_guard lock(mutex_);
     return items_.size();
   }
+  /// Bytes the waiting items hold (by `size_of`; 0 without it).
+  [[nodiscard]] std::size_t bytes() const {
+    std::lock_guard lock(mutex_);
+    return bytes_;
+  }
 
  private:
-  /// The queue is at its total: the oldest item of the key with the most items waiting (of
-  /// those, the one whose oldest came first), when that key holds two or more; else (one item
-  /// per key) none while the keys, with a `new_key`, number at most max_keys_; else the oldest.
-  typename std::deque<T>::iterator fairVictim(bool new_key) {
+  /// The oldest item of the key with the most items waiting (of those, the one whose oldest
+  /// came first) and how many it holds; without keys, the oldest item and the queue's size.
+  std::pair<typename std::deque<T>::iterator, std::size_t> fullestKey() {
+    if (!key_) return {items_.begin(), items_.size()};
     std::vector<std::pair<const std::string*, std::size_t>> counts;  // key, items (few keys)
     std::vector<typename std::deque<T>::iterator> oldest;
     for (auto it = items_.begin(); it != items_.end(); ++it) {
@@ -119,13 +141,23 @@ class LatestWinsQueue {
         ++found->second;
       }
     }
+    if (counts.empty()) return {items_.end(), 0};
     std::size_t most = 0;
     for (std::size_t i = 1; i < counts.size(); ++i) {
       if (counts[i].second > counts[most].second) most = i;  // ties: the first key seen
     }
-    if (counts.empty()) return items_.end();
-    if (counts[most].second >= 2) return oldest[most];
-    if (counts.size() + (new_key ? 1 : 0) <= max_keys_) return items_.end();
+    keys_waiting_ = counts.size();
+    return {oldest[most], counts[most].second};
+  }
+
+  /// The queue is at its total: the oldest item of the key with the most items waiting, when
+  /// that key holds two or more; else (one item per key) none while the keys, with a
+  /// `new_key`, number at most max_keys_; else the oldest.
+  typename std::deque<T>::iterator fairVictim(bool new_key) {
+    const auto [oldest, count] = fullestKey();
+    if (count == 0) return items_.end();
+    if (count >= 2) return oldest;
+    if (keys_waiting_ + (new_key ? 1 : 0) <= max_keys_) return items_.end();
     return items_.begin();
   }
 
@@ -136,6 +168,10 @@ class LatestWinsQueue {
   std::size_t total_capacity_;
   std::size_t max_keys_;
   KeyOf key_;
+  SizeOf size_of_;
+  std::size_t byte_budget_;
+  std::size_t bytes_ = 0;
+  std::size_t keys_waiting_ = 0;  // fullestKey()'s count of distinct keys
   std::size_t dropped_ = 0;
   bool closed_ = false;
 };

@@ -46,6 +46,10 @@ struct PipelineOptions {
   /// Scans waiting per sensor id (latest wins per sensor: a full sensor's oldest is dropped);
   /// all sensors together kQueueSensorShare times as many, one scan per sensor always fitting.
   std::size_t queue_depth = 2;
+  /// Bytes (rawScanBytes) the waiting scans may hold in all: beyond it the sensor with the most
+  /// waiting gives up its oldest, else the oldest scan goes (one scan larger than all of it
+  /// still waits alone). 0: no byte budget.
+  std::size_t queue_budget_bytes = std::size_t{256} << 20;
   ScanLimits limits;
   /// Fill IntegrationResult::changes for scans (cell by cell: costs O(changed cells) per
   /// scan). Off by default: readers diff published versions by their written blocks instead.

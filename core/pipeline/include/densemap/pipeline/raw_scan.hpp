@@ -2,6 +2,7 @@
 
 #include <array>
 #include <chrono>
+#include <cstddef>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -20,6 +21,12 @@ struct RawScan {
   std::vector<float> intensity;  // empty or one per point
   std::chrono::steady_clock::time_point received = std::chrono::steady_clock::now();
 };
+
+/// The memory a waiting scan holds: its arrays and strings (the ingest queue's byte budget).
+[[nodiscard]] inline std::size_t rawScanBytes(const RawScan& scan) {
+  return sizeof(RawScan) + scan.sensor_id.capacity() +
+         (scan.xyz.capacity() + scan.intensity.capacity()) * sizeof(float);
+}
 
 struct Scan;
 
