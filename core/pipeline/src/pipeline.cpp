@@ -61,7 +61,7 @@ struct Pipeline::Graph {
                           p.options_.collect_changes || p.mirror_ ? &job->result.changes : nullptr;
                       job->result.stats =
                           p.kernel_map_ ? p.integrateKernel(job->points_world, job->origin_world,
-                                                            job->result.changes)
+                                                            changes)
                                         : p.integrator_.integrate(*p.map_, job->points_world,
                                                                   job->origin_world, changes);
                       p.evict(job->origin_world, job->result, changes);
@@ -319,7 +319,7 @@ void Pipeline::warmUp() {
 }
 
 ScanStats Pipeline::integrateKernel(const PointCloud& points_world, const Point3f& origin_world,
-                                    CellChanges& changes) {
+                                    CellChanges* changes) {
   auto t0 = std::chrono::steady_clock::now();
   std::vector<BlockCells> touched;
   kernel_map_->integrate(points_world, origin_world, &touched);
@@ -334,7 +334,9 @@ ScanStats Pipeline::integrateKernel(const PointCloud& points_world, const Point3
     kernel_map_->blockLogOdds(block_key, cells, log_odds);
   };
   if (auto* grid = dynamic_cast<GridMap*>(map_.get())) {
-    stats.updated = grid->assignBlocks(touched, values, &changes).updated_cells;
+    const ApplyStats applied = grid->assignBlocks(touched, values, changes);
+    stats.updated = applied.updated_cells;
+    stats.changed = applied.changed_cells;
   } else {
     std::array<float, block::kVoxels> log_odds{};
     for (const BlockCells& b : touched) {
@@ -344,12 +346,12 @@ ScanStats Pipeline::integrateKernel(const PointCloud& points_world, const Point3
         ++stats.updated;
         if (map_->logOdds(key) != log_odds[cell]) {
           map_->setLogOdds(key, log_odds[cell]);
-          changes.push_back({key, log_odds[cell], true});
+          ++stats.changed;
+          if (changes != nullptr) changes->push_back({key, log_odds[cell], true});
         }
       });
     }
   }
-  stats.changed = changes.size();
   stats.ms_apply = msSince(t0);
   return stats;
 }

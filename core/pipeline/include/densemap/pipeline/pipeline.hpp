@@ -172,7 +172,7 @@ class Pipeline {
   void warmUp();
   /// The integrate stage for kernel map kinds: map_ mirrors the kernel map as log-odds.
   ScanStats integrateKernel(const PointCloud& points_world, const Point3f& origin_world,
-                            CellChanges& changes);
+                            CellChanges* changes);
 
   PipelineOptions options_;
   std::unique_ptr<OccupancyMap> map_;
