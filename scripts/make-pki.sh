@@ -113,6 +113,9 @@ queries_in=(densemap/query/point/reply densemap/query/bbox/reply densemap/query/
 map_in=(densemap/map/manifest densemap/map/tiles densemap/map/delta densemap/map/events
         densemap/status rt/octomap_binary rt/projected_map rt/octomap_point_cloud_centers)
 
+# Every partition: replies travel in the asking client's own partition (densemap.reply.<id>),
+# everything else in the default one.
+partitions='<partitions><partition>*</partition></partitions>'
 grant() {  # grant ROLE PUBLISH_TOPICS_XML SUBSCRIBE_TOPICS_XML
   cat <<EOF
     <grant name="densemap_$1">
@@ -120,8 +123,8 @@ grant() {  # grant ROLE PUBLISH_TOPICS_XML SUBSCRIBE_TOPICS_XML
       <validity><not_before>$not_before</not_before><not_after>$not_after</not_after></validity>
       <allow_rule>
         $domain_xml
-        <publish>$2</publish>
-        <subscribe>$3</subscribe>
+        <publish>$2$partitions</publish>
+        <subscribe>$3$partitions</subscribe>
       </allow_rule>
       <default>DENY</default>
     </grant>

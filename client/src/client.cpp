@@ -76,10 +76,15 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
   make(d.rq_w, d.topics.ray_request, requests, true);
   make(d.cq_w, d.topics.command_request, dds::kCommandQos, true);
   make(d.mq_w, d.topics.map_request, dds::kCommandQos, true);
-  make(d.pr_r, d.topics.point_reply, requests, false);
-  make(d.br_r, d.topics.bbox_reply, requests, false);
-  make(d.rr_r, d.topics.ray_reply, requests, false);
-  make(d.cr_r, d.topics.command_reply, dds::kCommandQos, false);
+  // Replies come in this client's own partition: the server writes each asker's replies with
+  // writers made for it, so no other client receives (and discards) them.
+  const std::string mine = dds::replyPartition(c->client_id_);
+  dds::QosSpec replies = requests, command_replies = dds::kCommandQos;
+  replies.partition = command_replies.partition = mine;
+  make(d.pr_r, d.topics.point_reply, replies, false);
+  make(d.br_r, d.topics.bbox_reply, replies, false);
+  make(d.rr_r, d.topics.ray_reply, replies, false);
+  make(d.cr_r, d.topics.command_reply, command_replies, false);
   make(d.man_r, d.topics.manifest, dds::kLatestStateQos, false);
   if (options.subscribe_deltas) make(d.delta_r, d.topics.delta, {.depth = 256}, false);
   make(d.event_r, d.topics.events, {.depth = 1024}, false);
@@ -113,8 +118,9 @@ Expected<void> Client::waitForServer() {
       if (dds_get_publication_matched_status(w->get(), &s) < 0 || s.current_count == 0)
         names.push_back(topic_name(*w));
     }
-    for (const dds::Entity* r :
-         {&dds_->pr_r, &dds_->br_r, &dds_->rr_r, &dds_->cr_r, &dds_->event_r, &dds_->delta_r}) {
+    // The reply readers match the server's writers for this client once it asks (the server
+    // waits for that match before it replies).
+    for (const dds::Entity* r : {&dds_->event_r, &dds_->delta_r}) {
       if (r->get() <= 0) continue;  // deltas not subscribed, or not granted
       dds_subscription_matched_status_t s;
       if (dds_get_subscription_matched_status(r->get(), &s) < 0 || s.current_count == 0)

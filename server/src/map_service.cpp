@@ -62,6 +62,8 @@ constexpr std::size_t kTrimAfterBytes = std::size_t{16} << 20;
 constexpr std::chrono::milliseconds kAskerWait{2000};
 // Participants tracked for the asker wait (beyond it, entries past their wait are dropped).
 constexpr std::size_t kMaxAskersTracked = 4096;
+// Reply writers kept (one per client and reply topic; the least recently used beyond go).
+constexpr std::size_t kMaxReplyWriters = 1024;
 // Beyond this many versions waiting for the publish thread, their deltas are coalesced.
 constexpr std::size_t kMaxPendingVersions = 8;
 
@@ -71,8 +73,8 @@ struct MapService::Dds {
   dds::Entity participant;
   dds::Topics topics;
   dds::Entity scan_reader, point_reader, bbox_reader, ray_reader, cmd_reader, map_reader;
-  dds::Entity point_writer, bbox_writer, ray_writer, cmd_writer, manifest_writer, tile_writer,
-      delta_writer, event_writer, status_writer;
+  // Replies go out through writers made per asking client (MapService::replyWriter).
+  dds::Entity manifest_writer, tile_writer, delta_writer, event_writer, status_writer;
   std::optional<dds::WaitSet> ingest_waitset;
   std::optional<dds::WaitSet> service_waitset;
   dds::Entity status_probe;  // reads densemap/status: matches every server's status writer
@@ -120,10 +122,6 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
   reader(d.ray_reader, d.topics.ray_request, requests);
   reader(d.cmd_reader, d.topics.command_request, dds::kCommandQos);
   reader(d.map_reader, d.topics.map_request, dds::kCommandQos);
-  writer(d.point_writer, d.topics.point_reply, requests);
-  writer(d.bbox_writer, d.topics.bbox_reply, requests);
-  writer(d.ray_writer, d.topics.ray_reply, requests);
-  writer(d.cmd_writer, d.topics.command_reply, dds::kCommandQos);
   writer(d.manifest_writer, d.topics.manifest, dds::kLatestStateQos);
   writer(d.tile_writer, d.topics.tiles, dds::kTileQos);
   writer(d.delta_writer, d.topics.delta, {.depth = 32});
@@ -532,18 +530,22 @@ void MapService::takeQueries() {
             rep.id = m.id;
             rep.status = kInvalid;
             rep.error = const_cast<char*>(refusal.c_str());
-            awaitAsker(dds_->point_writer, asker(dds_->point_reader, info));
-            (void)dds::write(dds_->point_writer, &rep);
+            if (const auto w = replyWriter(ReplyTopic::kPoint, m.id.client_id)) {
+              awaitAsker(*w, asker(dds_->point_reader, info));
+              (void)dds::write(*w, &rep);
+            }
             noteBadRequest(refusal);
             return;
           }
           PointRequest req{
               m.id, std::vector<float>(m.points._buffer, m.points._buffer + m.points._length)};
+          const auto w = replyWriter(ReplyTopic::kPoint, m.id.client_id);
+          if (!w) return;
           spawn(
-              [this, req = std::move(req), who = asker(dds_->point_reader, info)](
+              [this, w, req = std::move(req), who = asker(dds_->point_reader, info)](
                   const MapView& view, std::string& error) {
-                awaitAsker(dds_->point_writer, who);
-                answerPoints(dds_->point_writer, req, view, error);
+                awaitAsker(*w, who);
+                answerPoints(*w, req, view, error);
               },
               bytes);
         });
@@ -551,20 +553,24 @@ void MapService::takeQueries() {
         dds_->bbox_reader,
         [&](const densemap_msgs_BboxQueryRequest& m, const dds_sample_info_t& info) {
           BboxRequest req{m.id, toPoint(m.min), toPoint(m.max), m.max_centers};
-          spawn([this, req, who = asker(dds_->bbox_reader, info)](const MapView& view,
-                                                                  std::string& error) {
-            awaitAsker(dds_->bbox_writer, who);
-            answerBox(dds_->bbox_writer, req, view, options_.max_query_cells, error);
+          const auto w = replyWriter(ReplyTopic::kBbox, m.id.client_id);
+          if (!w) return;
+          spawn([this, w, req, who = asker(dds_->bbox_reader, info)](const MapView& view,
+                                                                     std::string& error) {
+            awaitAsker(*w, who);
+            answerBox(*w, req, view, options_.max_query_cells, error);
           });
         });
     took |= dds::takeOneWithInfo<densemap_msgs_RayQueryRequest>(
         dds_->ray_reader,
         [&](const densemap_msgs_RayQueryRequest& m, const dds_sample_info_t& info) {
           RayRequest req{m.id, toPoint(m.origin), toPoint(m.direction), m.max_range};
-          spawn([this, req, who = asker(dds_->ray_reader, info)](const MapView& view,
-                                                                 std::string& error) {
-            awaitAsker(dds_->ray_writer, who);
-            answerRay(dds_->ray_writer, req, view, error);
+          const auto w = replyWriter(ReplyTopic::kRay, m.id.client_id);
+          if (!w) return;
+          spawn([this, w, req, who = asker(dds_->ray_reader, info)](const MapView& view,
+                                                                    std::string& error) {
+            awaitAsker(*w, who);
+            answerRay(*w, req, view, error);
           });
         });
   }
@@ -606,8 +612,9 @@ void MapService::answerCommands() {
   while (dds::takeOneWithInfo<densemap_msgs_CommandRequest>(
       dds_->map_reader,
       [&](const densemap_msgs_CommandRequest& req, const dds_sample_info_t& info) {
-        awaitAsker(dds_->cmd_writer,
-                   dds::participantOfWriter(dds_->map_reader, info.publication_handle));
+        if (const auto w = replyWriter(ReplyTopic::kCommand, req.id.client_id)) {
+          awaitAsker(*w, dds::participantOfWriter(dds_->map_reader, info.publication_handle));
+        }
         if (static_cast<dds::CommandKind>(req.kind) == dds::CommandKind::kSendMap) {
           send_map(req.id);
         } else {
@@ -620,8 +627,9 @@ void MapService::answerCommands() {
   while (dds::takeOneWithInfo<densemap_msgs_CommandRequest>(
       dds_->cmd_reader,
       [&](const densemap_msgs_CommandRequest& req, const dds_sample_info_t& info) {
-        awaitAsker(dds_->cmd_writer,
-                   dds::participantOfWriter(dds_->cmd_reader, info.publication_handle));
+        if (const auto w = replyWriter(ReplyTopic::kCommand, req.id.client_id)) {
+          awaitAsker(*w, dds::participantOfWriter(dds_->cmd_reader, info.publication_handle));
+        }
         const auto kind = static_cast<dds::CommandKind>(req.kind);
         if (kind == dds::CommandKind::kSendMap) {
           send_map(req.id);
@@ -682,7 +690,39 @@ void MapService::replyCommand(const densemap_msgs_RequestId& id,
   rep.status = outcome ? kOk : kInvalid;
   rep.error = const_cast<char*>(error.c_str());
   rep.detail = const_cast<char*>(detail.c_str());
-  (void)dds::write(dds_->cmd_writer, &rep);
+  if (const auto w = replyWriter(ReplyTopic::kCommand, id.client_id)) (void)dds::write(*w, &rep);
+}
+
+std::shared_ptr<const dds::Entity> MapService::replyWriter(ReplyTopic topic,
+                                                           std::uint64_t client_id) {
+  std::lock_guard lock(reply_writers_mutex_);
+  const auto key = std::pair(client_id, static_cast<int>(topic));
+  if (auto it = reply_writers_.find(key); it != reply_writers_.end()) {
+    it->second.last_used = ++reply_writer_uses_;
+    return it->second.writer;
+  }
+  if (reply_writers_.size() >= kMaxReplyWriters) {  // the least recently used goes
+    auto oldest = reply_writers_.begin();
+    for (auto it = reply_writers_.begin(); it != reply_writers_.end(); ++it) {
+      if (it->second.last_used < oldest->second.last_used) oldest = it;
+    }
+    reply_writers_.erase(oldest);
+  }
+  const std::string partition = dds::replyPartition(client_id);
+  dds::QosSpec qos = topic == ReplyTopic::kCommand ? dds::kCommandQos : dds::kRequestQos;
+  qos.partition = partition;
+  const dds::Entity& reply_topic = topic == ReplyTopic::kPoint  ? dds_->topics.point_reply
+                                   : topic == ReplyTopic::kBbox ? dds_->topics.bbox_reply
+                                   : topic == ReplyTopic::kRay  ? dds_->topics.ray_reply
+                                                                : dds_->topics.command_reply;
+  auto w = dds::createWriter(dds_->participant, reply_topic, qos);
+  if (!w) {
+    spdlog::debug("no reply writer for client {:016x}: {}", client_id, w.error().message);
+    return nullptr;
+  }
+  auto writer = std::make_shared<const dds::Entity>(std::move(*w));
+  reply_writers_[key] = {writer, ++reply_writer_uses_};
+  return writer;
 }
 
 Expected<std::size_t> MapService::save(const std::filesystem::path& file) {

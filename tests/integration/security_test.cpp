@@ -228,7 +228,11 @@ TEST_F(Security, ViewerCannotResetOrClearOperatorCan) {
   EXPECT_FALSE(dds::createWriter(*raw, topics->scan, {.depth = 4}));
   // map/request is granted, for send-map only: a reset sent there is refused by the server.
   auto map_writer = dds::createWriter(*raw, topics->map_request, dds::kCommandQos);
-  auto reply_reader = dds::createReader(*raw, topics->command_reply, dds::kCommandQos);
+  // Replies come in the asker's own partition (client id 42 here).
+  const std::string partition = dds::replyPartition(42);
+  dds::QosSpec reply_qos = dds::kCommandQos;
+  reply_qos.partition = partition;
+  auto reply_reader = dds::createReader(*raw, topics->command_reply, reply_qos);
   ASSERT_TRUE(map_writer && reply_reader);
   for (const auto deadline = std::chrono::steady_clock::now() + 10s;;) {
     dds_publication_matched_status_t m{};

@@ -60,10 +60,10 @@ struct Pipeline::Graph {
                       CellChanges* changes =
                           p.options_.collect_changes || p.mirror_ ? &job->result.changes : nullptr;
                       job->result.stats =
-                          p.kernel_map_ ? p.integrateKernel(job->points_world, job->origin_world,
-                                                            changes)
-                                        : p.integrator_.integrate(*p.map_, job->points_world,
-                                                                  job->origin_world, changes);
+                          p.kernel_map_
+                              ? p.integrateKernel(job->points_world, job->origin_world, changes)
+                              : p.integrator_.integrate(*p.map_, job->points_world,
+                                                        job->origin_world, changes);
                       p.evict(job->origin_world, job->result, changes);
                     }
                     return job;

@@ -183,6 +183,7 @@ dds_qos_t* makeQos(const QosSpec& spec) {
   }
   dds_qset_durability(
       qos, spec.transient_local ? DDS_DURABILITY_TRANSIENT_LOCAL : DDS_DURABILITY_VOLATILE);
+  if (!spec.partition.empty()) dds_qset_partition1(qos, std::string(spec.partition).c_str());
   return qos;
 }
 

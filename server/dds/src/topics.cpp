@@ -38,4 +38,11 @@ Expected<Topics> Topics::create(const Entity& participant) {
   return t;
 }
 
+std::string replyPartition(std::uint64_t client_id) {
+  static constexpr char kHex[] = "0123456789abcdef";
+  std::string name = "densemap.reply.";
+  for (int shift = 60; shift >= 0; shift -= 4) name += kHex[(client_id >> shift) & 0xF];
+  return name;
+}
+
 }  // namespace densemap::dds

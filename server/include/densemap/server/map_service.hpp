@@ -7,6 +7,7 @@
 #include <condition_variable>
 #include <deque>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -100,6 +101,13 @@ class MapService {
   [[nodiscard]] Expected<void> checkAlone(std::chrono::milliseconds discovery) const;
   /// Participants other than this one that write densemap/status (other servers).
   [[nodiscard]] std::vector<std::string> otherServers() const;
+  /// The reply topics (replyWriter).
+  enum class ReplyTopic { kPoint, kBbox, kRay, kCommand };
+  /// The writer of `topic`'s replies to client `client_id`: in that client's partition
+  /// (dds::replyPartition), so only its readers receive them; made at its first request on
+  /// that topic, the most recently used kept (a task holding one keeps it alive). Null when DDS
+  /// refuses it. Thread-safe.
+  std::shared_ptr<const dds::Entity> replyWriter(ReplyTopic topic, std::uint64_t client_id);
   /// Waits until `writer` has matched a reader of `asker`, at most what is left of kAskerWait
   /// (in the .cpp) since the asker's first request. Thread-safe.
   void awaitAsker(const dds::Entity& writer, const std::optional<dds_guid_t>& asker);
@@ -124,8 +132,15 @@ class MapService {
   tbb::task_arena query_arena_;
   tbb::task_group queries_;
   std::atomic<int> queries_in_flight_{0};
-  std::atomic<std::size_t> request_bytes_{0};  // charged to options_.request_budget_bytes
+  std::atomic<std::size_t> request_bytes_{0};      // charged to options_.request_budget_bytes
   std::atomic<std::size_t> served_since_trim_{0};  // request bytes answered since the last trim
+  struct CachedReplyWriter {
+    std::shared_ptr<const dds::Entity> writer;
+    std::uint64_t last_used = 0;
+  };
+  std::mutex reply_writers_mutex_;
+  std::map<std::pair<std::uint64_t, int>, CachedReplyWriter> reply_writers_;  // (client, topic)
+  std::uint64_t reply_writer_uses_ = 0;
   std::mutex askers_mutex_;
   std::unordered_set<std::string> askers_matched_;  // "writer:participant" seen matched
   std::unordered_map<std::string, std::chrono::steady_clock::time_point> asker_first_seen_;

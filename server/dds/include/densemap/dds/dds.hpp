@@ -76,6 +76,7 @@ struct QosSpec {
   bool reliable = true;
   int depth = 1;  // keep-last depth (0: keep-all)
   bool transient_local = false;
+  std::string_view partition{};  // empty: the default partition
 };
 
 [[nodiscard]] Expected<Entity> createTopic(const Entity& participant,
