@@ -16,56 +16,57 @@ void GridMap::store(BlockNode& node, int index, float log_odds) const {
   }
 }
 
-ApplyStats GridMap::apply(const ScanUpdate& update, CellChanges* changes) {
-  struct Job {
-    std::uint64_t block_key;
-    BlockEntry* entry;
-    const ScanUpdate::Block* cells;
-  };
-  std::vector<Job> jobs;
-  jobs.reserve(update.blocks().size());
-  for (const auto& [block_key, cells] : update.blocks()) {
-    jobs.push_back({block_key, &store_->entry(block_key), &cells});
-  }
-
-  // Each job records its changes in its own slot; slots are concatenated in job order.
-  std::vector<CellChanges> job_changes(changes != nullptr ? jobs.size() : 0);
+/// One block's writes in a parallel update (apply, assignBlocks): reads the latest contents; the
+/// first change takes the writable node (a copy when a published version still reads the head).
+struct GridMap::BlockWriter {
   struct Counts {
     std::size_t updated = 0, changed = 0, newly_known = 0;
   };
-  const SensorModel& model = sensorModel();
-  const UpdateRule rule = update.rule();
-  static const BlockNode kEmpty{};
+  GridMap& map;
+  BlockEntry& entry;
+  Counts& counts;
+  CellChanges* out;
+  const BlockNode* read;
+  BlockNode* write = nullptr;
+
+  BlockWriter(GridMap& m, BlockEntry& e, Counts& c, CellChanges* changes)
+      : map(m), entry(e), counts(c), out(changes), read(BlockStore::latest(e)) {
+    static const BlockNode kEmpty{};
+    if (read == nullptr) read = &kEmpty;
+  }
+  [[nodiscard]] bool known(int i) const { return read->voxels.isKnown(i); }
+  [[nodiscard]] float value(int i) const { return read->voxels.log_odds[i]; }
+  /// Cell i (key) takes `v`: nothing is written for a known cell that already holds it.
+  void set(const VoxelKey& key, int i, float v) {
+    ++counts.updated;
+    const bool was_known = known(i);
+    if (was_known && value(i) == v) return;
+    if (write == nullptr) {
+      write = &map.store_->writable(entry);
+      read = write;
+    }
+    if (!was_known) {
+      write->voxels.markKnown(i);
+      ++counts.newly_known;
+    }
+    ++counts.changed;
+    if (out != nullptr) out->push_back({key, v, true});
+    map.store(*write, i, v);
+  }
+};
+
+template <class WriteBlock>
+ApplyStats GridMap::writeBlocks(std::span<BlockEntry* const> entries, CellChanges* changes,
+                                WriteBlock&& write_block) {
+  using Counts = BlockWriter::Counts;
+  // Each block records its changes in its own slot; slots are concatenated in block order.
+  std::vector<CellChanges> block_changes(changes != nullptr ? entries.size() : 0);
   const Counts total = tbb::parallel_reduce(
-      tbb::blocked_range<std::size_t>(0, jobs.size(), 16), Counts{},
+      tbb::blocked_range<std::size_t>(0, entries.size(), 16), Counts{},
       [&](const tbb::blocked_range<std::size_t>& range, Counts c) {
         for (std::size_t j = range.begin(); j != range.end(); ++j) {
-          // Read the latest contents; the first change takes the writable node (a copy when
-          // a published version still reads the head).
-          const BlockNode* head = BlockStore::latest(*jobs[j].entry);
-          const BlockNode* read = head != nullptr ? head : &kEmpty;
-          BlockNode* write = nullptr;
-          CellChanges* out = changes != nullptr ? &job_changes[j] : nullptr;
-          ScanUpdate::forEachCellInBlock(
-              jobs[j].block_key, *jobs[j].cells, [&](const VoxelKey& key, const CellHits& hits) {
-                const int i = block::indexOf(key);
-                const bool known = read->voxels.isKnown(i);
-                const float old_value = known ? read->voxels.log_odds[i] : 0.0F;
-                const float new_value = updatedLogOdds(model, rule, old_value, hits);
-                ++c.updated;
-                if (known && new_value == old_value) return;
-                if (write == nullptr) {
-                  write = &store_->writable(*jobs[j].entry);
-                  read = write;
-                }
-                if (!known) {
-                  write->voxels.markKnown(i);
-                  ++c.newly_known;
-                }
-                ++c.changed;
-                if (out != nullptr) out->push_back({key, new_value, true});
-                store(*write, i, new_value);
-              });
+          BlockWriter w(*this, *entries[j], c, changes != nullptr ? &block_changes[j] : nullptr);
+          write_block(j, w);
         }
         return c;
       },
@@ -77,9 +78,29 @@ ApplyStats GridMap::apply(const ScanUpdate& update, CellChanges* changes) {
       });
   known_cells_ += total.newly_known;
   if (changes != nullptr) {
-    for (auto& part : job_changes) changes->insert(changes->end(), part.begin(), part.end());
+    for (auto& part : block_changes) changes->insert(changes->end(), part.begin(), part.end());
   }
   return {total.updated, total.changed};
+}
+
+ApplyStats GridMap::apply(const ScanUpdate& update, CellChanges* changes) {
+  std::vector<BlockEntry*> entries;
+  std::vector<std::pair<std::uint64_t, const ScanUpdate::Block*>> blocks;
+  entries.reserve(update.blocks().size());
+  blocks.reserve(update.blocks().size());
+  for (const auto& [block_key, cells] : update.blocks()) {
+    entries.push_back(&store_->entry(block_key));
+    blocks.emplace_back(block_key, &cells);
+  }
+  const SensorModel& model = sensorModel();
+  const UpdateRule rule = update.rule();
+  return writeBlocks(entries, changes, [&](std::size_t j, BlockWriter& w) {
+    ScanUpdate::forEachCellInBlock(
+        blocks[j].first, *blocks[j].second, [&](const VoxelKey& key, const CellHits& hits) {
+          const int i = block::indexOf(key);
+          w.set(key, i, updatedLogOdds(model, rule, w.known(i) ? w.value(i) : 0.0F, hits));
+        });
+  });
 }
 
 std::size_t GridMap::clearBox(const VoxelKey& min, const VoxelKey& max, CellChanges* changes) {
@@ -230,51 +251,12 @@ ApplyStats GridMap::assignBlocks(std::span<const BlockCells> blocks, const Block
                                  CellChanges* changes) {
   std::vector<BlockEntry*> entries(blocks.size());
   for (std::size_t j = 0; j < blocks.size(); ++j) entries[j] = &store_->entry(blocks[j].key);
-  std::vector<CellChanges> block_changes(changes != nullptr ? blocks.size() : 0);
-  struct Counts {
-    std::size_t updated = 0, changed = 0, newly_known = 0;
-  };
-  static const BlockNode kEmpty{};
-  const Counts total = tbb::parallel_reduce(
-      tbb::blocked_range<std::size_t>(0, blocks.size(), 16), Counts{},
-      [&](const tbb::blocked_range<std::size_t>& range, Counts c) {
-        std::array<float, block::kVoxels> values{};
-        for (std::size_t j = range.begin(); j != range.end(); ++j) {
-          const BlockCells& b = blocks[j];
-          values_of(b.key, b.cells, values);
-          const BlockNode* head = BlockStore::latest(*entries[j]);
-          const BlockNode* read = head != nullptr ? head : &kEmpty;
-          BlockNode* write = nullptr;  // the first change takes the writable node
-          block::forEachSetBit(b.cells, [&](int i) {
-            ++c.updated;
-            const bool known = read->voxels.isKnown(i);
-            if (known && read->voxels.log_odds[i] == values[i]) return;
-            if (write == nullptr) {
-              write = &store_->writable(*entries[j]);
-              read = write;
-            }
-            if (!known) {
-              write->voxels.markKnown(i);
-              ++c.newly_known;
-            }
-            ++c.changed;
-            store(*write, i, values[i]);
-            if (changes != nullptr) block_changes[j].push_back({block::keyOf(b.key, i), values[i]});
-          });
-        }
-        return c;
-      },
-      [](Counts a, const Counts& b) {
-        a.updated += b.updated;
-        a.changed += b.changed;
-        a.newly_known += b.newly_known;
-        return a;
-      });
-  known_cells_ += total.newly_known;
-  if (changes != nullptr) {
-    for (auto& part : block_changes) changes->insert(changes->end(), part.begin(), part.end());
-  }
-  return {total.updated, total.changed};
+  return writeBlocks(entries, changes, [&](std::size_t j, BlockWriter& w) {
+    std::array<float, block::kVoxels> values;  // only the mask's cells are read
+    const BlockCells& b = blocks[j];
+    values_of(b.key, b.cells, values);
+    block::forEachSetBit(b.cells, [&](int i) { w.set(block::keyOf(b.key, i), i, values[i]); });
+  });
 }
 
 void GridMap::clear() {

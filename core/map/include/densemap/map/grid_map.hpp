@@ -73,6 +73,12 @@ class GridMap final : public OccupancyMap {
 
  private:
   void store(BlockNode& node, int index, float log_odds) const;
+  struct BlockWriter;  // one block's writes in a parallel update (grid_map.cpp)
+  /// Runs write_block(j, writer) for every entry in parallel, a block per task; counts, newly
+  /// known cells and the changes (in entry order) gathered.
+  template <class WriteBlock>
+  ApplyStats writeBlocks(std::span<BlockEntry* const> entries, CellChanges* changes,
+                         WriteBlock&& write_block);
   /// Drops a block (BlockStore::drop); returns its known cells. known_cells_ is the caller's.
   std::size_t dropBlock(BlockEntry& entry, CellChanges* changes);
 
