@@ -47,11 +47,15 @@ static int runMain(int argc, char** argv) {
   // blocks in the heap for reuse instead of mmap/munmap per buffer (each fresh mapping costs a
   // page fault per 4 KiB; profiles of 64-beam replays showed 5% of the time there).
   mallopt(M_MMAP_THRESHOLD, 64 << 20);
-  mallopt(M_TRIM_THRESHOLD, 256 << 20);
-  // Two heap arenas for all threads (glibc makes up to 8 per core): after point-query floods
-  // the trimmed heap gave back most of what the flood took (6 clients x 3M points: 46 of 120 MiB
-  // stayed), with the default arenas little of it (105 of 129 MiB stayed); integration rates
-  // at 10 Hz did not change (issue 28, item 9).
+  // Free memory at the top of a heap beyond 32 MiB goes back to the OS. A thread's heap arena
+  // gives its top back only past this threshold (malloc_trim does not trim it): at 256 MiB an
+  // 8-client point-query flood left 53-105 MiB of a 49 MiB server behind, at 32 MiB 52 MiB;
+  // scans at 10 Hz were not slower (64-beam at 0.1 m, log_odds: p50 80-86 against 85-88 ms).
+  mallopt(M_TRIM_THRESHOLD, 32 << 20);
+  // Two heap arenas for all threads (glibc makes up to 8 per core): fewer thread heaps to hold
+  // freed memory after point-query floods (6 clients x 3M points, with the 256 MiB threshold:
+  // 46 of 120 MiB stayed, 105 of 129 with the default arenas); integration rates at 10 Hz did
+  // not change (issue 28, item 9).
   mallopt(M_ARENA_MAX, 2);
   // SIGINT/SIGTERM are taken by sigwait below; block them before any thread starts so that
   // every thread (TBB, Cyclone) inherits the mask.

@@ -456,8 +456,8 @@ TEST(Server, PointBatchesLargerThanTheRequestBudgetAreAnsweredInParts) {
 
 // Issue 28, item 9: clients flooding the server with large point batches (sent in parts of
 // dds::kMaxQueryPoints): the server's RSS stays under its request budget + 64 MiB above where it
-// started (the map is empty), and within 10 s of the flood it has handed back memory (the heap
-// trimmed once no request is in flight; most runs return more than half of what it took). Before: 8
+// started (the map is empty), and within 10 s of the flood it has handed back most of what the
+// flood took (the heap trimmed once no request is in flight). Before: 8
 // clients x 10M points took it from 90 MB to 1.8 GB, and 159 MB stayed.
 TEST(Server, APointQueryFloodStaysInTheRequestBudgetAndItsMemoryReturns) {
   test::TempDir dir;
@@ -493,14 +493,13 @@ TEST(Server, APointQueryFloodStaysInTheRequestBudgetAndItsMemoryReturns) {
   long after_kb = 0;
   for (int i = 0; i < 100; ++i) {
     after_kb = server.residentKb();
-    if (10 * (after_kb - start_kb) < 8 * (peak_kb - start_kb)) break;
+    if (4 * (after_kb - start_kb) < peak_kb - start_kb) break;
     std::this_thread::sleep_for(100ms);
   }
-  // Most runs hand back more than half; some keep up to 83% (live Cyclone buffers or arena
-  // fragments); without the trim, all of it stays.
+  // Runs kept 6-37% of what the flood took; without the heap trims all of it stayed.
   std::cerr << "flood: start " << start_kb << " kB, peak " << peak_kb << " kB, after " << after_kb
             << " kB\n";
-  EXPECT_LT(10 * (after_kb - start_kb), 9 * (peak_kb - start_kb))
+  EXPECT_LT(4 * (after_kb - start_kb), 3 * (peak_kb - start_kb))
       << "start " << start_kb << " kB, peak " << peak_kb << " kB, 10 s after " << after_kb;
   EXPECT_EQ(server.stop(), 0);
 }
