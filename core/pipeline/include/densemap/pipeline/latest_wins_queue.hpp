@@ -72,8 +72,8 @@ class LatestWinsQueue {
       if (victim != items_.end()) drop(victim);
       const std::size_t item_bytes = size_of_ ? size_of_(item) : 0;
       while (byte_budget_ > 0 && !items_.empty() && bytes_ + item_bytes > byte_budget_) {
-        const auto [oldest, count] = fullestKey();
-        drop(count >= 2 ? oldest : items_.begin());
+        const Fullest f = fullestKey();
+        drop(f.items >= 2 ? f.oldest : items_.begin());
       }
       bytes_ += item_bytes;
       items_.push_back(std::move(item));
@@ -124,10 +124,16 @@ class LatestWinsQueue {
   }
 
  private:
-  /// The oldest item of the key with the most items waiting (of those, the one whose oldest
-  /// came first) and how many it holds; without keys, the oldest item and the queue's size.
-  std::pair<typename std::deque<T>::iterator, std::size_t> fullestKey() {
-    if (!key_) return {items_.begin(), items_.size()};
+  /// The key with the most items waiting (of those, the one whose oldest came first): its
+  /// oldest item and how many it holds, and how many keys have items waiting. Without keys,
+  /// the oldest item and the queue's size.
+  struct Fullest {
+    typename std::deque<T>::iterator oldest;
+    std::size_t items = 0;
+    std::size_t keys = 0;
+  };
+  Fullest fullestKey() {
+    if (!key_) return {items_.begin(), items_.size(), items_.empty() ? 0U : 1U};
     std::vector<std::pair<const std::string*, std::size_t>> counts;  // key, items (few keys)
     std::vector<typename std::deque<T>::iterator> oldest;
     for (auto it = items_.begin(); it != items_.end(); ++it) {
@@ -141,23 +147,22 @@ class LatestWinsQueue {
         ++found->second;
       }
     }
-    if (counts.empty()) return {items_.end(), 0};
+    if (counts.empty()) return {items_.end(), 0, 0};
     std::size_t most = 0;
     for (std::size_t i = 1; i < counts.size(); ++i) {
       if (counts[i].second > counts[most].second) most = i;  // ties: the first key seen
     }
-    keys_waiting_ = counts.size();
-    return {oldest[most], counts[most].second};
+    return {oldest[most], counts[most].second, counts.size()};
   }
 
   /// The queue is at its total: the oldest item of the key with the most items waiting, when
   /// that key holds two or more; else (one item per key) none while the keys, with a
   /// `new_key`, number at most max_keys_; else the oldest.
   typename std::deque<T>::iterator fairVictim(bool new_key) {
-    const auto [oldest, count] = fullestKey();
-    if (count == 0) return items_.end();
-    if (count >= 2) return oldest;
-    if (keys_waiting_ + (new_key ? 1 : 0) <= max_keys_) return items_.end();
+    const Fullest f = fullestKey();
+    if (f.items == 0) return items_.end();
+    if (f.items >= 2) return f.oldest;
+    if (f.keys + (new_key ? 1 : 0) <= max_keys_) return items_.end();
     return items_.begin();
   }
 
@@ -171,7 +176,6 @@ class LatestWinsQueue {
   SizeOf size_of_;
   std::size_t byte_budget_;
   std::size_t bytes_ = 0;
-  std::size_t keys_waiting_ = 0;  // fullestKey()'s count of distinct keys
   std::size_t dropped_ = 0;
   bool closed_ = false;
 };
