@@ -55,7 +55,8 @@ struct RayRequest {
 
 // Beyond this many queries waiting for a task, requests stay in the DDS readers (keep-last).
 constexpr int kMaxQueriesInFlight = 64;
-// A request this large hands the heap's free memory back to the OS when it is done.
+// Once this many request bytes were served and none is in flight, the status tick hands the
+// heap's free memory back to the OS.
 constexpr std::size_t kTrimAfterBytes = std::size_t{16} << 20;
 // How long a reply waits for its writer to match the asker's reply reader (discovery of a new
 // client usually completes within milliseconds on loopback).
@@ -717,7 +718,8 @@ std::shared_ptr<const dds::Entity> MapService::replyWriter(ReplyTopic topic,
                                                                 : dds_->topics.command_reply;
   auto w = dds::createWriter(dds_->participant, reply_topic, qos);
   if (!w) {
-    spdlog::debug("no reply writer for client {:016x}: {}", client_id, w.error().message);
+    // The request goes unanswered (its client times out): said in the log, not per request.
+    spdlog::warn("no reply writer for client {:016x}: {}", client_id, w.error().message);
     return nullptr;
   }
   auto writer = std::make_shared<const dds::Entity>(std::move(*w));
