@@ -718,7 +718,7 @@ std::shared_ptr<const dds::Entity> MapService::replyWriter(ReplyTopic topic,
                                                                 : dds_->topics.command_reply;
   auto w = dds::createWriter(dds_->participant, reply_topic, qos);
   if (!w) {
-    // The request goes unanswered (its client times out): said in the log, not per request.
+    // The request goes unanswered (its client times out): said in the log.
     spdlog::warn("no reply writer for client {:016x}: {}", client_id, w.error().message);
     return nullptr;
   }
