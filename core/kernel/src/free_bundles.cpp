@@ -53,53 +53,50 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
   }
   group_starts.push_back(n);
   const std::size_t groups = group_starts.size() - 1;
-  // A slot per group (its free capsule) and one per ray (its own tip), compacted afterwards.
-  std::vector<FreeExtent>& slots = buffers.slots;
-  slots.resize(groups + n);
-  std::vector<std::uint8_t>& used = buffers.used;
-  used.assign(groups + n, 0);
-  tbb::parallel_for(std::size_t{0}, groups, [&](std::size_t g) {
-    Eigen::Vector3d free_sum = Eigen::Vector3d::Zero();
-    double frees = 0.0;
+  // Each group's capsule (when a ray of it has free extent) then its rays' tips, in group
+  // order: counted first, written after at their offsets (no slot per ray; the order does not
+  // change the evidence, FreeTraversal's sums are integers).
+  std::vector<std::size_t>& offsets = buffers.offsets;
+  offsets.assign(groups + 1, 0);
+  const auto eachRay = [&](std::size_t g, auto&& f) {
     RayFreeSpace ray;
     for (std::size_t p = group_starts[g]; p < group_starts[g + 1]; ++p) {
       const std::uint32_t i = rays[p].second;
       std::size_t hit = hit_of[i];
-      if (!rayFreeSpace(points_world[i], origin, max_range, stops, hit, ray)) continue;
+      if (rayFreeSpace(points_world[i], origin, max_range, stops, hit, ray)) f(ray);
+    }
+  };
+  tbb::parallel_for(std::size_t{0}, groups, [&](std::size_t g) {
+    std::size_t count = 0;
+    bool free = false;
+    eachRay(g, [&](const RayFreeSpace& ray) {
+      free = free || ray.extent > 0.0;
+      count += ray.has_tip ? 1 : 0;
+    });
+    offsets[g + 1] = count + (free ? 1 : 0);
+  });
+  for (std::size_t g = 0; g < groups; ++g) offsets[g + 1] += offsets[g];
+  out.resize(offsets[groups]);
+  tbb::parallel_for(std::size_t{0}, groups, [&](std::size_t g) {
+    if (offsets[g + 1] == offsets[g]) return;
+    Eigen::Vector3d free_sum = Eigen::Vector3d::Zero();
+    double frees = 0.0;
+    std::size_t o = offsets[g];
+    eachRay(g, [&](const RayFreeSpace& ray) {
       if (ray.extent > 0.0) {  // one piece, [origin, origin + extent along the ray]
         free_sum += origin + ray.extent * ray.direction;
         frees += 1.0;
       }
-      if (ray.has_tip) {
-        slots[groups + i] = {origin + ray.tip_from * ray.direction,
-                             origin + ray.tip_to * ray.direction, shape.tip_radius_m,
-                             shape.tip_weight};
-        used[groups + i] = 1;
-      }
-    }
+    });
     if (frees > 0.0) {
-      slots[g] = {origin, free_sum / frees, shape.free_radius_m, shape.free_weight * frees};
-      used[g] = 1;
+      out[o++] = {origin, free_sum / frees, shape.free_radius_m, shape.free_weight * frees};
     }
-  });
-  // Compacted in parallel: each chunk of slots copies its used ones to its offset.
-  constexpr std::size_t kChunk = 8192;
-  const std::size_t chunks = (slots.size() + kChunk - 1) / kChunk;
-  std::vector<std::size_t>& offsets = buffers.offsets;
-  offsets.assign(chunks + 1, 0);
-  for (std::size_t c = 0; c < chunks; ++c) {
-    std::size_t k = 0;
-    for (std::size_t s = c * kChunk; s < std::min(slots.size(), (c + 1) * kChunk); ++s) {
-      k += used[s];
-    }
-    offsets[c + 1] = offsets[c] + k;
-  }
-  out.resize(offsets[chunks]);
-  tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
-    std::size_t o = offsets[c];
-    for (std::size_t s = c * kChunk; s < std::min(slots.size(), (c + 1) * kChunk); ++s) {
-      if (used[s] != 0) out[o++] = slots[s];
-    }
+    eachRay(g, [&](const RayFreeSpace& ray) {
+      if (ray.has_tip) {
+        out[o++] = {origin + ray.tip_from * ray.direction, origin + ray.tip_to * ray.direction,
+                    shape.tip_radius_m, shape.tip_weight};
+      }
+    });
   });
 }
 

@@ -37,8 +37,6 @@ struct FreeBundleBuffers {
   std::vector<std::pair<std::uint64_t, std::uint32_t>> rays, rays_other;
   std::vector<std::uint32_t> radix_counts;
   std::vector<std::size_t> group_starts, offsets;
-  std::vector<FreeExtent> slots;
-  std::vector<std::uint8_t> used;
 };
 
 void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, double max_range,

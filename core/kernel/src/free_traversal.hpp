@@ -57,13 +57,14 @@ class FreeTraversal {
   [[nodiscard]] static double evidenceShare(double reach);
   /// Bytes its buffers hold (kept between scans).
   [[nodiscard]] std::size_t memoryBytes() const;
-  /// The blocks reached by the last accumulate(), in ascending key order, sums merged.
-  [[nodiscard]] const std::vector<Block>& blocks() const { return merged_; }
+  /// The blocks reached by the last accumulate(), in ascending key order, sums merged (valid
+  /// until the next accumulate()).
+  [[nodiscard]] const std::vector<const Block*>& blocks() const { return merged_; }
 
  private:
   struct Buffers;
   std::unique_ptr<Buffers> buffers_;
-  std::vector<Block> merged_;
+  std::vector<const Block*> merged_;
 };
 
 }  // namespace densemap::kernel

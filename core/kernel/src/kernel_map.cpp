@@ -797,9 +797,13 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
       tbb::blocked_range<std::size_t>(0, starts.size() - 1, 4),
       [&](const tbb::blocked_range<std::size_t>& range) {
         std::size_t updates = 0;
+        // A block's sums of this scan in double (in kernel order), added to its float evidence
+        // once the block is done.
+        std::array<double, block::kVoxels> sum_alpha{}, sum_beta{};
         for (std::size_t g = range.begin(); g != range.end(); ++g) {
           const std::uint64_t block_key = pairs[starts[g]].first;
           Block& b = blocks_.find(block_key)->second;
+          block::BlockMask summed{};
           for (std::size_t p = starts[g]; p < starts[g + 1]; ++p) {
             const Kernel& k = kernels[pairs[p].second];
             const bool point = !k.cell && k.inverse_length != 0.0 && k.to == k.x;
@@ -845,14 +849,21 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
                                          : k.at(c, table);
                   if (!(v > 0.0)) continue;
                   const int cell = block::indexOf(key);
-                  (k.occupied ? b.alpha : b.beta)[cell] += v;
-                  block::setBit(b.known, cell);
-                  if (touched != nullptr) block::setBit(reached[g], cell);
+                  (k.occupied ? sum_alpha : sum_beta)[cell] += v;
+                  block::setBit(summed, cell);
                   ++updates;
                 }
               }
             }
           }
+          block::forEachSetBit(summed, [&](int cell) {
+            b.alpha[cell] += static_cast<float>(sum_alpha[cell]);
+            b.beta[cell] += static_cast<float>(sum_beta[cell]);
+            sum_alpha[cell] = 0.0;
+            sum_beta[cell] = 0.0;
+          });
+          for (int w = 0; w < block::kMaskWords; ++w) b.known[w] |= summed[w];
+          if (touched != nullptr) reached[g] = summed;
         }
         cell_updates += updates;
       });
@@ -871,18 +882,18 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
     stats.ms_free = msSince(t0);
     t0 = std::chrono::steady_clock::now();
     // The blocks found (or made) one by one, then filled in parallel: one block per task.
-    const std::vector<FreeTraversal::Block>& free_blocks = free_->blocks();
+    const std::vector<const FreeTraversal::Block*>& free_blocks = free_->blocks();
     std::vector<Block*>& targets = scratch_->free_targets;
     targets.resize(free_blocks.size());
     for (std::size_t i = 0; i < free_blocks.size(); ++i) {
-      targets[i] = &blocks_[free_blocks[i].key];
-      if (touched != nullptr) reached_blocks.emplace_back(free_blocks[i].key, free_blocks[i].mask);
+      targets[i] = &blocks_[free_blocks[i]->key];
+      if (touched != nullptr) reached_blocks.emplace_back(free_blocks[i]->key, free_blocks[i]->mask);
     }
     tbb::parallel_for(std::size_t{0}, free_blocks.size(), [&](std::size_t i) {
-      const FreeTraversal::Block& f = free_blocks[i];
+      const FreeTraversal::Block& f = *free_blocks[i];
       Block& b = *targets[i];
       block::forEachSetBit(f.mask, [&](int cell) {
-        b.beta[cell] += static_cast<double>(f.sum[cell]) / FreeTraversal::kScale;
+        b.beta[cell] += static_cast<float>(static_cast<double>(f.sum[cell]) / FreeTraversal::kScale);
         block::setBit(b.known, cell);
       });
     });
@@ -907,8 +918,8 @@ void KernelMap::erase(const VoxelKey& key) {
   if (it == blocks_.end()) return;
   const int cell = block::indexOf(key);
   block::clearBit(it->second.known, cell);
-  it->second.alpha[cell] = 0.0;
-  it->second.beta[cell] = 0.0;
+  it->second.alpha[cell] = 0.0F;
+  it->second.beta[cell] = 0.0F;
 }
 
 std::size_t KernelMap::evictBlocks(const std::function<bool(const Point3f&)>& keep) {
@@ -990,7 +1001,10 @@ Expected<void> KernelMap::restore(const KernelEvidence& e) {
   if (e.alpha.size() != e.keys.size() || e.beta.size() != e.keys.size()) {
     return makeError("kernel evidence arrays differ in length");
   }
-  const auto valid = [](double v) { return std::isfinite(v) && v >= 0.0; };
+  // Held as float: a value beyond float's range is refused, not stored as infinity.
+  const auto valid = [](double v) {
+    return std::isfinite(v) && v >= 0.0 && v <= std::numeric_limits<float>::max();
+  };
   for (std::size_t i = 0; i < e.keys.size(); ++i) {
     if (!valid(e.alpha[i]) || !valid(e.beta[i])) {
       return makeError("kernel evidence has a negative or non-finite value");
@@ -1000,8 +1014,8 @@ Expected<void> KernelMap::restore(const KernelEvidence& e) {
   for (std::size_t i = 0; i < e.keys.size(); ++i) {
     Block& b = blocks_[block::blockOf(e.keys[i])];
     const int cell = block::indexOf(e.keys[i]);
-    b.alpha[static_cast<std::size_t>(cell)] = e.alpha[i];
-    b.beta[static_cast<std::size_t>(cell)] = e.beta[i];
+    b.alpha[static_cast<std::size_t>(cell)] = static_cast<float>(e.alpha[i]);
+    b.beta[static_cast<std::size_t>(cell)] = static_cast<float>(e.beta[i]);
     block::setBit(b.known, cell);
   }
   scans_ = e.scans;
@@ -1025,8 +1039,7 @@ std::size_t KernelMap::memoryBytes() const {
            (fb.rays.capacity() + fb.rays_other.capacity()) *
                sizeof(std::pair<std::uint64_t, std::uint32_t>) +
            fb.radix_counts.capacity() * sizeof(std::uint32_t) +
-           (fb.group_starts.capacity() + fb.offsets.capacity()) * sizeof(std::size_t) +
-           fb.slots.capacity() * sizeof(FreeExtent) + fb.used.capacity();
+           (fb.group_starts.capacity() + fb.offsets.capacity()) * sizeof(std::size_t);
   bytes += scratch_->kernels.capacity() * sizeof(Kernel) +
            scratch_->free_extents.capacity() * sizeof(FreeExtent) +
            (scratch_->pairs.capacity() + scratch_->pairs_other.capacity()) *

@@ -175,9 +175,11 @@ class KernelMap {
   [[nodiscard]] Expected<void> restore(const KernelEvidence& evidence);
 
  private:
+  /// A block's evidence, float (a scan's kernels are summed in double, then added): half the
+  /// memory of double, and a Beta posterior's mean does not need more digits.
   struct Block {
-    std::array<double, block::kVoxels> alpha{};
-    std::array<double, block::kVoxels> beta{};
+    std::array<float, block::kVoxels> alpha{};
+    std::array<float, block::kVoxels> beta{};
     block::BlockMask known{};
   };
 
