@@ -1,5 +1,4 @@
 #include "free_traversal.hpp"
-#include "radix_sort.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
@@ -189,8 +188,6 @@ std::size_t collectVoxelsNear(const VoxelGrid& grid, const Eigen::Vector3d& a,
 
 struct FreeTraversal::Buffers {
   tbb::enumerable_thread_specific<ThreadBlocks> threads;
-  std::vector<std::uint64_t> order, order_other;  // (direction code, extent), sorted
-  std::vector<std::uint32_t> order_counts;
 };
 
 FreeTraversal::FreeTraversal() : buffers_(std::make_unique<Buffers>()) {}
@@ -226,43 +223,13 @@ std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const Fre
   reach = std::clamp(reach, 1e-3, 1.0);
   const double compensation = 1.0 / evidenceShare(reach);
   std::atomic<std::size_t> visits{0};
-  // Extents by direction (a Morton code of the octahedral projection of to - from): rays
-  // close in direction reach the same voxels, so each thread's run of them finds its blocks'
-  // sums still in cache. The sums are integers: the order does not change them.
-  std::vector<std::uint64_t>& order = buffers_->order;
-  order.resize(extents.size());
-  tbb::parallel_for(std::size_t{0}, extents.size(), [&](std::size_t r) {
-    const Eigen::Vector3d d = extents[r].to - extents[r].from;
-    const double l1 = std::abs(d.x()) + std::abs(d.y()) + std::abs(d.z());
-    double u = 0.0, v = 0.0;
-    if (l1 > 0.0) {
-      u = d.x() / l1;
-      v = d.y() / l1;
-      if (d.z() < 0.0) {  // the lower half folded out (octahedral map): [-1, 1]^2 in all
-        const double fu = (1.0 - std::abs(v)) * (u >= 0.0 ? 1.0 : -1.0);
-        v = (1.0 - std::abs(u)) * (v >= 0.0 ? 1.0 : -1.0);
-        u = fu;
-      }
-    }
-    const auto quantise = [](double x) {
-      return static_cast<std::uint32_t>(std::clamp((x + 1.0) * 512.0, 0.0, 1023.0));
-    };
-    std::uint32_t qu = quantise(u), qv = quantise(v), code = 0;
-    for (int bit = 0; bit < 10; ++bit) {
-      code |= ((qu >> bit) & 1U) << (2 * bit) | ((qv >> bit) & 1U) << (2 * bit + 1);
-    }
-    order[r] = (std::uint64_t{code} << 32) | r;
-  });
-  radixSort(
-      order, buffers_->order_other, 20, [](std::uint64_t k) { return k >> 32; },
-      buffers_->order_counts);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, extents.size(), 512),
                     [&](const tbb::blocked_range<std::size_t>& range) {
                       ThreadBlocks& mine = buffers_->threads.local();
                       std::vector<Near>& near = mine.near;
                       std::size_t n = 0;
-                      for (std::size_t o = range.begin(); o != range.end(); ++o) {
-                        const FreeExtent& e = extents[static_cast<std::uint32_t>(order[o])];
+                      for (std::size_t r = range.begin(); r != range.end(); ++r) {
+                        const FreeExtent& e = extents[r];
                         const double inverse_length2 = 1.0 / (e.radius_m * e.radius_m);
                         const double scaled_weight = e.weight * compensation * kScale;
                         const std::size_t count =
