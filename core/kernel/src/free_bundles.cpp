@@ -53,7 +53,7 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
   }
   group_starts.push_back(n);
   const std::size_t groups = group_starts.size() - 1;
-  // Each group's capsule (when a ray of it has free extent) then its rays' tips, in group
+  // Each group's rays' tips then its capsule (when a ray of it has free extent), in group
   // order: counted first, written after at their offsets (no slot per ray; the order does not
   // change the evidence, FreeTraversal's sums are integers).
   std::vector<std::size_t>& offsets = buffers.offsets;
@@ -87,16 +87,14 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
         free_sum += origin + ray.extent * ray.direction;
         frees += 1.0;
       }
-    });
-    if (frees > 0.0) {
-      out[o++] = {origin, free_sum / frees, shape.free_radius_m, shape.free_weight * frees};
-    }
-    eachRay(g, [&](const RayFreeSpace& ray) {
       if (ray.has_tip) {
         out[o++] = {origin + ray.tip_from * ray.direction, origin + ray.tip_to * ray.direction,
                     shape.tip_radius_m, shape.tip_weight};
       }
     });
+    if (frees > 0.0) {
+      out[o] = {origin, free_sum / frees, shape.free_radius_m, shape.free_weight * frees};
+    }
   });
 }
 

@@ -30,7 +30,7 @@ struct CapsuleShape {
 /// (0.15 m) at 0.1 m maps were 17% faster there but cost the oracle scenes 1.2-1.7% MSE (the
 /// unstructured scene's lead over BGKOctoMap-L). A voxel hit by one ray gives that ray's own
 /// capsule, bit for bit; cut rays are never bundled. The extents come in a fixed order (by
-/// voxel, then ray) whatever the thread count.
+/// voxel: its rays' tips in ray order, then its capsule) whatever the thread count.
 /// freeExtents' per-scan arrays, kept by the caller between scans (no fresh pages a scan).
 struct FreeBundleBuffers {
   std::vector<std::uint32_t> hit_of, takes;
