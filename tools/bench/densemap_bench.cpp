@@ -19,6 +19,8 @@
 #include "densemap/io/scan_source.hpp"
 #include "densemap/kernel/kernel_map.hpp"
 #include "densemap/map/map_diff.hpp"
+#include "densemap/geometry/percentile.hpp"
+#include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_factory.hpp"
 #include "densemap/map/octree_map.hpp"
 #include "densemap/map/update_rule.hpp"
@@ -46,6 +48,7 @@ struct Options {
   std::size_t turn = 10;
   std::string json;
   std::vector<std::string> kernel_settings;  // --kernel-set, for every dense method
+  std::size_t growth = 0;                    // --growth N: per-scan time as the map grows
 };
 
 /// A dense (kernel) method: `kind` or `kind@plain` (akimap_rays' earlier path: a segment kernel
@@ -199,7 +202,34 @@ class Lane {
     const double stage[5] = {stats.ms_rays, stats.ms_region, stats.ms_mark, stats.ms_merge,
                              stats.ms_apply};
     for (int k = 0; k < 5; ++k) stage_sums_[k] += stage[k];
+    region_ms_.push_back(stats.ms_region);
+    known_after_.push_back(kernel_ ? 0 : map_->knownCells());
+    const auto* grid = dynamic_cast<const GridMap*>(map_.get());
+    blocks_after_.push_back(grid != nullptr ? grid->store()->liveNodes() : 0);
     return ms;
+  }
+
+  /// --growth: the scans in `slices` consecutive parts, each part's p50 / p99 and the map's
+  /// known cells and blocks after it (per-scan cost against map size).
+  [[nodiscard]] std::string growthTable(std::size_t slices) const {
+    std::string out;
+    const std::size_t n = r_.ms_per_scan.size();
+    if (n == 0 || slices == 0 || kernel_) return out;
+    char line[160];
+    for (std::size_t s = 0; s < slices; ++s) {
+      const std::size_t from = n * s / slices, to = n * (s + 1) / slices;
+      if (to <= from) continue;
+      const std::vector<double> part(r_.ms_per_scan.begin() + static_cast<std::ptrdiff_t>(from),
+                                     r_.ms_per_scan.begin() + static_cast<std::ptrdiff_t>(to));
+      double region = 0.0;
+      for (std::size_t i = from; i < to; ++i) region += region_ms_[i];
+      std::snprintf(line, sizeof(line), "%-28s %5zu-%-5zu %9.1f %9.1f %10.2f %12zu %9zu\n",
+                    name_.c_str(), from + 1, to, densemap::percentile(part, 0.5),
+                    densemap::percentile(part, 0.99), region / static_cast<double>(to - from),
+                    known_after_[to - 1], blocks_after_[to - 1]);
+      out += line;
+    }
+    return out;
   }
 
   /// The result after the last scan (per-scan means of the counts and stage times).
@@ -230,6 +260,8 @@ class Lane {
   tbb::task_arena arena_;
   double sums_[6] = {0, 0, 0, 0, 0, 0};
   double stage_sums_[5] = {0, 0, 0, 0, 0};
+  std::vector<std::size_t> known_after_, blocks_after_;  // the map after each scan
+  std::vector<double> region_ms_;                         // each scan's culling-region stage
   std::string name_;
 };
 
@@ -357,6 +389,14 @@ int run(const Options& o) {
       std::printf(", evidence digest %016llx", static_cast<unsigned long long>(r.evidence_digest));
     std::printf("\n");
   }
+  if (o.growth > 0) {
+    std::printf("\nper-scan time as the map grows (--growth %zu; region: the culling region's "
+                "mean ms; cells and blocks: the map after the part)\n%-28s %11s %9s %9s %10s "
+                "%12s %9s\n",
+                o.growth, "method/backend", "scans", "p50 ms", "p99 ms", "region ms",
+                "known cells", "blocks");
+    for (const auto& lane : lanes) std::printf("%s", lane->growthTable(o.growth).c_str());
+  }
   if (!o.json.empty()) {
     std::ofstream out(o.json);
     out << formatJson(runs, o.data, machine);
@@ -413,6 +453,11 @@ static int runMain(int argc, char** argv) {
   app.add_option("--kernel-set", o.kernel_settings,
                  "A dense method's setting NAME=VALUE (repeatable; densemap-eval --help lists "
                  "them), for every dense method of the run");
+  app.add_option("--growth", o.growth,
+                 "Also print each method's p50 / p99 in this many consecutive parts of the scans, "
+                 "with the map's size after each (per-scan cost against map size; 0: no)")
+      ->check(CLI::Range(0, 1000))
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   return densemap::bench::run(o);
 }

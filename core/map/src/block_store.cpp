@@ -100,6 +100,7 @@ BlockEntry& BlockStore::entry(std::uint64_t block_key) {
     i = (i + 1) & t->mask;
   }
   BlockEntry& created = entries_.emplace_back(block_key);
+  index(created);
   if (entries_.size() * 2 > t->mask + 1) {
     grow();  // reinserts every entry, the new one included
   } else {
@@ -251,6 +252,7 @@ void BlockStore::compactIfWorthIt() {
   garbage->entries = std::move(entries_);
   garbage->tables = std::move(tables_);
   entries_ = std::deque<BlockEntry>();
+  regions_.clear();
   int bits = kInitialTableBits;
   while ((std::size_t{1} << bits) < alive * 2 + 2) ++bits;
   auto table = std::make_unique<Table>(bits);
@@ -259,6 +261,7 @@ void BlockStore::compactIfWorthIt() {
     if (head == nullptr) continue;
     BlockEntry& e = entries_.emplace_back(old.key);
     e.head.store(head, std::memory_order_relaxed);
+    index(e);
     std::size_t i = slotOf(*table, e.key);
     while (table->slots[i].load(std::memory_order_relaxed) != nullptr) i = (i + 1) & table->mask;
     table->slots[i].store(&e, std::memory_order_relaxed);
@@ -374,6 +377,7 @@ void BlockStore::clearUnversioned() {
   tables_.push_back(std::make_unique<Table>(kInitialTableBits));
   table_.store(tables_.back().get(), std::memory_order_release);
   entries_.clear();
+  regions_.clear();
 }
 
 void BlockStore::release(const std::vector<std::pair<ChainLink*, ChainLink*>>& superseded) {
@@ -391,7 +395,7 @@ std::size_t BlockStore::memoryBytes() const {
   for (const auto& t : tables_) table_bytes += (t->mask + 1) * sizeof(void*);
   std::lock_guard lock(pool_mutex_);
   return slabs_.size() * kSlabNodes * sizeof(BlockNode) + table_bytes +
-         entries_.size() * sizeof(BlockEntry) + free_.capacity() * sizeof(void*) +
+         entries_.size() * sizeof(BlockEntry) + indexBytes() + free_.capacity() * sizeof(void*) +
          tombs_.size() * sizeof(ChainLink);
 }
 

@@ -209,8 +209,9 @@ void GridMap::forEachKnown(const std::function<void(const VoxelKey&, float)>& f)
 }
 
 void GridMap::forEachFullyFreeBlock(
+    const block::BlockBox& box,
     const std::function<void(std::uint64_t, const block::BlockMask&)>& f) const {
-  store_->forEachEntryWriter([&](const BlockEntry& e) {
+  store_->forEachEntryIn(box, [&](const BlockEntry& e) {
     const BlockNode* n = BlockStore::latest(e);
     if (n != nullptr) f(e.key, n->fully_free);
   });

@@ -145,9 +145,12 @@ void OctreeMap::setLogOdds(const VoxelKey& key, float log_odds) {
 }
 
 void OctreeMap::forEachFullyFreeBlock(
+    const block::BlockBox& box,
     const std::function<void(std::uint64_t, const block::BlockMask&)>& f) const {
   refreshFullyFree();
-  for (const auto& [block_key, mask] : fully_free_) f(block_key, mask);
+  for (const auto& [block_key, mask] : fully_free_) {
+    if (box.contains(block_key)) f(block_key, mask);
+  }
 }
 
 void OctreeMap::refreshFullyFree() const {

@@ -44,10 +44,13 @@ void CullingRegion::loadFullyFree(const OccupancyMap& map) {
   const std::uint64_t bx0 = min_.x >> block::kShift, bx1 = (min_.x + nx_ - 1) >> block::kShift;
   const std::uint64_t by0 = min_.y >> block::kShift, by1 = (min_.y + ny_ - 1) >> block::kShift;
   const std::uint64_t bz0 = min_.z >> block::kShift, bz1 = (min_.z + nz_ - 1) >> block::kShift;
-  map.forEachFullyFreeBlock([&](std::uint64_t block_key, const block::BlockMask& mask) {
+  const block::BlockBox box{.min = {static_cast<std::uint32_t>(bx0), static_cast<std::uint32_t>(by0),
+                                     static_cast<std::uint32_t>(bz0)},
+                            .max = {static_cast<std::uint32_t>(bx1), static_cast<std::uint32_t>(by1),
+                                    static_cast<std::uint32_t>(bz1)}};
+  map.forEachFullyFreeBlock(box, [&](std::uint64_t block_key, const block::BlockMask& mask) {
     const std::uint64_t bx = block_key & 0x1fff, by = (block_key >> 13) & 0x1fff,
                         bz = (block_key >> 26) & 0x1fff;
-    if (bx < bx0 || bx > bx1 || by < by0 || by > by1 || bz < bz0 || bz > bz1) return;
     // Mask word z holds the block's 8x8 voxels of layer z, byte y the row along x.
     const int x0 = static_cast<int>(bx << block::kShift) - min_.x;
     for (int z = 0; z < block::kEdge; ++z) {

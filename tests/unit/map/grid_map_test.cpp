@@ -31,7 +31,8 @@ ScanUpdate randomUpdate(std::mt19937& rng, double p_occupied, UpdateRule rule = 
 /// The fully-free masks a map reports equal "known and at the lower bound", cell by cell.
 void expectFullyFreeMasksMatchValues(const OccupancyMap& map) {
   std::size_t from_masks = 0;
-  map.forEachFullyFreeBlock([&](std::uint64_t block_key, const block::BlockMask& mask) {
+  map.forEachFullyFreeBlock(block::BlockBox::all(), [&](std::uint64_t block_key,
+                                                     const block::BlockMask& mask) {
     for (int i = 0; i < block::kVoxels; ++i) {
       if (!block::testBit(mask, i)) continue;
       ++from_masks;
@@ -130,6 +131,67 @@ TEST(OccupancyMaps, FullyFreeMasksFollowUpdatesSetsAndClears) {
   octree.clearBox(lo, hi);
   expectFullyFreeMasksMatchValues(grid);
   expectFullyFreeMasksMatchValues(octree);
+}
+
+/// The fully-free blocks `map` reports in `box`: block key -> mask.
+std::map<std::uint64_t, block::BlockMask> fullyFreeIn(const OccupancyMap& map,
+                                                      const block::BlockBox& box) {
+  std::map<std::uint64_t, block::BlockMask> out;
+  map.forEachFullyFreeBlock(box, [&](std::uint64_t key, const block::BlockMask& mask) {
+    EXPECT_TRUE(out.emplace(key, mask).second) << "block " << key << " reported twice";
+  });
+  return out;
+}
+
+TEST(OccupancyMaps, FullyFreeBlocksInABoxAreTheWholeMapsBlocksInsideIt) {
+  // Issue 30: the culling region asks for the blocks of its box; the grid answers from its
+  // region index, whatever the box's size against the map's.
+  std::mt19937 rng(31);
+  GridMap grid(0.1, SensorModel{});
+  OctreeMap octree(0.1, SensorModel{});
+  for (int scan = 0; scan < 8; ++scan) {
+    const ScanUpdate u = randomUpdate(rng, 0.05);
+    grid.apply(u);
+    octree.apply(u);
+  }
+  // Blocks far from the others (other regions) and a block dropped.
+  grid.setLogOdds(VoxelKey{1000, 2000, 3000}, -3.0F);
+  octree.setLogOdds(VoxelKey{1000, 2000, 3000}, -3.0F);
+  grid.setLogOdds(VoxelKey{60000, 200, 32768}, -3.0F);  // then dropped (the grid only)
+  ASSERT_EQ(grid.evictBlocks([](const Point3f& c) { return c.x() < 2000.0F; }).blocks, 1U);
+  const auto nonEmpty = [](std::map<std::uint64_t, block::BlockMask> blocks) {
+    std::erase_if(blocks, [](const auto& b) { return block::countBits(b.second) == 0; });
+    return blocks;
+  };
+  const auto all_grid = fullyFreeIn(grid, block::BlockBox::all());
+  const auto all_octree = fullyFreeIn(octree, block::BlockBox::all());
+  ASSERT_GT(all_grid.size(), 100U);
+  ASSERT_GT(nonEmpty(all_grid).size(), 5U);
+  EXPECT_EQ(nonEmpty(all_grid), nonEmpty(all_octree));
+  const auto inside = [](const std::map<std::uint64_t, block::BlockMask>& blocks,
+                         const block::BlockBox& box) {
+    std::map<std::uint64_t, block::BlockMask> out;
+    for (const auto& [key, mask] : blocks) {
+      if (box.contains(key)) out.emplace(key, mask);
+    }
+    return out;
+  };
+  std::uniform_int_distribution<std::uint32_t> centre(4080, 4105), half(0, 12);
+  const std::uint32_t far[3] = {125, 250, 375};  // the lone block's coordinates (key / 8)
+  std::size_t found = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    block::BlockBox box;
+    for (int a = 0; a < 3; ++a) {
+      const std::uint32_t c = trial % 10 == 0 ? far[a] : centre(rng), h = half(rng);
+      box.min[a] = c - h;
+      box.max[a] = c + h;
+    }
+    const auto expected = inside(all_grid, box);
+    ASSERT_EQ(fullyFreeIn(grid, box), expected) << "trial " << trial;
+    ASSERT_EQ(fullyFreeIn(octree, box), inside(all_octree, box)) << "trial " << trial;
+    found += expected.size();
+  }
+  EXPECT_GT(found, 1000U);  // the boxes met the map
 }
 
 TEST(GridMap, OneAndTwoThreadsGiveTheSameMap) {

@@ -121,8 +121,9 @@ TEST(MapView, ReservedBlocksServeTheFirstVersionsWithoutGrowingThePool) {
     (void)MapView::publish(sut);
   }
   EXPECT_GT(sut.store()->liveNodes(), 0U);
-  EXPECT_EQ(sut.memoryBytes() - sut.store()->entryCount() * sizeof(BlockEntry),
-            reserved);  // the same slabs (only entries and table were added)
+  EXPECT_EQ(sut.memoryBytes() - sut.store()->entryCount() * sizeof(BlockEntry) -
+                sut.store()->indexBytes(),
+            reserved);  // the same slabs (only entries, their index and table were added)
 }
 
 TEST(MapView, AnUnversionedMapWritesInPlace) {
@@ -158,7 +159,7 @@ TEST(MapView, DroppedBlocksLeaveNewVersionsAndStayInHeldOnesThroughCompaction) {
   GridMap sut(0.1, SensorModel{});
   std::mt19937 rng(11);
   std::vector<std::pair<std::shared_ptr<const MapView>, Cells>> held;
-  std::size_t evicted_blocks = 0;
+  std::size_t evicted_blocks = 0, boxed_blocks = 0;
   for (int v = 0; v < 160; ++v) {
     fillWindow(sut, rng, v, 24, 3);
     if (v % 10 == 5) randomVersion(sut, rng, 200);  // cells that come back in old blocks
@@ -169,6 +170,25 @@ TEST(MapView, DroppedBlocksLeaveNewVersionsAndStayInHeldOnesThroughCompaction) {
         sut.evictBlocks([&](const Point3f& centre) { return centre.x() >= x_min; });
     evicted_blocks += stats.blocks;
     EXPECT_EQ(sut.knownCells(), known_before - stats.cells);
+    // The region index (forEachEntryIn) finds the entries a walk of all of them finds in a
+    // box, through drops and compactions.
+    block::BlockBox box;
+    const auto corner = block::coordsOf(block::blockOf(VoxelKey{32000, 32000, 32000}));
+    for (int a = 0; a < 3; ++a) {
+      box.min[a] = corner[a] + static_cast<std::uint32_t>(a == 0 ? v : a == 1 ? v % 7 : 0);
+      box.max[a] = box.min[a] + static_cast<std::uint32_t>(a == 2 ? v % 2 : 3 + v % 11);
+    }
+    std::vector<std::uint64_t> walked, indexed;
+    sut.store()->forEachEntry([&](const BlockEntry& e) {
+      if (box.contains(e.key) && BlockStore::latest(e) != nullptr) walked.push_back(e.key);
+    });
+    sut.store()->forEachEntryIn(box, [&](const BlockEntry& e) {
+      if (BlockStore::latest(e) != nullptr) indexed.push_back(e.key);
+    });
+    std::sort(walked.begin(), walked.end());
+    std::sort(indexed.begin(), indexed.end());
+    EXPECT_EQ(indexed, walked) << "version " << v;
+    boxed_blocks += indexed.size();
     auto view = MapView::publish(sut);
     const Cells now = snapshotOf(sut);
     EXPECT_EQ(view->knownCells(), now.size());
@@ -182,6 +202,7 @@ TEST(MapView, DroppedBlocksLeaveNewVersionsAndStayInHeldOnesThroughCompaction) {
     EXPECT_EQ(snapshotOf(*view), cells) << "version " << view->version();
   }
   EXPECT_GT(evicted_blocks, 8000U);
+  EXPECT_GT(boxed_blocks, 1000U);  // the boxes met the window
   EXPECT_GE(sut.store()->compactions(), 1U) << "thousands of dropped entries were compacted";
   held.clear();
   for (int v = 0; v < 3; ++v) (void)MapView::publish(sut);

@@ -62,6 +62,26 @@ void forEachSetBit(const BlockMask& m, F&& f) {
                                  ((index >> (2 * kShift)) & m))};
 }
 
+/// A block's coordinates (its key's three 13-bit fields: x, y, z).
+[[nodiscard]] inline std::array<std::uint32_t, 3> coordsOf(std::uint64_t block) {
+  return {static_cast<std::uint32_t>(block & 0x1fff), static_cast<std::uint32_t>((block >> 13) & 0x1fff),
+          static_cast<std::uint32_t>((block >> 26) & 0x1fff)};
+}
+
+/// A box of blocks, inclusive, in block coordinates.
+struct BlockBox {
+  std::array<std::uint32_t, 3> min{}, max{};
+  /// Every block there is.
+  [[nodiscard]] static BlockBox all() { return {{0, 0, 0}, {0x1fff, 0x1fff, 0x1fff}}; }
+  [[nodiscard]] bool contains(std::uint64_t block) const {
+    const auto c = coordsOf(block);
+    for (int a = 0; a < 3; ++a) {
+      if (c[a] < min[a] || c[a] > max[a]) return false;
+    }
+    return true;
+  }
+};
+
 /// A block's centre: its corner cell's centre plus half a block less half a cell. The one
 /// definition eviction uses (every map kind evicts the same blocks).
 [[nodiscard]] inline Point3f centreOf(const VoxelGrid& grid, std::uint64_t block) {

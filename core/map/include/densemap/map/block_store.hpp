@@ -5,8 +5,10 @@
 #include <deque>
 #include <memory>
 #include <mutex>
+#include <unordered_map>
 #include <vector>
 
+#include "densemap/map/block_layout.hpp"
 #include "densemap/map/voxel_block.hpp"
 
 namespace densemap {
@@ -110,6 +112,32 @@ class BlockStore {
   void forEachEntryWriter(F&& f) {
     for (BlockEntry& e : entries_) f(e);
   }
+  /// Calls f(entry) for every entry whose block lies in `box` (writer), region by region: the
+  /// cost follows the entries in and near the box (and the box's regions), not the whole map.
+  template <typename F>
+  void forEachEntryIn(const block::BlockBox& box, F&& f) const {
+    const auto visit = [&](const std::vector<BlockEntry*>& region) {
+      for (const BlockEntry* e : region) {
+        if (box.contains(e->key)) f(*e);
+      }
+    };
+    std::size_t box_regions = 1;
+    for (int a = 0; a < 3; ++a) {
+      box_regions *= std::size_t{(box.max[a] >> kRegionShift) - (box.min[a] >> kRegionShift) + 1};
+    }
+    if (box_regions > regions_.size()) {  // fewer regions in the map than in the box
+      for (const auto& [key, region] : regions_) visit(region);
+      return;
+    }
+    for (std::uint32_t z = box.min[2] >> kRegionShift; z <= box.max[2] >> kRegionShift; ++z) {
+      for (std::uint32_t y = box.min[1] >> kRegionShift; y <= box.max[1] >> kRegionShift; ++y) {
+        for (std::uint32_t x = box.min[0] >> kRegionShift; x <= box.max[0] >> kRegionShift; ++x) {
+          const auto it = regions_.find(regionKey(x, y, z));
+          if (it != regions_.end()) visit(it->second);
+        }
+      }
+    }
+  }
   /// Whether a version was ever published (writes then copy blocks readers may hold).
   [[nodiscard]] bool versioned() const { return versioned_; }
 
@@ -138,6 +166,10 @@ class BlockStore {
   /// Compactions of the entry table so far (for tests).
   [[nodiscard]] std::size_t compactions() const { return compactions_; }
   [[nodiscard]] std::size_t memoryBytes() const;
+  /// Bytes of forEachEntryIn's region index (a pointer per entry, a hash node per region).
+  [[nodiscard]] std::size_t indexBytes() const {
+    return entries_.size() * sizeof(void*) + regions_.size() * 64;
+  }
 
  private:
   struct Table {
@@ -169,9 +201,21 @@ class BlockStore {
   void retireTombstones();  // writer, in publish()
   void compactIfWorthIt();  // writer, in publish()
 
+  /// Regions of 8^3 blocks (64^3 voxels) and their entries: forEachEntryIn's index (writer).
+  static constexpr int kRegionShift = 3;
+  [[nodiscard]] static std::uint64_t regionKey(std::uint32_t x, std::uint32_t y, std::uint32_t z) {
+    return std::uint64_t{x} | (std::uint64_t{y} << 10) | (std::uint64_t{z} << 20);
+  }
+  [[nodiscard]] static std::uint64_t regionOf(std::uint64_t block_key) {
+    const auto c = block::coordsOf(block_key);
+    return regionKey(c[0] >> kRegionShift, c[1] >> kRegionShift, c[2] >> kRegionShift);
+  }
+  void index(BlockEntry& e) { regions_[regionOf(e.key)].push_back(&e); }
+
   std::uint64_t writing_ = 0;
   bool versioned_ = false;
   std::deque<BlockEntry> entries_;
+  std::unordered_map<std::uint64_t, std::vector<BlockEntry*>> regions_;
   std::atomic<Table*> table_;
   std::vector<std::unique_ptr<Table>> tables_;  // the current one last
 

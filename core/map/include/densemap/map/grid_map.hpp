@@ -35,6 +35,7 @@ class GridMap final : public OccupancyMap {
   void forEachKnown(const std::function<void(const VoxelKey&, float)>& f) const override;
   void setLogOdds(const VoxelKey& key, float log_odds) override;
   void forEachFullyFreeBlock(
+      const block::BlockBox& box,
       const std::function<void(std::uint64_t, const block::BlockMask&)>& f) const override;
   [[nodiscard]] std::size_t knownCells() const override { return known_cells_; }
   [[nodiscard]] std::size_t memoryBytes() const override { return store_->memoryBytes(); }

@@ -68,10 +68,11 @@ class OccupancyMap {
   /// Sets a cell's log-odds directly (loading snapshots, building maps in tests).
   virtual void setLogOdds(const VoxelKey& key, float log_odds) = 0;
 
-  /// Calls f(block_key, mask) for every block with cells at the lower clamping bound (a free
-  /// update cannot change them): the input of the culling region. Blocks may come with an
-  /// empty mask.
+  /// Calls f(block_key, mask) for every block in `box` with cells at the lower clamping bound
+  /// (a free update cannot change them): the input of the culling region. Blocks may come with
+  /// an empty mask. The grid's cost follows the blocks in and near the box, not the map's size.
   virtual void forEachFullyFreeBlock(
+      const block::BlockBox& box,
       const std::function<void(std::uint64_t, const block::BlockMask&)>& f) const = 0;
 
   [[nodiscard]] virtual std::size_t knownCells() const = 0;
