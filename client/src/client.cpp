@@ -312,6 +312,14 @@ Expected<RayQueryAnswer> Client::castRay(const Point3f& origin, const Point3f& d
 
 Expected<std::string> Client::command(CommandKind kind, const Point3f& min, const Point3f& max,
                                       const std::string& path) {
+  auto outcome = commandReply(kind, min, max, path);
+  if (!outcome) return std::unexpected(outcome.error());
+  return outcome->detail;
+}
+
+Expected<Client::CommandOutcome> Client::commandReply(CommandKind kind, const Point3f& min,
+                                                      const Point3f& max,
+                                                      const std::string& path) {
   densemap_msgs_CommandRequest req{};
   req.id = {client_id_, next_request_++};
   req.kind = static_cast<std::int32_t>(kind);
@@ -323,17 +331,19 @@ Expected<std::string> Client::command(CommandKind kind, const Point3f& min, cons
   if (auto ok = permitted(writer, "this command"); !ok) return std::unexpected(ok.error());
   if (auto ok = permitted(dds_->cr_r, "command replies"); !ok) return std::unexpected(ok.error());
   if (auto ok = dds::write(writer, &req); !ok) return std::unexpected(ok.error());
-  std::string detail, error;
+  CommandOutcome outcome;
+  std::string error;
   // Commands wait for the scan in flight and may write large files: allow more time.
   auto ok =
       awaitReply<densemap_msgs_CommandReply>(dds_->cr_r, *dds_->cr_ws, req.id, options_.timeout * 6,
                                              [&](const densemap_msgs_CommandReply& r) {
                                                if (r.status != 0) error = text(r.error);
-                                               detail = text(r.detail);
+                                               outcome = {text(r.detail), r.sent_version,
+                                                          r.sent_tiles, r.sent_cells};
                                              });
   if (!ok) return std::unexpected(ok.error());
   if (!error.empty()) return makeError("server: " + error);
-  return detail;
+  return outcome;
 }
 
 Expected<ServerStatus> Client::status() {
@@ -464,13 +474,10 @@ Expected<std::pair<std::unique_ptr<GridMap>, std::uint64_t>> Client::fetchMap(
   std::this_thread::sleep_for(std::chrono::milliseconds(100));  // the server's side of the match
   // 3. send-map; the reply comes after the server wrote every tile and says how many.
   const densemap_msgs_RequestId id{client_id_, next_request_};
-  auto detail = command(CommandKind::kSendMap);
-  if (!detail) return std::unexpected(detail.error());
-  unsigned long long version = 0, tile_count = 0, cell_count = 0;
-  if (std::sscanf(detail->c_str(), "version %llu tiles %llu cells %llu", &version, &tile_count,
-                  &cell_count) != 3) {
-    return makeError("unexpected send-map reply: " + *detail);
-  }
+  auto sent = commandReply(CommandKind::kSendMap, {0, 0, 0}, {0, 0, 0}, {});
+  if (!sent) return std::unexpected(sent.error());
+  const std::uint64_t version = sent->sent_version, tile_count = sent->sent_tiles,
+                      cell_count = sent->sent_cells;
   auto map = std::make_unique<GridMap>(manifest->resolution, SensorModel{});
   std::size_t tiles = 0, cells = 0;
   bool malformed = false;

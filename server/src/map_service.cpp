@@ -608,7 +608,18 @@ void MapService::awaitAsker(const dds::Entity& writer, const std::optional<dds_g
 void MapService::answerCommands() {
   // send-map: a task, so it does not hold up other commands.
   const auto send_map = [this](const densemap_msgs_RequestId& id) {
-    runTask([this, id] { replyCommand(id, sendMap(id)); });
+    runTask([this, id] {
+      const Expected<SentMap> sent = sendMap(id);
+      if (!sent) {
+        replyCommand(id, std::unexpected(sent.error()));
+        return;
+      }
+      replyCommand(id,
+                   "version " + std::to_string(sent->version) + ": " +
+                       std::to_string(sent->tiles) + " tiles, " + std::to_string(sent->cells) +
+                       " cells",
+                   *sent);
+    });
   };
   while (dds::takeOneWithInfo<densemap_msgs_CommandRequest>(
       dds_->map_reader,
@@ -681,10 +692,13 @@ void MapService::answerCommands() {
 }
 
 void MapService::replyCommand(const densemap_msgs_RequestId& id,
-                              const Expected<std::string>& outcome) {
+                              const Expected<std::string>& outcome, const SentMap& sent) {
   densemap_msgs_CommandReply rep{};
   rep.id = id;
   rep.map_version = pipeline_.view()->version();
+  rep.sent_version = sent.version;
+  rep.sent_tiles = sent.tiles;
+  rep.sent_cells = sent.cells;
   const std::string error = outcome ? "" : outcome.error().message;
   const std::string detail = outcome ? *outcome : "";
   if (!outcome) noteBadRequest(error);
@@ -831,7 +845,7 @@ void MapService::publishManifest() {
   (void)dds::write(dds_->manifest_writer, &manifest);
 }
 
-Expected<std::string> MapService::sendMap(const densemap_msgs_RequestId& request) {
+Expected<SentMap> MapService::sendMap(const densemap_msgs_RequestId& request) {
   // One version throughout: the tiles are a consistent copy of it.
   const ReturnFreeMemory trim;  // the tiles' buffers and the writer's copies until acked
   const auto view = pipeline_.view();
@@ -851,8 +865,7 @@ Expected<std::string> MapService::sendMap(const densemap_msgs_RequestId& request
                        " cells: " + ok.error().message);
     }
   }
-  return "version " + std::to_string(view->version()) + " tiles " + std::to_string(tiles.size()) +
-         " cells " + std::to_string(cells);
+  return SentMap{.version = view->version(), .tiles = tiles.size(), .cells = cells};
 }
 
 }  // namespace densemap::server

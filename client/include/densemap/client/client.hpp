@@ -140,6 +140,13 @@ class Client {
  private:
   struct Dds;
   explicit Client(const ClientOptions& options);
+  /// A command's reply: the detail message and send-map's counts (CommandReply's sent_*).
+  struct CommandOutcome {
+    std::string detail;
+    std::uint64_t sent_version = 0, sent_tiles = 0, sent_cells = 0;
+  };
+  [[nodiscard]] Expected<CommandOutcome> commandReply(CommandKind kind, const Point3f& min,
+                                                      const Point3f& max, const std::string& path);
   ClientOptions options_;
   std::unique_ptr<Dds> dds_;
   std::uint64_t client_id_;

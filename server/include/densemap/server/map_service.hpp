@@ -42,6 +42,12 @@ struct ServiceOptions {
   std::chrono::milliseconds alone_discovery{1000};
 };
 
+/// What send-map wrote: its command reply's counts (a fetch waits for that many tiles and
+/// cells of that version).
+struct SentMap {
+  std::uint64_t version = 0, tiles = 0, cells = 0;
+};
+
 /// densemap-server's DDS face (DESIGN.md topics), three threads and a task arena:
 /// - ingest: only takes scans and submits them to the pipeline;
 /// - service: takes requests; point/bbox/ray queries run as tasks in the query arena (one slow
@@ -94,7 +100,8 @@ class MapService {
   [[nodiscard]] static std::size_t pointRequestBytes(std::size_t coordinates);
   void takeQueries();
   void answerCommands();
-  void replyCommand(const densemap_msgs_RequestId& id, const Expected<std::string>& outcome);
+  void replyCommand(const densemap_msgs_RequestId& id, const Expected<std::string>& outcome,
+                    const SentMap& sent = {});
   [[nodiscard]] Expected<std::size_t> saveUncounted(const std::filesystem::path& file);
   /// Fails when another densemap-server's status writer is discovered on the domain within
   /// `discovery` (DESIGN.md: two servers on one domain are detected, not merged).
@@ -114,8 +121,8 @@ class MapService {
   void publishDeltas(std::deque<Version>& versions);
   void publishStatus();
   void publishManifest();
-  /// Writes the latest version's tiles for `request` (send-map); returns the reply detail.
-  Expected<std::string> sendMap(const densemap_msgs_RequestId& request);
+  /// Writes the latest version's tiles for `request` (send-map); returns what it wrote.
+  Expected<SentMap> sendMap(const densemap_msgs_RequestId& request);
   void noteBadRequest(const std::string& error);
 
   Pipeline& pipeline_;
