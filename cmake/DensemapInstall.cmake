@@ -10,13 +10,13 @@ include(CMakePackageConfigHelpers)
 set(DENSEMAP_CMAKE_DIR ${CMAKE_INSTALL_LIBDIR}/cmake/densemap)
 
 # The client library and everything it links, as static libraries; exported as densemap::<name>.
+# (The read side, core/query, not the engine: a client does not link raycast, upsample or the
+# pipeline, issue 30.)
 set(DENSEMAP_SDK_TARGETS
-    densemap_options densemap_geometry densemap_map densemap_raycast densemap_kernel
-    densemap_iln_proto densemap_upsample densemap_io densemap_pipeline densemap_snapshot_proto
-    densemap_store densemap_dds_msgs densemap_dds densemap_client)
+    densemap_options densemap_geometry densemap_map densemap_query densemap_kernel densemap_io
+    densemap_snapshot_proto densemap_store densemap_dds_msgs densemap_dds densemap_client)
 set(DENSEMAP_SDK_HEADER_DIRS
-    core/geometry core/map core/raycast core/kernel core/upsample core/io core/pipeline core/store
-    server/dds client)
+    core/geometry core/map core/query core/kernel core/io core/store server/dds client)
 foreach(target IN LISTS DENSEMAP_SDK_TARGETS)
   string(REGEX REPLACE "^densemap_" "" export_name ${target})
   set_target_properties(${target} PROPERTIES EXPORT_NAME ${export_name})

@@ -11,7 +11,7 @@
 #include "densemap/dds/dds.hpp"
 #include "densemap/dds/delta_wire.hpp"
 #include "densemap/dds/topics.hpp"
-#include "densemap/pipeline/version_delta.hpp"
+#include "densemap/query/version_delta.hpp"
 #include "densemap_msgs.h"
 
 namespace densemap {

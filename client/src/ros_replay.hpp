@@ -5,7 +5,7 @@
 
 #include "densemap/dds/dds.hpp"
 #include "densemap/geometry/error.hpp"
-#include "densemap/pipeline/raw_scan.hpp"
+#include "densemap/io/raw_scan.hpp"
 #include "densemap/ros2/replay_frames.hpp"
 
 namespace densemap::cli {

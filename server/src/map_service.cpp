@@ -20,8 +20,8 @@
 #include "densemap/dds/delta_wire.hpp"
 #include "densemap/dds/topics.hpp"
 #include "densemap/io/process_usage.hpp"
-#include "densemap/pipeline/map_queries.hpp"
-#include "densemap/pipeline/version_delta.hpp"
+#include "densemap/query/map_queries.hpp"
+#include "densemap/query/version_delta.hpp"
 #include "densemap/store/snapshot.hpp"
 #include "densemap_msgs.h"
 

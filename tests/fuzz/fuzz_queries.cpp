@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "densemap/map/grid_map.hpp"
-#include "densemap/pipeline/map_queries.hpp"
+#include "densemap/query/map_queries.hpp"
 #include "fuzz_input.hpp"
 
 namespace {

@@ -16,7 +16,7 @@
 
 #include "densemap/io/process_usage.hpp"
 #include "densemap/io/scan_source.hpp"
-#include "densemap/pipeline/raw_scan.hpp"
+#include "densemap/io/raw_scan.hpp"
 #include "densemap/sim/sequence.hpp"
 
 extern char** environ;

@@ -6,7 +6,7 @@
 
 #include "densemap/geometry/voxel_grid.hpp"
 #include "densemap/io/octomap_export.hpp"
-#include "densemap/pipeline/version_delta.hpp"
+#include "densemap/query/version_delta.hpp"
 
 namespace densemap::ros2 {
 namespace {

@@ -1,4 +1,4 @@
-#include "densemap/pipeline/map_queries.hpp"
+#include "densemap/query/map_queries.hpp"
 
 #include <gtest/gtest.h>
 

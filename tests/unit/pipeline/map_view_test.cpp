@@ -1,6 +1,6 @@
 // MapView over the versioned BlockStore: versions are immutable, readers see whole versions
 // while the writer goes on, superseded blocks are freed once nobody reads them.
-#include "densemap/pipeline/map_view.hpp"
+#include "densemap/query/map_view.hpp"
 
 #include <gtest/gtest.h>
 
@@ -15,7 +15,7 @@
 #include <thread>
 #include <unordered_map>
 
-#include "densemap/pipeline/version_delta.hpp"
+#include "densemap/query/version_delta.hpp"
 
 namespace densemap {
 namespace {

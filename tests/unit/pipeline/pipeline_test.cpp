@@ -1,5 +1,5 @@
 #include "densemap/pipeline/pipeline.hpp"
-#include "densemap/pipeline/version_delta.hpp"
+#include "densemap/query/version_delta.hpp"
 
 #include <gtest/gtest.h>
 

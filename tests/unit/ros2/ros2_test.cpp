@@ -8,7 +8,7 @@
 #include <random>
 
 #include "densemap/map/grid_map.hpp"
-#include "densemap/pipeline/map_view.hpp"
+#include "densemap/query/map_view.hpp"
 #include "densemap/raycast/integrator.hpp"
 #include "densemap/ros2/map_topics.hpp"
 #include "densemap/ros2/point_cloud2.hpp"

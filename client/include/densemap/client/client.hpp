@@ -13,9 +13,9 @@
 #include "densemap/dds/topics.hpp"
 #include "densemap/geometry/error.hpp"
 #include "densemap/map/grid_map.hpp"
-#include "densemap/pipeline/map_queries.hpp"
-#include "densemap/pipeline/raw_scan.hpp"
-#include "densemap/pipeline/sensor_tally.hpp"
+#include "densemap/query/map_queries.hpp"
+#include "densemap/io/raw_scan.hpp"
+#include "densemap/io/sensor_counters.hpp"
 
 namespace densemap {
 

@@ -6,7 +6,7 @@
 
 #include "densemap/geometry/error.hpp"
 #include "densemap/io/scan.hpp"
-#include "densemap/pipeline/raw_scan.hpp"
+#include "densemap/io/raw_scan.hpp"
 
 namespace densemap {
 

@@ -5,20 +5,9 @@
 #include <string>
 #include <vector>
 
-namespace densemap {
+#include "densemap/io/sensor_counters.hpp"
 
-/// What the pipeline did with one sensor's scans.
-struct SensorCounters {
-  std::string sensor_id;
-  std::uint64_t received = 0;    // submitted to the pipeline
-  std::uint64_t integrated = 0;  // in the map
-  std::uint64_t dropped = 0;     // overwritten in the latest-wins queue (integration behind)
-  std::uint64_t rejected = 0;    // failed validation
-  /// Sequence numbers skipped between consecutive received scans: scans lost before the
-  /// pipeline saw them (e.g. overwritten in the DDS reader's history) or never sent.
-  std::uint64_t seq_gaps = 0;
-  std::uint64_t last_seq = 0;
-};
+namespace densemap {
 
 /// Per-sensor counters of the pipeline. At most kMaxSensors ids are kept apart; scans of
 /// further ids are counted under kOtherSensors, so bogus ids cannot grow it without bound.

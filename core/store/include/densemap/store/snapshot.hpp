@@ -10,7 +10,7 @@
 
 #include "densemap/geometry/error.hpp"
 #include "densemap/map/occupancy_map.hpp"
-#include "densemap/pipeline/map_view.hpp"
+#include "densemap/query/map_view.hpp"
 
 namespace densemap {
 

@@ -1,7 +1,7 @@
 #pragma once
 
 #include "densemap/dds/dds.hpp"
-#include "densemap/pipeline/version_delta.hpp"
+#include "densemap/query/version_delta.hpp"
 
 namespace densemap::dds {
 

@@ -11,7 +11,7 @@
 
 #include "densemap/geometry/point_cloud.hpp"
 #include "densemap/map/sensor_model.hpp"
-#include "densemap/pipeline/map_view.hpp"
+#include "densemap/query/map_view.hpp"
 
 namespace densemap::ros2 {
 

@@ -6,7 +6,7 @@
 #include <vector>
 
 #include "densemap/geometry/error.hpp"
-#include "densemap/pipeline/map_view.hpp"
+#include "densemap/query/map_view.hpp"
 
 namespace densemap {
 

@@ -1,4 +1,4 @@
-#include "densemap/pipeline/version_delta.hpp"
+#include "densemap/query/version_delta.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "densemap/pipeline/map_view.hpp"
+#include "densemap/query/map_view.hpp"
 
 namespace densemap {
 

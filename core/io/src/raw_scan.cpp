@@ -1,4 +1,4 @@
-#include "densemap/pipeline/raw_scan.hpp"
+#include "densemap/io/raw_scan.hpp"
 
 #include "densemap/io/scan.hpp"
 
