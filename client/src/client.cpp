@@ -318,8 +318,7 @@ Expected<std::string> Client::command(CommandKind kind, const Point3f& min, cons
 }
 
 Expected<Client::CommandOutcome> Client::commandReply(CommandKind kind, const Point3f& min,
-                                                      const Point3f& max,
-                                                      const std::string& path) {
+                                                      const Point3f& max, const std::string& path) {
   densemap_msgs_CommandRequest req{};
   req.id = {client_id_, next_request_++};
   req.kind = static_cast<std::int32_t>(kind);
@@ -334,13 +333,12 @@ Expected<Client::CommandOutcome> Client::commandReply(CommandKind kind, const Po
   CommandOutcome outcome;
   std::string error;
   // Commands wait for the scan in flight and may write large files: allow more time.
-  auto ok =
-      awaitReply<densemap_msgs_CommandReply>(dds_->cr_r, *dds_->cr_ws, req.id, options_.timeout * 6,
-                                             [&](const densemap_msgs_CommandReply& r) {
-                                               if (r.status != 0) error = text(r.error);
-                                               outcome = {text(r.detail), r.sent_version,
-                                                          r.sent_tiles, r.sent_cells};
-                                             });
+  auto ok = awaitReply<densemap_msgs_CommandReply>(
+      dds_->cr_r, *dds_->cr_ws, req.id, options_.timeout * 6,
+      [&](const densemap_msgs_CommandReply& r) {
+        if (r.status != 0) error = text(r.error);
+        outcome = {text(r.detail), r.sent_version, r.sent_tiles, r.sent_cells};
+      });
   if (!ok) return std::unexpected(ok.error());
   if (!error.empty()) return makeError("server: " + error);
   return outcome;

@@ -16,11 +16,11 @@
 #include "bench_report.hpp"
 #include "densemap/cli/guarded_main.hpp"
 #include "densemap/cli/progress.hpp"
+#include "densemap/geometry/percentile.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/kernel/kernel_map.hpp"
-#include "densemap/map/map_diff.hpp"
-#include "densemap/geometry/percentile.hpp"
 #include "densemap/map/grid_map.hpp"
+#include "densemap/map/map_diff.hpp"
 #include "densemap/map/map_factory.hpp"
 #include "densemap/map/octree_map.hpp"
 #include "densemap/map/update_rule.hpp"
@@ -261,7 +261,7 @@ class Lane {
   double sums_[6] = {0, 0, 0, 0, 0, 0};
   double stage_sums_[5] = {0, 0, 0, 0, 0};
   std::vector<std::size_t> known_after_, blocks_after_;  // the map after each scan
-  std::vector<double> region_ms_;                         // each scan's culling-region stage
+  std::vector<double> region_ms_;                        // each scan's culling-region stage
   std::string name_;
 };
 
@@ -390,11 +390,12 @@ int run(const Options& o) {
     std::printf("\n");
   }
   if (o.growth > 0) {
-    std::printf("\nper-scan time as the map grows (--growth %zu; region: the culling region's "
-                "mean ms; cells and blocks: the map after the part)\n%-28s %11s %9s %9s %10s "
-                "%12s %9s\n",
-                o.growth, "method/backend", "scans", "p50 ms", "p99 ms", "region ms",
-                "known cells", "blocks");
+    std::printf(
+        "\nper-scan time as the map grows (--growth %zu; region: the culling region's "
+        "mean ms; cells and blocks: the map after the part)\n%-28s %11s %9s %9s %10s "
+        "%12s %9s\n",
+        o.growth, "method/backend", "scans", "p50 ms", "p99 ms", "region ms", "known cells",
+        "blocks");
     for (const auto& lane : lanes) std::printf("%s", lane->growthTable(o.growth).c_str());
   }
   if (!o.json.empty()) {

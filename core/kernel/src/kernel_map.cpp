@@ -887,13 +887,15 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
     targets.resize(free_blocks.size());
     for (std::size_t i = 0; i < free_blocks.size(); ++i) {
       targets[i] = &blocks_[free_blocks[i]->key];
-      if (touched != nullptr) reached_blocks.emplace_back(free_blocks[i]->key, free_blocks[i]->mask);
+      if (touched != nullptr)
+        reached_blocks.emplace_back(free_blocks[i]->key, free_blocks[i]->mask);
     }
     tbb::parallel_for(std::size_t{0}, free_blocks.size(), [&](std::size_t i) {
       const FreeTraversal::Block& f = *free_blocks[i];
       Block& b = *targets[i];
       block::forEachSetBit(f.mask, [&](int cell) {
-        b.beta[cell] += static_cast<float>(static_cast<double>(f.sum[cell]) / FreeTraversal::kScale);
+        b.beta[cell] +=
+            static_cast<float>(static_cast<double>(f.sum[cell]) / FreeTraversal::kScale);
         block::setBit(b.known, cell);
       });
     });

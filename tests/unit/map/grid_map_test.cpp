@@ -31,16 +31,16 @@ ScanUpdate randomUpdate(std::mt19937& rng, double p_occupied, UpdateRule rule = 
 /// The fully-free masks a map reports equal "known and at the lower bound", cell by cell.
 void expectFullyFreeMasksMatchValues(const OccupancyMap& map) {
   std::size_t from_masks = 0;
-  map.forEachFullyFreeBlock(block::BlockBox::all(), [&](std::uint64_t block_key,
-                                                     const block::BlockMask& mask) {
-    for (int i = 0; i < block::kVoxels; ++i) {
-      if (!block::testBit(mask, i)) continue;
-      ++from_masks;
-      const auto v = map.logOdds(block::keyOf(block_key, i));
-      ASSERT_TRUE(v.has_value());
-      EXPECT_LE(*v, map.sensorModel().clampMin());
-    }
-  });
+  map.forEachFullyFreeBlock(block::BlockBox::all(),
+                            [&](std::uint64_t block_key, const block::BlockMask& mask) {
+                              for (int i = 0; i < block::kVoxels; ++i) {
+                                if (!block::testBit(mask, i)) continue;
+                                ++from_masks;
+                                const auto v = map.logOdds(block::keyOf(block_key, i));
+                                ASSERT_TRUE(v.has_value());
+                                EXPECT_LE(*v, map.sensorModel().clampMin());
+                              }
+                            });
   std::size_t from_values = 0;
   map.forEachKnown([&](const VoxelKey&, float v) {
     if (map.sensorModel().isFullyFree(v)) ++from_values;

@@ -1,8 +1,5 @@
 #pragma once
 
-#include <tbb/task_arena.h>
-#include <tbb/task_group.h>
-
 #include <atomic>
 #include <condition_variable>
 #include <deque>
@@ -23,6 +20,15 @@
 
 namespace densemap::server {
 
+class RequestStats;
+class RequestTasks;
+class SnapshotSaver;
+class ReplyWriters;
+class QueryRoom;
+class CommandRoom;
+class Publisher;
+class StatusRoom;
+
 struct ServiceOptions {
   std::uint32_t domain_id = 0;
   std::string network_interface = "lo";
@@ -42,13 +48,9 @@ struct ServiceOptions {
   std::chrono::milliseconds alone_discovery{1000};
 };
 
-/// What send-map wrote: its command reply's counts (a fetch waits for that many tiles and
-/// cells of that version).
-struct SentMap {
-  std::uint64_t version = 0, tiles = 0, cells = 0;
-};
-
-/// densemap-server's DDS face (DESIGN.md topics), three threads and a task arena:
+/// densemap-server's DDS face (DESIGN.md topics): the endpoints, three threads, and rooms of
+/// one job each in server/src (replies, request_tasks, query_room, command_room, publisher,
+/// status_room, snapshot_saver):
 /// - ingest: only takes scans and submits them to the pipeline;
 /// - service: takes requests; point/bbox/ray queries run as tasks in the query arena (one slow
 ///   bbox does not hold up point queries), each answered from the latest published version;
@@ -83,89 +85,36 @@ class MapService {
 
  private:
   struct Dds;
-  struct Version {  // a published version handed to the publish thread
-    IntegrationResult result;
-    std::shared_ptr<const MapView> view;
-  };
   MapService(Pipeline& pipeline, const ServiceOptions& options);
+  /// The rooms, once the DDS endpoints exist (create()).
+  void makeRooms();
   void ingestLoop();
   void serviceLoop();
   void publishLoop();
-  void onIntegrated(const IntegrationResult& result, const std::shared_ptr<const MapView>& view);
-  /// Runs `task` in the query arena, counted in queries_in_flight_ until it ends.
-  /// Runs a request's task in the query arena; `bytes` is charged to the request budget while
-  /// it runs.
-  void runTask(std::function<void()> task, std::size_t bytes = 0);
-  /// The memory a point request of `coordinates` floats holds while it is answered.
-  [[nodiscard]] static std::size_t pointRequestBytes(std::size_t coordinates);
-  void takeQueries();
-  void answerCommands();
-  void replyCommand(const densemap_msgs_RequestId& id, const Expected<std::string>& outcome,
-                    const SentMap& sent = {});
-  [[nodiscard]] Expected<std::size_t> saveUncounted(const std::filesystem::path& file);
   /// Fails when another densemap-server's status writer is discovered on the domain within
   /// `discovery` (DESIGN.md: two servers on one domain are detected, not merged).
   [[nodiscard]] Expected<void> checkAlone(std::chrono::milliseconds discovery) const;
-  /// Participants other than this one that write densemap/status (other servers).
-  [[nodiscard]] std::vector<std::string> otherServers() const;
-  /// The reply topics (replyWriter).
-  enum class ReplyTopic { kPoint, kBbox, kRay, kCommand };
-  /// The writer of `topic`'s replies to client `client_id`: in that client's partition
-  /// (dds::replyPartition), so only its readers receive them; made at its first request on
-  /// that topic, the most recently used kept (a task holding one keeps it alive). Null when DDS
-  /// refuses it. Thread-safe.
-  std::shared_ptr<const dds::Entity> replyWriter(ReplyTopic topic, std::uint64_t client_id);
-  /// Waits until `writer` has matched a reader of `asker`, at most what is left of kAskerWait
-  /// (in the .cpp) since the asker's first request. Thread-safe.
-  void awaitAsker(const dds::Entity& writer, const std::optional<dds_guid_t>& asker);
-  void publishDeltas(std::deque<Version>& versions);
-  void publishStatus();
-  void publishManifest();
-  /// Writes the latest version's tiles for `request` (send-map); returns what it wrote.
-  Expected<SentMap> sendMap(const densemap_msgs_RequestId& request);
-  void noteBadRequest(const std::string& error);
 
   Pipeline& pipeline_;
   ServiceOptions options_;
-  std::unique_ptr<Dds> dds_;
+  std::unique_ptr<Dds> dds_;  // before the rooms: they hold its endpoints
   std::unique_ptr<Ros2Bridge> ros2_;
+  // Rooms of one job each (server/src): shared request counters, the request task arena with
+  // its memory budget, snapshots; the per-client reply writers; queries; commands; publishing
+  // of versions; status.
+  std::unique_ptr<RequestStats> stats_;
+  std::unique_ptr<RequestTasks> tasks_;
+  std::unique_ptr<SnapshotSaver> saver_;
+  std::unique_ptr<ReplyWriters> replies_;
+  std::unique_ptr<QueryRoom> queries_;
+  std::unique_ptr<CommandRoom> commands_;
+  std::unique_ptr<Publisher> publisher_;
+  std::unique_ptr<StatusRoom> status_;
   std::atomic<bool> running_{false};
   std::atomic<std::chrono::steady_clock::rep> heartbeat_{0};
   std::thread ingest_;
   std::thread service_;
   std::thread publish_;
-  std::chrono::steady_clock::time_point started_ = std::chrono::steady_clock::now();
-
-  tbb::task_arena query_arena_;
-  tbb::task_group queries_;
-  std::atomic<int> queries_in_flight_{0};
-  std::atomic<std::size_t> request_bytes_{0};      // charged to options_.request_budget_bytes
-  std::atomic<std::size_t> served_since_trim_{0};  // request bytes answered since the last trim
-  struct CachedReplyWriter {
-    std::shared_ptr<const dds::Entity> writer;
-    std::uint64_t last_used = 0;
-  };
-  std::mutex reply_writers_mutex_;
-  std::map<std::pair<std::uint64_t, int>, CachedReplyWriter> reply_writers_;  // (client, topic)
-  std::uint64_t reply_writer_uses_ = 0;
-  std::mutex askers_mutex_;
-  std::unordered_set<std::string> askers_matched_;  // "writer:participant" seen matched
-  std::unordered_map<std::string, std::chrono::steady_clock::time_point> asker_first_seen_;
-
-  std::mutex versions_mutex_;
-  std::condition_variable versions_cv_;
-  std::deque<Version> versions_;
-  // Publish thread only:
-  std::shared_ptr<const MapView> delta_base_;  // the last version a delta went out for
-
-  std::atomic<std::uint64_t> queries_answered_{0};
-  std::atomic<std::uint64_t> queries_rejected_{0};
-  std::mutex error_mutex_;
-  std::mutex save_mutex_;  // one snapshot rotation at a time (command save, autosave, shutdown)
-  std::atomic<std::uint64_t> snapshot_failures_{0};
-  std::chrono::steady_clock::time_point next_alone_check_{};  // publish thread only
-  std::string last_snapshot_error_;                           // error_mutex_
-  std::string last_query_error_;
 };
 
 }  // namespace densemap::server

@@ -64,7 +64,8 @@ void forEachSetBit(const BlockMask& m, F&& f) {
 
 /// A block's coordinates (its key's three 13-bit fields: x, y, z).
 [[nodiscard]] inline std::array<std::uint32_t, 3> coordsOf(std::uint64_t block) {
-  return {static_cast<std::uint32_t>(block & 0x1fff), static_cast<std::uint32_t>((block >> 13) & 0x1fff),
+  return {static_cast<std::uint32_t>(block & 0x1fff),
+          static_cast<std::uint32_t>((block >> 13) & 0x1fff),
           static_cast<std::uint32_t>((block >> 26) & 0x1fff)};
 }
 
@@ -101,4 +102,3 @@ struct BlockCells {
 };
 
 }  // namespace densemap
-

@@ -1,0 +1,61 @@
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+
+#include "densemap/dds/dds.hpp"
+#include "densemap/pipeline/pipeline.hpp"
+#include "densemap_msgs.h"
+#include "replies.hpp"
+#include "request_tasks.hpp"
+#include "snapshot_saver.hpp"
+
+namespace densemap::server {
+
+/// What send-map wrote: its command reply's counts (a fetch waits for that many tiles and
+/// cells of that version).
+struct SentMap {
+  std::uint64_t version = 0, tiles = 0, cells = 0;
+};
+
+/// Commands: reset, clear-bbox and save (densemap/cmd/request; they wait for the pipeline's
+/// worker), and send-map (densemap/map/request, or cmd/request: a task that writes one
+/// version's tiles to the asker, keep-all and flow-controlled).
+class CommandRoom {
+ public:
+  struct Endpoints {
+    const dds::Entity& commands;  // densemap/cmd/request
+    const dds::Entity& map;       // densemap/map/request (send-map only)
+    const dds::Entity& tiles;     // densemap/map/tiles
+  };
+  /// `export_dir`: where a named save goes (exportDirectory()).
+  CommandRoom(Pipeline& pipeline, Endpoints endpoints, ReplyWriters& replies, RequestTasks& tasks,
+              RequestStats& stats, SnapshotSaver& saver, std::filesystem::path export_dir)
+      : pipeline_(pipeline),
+        endpoints_(endpoints),
+        replies_(replies),
+        tasks_(tasks),
+        stats_(stats),
+        saver_(saver),
+        export_dir_(std::move(export_dir)) {}
+
+  /// Answers the commands waiting (service thread).
+  void answer();
+
+ private:
+  void reply(const densemap_msgs_RequestId& id, const Expected<std::string>& outcome,
+             const SentMap& sent = {});
+  /// Writes the latest version's tiles for `request` (send-map); returns what it wrote.
+  Expected<SentMap> sendMap(const densemap_msgs_RequestId& request);
+
+  Pipeline& pipeline_;
+  Endpoints endpoints_;
+  ReplyWriters& replies_;
+  RequestTasks& tasks_;
+  RequestStats& stats_;
+  SnapshotSaver& saver_;
+  std::filesystem::path export_dir_;
+};
+
+}  // namespace densemap::server

@@ -1,0 +1,186 @@
+#include "query_room.hpp"
+
+#include <algorithm>
+#include <string>
+#include <vector>
+
+#include "densemap/dds/topics.hpp"
+#include "densemap/query/map_queries.hpp"
+#include "densemap_msgs.h"
+
+namespace densemap::server {
+
+namespace {
+
+// Requests copied out of DDS's loans, answered later by a query task.
+struct PointRequest {
+  densemap_msgs_RequestId id;
+  std::vector<float> xyz;
+};
+struct BboxRequest {
+  densemap_msgs_RequestId id;
+  Point3f min, max;
+  std::uint32_t max_centers;
+};
+struct RayRequest {
+  densemap_msgs_RequestId id;
+  Point3f origin, direction;
+  float max_range;
+};
+
+void answerPoints(const dds::Entity& writer, const PointRequest& req, const MapView& view,
+                  std::string& error) {
+  densemap_msgs_PointQueryReply rep{};
+  rep.id = req.id;
+  rep.map_version = view.version();
+  auto result = queryPoints(view, req.xyz);
+  if (!result) {
+    error = result.error().message;
+    result = PointQueryResult{};
+  }
+  rep.status = error.empty() ? kOk : kInvalid;
+  rep.error = const_cast<char*>(error.c_str());
+  rep.log_odds = dds::borrowSequence<dds_sequence_float>(result->log_odds);
+  rep.state = dds::borrowSequence<dds_sequence_octet>(result->states);
+  (void)dds::write(writer, &rep);
+}
+
+void answerBox(const dds::Entity& writer, const BboxRequest& req, const MapView& view,
+               std::size_t max_cells, std::string& error) {
+  densemap_msgs_BboxQueryReply rep{};
+  rep.id = req.id;
+  rep.map_version = view.version();
+  auto result = queryBox(view, req.min, req.max, max_cells,
+                         std::min<std::uint32_t>(req.max_centers, 1'000'000));
+  std::vector<float> centers;
+  if (result) {
+    rep.occupied = result->occupied;
+    rep.free_cells = result->free;
+    rep.unknown = result->unknown;
+    for (const auto& c : result->occupied_centers)
+      centers.insert(centers.end(), {c.x(), c.y(), c.z()});
+  } else {
+    error = result.error().message;
+  }
+  rep.status = error.empty() ? kOk : kInvalid;
+  rep.error = const_cast<char*>(error.c_str());
+  rep.occupied_centers = dds::borrowSequence<dds_sequence_float>(centers);
+  (void)dds::write(writer, &rep);
+}
+
+void answerRay(const dds::Entity& writer, const RayRequest& req, const MapView& view,
+               std::string& error) {
+  densemap_msgs_RayQueryReply rep{};
+  rep.id = req.id;
+  rep.map_version = view.version();
+  auto result = castRay(view, req.origin, req.direction, req.max_range);
+  if (result) {
+    rep.hit = result->hit;
+    for (int i = 0; i < 3; ++i) rep.hit_point[i] = result->hit_center[i];
+    rep.distance = result->distance;
+  } else {
+    error = result.error().message;
+  }
+  rep.status = error.empty() ? kOk : kInvalid;
+  rep.error = const_cast<char*>(error.c_str());
+  (void)dds::write(writer, &rep);
+}
+
+}  // namespace
+
+std::size_t QueryRoom::pointRequestBytes(std::size_t coordinates) {
+  // The request's copy (12 bytes a point), the reply's values and states (5 bytes a point) and
+  // the DDS sample written (about as much again).
+  return coordinates * sizeof(float) + coordinates / 3 * 2 * (sizeof(float) + 1);
+}
+
+void QueryRoom::take() {
+  // Each request becomes a task answered from the latest version when it runs; the task reads
+  // one view throughout, so a multi-cell answer is one consistent version.
+  auto spawn = [this](auto answer, std::size_t bytes = 0) {
+    tasks_.run(
+        [this, answer = std::move(answer)] {
+          std::string error;
+          answer(*pipeline_.view(), error);
+          if (!error.empty()) stats_.refused(error);
+          stats_.answered();
+        },
+        bytes);
+  };
+  // Take one request at a time from each reader in turn, so no kind starves the others. Each
+  // reply waits (at most kAskerWait) until its writer has matched the asker's reply reader:
+  // discovery is not symmetric, and a reply written before that match is lost (issue 28,
+  // item 4: 1-3% of one-shot queries timed out while the server had answered).
+  const auto asker = [](const dds::Entity& reader, const dds_sample_info_t& info) {
+    return dds::participantOfWriter(reader, info.publication_handle);
+  };
+  // Requests in flight share one memory budget (pipeline.request_budget_mb): while it is spent,
+  // new requests wait in DDS (bounded by the readers' depth); one that could never fit is refused.
+  bool took = true;
+  while (took && tasks_.roomForMore()) {
+    took = dds::takeOneWithInfo<densemap_msgs_PointQueryRequest>(
+        readers_.point,
+        [&](const densemap_msgs_PointQueryRequest& m, const dds_sample_info_t& info) {
+          const std::size_t bytes = pointRequestBytes(m.points._length);
+          std::string refusal;
+          if (m.points._length / 3 > dds::kMaxQueryPoints) {
+            refusal = std::to_string(m.points._length / 3) +
+                      " query points in one request: at most " +
+                      std::to_string(dds::kMaxQueryPoints) +
+                      " (densemap's client library splits larger batches)";
+          } else if (bytes > tasks_.budgetBytes()) {
+            refusal = std::to_string(m.points._length / 3) + " query points need " +
+                      std::to_string(bytes >> 20) + " MiB, over the server's request budget of " +
+                      std::to_string(tasks_.budgetBytes() >> 20) +
+                      " MiB (pipeline.request_budget_mb): send smaller batches";
+          }
+          if (!refusal.empty()) {
+            densemap_msgs_PointQueryReply rep{};
+            rep.id = m.id;
+            rep.status = kInvalid;
+            rep.error = const_cast<char*>(refusal.c_str());
+            if (const auto w = replies_.writer(ReplyTopic::kPoint, m.id.client_id)) {
+              replies_.awaitAsker(*w, asker(readers_.point, info));
+              (void)dds::write(*w, &rep);
+            }
+            stats_.refused(refusal);
+            return;
+          }
+          PointRequest req{
+              m.id, std::vector<float>(m.points._buffer, m.points._buffer + m.points._length)};
+          const auto w = replies_.writer(ReplyTopic::kPoint, m.id.client_id);
+          if (!w) return;
+          spawn(
+              [this, w, req = std::move(req), who = asker(readers_.point, info)](
+                  const MapView& view, std::string& error) {
+                replies_.awaitAsker(*w, who);
+                answerPoints(*w, req, view, error);
+              },
+              bytes);
+        });
+    took |= dds::takeOneWithInfo<densemap_msgs_BboxQueryRequest>(
+        readers_.bbox, [&](const densemap_msgs_BboxQueryRequest& m, const dds_sample_info_t& info) {
+          BboxRequest req{m.id, toPoint(m.min), toPoint(m.max), m.max_centers};
+          const auto w = replies_.writer(ReplyTopic::kBbox, m.id.client_id);
+          if (!w) return;
+          spawn([this, w, req, who = asker(readers_.bbox, info)](const MapView& view,
+                                                                 std::string& error) {
+            replies_.awaitAsker(*w, who);
+            answerBox(*w, req, view, max_query_cells_, error);
+          });
+        });
+    took |= dds::takeOneWithInfo<densemap_msgs_RayQueryRequest>(
+        readers_.ray, [&](const densemap_msgs_RayQueryRequest& m, const dds_sample_info_t& info) {
+          RayRequest req{m.id, toPoint(m.origin), toPoint(m.direction), m.max_range};
+          const auto w = replies_.writer(ReplyTopic::kRay, m.id.client_id);
+          if (!w) return;
+          spawn([this, w, req, who = asker(readers_.ray, info)](const MapView& view,
+                                                                std::string& error) {
+            replies_.awaitAsker(*w, who);
+            answerRay(*w, req, view, error);
+          });
+        });
+  }
+}
+
+}  // namespace densemap::server

@@ -1,0 +1,45 @@
+#pragma once
+
+#include <cstddef>
+
+#include "densemap/dds/dds.hpp"
+#include "densemap/pipeline/pipeline.hpp"
+#include "replies.hpp"
+#include "request_tasks.hpp"
+
+namespace densemap::server {
+
+/// Point, box and ray queries: takes one request at a time from each reader in turn (no kind
+/// starves the others) while the request budget has room, and answers each in a task from the
+/// latest published version (one version throughout a multi-cell answer).
+class QueryRoom {
+ public:
+  struct Readers {
+    const dds::Entity& point;
+    const dds::Entity& bbox;
+    const dds::Entity& ray;
+  };
+  QueryRoom(Pipeline& pipeline, Readers readers, ReplyWriters& replies, RequestTasks& tasks,
+            RequestStats& stats, std::size_t max_query_cells)
+      : pipeline_(pipeline),
+        readers_(readers),
+        replies_(replies),
+        tasks_(tasks),
+        stats_(stats),
+        max_query_cells_(max_query_cells) {}
+
+  /// Takes the requests waiting (service thread).
+  void take();
+  /// The memory a point request of `coordinates` floats holds while it is answered.
+  [[nodiscard]] static std::size_t pointRequestBytes(std::size_t coordinates);
+
+ private:
+  Pipeline& pipeline_;
+  Readers readers_;
+  ReplyWriters& replies_;
+  RequestTasks& tasks_;
+  RequestStats& stats_;
+  std::size_t max_query_cells_;
+};
+
+}  // namespace densemap::server
