@@ -8,7 +8,7 @@
 #include <chrono>
 #include <cmath>
 
-#include "densemap/geometry/stopwatch.hpp"
+#include "map_kind.hpp"
 
 namespace densemap {
 
@@ -57,13 +57,11 @@ struct Pipeline::Graph {
         integrate(graph, tbb::flow::serial,
                   [&p](JobPtr job) {
                     if (!job->rejection) {
-                      CellChanges* changes =
-                          p.options_.collect_changes || p.mirror_ ? &job->result.changes : nullptr;
+                      CellChanges* changes = p.options_.collect_changes || p.kind_->needsChanges()
+                                                 ? &job->result.changes
+                                                 : nullptr;
                       job->result.stats =
-                          p.kernel_map_
-                              ? p.integrateKernel(job->points_world, job->origin_world, changes)
-                              : p.integrator_.integrate(*p.map_, job->points_world,
-                                                        job->origin_world, changes);
+                          p.kind_->integrate(job->points_world, job->origin_world, changes);
                       p.evict(job->origin_world, job->result, changes);
                     }
                     return job;
@@ -117,9 +115,6 @@ Expected<std::unique_ptr<Pipeline>> Pipeline::create(const PipelineOptions& opti
 Pipeline::Pipeline(const PipelineOptions& options, std::unique_ptr<OccupancyMap> map,
                    std::uint64_t version)
     : options_(options),
-      map_(std::move(map)),
-      integrator_(
-          {.method = options.method, .rule = options.rule, .max_range_m = options.max_range_m}),
       arena_(options.threads),
       queue_(
           options.queue_depth, options.queue_depth * kQueueSensorShare,
@@ -128,20 +123,18 @@ Pipeline::Pipeline(const PipelineOptions& options, std::unique_ptr<OccupancyMap>
   if (options.kernel) {
     auto kernel_options = kernel::KernelOptions::defaults(*options.kernel);
     kernel_options.max_range = options.max_range_m;
-    kernel_map_ = std::make_unique<kernel::KernelMap>(options.resolution_m, kernel_options);
+    kind_ = makeKernelKind(std::move(map), kernel_options);
+  } else {
+    kind_ = makeLogOddsKind(
+        std::move(map),
+        {.method = options.method, .rule = options.rule, .max_range_m = options.max_range_m});
   }
-  readable_ = dynamic_cast<GridMap*>(map_.get());
-  if (readable_ == nullptr) {
-    mirror_ = std::make_unique<GridMap>(map_->resolution(), map_->sensorModel());
-    map_->forEachKnown([this](const VoxelKey& k, float v) { mirror_->setLogOdds(k, v); });
-    readable_ = mirror_.get();
-  }
-  readable_->startVersionsAt(version);
-  readable_->reserveBlocks(options.reserve_blocks);
-  view_.store(MapView::publish(*readable_));
+  kind_->published().startVersionsAt(version);
+  kind_->published().reserveBlocks(options.reserve_blocks);
+  view_.store(MapView::publish(kind_->published()));
   // The graph belongs to the pipeline's arena: build it there.
   arena_.execute([this] { graph_ = std::make_unique<Graph>(*this); });
-  if (options.warm_up && !kernel_map_) arena_.execute([this] { warmUp(); });
+  if (options.warm_up) arena_.execute([this] { kind_->warmUp(options_.max_range_m); });
 }
 
 Pipeline::~Pipeline() { stop(); }
@@ -193,7 +186,7 @@ Pipeline::SavedState Pipeline::savedState() {
   // the one the kernel map's evidence stands behind.
   auto done = command([&](OccupancyMap&, CellChanges&) -> Expected<std::string> {
     state.view = view_.load();
-    if (kernel_map_) state.kernel = kernel_map_->evidence();
+    state.kernel = kind_->evidence();
     return std::string();
   });
   done.wait();
@@ -202,11 +195,7 @@ Pipeline::SavedState Pipeline::savedState() {
 
 Expected<void> Pipeline::restoreKernelEvidence(const kernel::KernelEvidence& evidence) {
   if (running_.load()) return makeError("kernel evidence is restored before start()");
-  if (!kernel_map_) {
-    return makeError("the map kind is log_odds: kernel evidence of " +
-                     std::string(kernel::kernelMethodName(evidence.method)) + " has no place");
-  }
-  return kernel_map_->restore(evidence);
+  return kind_->restore(evidence);
 }
 
 void Pipeline::run() {
@@ -235,23 +224,17 @@ void Pipeline::runCommands() {
   for (auto& [command, promise] : pending) {
     IntegrationResult result;
     Expected<std::string> outcome;
-    arena_.execute([&] { outcome = command(*map_, result.changes); });
-    if (kernel_map_) {  // erased cells lose their kernel evidence too
-      for (const CellChange& c : result.changes) {
-        if (!c.known) kernel_map_->erase(c.key);
-      }
-    }
+    arena_.execute([&] { outcome = kind_->command(command, result.changes); });
     if (!result.changes.empty()) publish(result);
     promise.set_value(std::move(outcome));
   }
 }
 
 void Pipeline::publish(IntegrationResult& result) {
-  if (mirror_) mirror_->applyChanges(result.changes);
+  kind_->beforePublish(result.changes);
   result.base_version = view_.load()->version();
-  // The mirror follows the octree cell for cell, so its known-cell count is the map's.
-  auto next =
-      MapView::publish(*readable_, mirror_ ? map_->memoryBytes() : 0, &result.written_blocks);
+  // A mirror follows the octree cell for cell, so its known-cell count is the map's.
+  auto next = MapView::publish(kind_->published(), kind_->ownBytes(), &result.written_blocks);
   result.new_version = next->version();
   view_.store(next);
   if (result.from_scan) {
@@ -271,8 +254,8 @@ void Pipeline::publish(IntegrationResult& result) {
 }
 
 void Pipeline::evict(const Point3f& origin, IntegrationResult& result, CellChanges* changes) {
-  // create() refuses eviction unless map_ is the GridMap itself (readable_, no mirror).
-  if ((options_.keep_radius_m <= 0 && !options_.bounds) || mirror_) return;
+  // create() refuses eviction unless the map is the grid itself (no mirror).
+  if ((options_.keep_radius_m <= 0 && !options_.bounds) || !kind_->canEvict()) return;
   const double r2 = options_.keep_radius_m * options_.keep_radius_m;
   const auto keep = [&](const Point3f& centre) {
     if (options_.keep_radius_m > 0 && (centre - origin).cast<double>().squaredNorm() > r2) {
@@ -284,76 +267,9 @@ void Pipeline::evict(const Point3f& origin, IntegrationResult& result, CellChang
     }
     return true;
   };
-  const EvictStats stats = readable_->evictBlocks(keep, changes);
-  // A kernel map drops the same blocks (its evidence and memory); its published map is the
-  // grid above, whose changes say which cells became unknown.
-  if (kernel_map_) kernel_map_->evictBlocks(keep);
+  const EvictStats stats = kind_->evict(keep, changes);
   result.evicted_blocks = stats.blocks;
   result.evicted_cells = stats.cells;
-}
-
-void Pipeline::warmUp() {
-  // A sparse fan (16 x 256 rays) at 90% of the max range (50 m when unlimited), +-3 deg about
-  // the horizon: the rays' box (which sizes the dense free marks) is as wide as a real scan's,
-  // and the blocks the rays touch size the per-worker update tables. Measured on the 64-beam
-  // simulation at 0.1 m / 80 m: p99 about 220 -> 150 ms, for about 230 MB more RSS kept for
-  // the life of the process (a 4 x 64 fan: +60 MB, no clear gain).
-  const float range =
-      0.9F * static_cast<float>(options_.max_range_m > 0 ? options_.max_range_m : 50.0);
-  PointCloud points;
-  points.reserve(16 * 256);
-  for (int beam = 0; beam < 16; ++beam) {
-    const float elevation = (-3.0F + 6.0F * static_cast<float>(beam) / 15.0F) * 0.0174533F;
-    for (int col = 0; col < 256; ++col) {
-      const float azimuth = 6.2831853F * static_cast<float>(col) / 256.0F;
-      points.emplace_back(range * std::cos(elevation) * std::cos(azimuth),
-                          range * std::cos(elevation) * std::sin(azimuth),
-                          range * std::sin(elevation));
-    }
-  }
-  GridMap scratch(options_.resolution_m, SensorModel(options_.sensor));
-  // Twice: each TBB worker has its own buffers, and one pass may not reach every worker.
-  for (int pass = 0; pass < 2; ++pass) {
-    (void)integrator_.integrate(scratch, points, Point3f::Zero());
-  }
-}
-
-ScanStats Pipeline::integrateKernel(const PointCloud& points_world, const Point3f& origin_world,
-                                    CellChanges* changes) {
-  auto t0 = std::chrono::steady_clock::now();
-  std::vector<BlockCells> touched;
-  kernel_map_->integrate(points_world, origin_world, &touched);
-  ScanStats stats;
-  stats.points = points_world.size();
-  stats.rays = points_world.size();
-  stats.ms_mark = msSince(t0);
-  // The published map follows the evidence of the cells this scan reached: block by block, in
-  // parallel, on the grid; cell by cell on another backend.
-  const auto values = [this](std::uint64_t block_key, const block::BlockMask& cells,
-                             std::array<float, block::kVoxels>& log_odds) {
-    kernel_map_->blockLogOdds(block_key, cells, log_odds);
-  };
-  if (auto* grid = dynamic_cast<GridMap*>(map_.get())) {
-    const ApplyStats applied = grid->assignBlocks(touched, values, changes);
-    stats.updated = applied.updated_cells;
-    stats.changed = applied.changed_cells;
-  } else {
-    std::array<float, block::kVoxels> log_odds{};
-    for (const BlockCells& b : touched) {
-      values(b.key, b.cells, log_odds);
-      block::forEachSetBit(b.cells, [&](int cell) {
-        const VoxelKey key = block::keyOf(b.key, cell);
-        ++stats.updated;
-        if (map_->logOdds(key) != log_odds[cell]) {
-          map_->setLogOdds(key, log_odds[cell]);
-          ++stats.changed;
-          if (changes != nullptr) changes->push_back({key, log_odds[cell], true});
-        }
-      });
-    }
-  }
-  stats.ms_apply = msSince(t0);
-  return stats;
 }
 
 PipelineCounters Pipeline::counters() const {

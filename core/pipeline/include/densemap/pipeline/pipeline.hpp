@@ -10,14 +10,14 @@
 #include <mutex>
 #include <thread>
 
+#include "densemap/io/raw_scan.hpp"
 #include "densemap/kernel/kernel_map.hpp"
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_factory.hpp"
 #include "densemap/pipeline/latest_wins_queue.hpp"
-#include "densemap/query/map_view.hpp"
-#include "densemap/io/raw_scan.hpp"
 #include "densemap/pipeline/scan_validator.hpp"
 #include "densemap/pipeline/sensor_tally.hpp"
+#include "densemap/query/map_view.hpp"
 #include "densemap/raycast/integrator.hpp"
 #include "densemap/upsample/interpolation.hpp"
 
@@ -104,6 +104,8 @@ struct PipelineCounters {
   std::vector<SensorCounters> sensors;  // the same counts per sensor id, with seq gaps
 };
 
+class MapKind;  // the map kind the pipeline integrates into (src/map_kind.hpp)
+
 /// The ingest pipeline (DESIGN.md data flow): a bounded latest-wins queue feeding a TBB flow
 /// graph validate -> transform -> integrate -> publish, run one scan at a time by a worker
 /// thread inside the task arena the pipeline owns. Readers get the latest published MapView
@@ -169,17 +171,10 @@ class Pipeline {
   void publish(IntegrationResult& result);
   /// Drops the blocks keep_radius_m / bounds leave out, after a scan from `origin`.
   void evict(const Point3f& origin, IntegrationResult& result, CellChanges* changes);
-  void warmUp();
-  /// The integrate stage for kernel map kinds: map_ mirrors the kernel map as log-odds.
-  ScanStats integrateKernel(const PointCloud& points_world, const Point3f& origin_world,
-                            CellChanges* changes);
 
   PipelineOptions options_;
-  std::unique_ptr<OccupancyMap> map_;
-  std::unique_ptr<GridMap> mirror_;  // readers' copy when map_ is not a GridMap (octree)
-  GridMap* readable_ = nullptr;      // map_ itself or mirror_
-  Integrator integrator_;
-  std::unique_ptr<kernel::KernelMap> kernel_map_;  // map kinds akimap, bgk, bgkl
+  /// The map kind (log-odds or a kernel map) behind one interface (map_kind.hpp).
+  std::unique_ptr<MapKind> kind_;
   tbb::task_arena arena_;
   std::unique_ptr<Graph> graph_;
   LatestWinsQueue<RawScan> queue_;
