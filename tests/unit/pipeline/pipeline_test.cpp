@@ -109,6 +109,34 @@ TEST(Pipeline, PublishedViewEqualsTheOfflineMapAndDeltasReproduceEachVersion) {
   }
 }
 
+TEST(Pipeline, WarmUpLeavesTheMapEmptyAndTheScansMapUnchangedOnBothBackends) {
+  // The warm-up's fan goes into a scratch map (MapKind::warmUp): the served map starts empty at
+  // version 0 and ends as the offline map of the scans, cell for cell.
+  for (const Backend backend : {Backend::kGrid, Backend::kOctree}) {
+    PipelineOptions options{
+        .backend = backend, .resolution_m = 0.2, .max_range_m = 5.0, .threads = 2};
+    options.warm_up = true;
+    auto sut = Pipeline::create(options);
+    ASSERT_TRUE(sut);
+    EXPECT_EQ((*sut)->view()->knownCells(), 0U);
+    EXPECT_EQ((*sut)->view()->version(), 0U);
+    (*sut)->start();
+    std::vector<RawScan> raws;
+    for (std::uint64_t seq = 1; seq <= 3; ++seq) {
+      raws.push_back(rawScan(seq));
+      (*sut)->submit(raws.back());
+      ASSERT_TRUE(waitFor([&] { return (*sut)->counters().integrated == seq; }));
+    }
+    (*sut)->stop();
+    const auto offline = offlineMap(raws, 5.0);
+    const auto view = (*sut)->view();
+    EXPECT_EQ(view->knownCells(), offline->knownCells());
+    std::size_t mismatches = 0;
+    offline->forEachKnown([&](const VoxelKey& k, float v) { mismatches += view->logOdds(k) != v; });
+    EXPECT_EQ(mismatches, 0U) << backendName(backend);
+  }
+}
+
 TEST(Pipeline, AKeepRadiusEvictsExactlyWhatTheOfflineMapLosesAndDeltasFollow) {
   // keep_radius_m 3: after each scan, blocks whose centre is more than 3 m from its origin go.
   PipelineOptions options{.resolution_m = 0.2, .max_range_m = 5.0, .threads = 2, .queue_depth = 8};
