@@ -58,6 +58,27 @@ std::unique_ptr<GridMap> offlineMap(const std::vector<RawScan>& raws, double max
   return map;
 }
 
+/// Submits scans 1..n one at a time, each integrated before the next; returns them.
+std::vector<RawScan> feedScans(Pipeline& pipeline, std::uint64_t n) {
+  std::vector<RawScan> raws;
+  for (std::uint64_t seq = 1; seq <= n; ++seq) {
+    raws.push_back(rawScan(seq));
+    pipeline.submit(raws.back());
+    EXPECT_TRUE(waitFor([&] { return pipeline.counters().integrated == seq; })) << "scan " << seq;
+  }
+  return raws;
+}
+
+/// The cells of the offline map of `raws` whose value `view` does not hold.
+std::size_t mismatchesWithOffline(const MapView& view, const std::vector<RawScan>& raws,
+                                  double max_range) {
+  std::size_t mismatches = 0;
+  offlineMap(raws, max_range)->forEachKnown([&](const VoxelKey& k, float v) {
+    mismatches += view.logOdds(k) != v;
+  });
+  return mismatches;
+}
+
 TEST(Pipeline, PublishedViewEqualsTheOfflineMapAndDeltasReproduceEachVersion) {
   PipelineOptions options{.resolution_m = 0.2, .max_range_m = 5.0, .threads = 2, .queue_depth = 8};
   options.collect_changes = true;
@@ -65,20 +86,13 @@ TEST(Pipeline, PublishedViewEqualsTheOfflineMapAndDeltasReproduceEachVersion) {
   ASSERT_TRUE(sut);
   Published published(**sut);
   (*sut)->start();
-  std::vector<RawScan> raws;
-  for (std::uint64_t seq = 1; seq <= 5; ++seq) {
-    raws.push_back(rawScan(seq));
-    (*sut)->submit(raws.back());
-    ASSERT_TRUE(waitFor([&] { return (*sut)->counters().integrated == seq; }));
-  }
+  const std::vector<RawScan> raws = feedScans(**sut, 5);
   (*sut)->stop();
   const auto offline = offlineMap(raws, 5.0);
   const auto view = (*sut)->view();
   EXPECT_EQ(view->version(), 5U);
   EXPECT_EQ(view->knownCells(), offline->knownCells());
-  std::size_t mismatches = 0;
-  offline->forEachKnown([&](const VoxelKey& k, float v) { mismatches += view->logOdds(k) != v; });
-  EXPECT_EQ(mismatches, 0U);
+  EXPECT_EQ(mismatchesWithOffline(*view, raws, 5.0), 0U);
 
   ASSERT_EQ(published.size(), 5U);
   auto previous = MapView::fromMap(GridMap(0.2, SensorModel{}), 0);
@@ -121,19 +135,11 @@ TEST(Pipeline, WarmUpLeavesTheMapEmptyAndTheScansMapUnchangedOnBothBackends) {
     EXPECT_EQ((*sut)->view()->knownCells(), 0U);
     EXPECT_EQ((*sut)->view()->version(), 0U);
     (*sut)->start();
-    std::vector<RawScan> raws;
-    for (std::uint64_t seq = 1; seq <= 3; ++seq) {
-      raws.push_back(rawScan(seq));
-      (*sut)->submit(raws.back());
-      ASSERT_TRUE(waitFor([&] { return (*sut)->counters().integrated == seq; }));
-    }
+    const std::vector<RawScan> raws = feedScans(**sut, 3);
     (*sut)->stop();
-    const auto offline = offlineMap(raws, 5.0);
     const auto view = (*sut)->view();
-    EXPECT_EQ(view->knownCells(), offline->knownCells());
-    std::size_t mismatches = 0;
-    offline->forEachKnown([&](const VoxelKey& k, float v) { mismatches += view->logOdds(k) != v; });
-    EXPECT_EQ(mismatches, 0U) << backendName(backend);
+    EXPECT_EQ(view->knownCells(), offlineMap(raws, 5.0)->knownCells());
+    EXPECT_EQ(mismatchesWithOffline(*view, raws, 5.0), 0U) << backendName(backend);
   }
 }
 
