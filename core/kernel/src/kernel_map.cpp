@@ -620,6 +620,34 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
                                      std::vector<BlockCells>* touched) {
   KernelScanStats stats;
   auto t0 = std::chrono::steady_clock::now();
+  drawSamples(points_world, origin_world);
+  ++scans_;
+  stats.ms_samples = msSince(t0);
+  t0 = std::chrono::steady_clock::now();
+  fitKernels(points_world, origin_world);
+  stats.samples = scratch_->kernels.size();
+  stats.ms_kernels = msSince(t0);
+  t0 = std::chrono::steady_clock::now();
+  // Blocks reached by the kernels and by the free capsules (when `touched` is wanted).
+  std::vector<std::pair<std::uint64_t, block::BlockMask>> reached;
+  auto* reached_or_null = touched != nullptr ? &reached : nullptr;
+  stats.cell_updates = accumulateKernels(reached_or_null);
+  stats.ms_occupied = msSince(t0);
+  const std::vector<FreeExtent>& free_extents = scratch_->free_extents;
+  if (!free_extents.empty()) {
+    t0 = std::chrono::steady_clock::now();
+    stats.free_visits = free_->accumulate(grid_, free_extents, options_.free_reach);
+    stats.ms_free = msSince(t0);
+    t0 = std::chrono::steady_clock::now();
+    applyFree(reached_or_null);
+  }
+  if (touched != nullptr) mergeReached(reached, *touched);
+  if (!free_extents.empty()) stats.ms_apply = msSince(t0);
+  return stats;
+}
+
+/// The scan's samples into samples_ (hits; and free samples for the kinds that draw them).
+void KernelMap::drawSamples(const PointCloud& points_world, const Point3f& origin_world) {
   SamplingOptions sampling;
   sampling.free_step = options_.free_step;
   sampling.max_range = options_.max_range;
@@ -644,11 +672,13 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
     makeSamples(points_world, origin_world, sampling, scans_, nullptr, samples_,
                 scratch_->sample_parts);
   }
-  const std::vector<Sample>& samples = samples_;
-  ++scans_;
-  stats.ms_samples = msSince(t0);
-  t0 = std::chrono::steady_clock::now();
+}
 
+/// The scan's kernels into scratch_->kernels (kAkimapRays: and its free extents into
+/// scratch_->free_extents).
+void KernelMap::fitKernels(const PointCloud& points_world, const Point3f& origin_world) {
+  const bool rays = options_.method == KernelMethod::kAkimapRays;
+  const std::vector<Sample>& samples = samples_;
   std::vector<Kernel>& kernels = scratch_->kernels;
   std::vector<FreeExtent>& free_extents = scratch_->free_extents;
   kernels.clear();
@@ -725,12 +755,13 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
     kernels.reserve(samples.size());
     for (const Sample& s : samples) kernels.push_back(isotropicKernel(s, options_));
   }
-  stats.samples = kernels.size();
-  stats.ms_kernels = msSince(t0);
-  t0 = std::chrono::steady_clock::now();
+}
 
-  // (block, kernel) pairs, sorted: each block then sums its kernels in sample order, whatever
-  // the thread that runs it.
+/// The (block, kernel) pairs of every block each kernel's box overlaps, into scratch_->pairs
+/// sorted by block, kernels in order within each (counts, offsets, then the pairs in place, in
+/// parallel; a stable radix sort).
+void KernelMap::sortKernelPairs() {
+  std::vector<Kernel>& kernels = scratch_->kernels;  // their key boxes are set here
   std::vector<std::pair<std::uint64_t, std::uint32_t>>& pairs = scratch_->pairs;
   // Each kernel's box of blocks (in parallel: counts, offsets, then the pairs in place).
   std::vector<std::size_t>& pair_offsets = scratch_->pair_offsets;
@@ -782,6 +813,18 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
   radixSort(
       pairs, scratch_->pairs_other, 39, [](const auto& pair) { return pair.first; },
       scratch_->radix_counts);
+}
+
+/// Sums the kernels into their blocks: each block's kernels in kernel order, blocks in
+/// parallel. Returns the (cell, kernel) contributions; appends each block's reached cells to
+/// `reached` when given.
+std::size_t KernelMap::accumulateKernels(
+    std::vector<std::pair<std::uint64_t, block::BlockMask>>* reached_blocks) {
+  // (block, kernel) pairs, sorted: each block then sums its kernels in sample order, whatever
+  // the thread that runs it.
+  sortKernelPairs();
+  const std::vector<Kernel>& kernels = scratch_->kernels;
+  const std::vector<std::pair<std::uint64_t, std::uint32_t>>& pairs = scratch_->pairs;
   std::vector<std::size_t> starts;
   for (std::size_t p = 0; p < pairs.size(); ++p) {
     if (p == 0 || pairs[p].first != pairs[p - 1].first) {
@@ -792,7 +835,7 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
   starts.push_back(pairs.size());
   std::atomic<std::size_t> cell_updates{0};
   const SquaredKernelTable& table = squaredKernel();
-  std::vector<block::BlockMask> reached(touched != nullptr ? starts.size() - 1 : 0);
+  std::vector<block::BlockMask> reached(reached_blocks != nullptr ? starts.size() - 1 : 0);
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, starts.size() - 1, 4),
       [&](const tbb::blocked_range<std::size_t>& range) {
@@ -863,56 +906,52 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
             sum_beta[cell] = 0.0;
           });
           for (int w = 0; w < block::kMaskWords; ++w) b.known[w] |= summed[w];
-          if (touched != nullptr) reached[g] = summed;
+          if (reached_blocks != nullptr) reached[g] = summed;
         }
         cell_updates += updates;
       });
-  stats.cell_updates = cell_updates;
-  // Blocks reached by the kernels and by the free capsules; in key order, a block's masks merged.
-  std::vector<std::pair<std::uint64_t, block::BlockMask>> reached_blocks;
-  if (touched != nullptr) {
+  if (reached_blocks != nullptr) {
     for (std::size_t g = 0; g + 1 < starts.size(); ++g) {
-      reached_blocks.emplace_back(pairs[starts[g]].first, reached[g]);
+      reached_blocks->emplace_back(pairs[starts[g]].first, reached[g]);
     }
   }
-  stats.ms_occupied = msSince(t0);
-  if (!free_extents.empty()) {
-    t0 = std::chrono::steady_clock::now();
-    stats.free_visits = free_->accumulate(grid_, free_extents, options_.free_reach);
-    stats.ms_free = msSince(t0);
-    t0 = std::chrono::steady_clock::now();
-    // The blocks found (or made) one by one, then filled in parallel: one block per task.
-    const std::vector<const FreeTraversal::Block*>& free_blocks = free_->blocks();
-    std::vector<Block*>& targets = scratch_->free_targets;
-    targets.resize(free_blocks.size());
-    for (std::size_t i = 0; i < free_blocks.size(); ++i) {
-      targets[i] = &blocks_[free_blocks[i]->key];
-      if (touched != nullptr)
-        reached_blocks.emplace_back(free_blocks[i]->key, free_blocks[i]->mask);
-    }
-    tbb::parallel_for(std::size_t{0}, free_blocks.size(), [&](std::size_t i) {
-      const FreeTraversal::Block& f = *free_blocks[i];
-      Block& b = *targets[i];
-      block::forEachSetBit(f.mask, [&](int cell) {
-        b.beta[cell] +=
-            static_cast<float>(static_cast<double>(f.sum[cell]) / FreeTraversal::kScale);
-        block::setBit(b.known, cell);
-      });
+  return cell_updates.load();
+}
+
+/// Adds the free traversal's sums to the blocks' beta; appends the blocks it reached to
+/// `reached` when given.
+void KernelMap::applyFree(std::vector<std::pair<std::uint64_t, block::BlockMask>>* reached_blocks) {
+  // The blocks found (or made) one by one, then filled in parallel: one block per task.
+  const std::vector<const FreeTraversal::Block*>& free_blocks = free_->blocks();
+  std::vector<Block*>& targets = scratch_->free_targets;
+  targets.resize(free_blocks.size());
+  for (std::size_t i = 0; i < free_blocks.size(); ++i) {
+    targets[i] = &blocks_[free_blocks[i]->key];
+    if (reached_blocks != nullptr)
+      reached_blocks->emplace_back(free_blocks[i]->key, free_blocks[i]->mask);
+  }
+  tbb::parallel_for(std::size_t{0}, free_blocks.size(), [&](std::size_t i) {
+    const FreeTraversal::Block& f = *free_blocks[i];
+    Block& b = *targets[i];
+    block::forEachSetBit(f.mask, [&](int cell) {
+      b.beta[cell] += static_cast<float>(static_cast<double>(f.sum[cell]) / FreeTraversal::kScale);
+      block::setBit(b.known, cell);
     });
-  }
-  if (touched != nullptr) {
-    std::stable_sort(reached_blocks.begin(), reached_blocks.end(),
-                     [](const auto& x, const auto& y) { return x.first < y.first; });
-    for (std::size_t i = 0; i < reached_blocks.size();) {
-      const std::uint64_t block_key = reached_blocks[i].first;
-      BlockCells& merged = touched->emplace_back(BlockCells{.key = block_key});
-      for (; i < reached_blocks.size() && reached_blocks[i].first == block_key; ++i) {
-        for (int w = 0; w < block::kMaskWords; ++w) merged.cells[w] |= reached_blocks[i].second[w];
-      }
+  });
+}
+
+/// `reached` by block key (stably), each block's masks merged, appended to `touched`.
+void KernelMap::mergeReached(std::vector<std::pair<std::uint64_t, block::BlockMask>>& reached,
+                             std::vector<BlockCells>& touched) {
+  std::stable_sort(reached.begin(), reached.end(),
+                   [](const auto& x, const auto& y) { return x.first < y.first; });
+  for (std::size_t i = 0; i < reached.size();) {
+    const std::uint64_t block_key = reached[i].first;
+    BlockCells& merged = touched.emplace_back(BlockCells{.key = block_key});
+    for (; i < reached.size() && reached[i].first == block_key; ++i) {
+      for (int w = 0; w < block::kMaskWords; ++w) merged.cells[w] |= reached[i].second[w];
     }
   }
-  if (!free_extents.empty()) stats.ms_apply = msSince(t0);
-  return stats;
 }
 
 void KernelMap::erase(const VoxelKey& key) {

@@ -183,6 +183,15 @@ class KernelMap {
     block::BlockMask known{};
   };
 
+  // integrate()'s stages, in order; they pass their results through the scan buffers.
+  void drawSamples(const PointCloud& points_world, const Point3f& origin_world);
+  void fitKernels(const PointCloud& points_world, const Point3f& origin_world);
+  void sortKernelPairs();
+  std::size_t accumulateKernels(std::vector<std::pair<std::uint64_t, block::BlockMask>>* reached);
+  void applyFree(std::vector<std::pair<std::uint64_t, block::BlockMask>>* reached);
+  static void mergeReached(std::vector<std::pair<std::uint64_t, block::BlockMask>>& reached,
+                           std::vector<BlockCells>& touched);
+
   VoxelGrid grid_;
   KernelOptions options_;
   std::unordered_map<std::uint64_t, Block> blocks_;
