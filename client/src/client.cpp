@@ -70,7 +70,7 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
       status = std::unexpected(e.error());
   };
   const dds::QosSpec requests = dds::kRequestQos;
-  make(d.scan_w, d.topics.scan, {.depth = 4}, true);
+  make(d.scan_w, d.topics.scan, dds::kScanQos, true);
   make(d.pq_w, d.topics.point_request, requests, true);
   make(d.bq_w, d.topics.bbox_request, requests, true);
   make(d.rq_w, d.topics.ray_request, requests, true);
@@ -86,8 +86,8 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
   make(d.rr_r, d.topics.ray_reply, replies, false);
   make(d.cr_r, d.topics.command_reply, command_replies, false);
   make(d.man_r, d.topics.manifest, dds::kLatestStateQos, false);
-  if (options.subscribe_deltas) make(d.delta_r, d.topics.delta, {.depth = 256}, false);
-  make(d.event_r, d.topics.events, {.depth = 1024}, false);
+  if (options.subscribe_deltas) make(d.delta_r, d.topics.delta, dds::kDeltaReaderQos, false);
+  make(d.event_r, d.topics.events, dds::kEventReaderQos, false);
   make(d.st_r, d.topics.status, dds::kLatestStateQos, false);
   if (!status) return std::unexpected(status.error());
   for (auto [ws, reader] : {std::pair{&d.pr_ws, &d.pr_r}, std::pair{&d.br_ws, &d.br_r},

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "densemap/dds/dds.hpp"
+#include "densemap/dds/topics.hpp"
 #include "densemap/ros2/names.hpp"
 #include "sensor_msgs.h"
 #include "tf2_msgs.h"
@@ -44,18 +45,20 @@ Expected<std::unique_ptr<RosReplayPublisher>> RosReplayPublisher::create(
   if (!participant) return std::unexpected(participant.error());
   d.participant = std::move(*participant);
   auto ct = dds::createTopic(d.participant, sensor_msgs_msg_dds__PointCloud2__desc, cloud_name);
-  auto tt = dds::createTopic(d.participant, tf2_msgs_msg_dds__TFMessage__desc, "rt/tf");
-  auto st = dds::createTopic(d.participant, tf2_msgs_msg_dds__TFMessage__desc, "rt/tf_static");
+  auto tt =
+      dds::createTopic(d.participant, tf2_msgs_msg_dds__TFMessage__desc, ros2::ddsTopicName("/tf"));
+  auto st = dds::createTopic(d.participant, tf2_msgs_msg_dds__TFMessage__desc,
+                             ros2::ddsTopicName("/tf_static"));
   if (!ct || !tt || !st) return makeError("cannot create the ROS 2 topics");
   d.cloud_topic = std::move(*ct);
   d.tf_topic = std::move(*tt);
   d.tf_static_topic = std::move(*st);
   // A LiDAR driver publishes best effort; the replay can be reliable (the default) so that a
   // reliable reader gets every cloud. /tf: reliable, keep last 100; /tf_static: latched.
-  auto cw = dds::createWriter(d.participant, d.cloud_topic, {.reliable = reliable, .depth = 5});
-  auto tw = dds::createWriter(d.participant, d.tf_topic, {.depth = 100});
-  auto sw =
-      dds::createWriter(d.participant, d.tf_static_topic, {.depth = 1, .transient_local = true});
+  auto cw = dds::createWriter(d.participant, d.cloud_topic,
+                              {.reliable = reliable, .depth = dds::kRosCloudDepth});
+  auto tw = dds::createWriter(d.participant, d.tf_topic, dds::kTfQos);
+  auto sw = dds::createWriter(d.participant, d.tf_static_topic, dds::kLatchedQos);
   if (!cw || !tw || !sw) return makeError("cannot create the ROS 2 writers");
   d.cloud_writer = std::move(*cw);
   d.tf_writer = std::move(*tw);

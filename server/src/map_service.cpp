@@ -75,7 +75,7 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
     return std::unexpected(alone.error());
   }
   const dds::QosSpec requests = dds::kRequestQos;
-  reader(d.scan_reader, d.topics.scan, {.depth = 4});
+  reader(d.scan_reader, d.topics.scan, dds::kScanQos);
   reader(d.point_reader, d.topics.point_request, requests);
   reader(d.bbox_reader, d.topics.bbox_request, requests);
   reader(d.ray_reader, d.topics.ray_request, requests);
@@ -83,8 +83,8 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
   reader(d.map_reader, d.topics.map_request, dds::kCommandQos);
   writer(d.manifest_writer, d.topics.manifest, dds::kLatestStateQos);
   writer(d.tile_writer, d.topics.tiles, dds::kTileQos);
-  writer(d.delta_writer, d.topics.delta, {.depth = 32});
-  writer(d.event_writer, d.topics.events, {.depth = 64});
+  writer(d.delta_writer, d.topics.delta, dds::kDeltaWriterQos);
+  writer(d.event_writer, d.topics.events, dds::kEventWriterQos);
   writer(d.status_writer, d.topics.status, dds::kLatestStateQos);
   if (!status) return std::unexpected(status.error());
 

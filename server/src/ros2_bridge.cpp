@@ -7,6 +7,7 @@
 #include <cstring>
 #include <deque>
 
+#include "densemap/dds/topics.hpp"
 #include "densemap/ros2/map_topics.hpp"
 #include "densemap/ros2/names.hpp"
 #include "densemap/ros2/tf_buffer.hpp"
@@ -85,7 +86,7 @@ Expected<std::unique_ptr<Ros2Bridge>> Ros2Bridge::create(Pipeline& pipeline,
   };
   // ROS sensor data QoS (best effort, keep last 5) unless told otherwise; a best-effort reader
   // also matches reliable writers.
-  const dds::QosSpec cloud_qos{.reliable = options.reliable_clouds, .depth = 5};
+  const dds::QosSpec cloud_qos{.reliable = options.reliable_clouds, .depth = dds::kRosCloudDepth};
   for (const std::string& name : options.clouds) {
     auto t = topic(sensor_msgs_msg_dds__PointCloud2__desc, name);
     if (!t) return std::unexpected(t.error());
@@ -101,14 +102,14 @@ Expected<std::unique_ptr<Ros2Bridge>> Ros2Bridge::create(Pipeline& pipeline,
   if (!tf || !tf_static) return makeError("ros2: cannot create the TF topics");
   d.tf_topic = std::move(*tf);
   d.tf_static_topic = std::move(*tf_static);
-  auto tf_reader = dds::createReader(participant, d.tf_topic, {.depth = 100});
+  auto tf_reader = dds::createReader(participant, d.tf_topic, dds::kTfQos);
   auto tf_static_reader =
-      dds::createReader(participant, d.tf_static_topic, {.depth = 100, .transient_local = true});
+      dds::createReader(participant, d.tf_static_topic, dds::kTfStaticReaderQos);
   if (!tf_reader || !tf_static_reader) return makeError("ros2: cannot create the TF readers");
   d.tf_reader = std::move(*tf_reader);
   d.tf_static_reader = std::move(*tf_static_reader);
   // Maps for late joiners (RViz, Nav2): reliable, transient-local, keep-last 1.
-  const dds::QosSpec latched{.depth = 1, .transient_local = true};
+  const dds::QosSpec latched = dds::kLatchedQos;
   auto map_writer = [&](const dds_topic_descriptor_t& desc, const std::string& ros_name,
                         dds::Entity& t_out, dds::Entity& w_out) -> Expected<void> {
     if (ros_name.empty() || options.publish_period_s <= 0) return {};

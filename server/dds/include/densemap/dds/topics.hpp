@@ -44,5 +44,20 @@ inline constexpr QosSpec kCommandQos{.depth = 16};
 inline constexpr QosSpec kLatestStateQos{.depth = 1, .transient_local = true};
 /// Map tiles sent on request: reliable, volatile, keep-all (flow-controlled, nothing dropped).
 inline constexpr QosSpec kTileQos{.depth = 0};
+/// densemap/scan: reliable, keep-last 4 on both sides (the pipeline's queue does the rest).
+inline constexpr QosSpec kScanQos{.depth = 4};
+/// Per-version streams: the server keeps the last 32 deltas and 64 events for slow readers; a
+/// client keeps 256 and 1024 it has not polled yet.
+inline constexpr QosSpec kDeltaWriterQos{.depth = 32}, kDeltaReaderQos{.depth = 256};
+inline constexpr QosSpec kEventWriterQos{.depth = 64}, kEventReaderQos{.depth = 1024};
+
+/// ROS 2's topics (ROS2.md): clouds keep the last 5 (sensor data QoS; best effort unless the
+/// user asks for reliable); /tf reliable, keep-last 100; /tf_static and the published maps
+/// latched (reliable, transient-local, keep-last 1 a writer; a /tf_static reader keeps 100,
+/// one per broadcaster).
+inline constexpr int kRosCloudDepth = 5;
+inline constexpr QosSpec kTfQos{.depth = 100};
+inline constexpr QosSpec kTfStaticReaderQos{.depth = 100, .transient_local = true};
+inline constexpr QosSpec kLatchedQos = kLatestStateQos;
 
 }  // namespace densemap::dds
