@@ -105,7 +105,6 @@ std::size_t countBelow(const std::vector<double>& values, double v) {
 std::size_t SuperRayBuilder::groupCell(const VoxelGrid& grid, const Point3f& origin,
                                        std::span<const RayEnd> rays, RayEnd* out,
                                        Scratch& scratch) {
-  const std::size_t n = rays.size();
   const VoxelKey end_key = rays[0].key;
   const auto origin_key = grid.pointToKey(origin);
   if (!origin_key || *origin_key == end_key) {
@@ -115,10 +114,20 @@ std::size_t SuperRayBuilder::groupCell(const VoxelGrid& grid, const Point3f& ori
     for (const RayEnd& r : rays) out[0].weight += r.weight;
     return 1;
   }
+  describeRays(grid, origin, end_key, rays, scratch);
+  classifySlopes(grid, origin, *origin_key, end_key, scratch);
+  return emitGroups(rays, out, scratch);
+}
+
+/// Each ray's direction exactly as traverseRay computes it, its step class (the signs of its
+/// steps), and whether its end lies clear of the end voxel's faces (scratch.info).
+void SuperRayBuilder::describeRays(const VoxelGrid& grid, const Point3f& origin,
+                                   const VoxelKey& end_key, std::span<const RayEnd> rays,
+                                   Scratch& scratch) {
+  const std::size_t n = rays.size();
   const double res = grid.resolution();
   const double factor = grid.resolutionFactor();
 
-  // Directions exactly as traverseRay computes them; end margins.
   auto& info = scratch.info;
   info.resize(n);
   for (std::size_t i = 0; i < n; ++i) {
@@ -141,7 +150,17 @@ std::size_t SuperRayBuilder::groupCell(const VoxelGrid& grid, const Point3f& ori
       if (!(u >= margin && u <= 1.0 - margin)) ri.certain = false;
     }
   }
+}
 
+/// Per step class, the segment of each pair of axes' slope between the critical slopes where
+/// the traversal's order of border crossings changes (scratch.info[].segment); a ray near a
+/// critical slope is not certain. Rays of one class and segments cross the same cells.
+void SuperRayBuilder::classifySlopes(const VoxelGrid& grid, const Point3f& origin,
+                                     const VoxelKey& origin_key, const VoxelKey& end_key,
+                                     Scratch& scratch) {
+  auto& info = scratch.info;
+  const std::size_t n = info.size();
+  const double res = grid.resolution();
   // Rays with equal step signs share the traversal's borders; classify them per class.
   auto& order = scratch.order;
   order.resize(n);
@@ -166,11 +185,11 @@ std::size_t SuperRayBuilder::groupCell(const VoxelGrid& grid, const Point3f& ori
     int crossings[3];
     for (int a = 0; a < 3; ++a) {
       step[a] = first.dir[a] > 0.0F ? 1 : (first.dir[a] < 0.0F ? -1 : 0);
-      crossings[a] = std::abs(static_cast<int>(end_key[a]) - static_cast<int>((*origin_key)[a]));
+      crossings[a] = std::abs(static_cast<int>(end_key[a]) - static_cast<int>(origin_key[a]));
       d0[a] = 0;
       if (step[a] != 0) {
         // traverseRay's first border, with its float half step.
-        double border = grid.keyToCoord((*origin_key)[a]);
+        double border = grid.keyToCoord(origin_key[a]);
         border += static_cast<float>(step[a] * res * 0.5);
         d0[a] = step[a] * (border - static_cast<double>(origin[a]));
       }
@@ -206,7 +225,15 @@ std::size_t SuperRayBuilder::groupCell(const VoxelGrid& grid, const Point3f& ori
     }
     begin = end;
   }
+}
 
+/// Uncertain rays pass through as they are; the others form one super ray per (class,
+/// segments), weighing their count, in ray order within each. Returns how many were written.
+std::size_t SuperRayBuilder::emitGroups(std::span<const RayEnd> rays, RayEnd* out,
+                                        Scratch& scratch) {
+  const std::size_t n = rays.size();
+  const auto& info = scratch.info;
+  auto& order = scratch.order;
   // Uncertain rays pass through; the others form one super ray per (class, segments).
   std::size_t written = 0;
   std::size_t kept = 0;

@@ -63,6 +63,12 @@ class SuperRayBuilder {
   /// (room for rays.size()); returns how many were written.
   static std::size_t groupCell(const VoxelGrid& grid, const Point3f& origin,
                                std::span<const RayEnd> rays, RayEnd* out, Scratch& scratch);
+  // groupCell's stages, in order (super_rays.cpp says what each does).
+  static void describeRays(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& end_key,
+                           std::span<const RayEnd> rays, Scratch& scratch);
+  static void classifySlopes(const VoxelGrid& grid, const Point3f& origin,
+                             const VoxelKey& origin_key, const VoxelKey& end_key, Scratch& scratch);
+  static std::size_t emitGroups(std::span<const RayEnd> rays, RayEnd* out, Scratch& scratch);
 
   std::vector<std::uint64_t> order_;  // (cell code, ray index), sorted
   std::vector<std::uint64_t> sort_tmp_;
