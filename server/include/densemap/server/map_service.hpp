@@ -1,22 +1,15 @@
 #pragma once
 
 #include <atomic>
-#include <condition_variable>
-#include <deque>
 #include <filesystem>
-#include <map>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <string_view>
 #include <thread>
-#include <unordered_map>
-#include <unordered_set>
 
 #include "densemap/dds/dds.hpp"
 #include "densemap/pipeline/pipeline.hpp"
 #include "densemap/server/ros2_bridge.hpp"
-#include "densemap_msgs.h"
 
 namespace densemap::server {
 
