@@ -216,12 +216,25 @@ double FreeTraversal::evidenceShare(double reach) {
   return inside / all;
 }
 
+double FreeTraversal::scaleFor(double total_weight) {
+  // Every visit adds at most weight * scale + 0.5 (the rounding): keep a unit of margin per
+  // extent's rounding by halving once more than the bound needs.
+  constexpr double kLimit = 2147483647.0;
+  double scale = kMaxScale;
+  while (scale > 1.0 && 2.0 * total_weight * scale >= kLimit) scale *= 0.5;
+  return scale;
+}
+
 std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const FreeExtent> extents,
                                       double reach) {
   for (ThreadBlocks& t : buffers_->threads) t.reset();
   const SquaredKernelTable& table = squaredKernel();
   reach = std::clamp(reach, 1e-3, 1.0);
   const double compensation = 1.0 / evidenceShare(reach);
+  double total_weight = 0.0;
+  for (const FreeExtent& e : extents) total_weight += e.weight * compensation;
+  scale_ = scaleFor(total_weight + static_cast<double>(extents.size()));
+  const double scale = scale_;
   std::atomic<std::size_t> visits{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, extents.size(), 512),
                     [&](const tbb::blocked_range<std::size_t>& range) {
@@ -231,7 +244,7 @@ std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const Fre
                       for (std::size_t r = range.begin(); r != range.end(); ++r) {
                         const FreeExtent& e = extents[r];
                         const double inverse_length2 = 1.0 / (e.radius_m * e.radius_m);
-                        const double scaled_weight = e.weight * compensation * kScale;
+                        const double scaled_weight = e.weight * compensation * scale;
                         const std::size_t count =
                             collectVoxelsNear(grid, e.from, e.to, reach * e.radius_m, near);
                         for (std::size_t q = 0; q < count; ++q) {
@@ -244,7 +257,7 @@ std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const Fre
                           const int cell = block::indexOf(key);
                           // w >= 0: rounding half up without llround's call.
                           blk.sum[static_cast<std::size_t>(cell)] +=
-                              static_cast<std::int64_t>(w * scaled_weight + 0.5);
+                              static_cast<std::int32_t>(w * scaled_weight + 0.5);
                           block::setBit(blk.mask, cell);
                         }
                       }

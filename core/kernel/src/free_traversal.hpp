@@ -28,17 +28,23 @@ struct FreeExtent {
 /// bounding box), and each such voxel gets weight * k(d / radius_m), k the sparse kernel
 /// (Eq. 3.5) of d, its centre's distance from the extent.
 ///
-/// Sums are fixed point (2^-30) in per-thread block buffers kept between scans: integer sums do
-/// not depend on the order of the rays, so the map does not depend on the thread count. Not
+/// Sums are fixed point in per-thread block buffers kept between scans: integer sums do not
+/// depend on the order of the rays, so the map does not depend on the thread count. They are
+/// 32-bit (half the bytes and cache lines of 64-bit sums), so each scan takes the finest step
+/// 2^-k (k <= 30) at which no voxel's sum can exceed 2^31 - 1: a voxel gets at most every
+/// extent's weight once, so the step follows from the scan's total weight (scale()). Not
 /// thread-safe itself (one scan at a time); accumulate() runs its rays in parallel.
 class FreeTraversal {
  public:
   struct Block {
     std::uint64_t key = 0;
-    std::array<std::int64_t, block::kVoxels> sum{};
+    std::array<std::int32_t, block::kVoxels> sum{};
     block::BlockMask mask{};
   };
-  static constexpr double kScale = 1073741824.0;  // 2^30 per unit of evidence
+  static constexpr double kMaxScale = 1073741824.0;  // 2^30 per unit of evidence at most
+  /// The fixed-point scale for extents whose weights (after the reach's compensation) sum to
+  /// `total_weight`: the largest power of two <= kMaxScale with every sum within int32.
+  [[nodiscard]] static double scaleFor(double total_weight);
 
   FreeTraversal();
   ~FreeTraversal();
@@ -60,11 +66,14 @@ class FreeTraversal {
   /// The blocks reached by the last accumulate(), in ascending key order, sums merged (valid
   /// until the next accumulate()).
   [[nodiscard]] const std::vector<const Block*>& blocks() const { return merged_; }
+  /// Units of a sum per unit of evidence in the last accumulate()'s blocks (scaleFor).
+  [[nodiscard]] double scale() const { return scale_; }
 
  private:
   struct Buffers;
   std::unique_ptr<Buffers> buffers_;
   std::vector<const Block*> merged_;
+  double scale_ = kMaxScale;
 };
 
 }  // namespace densemap::kernel

@@ -684,10 +684,13 @@ void KernelMap::fitKernels(const PointCloud& points_world, const Point3f& origin
   kernels.clear();
   free_extents.clear();
   if (options_.method == KernelMethod::kAkimap || rays) {
-    // Buckets about the smallest search box (a voxel), at most 2^21 of them (coarser over a
-    // large scan: the counting sort clears, sums and copies every bucket each scan).
+    // Buckets about the smallest search box (a voxel), at most 8 per sample and 2^21 in all
+    // (coarser over a large scan: the counting sort writes every bucket each scan, and the
+    // table is kept between scans).
+    const std::size_t max_buckets =
+        std::clamp(8 * samples.size(), std::size_t{1} << 16, std::size_t{1} << 21);
     const SampleIndex index(samples, std::max(grid_.resolution(), 0.25 * options_.search_max),
-                            std::size_t{1} << 21, scratch_->index);
+                            max_buckets, scratch_->index);
     // kAkimapRays: kernels for the occupied samples only (then the free segments).
     std::vector<std::uint32_t> centres;
     for (std::uint32_t i = 0; i < samples.size(); ++i) {
@@ -925,6 +928,7 @@ void KernelMap::applyFree(std::vector<std::pair<std::uint64_t, block::BlockMask>
   const std::vector<const FreeTraversal::Block*>& free_blocks = free_->blocks();
   std::vector<Block*>& targets = scratch_->free_targets;
   targets.resize(free_blocks.size());
+  const double inverse_scale = 1.0 / free_->scale();
   for (std::size_t i = 0; i < free_blocks.size(); ++i) {
     targets[i] = &blocks_[free_blocks[i]->key];
     if (reached_blocks != nullptr)
@@ -934,7 +938,7 @@ void KernelMap::applyFree(std::vector<std::pair<std::uint64_t, block::BlockMask>
     const FreeTraversal::Block& f = *free_blocks[i];
     Block& b = *targets[i];
     block::forEachSetBit(f.mask, [&](int cell) {
-      b.beta[cell] += static_cast<float>(static_cast<double>(f.sum[cell]) / FreeTraversal::kScale);
+      b.beta[cell] += static_cast<float>(static_cast<double>(f.sum[cell]) * inverse_scale);
       block::setBit(b.known, cell);
     });
   });

@@ -358,6 +358,36 @@ TEST(FreeTraversal, CutRaysGiveEveryVoxelInReachTheKernelOfItsDistance) {
   EXPECT_LE(checked, beta.size());
 }
 
+// The free sums are 32-bit fixed point at a step chosen per scan: a voxel crossed by thousands of
+// rays (each near a unit of evidence; the int32 range at 2^-30 holds 2) keeps its sum. The same
+// ray 5,000 times gives 5,000 times one ray's evidence in every voxel, to the coarser step's
+// rounding, where a fixed 2^-30 step would wrap.
+TEST(FreeTraversal, ThousandsOfRaysThroughOneVoxelKeepTheirSums) {
+  KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
+  options.max_range = 1.5;
+  const auto betas = [&](int copies) {
+    KernelMap map(0.1, options);
+    PointCloud points(static_cast<std::size_t>(copies), Point3f(6.0F, 1.0F, 0.5F));  // cut
+    map.integrate(points, Point3f(0.02F, 0.01F, -0.03F));
+    std::map<std::uint64_t, double> out;
+    const KernelEvidence e = map.evidence();
+    for (std::size_t i = 0; i < e.keys.size(); ++i) out[e.keys[i].packed()] = e.beta[i];
+    return out;
+  };
+  const auto one = betas(1);
+  const auto many = betas(5000);
+  ASSERT_GT(one.size(), 50U);
+  ASSERT_EQ(one.size(), many.size());
+  for (const auto& [key, b] : one) {
+    ASSERT_TRUE(many.count(key));
+    EXPECT_GT(many.at(key), 0.0);
+    // The step is at least 2^31 / (4 * total weight), total weight about 2 * 5,000 (weights and
+    // a unit of rounding per extent): each ray's contribution rounds by at most 9.4e-6, the same
+    // way for all 5,000 identical rays.
+    EXPECT_NEAR(many.at(key), 5000.0 * b, 5000.0 * 9.4e-6 + 1e-5 * 5000.0 * b);
+  }
+}
+
 // The fast path changes the model a little (one capsule per ray, its joints as a mean; one
 // kernel per voxel of many hits): on a room with grazing rays it classifies as the segment kernels
 // do almost everywhere.
