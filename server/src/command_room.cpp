@@ -54,7 +54,7 @@ void CommandRoom::answer() {
         }
         Expected<std::string> outcome =
             makeError("unknown command kind " + std::to_string(req.kind));
-        const VoxelGrid& grid = pipeline_.view()->grid();
+        const VoxelGrid& grid = ingest_.view()->grid();
         if (kind == dds::CommandKind::kReset || kind == dds::CommandKind::kClearBox) {
           VoxelKey lo{0, 0, 0}, hi{65535, 65535, 65535};
           bool valid = true;
@@ -68,7 +68,7 @@ void CommandRoom::answer() {
             }
           }
           if (valid) {
-            auto future = pipeline_.command(
+            auto future = ingest_.command(
                 [lo, hi](OccupancyMap& map, CellChanges& changes) -> Expected<std::string> {
                   return "erased " + std::to_string(map.clearBox(lo, hi, &changes)) + " cells";
                 });
@@ -99,7 +99,7 @@ void CommandRoom::reply(const densemap_msgs_RequestId& id, const Expected<std::s
                         const SentMap& sent) {
   densemap_msgs_CommandReply rep{};
   rep.id = id;
-  rep.map_version = pipeline_.view()->version();
+  rep.map_version = ingest_.view()->version();
   rep.sent_version = sent.version;
   rep.sent_tiles = sent.tiles;
   rep.sent_cells = sent.cells;
@@ -116,7 +116,7 @@ void CommandRoom::reply(const densemap_msgs_RequestId& id, const Expected<std::s
 Expected<SentMap> CommandRoom::sendMap(const densemap_msgs_RequestId& request) {
   // One version throughout: the tiles are a consistent copy of it.
   const ReturnFreeMemory trim;  // the tiles' buffers and the writer's copies until acked
-  const auto view = pipeline_.view();
+  const auto view = ingest_.view();
   const auto tiles = tilesOf(*view);
   std::size_t cells = 0;
   for (const auto& [id, blocks] : tiles) {

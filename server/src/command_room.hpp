@@ -5,7 +5,7 @@
 #include <string>
 
 #include "densemap/dds/dds.hpp"
-#include "densemap/pipeline/pipeline.hpp"
+#include "densemap/server/ingest.hpp"
 #include "densemap_msgs.h"
 #include "replies.hpp"
 #include "request_tasks.hpp"
@@ -30,9 +30,9 @@ class CommandRoom {
     const dds::Entity& tiles;     // densemap/map/tiles
   };
   /// `export_dir`: where a named save goes (exportDirectory()).
-  CommandRoom(Pipeline& pipeline, Endpoints endpoints, ReplyWriters& replies, RequestTasks& tasks,
+  CommandRoom(Ingest& ingest, Endpoints endpoints, ReplyWriters& replies, RequestTasks& tasks,
               RequestStats& stats, SnapshotSaver& saver, std::filesystem::path export_dir)
-      : pipeline_(pipeline),
+      : ingest_(ingest),
         endpoints_(endpoints),
         replies_(replies),
         tasks_(tasks),
@@ -49,7 +49,7 @@ class CommandRoom {
   /// Writes the latest version's tiles for `request` (send-map); returns what it wrote.
   Expected<SentMap> sendMap(const densemap_msgs_RequestId& request);
 
-  Pipeline& pipeline_;
+  Ingest& ingest_;
   Endpoints endpoints_;
   ReplyWriters& replies_;
   RequestTasks& tasks_;

@@ -203,7 +203,7 @@ static int runMain(int argc, char** argv) {
   tbb::global_control parallelism(
       tbb::global_control::max_allowed_parallelism,
       static_cast<std::size_t>(options->threads + service_options.query_threads));
-  auto pipeline = densemap::Pipeline::create(*options, std::move(initial), version);
+  auto pipeline = densemap::Ingest::create(*options, std::move(initial), version);
   if (!pipeline) return fail(pipeline.error().message);
   if (kernel_evidence) {
     if (auto restored = (*pipeline)->restoreKernelEvidence(*kernel_evidence); !restored) {

@@ -39,9 +39,9 @@ struct MapService::Dds {
   dds::Entity status_probe;  // reads densemap/status: matches every server's status writer
 };
 
-Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
+Expected<std::unique_ptr<MapService>> MapService::create(Ingest& ingest,
                                                          const ServiceOptions& options) {
-  std::unique_ptr<MapService> service(new MapService(pipeline, options));
+  std::unique_ptr<MapService> service(new MapService(ingest, options));
   auto& d = *service->dds_;
   auto participant =
       dds::createParticipant({options.domain_id, options.network_interface, options.security});
@@ -102,12 +102,12 @@ Expected<std::unique_ptr<MapService>> MapService::create(Pipeline& pipeline,
     return std::unexpected(ok.error());
   }
   if (options.ros2) {
-    auto bridge = Ros2Bridge::create(pipeline, d.participant, *options.ros2);
+    auto bridge = Ros2Bridge::create(ingest, d.participant, *options.ros2);
     if (!bridge) return std::unexpected(bridge.error());
     service->ros2_ = std::move(*bridge);
   }
   service->makeRooms();
-  pipeline.setPublisher([p = service->publisher_.get()](const IntegrationResult& r,
+  ingest.setPublisher([p = service->publisher_.get()](const IntegrationResult& r,
                                                         const std::shared_ptr<const MapView>& v) {
     p->onIntegrated(r, v);
   });
@@ -118,15 +118,15 @@ void MapService::makeRooms() {
   Dds& d = *dds_;
   replies_ = std::make_unique<ReplyWriters>(d.participant, d.topics);
   queries_ = std::make_unique<QueryRoom>(
-      pipeline_, QueryRoom::Readers{d.point_reader, d.bbox_reader, d.ray_reader}, *replies_,
+      ingest_, QueryRoom::Readers{d.point_reader, d.bbox_reader, d.ray_reader}, *replies_,
       *tasks_, *stats_, options_.max_query_cells);
   commands_ = std::make_unique<CommandRoom>(
-      pipeline_, CommandRoom::Endpoints{d.cmd_reader, d.map_reader, d.tile_writer}, *replies_,
+      ingest_, CommandRoom::Endpoints{d.cmd_reader, d.map_reader, d.tile_writer}, *replies_,
       *tasks_, *stats_, *saver_, exportDirectory(options_.export_dir, options_.snapshot_path));
   publisher_ = std::make_unique<Publisher>(
-      pipeline_, Publisher::Writers{d.event_writer, d.delta_writer, d.manifest_writer},
+      ingest_, Publisher::Writers{d.event_writer, d.delta_writer, d.manifest_writer},
       ros2_.get());
-  status_ = std::make_unique<StatusRoom>(pipeline_, d.status_writer, d.participant, d.status_probe,
+  status_ = std::make_unique<StatusRoom>(ingest_, d.status_writer, d.participant, d.status_probe,
                                          options_.domain_id,
                                          StatusRoom::Sources{*stats_, *saver_, ros2_.get()});
 }
@@ -145,20 +145,20 @@ Expected<void> MapService::checkAlone(std::chrono::milliseconds discovery) const
   }
 }
 
-MapService::MapService(Pipeline& pipeline, const ServiceOptions& options)
-    : pipeline_(pipeline),
+MapService::MapService(Ingest& ingest, const ServiceOptions& options)
+    : ingest_(ingest),
       options_(options),
       dds_(std::make_unique<Dds>()),
       stats_(std::make_unique<RequestStats>()),
       tasks_(std::make_unique<RequestTasks>(options.query_threads, options.request_budget_bytes)),
-      saver_(std::make_unique<SnapshotSaver>(pipeline, options.snapshot_path,
+      saver_(std::make_unique<SnapshotSaver>(ingest, options.snapshot_path,
                                              options.snapshot_keep)) {}
 
 MapService::~MapService() { stop(); }
 
 void MapService::start() {
   if (running_.exchange(true)) return;
-  ingest_ = std::thread([this] { ingestLoop(); });
+  scan_taker_ = std::thread([this] { ingestLoop(); });
   service_ = std::thread([this] { serviceLoop(); });
   publish_ = std::thread([this] { publishLoop(); });
   if (ros2_) ros2_->start();
@@ -170,7 +170,7 @@ void MapService::stop() {
   dds_->ingest_waitset->wake();
   dds_->service_waitset->wake();
   publisher_->wake();
-  if (ingest_.joinable()) ingest_.join();
+  if (scan_taker_.joinable()) scan_taker_.join();
   if (service_.joinable()) service_.join();
   tasks_->wait();
   if (publish_.joinable()) publish_.join();
@@ -193,7 +193,7 @@ void MapService::ingestLoop() {
       for (int i = 0; i < 4; ++i) raw.q_world_sensor[i] = msg.T_world_sensor.q[i];
       raw.xyz.assign(msg.points._buffer, msg.points._buffer + msg.points._length);
       raw.intensity.assign(msg.intensity._buffer, msg.intensity._buffer + msg.intensity._length);
-      pipeline_.submit(std::move(raw));
+      ingest_.submit(std::move(raw));
     });
   }
 }
@@ -212,7 +212,7 @@ void MapService::publishLoop() {
       std::chrono::duration<double>(options_.autosave_period_s));
   auto next_save = next_status + autosave_period;
   const bool autosave = options_.autosave_period_s > 0 && !options_.snapshot_path.empty();
-  std::uint64_t saved_version = pipeline_.view()->version();  // what the file already holds
+  std::uint64_t saved_version = ingest_.view()->version();  // what the file already holds
   while (running_.load()) {
     publisher_->publishWaiting(autosave ? std::min(next_status, next_save) : next_status, running_);
     const auto now = std::chrono::steady_clock::now();
@@ -227,7 +227,7 @@ void MapService::publishLoop() {
     }
     // Autosave only a changed map: a daemon idle for months does not rewrite the same file.
     if (autosave && now >= next_save) {
-      const std::uint64_t version = pipeline_.view()->version();
+      const std::uint64_t version = ingest_.view()->version();
       auto pause = autosave_period;
       if (version != saved_version) {
         const auto began = std::chrono::steady_clock::now();

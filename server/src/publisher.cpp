@@ -93,7 +93,7 @@ void Publisher::publishDeltas(std::deque<Version>& versions) {
 }
 
 void Publisher::publishManifest() {
-  const auto view = pipeline_.view();
+  const auto view = ingest_.view();
   densemap_msgs_MapManifest manifest{};
   manifest.version = view->version();
   manifest.resolution = view->grid().resolution();

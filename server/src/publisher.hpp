@@ -8,7 +8,7 @@
 #include <mutex>
 
 #include "densemap/dds/dds.hpp"
-#include "densemap/pipeline/pipeline.hpp"
+#include "densemap/server/ingest.hpp"
 #include "densemap/server/ros2_bridge.hpp"
 
 namespace densemap::server {
@@ -24,8 +24,8 @@ class Publisher {
     const dds::Entity& manifest;
   };
   /// The map loaded at start (a snapshot) is the first delta's base.
-  Publisher(Pipeline& pipeline, Writers writers, Ros2Bridge* ros2)
-      : pipeline_(pipeline), writers_(writers), ros2_(ros2), delta_base_(pipeline.view()) {}
+  Publisher(Ingest& ingest, Writers writers, Ros2Bridge* ros2)
+      : ingest_(ingest), writers_(writers), ros2_(ros2), delta_base_(ingest.view()) {}
 
   /// The pipeline's publisher (its worker): the event now, the version to the publish thread.
   void onIntegrated(const IntegrationResult& result, const std::shared_ptr<const MapView>& view);
@@ -44,7 +44,7 @@ class Publisher {
   };
   void publishDeltas(std::deque<Version>& versions);
 
-  Pipeline& pipeline_;
+  Ingest& ingest_;
   Writers writers_;
   Ros2Bridge* ros2_;
   std::mutex mutex_;

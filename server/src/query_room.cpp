@@ -101,7 +101,7 @@ void QueryRoom::take() {
     tasks_.run(
         [this, answer = std::move(answer)] {
           std::string error;
-          answer(*pipeline_.view(), error);
+          answer(*ingest_.view(), error);
           if (!error.empty()) stats_.refused(error);
           stats_.answered();
         },

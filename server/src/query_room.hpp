@@ -3,7 +3,7 @@
 #include <cstddef>
 
 #include "densemap/dds/dds.hpp"
-#include "densemap/pipeline/pipeline.hpp"
+#include "densemap/server/ingest.hpp"
 #include "replies.hpp"
 #include "request_tasks.hpp"
 
@@ -19,9 +19,9 @@ class QueryRoom {
     const dds::Entity& bbox;
     const dds::Entity& ray;
   };
-  QueryRoom(Pipeline& pipeline, Readers readers, ReplyWriters& replies, RequestTasks& tasks,
+  QueryRoom(Ingest& ingest, Readers readers, ReplyWriters& replies, RequestTasks& tasks,
             RequestStats& stats, std::size_t max_query_cells)
-      : pipeline_(pipeline),
+      : ingest_(ingest),
         readers_(readers),
         replies_(replies),
         tasks_(tasks),
@@ -34,7 +34,7 @@ class QueryRoom {
   [[nodiscard]] static std::size_t pointRequestBytes(std::size_t coordinates);
 
  private:
-  Pipeline& pipeline_;
+  Ingest& ingest_;
   Readers readers_;
   ReplyWriters& replies_;
   RequestTasks& tasks_;

@@ -63,8 +63,8 @@ struct Ros2Bridge::Topics {
   Clock::time_point next_publish = Clock::now();
 };
 
-Ros2Bridge::Ros2Bridge(Pipeline& pipeline, const Ros2Options& options)
-    : pipeline_(pipeline),
+Ros2Bridge::Ros2Bridge(Ingest& ingest, const Ros2Options& options)
+    : ingest_(ingest),
       options_(options),
       dds_(std::make_unique<Dds>()),
       state_(std::make_unique<Topics>()) {
@@ -73,10 +73,10 @@ Ros2Bridge::Ros2Bridge(Pipeline& pipeline, const Ros2Options& options)
 
 Ros2Bridge::~Ros2Bridge() { stop(); }
 
-Expected<std::unique_ptr<Ros2Bridge>> Ros2Bridge::create(Pipeline& pipeline,
+Expected<std::unique_ptr<Ros2Bridge>> Ros2Bridge::create(Ingest& ingest,
                                                          const dds::Entity& participant,
                                                          const Ros2Options& options) {
-  std::unique_ptr<Ros2Bridge> bridge(new Ros2Bridge(pipeline, options));
+  std::unique_ptr<Ros2Bridge> bridge(new Ros2Bridge(ingest, options));
   Dds& d = *bridge->dds_;
   auto topic = [&](const dds_topic_descriptor_t& desc,
                    const std::string& ros_name) -> Expected<dds::Entity> {
@@ -142,10 +142,10 @@ Expected<std::unique_ptr<Ros2Bridge>> Ros2Bridge::create(Pipeline& pipeline,
       return std::unexpected(ok.error());
     }
   }
-  const PipelineOptions& p = pipeline.options();
+  const PipelineOptions& p = ingest.options();
   bridge->state_->map = std::make_unique<ros2::MapTopicsState>(p.resolution_m, options.grid_min_z_m,
                                                                options.grid_max_z_m);
-  bridge->latest_ = pipeline.view();
+  bridge->latest_ = ingest.view();
   return bridge;
 }
 
@@ -300,7 +300,7 @@ void Ros2Bridge::resolveWaiting(Clock::time_point now) {
       raw.xyz = std::move(it->cloud.xyz);
       raw.intensity = std::move(it->cloud.intensity);
       raw.received = it->received;
-      pipeline_.submit(std::move(raw));
+      ingest_.submit(std::move(raw));
       std::lock_guard lock(counters_mutex_);
       ++counters_.submitted;
     }

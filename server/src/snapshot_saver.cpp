@@ -27,17 +27,17 @@ Expected<std::size_t> SnapshotSaver::saveUncounted(const std::filesystem::path& 
   const std::filesystem::path target = file.empty() ? path_ : file;
   if (target.empty()) return makeError("no snapshot path configured or given");
   const ReturnFreeMemory trim;  // the snapshot's buffers (about the file's size)
-  const SensorModel model(pipeline_.options().sensor);
+  const SensorModel model(ingest_.options().sensor);
   if (file.empty() || file == path_) {
     // One rotation at a time: a command's save and an autosave must not rotate generations
     // under each other.
     const std::lock_guard lock(save_mutex_);
-    const Pipeline::SavedState state = pipeline_.savedState();
-    return saveSnapshotKeeping(*state.view, model, pipeline_.options().backend, target, keep_,
+    const Ingest::SavedState state = ingest_.savedState();
+    return saveSnapshotKeeping(*state.view, model, ingest_.options().backend, target, keep_,
                                state.kernel ? &*state.kernel : nullptr);
   }
-  const Pipeline::SavedState state = pipeline_.savedState();
-  return saveSnapshot(*state.view, model, pipeline_.options().backend, target,
+  const Ingest::SavedState state = ingest_.savedState();
+  return saveSnapshot(*state.view, model, ingest_.options().backend, target,
                       state.kernel ? &*state.kernel : nullptr);
 }
 

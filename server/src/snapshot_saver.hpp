@@ -7,7 +7,7 @@
 #include <string>
 
 #include "densemap/geometry/error.hpp"
-#include "densemap/pipeline/pipeline.hpp"
+#include "densemap/server/ingest.hpp"
 
 namespace densemap::server {
 
@@ -16,8 +16,8 @@ namespace densemap::server {
 class SnapshotSaver {
  public:
   /// `path`: the configured snapshot (empty: none), kept in `keep` generations.
-  SnapshotSaver(Pipeline& pipeline, std::filesystem::path path, int keep)
-      : pipeline_(pipeline), path_(std::move(path)), keep_(keep) {}
+  SnapshotSaver(Ingest& ingest, std::filesystem::path path, int keep)
+      : ingest_(ingest), path_(std::move(path)), keep_(keep) {}
 
   /// Saves to `file`, or the configured path (its generations rotated); a failure is counted.
   [[nodiscard]] Expected<std::size_t> save(const std::filesystem::path& file = {});
@@ -28,7 +28,7 @@ class SnapshotSaver {
  private:
   [[nodiscard]] Expected<std::size_t> saveUncounted(const std::filesystem::path& file);
 
-  Pipeline& pipeline_;
+  Ingest& ingest_;
   std::filesystem::path path_;
   int keep_;
   std::mutex save_mutex_;  // one rotation at a time (command save, autosave, shutdown)

@@ -49,8 +49,8 @@ void StatusRoom::publish() {
                     others.front(), domain_id_);
     }
   }
-  const PipelineCounters c = pipeline_.counters();
-  const auto view = pipeline_.view();
+  const PipelineCounters c = ingest_.counters();
+  const auto view = ingest_.view();
   densemap_msgs_Status s{};
   s.received = c.received;
   s.integrated = c.integrated;

@@ -6,7 +6,7 @@
 #include <vector>
 
 #include "densemap/dds/dds.hpp"
-#include "densemap/pipeline/pipeline.hpp"
+#include "densemap/server/ingest.hpp"
 #include "densemap/server/ros2_bridge.hpp"
 #include "request_tasks.hpp"
 #include "snapshot_saver.hpp"
@@ -27,9 +27,9 @@ class StatusRoom {
     const SnapshotSaver& snapshots;
     const Ros2Bridge* ros2;  // null: ROS 2 off
   };
-  StatusRoom(Pipeline& pipeline, const dds::Entity& writer, const dds::Entity& participant,
+  StatusRoom(Ingest& ingest, const dds::Entity& writer, const dds::Entity& participant,
              const dds::Entity& status_probe, std::uint32_t domain_id, Sources sources)
-      : pipeline_(pipeline),
+      : ingest_(ingest),
         writer_(writer),
         participant_(participant),
         status_probe_(status_probe),
@@ -40,7 +40,7 @@ class StatusRoom {
   void publish();
 
  private:
-  Pipeline& pipeline_;
+  Ingest& ingest_;
   const dds::Entity& writer_;
   const dds::Entity& participant_;
   const dds::Entity& status_probe_;

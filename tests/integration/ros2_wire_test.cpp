@@ -14,7 +14,7 @@
 #include "densemap/dds/dds.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_diff.hpp"
-#include "densemap/pipeline/pipeline.hpp"
+#include "densemap/server/ingest.hpp"
 #include "densemap/ros2/map_topics.hpp"
 #include "densemap/ros2/names.hpp"
 #include "densemap/ros2/point_cloud2.hpp"
@@ -90,7 +90,7 @@ std::shared_ptr<const MapView> expectedMap(const fs::path& data, std::size_t sca
   EXPECT_TRUE(cfg) << cfg.error().message;
   auto options = server::pipelineOptions(*cfg);
   EXPECT_TRUE(options);
-  auto pipeline = Pipeline::create(*options);
+  auto pipeline = Ingest::create(*options);
   EXPECT_TRUE(pipeline);
   (*pipeline)->start();
   for (std::size_t k = 0; k < raws.size(); ++k) {

@@ -1,4 +1,4 @@
-#include "densemap/pipeline/pipeline.hpp"
+#include "densemap/server/ingest.hpp"
 #include "densemap/query/version_delta.hpp"
 
 #include <gtest/gtest.h>
@@ -37,7 +37,7 @@ bool waitFor(const std::function<bool()>& condition) {
 
 /// Every result and view a pipeline publishes, in order (read them after stop()).
 struct Published : std::vector<std::pair<IntegrationResult, std::shared_ptr<const MapView>>> {
-  explicit Published(Pipeline& pipeline) {
+  explicit Published(Ingest& pipeline) {
     pipeline.setPublisher(
         [this](const IntegrationResult& r, const std::shared_ptr<const MapView>& v) {
           std::lock_guard lock(mutex);
@@ -59,7 +59,7 @@ std::unique_ptr<GridMap> offlineMap(const std::vector<RawScan>& raws, double max
 }
 
 /// Submits scans 1..n one at a time, each integrated before the next; returns them.
-std::vector<RawScan> feedScans(Pipeline& pipeline, std::uint64_t n) {
+std::vector<RawScan> feedScans(Ingest& pipeline, std::uint64_t n) {
   std::vector<RawScan> raws;
   for (std::uint64_t seq = 1; seq <= n; ++seq) {
     raws.push_back(rawScan(seq));
@@ -82,7 +82,7 @@ std::size_t mismatchesWithOffline(const MapView& view, const std::vector<RawScan
 TEST(Pipeline, PublishedViewEqualsTheOfflineMapAndDeltasReproduceEachVersion) {
   PipelineOptions options{.resolution_m = 0.2, .max_range_m = 5.0, .threads = 2, .queue_depth = 8};
   options.collect_changes = true;
-  auto sut = Pipeline::create(options);
+  auto sut = Ingest::create(options);
   ASSERT_TRUE(sut);
   Published published(**sut);
   (*sut)->start();
@@ -130,7 +130,7 @@ TEST(Pipeline, WarmUpLeavesTheMapEmptyAndTheScansMapUnchangedOnBothBackends) {
     PipelineOptions options{
         .backend = backend, .resolution_m = 0.2, .max_range_m = 5.0, .threads = 2};
     options.warm_up = true;
-    auto sut = Pipeline::create(options);
+    auto sut = Ingest::create(options);
     ASSERT_TRUE(sut);
     EXPECT_EQ((*sut)->view()->knownCells(), 0U);
     EXPECT_EQ((*sut)->view()->version(), 0U);
@@ -148,7 +148,7 @@ TEST(Pipeline, AKeepRadiusEvictsExactlyWhatTheOfflineMapLosesAndDeltasFollow) {
   PipelineOptions options{.resolution_m = 0.2, .max_range_m = 5.0, .threads = 2, .queue_depth = 8};
   options.keep_radius_m = 3.0;
   options.collect_changes = true;
-  auto sut = Pipeline::create(options);
+  auto sut = Ingest::create(options);
   ASSERT_TRUE(sut);
   Published published(**sut);
   (*sut)->start();
@@ -194,11 +194,11 @@ TEST(Pipeline, AKeepRadiusEvictsExactlyWhatTheOfflineMapLosesAndDeltasFollow) {
   // Eviction needs the grid backend and the log-odds map.
   PipelineOptions octree = options;
   octree.backend = Backend::kOctree;
-  EXPECT_FALSE(Pipeline::create(octree));
+  EXPECT_FALSE(Ingest::create(octree));
 }
 
 TEST(Pipeline, FallingBehindDropsOldScansNeverQueuesThem) {
-  auto sut = Pipeline::create({.resolution_m = 0.05, .threads = 1, .queue_depth = 2});
+  auto sut = Ingest::create({.resolution_m = 0.05, .threads = 1, .queue_depth = 2});
   ASSERT_TRUE(sut);
   (*sut)->start();
   for (std::uint64_t seq = 1; seq <= 40; ++seq) (*sut)->submit(rawScan(seq, 20000));
@@ -215,7 +215,7 @@ TEST(Pipeline, FallingBehindDropsOldScansNeverQueuesThem) {
 }
 
 TEST(Pipeline, BadScansAreRejectedWithTheirReasonAndLeaveTheMapUnchanged) {
-  auto sut = Pipeline::create({.resolution_m = 0.2,
+  auto sut = Ingest::create({.resolution_m = 0.2,
                                .threads = 2,
                                .queue_depth = 16,
                                .limits = {.max_points = 5000, .max_abs_position_m = 100.0}});
@@ -258,7 +258,7 @@ TEST(Pipeline, BadScansAreRejectedWithTheirReasonAndLeaveTheMapUnchanged) {
 }
 
 TEST(Pipeline, CommandsRunBetweenScansAndPublishTheirChanges) {
-  auto sut = Pipeline::create({.resolution_m = 0.2, .threads = 2});
+  auto sut = Ingest::create({.resolution_m = 0.2, .threads = 2});
   ASSERT_TRUE(sut);
   (*sut)->start();
   (*sut)->submit(rawScan(1));
@@ -290,7 +290,7 @@ TEST(Pipeline, CommandsRunBetweenScansAndPublishTheirChanges) {
 TEST(Pipeline, KernelMapEvictionEqualsTheOfflineMapMinusTheEvictedBlocks) {
   const auto method = kernel::KernelMethod::kAkimapRays;
   constexpr double kRadius = 3.0;
-  auto sut = Pipeline::create({.resolution_m = 0.2,
+  auto sut = Ingest::create({.resolution_m = 0.2,
                                .max_range_m = 5.0,
                                .kernel = method,
                                .threads = 2,
@@ -332,7 +332,7 @@ TEST(Pipeline, KernelMapKindsPublishLogitOfTheOfflineKernelMapAndClearBothStores
                             kernel::KernelMethod::kBgkl, kernel::KernelMethod::kAkimapRays}) {
     const std::string name(kernel::kernelMethodName(method));
     auto sut =
-        Pipeline::create({.resolution_m = 0.2, .max_range_m = 5.0, .kernel = method, .threads = 2});
+        Ingest::create({.resolution_m = 0.2, .max_range_m = 5.0, .kernel = method, .threads = 2});
     ASSERT_TRUE(sut) << name;
     (*sut)->start();
     std::vector<RawScan> raws = {rawScan(1, 1500), rawScan(2, 1500)};
@@ -393,7 +393,7 @@ TEST(Pipeline, UpsampleStageIntegratesTheDensifiedScan) {
                                                   {.rows = 61, .cols = 512}, DENSEMAP_ILN_MODEL);
     ASSERT_TRUE(up) << up.error().message;
     auto sut =
-        Pipeline::create({.resolution_m = 0.2, .max_range_m = 20.0, .upsample = *up, .threads = 2});
+        Ingest::create({.resolution_m = 0.2, .max_range_m = 20.0, .upsample = *up, .threads = 2});
     ASSERT_TRUE(sut);
     // A 16-beam scan: a sphere of 4 m around the sensor in one sector, 6 m elsewhere.
     RawScan raw;
@@ -426,7 +426,7 @@ TEST(Pipeline, UpsampleStageIntegratesTheDensifiedScan) {
 TEST(Pipeline, RejectsAnUpsampleStageWithMismatchedFieldsOfView) {
   upsample::UpsampleOptions up;
   up.output.top_deg = 20.0;
-  EXPECT_FALSE(Pipeline::create({.upsample = up}));
+  EXPECT_FALSE(Ingest::create({.upsample = up}));
 }
 
 TEST(LatestWinsQueue, DropsTheOldestWhenFullAndCountsIt) {
@@ -570,7 +570,7 @@ TEST(SensorTally, KeepsAtMostSixtyFourIdsApartAndCountsTheRestTogether) {
 TEST(Pipeline, OneSensorsBurstNeverPushesOutAnotherSensorsScan) {
   // The worker is busy with front's first scan while rear's scan waits and front floods the
   // queue: front's own older scans are dropped, rear's is integrated.
-  auto sut = Pipeline::create({.resolution_m = 0.05, .threads = 1, .queue_depth = 2});
+  auto sut = Ingest::create({.resolution_m = 0.05, .threads = 1, .queue_depth = 2});
   ASSERT_TRUE(sut);
   (*sut)->start();
   auto scan = [](const char* id, std::uint64_t seq) {
@@ -597,7 +597,7 @@ TEST(Pipeline, OneSensorsBurstNeverPushesOutAnotherSensorsScan) {
 TEST(Pipeline, CountsEachSensorsScansAndTheirSeqGaps) {
   // One worker thread on a fine map falls behind: scans are dropped. Every scan of each sensor
   // ends integrated, dropped or rejected, and a skipped seq is a gap of that sensor only.
-  auto sut = Pipeline::create({.resolution_m = 0.05, .threads = 1, .queue_depth = 2});
+  auto sut = Ingest::create({.resolution_m = 0.05, .threads = 1, .queue_depth = 2});
   ASSERT_TRUE(sut);
   (*sut)->start();
   std::uint64_t sent_a = 0, sent_b = 0;

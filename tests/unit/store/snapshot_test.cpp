@@ -13,7 +13,7 @@
 #include "densemap/kernel/kernel_map.hpp"
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_diff.hpp"
-#include "densemap/pipeline/pipeline.hpp"
+#include "densemap/server/ingest.hpp"
 #include "densemap/raycast/integrator.hpp"
 #include "densemap/store/snapshot.hpp"
 #include "densemap/test_support/data_dir.hpp"
@@ -188,7 +188,7 @@ std::shared_ptr<const MapView> serverMap(const KindCase& c, double resolution) {
     EXPECT_TRUE(method) << c.kind;
     options.kernel = *method;
   }
-  auto pipeline = Pipeline::create(options);
+  auto pipeline = Ingest::create(options);
   EXPECT_TRUE(pipeline) << pipeline.error().message;
   (*pipeline)->start();
   for (int s = 0; s < 2; ++s) {
@@ -275,7 +275,7 @@ RawScan kernelScan(std::uint64_t seq) {
   return raw;
 }
 
-void integrateAll(Pipeline& pipeline, const std::vector<RawScan>& raws) {
+void integrateAll(Ingest& pipeline, const std::vector<RawScan>& raws) {
   const std::uint64_t before = pipeline.counters().integrated;
   for (const RawScan& raw : raws) pipeline.submit(raw);
   for (int i = 0; i < 1000 && pipeline.counters().integrated < before + raws.size(); ++i) {
@@ -298,11 +298,11 @@ TEST(Snapshot, ADenseMapResumesItsKernelEvidenceAndTheNextScanUpdatesItAlike) {
                                 .max_range_m = 5.0,
                                 .kernel = kernel::KernelMethod::kAkimapRays,
                                 .threads = 2};
-  auto original = Pipeline::create(options);
+  auto original = Ingest::create(options);
   ASSERT_TRUE(original) << original.error().message;
   (*original)->start();
   integrateAll(**original, {kernelScan(1), kernelScan(2)});
-  const Pipeline::SavedState saved = (*original)->savedState();
+  const Ingest::SavedState saved = (*original)->savedState();
   ASSERT_TRUE(saved.kernel);
   ASSERT_GT(saved.kernel->keys.size(), 1000U);
   EXPECT_EQ(saved.kernel->scans, 2U);
@@ -319,14 +319,14 @@ TEST(Snapshot, ADenseMapResumesItsKernelEvidenceAndTheNextScanUpdatesItAlike) {
   // The same file without its evidence: the control.
   auto plain = loadSnapshot(file, Backend::kGrid, 0.2);
   ASSERT_TRUE(plain);
-  auto resumed = Pipeline::create(options, std::move(loaded->map), loaded->version);
-  auto control = Pipeline::create(options, std::move(plain->map), plain->version);
+  auto resumed = Ingest::create(options, std::move(loaded->map), loaded->version);
+  auto control = Ingest::create(options, std::move(plain->map), plain->version);
   ASSERT_TRUE(resumed && control);
   ASSERT_TRUE((*resumed)->restoreKernelEvidence(*loaded->kernel));
   expectSameEvidence(*(*resumed)->savedState().kernel, *saved.kernel);
   (*resumed)->start();
   (*control)->start();
-  for (Pipeline* p : {original->get(), resumed->get(), control->get()}) {
+  for (Ingest* p : {original->get(), resumed->get(), control->get()}) {
     integrateAll(*p, {kernelScan(3)});
   }
   const auto a = (*original)->savedState(), b = (*resumed)->savedState(),
@@ -345,11 +345,11 @@ TEST(Snapshot, ADenseMapResumesItsKernelEvidenceAndTheNextScanUpdatesItAlike) {
   // Evidence of another kind, or for a log-odds map, is refused.
   auto other = *loaded->kernel;
   other.method = kernel::KernelMethod::kBgk;
-  auto fresh = Pipeline::create(options);
+  auto fresh = Ingest::create(options);
   EXPECT_FALSE((*fresh)->restoreKernelEvidence(other));
-  auto log_odds = Pipeline::create({.resolution_m = 0.2, .max_range_m = 5.0});
+  auto log_odds = Ingest::create({.resolution_m = 0.2, .max_range_m = 5.0});
   EXPECT_FALSE((*log_odds)->restoreKernelEvidence(*loaded->kernel));
-  for (Pipeline* p : {original->get(), resumed->get(), control->get()}) p->stop();
+  for (Ingest* p : {original->get(), resumed->get(), control->get()}) p->stop();
 }
 
 TEST(Snapshot, KernelEvidenceCutOrCorruptedIsRefused) {

@@ -8,7 +8,7 @@
 #include <thread>
 
 #include "densemap/dds/dds.hpp"
-#include "densemap/pipeline/pipeline.hpp"
+#include "densemap/server/ingest.hpp"
 #include "densemap/server/ros2_bridge.hpp"
 
 namespace densemap::server {
@@ -55,7 +55,7 @@ struct ServiceOptions {
 /// The pipeline's worker only writes a small map/events sample and hands the version over.
 class MapService {
  public:
-  [[nodiscard]] static Expected<std::unique_ptr<MapService>> create(Pipeline& pipeline,
+  [[nodiscard]] static Expected<std::unique_ptr<MapService>> create(Ingest& ingest,
                                                                     const ServiceOptions& options);
   ~MapService();
   MapService(const MapService&) = delete;
@@ -78,7 +78,7 @@ class MapService {
 
  private:
   struct Dds;
-  MapService(Pipeline& pipeline, const ServiceOptions& options);
+  MapService(Ingest& ingest, const ServiceOptions& options);
   /// The rooms, once the DDS endpoints exist (create()).
   void makeRooms();
   void ingestLoop();
@@ -88,7 +88,7 @@ class MapService {
   /// `discovery` (DESIGN.md: two servers on one domain are detected, not merged).
   [[nodiscard]] Expected<void> checkAlone(std::chrono::milliseconds discovery) const;
 
-  Pipeline& pipeline_;
+  Ingest& ingest_;
   ServiceOptions options_;
   std::unique_ptr<Dds> dds_;  // before the rooms: they hold its endpoints
   std::unique_ptr<Ros2Bridge> ros2_;
@@ -105,7 +105,7 @@ class MapService {
   std::unique_ptr<StatusRoom> status_;
   std::atomic<bool> running_{false};
   std::atomic<std::chrono::steady_clock::rep> heartbeat_{0};
-  std::thread ingest_;
+  std::thread scan_taker_;  // ingestLoop: takes scans off DDS
   std::thread service_;
   std::thread publish_;
 };

@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "densemap/dds/dds.hpp"
-#include "densemap/pipeline/pipeline.hpp"
+#include "densemap/server/ingest.hpp"
 #include "densemap/ros2/point_cloud2.hpp"
 
 namespace densemap::server {
@@ -52,7 +52,7 @@ struct Ros2Counters {
 ///   from state kept current per version (O(changed cells)), never a walk of the map per scan.
 class Ros2Bridge {
  public:
-  [[nodiscard]] static Expected<std::unique_ptr<Ros2Bridge>> create(Pipeline& pipeline,
+  [[nodiscard]] static Expected<std::unique_ptr<Ros2Bridge>> create(Ingest& ingest,
                                                                     const dds::Entity& participant,
                                                                     const Ros2Options& options);
   ~Ros2Bridge();
@@ -69,7 +69,7 @@ class Ros2Bridge {
   struct Dds;
   struct Waiting;
   struct Topics;  // the bridge thread's state: TF buffer, waiting clouds, map-topic state
-  Ros2Bridge(Pipeline& pipeline, const Ros2Options& options);
+  Ros2Bridge(Ingest& ingest, const Ros2Options& options);
   void loop();
   void takeTransforms();
   void takeClouds(std::size_t topic);
@@ -78,7 +78,7 @@ class Ros2Bridge {
   void publishMaps();
   void reject(ros2::CloudReject reason);
 
-  Pipeline& pipeline_;
+  Ingest& ingest_;
   Ros2Options options_;
   std::unique_ptr<Dds> dds_;
   std::unique_ptr<Topics> state_;

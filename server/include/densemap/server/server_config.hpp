@@ -7,7 +7,7 @@
 #include "densemap.pb.h"
 #include "densemap/dds/security.hpp"
 #include "densemap/geometry/error.hpp"
-#include "densemap/pipeline/pipeline.hpp"
+#include "densemap/server/ingest.hpp"
 #include "densemap/server/ros2_bridge.hpp"
 
 namespace densemap::server {

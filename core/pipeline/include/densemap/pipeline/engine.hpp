@@ -1,32 +1,22 @@
 #pragma once
 
-#include <tbb/task_arena.h>
-
-#include <array>
 #include <atomic>
 #include <functional>
-#include <future>
 #include <memory>
-#include <mutex>
-#include <thread>
+#include <optional>
+#include <string>
+#include <utility>
 
 #include "densemap/io/raw_scan.hpp"
 #include "densemap/kernel/kernel_map.hpp"
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_factory.hpp"
-#include "densemap/pipeline/latest_wins_queue.hpp"
 #include "densemap/pipeline/scan_validator.hpp"
-#include "densemap/pipeline/sensor_tally.hpp"
 #include "densemap/query/map_view.hpp"
 #include "densemap/raycast/integrator.hpp"
 #include "densemap/upsample/interpolation.hpp"
 
 namespace densemap {
-
-/// The waiting scans of all sensors together: this many times `queue_depth`, beyond which the
-/// sensor with the most scans waiting gives up its oldest; one scan per sensor always fits, up
-/// to SensorTally::kMaxSensors sensors at once (LatestWinsQueue).
-inline constexpr std::size_t kQueueSensorShare = 8;
 
 struct PipelineOptions {
   Backend backend = Backend::kGrid;
@@ -42,7 +32,8 @@ struct PipelineOptions {
   std::optional<kernel::KernelMethod> kernel;
   /// Densify each scan before integration (issue 6's upsample stage); std::nullopt: off.
   std::optional<upsample::UpsampleOptions> upsample;
-  int threads = 2;  // size of the task arena the pipeline owns
+  // The next three are the server's ingest (densemap/server/ingest.hpp), not the engine's.
+  int threads = 2;  // size of the task arena the ingest runs the engine in
   /// Scans waiting per sensor id (latest wins per sensor: a full sensor's oldest is dropped);
   /// all sensors together kQueueSensorShare times as many, one scan per sensor always fitting.
   std::size_t queue_depth = 2;
@@ -90,109 +81,59 @@ struct IntegrationResult {
   std::size_t evicted_cells = 0;
 };
 
-struct PipelineCounters {
-  std::uint64_t received = 0;
-  std::uint64_t integrated = 0;
-  std::uint64_t dropped = 0;
-  std::uint64_t rejected = 0;
-  std::array<std::uint64_t, kRejectReasonCount> rejected_by_reason{};
-  std::string last_reject_reason;
-  double latency_p50_ms = 0.0;  // over the last 1024 integrated scans
-  double latency_p99_ms = 0.0;
-  std::uint64_t evicted_blocks = 0;  // dropped by keep_radius_m / bounds, and their known cells
-  std::uint64_t evicted_cells = 0;
-  std::vector<SensorCounters> sensors;  // the same counts per sensor id, with seq gaps
-};
+class MapKind;  // the map kind the engine integrates into (src/map_kind.hpp)
 
-class MapKind;  // the map kind the pipeline integrates into (src/map_kind.hpp)
-
-/// The ingest pipeline (DESIGN.md data flow): a bounded latest-wins queue feeding a TBB flow
-/// graph validate -> transform -> integrate -> publish, run one scan at a time by a worker
-/// thread inside the task arena the pipeline owns. Readers get the latest published MapView
-/// without waiting for integration: a view reads the map's own versioned blocks, so a scan's
-/// publish costs O(changed blocks) and the map is held once (a second, mirrored GridMap only
-/// for the octree backend). Commands (reset, clear, save...) run on the worker between
-/// scans, so the map has one writer.
-/// Thread-safety: submit(), view(), command() and counters() from any thread.
-class Pipeline {
+/// The mapping engine (DESIGN.md data flow), one scan at a time on the caller's thread (its
+/// parallel stages use the caller's TBB arena): validate -> transform (pose, [upsample]) ->
+/// integrate into the map kind -> evict -> publish a MapView. It owns the map and no thread,
+/// queue or counter: the server's ingest (densemap/server/ingest.hpp) runs it behind a queue.
+/// Readers get the latest published view from any thread (view()); everything else from one
+/// thread at a time.
+class Engine {
  public:
-  using Publisher =
-      std::function<void(const IntegrationResult&, const std::shared_ptr<const MapView>&)>;
-  using RejectHandler = std::function<void(const RawScan&, const Rejection&)>;
-  /// Runs on the worker with the map and a change list to fill; returns a message or an error.
+  /// Runs on the engine's thread with the map and a change list to fill; returns a message or
+  /// an error.
   using Command = std::function<Expected<std::string>(OccupancyMap&, CellChanges&)>;
 
-  /// A pipeline over `initial` (or a new empty map) starting at `initial_version`.
-  [[nodiscard]] static Expected<std::unique_ptr<Pipeline>> create(
+  /// An engine over `initial` (or a new empty map) starting at `initial_version`; the options'
+  /// threads and queue fields are not read here.
+  [[nodiscard]] static Expected<std::unique_ptr<Engine>> create(
       const PipelineOptions& options, std::unique_ptr<OccupancyMap> initial = nullptr,
       std::uint64_t initial_version = 0);
-  ~Pipeline();
-  Pipeline(const Pipeline&) = delete;
-  Pipeline& operator=(const Pipeline&) = delete;
+  ~Engine();
+  Engine(const Engine&) = delete;
+  Engine& operator=(const Engine&) = delete;
 
-  /// Set before start(). Called on the worker after each scan / state change.
-  void setPublisher(Publisher publisher) { publisher_ = std::move(publisher); }
-  void setRejectHandler(RejectHandler handler) { on_reject_ = std::move(handler); }
-
-  void start();
-  /// Stops taking scans, finishes the one in flight, runs queued commands, joins. Idempotent.
-  void stop();
-
-  /// Never blocks. When integration is behind, the oldest queued scan is dropped.
-  void submit(RawScan scan);
-  /// Runs `command` on the worker between scans; a non-empty change list publishes a version.
-  [[nodiscard]] std::future<Expected<std::string>> command(Command command);
+  /// One scan through every stage: a published version and its result, or why it was
+  /// rejected (the map unchanged). The result names the scan (sensor, seq, stamp); its
+  /// latency is the caller's to fill.
+  [[nodiscard]] std::expected<IntegrationResult, Rejection> integrate(const RawScan& raw);
+  /// Runs `command` on the map; a non-empty change list publishes a version (`result`).
+  [[nodiscard]] Expected<std::string> command(const Command& command, IntegrationResult& result);
+  /// Integrates a synthetic fan into scratch buffers (PipelineOptions::warm_up).
+  void warmUp();
 
   [[nodiscard]] std::shared_ptr<const MapView> view() const { return view_.load(); }
-
-  /// What a snapshot saves: the latest view and, for kernel map kinds, the kernel evidence of
-  /// the same version (taken on the worker between scans, so the two agree).
-  struct SavedState {
-    std::shared_ptr<const MapView> view;
-    std::optional<kernel::KernelEvidence> kernel;
-  };
-  /// Waits for the worker (at most one scan) unless the pipeline is stopped. Not from a
-  /// Command (the worker would wait for itself).
-  [[nodiscard]] SavedState savedState();
-  /// Before start(): resumes a kernel map kind's evidence from a snapshot (issue 29). An error
-  /// (and nothing changed) for a log-odds kind or another kernel kind's evidence.
-  [[nodiscard]] Expected<void> restoreKernelEvidence(const kernel::KernelEvidence& evidence);
-  [[nodiscard]] PipelineCounters counters() const;
+  /// A kernel map kind's evidence of the latest version (snapshots); none for log-odds.
+  [[nodiscard]] std::optional<kernel::KernelEvidence> evidence() const;
+  /// Resumes a kernel map kind's evidence from a snapshot (issue 29). An error (and nothing
+  /// changed) for a log-odds kind or another kernel kind's evidence.
+  [[nodiscard]] Expected<void> restore(const kernel::KernelEvidence& evidence);
   [[nodiscard]] const PipelineOptions& options() const { return options_; }
 
  private:
-  struct Job;
-  struct Graph;
-  Pipeline(const PipelineOptions& options, std::unique_ptr<OccupancyMap> map,
-           std::uint64_t version);
-  void run();
-  void runCommands();
-  void process(RawScan raw);
-  void publish(IntegrationResult& result);
+  Engine(const PipelineOptions& options, std::unique_ptr<OccupancyMap> map,
+         std::uint64_t version);
+  /// The scan's points in the world frame (densified first when upsampling is on).
+  void transform(Scan& scan, PointCloud& points_world, Point3f& origin_world) const;
   /// Drops the blocks keep_radius_m / bounds leave out, after a scan from `origin`.
   void evict(const Point3f& origin, IntegrationResult& result, CellChanges* changes);
+  void publish(IntegrationResult& result);
 
   PipelineOptions options_;
   /// The map kind (log-odds or a kernel map) behind one interface (map_kind.hpp).
   std::unique_ptr<MapKind> kind_;
-  tbb::task_arena arena_;
-  std::unique_ptr<Graph> graph_;
-  LatestWinsQueue<RawScan> queue_;
   std::atomic<std::shared_ptr<const MapView>> view_;
-  Publisher publisher_;
-  RejectHandler on_reject_;
-
-  std::mutex commands_mutex_;
-  std::vector<std::pair<Command, std::promise<Expected<std::string>>>> commands_;
-
-  mutable std::mutex counters_mutex_;
-  PipelineCounters counters_;
-  SensorTally sensors_;
-  std::vector<double> latencies_;  // ring of the last 1024
-  std::size_t latency_next_ = 0;
-
-  std::atomic<bool> running_{false};
-  std::thread worker_;
 };
 
 }  // namespace densemap

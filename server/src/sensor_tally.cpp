@@ -1,4 +1,4 @@
-#include "densemap/pipeline/sensor_tally.hpp"
+#include "densemap/server/sensor_tally.hpp"
 
 namespace densemap {
 

@@ -1,0 +1,113 @@
+#include "densemap/pipeline/engine.hpp"
+
+#include "map_kind.hpp"
+
+namespace densemap {
+
+Expected<std::unique_ptr<Engine>> Engine::create(const PipelineOptions& options,
+                                                 std::unique_ptr<OccupancyMap> initial,
+                                                 std::uint64_t initial_version) {
+  if (options.upsample) {
+    if (auto ok = options.upsample->validate(); !ok) return std::unexpected(ok.error());
+  }
+  if ((options.keep_radius_m > 0 || options.bounds) && options.backend != Backend::kGrid) {
+    return makeError("keep_radius_m and bounds (eviction) need the grid backend");
+  }
+  if (!initial) {
+    auto map = makeMap(options.backend, options.resolution_m, SensorModel(options.sensor));
+    if (!map) return std::unexpected(map.error());
+    initial = std::move(*map);
+  }
+  return std::unique_ptr<Engine>(new Engine(options, std::move(initial), initial_version));
+}
+
+Engine::Engine(const PipelineOptions& options, std::unique_ptr<OccupancyMap> map,
+               std::uint64_t version)
+    : options_(options) {
+  if (options.kernel) {
+    auto kernel_options = kernel::KernelOptions::defaults(*options.kernel);
+    kernel_options.max_range = options.max_range_m;
+    kind_ = makeKernelKind(std::move(map), kernel_options);
+  } else {
+    kind_ = makeLogOddsKind(
+        std::move(map),
+        {.method = options.method, .rule = options.rule, .max_range_m = options.max_range_m});
+  }
+  kind_->published().startVersionsAt(version);
+  kind_->published().reserveBlocks(options.reserve_blocks);
+  view_.store(MapView::publish(kind_->published()));
+}
+
+Engine::~Engine() = default;
+
+std::expected<IntegrationResult, Rejection> Engine::integrate(const RawScan& raw) {
+  auto scan = validateScan(raw, options_.limits);
+  if (!scan) return std::unexpected(std::move(scan.error()));
+  PointCloud points_world;
+  Point3f origin_world = Point3f::Zero();
+  transform(*scan, points_world, origin_world);
+  IntegrationResult result;
+  CellChanges* changes =
+      options_.collect_changes || kind_->needsChanges() ? &result.changes : nullptr;
+  result.stats = kind_->integrate(points_world, origin_world, changes);
+  evict(origin_world, result, changes);
+  result.from_scan = true;
+  result.sensor_id = raw.sensor_id;
+  result.scan_seq = raw.seq;
+  result.stamp_ns = raw.stamp_ns;
+  publish(result);
+  return result;
+}
+
+void Engine::transform(Scan& scan, PointCloud& points_world, Point3f& origin_world) const {
+  if (options_.upsample) {
+    scan.points = upsample::upsamplePoints(scan.points, *options_.upsample);
+    scan.intensities.clear();
+  }
+  points_world = scan.pointsWorld();
+  origin_world = scan.originWorld();
+}
+
+Expected<std::string> Engine::command(const Command& command, IntegrationResult& result) {
+  Expected<std::string> outcome = kind_->command(command, result.changes);
+  if (!result.changes.empty()) publish(result);
+  return outcome;
+}
+
+void Engine::warmUp() { kind_->warmUp(options_.max_range_m); }
+
+std::optional<kernel::KernelEvidence> Engine::evidence() const { return kind_->evidence(); }
+
+Expected<void> Engine::restore(const kernel::KernelEvidence& evidence) {
+  return kind_->restore(evidence);
+}
+
+void Engine::publish(IntegrationResult& result) {
+  kind_->beforePublish(result.changes);
+  result.base_version = view_.load()->version();
+  // A mirror follows the octree cell for cell, so its known-cell count is the map's.
+  auto next = MapView::publish(kind_->published(), kind_->ownBytes(), &result.written_blocks);
+  result.new_version = next->version();
+  view_.store(std::move(next));
+}
+
+void Engine::evict(const Point3f& origin, IntegrationResult& result, CellChanges* changes) {
+  // create() refuses eviction unless the map is the grid itself (no mirror).
+  if ((options_.keep_radius_m <= 0 && !options_.bounds) || !kind_->canEvict()) return;
+  const double r2 = options_.keep_radius_m * options_.keep_radius_m;
+  const auto keep = [&](const Point3f& centre) {
+    if (options_.keep_radius_m > 0 && (centre - origin).cast<double>().squaredNorm() > r2) {
+      return false;
+    }
+    if (const auto& box = options_.bounds) {
+      return (centre.array() >= box->first.array()).all() &&
+             (centre.array() <= box->second.array()).all();
+    }
+    return true;
+  };
+  const EvictStats stats = kind_->evict(keep, changes);
+  result.evicted_blocks = stats.blocks;
+  result.evicted_cells = stats.cells;
+}
+
+}  // namespace densemap

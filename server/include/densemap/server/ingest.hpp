@@ -1,0 +1,118 @@
+#pragma once
+
+#include <tbb/task_arena.h>
+
+#include <array>
+#include <atomic>
+#include <functional>
+#include <future>
+#include <memory>
+#include <mutex>
+#include <thread>
+
+#include "densemap/io/raw_scan.hpp"
+#include "densemap/pipeline/engine.hpp"
+#include "densemap/server/latest_wins_queue.hpp"
+#include "densemap/server/sensor_tally.hpp"
+
+namespace densemap {
+
+/// The waiting scans of all sensors together: this many times `queue_depth`, beyond which the
+/// sensor with the most scans waiting gives up its oldest; one scan per sensor always fits, up
+/// to SensorTally::kMaxSensors sensors at once (LatestWinsQueue).
+inline constexpr std::size_t kQueueSensorShare = 8;
+
+struct PipelineCounters {
+  std::uint64_t received = 0;
+  std::uint64_t integrated = 0;
+  std::uint64_t dropped = 0;
+  std::uint64_t rejected = 0;
+  std::array<std::uint64_t, kRejectReasonCount> rejected_by_reason{};
+  std::string last_reject_reason;
+  double latency_p50_ms = 0.0;  // over the last 1024 integrated scans
+  double latency_p99_ms = 0.0;
+  std::uint64_t evicted_blocks = 0;  // dropped by keep_radius_m / bounds, and their known cells
+  std::uint64_t evicted_cells = 0;
+  std::vector<SensorCounters> sensors;  // the same counts per sensor id, with seq gaps
+};
+
+/// The server's ingest (DESIGN.md data flow): a bounded latest-wins queue in front of the
+/// mapping engine (densemap/pipeline/engine.hpp), run one scan at a time by a worker thread
+/// inside a task arena of `threads`. Readers get the latest published MapView without waiting
+/// for integration. Commands (reset, clear, save...) run on the worker between scans, so the
+/// map has one writer. The ingest keeps the counters: received, dropped, rejected (with
+/// reasons), per sensor, and the latency of the last 1024 scans.
+/// Thread-safety: submit(), view(), command() and counters() from any thread.
+class Ingest {
+ public:
+  using Publisher =
+      std::function<void(const IntegrationResult&, const std::shared_ptr<const MapView>&)>;
+  using RejectHandler = std::function<void(const RawScan&, const Rejection&)>;
+  using Command = Engine::Command;
+
+  /// An ingest over `initial` (or a new empty map) starting at `initial_version`.
+  [[nodiscard]] static Expected<std::unique_ptr<Ingest>> create(
+      const PipelineOptions& options, std::unique_ptr<OccupancyMap> initial = nullptr,
+      std::uint64_t initial_version = 0);
+  ~Ingest();
+  Ingest(const Ingest&) = delete;
+  Ingest& operator=(const Ingest&) = delete;
+
+  /// Set before start(). Called on the worker after each scan / state change.
+  void setPublisher(Publisher publisher) { publisher_ = std::move(publisher); }
+  void setRejectHandler(RejectHandler handler) { on_reject_ = std::move(handler); }
+
+  void start();
+  /// Stops taking scans, finishes the one in flight, runs queued commands, joins. Idempotent.
+  void stop();
+
+  /// Never blocks. When integration is behind, the oldest queued scan is dropped.
+  void submit(RawScan scan);
+  /// Runs `command` on the worker between scans; a non-empty change list publishes a version.
+  [[nodiscard]] std::future<Expected<std::string>> command(Command command);
+
+  [[nodiscard]] std::shared_ptr<const MapView> view() const { return engine_->view(); }
+
+  /// What a snapshot saves: the latest view and, for kernel map kinds, the kernel evidence of
+  /// the same version (taken on the worker between scans, so the two agree).
+  struct SavedState {
+    std::shared_ptr<const MapView> view;
+    std::optional<kernel::KernelEvidence> kernel;
+  };
+  /// Waits for the worker (at most one scan) unless the ingest is stopped. Not from a
+  /// Command (the worker would wait for itself).
+  [[nodiscard]] SavedState savedState();
+  /// Before start(): resumes a kernel map kind's evidence from a snapshot (issue 29). An error
+  /// (and nothing changed) for a log-odds kind or another kernel kind's evidence.
+  [[nodiscard]] Expected<void> restoreKernelEvidence(const kernel::KernelEvidence& evidence);
+  [[nodiscard]] PipelineCounters counters() const;
+  [[nodiscard]] const PipelineOptions& options() const { return engine_->options(); }
+
+ private:
+  Ingest(const PipelineOptions& options, std::unique_ptr<Engine> engine);
+  void run();
+  void runCommands();
+  void process(const RawScan& raw);
+  /// Counts an integrated scan (its latency, evictions) and hands the result on.
+  void published(IntegrationResult& result);
+
+  std::unique_ptr<Engine> engine_;
+  tbb::task_arena arena_;
+  LatestWinsQueue<RawScan> queue_;
+  Publisher publisher_;
+  RejectHandler on_reject_;
+
+  std::mutex commands_mutex_;
+  std::vector<std::pair<Command, std::promise<Expected<std::string>>>> commands_;
+
+  mutable std::mutex counters_mutex_;
+  PipelineCounters counters_;
+  SensorTally sensors_;
+  std::vector<double> latencies_;  // ring of the last 1024
+  std::size_t latency_next_ = 0;
+
+  std::atomic<bool> running_{false};
+  std::thread worker_;
+};
+
+}  // namespace densemap

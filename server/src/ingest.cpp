@@ -1,0 +1,167 @@
+#include "densemap/server/ingest.hpp"
+
+#include <algorithm>
+#include <chrono>
+
+#include "densemap/geometry/percentile.hpp"
+
+namespace densemap {
+
+Expected<std::unique_ptr<Ingest>> Ingest::create(const PipelineOptions& options,
+                                                 std::unique_ptr<OccupancyMap> initial,
+                                                 std::uint64_t initial_version) {
+  if (options.threads < 1 || options.threads > 256) return makeError("threads must be in 1..256");
+  if (options.queue_depth < 1 || options.queue_depth > 1024) {
+    return makeError("queue depth must be in 1..1024");
+  }
+  auto engine = Engine::create(options, std::move(initial), initial_version);
+  if (!engine) return std::unexpected(engine.error());
+  return std::unique_ptr<Ingest>(new Ingest(options, std::move(*engine)));
+}
+
+Ingest::Ingest(const PipelineOptions& options, std::unique_ptr<Engine> engine)
+    : engine_(std::move(engine)),
+      arena_(options.threads),
+      queue_(
+          options.queue_depth, options.queue_depth * kQueueSensorShare,
+          [](const RawScan& scan) -> const std::string& { return scan.sensor_id; },
+          SensorTally::kMaxSensors, rawScanBytes, options.queue_budget_bytes) {
+  if (options.warm_up) arena_.execute([this] { engine_->warmUp(); });
+}
+
+Ingest::~Ingest() { stop(); }
+
+void Ingest::start() {
+  if (running_.exchange(true)) return;
+  worker_ = std::thread([this] { run(); });
+}
+
+void Ingest::stop() {
+  if (!running_.exchange(false)) return;
+  const auto discarded = queue_.close();
+  {
+    std::lock_guard lock(counters_mutex_);
+    for (const RawScan& scan : discarded) sensors_.dropped(scan.sensor_id);
+  }
+  if (worker_.joinable()) worker_.join();
+  runCommands();  // commands queued while stopping (e.g. the shutdown snapshot) still run
+}
+
+void Ingest::submit(RawScan scan) {
+  {
+    std::lock_guard lock(counters_mutex_);
+    ++counters_.received;
+    sensors_.received(scan.sensor_id, scan.seq);
+  }
+  std::vector<RawScan> dropped;
+  queue_.push(std::move(scan), &dropped);
+  if (!dropped.empty()) {
+    std::lock_guard lock(counters_mutex_);
+    for (const RawScan& d : dropped) sensors_.dropped(d.sensor_id);
+  }
+}
+
+std::future<Expected<std::string>> Ingest::command(Command command) {
+  std::promise<Expected<std::string>> promise;
+  auto future = promise.get_future();
+  {
+    std::lock_guard lock(commands_mutex_);
+    commands_.emplace_back(std::move(command), std::move(promise));
+  }
+  if (!running_.load()) runCommands();
+  return future;
+}
+
+Ingest::SavedState Ingest::savedState() {
+  SavedState state;
+  // A command with no changes publishes nothing: the view it reads is the latest published,
+  // the one the kernel map's evidence stands behind.
+  auto done = command([&](OccupancyMap&, CellChanges&) -> Expected<std::string> {
+    state.view = engine_->view();
+    state.kernel = engine_->evidence();
+    return std::string();
+  });
+  done.wait();
+  return state;
+}
+
+Expected<void> Ingest::restoreKernelEvidence(const kernel::KernelEvidence& evidence) {
+  if (running_.load()) return makeError("kernel evidence is restored before start()");
+  return engine_->restore(evidence);
+}
+
+void Ingest::run() {
+  while (running_.load()) {
+    runCommands();
+    auto raw = queue_.pop(std::chrono::milliseconds(20));
+    if (raw) process(*raw);
+  }
+}
+
+void Ingest::process(const RawScan& raw) {
+  std::expected<IntegrationResult, Rejection> outcome;
+  arena_.execute([&] { outcome = engine_->integrate(raw); });
+  if (outcome) {
+    outcome->latency_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - raw.received)
+            .count();
+    published(*outcome);
+    return;
+  }
+  {
+    std::lock_guard lock(counters_mutex_);
+    ++counters_.rejected;
+    ++counters_.rejected_by_reason[static_cast<std::size_t>(outcome.error().reason)];
+    sensors_.rejected(raw.sensor_id);
+    counters_.last_reject_reason = outcome.error().message;
+  }
+  if (on_reject_) on_reject_(raw, outcome.error());
+}
+
+void Ingest::runCommands() {
+  std::vector<std::pair<Command, std::promise<Expected<std::string>>>> pending;
+  {
+    std::lock_guard lock(commands_mutex_);
+    pending.swap(commands_);
+  }
+  for (auto& [command, promise] : pending) {
+    IntegrationResult result;
+    Expected<std::string> outcome;
+    arena_.execute([&] { outcome = engine_->command(command, result); });
+    if (!result.changes.empty()) published(result);
+    promise.set_value(std::move(outcome));
+  }
+}
+
+void Ingest::published(IntegrationResult& result) {
+  if (result.from_scan) {
+    std::lock_guard lock(counters_mutex_);
+    ++counters_.integrated;
+    counters_.evicted_blocks += result.evicted_blocks;
+    counters_.evicted_cells += result.evicted_cells;
+    sensors_.integrated(result.sensor_id);
+    if (latencies_.size() < 1024) {
+      latencies_.push_back(result.latency_ms);
+    } else {
+      latencies_[latency_next_] = result.latency_ms;
+      latency_next_ = (latency_next_ + 1) % latencies_.size();
+    }
+  }
+  if (publisher_) publisher_(result, engine_->view());
+}
+
+PipelineCounters Ingest::counters() const {
+  std::lock_guard lock(counters_mutex_);
+  PipelineCounters c = counters_;
+  c.dropped = queue_.dropped();
+  c.sensors = sensors_.sensors();
+  if (!latencies_.empty()) {
+    std::vector<double> v = latencies_;
+    std::sort(v.begin(), v.end());
+    c.latency_p50_ms = nearestRank(v, 0.5);
+    c.latency_p99_ms = nearestRank(v, 0.99);
+  }
+  return c;
+}
+
+}  // namespace densemap

@@ -1,0 +1,100 @@
+// The mapping engine alone (issue 30: core computes): no thread, no queue, no counters; each
+// call runs every stage on the caller's thread and publishes a version.
+#include "densemap/pipeline/engine.hpp"
+
+#include <gtest/gtest.h>
+
+#include <thread>
+
+#include "densemap/map/grid_map.hpp"
+#include "densemap/test_support/random_rays.hpp"
+
+namespace densemap {
+namespace {
+
+RawScan rawScan(std::uint64_t seq) {
+  const PointCloud cloud = test::adversarialScan(0.2, Point3f::Zero(), 3000, 6.0, 1000 + seq);
+  RawScan raw;
+  raw.sensor_id = "front";
+  raw.seq = seq;
+  raw.stamp_ns = 1000 * static_cast<std::int64_t>(seq);
+  raw.t_world_sensor = {0.1 * static_cast<double>(seq), 0.05, 0.3};
+  for (const auto& p : cloud) raw.xyz.insert(raw.xyz.end(), {p.x(), p.y(), p.z()});
+  return raw;
+}
+
+TEST(Engine, IntegratesOnTheCallersThreadAsTheOfflineIntegratorDoes) {
+  auto engine = Engine::create({.resolution_m = 0.2, .max_range_m = 5.0});
+  ASSERT_TRUE(engine);
+  GridMap offline(0.2, SensorModel{});
+  Integrator integrator({.max_range_m = 5.0});
+  const auto caller = std::this_thread::get_id();
+  auto seen = (*engine)->view();
+  for (std::uint64_t seq = 1; seq <= 4; ++seq) {
+    const RawScan raw = rawScan(seq);
+    auto result = (*engine)->integrate(raw);
+    ASSERT_TRUE(result) << result.error().message;
+    EXPECT_EQ(std::this_thread::get_id(), caller);
+    EXPECT_TRUE(result->from_scan);
+    EXPECT_EQ(result->sensor_id, "front");
+    EXPECT_EQ(result->scan_seq, seq);
+    EXPECT_EQ(result->stamp_ns, raw.stamp_ns);
+    EXPECT_EQ(result->base_version, seen->version());
+    EXPECT_EQ(result->new_version, seq);
+    EXPECT_FALSE(result->written_blocks.empty());
+    const Scan scan = *validateScan(raw, ScanLimits{});
+    integrator.integrate(offline, scan.pointsWorld(), scan.originWorld());
+    seen = (*engine)->view();
+    EXPECT_EQ(seen->version(), seq);
+    std::size_t wrong = 0;
+    offline.forEachKnown([&](const VoxelKey& k, float v) { wrong += seen->logOdds(k) != v; });
+    EXPECT_EQ(wrong, 0U);
+    EXPECT_EQ(seen->knownCells(), offline.knownCells());
+  }
+}
+
+TEST(Engine, ARejectedScanSaysWhyAndPublishesNothing) {
+  auto engine = Engine::create({.resolution_m = 0.2, .limits = {.max_points = 2000}});
+  ASSERT_TRUE(engine);
+  const auto before = (*engine)->view();
+  const auto too_many = (*engine)->integrate(rawScan(1));  // 3000 points
+  ASSERT_FALSE(too_many);
+  EXPECT_EQ(too_many.error().reason, RejectReason::kTooManyPoints);
+  RawScan nan = rawScan(2);
+  nan.xyz.resize(300);
+  nan.xyz[5] = std::numeric_limits<float>::quiet_NaN();
+  const auto non_finite = (*engine)->integrate(nan);
+  ASSERT_FALSE(non_finite);
+  EXPECT_EQ(non_finite.error().reason, RejectReason::kNonFinitePoint);
+  EXPECT_EQ((*engine)->view(), before);
+}
+
+TEST(Engine, ACommandWithChangesPublishesAVersionAndOneWithoutDoesNot) {
+  auto engine = Engine::create({.resolution_m = 0.2, .max_range_m = 5.0});
+  ASSERT_TRUE(engine);
+  ASSERT_TRUE((*engine)->integrate(rawScan(1)));
+  IntegrationResult quiet;
+  const auto noop = (*engine)->command(
+      [](OccupancyMap&, CellChanges&) -> Expected<std::string> { return std::string("ok"); },
+      quiet);
+  ASSERT_TRUE(noop);
+  EXPECT_EQ((*engine)->view()->version(), 1U);
+  IntegrationResult cleared;
+  const auto reset = (*engine)->command(
+      [](OccupancyMap& map, CellChanges& changes) -> Expected<std::string> {
+        const VoxelKey lo = *map.grid().pointToKey(Point3f(-20, -20, -20));
+        const VoxelKey hi = *map.grid().pointToKey(Point3f(20, 20, 20));
+        map.clearBox(lo, hi, &changes);
+        return std::string("cleared");
+      },
+      cleared);
+  ASSERT_TRUE(reset);
+  EXPECT_EQ(*reset, "cleared");
+  EXPECT_FALSE(cleared.from_scan);
+  EXPECT_EQ(cleared.base_version, 1U);
+  EXPECT_EQ(cleared.new_version, 2U);
+  EXPECT_EQ((*engine)->view()->knownCells(), 0U);
+}
+
+}  // namespace
+}  // namespace densemap
