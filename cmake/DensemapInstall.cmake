@@ -14,9 +14,9 @@ set(DENSEMAP_CMAKE_DIR ${CMAKE_INSTALL_LIBDIR}/cmake/densemap)
 # pipeline, issue 30.)
 set(DENSEMAP_SDK_TARGETS
     densemap_options densemap_geometry densemap_map densemap_query densemap_kernel densemap_io
-    densemap_snapshot_proto densemap_store densemap_dds_msgs densemap_dds densemap_client)
+    densemap_snapshot_proto densemap_store densemap_dds_msgs densemap_wire densemap_client)
 set(DENSEMAP_SDK_HEADER_DIRS
-    core/geometry core/map core/query core/kernel core/io core/store server/dds client)
+    core/geometry core/map core/query core/kernel core/io core/store wire client)
 foreach(target IN LISTS DENSEMAP_SDK_TARGETS)
   string(REGEX REPLACE "^densemap_" "" export_name ${target})
   set_target_properties(${target} PROPERTIES EXPORT_NAME ${export_name})

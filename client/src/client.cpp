@@ -8,9 +8,9 @@
 #include <thread>
 #include <unordered_map>
 
-#include "densemap/dds/dds.hpp"
-#include "densemap/dds/delta_wire.hpp"
-#include "densemap/dds/topics.hpp"
+#include "densemap/wire/dds.hpp"
+#include "densemap/wire/delta_wire.hpp"
+#include "densemap/wire/topics.hpp"
 #include "densemap/query/version_delta.hpp"
 #include "densemap_msgs.h"
 
@@ -361,50 +361,7 @@ Expected<ServerStatus> Client::status() {
                        " has stopped (its status is gone)");
     }
     if (n > 0 && info[0].valid_data) {
-      const auto& s = *static_cast<const densemap_msgs_Status*>(samples[0]);
-      ServerStatus out;
-      out.received = s.received;
-      out.integrated = s.integrated;
-      out.dropped = s.dropped;
-      out.rejected = s.rejected;
-      out.rejected_by_reason.assign(s.rejected_by_reason._buffer,
-                                    s.rejected_by_reason._buffer + s.rejected_by_reason._length);
-      out.last_reject_reason = text(s.last_reject_reason);
-      out.latency_p50_ms = s.latency_p50_ms;
-      out.latency_p99_ms = s.latency_p99_ms;
-      out.known_cells = s.known_cells;
-      out.map_version = s.map_version;
-      out.memory_bytes = s.memory_bytes;
-      out.uptime_s = s.uptime_s;
-      out.rss_bytes = s.rss_bytes;
-      out.evicted_blocks = s.evicted_blocks;
-      out.evicted_cells = s.evicted_cells;
-      out.snapshot_failures = s.snapshot_failures;
-      out.last_snapshot_error = text(s.last_snapshot_error);
-      out.cpu_s = s.cpu_s;
-      out.ros_enabled = s.ros_enabled;
-      out.ros_received = s.ros_received;
-      out.ros_submitted = s.ros_submitted;
-      out.ros_rejected = s.ros_rejected;
-      out.ros_no_transform = s.ros_no_transform;
-      out.ros_rejected_by_reason.assign(
-          s.ros_rejected_by_reason._buffer,
-          s.ros_rejected_by_reason._buffer + s.ros_rejected_by_reason._length);
-      out.ros_last_reject = s.ros_last_reject != nullptr ? s.ros_last_reject : "";
-      out.ros_maps_published = s.ros_maps_published;
-      out.queries_answered = s.queries_answered;
-      out.queries_rejected = s.queries_rejected;
-      out.last_query_error = text(s.last_query_error);
-      for (std::uint32_t i = 0; i < s.sensors._length; ++i) {
-        const auto& sc = s.sensors._buffer[i];
-        out.sensors.push_back({.sensor_id = text(sc.sensor_id),
-                               .received = sc.received,
-                               .integrated = sc.integrated,
-                               .dropped = sc.dropped,
-                               .rejected = sc.rejected,
-                               .seq_gaps = sc.seq_gaps});
-      }
-      latest = out;
+      latest = dds::statusFromWire(*static_cast<const densemap_msgs_Status*>(samples[0]));
     }
     if (n > 0) dds_return_loan(dds_->st_r.get(), samples, n);
     if (latest) return *latest;

@@ -5,8 +5,8 @@
 #include <thread>
 #include <vector>
 
-#include "densemap/dds/dds.hpp"
-#include "densemap/dds/topics.hpp"
+#include "densemap/wire/dds.hpp"
+#include "densemap/wire/topics.hpp"
 #include "densemap/ros2/names.hpp"
 #include "sensor_msgs.h"
 #include "tf2_msgs.h"

@@ -3,7 +3,7 @@
 #include <memory>
 #include <string>
 
-#include "densemap/dds/dds.hpp"
+#include "densemap/wire/dds.hpp"
 #include "densemap/geometry/error.hpp"
 #include "densemap/io/raw_scan.hpp"
 #include "densemap/ros2/replay_frames.hpp"

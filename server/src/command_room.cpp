@@ -3,8 +3,8 @@
 #include <tuple>
 #include <vector>
 
-#include "densemap/dds/delta_wire.hpp"
-#include "densemap/dds/topics.hpp"
+#include "densemap/wire/delta_wire.hpp"
+#include "densemap/wire/topics.hpp"
 #include "densemap/query/map_queries.hpp"
 #include "densemap/query/version_delta.hpp"
 #include "densemap/server/export_path.hpp"

@@ -4,7 +4,7 @@
 #include <filesystem>
 #include <string>
 
-#include "densemap/dds/dds.hpp"
+#include "densemap/wire/dds.hpp"
 #include "densemap/server/ingest.hpp"
 #include "densemap_msgs.h"
 #include "replies.hpp"

@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "command_room.hpp"
-#include "densemap/dds/topics.hpp"
+#include "densemap/wire/topics.hpp"
 #include "densemap/server/export_path.hpp"
 #include "densemap_msgs.h"
 #include "publisher.hpp"

@@ -1,6 +1,6 @@
 #include "publisher.hpp"
 
-#include "densemap/dds/delta_wire.hpp"
+#include "densemap/wire/delta_wire.hpp"
 #include "densemap/query/version_delta.hpp"
 #include "densemap_msgs.h"
 

@@ -7,7 +7,7 @@
 #include <memory>
 #include <mutex>
 
-#include "densemap/dds/dds.hpp"
+#include "densemap/wire/dds.hpp"
 #include "densemap/server/ingest.hpp"
 #include "densemap/server/ros2_bridge.hpp"
 

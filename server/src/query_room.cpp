@@ -4,7 +4,7 @@
 #include <string>
 #include <vector>
 
-#include "densemap/dds/topics.hpp"
+#include "densemap/wire/topics.hpp"
 #include "densemap/query/map_queries.hpp"
 #include "densemap_msgs.h"
 

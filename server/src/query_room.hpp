@@ -2,7 +2,7 @@
 
 #include <cstddef>
 
-#include "densemap/dds/dds.hpp"
+#include "densemap/wire/dds.hpp"
 #include "densemap/server/ingest.hpp"
 #include "replies.hpp"
 #include "request_tasks.hpp"

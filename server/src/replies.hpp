@@ -10,8 +10,8 @@
 #include <unordered_map>
 #include <unordered_set>
 
-#include "densemap/dds/dds.hpp"
-#include "densemap/dds/topics.hpp"
+#include "densemap/wire/dds.hpp"
+#include "densemap/wire/topics.hpp"
 #include "densemap/geometry/point_cloud.hpp"
 
 namespace densemap::server {

@@ -7,7 +7,7 @@
 #include <cstring>
 #include <deque>
 
-#include "densemap/dds/topics.hpp"
+#include "densemap/wire/topics.hpp"
 #include "densemap/ros2/map_topics.hpp"
 #include "densemap/ros2/names.hpp"
 #include "densemap/ros2/tf_buffer.hpp"

@@ -1,5 +1,7 @@
 #include "status_room.hpp"
 
+#include "densemap/wire/status.hpp"
+
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -51,14 +53,13 @@ void StatusRoom::publish() {
   }
   const PipelineCounters c = ingest_.counters();
   const auto view = ingest_.view();
-  densemap_msgs_Status s{};
+  ServerStatus s;
   s.received = c.received;
   s.integrated = c.integrated;
   s.dropped = c.dropped;
   s.rejected = c.rejected;
-  std::vector<std::uint64_t> by_reason(c.rejected_by_reason.begin(), c.rejected_by_reason.end());
-  s.rejected_by_reason = dds::borrowSequence<dds_sequence_unsigned_long_long>(by_reason);
-  s.last_reject_reason = const_cast<char*>(c.last_reject_reason.c_str());
+  s.rejected_by_reason.assign(c.rejected_by_reason.begin(), c.rejected_by_reason.end());
+  s.last_reject_reason = c.last_reject_reason;
   s.latency_p50_ms = c.latency_p50_ms;
   s.latency_p99_ms = c.latency_p99_ms;
   s.known_cells = view->knownCells();
@@ -67,35 +68,25 @@ void StatusRoom::publish() {
   s.uptime_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count();
   const ProcessUsage usage = processUsage();
   s.rss_bytes = usage.rss_bytes;
+  s.cpu_s = usage.cpu_s;
   s.evicted_blocks = c.evicted_blocks;
   s.evicted_cells = c.evicted_cells;
   s.snapshot_failures = sources_.snapshots.failures();
-  const std::string last_snapshot_error = sources_.snapshots.lastError();
-  s.last_snapshot_error = const_cast<char*>(last_snapshot_error.c_str());
-  s.cpu_s = usage.cpu_s;
+  s.last_snapshot_error = sources_.snapshots.lastError();
   s.queries_answered = sources_.requests.answeredCount();
   s.queries_rejected = sources_.requests.refusedCount();
-  const std::string last_error = sources_.requests.lastError();
-  s.last_query_error = const_cast<char*>(last_error.c_str());
-  std::vector<densemap_msgs_SensorStatus> sensors;
-  sensors.reserve(c.sensors.size());
-  for (const SensorCounters& sc : c.sensors) {
-    sensors.push_back({const_cast<char*>(sc.sensor_id.c_str()), sc.received, sc.integrated,
-                       sc.dropped, sc.rejected, sc.seq_gaps});
-  }
-  s.sensors = dds::borrowSequence<dds_sequence_densemap_msgs_SensorStatus>(sensors);
+  s.last_query_error = sources_.requests.lastError();
+  s.sensors = c.sensors;
   const Ros2Counters ros = sources_.ros2 != nullptr ? sources_.ros2->counters() : Ros2Counters{};
   s.ros_enabled = sources_.ros2 != nullptr;
   s.ros_received = ros.received;
   s.ros_submitted = ros.submitted;
   s.ros_rejected = ros.rejected;
   s.ros_no_transform = ros.no_transform;
-  std::vector<std::uint64_t> ros_by_reason(ros.rejected_by_reason.begin(),
-                                           ros.rejected_by_reason.end());
-  s.ros_rejected_by_reason = dds::borrowSequence<dds_sequence_unsigned_long_long>(ros_by_reason);
-  s.ros_last_reject = const_cast<char*>(ros.last_reject.c_str());
+  s.ros_rejected_by_reason.assign(ros.rejected_by_reason.begin(), ros.rejected_by_reason.end());
+  s.ros_last_reject = ros.last_reject;
   s.ros_maps_published = ros.maps_published;
-  (void)dds::write(writer_, &s);
+  (void)dds::writeStatus(writer_, s);
 }
 
 }  // namespace densemap::server

@@ -5,7 +5,7 @@
 #include <string>
 #include <vector>
 
-#include "densemap/dds/dds.hpp"
+#include "densemap/wire/dds.hpp"
 #include "densemap/server/ingest.hpp"
 #include "densemap/server/ros2_bridge.hpp"
 #include "request_tasks.hpp"

@@ -11,7 +11,7 @@
 #include <thread>
 
 #include "densemap/client/client.hpp"
-#include "densemap/dds/dds.hpp"
+#include "densemap/wire/dds.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_diff.hpp"
 #include "densemap/server/ingest.hpp"

@@ -19,7 +19,7 @@
 #include <thread>
 
 #include "densemap/client/client.hpp"
-#include "densemap/dds/topics.hpp"
+#include "densemap/wire/topics.hpp"
 #include "densemap/test_support/server_clients.hpp"
 #include "densemap/test_support/server_process.hpp"
 #include "densemap_msgs.h"

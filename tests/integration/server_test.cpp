@@ -10,7 +10,7 @@
 #include <thread>
 
 #include "densemap/client/client.hpp"
-#include "densemap/dds/topics.hpp"
+#include "densemap/wire/topics.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_diff.hpp"
 #include "densemap/pipeline/scan_validator.hpp"

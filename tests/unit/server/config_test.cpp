@@ -2,7 +2,7 @@
 
 #include <fstream>
 
-#include "densemap/dds/dds.hpp"
+#include "densemap/wire/dds.hpp"
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_diff.hpp"
 #include "densemap/raycast/integrator.hpp"

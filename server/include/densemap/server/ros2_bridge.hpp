@@ -10,7 +10,7 @@
 #include <thread>
 #include <vector>
 
-#include "densemap/dds/dds.hpp"
+#include "densemap/wire/dds.hpp"
 #include "densemap/server/ingest.hpp"
 #include "densemap/ros2/point_cloud2.hpp"
 

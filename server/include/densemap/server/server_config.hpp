@@ -5,7 +5,7 @@
 #include <filesystem>
 
 #include "densemap.pb.h"
-#include "densemap/dds/security.hpp"
+#include "densemap/wire/security.hpp"
 #include "densemap/geometry/error.hpp"
 #include "densemap/server/ingest.hpp"
 #include "densemap/server/ros2_bridge.hpp"

@@ -16,6 +16,8 @@ struct SensorCounters {
   /// pipeline saw them (e.g. overwritten in the DDS reader's history) or never sent.
   std::uint64_t seq_gaps = 0;
   std::uint64_t last_seq = 0;
+
+  bool operator==(const SensorCounters&) const = default;
 };
 
 }  // namespace densemap

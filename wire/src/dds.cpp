@@ -1,4 +1,4 @@
-#include "densemap/dds/dds.hpp"
+#include "densemap/wire/dds.hpp"
 
 #include <thread>
 

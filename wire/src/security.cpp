@@ -1,4 +1,4 @@
-#include "densemap/dds/security.hpp"
+#include "densemap/wire/security.hpp"
 
 #include <algorithm>
 #include <fstream>

@@ -1,6 +1,6 @@
 #pragma once
 
-#include "densemap/dds/dds.hpp"
+#include "densemap/wire/dds.hpp"
 #include "densemap/query/version_delta.hpp"
 
 namespace densemap::dds {

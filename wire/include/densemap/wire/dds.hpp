@@ -13,7 +13,7 @@
 #include <utility>
 #include <vector>
 
-#include "densemap/dds/security.hpp"
+#include "densemap/wire/security.hpp"
 #include "densemap/geometry/error.hpp"
 
 namespace densemap::dds {

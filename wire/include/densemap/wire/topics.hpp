@@ -3,7 +3,7 @@
 #include <cstdint>
 #include <string>
 
-#include "densemap/dds/dds.hpp"
+#include "densemap/wire/dds.hpp"
 
 namespace densemap::dds {
 

@@ -1,4 +1,4 @@
-#include "densemap/dds/topics.hpp"
+#include "densemap/wire/topics.hpp"
 
 #include "densemap_msgs.h"
 

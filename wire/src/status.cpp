@@ -1,0 +1,101 @@
+#include "densemap/wire/status.hpp"
+
+namespace densemap::dds {
+namespace {
+
+std::string text(const char* s) { return s != nullptr ? s : ""; }
+char* lend(const std::string& s) { return const_cast<char*>(s.c_str()); }
+
+}  // namespace
+
+Expected<void> writeStatus(const Entity& writer, const ServerStatus& st) {
+  densemap_msgs_Status s{};
+  s.received = st.received;
+  s.integrated = st.integrated;
+  s.dropped = st.dropped;
+  s.rejected = st.rejected;
+  // Lent for the write: DDS serialises the sample and never writes through these.
+  auto by_reason = st.rejected_by_reason;
+  s.rejected_by_reason = borrowSequence<dds_sequence_unsigned_long_long>(by_reason);
+  s.last_reject_reason = lend(st.last_reject_reason);
+  s.latency_p50_ms = st.latency_p50_ms;
+  s.latency_p99_ms = st.latency_p99_ms;
+  s.known_cells = st.known_cells;
+  s.map_version = st.map_version;
+  s.memory_bytes = st.memory_bytes;
+  s.uptime_s = st.uptime_s;
+  s.rss_bytes = st.rss_bytes;
+  s.evicted_blocks = st.evicted_blocks;
+  s.evicted_cells = st.evicted_cells;
+  s.snapshot_failures = st.snapshot_failures;
+  s.last_snapshot_error = lend(st.last_snapshot_error);
+  s.cpu_s = st.cpu_s;
+  s.queries_answered = st.queries_answered;
+  s.queries_rejected = st.queries_rejected;
+  s.last_query_error = lend(st.last_query_error);
+  std::vector<densemap_msgs_SensorStatus> sensors;
+  sensors.reserve(st.sensors.size());
+  for (const SensorCounters& sc : st.sensors) {
+    sensors.push_back(
+        {lend(sc.sensor_id), sc.received, sc.integrated, sc.dropped, sc.rejected, sc.seq_gaps});
+  }
+  s.sensors = borrowSequence<dds_sequence_densemap_msgs_SensorStatus>(sensors);
+  s.ros_enabled = st.ros_enabled;
+  s.ros_received = st.ros_received;
+  s.ros_submitted = st.ros_submitted;
+  s.ros_rejected = st.ros_rejected;
+  s.ros_no_transform = st.ros_no_transform;
+  auto ros_by_reason = st.ros_rejected_by_reason;
+  s.ros_rejected_by_reason = borrowSequence<dds_sequence_unsigned_long_long>(ros_by_reason);
+  s.ros_last_reject = lend(st.ros_last_reject);
+  s.ros_maps_published = st.ros_maps_published;
+  return write(writer, &s);
+}
+
+ServerStatus statusFromWire(const densemap_msgs_Status& s) {
+  ServerStatus out;
+  out.received = s.received;
+  out.integrated = s.integrated;
+  out.dropped = s.dropped;
+  out.rejected = s.rejected;
+  out.rejected_by_reason.assign(s.rejected_by_reason._buffer,
+                                s.rejected_by_reason._buffer + s.rejected_by_reason._length);
+  out.last_reject_reason = text(s.last_reject_reason);
+  out.latency_p50_ms = s.latency_p50_ms;
+  out.latency_p99_ms = s.latency_p99_ms;
+  out.known_cells = s.known_cells;
+  out.map_version = s.map_version;
+  out.memory_bytes = s.memory_bytes;
+  out.uptime_s = s.uptime_s;
+  out.rss_bytes = s.rss_bytes;
+  out.evicted_blocks = s.evicted_blocks;
+  out.evicted_cells = s.evicted_cells;
+  out.snapshot_failures = s.snapshot_failures;
+  out.last_snapshot_error = text(s.last_snapshot_error);
+  out.cpu_s = s.cpu_s;
+  out.queries_answered = s.queries_answered;
+  out.queries_rejected = s.queries_rejected;
+  out.last_query_error = text(s.last_query_error);
+  for (std::uint32_t i = 0; i < s.sensors._length; ++i) {
+    const auto& sc = s.sensors._buffer[i];
+    out.sensors.push_back({.sensor_id = text(sc.sensor_id),
+                           .received = sc.received,
+                           .integrated = sc.integrated,
+                           .dropped = sc.dropped,
+                           .rejected = sc.rejected,
+                           .seq_gaps = sc.seq_gaps});
+  }
+  out.ros_enabled = s.ros_enabled;
+  out.ros_received = s.ros_received;
+  out.ros_submitted = s.ros_submitted;
+  out.ros_rejected = s.ros_rejected;
+  out.ros_no_transform = s.ros_no_transform;
+  out.ros_rejected_by_reason.assign(
+      s.ros_rejected_by_reason._buffer,
+      s.ros_rejected_by_reason._buffer + s.ros_rejected_by_reason._length);
+  out.ros_last_reject = text(s.ros_last_reject);
+  out.ros_maps_published = s.ros_maps_published;
+  return out;
+}
+
+}  // namespace densemap::dds
