@@ -1,0 +1,175 @@
+#include "kernel_fit.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <unordered_map>
+
+namespace densemap::kernel::detail {
+
+Kernel isotropicKernel(const Sample& s, const KernelOptions& o) {
+  Kernel k;
+  k.x = s.x;
+  k.to = s.to;
+  const double length = s.tip ? o.tip_length_scale : o.length_scale;
+  k.weight = o.sf2;
+  k.inverse_length = 1.0 / length;
+  k.occupied = s.occupied;
+  k.half_extent = Eigen::Vector3d::Constant(length);
+  return k;
+}
+
+/// The hits of a scan: the points within max range (the occupied samples of makeSamples).
+std::vector<Eigen::Vector3d> hitsOf(const PointCloud& points_world, const Eigen::Vector3d& origin,
+                                    double max_range) {
+  std::vector<Eigen::Vector3d> hits;
+  for (const Point3f& p : points_world) {
+    const double length = (p.cast<double>() - origin).norm();
+    if (length > 0.0 && (max_range < 0.0 || length <= max_range)) hits.push_back(p.cast<double>());
+  }
+  return hits;
+}
+
+/// Where kAkimapRays' free evidence along a ray stops: `free_margin` and `tip_margin` from the
+/// surface, measured along its normal (a distance d from the surface is d / cos(incidence)
+/// along the ray, at most max_margin), or along the ray where no normal is known (zero).
+RayStop rayStop(const Eigen::Vector3d& ray, const Eigen::Vector3d& normal, const KernelOptions& o) {
+  const double cosine = std::abs(ray.dot(normal));
+  const auto along = [&](double margin) {
+    if (margin < 0.0 || normal.isZero()) return margin;
+    return std::min(margin / std::max(cosine, 1e-6), std::max(o.max_margin, margin));
+  };
+  return {along(o.free_margin), along(o.tip_margin)};
+}
+
+/// kAkimapRays' direct hit evidence: per hit, its cell (hit_weight) and an isotropic kernel of
+/// hit_length_voxels (hit_kernel_weight); with `counts`, `positions` are voxels' mean hits, each
+/// standing for that many hits (the cell's evidence is then exactly the hits' sum).
+void appendHitKernels(const std::vector<Eigen::Vector3d>& positions,
+                      const std::vector<double>* counts, const KernelOptions& o, double resolution,
+                      std::vector<Kernel>& kernels) {
+  const double radius = o.hit_length_voxels * resolution;
+  for (std::size_t i = 0; i < positions.size(); ++i) {
+    const double count = counts != nullptr ? (*counts)[i] : 1.0;
+    Kernel k;
+    k.x = k.to = positions[i];
+    k.occupied = true;
+    if (o.hit_weight > 0.0) {
+      k.weight = o.hit_weight * count;
+      k.cell = true;
+      k.half_extent.setZero();
+      kernels.push_back(k);
+    }
+    if (o.hit_kernel_weight > 0.0) {
+      k.weight = o.hit_kernel_weight * count;
+      k.cell = false;
+      k.half_extent.setConstant(radius);
+      k.inverse_length = 1.0 / radius;
+      kernels.push_back(k);
+    }
+  }
+}
+
+/// kAkimapRays with aggregate_hits: the adaptive kernels of a scan's hits (`hits`: indices of
+/// the occupied samples) and each hit's ray stop. A voxel with at least `aggregate_min_hits`
+/// hits gets one kernel at their mean, weighing their count, fitted to the neighbourhood
+/// outside the voxel; its normal sets its rays' stops. Other voxels keep a kernel per hit (a
+/// mean would lose the spread of a few hits, which is their shape: a grazing floor's).
+/// `means` and `counts`: where the direct hit evidence goes and how many hits it stands for.
+void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
+                          const std::vector<Sample>& samples,
+                          const std::vector<std::uint32_t>& hits, const SampleIndex& index,
+                          const Eigen::Vector3d& origin, std::vector<Kernel>& kernels,
+                          std::vector<RayStop>& stops, std::vector<Eigen::Vector3d>& means,
+                          std::vector<double>& counts) {
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> by_voxel(hits.size());
+  // A hit's voxel, packed in 48 bits (outside the addressable range: one reserved value
+  // above them, so such hits sort last).
+  const auto voxelOf = [&grid](const Eigen::Vector3d& x) {
+    const auto key = grid.pointToKey(x.cast<float>());
+    return key ? key->packed() : std::uint64_t{1} << 48;
+  };
+  for (std::uint32_t h = 0; h < hits.size(); ++h) by_voxel[h] = {voxelOf(samples[hits[h]].x), h};
+  // By voxel, hits in order within each (stable; made in hit order).
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> by_voxel_other;
+  std::vector<std::uint32_t> radix_counts;
+  radixSort(
+      by_voxel, by_voxel_other, 49, [](const auto& pair) { return pair.first; }, radix_counts);
+  // Groups of hits by voxel, and where each group's kernels go (one, or one per hit).
+  const auto min_hits = static_cast<std::uint32_t>(std::max(1.0, options.aggregate_min_hits));
+  std::vector<std::uint32_t> group_starts, outputs{0};
+  for (std::size_t p = 0; p <= by_voxel.size(); ++p) {
+    if (p == by_voxel.size() || p == 0 || by_voxel[p].first != by_voxel[p - 1].first) {
+      if (!group_starts.empty()) {
+        const std::uint32_t n = static_cast<std::uint32_t>(p) - group_starts.back();
+        outputs.push_back(outputs.back() + (n >= min_hits ? 1 : n));
+      }
+      group_starts.push_back(static_cast<std::uint32_t>(p));
+    }
+  }
+  const std::size_t groups = group_starts.size() - 1;
+  kernels.resize(outputs.back());
+  means.resize(outputs.back());
+  counts.resize(outputs.back());
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, groups, 64),
+      [&](const tbb::blocked_range<std::size_t>& range) {
+        std::vector<Neighbour> neighbours;
+        Eigen::Vector3d normal;
+        for (std::size_t g = range.begin(); g != range.end(); ++g) {
+          const std::uint32_t first = group_starts[g], last = group_starts[g + 1];
+          std::uint32_t out = outputs[g];
+          if (last - first < min_hits) {  // a kernel per hit, as without aggregation
+            for (std::uint32_t p = first; p < last; ++p, ++out) {
+              const std::uint32_t h = by_voxel[p].second, i = hits[h];
+              kernels[out] = adaptiveKernel(
+                  samples[i], [i](const SampleIndex::Entry& e) { return e.index == i; },
+                  index, options, grid.resolution(), neighbours, &normal);
+              means[out] = samples[i].x;
+              counts[out] = 1.0;
+              stops[h] = rayStop((samples[i].x - origin).normalized(), normal, options);
+            }
+            continue;
+          }
+          Sample centre;
+          centre.occupied = true;
+          for (std::uint32_t p = first; p < last; ++p) {
+            const Sample& h = samples[hits[by_voxel[p].second]];
+            centre.x += h.x;
+            centre.range += h.range;
+          }
+          const double count = last - first;
+          centre.x /= count;
+          centre.to = centre.x;
+          centre.range /= count;
+          const std::uint64_t own = by_voxel[first].first;
+          // The voxel's own hits, recognised by their position (no lookup per neighbour): a
+          // point clearly outside the voxel's cube (by more than a millimetre and a float's
+          // rounding at that distance from the origin) is not one; only points near its faces
+          // take the key's own test.
+          const VoxelKey own_key = VoxelKey::fromPacked(own);
+          const Eigen::Vector3d own_centre(grid.keyToCoord(own_key.x), grid.keyToCoord(own_key.y),
+                                           grid.keyToCoord(own_key.z));
+          const double clearly_out = 0.5 * grid.resolution() + 1e-3 +
+                                     2e-7 * own_centre.cwiseAbs().maxCoeff();  // float's step
+          Kernel k = adaptiveKernel(
+              centre,
+              [&](const SampleIndex::Entry& e) {
+                if (!e.occupied) return false;
+                if (((e.x - own_centre).array().abs() > clearly_out).any()) return false;
+                return voxelOf(e.x) == own;
+              },
+              index, options, grid.resolution(), neighbours, &normal);
+          k.weight *= count;
+          kernels[out] = k;
+          means[out] = centre.x;
+          counts[out] = count;
+          for (std::uint32_t p = first; p < last; ++p) {
+            const std::uint32_t h = by_voxel[p].second;
+            stops[h] = rayStop((samples[hits[h]].x - origin).normalized(), normal, options);
+          }
+        }
+      });
+}
+
+}  // namespace densemap::kernel::detail

@@ -1,0 +1,176 @@
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "densemap/geometry/voxel_grid.hpp"
+#include "densemap/kernel/bandwidth.hpp"
+#include "densemap/kernel/kernel_function.hpp"
+#include "densemap/kernel/kernel_map.hpp"
+#include "densemap/kernel/occupancy_samples.hpp"
+#include "sample_index.hpp"
+
+/// The kernels a scan's samples give (AKIMap's adaptive kernels, BGK's isotropic ones,
+/// akimap_rays' per-voxel kernels and ray stops): fitted here, accumulated by KernelMap.
+namespace densemap::kernel::detail {
+
+/// One sample's kernel, ready to evaluate at cell centres.
+struct Kernel {
+  Eigen::Vector3d x;
+  Eigen::Vector3d to;  // segment end (== x for point kernels)
+  // Anisotropic kernels: H^-1.
+  Eigen::Matrix3d h_inverse = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d half_extent;  // bounding box of the support around [x, to]
+  VoxelKey key_min, key_max;    // that box's voxels (set when the kernel is scheduled)
+  double weight = 1.0;          // |H|^-1/2 (AKIMap) or sf2 (BGK)
+  double inverse_length = 0.0;  // isotropic kernels: 1 / length scale; 0: anisotropic
+  bool occupied = false;
+  bool cell = false;  // `weight` on the one cell [key_min, key_max] (a hit's cell)
+
+  /// The kernel's value at c, from the r^2 table (squaredKernel: no sqrt, no sincos).
+  [[nodiscard]] double at(const Eigen::Vector3d& c, const SquaredKernelTable& table) const {
+    if (cell) return weight;
+    if (inverse_length == 0.0) {
+      const Eigen::Vector3d d = c - x;
+      return weight * table(d.dot(h_inverse * d));
+    }
+    // Distance to the point, or to the segment [x, to].
+    const Eigen::Vector3d seg = to - x;
+    const double len2 = seg.squaredNorm();
+    double t = len2 > 0.0 ? (c - x).dot(seg) / len2 : 0.0;
+    t = std::clamp(t, 0.0, 1.0);
+    return weight * table((c - (x + t * seg)).squaredNorm() * inverse_length * inverse_length);
+  }
+
+  /// The x interval [lo, hi] (m) of the row at (y, z) outside which the kernel is 0: exact for
+  /// ellipsoids, the infinite cylinder around a segment cut by its end planes (a superset of
+  /// the capsule) otherwise. False when the row misses the support. Widened by a micrometre so
+  /// that rounding never drops a cell the kernel reaches.
+  [[nodiscard]] bool rowInterval(double y, double z, double& lo, double& hi) const {
+    constexpr double kSlack = 1e-6;
+    lo = -std::numeric_limits<double>::infinity();
+    hi = std::numeric_limits<double>::infinity();
+    if (cell) return true;
+    const double dy = y - x.y(), dz = z - x.z();
+    // a t^2 + 2 b t + c < 1 for t = cx - x.x (ellipsoid, or cylinder scaled to radius 1).
+    double a = 0.0, b = 0.0, c = 0.0;
+    if (inverse_length == 0.0) {
+      const Eigen::Matrix3d& m = h_inverse;
+      a = m(0, 0);
+      b = m(0, 1) * dy + m(0, 2) * dz;
+      c = m(1, 1) * dy * dy + 2.0 * m(1, 2) * dy * dz + m(2, 2) * dz * dz;
+    } else {
+      const Eigen::Vector3d seg = to - x;
+      const double length = seg.norm();
+      const double r2 = inverse_length * inverse_length;
+      if (length > 0.0) {
+        const Eigen::Vector3d u = seg / length;
+        const double along_yz = dy * u.y() + dz * u.z();
+        a = (1.0 - u.x() * u.x()) * r2;
+        b = -u.x() * along_yz * r2;
+        c = (dy * dy + dz * dz - along_yz * along_yz) * r2;
+        // End planes: -radius <= t u.x + along_yz <= length + radius.
+        const double radius = 1.0 / inverse_length;
+        if (std::abs(u.x()) > 1e-12) {
+          double t0 = (-radius - along_yz) / u.x(), t1 = (length + radius - along_yz) / u.x();
+          if (t0 > t1) std::swap(t0, t1);
+          lo = x.x() + t0 - kSlack;
+          hi = x.x() + t1 + kSlack;
+        } else if (along_yz < -radius || along_yz > length + radius) {
+          return false;
+        }
+      } else {
+        a = r2;
+        c = (dy * dy + dz * dz) * r2;
+      }
+    }
+    if (a <= 1e-12) return c < 1.0 + kSlack;  // the row runs along the axis
+    const double disc = b * b - a * (c - 1.0);
+    if (disc < 0.0) return false;
+    const double root = std::sqrt(disc);
+    lo = std::max(lo, x.x() + (-b - root) / a - kSlack);
+    hi = std::min(hi, x.x() + (-b + root) / a + kSlack);
+    return lo <= hi;
+  }
+};
+
+/// BGK's isotropic kernel for sample s (its length scale: o.length_scale, tips
+/// o.tip_length_scale).
+[[nodiscard]] Kernel isotropicKernel(const Sample& s, const KernelOptions& o);
+
+/// AKIMap's kernel for sample i (Sec. 3.3.3): covariance of same-label neighbours in the search
+/// box, then the scale minimising Eq. 3.7.
+/// When `normal` is given, it is set to the surface normal at the sample (the covariance's
+/// least axis) where the same-label neighbourhood is flat (least spread under a quarter of
+/// the middle one, regulariser aside), else to zero.
+/// `s` is a sample or a voxel's mean hit; `left_out(entry)` says which samples are not its
+/// neighbours (the sample itself, or the voxel's own hits).
+template <class LeftOut>
+Kernel adaptiveKernel(const Sample& s, LeftOut&& left_out, const SampleIndex& index,
+                      const KernelOptions& o, double resolution,
+                      std::vector<Neighbour>& neighbours, Eigen::Vector3d* normal = nullptr) {
+  const double range_ref = o.max_range > 0.0 ? o.max_range : o.search_range;
+  const double half =
+      resolution + (o.search_max - resolution) * std::clamp(s.range / range_ref, 0.0, 1.0);
+  neighbours.clear();
+  index.forEachInBox(s.x, half, [&](const SampleIndex::Entry& e) {
+    if (!left_out(e)) neighbours.push_back({e.x, e.occupied == s.occupied});
+  });
+  // The regulariser keeps flat kernels at least `min_thickness` (and a voxel) thick, one
+  // standard deviation, so a surface's samples reach the centres of the cells they lie in; the
+  // isotropic fallback spans half the search box.
+  const double thickness = std::max(o.min_thickness, resolution);
+  const double regulariser = thickness * thickness;
+  const Eigen::Matrix3d sigma =
+      neighbourCovariance(s.x, neighbours, regulariser, 0.25 * half * half);
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(
+      sigma, normal != nullptr ? Eigen::ComputeEigenvectors : Eigen::EigenvaluesOnly);
+  const double largest = eigen.eigenvalues().maxCoeff();  // ascending: [0] least, [2] largest
+  if (normal != nullptr) {
+    const std::size_t same = static_cast<std::size_t>(std::count_if(
+        neighbours.begin(), neighbours.end(), [](const Neighbour& n) { return n.same_label; }));
+    const double least = eigen.eigenvalues()[0] - regulariser;
+    const double middle = eigen.eigenvalues()[1] - regulariser;
+    *normal = same >= 3 && middle > 4.0 * std::max(least, 0.0) && middle > 0.0
+                  ? Eigen::Vector3d(eigen.eigenvectors().col(0))
+                  : Eigen::Vector3d::Zero();
+  }
+  // The support (sqrt(s * lambda) along each axis) stays inside the search box.
+  const double s_max = std::max(1.0, half * half / largest);
+  const double scale = fitScale(sigma, s.x, neighbours, 1.0 / 16.0, s_max);
+  const Eigen::Matrix3d h = scale * sigma;
+  Kernel k;
+  k.x = s.x;
+  k.to = s.x;
+  k.h_inverse = h.inverse();
+  k.weight = o.method == KernelMethod::kAkimapRays && o.occupied_weight > 0.0
+                 ? o.occupied_weight
+                 : 1.0 / std::sqrt(h.determinant());
+  k.occupied = s.occupied;
+  k.half_extent = h.diagonal().cwiseSqrt();
+  return k;
+}
+
+/// The hits of a scan: the points within max range (the occupied samples of makeSamples).
+[[nodiscard]] std::vector<Eigen::Vector3d> hitsOf(const PointCloud& points_world,
+                                                  const Eigen::Vector3d& origin, double max_range);
+/// Where kAkimapRays' free evidence along a ray stops (see kernel_fit.cpp).
+[[nodiscard]] RayStop rayStop(const Eigen::Vector3d& ray, const Eigen::Vector3d& normal,
+                              const KernelOptions& o);
+/// kAkimapRays' direct hit evidence (see kernel_fit.cpp).
+void appendHitKernels(const std::vector<Eigen::Vector3d>& positions,
+                      const std::vector<double>* counts, const KernelOptions& o, double resolution,
+                      std::vector<Kernel>& kernels);
+/// kAkimapRays' kernels of the hits voxel by voxel (see kernel_fit.cpp).
+void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
+                          const std::vector<Sample>& samples,
+                          const std::vector<std::uint32_t>& hits, const SampleIndex& index,
+                          const Eigen::Vector3d& origin, std::vector<Kernel>& kernels,
+                          std::vector<RayStop>& stops, std::vector<Eigen::Vector3d>& means,
+                          std::vector<double>& counts);
+
+}  // namespace densemap::kernel::detail

@@ -1,0 +1,156 @@
+#include "densemap/kernel/kernel_map.hpp"
+
+#include <bit>
+#include <cmath>
+#include <limits>
+
+#include "kernel_scratch.hpp"
+
+/// The kernel map as a store: its cells' evidence, probabilities, erasure and eviction,
+/// snapshots' evidence, memory.
+namespace densemap::kernel {
+
+void KernelMap::erase(const VoxelKey& key) {
+  const auto it = blocks_.find(block::blockOf(key));
+  if (it == blocks_.end()) return;
+  const int cell = block::indexOf(key);
+  block::clearBit(it->second.known, cell);
+  it->second.alpha[cell] = 0.0F;
+  it->second.beta[cell] = 0.0F;
+}
+
+std::size_t KernelMap::evictBlocks(const std::function<bool(const Point3f&)>& keep) {
+  const std::size_t before = blocks_.size();
+  std::erase_if(blocks_,
+                [&](const auto& entry) { return !keep(block::centreOf(grid_, entry.first)); });
+  return before - blocks_.size();
+}
+
+std::optional<double> KernelMap::probability(const VoxelKey& key) const {
+  const auto it = blocks_.find(block::blockOf(key));
+  if (it == blocks_.end()) return std::nullopt;
+  const int cell = block::indexOf(key);
+  if (!block::testBit(it->second.known, cell)) return std::nullopt;
+  const double alpha = options_.prior + it->second.alpha[cell];
+  const double beta = options_.prior + it->second.beta[cell];
+  return alpha / (alpha + beta);
+}
+
+void KernelMap::blockLogOdds(std::uint64_t block_key, const block::BlockMask& cells,
+                             std::array<float, block::kVoxels>& log_odds) const {
+  const auto it = blocks_.find(block_key);
+  block::forEachSetBit(cells, [&](int cell) {
+    // probability(), cell by cell: unknown is p = 0.5
+    double p = 0.5;
+    if (it != blocks_.end() && block::testBit(it->second.known, cell)) {
+      const double alpha = options_.prior + it->second.alpha[cell];
+      const double beta = options_.prior + it->second.beta[cell];
+      p = alpha / (alpha + beta);
+    }
+    log_odds[cell] = static_cast<float>(std::log(p / (1.0 - p)));
+  });
+}
+
+void KernelMap::forEachKnown(const std::function<void(const VoxelKey&, double)>& f) const {
+  for (const auto& [block_key, b] : blocks_) {
+    for (int cell = 0; cell < block::kVoxels; ++cell) {
+      if (!block::testBit(b.known, cell)) continue;
+      const double alpha = options_.prior + b.alpha[cell];
+      const double beta = options_.prior + b.beta[cell];
+      f(block::keyOf(block_key, cell), alpha / (alpha + beta));
+    }
+  }
+}
+
+KernelEvidence KernelMap::evidence() const {
+  KernelEvidence e;
+  e.method = options_.method;
+  e.resolution_m = grid_.resolution();
+  e.scans = scans_;
+  std::vector<std::uint64_t> order;
+  order.reserve(blocks_.size());
+  for (const auto& entry : blocks_) order.push_back(entry.first);
+  std::sort(order.begin(), order.end());  // a file does not depend on the hash's order
+  const std::size_t n = knownCells();
+  e.keys.reserve(n);
+  e.alpha.reserve(n);
+  e.beta.reserve(n);
+  for (const std::uint64_t block_key : order) {
+    const Block& b = blocks_.at(block_key);
+    block::forEachSetBit(b.known, [&](int cell) {
+      e.keys.push_back(block::keyOf(block_key, cell));
+      e.alpha.push_back(b.alpha[static_cast<std::size_t>(cell)]);
+      e.beta.push_back(b.beta[static_cast<std::size_t>(cell)]);
+    });
+  }
+  return e;
+}
+
+Expected<void> KernelMap::restore(const KernelEvidence& e) {
+  if (e.method != options_.method) {
+    return makeError("kernel evidence of " + std::string(kernelMethodName(e.method)) + ", not " +
+                     std::string(kernelMethodName(options_.method)));
+  }
+  if (e.resolution_m != grid_.resolution()) {
+    return makeError("kernel evidence at " + std::to_string(e.resolution_m) + " m, not " +
+                     std::to_string(grid_.resolution()) + " m");
+  }
+  if (e.alpha.size() != e.keys.size() || e.beta.size() != e.keys.size()) {
+    return makeError("kernel evidence arrays differ in length");
+  }
+  // Held as float: a value beyond float's range is refused, not stored as infinity.
+  const auto valid = [](double v) {
+    return std::isfinite(v) && v >= 0.0 && v <= std::numeric_limits<float>::max();
+  };
+  for (std::size_t i = 0; i < e.keys.size(); ++i) {
+    if (!valid(e.alpha[i]) || !valid(e.beta[i])) {
+      return makeError("kernel evidence has a negative or non-finite value");
+    }
+  }
+  blocks_.clear();
+  for (std::size_t i = 0; i < e.keys.size(); ++i) {
+    Block& b = blocks_[block::blockOf(e.keys[i])];
+    const int cell = block::indexOf(e.keys[i]);
+    b.alpha[static_cast<std::size_t>(cell)] = static_cast<float>(e.alpha[i]);
+    b.beta[static_cast<std::size_t>(cell)] = static_cast<float>(e.beta[i]);
+    block::setBit(b.known, cell);
+  }
+  scans_ = e.scans;
+  return {};
+}
+
+std::size_t KernelMap::memoryBytes() const {
+  // A node of the hash (the block, its key, the next pointer) and a bucket per block.
+  std::size_t bytes = blocks_.size() * (sizeof(Block) + 2 * sizeof(void*) + sizeof(std::uint64_t)) +
+                      blocks_.bucket_count() * sizeof(void*);
+  bytes += (samples_.capacity() + segments_.capacity()) * sizeof(Sample);
+  for (const auto& part : scratch_->sample_parts) bytes += part.capacity() * sizeof(Sample);
+  bytes += scratch_->index.starts.capacity() * sizeof(std::uint32_t) +
+           scratch_->index.entries.capacity() * sizeof(SampleIndex::Entry) +
+           scratch_->index.bucket.capacity() * sizeof(std::uint32_t) +
+           (scratch_->index.keys.capacity() + scratch_->index.keys_other.capacity()) *
+               sizeof(std::uint64_t) +
+           scratch_->index.counts.capacity() * sizeof(std::uint32_t);
+  const FreeBundleBuffers& fb = scratch_->bundles;
+  bytes += (fb.hit_of.capacity() + fb.takes.capacity()) * sizeof(std::uint32_t) +
+           (fb.rays.capacity() + fb.rays_other.capacity()) *
+               sizeof(std::pair<std::uint64_t, std::uint32_t>) +
+           fb.radix_counts.capacity() * sizeof(std::uint32_t) +
+           (fb.group_starts.capacity() + fb.offsets.capacity()) * sizeof(std::size_t);
+  bytes += scratch_->kernels.capacity() * sizeof(Kernel) +
+           scratch_->free_extents.capacity() * sizeof(FreeExtent) +
+           (scratch_->pairs.capacity() + scratch_->pairs_other.capacity()) *
+               sizeof(std::pair<std::uint64_t, std::uint32_t>) +
+           scratch_->radix_counts.capacity() * sizeof(std::uint32_t);
+  return bytes + free_->memoryBytes();
+}
+
+std::size_t KernelMap::knownCells() const {
+  std::size_t n = 0;
+  for (const auto& [block_key, b] : blocks_) {
+    for (const std::uint64_t w : b.known) n += static_cast<std::size_t>(std::popcount(w));
+  }
+  return n;
+}
+
+}  // namespace densemap::kernel
