@@ -123,8 +123,8 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
             for (std::uint32_t p = first; p < last; ++p, ++out) {
               const std::uint32_t h = by_voxel[p].second, i = hits[h];
               kernels[out] = adaptiveKernel(
-                  samples[i], [i](const SampleIndex::Entry& e) { return e.index == i; },
-                  index, options, grid.resolution(), neighbours, &normal);
+                  samples[i], [i](const SampleIndex::Entry& e) { return e.index == i; }, index,
+                  options, grid.resolution(), neighbours, &normal);
               means[out] = samples[i].x;
               counts[out] = 1.0;
               stops[h] = rayStop((samples[i].x - origin).normalized(), normal, options);

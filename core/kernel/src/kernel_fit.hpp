@@ -111,8 +111,8 @@ struct Kernel {
 /// neighbours (the sample itself, or the voxel's own hits).
 template <class LeftOut>
 Kernel adaptiveKernel(const Sample& s, LeftOut&& left_out, const SampleIndex& index,
-                      const KernelOptions& o, double resolution,
-                      std::vector<Neighbour>& neighbours, Eigen::Vector3d* normal = nullptr) {
+                      const KernelOptions& o, double resolution, std::vector<Neighbour>& neighbours,
+                      Eigen::Vector3d* normal = nullptr) {
   const double range_ref = o.max_range > 0.0 ? o.max_range : o.search_range;
   const double half =
       resolution + (o.search_max - resolution) * std::clamp(s.range / range_ref, 0.0, 1.0);

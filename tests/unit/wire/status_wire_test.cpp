@@ -18,9 +18,9 @@ ServerStatus everyFieldSet() {
   std::uint64_t n = 1;
   for (std::uint64_t* f :
        {&s.received, &s.integrated, &s.dropped, &s.rejected, &s.known_cells, &s.map_version,
-        &s.memory_bytes, &s.queries_answered, &s.queries_rejected, &s.rss_bytes,
-        &s.evicted_blocks, &s.evicted_cells, &s.snapshot_failures, &s.ros_received,
-        &s.ros_submitted, &s.ros_rejected, &s.ros_no_transform, &s.ros_maps_published}) {
+        &s.memory_bytes, &s.queries_answered, &s.queries_rejected, &s.rss_bytes, &s.evicted_blocks,
+        &s.evicted_cells, &s.snapshot_failures, &s.ros_received, &s.ros_submitted, &s.ros_rejected,
+        &s.ros_no_transform, &s.ros_maps_published}) {
     *f = 1000 + n++;
   }
   s.rejected_by_reason = {1, 0, 2, 3, 0, 4, 5};
@@ -29,10 +29,18 @@ ServerStatus everyFieldSet() {
   s.latency_p99_ms = 40.25;
   s.uptime_s = 3600.5;
   s.last_query_error = "box too large";
-  s.sensors = {{.sensor_id = "front", .received = 7, .integrated = 5, .dropped = 1,
-                .rejected = 1, .seq_gaps = 2},
-               {.sensor_id = "rear", .received = 9, .integrated = 9, .dropped = 0,
-                .rejected = 0, .seq_gaps = 0}};
+  s.sensors = {{.sensor_id = "front",
+                .received = 7,
+                .integrated = 5,
+                .dropped = 1,
+                .rejected = 1,
+                .seq_gaps = 2},
+               {.sensor_id = "rear",
+                .received = 9,
+                .integrated = 9,
+                .dropped = 0,
+                .rejected = 0,
+                .seq_gaps = 0}};
   s.last_snapshot_error = "disk full";
   s.cpu_s = 17.75;
   s.ros_enabled = true;
@@ -53,9 +61,8 @@ TEST(StatusWire, EveryFieldSurvivesTheWire) {
   ASSERT_TRUE(dds::writeStatus(*writer, sent));
   std::optional<ServerStatus> received;
   for (int i = 0; i < 200 && !received; ++i) {
-    dds::takeAll<densemap_msgs_Status>(*reader, [&](const densemap_msgs_Status& s) {
-      received = dds::statusFromWire(s);
-    });
+    dds::takeAll<densemap_msgs_Status>(
+        *reader, [&](const densemap_msgs_Status& s) { received = dds::statusFromWire(s); });
     if (!received) std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   ASSERT_TRUE(received);

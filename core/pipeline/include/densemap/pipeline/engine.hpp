@@ -122,8 +122,7 @@ class Engine {
   [[nodiscard]] const PipelineOptions& options() const { return options_; }
 
  private:
-  Engine(const PipelineOptions& options, std::unique_ptr<OccupancyMap> map,
-         std::uint64_t version);
+  Engine(const PipelineOptions& options, std::unique_ptr<OccupancyMap> map, std::uint64_t version);
   /// The scan's points in the world frame (densified first when upsampling is on).
   void transform(Scan& scan, PointCloud& points_world, Point3f& origin_world) const;
   /// Drops the blocks keep_radius_m / bounds leave out, after a scan from `origin`.
