@@ -40,19 +40,22 @@ std::string formatTable(const std::vector<RunResult>& runs) {
 std::string formatRayTable(const std::vector<RunResult>& runs) {
   std::ostringstream out;
   char line[512];
-  std::snprintf(line, sizeof(line), "%-16s %-7s %11s %11s %8s %11s %12s %12s   %s\n", "method",
-                "backend", "rays/scan", "super/scan", "pts/ray", "visits/scan", "culled/scan",
-                "region/scan", "mean ms: rays region mark merge apply");
+  std::snprintf(line, sizeof(line), "%-16s %-7s %11s %11s %8s %11s %11s %7s %8s %12s %12s   %s\n",
+                "method", "backend", "rays/scan", "super/scan", "pts/ray", "visits/scan",
+                "cells/scan", "v/cell", "ns/visit", "culled/scan", "region/scan",
+                "mean ms: rays region mark merge apply");
   out << line;
   for (const RunResult& r : runs) {
     if (!r.has_counts) continue;
     const double points_per_scan = r.scans > 0 ? static_cast<double>(r.points) / r.scans : 0;
     std::snprintf(
         line, sizeof(line),
-        "%-16s %-7s %11.0f %11.0f %8.2f %11.0f %12.0f %12.0f   %.1f %.1f %.1f %.1f %.1f%s\n",
+        "%-16s %-7s %11.0f %11.0f %8.2f %11.0f %11.0f %7.2f %8.2f %12.0f %12.0f   %.1f %.1f %.1f "
+        "%.1f %.1f%s\n",
         r.method.c_str(), r.backend.c_str(), r.rays_per_scan, r.super_rays_per_scan,
         r.rays_per_scan > 0 ? points_per_scan / r.rays_per_scan : 0.0, r.visits_per_scan,
-        r.culled_per_scan, r.region_voxels_per_scan, r.ms_stage[0], r.ms_stage[1], r.ms_stage[2],
+        r.cells_per_scan, r.cells_per_scan > 0 ? r.visits_per_scan / r.cells_per_scan : 0.0,
+        r.nsPerVisit(), r.culled_per_scan, r.region_voxels_per_scan, r.ms_stage[0], r.ms_stage[1], r.ms_stage[2],
         r.ms_stage[3], r.ms_stage[4],
         r.dense ? "  (dense: samples kernels occupied free apply)" : "");
     out << line;
@@ -97,6 +100,8 @@ std::string formatJson(const std::vector<RunResult>& runs, const std::string& da
         << ", \"visits_per_scan\": " << (r.has_counts ? number(r.visits_per_scan) : "null")
         << ", \"changed_cells_per_scan\": "
         << (r.has_counts ? number(r.changed_cells_per_scan) : "null")
+        << ", \"cells_per_scan\": " << (r.has_counts ? number(r.cells_per_scan) : "null")
+        << ", \"ns_per_visit\": " << (r.has_counts ? number(r.nsPerVisit()) : "null")
         << ", \"rays_per_scan\": " << (r.has_counts ? number(r.rays_per_scan) : "null")
         << ", \"super_rays_per_scan\": " << (r.has_counts ? number(r.super_rays_per_scan) : "null")
         << ", \"culled_steps_per_scan\": " << (r.has_counts ? number(r.culled_per_scan) : "null")

@@ -25,6 +25,9 @@ struct RunResult {
   bool dense = false;       // a kernel map (visits: kernel-cell updates + free-capsule voxels)
   double visits_per_scan = 0;
   double changed_cells_per_scan = 0;
+  /// Distinct cells each scan updates (issue 31's floor: an exact update needs each once; the
+  /// culling region's cells are skipped, not updated). Visits beyond them are repeats.
+  double cells_per_scan = 0;
   // Ray statistics (the dissertation's Tables 2.2-2.3), per scan.
   double rays_per_scan = 0;        // rays traversed; a super ray counts once
   double super_rays_per_scan = 0;  // of which stand for more than one point
@@ -42,6 +45,13 @@ struct RunResult {
 
   [[nodiscard]] double percentile(double q) const;
   [[nodiscard]] double pointsPerSecond() const { return total_s > 0 ? points / total_s : 0; }
+  /// Wall-clock ns per visit (the mean scan's time over its visits; times `threads` for the
+  /// cores' time): what each visit costs, beside how many there are.
+  [[nodiscard]] double nsPerVisit() const {
+    return scans > 0 && visits_per_scan > 0 ? total_s * 1e9 / static_cast<double>(scans) /
+                                                  visits_per_scan
+                                            : 0;
+  }
 };
 
 [[nodiscard]] std::string formatTable(const std::vector<RunResult>& runs);
