@@ -60,6 +60,9 @@ struct Ros2Bridge::Topics {
   std::deque<Waiting> waiting;
   std::unique_ptr<ros2::MapTopicsState> map;
   std::shared_ptr<const MapView> published;  // the version `map` holds
+  /// The version last written to the map topics (kept while no one listens: a viewer that
+  /// returns gets it from the writers' transient-local history, not a second copy).
+  std::optional<std::uint64_t> written;
   Clock::time_point next_publish = Clock::now();
 };
 
@@ -336,6 +339,10 @@ void Ros2Bridge::publishMaps() {
   blocks.erase(std::unique(blocks.begin(), blocks.end()), blocks.end());
   s.map->update(s.published.get(), *latest, blocks);
   s.published = latest;
+  // As octomap_server: an empty map is not published (no 0-byte Octomap, no 0x0 grid), and a
+  // version already written is not written again.
+  if (latest->knownCells() == 0 || s.written == latest->version()) return;
+  s.written = latest->version();
 
   const std::string frame = options_.world_frame;
   std_msgs_msg_dds__Header_ header{rosNow(), const_cast<char*>(frame.c_str())};

@@ -437,5 +437,63 @@ TEST(Ros2Wire, TopicAndTypeNamesFollowRmwCycloneddsConventions) {
 
 #endif
 
+#ifndef DENSEMAP_ROS2_REALDATA
+// Issue 32, item 3: as octomap_server, an empty map is not published on the map topics (no
+// 0-byte Octomap), and a viewer that leaves and returns gets the unchanged map once (from the
+// writer's transient-local history), not a second copy.
+TEST(Ros2Wire, AnEmptyMapIsNotPublishedAndAReturningViewerGetsTheMapOnce) {
+  constexpr std::uint32_t kDomain = 154;
+  test::TempDir dir;
+  SequenceOptions o;
+  o.scene = "indoor";
+  o.sensor = "vlp16";
+  o.columns = 300;
+  o.scans = 2;
+  o.ground_truth_resolution_m = 0;
+  ASSERT_TRUE(writeSimulatedSequence(o, dir.path() / "data"));
+  test::ServerProcess server(dir.path(), kDomain, kRosConfig);
+  auto client = connect(kDomain);
+  ASSERT_TRUE(client);
+  auto participant = dds::createParticipant({kDomain, "lo", std::nullopt});
+  ASSERT_TRUE(participant);
+  auto topic = dds::createTopic(*participant, octomap_msgs_msg_dds__Octomap__desc,
+                                ros2::ddsTopicName("/octomap_binary"));
+  ASSERT_TRUE(topic);
+  const dds::QosSpec latched{.depth = 1, .transient_local = true};
+  const auto samplesWithin = [&](const dds::Entity& reader, std::chrono::milliseconds wait) {
+    std::size_t n = 0;
+    for (const auto end = std::chrono::steady_clock::now() + wait;
+         std::chrono::steady_clock::now() < end;) {
+      n += dds::takeAll<octomap_msgs_msg_dds__Octomap_>(
+          reader, [](const octomap_msgs_msg_dds__Octomap_& m) { EXPECT_GT(m.data._length, 0U); });
+      std::this_thread::sleep_for(20ms);
+    }
+    return n;
+  };
+  {
+    auto viewer = dds::createReader(*participant, *topic, latched);
+    ASSERT_TRUE(viewer);
+    // The empty map: nothing in 1.5 s (7 publish periods).
+    EXPECT_EQ(samplesWithin(*viewer, 1500ms), 0U);
+    ASSERT_EQ(runCli("--domain-id " + std::to_string(kDomain) + " replay --data " +
+                     (dir.path() / "data").string() + " --rate 10"),
+              0);
+    const ServerStatus s = waitForStatus(*client, [](const ServerStatus& st) {
+      return st.integrated >= 2;
+    });
+    ASSERT_EQ(s.integrated, 2U);
+    EXPECT_GE(samplesWithin(*viewer, 1500ms), 1U);
+  }
+  // The viewer left; the map is unchanged. A returning viewer gets it exactly once.
+  std::this_thread::sleep_for(1s);
+  // Depth 2: a second copy written right after the history's would be kept, not replace it.
+  auto returning =
+      dds::createReader(*participant, *topic, {.depth = 2, .transient_local = true});
+  ASSERT_TRUE(returning);
+  EXPECT_EQ(samplesWithin(*returning, 2000ms), 1U);
+  EXPECT_EQ(server.stop(), 0);
+}
+#endif
+
 }  // namespace
 }  // namespace densemap

@@ -67,6 +67,9 @@ void MapTopicsState::update(const MapView* base, const MapView& next,
     });
   }
   tree_.updateInnerOccupancy();
+  // Pruned, as octomap_server publishes it: eight equal children become their parent (a
+  // later update of one cell expands it again, OcTree::setNodeValue does).
+  tree_.prune();
 }
 
 void MapTopicsState::clear() {
@@ -83,10 +86,23 @@ std::string MapTopicsState::binaryData() const {
 
 std::vector<Point3f> MapTopicsState::occupiedCenters() const {
   std::vector<Point3f> centers;
+  const unsigned max_depth = tree_.getTreeDepth();
   for (auto it = tree_.begin_leafs(), end = tree_.end_leafs(); it != end; ++it) {
-    if (it->getLogOdds() > 0.0F) {
-      const octomap::point3d c = it.getCoordinate();
-      centers.emplace_back(c.x(), c.y(), c.z());
+    if (!(it->getLogOdds() > 0.0F)) continue;
+    // A pruned leaf stands for every cell under it: one centre each.
+    const octomap::OcTreeKey k = it.getKey();
+    const unsigned cells = 1U << (max_depth - it.getDepth());
+    const unsigned base_x = k[0] & ~(cells - 1), base_y = k[1] & ~(cells - 1),
+                   base_z = k[2] & ~(cells - 1);
+    for (unsigned dz = 0; dz < cells; ++dz) {
+      for (unsigned dy = 0; dy < cells; ++dy) {
+        for (unsigned dx = 0; dx < cells; ++dx) {
+          const octomap::point3d c = tree_.keyToCoord(octomap::OcTreeKey(
+              static_cast<octomap::key_type>(base_x + dx), static_cast<octomap::key_type>(base_y + dy),
+              static_cast<octomap::key_type>(base_z + dz)));
+          centers.emplace_back(c.x(), c.y(), c.z());
+        }
+      }
     }
   }
   return centers;

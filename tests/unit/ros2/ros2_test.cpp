@@ -329,5 +329,36 @@ TEST(MapTopicsState, IncrementalUpdatesEqualTheWholeMapReference) {
   EXPECT_GT(std::count(grid.data.begin(), grid.data.end(), 0), 10);
 }
 
+// Issue 32, item 3: /octomap_binary is pruned as octomap_server's is (eight equal children
+// become their parent), still every cell as densemap has it, and a pruned region updated
+// later is expanded again cell for cell.
+TEST(MapTopicsState, TheOctomapIsPrunedAndStillEveryCell) {
+  GridMap map(0.2, SensorModel{});
+  // A free room 3.2 m a side (16^3 cells: aligned octants prune) with an occupied wall.
+  const std::uint16_t o = 32768;
+  for (std::uint16_t x = o; x < o + 16; ++x) {
+    for (std::uint16_t y = o; y < o + 16; ++y) {
+      for (std::uint16_t z = o; z < o + 16; ++z) {
+        map.setLogOdds(VoxelKey{x, y, z}, x == o + 15 ? 2.0F : -2.0F);
+      }
+    }
+  }
+  const auto v1 = MapView::fromMap(map, 1);
+  MapTopicsState state(0.2, -1.0, 4.0);
+  state.update(nullptr, *v1, {});
+  expectStateEquals(state, *v1, -1.0, 4.0);
+  std::istringstream in(state.binaryData());
+  octomap::OcTree tree(0.2);
+  ASSERT_TRUE(tree.readBinaryData(in));
+  // 4,096 cells: pruned to a few hundred nodes (unpruned, the leaves alone are 4,096).
+  EXPECT_LT(tree.size(), 700U);
+  EXPECT_LT(state.tree().size(), 700U);
+  // One free cell in the middle of a pruned octant becomes occupied: the octant expands.
+  map.setLogOdds(VoxelKey{o + 3, o + 3, o + 3}, 1.5F);
+  const auto v2 = MapView::fromMap(map, 2);
+  state.update(v1.get(), *v2, allBlocks(*v1, *v2));
+  expectStateEquals(state, *v2, -1.0, 4.0);
+}
+
 }  // namespace
 }  // namespace densemap::ros2
