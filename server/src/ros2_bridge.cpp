@@ -35,6 +35,23 @@ builtin_interfaces_msg_dds__Time_ rosNow() {
 
 constexpr dds_attach_t kTfTag = 1, kTfStaticTag = 2, kCloudTag0 = 16;
 
+/// A QoS policy's name as DDS specifications spell it (status: why a writer was refused).
+std::string policyName(dds_qos_policy_id_t id) {
+  switch (id) {
+    case DDS_RELIABILITY_QOS_POLICY_ID: return "reliability";
+    case DDS_DURABILITY_QOS_POLICY_ID: return "durability";
+    case DDS_DEADLINE_QOS_POLICY_ID: return "deadline";
+    case DDS_LIVELINESS_QOS_POLICY_ID: return "liveliness";
+    case DDS_OWNERSHIP_QOS_POLICY_ID: return "ownership";
+    case DDS_PRESENTATION_QOS_POLICY_ID: return "presentation";
+    case DDS_DESTINATIONORDER_QOS_POLICY_ID: return "destination order";
+    case DDS_LATENCYBUDGET_QOS_POLICY_ID: return "latency budget";
+    case DDS_DATA_REPRESENTATION_QOS_POLICY_ID: return "data representation";
+    case DDS_TYPE_CONSISTENCY_ENFORCEMENT_QOS_POLICY_ID: return "type consistency";
+    default: return "policy " + std::to_string(static_cast<int>(id));
+  }
+}
+
 }  // namespace
 
 struct Ros2Bridge::Dds {
@@ -172,8 +189,30 @@ void Ros2Bridge::onVersion(const IntegrationResult& result,
 }
 
 Ros2Counters Ros2Bridge::counters() const {
-  std::lock_guard lock(counters_mutex_);
-  return counters_;
+  Ros2Counters c;
+  {
+    std::lock_guard lock(counters_mutex_);
+    c = counters_;
+  }
+  // Why no clouds may arrive, per topic: DDS's own matched and incompatible-QoS statuses.
+  for (std::size_t i = 0; i < dds_->cloud_readers.size(); ++i) {
+    RosCloudTopicStatus t;
+    t.topic = dds_->cloud_names[i];
+    dds_subscription_matched_status_t matched{};
+    if (dds_get_subscription_matched_status(dds_->cloud_readers[i].get(), &matched) >= 0) {
+      t.matched_writers = matched.current_count;
+    }
+    dds_requested_incompatible_qos_status_t refused{};
+    if (dds_get_requested_incompatible_qos_status(dds_->cloud_readers[i].get(), &refused) >= 0) {
+      t.incompatible_qos = refused.total_count;
+      if (refused.total_count > 0) {
+        t.last_incompatible_policy =
+            policyName(static_cast<dds_qos_policy_id_t>(refused.last_policy_id));
+      }
+    }
+    c.clouds.push_back(std::move(t));
+  }
+  return c;
 }
 
 void Ros2Bridge::reject(ros2::CloudReject reason) {

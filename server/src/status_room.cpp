@@ -86,6 +86,7 @@ void StatusRoom::publish() {
   s.ros_rejected_by_reason.assign(ros.rejected_by_reason.begin(), ros.rejected_by_reason.end());
   s.ros_last_reject = ros.last_reject;
   s.ros_maps_published = ros.maps_published;
+  s.ros_clouds = ros.clouds;
   (void)dds::writeStatus(writer_, s);
 }
 

@@ -495,5 +495,65 @@ TEST(Ros2Wire, AnEmptyMapIsNotPublishedAndAReturningViewerGetsTheMapOnce) {
 }
 #endif
 
+#ifndef DENSEMAP_ROS2_REALDATA
+// Issue 32, item 4: a robot whose clouds never arrive is explained in the status: a best-effort
+// publisher against reliable_clouds: true is refused for its reliability (DDS's incompatible
+// QoS status), a matching one is counted as a matched writer.
+TEST(Ros2Wire, StatusSaysWhichCloudWritersMatchAndWhichWereRefusedForTheirQos) {
+  constexpr std::uint32_t kDomain = 155;
+  test::TempDir dir;
+  test::ServerProcess server(dir.path(), kDomain, kRosConfig);  // reliable_clouds: true
+  auto client = connect(kDomain);
+  ASSERT_TRUE(client);
+  auto participant = dds::createParticipant({kDomain, "lo", std::nullopt});
+  ASSERT_TRUE(participant);
+  auto topic = dds::createTopic(*participant, sensor_msgs_msg_dds__PointCloud2__desc,
+                                ros2::ddsTopicName("/points"));
+  ASSERT_TRUE(topic);
+  auto best_effort = dds::createWriter(*participant, *topic, {.reliable = false, .depth = 5});
+  ASSERT_TRUE(best_effort);
+  const auto cloudTopic = [](const ServerStatus& s) -> const RosCloudTopicStatus* {
+    for (const auto& c : s.ros_clouds) {
+      if (c.topic == "/points") return &c;
+    }
+    return nullptr;
+  };
+  ServerStatus s = waitForStatus(*client, [&](const ServerStatus& st) {
+    const auto* c = cloudTopic(st);
+    return c != nullptr && c->incompatible_qos > 0;
+  });
+  const RosCloudTopicStatus* refused = cloudTopic(s);
+  ASSERT_NE(refused, nullptr);
+  EXPECT_GE(refused->incompatible_qos, 1U);
+  EXPECT_EQ(refused->last_incompatible_policy, "reliability");
+  EXPECT_EQ(refused->matched_writers, 0U);
+  auto reliable = dds::createWriter(*participant, *topic, {.depth = 5});
+  ASSERT_TRUE(reliable);
+  s = waitForStatus(*client, [&](const ServerStatus& st) {
+    const auto* c = cloudTopic(st);
+    return c != nullptr && c->matched_writers == 1;
+  });
+  ASSERT_NE(cloudTopic(s), nullptr);
+  EXPECT_EQ(cloudTopic(s)->matched_writers, 1U);
+  // The CLI says it in words.
+  std::string printed;
+  {
+    FILE* pipe = popen((std::string(DENSEMAP_CLI_BIN) + " --domain-id " +
+                        std::to_string(kDomain) + " status 2>&1")
+                           .c_str(),
+                       "r");
+    ASSERT_NE(pipe, nullptr);
+    char buf[512];
+    while (std::fgets(buf, sizeof buf, pipe) != nullptr) printed += buf;
+    pclose(pipe);
+  }
+  EXPECT_NE(printed.find("ros2 cloud topic /points: 1 writer matched"), std::string::npos)
+      << printed;
+  EXPECT_NE(printed.find("refused for incompatible QoS (last: reliability"), std::string::npos)
+      << printed;
+  EXPECT_EQ(server.stop(), 0);
+}
+#endif
+
 }  // namespace
 }  // namespace densemap

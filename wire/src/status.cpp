@@ -49,6 +49,13 @@ Expected<void> writeStatus(const Entity& writer, const ServerStatus& st) {
   s.ros_rejected_by_reason = borrowSequence<dds_sequence_unsigned_long_long>(ros_by_reason);
   s.ros_last_reject = lend(st.ros_last_reject);
   s.ros_maps_published = st.ros_maps_published;
+  std::vector<densemap_msgs_RosCloudTopic> clouds;
+  clouds.reserve(st.ros_clouds.size());
+  for (const RosCloudTopicStatus& c : st.ros_clouds) {
+    clouds.push_back({lend(c.topic), c.matched_writers, c.incompatible_qos,
+                      lend(c.last_incompatible_policy)});
+  }
+  s.ros_clouds = borrowSequence<dds_sequence_densemap_msgs_RosCloudTopic>(clouds);
   return write(writer, &s);
 }
 
@@ -95,6 +102,13 @@ ServerStatus statusFromWire(const densemap_msgs_Status& s) {
       s.ros_rejected_by_reason._buffer + s.ros_rejected_by_reason._length);
   out.ros_last_reject = text(s.ros_last_reject);
   out.ros_maps_published = s.ros_maps_published;
+  for (std::uint32_t i = 0; i < s.ros_clouds._length; ++i) {
+    const auto& c = s.ros_clouds._buffer[i];
+    out.ros_clouds.push_back({.topic = text(c.topic),
+                              .matched_writers = c.matched_writers,
+                              .incompatible_qos = c.incompatible_qos,
+                              .last_incompatible_policy = text(c.last_incompatible_policy)});
+  }
   return out;
 }
 

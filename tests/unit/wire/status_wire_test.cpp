@@ -46,6 +46,10 @@ ServerStatus everyFieldSet() {
   s.ros_enabled = true;
   s.ros_rejected_by_reason = {0, 6, 0, 8};
   s.ros_last_reject = "point step too small";
+  s.ros_clouds = {{.topic = "/points", .matched_writers = 2, .incompatible_qos = 3,
+                   .last_incompatible_policy = "reliability"},
+                  {.topic = "/front/points", .matched_writers = 0, .incompatible_qos = 0,
+                   .last_incompatible_policy = ""}};
   return s;
 }
 

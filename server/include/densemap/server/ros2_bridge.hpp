@@ -12,6 +12,7 @@
 
 #include "densemap/wire/dds.hpp"
 #include "densemap/server/ingest.hpp"
+#include "densemap/wire/status.hpp"
 #include "densemap/ros2/point_cloud2.hpp"
 
 namespace densemap::server {
@@ -40,6 +41,8 @@ struct Ros2Counters {
   std::uint64_t tf_rejected = 0;        // transforms refused (bad quaternion, cycle...)
   std::uint64_t maps_published = 0;     // map-topic rounds written
   std::string last_reject;
+  /// Per cloud topic: writers matched now and refused for their QoS (issue 32, item 4).
+  std::vector<RosCloudTopicStatus> clouds;
 };
 
 /// The server's ROS 2 face (README "ROS 2"), one thread on the server's participant:

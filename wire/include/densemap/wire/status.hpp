@@ -10,6 +10,16 @@
 
 namespace densemap {
 
+/// One ROS 2 cloud topic the server reads: writers matched now, writers refused for their QoS.
+struct RosCloudTopicStatus {
+  std::string topic;
+  std::uint32_t matched_writers = 0;
+  std::uint64_t incompatible_qos = 0;   // writers refused so far (total)
+  std::string last_incompatible_policy;  // e.g. "reliability"; empty: none
+
+  bool operator==(const RosCloudTopicStatus&) const = default;
+};
+
 /// A server's status as densemap/status carries it (densemap_msgs.idl Status): built once by
 /// the server from its counters, written and read by the conversions below only, for the server
 /// and the client alike (issue 30: one definition on each side of the wire).
@@ -36,6 +46,7 @@ struct ServerStatus {
   std::vector<std::uint64_t> ros_rejected_by_reason;
   std::string ros_last_reject;
   std::uint64_t ros_maps_published = 0;
+  std::vector<RosCloudTopicStatus> ros_clouds;  // per cloud topic (ros2.clouds)
 
   bool operator==(const ServerStatus&) const = default;
 };
