@@ -81,5 +81,9 @@ install(DIRECTORY ${PROJECT_SOURCE_DIR}/config/load ${PROJECT_SOURCE_DIR}/config
         DESTINATION share/densemap/config COMPONENT server)
 install(DIRECTORY DESTINATION ${DENSEMAP_STATE_DIR} COMPONENT server)
 # The DDS Security PKI maker (README "DDS Security: who may do what").
-install(PROGRAMS ${PROJECT_SOURCE_DIR}/scripts/make-pki.sh DESTINATION bin
-        RENAME densemap-make-pki COMPONENT server)
+# Installed with its version filled in (--version; its man page reads it).
+set(DENSEMAP_VERSION ${PROJECT_VERSION})
+configure_file(${PROJECT_SOURCE_DIR}/scripts/make-pki.sh
+               ${PROJECT_BINARY_DIR}/packaging/densemap-make-pki @ONLY)
+install(PROGRAMS ${PROJECT_BINARY_DIR}/packaging/densemap-make-pki DESTINATION bin
+        COMPONENT server)

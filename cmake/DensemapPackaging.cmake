@@ -4,6 +4,13 @@
 # Each carries the copyright and changelog files Debian policy asks for, stripped binaries and
 # its dependencies: shared libraries found by dpkg-shlibdeps for the server, the -dev packages
 # of the SDK's dependencies for libdensemap-dev.
+# The Maintainer field (and the changelog's signature): set it for a release,
+# cmake -DDENSEMAP_MAINTAINER="Name <address>".
+set(DENSEMAP_MAINTAINER "densemap maintainers <densemap-maintainers@example.org>"
+    CACHE STRING "The packages' Maintainer field: Name <address>")
+if(NOT DENSEMAP_MAINTAINER MATCHES "^[^<>]+ <[^<>@ ]+@[^<>@ ]+>$")
+  message(FATAL_ERROR "DENSEMAP_MAINTAINER must read 'Name <address>', got '${DENSEMAP_MAINTAINER}'")
+endif()
 set(DENSEMAP_DEB_DIR ${PROJECT_SOURCE_DIR}/cmake/debian)
 foreach(package densemap-server libdensemap-dev)
   if(package STREQUAL densemap-server)
@@ -27,7 +34,8 @@ install(FILES ${PROJECT_SOURCE_DIR}/README.md DESTINATION ${CMAKE_INSTALL_DATADI
 set(CPACK_GENERATOR DEB)
 set(CPACK_PACKAGE_NAME densemap)
 set(CPACK_PACKAGE_VENDOR "densemap developers")
-set(CPACK_PACKAGE_CONTACT "densemap maintainers <densemap-maintainers@example.org>")
+set(CPACK_PACKAGE_CONTACT "${DENSEMAP_MAINTAINER}")
+set(CPACK_DEBIAN_PACKAGE_MAINTAINER "${DENSEMAP_MAINTAINER}")
 set(CPACK_PACKAGE_VERSION ${PROJECT_VERSION})
 # A Debian revision: packaged from upstream sources, not a native Debian package.
 set(CPACK_DEBIAN_PACKAGE_RELEASE 1)

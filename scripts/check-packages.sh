@@ -39,11 +39,16 @@ dpkg-deb -c "$dev_deb" | awk '{print $6}' >"$work/dev.txt"
 for f in ./usr/bin/densemap-server ./usr/bin/densemap ./usr/bin/densemap-map ./usr/bin/densemap-make-pki \
   ./etc/densemap/densemap.textproto ./lib/systemd/system/densemap-server.service \
   ./var/lib/densemap/ ./usr/share/densemap/models/iln.pb \
-  ./usr/share/doc/densemap-server/copyright ./usr/share/doc/densemap-server/changelog.Debian.gz; do
+  ./usr/share/doc/densemap-server/copyright ./usr/share/doc/densemap-server/changelog.Debian.gz \
+  ./usr/share/man/man1/densemap-server.1.gz ./usr/share/man/man1/densemap.1.gz \
+  ./usr/share/man/man1/densemap-make-pki.1.gz; do
   grep -qxF "$f" "$work/server.txt" || die "densemap-server lacks $f"
 done
-for f in ./usr/include/densemap/client/client.hpp ./usr/lib/libdensemap_client.a \
-  ./usr/lib/cmake/densemap/densemapConfig.cmake ./usr/lib/cmake/densemap/densemapTargets.cmake \
+# Libraries in Debian's multiarch directory (lib/<triplet>).
+multiarch=$(dpkg-architecture -qDEB_HOST_MULTIARCH 2>/dev/null || gcc -print-multiarch)
+lib=./usr/lib/$multiarch
+for f in ./usr/include/densemap/client/client.hpp $lib/libdensemap_client.a \
+  $lib/cmake/densemap/densemapConfig.cmake $lib/cmake/densemap/densemapTargets.cmake \
   ./usr/share/doc/libdensemap-dev/copyright; do
   grep -qxF "$f" "$work/dev.txt" || die "libdensemap-dev lacks $f"
 done
@@ -52,6 +57,8 @@ if grep -E '/tests?/|_test|/work/|shared/data|\.o$' "$work/server.txt" "$work/de
   die "unexpected files in a package"
 fi
 dpkg-deb -f "$server_deb" Depends | grep -q libddsc || die "densemap-server does not depend on Cyclone DDS"
+dpkg-deb --fsys-tarfile "$server_deb" | tar -xO ./usr/share/doc/densemap-server/copyright |
+  grep -q '^License: Apache-2.0' || die "the copyright file does not name the Apache-2.0 license"
 grep -q '/var/lib/densemap/densemap.dmap' <(dpkg-deb --fsys-tarfile "$server_deb" |
   tar -xO ./etc/densemap/densemap.textproto) || die "the packaged config does not keep its snapshot in /var/lib/densemap"
 say "contents ok: densemap-server $(wc -l <"$work/server.txt") entries, libdensemap-dev $(wc -l <"$work/dev.txt")"
@@ -60,6 +67,11 @@ if command -v lintian >/dev/null 2>&1; then
   if grep -q '^E:' "$work/lintian.txt"; then
     cat "$work/lintian.txt" >&2
     die "lintian reports errors"
+  fi
+  # Every installed program has its man page (help2man, cmake/DensemapManPages.cmake).
+  if grep -q 'no-manual-page' "$work/lintian.txt"; then
+    grep 'no-manual-page' "$work/lintian.txt" >&2
+    die "a program without a man page (is help2man installed? scripts/install-deps.sh)"
   fi
   say "lintian: no errors ($(grep -c '^W:' "$work/lintian.txt" || true) warnings)"
 else

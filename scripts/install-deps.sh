@@ -15,7 +15,7 @@ PACKAGES=(
   libcli11-dev libspdlog-dev
   libbz2-dev zlib1g-dev iproute2 util-linux
   clang-format clang-tidy
-  dpkg-dev fakeroot lintian adduser
+  dpkg-dev fakeroot lintian adduser help2man
   clang-16 libclang-rt-16-dev libsystemd-dev
   openssl tcpdump
 )

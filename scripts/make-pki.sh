@@ -19,6 +19,34 @@
 # the files of its role.
 set -euo pipefail
 
+usage() {
+  cat <<'USAGE'
+Usage: densemap-make-pki [--days N] [--domains MIN-MAX] DIR
+Makes a DDS Security PKI for densemap-server and its clients in DIR (openssl only): a CA,
+an identity per role (server, robot, operator, viewer), and the signed governance and
+permissions documents (one grant per role, default deny).
+
+Options:
+  --days N            certificates and grants valid for N days from now (default 365)
+  --domains MIN-MAX   DDS domain ids the documents cover (default 0-230)
+  -h, --help          print this help and exit
+  --version           print the version and exit
+
+The server's config then names DIR/ca.pem, DIR/server.pem, DIR/server.key,
+DIR/governance.p7s and DIR/permissions.p7s; a client uses `densemap --pki DIR --role R`.
+The private keys are unencrypted (0600): give each machine only the files of its role.
+USAGE
+}
+case "${1:-}" in
+  -h | --help) usage; exit 0 ;;
+  --version)
+    version="@DENSEMAP_VERSION@"  # set where the package installs it (DensemapInstall.cmake)
+    [[ $version == "@"* ]] && version="source tree"
+    echo "densemap-make-pki (densemap) $version"
+    exit 0
+    ;;
+esac
+
 days=365
 domains="0-230"
 while [[ $# -gt 1 ]]; do

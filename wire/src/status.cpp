@@ -1,5 +1,7 @@
 #include "densemap/wire/status.hpp"
 
+#include "densemap_msgs.h"
+
 namespace densemap::dds {
 namespace {
 

@@ -6,7 +6,9 @@
 
 #include "densemap/io/sensor_counters.hpp"
 #include "densemap/wire/dds.hpp"
-#include "densemap_msgs.h"
+
+// The IDL type (densemap_msgs.h, generated; not installed with the SDK).
+struct densemap_msgs_Status;
 
 namespace densemap {
 
