@@ -203,7 +203,7 @@ class ReplayRun {
 Expected<std::unique_ptr<RosReplayPublisher>> rosPublisher(const ClientOptions& o,
                                                            const std::string& topic,
                                                            ros2::ReplayFrames frames, bool reliable,
-                                                           double rate,
+                                                           double rate, double static_delay_s,
                                                            const Expected<ServerStatus>& s) {
   if (s && !s->ros_enabled) {
     return makeError("--ros: the server's ROS 2 face is off (config: ros2 { enabled: true })");
@@ -214,8 +214,9 @@ Expected<std::unique_ptr<RosReplayPublisher>> rosPublisher(const ClientOptions& 
                                .count();
   }
   if (rate > 0) frames.period_ns = static_cast<std::int64_t>(1e9 / rate);
-  auto p = RosReplayPublisher::create({o.domain_id, o.network_interface, o.security}, topic, frames,
-                                      reliable);
+  auto p = RosReplayPublisher::create(
+      {o.domain_id, o.network_interface, o.security}, topic, frames, reliable,
+      std::chrono::milliseconds(static_cast<std::int64_t>(static_delay_s * 1000)));
   if (!p) return std::unexpected(p.error());
   if (auto ok = (*p)->waitForReader(static_cast<int>(o.timeout.count())); !ok) {
     return std::unexpected(ok.error());
@@ -278,6 +279,11 @@ ReplayCommand::ReplayCommand(CLI::App& app)
   c.add_option("--ros-stamp-base-ns", ros_frames_.stamp_base_ns,
                "Stamp of the first scan, ns (0: now); the next are 1/rate apart")
       ->capture_default_str();
+  c.add_option("--ros-static-delay", ros_static_delay_s_,
+               "Publish /tf_static this many seconds after the first scans, as a late static "
+               "broadcaster would (the server keeps waiting clouds for ros2.tf_wait_s)")
+      ->check(CLI::Range(0.0, 60.0))
+      ->capture_default_str();
   c.add_flag("!--ros-best-effort", ros_reliable_,
              "Publish clouds best effort, as LiDAR drivers do (default: reliable)")
       ->default_str("");  // a negated flag: CLI11 would print its bool as {false}
@@ -302,7 +308,8 @@ int ReplayCommand::run(const ClientOptions& o) {
   const auto before = (*client)->status();
   std::unique_ptr<RosReplayPublisher> ros_out;
   if (ros_) {
-    auto p = rosPublisher(o, ros_topic_, ros_frames_, ros_reliable_, rate_, before);
+    auto p = rosPublisher(o, ros_topic_, ros_frames_, ros_reliable_, rate_, ros_static_delay_s_,
+                          before);
     if (!p) return fail(p.error().message);
     ros_out = std::move(*p);
   }

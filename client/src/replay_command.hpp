@@ -33,6 +33,7 @@ class ReplayCommand {
   std::string ros_topic_ = "/points";
   ros2::ReplayFrames ros_frames_;
   bool ros_reliable_ = true;
+  double ros_static_delay_s_ = 0;
 };
 
 }  // namespace densemap::cli

@@ -36,7 +36,7 @@ RosReplayPublisher::~RosReplayPublisher() = default;
 
 Expected<std::unique_ptr<RosReplayPublisher>> RosReplayPublisher::create(
     const dds::ParticipantOptions& participant_options, const std::string& topic,
-    const ros2::ReplayFrames& frames, bool reliable) {
+    const ros2::ReplayFrames& frames, bool reliable, std::chrono::milliseconds static_delay) {
   std::unique_ptr<RosReplayPublisher> p(new RosReplayPublisher(frames));
   Dds& d = *p->dds_;
   const std::string cloud_name = ros2::ddsTopicName(topic);
@@ -56,22 +56,31 @@ Expected<std::unique_ptr<RosReplayPublisher>> RosReplayPublisher::create(
   // A LiDAR driver publishes best effort; the replay can be reliable (the default) so that a
   // reliable reader gets every cloud. /tf: reliable, keep last 100; /tf_static: latched.
   auto cw = dds::createWriter(d.participant, d.cloud_topic,
-                              {.reliable = reliable, .depth = dds::kRosCloudDepth});
+                              dds::rosCloudQos(reliable));
   auto tw = dds::createWriter(d.participant, d.tf_topic, dds::kTfQos);
   auto sw = dds::createWriter(d.participant, d.tf_static_topic, dds::kLatchedQos);
   if (!cw || !tw || !sw) return makeError("cannot create the ROS 2 writers");
   d.cloud_writer = std::move(*cw);
   d.tf_writer = std::move(*tw);
   d.tf_static_writer = std::move(*sw);
+  if (static_delay.count() <= 0) {
+    if (auto ok = p->publishStatic(); !ok) return std::unexpected(ok.error());
+  } else {
+    p->static_due_ = std::chrono::steady_clock::now() + static_delay;
+  }
+  return p;
+}
+
+Expected<void> RosReplayPublisher::publishStatic() {
   // The static transforms, in one latched message as tf2's static broadcaster sends them.
-  const ros2::TfSample identity{frames.stampOf(0), Eigen::Vector3d::Zero(),
+  const ros2::TfSample identity{frames_.stampOf(0), Eigen::Vector3d::Zero(),
                                 Eigen::Quaterniond::Identity()};
   ros2::TfSample mount = ros2::sensorMount();
-  mount.stamp_ns = frames.stampOf(0);
+  mount.stamp_ns = frames_.stampOf(0);
   geometry_msgs_msg_dds__TransformStamped_ ts[2] = {};
   const ros2::TfSample* samples[2] = {&identity, &mount};
-  const std::string* names[2][2] = {{&p->frames_.map, &p->frames_.odom},
-                                    {&p->frames_.base, &p->frames_.sensor}};
+  const std::string* names[2][2] = {{&frames_.map, &frames_.odom},
+                                    {&frames_.base, &frames_.sensor}};
   for (int i = 0; i < 2; ++i) {
     ts[i].header.stamp = rosTime(samples[i]->stamp_ns);
     ts[i].header.frame_id = const_cast<char*>(names[i][0]->c_str());
@@ -84,8 +93,14 @@ Expected<std::unique_ptr<RosReplayPublisher>> RosReplayPublisher::create(
   msg.transforms._length = msg.transforms._maximum = 2;
   msg.transforms._buffer = ts;
   msg.transforms._release = false;
-  if (auto ok = dds::write(d.tf_static_writer, &msg); !ok) return std::unexpected(ok.error());
-  return p;
+  if (auto ok = dds::write(dds_->tf_static_writer, &msg); !ok) return ok;
+  static_sent_ = true;
+  return {};
+}
+
+Expected<void> RosReplayPublisher::publishStaticWhenDue(bool now) {
+  if (static_sent_ || (!now && std::chrono::steady_clock::now() < static_due_)) return {};
+  return publishStatic();
 }
 
 Expected<void> RosReplayPublisher::waitForReader(int timeout_ms) {
@@ -118,6 +133,7 @@ Expected<void> RosReplayPublisher::publishTf(const ros2::TfSample& s, const std:
 }
 
 Expected<void> RosReplayPublisher::publish(const RawScan& scan, std::size_t k) {
+  if (auto ok = publishStaticWhenDue(false); !ok) return ok;
   if (auto ok = publishTf(ros2::odomToBase(poseOf(scan), frames_.stampOf(k)), frames_.odom,
                           frames_.base, false);
       !ok) {
@@ -154,6 +170,11 @@ Expected<void> RosReplayPublisher::publish(const RawScan& scan, std::size_t k) {
 }
 
 Expected<void> RosReplayPublisher::finish(const RawScan& last, std::size_t k_after) {
+  // A static delay longer than the replay: the transforms still go out, at its due time.
+  if (!static_sent_) {
+    std::this_thread::sleep_until(static_due_);
+    if (auto ok = publishStaticWhenDue(true); !ok) return ok;
+  }
   return publishTf(ros2::odomToBase(poseOf(last), frames_.stampOf(k_after)), frames_.odom,
                    frames_.base, false);
 }

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <chrono>
 #include <memory>
 #include <string>
 
@@ -15,9 +16,12 @@ namespace densemap::cli {
 /// Loopback only, like every densemap participant (DESIGN.md).
 class RosReplayPublisher {
  public:
+  /// `static_delay` > 0: /tf_static goes out that long after creation (with the first scan
+  /// after it), as a late static broadcaster's does; else at once.
   [[nodiscard]] static Expected<std::unique_ptr<RosReplayPublisher>> create(
       const dds::ParticipantOptions& participant, const std::string& topic,
-      const ros2::ReplayFrames& frames, bool reliable);
+      const ros2::ReplayFrames& frames, bool reliable,
+      std::chrono::milliseconds static_delay = std::chrono::milliseconds(0));
   ~RosReplayPublisher();
   /// Waits (up to `timeout_ms`) until a reader matches the cloud topic.
   [[nodiscard]] Expected<void> waitForReader(int timeout_ms);
@@ -30,10 +34,14 @@ class RosReplayPublisher {
  private:
   struct Dds;
   RosReplayPublisher(const ros2::ReplayFrames& frames);
+  [[nodiscard]] Expected<void> publishStatic();
+  [[nodiscard]] Expected<void> publishStaticWhenDue(bool now);
   [[nodiscard]] Expected<void> publishTf(const ros2::TfSample& s, const std::string& parent,
                                          const std::string& child, bool is_static);
   ros2::ReplayFrames frames_;
   std::unique_ptr<Dds> dds_;
+  bool static_sent_ = false;
+  std::chrono::steady_clock::time_point static_due_{};
 };
 
 }  // namespace densemap::cli

@@ -70,6 +70,7 @@ struct Ros2Bridge::Waiting {
   std::uint64_t seq = 0;
   ros2::DecodedCloud cloud;
   Clock::time_point received;
+  bool waited = false;  // its transform was missing once: a backlog, submitted as room frees
 };
 
 struct Ros2Bridge::Topics {
@@ -106,7 +107,7 @@ Expected<std::unique_ptr<Ros2Bridge>> Ros2Bridge::create(Ingest& ingest,
   };
   // ROS sensor data QoS (best effort, keep last 5) unless told otherwise; a best-effort reader
   // also matches reliable writers.
-  const dds::QosSpec cloud_qos{.reliable = options.reliable_clouds, .depth = dds::kRosCloudDepth};
+  const dds::QosSpec cloud_qos = dds::rosCloudQos(options.reliable_clouds);
   for (const std::string& name : options.clouds) {
     auto t = topic(sensor_msgs_msg_dds__PointCloud2__desc, name);
     if (!t) return std::unexpected(t.error());
@@ -308,9 +309,17 @@ void Ros2Bridge::takeClouds(std::size_t topic) {
         w.seq = seq;
         w.cloud = std::move(*cloud);
         w.received = Clock::now();
-        state_->waiting.push_back(std::move(w));
-        while (state_->waiting.size() > std::max<std::size_t>(options_.max_waiting, 1)) {
-          state_->waiting.pop_front();
+        auto& waiting = state_->waiting;
+        waiting.push_back(std::move(w));
+        const auto bytesOf = [](const Waiting& c) {
+          return (c.cloud.xyz.size() + c.cloud.intensity.size()) * sizeof(float);
+        };
+        std::size_t bytes = 0;
+        for (const Waiting& c : waiting) bytes += bytesOf(c);
+        while (waiting.size() > 1 &&
+               (waiting.size() > options_.max_waiting || bytes > options_.max_waiting_bytes)) {
+          bytes -= bytesOf(waiting.front());
+          waiting.pop_front();
           std::lock_guard lock(counters_mutex_);
           ++counters_.no_transform;
         }
@@ -319,10 +328,17 @@ void Ros2Bridge::takeClouds(std::size_t topic) {
 
 void Ros2Bridge::resolveWaiting(Clock::time_point now) {
   auto& waiting = state_->waiting;
+  // Sensors whose backlog waits for room in the ingest queue: their later clouds wait too (in
+  // order), so a burst of clouds a late transform released is integrated, not pushed out.
+  std::vector<std::string> held;
+  const auto isHeld = [&](const std::string& id) {
+    return std::find(held.begin(), held.end(), id) != held.end();
+  };
   for (auto it = waiting.begin(); it != waiting.end();) {
     auto T = state_->tf.lookup(options_.world_frame, it->frame, it->stamp_ns);
     const bool expired = now - it->received > options_.tf_wait;
     if (!T && !expired && T.error() != ros2::TfFailure::kTooOld) {
+      it->waited = true;
       ++it;
       continue;
     }
@@ -334,6 +350,11 @@ void Ros2Bridge::resolveWaiting(Clock::time_point now) {
     } else {
       RawScan raw;
       raw.sensor_id = it->sensor_id;
+      if (isHeld(raw.sensor_id) || (it->waited && !ingest_.hasRoomFor(raw))) {
+        if (!isHeld(raw.sensor_id)) held.push_back(raw.sensor_id);
+        ++it;
+        continue;
+      }
       raw.seq = it->seq;
       raw.stamp_ns = it->stamp_ns;
       const ros2::ScanPose pose = ros2::toScanPose(*T);

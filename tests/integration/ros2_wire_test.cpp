@@ -435,6 +435,45 @@ TEST(Ros2Wire, TopicAndTypeNamesFollowRmwCycloneddsConventions) {
                "nav_msgs::msg::dds_::OccupancyGrid_");
 }
 
+// Issue 32, item 5: as rmw_cyclonedds (humble serdata.cpp), the ROS types carry no type
+// information and the rt/ endpoints offer XCDR1 only, so peers stricter than Fast DDS 2.x
+// match the server as they match a ROS node.
+TEST(Ros2Wire, RosEndpointsOfferXcdr1OnlyAndNoTypeInformation) {
+  for (const dds_topic_descriptor_t* d :
+       {&sensor_msgs_msg_dds__PointCloud2__desc, &tf2_msgs_msg_dds__TFMessage__desc,
+        &octomap_msgs_msg_dds__Octomap__desc, &nav_msgs_msg_dds__OccupancyGrid__desc}) {
+    EXPECT_EQ(d->m_flagset & DDS_TOPIC_XTYPES_METADATA, 0U) << d->m_typename;
+    EXPECT_EQ(d->type_information.sz, 0U) << d->m_typename;
+  }
+  auto participant = dds::createParticipant({157, "lo", std::nullopt});
+  ASSERT_TRUE(participant);
+  auto topic = dds::createTopic(*participant, sensor_msgs_msg_dds__PointCloud2__desc,
+                                ros2::ddsTopicName("/points"));
+  ASSERT_TRUE(topic);
+  const auto offered = [](const dds::Entity& e) {
+    dds_qos_t* qos = dds_create_qos();
+    std::vector<dds_data_representation_id_t> out;
+    uint32_t n = 0;
+    dds_data_representation_id_t* values = nullptr;
+    if (dds_get_qos(e.get(), qos) == DDS_RETCODE_OK &&
+        dds_qget_data_representation(qos, &n, &values)) {
+      out.assign(values, values + n);
+      dds_free(values);
+    }
+    dds_delete_qos(qos);
+    return out;
+  };
+  const std::vector<dds_data_representation_id_t> xcdr1{DDS_DATA_REPRESENTATION_XCDR1};
+  for (const dds::QosSpec& q : {dds::rosCloudQos(false), dds::rosCloudQos(true), dds::kTfQos,
+                                dds::kTfStaticReaderQos, dds::kLatchedQos}) {
+    auto reader = dds::createReader(*participant, *topic, q);
+    auto writer = dds::createWriter(*participant, *topic, q);
+    ASSERT_TRUE(reader && writer);
+    EXPECT_EQ(offered(*reader), xcdr1);
+    EXPECT_EQ(offered(*writer), xcdr1);
+  }
+}
+
 #endif
 
 #ifndef DENSEMAP_ROS2_REALDATA
@@ -551,6 +590,37 @@ TEST(Ros2Wire, StatusSaysWhichCloudWritersMatchAndWhichWereRefusedForTheirQos) {
       << printed;
   EXPECT_NE(printed.find("refused for incompatible QoS (last: reliability"), std::string::npos)
       << printed;
+  EXPECT_EQ(server.stop(), 0);
+}
+#endif
+
+#ifndef DENSEMAP_ROS2_REALDATA
+// Issue 32, item 1: with the default config, clouds that arrive before a late /tf_static (a
+// Fast DDS broadcaster's sample reaches Cyclone at its next heartbeat, ~3 s) wait for it and
+// are all integrated, as octomap_server's TF filter keeps them (5 clouds, 5 s).
+TEST(Ros2Wire, CloudsBeforeALateTfStaticWaitForItWithTheDefaultConfig) {
+  constexpr std::uint32_t kDomain = 156;
+  test::TempDir dir;
+  SequenceOptions o;
+  o.scene = "indoor";
+  o.sensor = "vlp16";
+  o.columns = 300;
+  o.scans = 10;
+  o.ground_truth_resolution_m = 0;
+  ASSERT_TRUE(writeSimulatedSequence(o, dir.path() / "data"));
+  test::ServerProcess server(dir.path(), kDomain,
+                             "ros2 { enabled: true reliable_clouds: true publish_period_s: 0 }\n");
+  auto client = connect(kDomain);
+  ASSERT_TRUE(client);
+  // 10 scans at 10 Hz: /tf_static goes out 2 s after the first, after the last cloud.
+  ASSERT_EQ(runCli("--domain-id " + std::to_string(kDomain) + " replay --ros --data " +
+                   (dir.path() / "data").string() + " --rate 10 --ros-static-delay 2"),
+            0);
+  const ServerStatus s =
+      waitForStatus(*client, [](const ServerStatus& st) { return st.integrated >= 10; });
+  EXPECT_EQ(s.ros_received, 10U);
+  EXPECT_EQ(s.ros_no_transform, 0U);
+  EXPECT_EQ(s.integrated, 10U);
   EXPECT_EQ(server.stop(), 0);
 }
 #endif

@@ -184,6 +184,10 @@ dds_qos_t* makeQos(const QosSpec& spec) {
   dds_qset_durability(
       qos, spec.transient_local ? DDS_DURABILITY_TRANSIENT_LOCAL : DDS_DURABILITY_VOLATILE);
   if (!spec.partition.empty()) dds_qset_partition1(qos, std::string(spec.partition).c_str());
+  if (spec.xcdr1_only) {
+    dds_data_representation_id_t xcdr1[1] = {DDS_DATA_REPRESENTATION_XCDR1};
+    dds_qset_data_representation(qos, 1, xcdr1);
+  }
   return qos;
 }
 

@@ -469,6 +469,28 @@ TEST(LatestWinsQueue, PerKeyTheLatestWinsWithinItsOwnKeyAndTheTotalIsBounded) {
   for (const char* expected : {"a2", "b2", "a3", "c1", "d1"}) EXPECT_EQ(sut.pop(0ms), expected);
 }
 
+// Issue 32, item 1: a backlog (clouds a late transform released) goes in only where it pushes
+// nothing out: hasRoomFor says so exactly when push would drop nothing.
+TEST(LatestWinsQueue, HasRoomForExactlyWhenAPushWouldDropNothing) {
+  const std::map<std::string, std::string> letter = {
+      {"a1", "a"}, {"a2", "a"}, {"a3", "a"}, {"b1", "b"}, {"b2", "b"}, {"c1", "c"}};
+  LatestWinsQueue<std::string> sut(
+      2, 4, [&](const std::string& s) -> const std::string& { return letter.at(s); });
+  for (const char* item : {"a1", "a2", "b1"}) {
+    EXPECT_TRUE(sut.hasRoomFor(item));
+    sut.push(item);
+  }
+  EXPECT_FALSE(sut.hasRoomFor("a3"));  // a holds 2
+  EXPECT_TRUE(sut.hasRoomFor("b2"));
+  sut.push("b2");
+  EXPECT_FALSE(sut.hasRoomFor("c1"));  // 4 in all
+  std::vector<std::string> dropped;
+  sut.push("c1", &dropped);
+  EXPECT_EQ(dropped.size(), 1U);  // as predicted
+  EXPECT_EQ(sut.pop(0ms), "a2");
+  EXPECT_TRUE(sut.hasRoomFor("a3"));
+}
+
 TEST(LatestWinsQueue, ManySensorsWithAScanEachLoseNoneAndTheFullestSensorGivesWay) {
   // Issue 28, item 11: 24 sensors with one scan each against a total of 16 (8 x depth 2) lost
   // 7 scans to the total cap. Items are "KEY:N"; the key is before the colon.

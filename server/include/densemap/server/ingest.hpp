@@ -68,6 +68,9 @@ class Ingest {
 
   /// Never blocks. When integration is behind, the oldest queued scan is dropped.
   void submit(RawScan scan);
+  /// Whether submit(scan) now would drop no queued scan (a backlog, e.g. clouds that waited
+  /// for a late transform, goes in as the queue drains instead).
+  [[nodiscard]] bool hasRoomFor(const RawScan& scan) const { return queue_.hasRoomFor(scan); }
   /// Runs `command` on the worker between scans; a non-empty change list publishes a version.
   [[nodiscard]] std::future<Expected<std::string>> command(Command command);
 

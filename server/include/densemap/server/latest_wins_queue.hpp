@@ -117,6 +117,20 @@ class LatestWinsQueue {
     std::lock_guard lock(mutex_);
     return items_.size();
   }
+  /// Whether `item` would wait without pushing another item out (its key below `capacity`, the
+  /// queue below `total_capacity`, the byte budget not exceeded).
+  [[nodiscard]] bool hasRoomFor(const T& item) const {
+    std::lock_guard lock(mutex_);
+    if (items_.size() >= total_capacity_) return false;
+    if (byte_budget_ > 0 && bytes_ + size_of_(item) > byte_budget_ && !items_.empty()) {
+      return false;
+    }
+    if (!key_) return items_.size() < capacity_;
+    const std::string& key = key_(item);
+    std::size_t same = 0;
+    for (const T& waiting : items_) same += key_(waiting) == key ? 1 : 0;
+    return same < capacity_;
+  }
   /// Bytes the waiting items hold (by `size_of`; 0 without it).
   [[nodiscard]] std::size_t bytes() const {
     std::lock_guard lock(mutex_);

@@ -21,8 +21,14 @@ struct Ros2Options {
   std::vector<std::string> clouds{"/points"};  // ROS topic names
   bool reliable_clouds = false;
   std::string world_frame = "map";
-  std::chrono::milliseconds tf_wait{500};
-  std::size_t max_waiting = 5;
+  /// A cloud whose transform is not there yet waits this long (octomap_server's TF filter
+  /// keeps clouds 5 s: a late /tf_static, e.g. Fast DDS's answered at its next heartbeat 3 s
+  /// later, loses none) ...
+  std::chrono::milliseconds tf_wait{5000};
+  /// ... at most this many clouds and bytes of points at once (the oldest gives way; one
+  /// cloud always waits).
+  std::size_t max_waiting = 20;
+  std::size_t max_waiting_bytes = std::size_t{128} << 20;
   std::int64_t tf_buffer_ns = 10'000'000'000;
   double publish_period_s = 1.0;  // 0: no map topics
   std::string octomap_topic = "/octomap_binary", grid_topic = "/projected_map",

@@ -77,6 +77,8 @@ struct QosSpec {
   int depth = 1;  // keep-last depth (0: keep-all)
   bool transient_local = false;
   std::string_view partition{};  // empty: the default partition
+  /// Offer XCDR1 only (ROS 2's topics: rmw_cyclonedds offers no XCDR2); else Cyclone's default.
+  bool xcdr1_only = false;
 };
 
 [[nodiscard]] Expected<Entity> createTopic(const Entity& participant,

@@ -54,10 +54,14 @@ inline constexpr QosSpec kEventWriterQos{.depth = 64}, kEventReaderQos{.depth = 
 /// ROS 2's topics (ROS2.md): clouds keep the last 5 (sensor data QoS; best effort unless the
 /// user asks for reliable); /tf reliable, keep-last 100; /tf_static and the published maps
 /// latched (reliable, transient-local, keep-last 1 a writer; a /tf_static reader keeps 100,
-/// one per broadcaster).
+/// one per broadcaster). All offer XCDR1 only, as rmw_cyclonedds does (issue 32, item 5).
 inline constexpr int kRosCloudDepth = 5;
-inline constexpr QosSpec kTfQos{.depth = 100};
-inline constexpr QosSpec kTfStaticReaderQos{.depth = 100, .transient_local = true};
-inline constexpr QosSpec kLatchedQos = kLatestStateQos;
+[[nodiscard]] constexpr QosSpec rosCloudQos(bool reliable) {
+  return {.reliable = reliable, .depth = kRosCloudDepth, .xcdr1_only = true};
+}
+inline constexpr QosSpec kTfQos{.depth = 100, .xcdr1_only = true};
+inline constexpr QosSpec kTfStaticReaderQos{.depth = 100, .transient_local = true,
+                                            .xcdr1_only = true};
+inline constexpr QosSpec kLatchedQos{.depth = 1, .transient_local = true, .xcdr1_only = true};
 
 }  // namespace densemap::dds
