@@ -49,6 +49,19 @@ int runCli(const std::string& args) {
   return std::system(command.c_str());
 }
 
+#ifndef DENSEMAP_ROS2_REALDATA
+/// `scans` simulated VLP-16 scans (300 columns) of the indoor scene in `dir`.
+bool writeSmallIndoorScans(const fs::path& dir, int scans) {
+  SequenceOptions o;
+  o.scene = "indoor";
+  o.sensor = "vlp16";
+  o.columns = 300;
+  o.scans = scans;
+  o.ground_truth_resolution_m = 0;
+  return static_cast<bool>(writeSimulatedSequence(o, dir));
+}
+#endif
+
 /// Waits until the server's status satisfies `done`; returns the last status.
 ServerStatus waitForStatus(Client& client, const std::function<bool(const ServerStatus&)>& done) {
   ServerStatus last;
@@ -483,13 +496,7 @@ TEST(Ros2Wire, RosEndpointsOfferXcdr1OnlyAndNoTypeInformation) {
 TEST(Ros2Wire, AnEmptyMapIsNotPublishedAndAReturningViewerGetsTheMapOnce) {
   constexpr std::uint32_t kDomain = 154;
   test::TempDir dir;
-  SequenceOptions o;
-  o.scene = "indoor";
-  o.sensor = "vlp16";
-  o.columns = 300;
-  o.scans = 2;
-  o.ground_truth_resolution_m = 0;
-  ASSERT_TRUE(writeSimulatedSequence(o, dir.path() / "data"));
+  ASSERT_TRUE(writeSmallIndoorScans(dir.path() / "data", 2));
   test::ServerProcess server(dir.path(), kDomain, kRosConfig);
   auto client = connect(kDomain);
   ASSERT_TRUE(client);
@@ -601,13 +608,7 @@ TEST(Ros2Wire, StatusSaysWhichCloudWritersMatchAndWhichWereRefusedForTheirQos) {
 TEST(Ros2Wire, CloudsBeforeALateTfStaticWaitForItWithTheDefaultConfig) {
   constexpr std::uint32_t kDomain = 156;
   test::TempDir dir;
-  SequenceOptions o;
-  o.scene = "indoor";
-  o.sensor = "vlp16";
-  o.columns = 300;
-  o.scans = 10;
-  o.ground_truth_resolution_m = 0;
-  ASSERT_TRUE(writeSimulatedSequence(o, dir.path() / "data"));
+  ASSERT_TRUE(writeSmallIndoorScans(dir.path() / "data", 10));
   test::ServerProcess server(dir.path(), kDomain,
                              "ros2 { enabled: true reliable_clouds: true publish_period_s: 0 }\n");
   auto client = connect(kDomain);
