@@ -8,6 +8,7 @@
 #include <deque>
 
 #include "densemap/wire/topics.hpp"
+#include "ros2_bridge_state.hpp"
 #include "densemap/ros2/map_topics.hpp"
 #include "densemap/ros2/names.hpp"
 #include "densemap/ros2/tf_buffer.hpp"
@@ -23,14 +24,6 @@ using Clock = std::chrono::steady_clock;
 
 std::int64_t stampNs(const builtin_interfaces_msg_dds__Time_& t) {
   return std::int64_t{t.sec} * 1'000'000'000 + t.nanosec;
-}
-
-builtin_interfaces_msg_dds__Time_ rosNow() {
-  const auto ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
-                      std::chrono::system_clock::now().time_since_epoch())
-                      .count();
-  return {static_cast<std::int32_t>(ns / 1'000'000'000),
-          static_cast<std::uint32_t>(ns % 1'000'000'000)};
 }
 
 constexpr dds_attach_t kTfTag = 1, kTfStaticTag = 2, kCloudTag0 = 16;
@@ -53,36 +46,6 @@ std::string policyName(dds_qos_policy_id_t id) {
 }
 
 }  // namespace
-
-struct Ros2Bridge::Dds {
-  std::vector<dds::Entity> cloud_topics, cloud_readers;
-  std::vector<std::string> cloud_names;  // ROS names, the scans' sensor ids
-  std::vector<std::uint64_t> cloud_seq;
-  dds::Entity tf_topic, tf_static_topic, tf_reader, tf_static_reader;
-  dds::Entity octomap_topic, grid_topic, centers_topic;
-  dds::Entity octomap_writer, grid_writer, centers_writer;
-  std::optional<dds::WaitSet> waitset;
-};
-
-struct Ros2Bridge::Waiting {
-  std::string frame, sensor_id;
-  std::int64_t stamp_ns = 0;
-  std::uint64_t seq = 0;
-  ros2::DecodedCloud cloud;
-  Clock::time_point received;
-  bool waited = false;  // its transform was missing once: a backlog, submitted as room frees
-};
-
-struct Ros2Bridge::Topics {
-  ros2::TfBuffer tf;
-  std::deque<Waiting> waiting;
-  std::unique_ptr<ros2::MapTopicsState> map;
-  std::shared_ptr<const MapView> published;  // the version `map` holds
-  /// The version last written to the map topics (kept while no one listens: a viewer that
-  /// returns gets it from the writers' transient-local history, not a second copy).
-  std::optional<std::uint64_t> written;
-  Clock::time_point next_publish = Clock::now();
-};
 
 Ros2Bridge::Ros2Bridge(Ingest& ingest, const Ros2Options& options)
     : ingest_(ingest),
@@ -369,98 +332,6 @@ void Ros2Bridge::resolveWaiting(Clock::time_point now) {
     }
     it = waiting.erase(it);
   }
-}
-
-void Ros2Bridge::publishMaps() {
-  std::vector<std::uint64_t> blocks;
-  std::shared_ptr<const MapView> latest;
-  {
-    std::lock_guard lock(versions_mutex_);
-    blocks.swap(pending_blocks_);
-    latest = latest_;
-  }
-  Topics& s = *state_;
-  if (latest == nullptr) return;
-  // Like map/delta: while no ROS tool listens, no state is kept (an OcTree update per changed
-  // cell is the costly part); the first reader gets the map built once from the latest version.
-  const auto listened = [](const dds::Entity& w) {
-    dds_publication_matched_status_t m{};
-    return w.get() > 0 && dds_get_publication_matched_status(w.get(), &m) >= 0 &&
-           m.current_count > 0;
-  };
-  if (!listened(dds_->octomap_writer) && !listened(dds_->grid_writer) &&
-      !listened(dds_->centers_writer)) {
-    if (s.published != nullptr) s.map->clear();
-    s.published = nullptr;
-    return;
-  }
-  if (s.published != nullptr && latest->version() == s.published->version()) return;
-  std::sort(blocks.begin(), blocks.end());
-  blocks.erase(std::unique(blocks.begin(), blocks.end()), blocks.end());
-  s.map->update(s.published.get(), *latest, blocks);
-  s.published = latest;
-  // As octomap_server: an empty map is not published (no 0-byte Octomap, no 0x0 grid), and a
-  // version already written is not written again.
-  if (latest->knownCells() == 0 || s.written == latest->version()) return;
-  s.written = latest->version();
-
-  const std::string frame = options_.world_frame;
-  std_msgs_msg_dds__Header_ header{rosNow(), const_cast<char*>(frame.c_str())};
-  const double resolution = latest->grid().resolution();
-  if (dds_->octomap_writer.get() > 0) {
-    std::string bytes = s.map->binaryData();
-    octomap_msgs_msg_dds__Octomap_ msg{};
-    msg.header = header;
-    msg.binary = true;
-    msg.id = const_cast<char*>("OcTree");
-    msg.resolution = resolution;
-    msg.data._length = msg.data._maximum = static_cast<std::uint32_t>(bytes.size());
-    msg.data._buffer = reinterpret_cast<std::int8_t*>(bytes.data());
-    msg.data._release = false;
-    (void)dds::write(dds_->octomap_writer, &msg);
-  }
-  if (dds_->grid_writer.get() > 0) {
-    ros2::GridImage grid = s.map->projectedGrid();
-    nav_msgs_msg_dds__OccupancyGrid_ msg{};
-    msg.header = header;
-    msg.info.map_load_time = header.stamp;
-    msg.info.resolution = static_cast<float>(grid.resolution);
-    msg.info.width = grid.width;
-    msg.info.height = grid.height;
-    msg.info.origin.position = {grid.origin_x, grid.origin_y, 0.0};
-    msg.info.origin.orientation = {0.0, 0.0, 0.0, 1.0};
-    msg.data._length = msg.data._maximum = static_cast<std::uint32_t>(grid.data.size());
-    msg.data._buffer = grid.data.data();
-    msg.data._release = false;
-    (void)dds::write(dds_->grid_writer, &msg);
-  }
-  if (dds_->centers_writer.get() > 0) {
-    const std::vector<Point3f> centers = s.map->occupiedCenters();
-    std::vector<std::uint8_t> data(centers.size() * 12);
-    for (std::size_t i = 0; i < centers.size(); ++i) {
-      std::memcpy(data.data() + 12 * i, centers[i].data(), 12);
-    }
-    sensor_msgs_msg_dds__PointField_ fields[3] = {{const_cast<char*>("x"), 0, 7, 1},
-                                                  {const_cast<char*>("y"), 4, 7, 1},
-                                                  {const_cast<char*>("z"), 8, 7, 1}};
-    sensor_msgs_msg_dds__PointCloud2_ msg{};
-    msg.header = header;
-    msg.height = 1;
-    msg.width = static_cast<std::uint32_t>(centers.size());
-    msg.fields._length = msg.fields._maximum = 3;
-    msg.fields._buffer = fields;
-    msg.fields._release = false;
-    msg.is_bigendian = false;
-    msg.point_step = 12;
-    msg.row_step = static_cast<std::uint32_t>(data.size());
-    msg.data._length = msg.data._maximum = static_cast<std::uint32_t>(data.size());
-    msg.data._buffer = data.data();
-    msg.data._release = false;
-    msg.is_dense = true;
-    (void)dds::write(dds_->centers_writer, &msg);
-  }
-  std::lock_guard lock(counters_mutex_);
-  ++counters_.maps_published;
 }
 
 }  // namespace densemap::server

@@ -267,7 +267,8 @@ class Lane {
   std::string name_;
 };
 
-int run(const Options& o) {
+/// The methods, rule and backends make sense, or a message and exit status 2.
+int checkOptions(const Options& o, std::vector<Backend>& backends) {
   // Settings first: a bad --kernel-set would otherwise read as an unknown dense method.
   if (kernel::KernelOptions probe; !kernel::applySettings(probe, o.kernel_settings)) {
     std::fprintf(stderr, "densemap-bench: --kernel-set: %s\n",
@@ -284,7 +285,6 @@ int run(const Options& o) {
       return 2;
     }
   }
-  std::vector<Backend> backends;
   for (const auto& b : o.backends) {
     auto parsed = parseBackend(b);
     if (!parsed) {
@@ -297,18 +297,16 @@ int run(const Options& o) {
     std::fprintf(stderr, "densemap-bench: %s\n", probe.error().message.c_str());
     return 2;
   }
-  auto scans = loadScans(o);
-  if (!scans) {
-    std::fprintf(stderr, "densemap-bench: error: %s\n", scans.error().message.c_str());
-    return 1;
-  }
+  return 0;
+}
 
-  // Under "set" OctoMap is the reference every map is compared with; under "per_ray" (which
-  // OctoMap does not implement) the plain raycast map is, per backend. References come first.
-  const bool per_ray = o.rule != "set";
-  const std::string reference_method = per_ray ? "raycast" : "octomap";
+/// A lane per (method, backend), references first: under "set" OctoMap is the reference every
+/// map is compared with; under "per_ray" (which OctoMap does not implement) the plain raycast
+/// map is, per backend.
+std::vector<std::unique_ptr<Lane>> makeLanes(const Options& o,
+                                             const std::vector<Backend>& backends) {
   std::vector<std::string> order = o.methods;
-  if (per_ray && std::find(order.begin(), order.end(), "raycast") == order.end()) {
+  if (o.rule != "set" && std::find(order.begin(), order.end(), "raycast") == order.end()) {
     order.push_back("raycast");
   }
   std::stable_partition(order.begin(), order.end(), [](const auto& m) { return m == "raycast"; });
@@ -322,24 +320,34 @@ int run(const Options& o) {
     for (const Backend backend : backends)
       lanes.push_back(std::make_unique<Lane>(method, backend, o));
   }
-  // Lanes take turns, `o.turn` scans at a time (0: all of them), and the lane that starts a
-  // turn rotates: none always follows OctoMap's long serial run (caches evicted, idle workers).
-  const std::size_t turn = o.turn == 0 ? scans->size() : o.turn;
-  tools::Progress progress("integrating (method, scan) pair", scans->size() * lanes.size());
+  return lanes;
+}
+
+/// Lanes take turns, `turn` scans at a time (0: all of them), and the lane that starts a
+/// turn rotates: none always follows OctoMap's long serial run (caches evicted, idle workers).
+void runLanes(std::vector<std::unique_ptr<Lane>>& lanes, const std::vector<WorldScan>& scans,
+              std::size_t turn) {
+  if (turn == 0) turn = scans.size();
+  tools::Progress progress("integrating (method, scan) pair", scans.size() * lanes.size());
   std::size_t done = 0;
-  for (std::size_t first = 0, t = 0; first < scans->size(); first += turn, ++t) {
-    const std::size_t last = std::min(scans->size(), first + turn);
+  for (std::size_t first = 0, t = 0; first < scans.size(); first += turn, ++t) {
+    const std::size_t last = std::min(scans.size(), first + turn);
     for (std::size_t k = 0; k < lanes.size(); ++k) {
       auto& lane = lanes[(t + k) % lanes.size()];
       for (std::size_t i = first; i < last; ++i) {
         char detail[96];
         std::snprintf(detail, sizeof(detail), "(%s, scan %zu: %.1f ms)", lane->name().c_str(),
-                      i + 1, lane->step((*scans)[i]));
+                      i + 1, lane->step(scans[i]));
         progress.update(++done, detail);
       }
     }
   }
+}
 
+/// Each lane's result, its map compared cell by cell with its reference's (the reference lanes
+/// come first) and its speed with OctoMap's.
+std::vector<RunResult> compareLanes(std::vector<std::unique_ptr<Lane>>& lanes, bool per_ray) {
+  const std::string reference_method = per_ray ? "raycast" : "octomap";
   std::vector<RunResult> runs;
   std::map<std::string, const OccupancyMap*> references;  // by backend
   double octomap_p50 = 0;
@@ -375,12 +383,18 @@ int run(const Options& o) {
     if (octomap_p50 > 0) r.speedup_vs_octomap = octomap_p50 / std::max(1e-9, r.percentile(0.5));
     runs.push_back(std::move(r));
   }
+  return runs;
+}
+
+/// The tables on stdout (and --json, --growth); 1 when the JSON file cannot be written.
+int report(const Options& o, const std::vector<RunResult>& runs,
+           const std::vector<std::unique_ptr<Lane>>& lanes, std::size_t scans) {
   const std::string machine = machineDescription();
   std::printf(
       "densemap-bench: %s, resolution %g m, max range %g m, %zu scans, rule %s "
       "(diff cells vs %s); %s\n",
-      o.data.c_str(), o.resolution, o.max_range, scans->size(), o.rule.c_str(),
-      reference_method.c_str(), machine.c_str());
+      o.data.c_str(), o.resolution, o.max_range, scans, o.rule.c_str(),
+      o.rule != "set" ? "raycast" : "octomap", machine.c_str());
   std::printf("%s\n", formatTable(runs).c_str());
   std::printf("%s", formatRayTable(runs).c_str());
   for (const RunResult& r : runs) {
@@ -409,6 +423,20 @@ int run(const Options& o) {
     }
   }
   return 0;
+}
+
+int run(const Options& o) {
+  std::vector<Backend> backends;
+  if (const int bad = checkOptions(o, backends); bad != 0) return bad;
+  auto scans = loadScans(o);
+  if (!scans) {
+    std::fprintf(stderr, "densemap-bench: error: %s\n", scans.error().message.c_str());
+    return 1;
+  }
+  auto lanes = makeLanes(o, backends);
+  runLanes(lanes, *scans, o.turn);
+  const std::vector<RunResult> runs = compareLanes(lanes, o.rule != "set");
+  return report(o, runs, lanes, scans->size());
 }
 
 }  // namespace

@@ -1,0 +1,50 @@
+#pragma once
+
+// The ROS 2 bridge's private state, shared by its two files: ros2_bridge.cpp (clouds and
+// transforms in) and ros2_map_topics.cpp (the map topics out).
+#include <chrono>
+#include <deque>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "densemap/ros2/map_topics.hpp"
+#include "densemap/ros2/point_cloud2.hpp"
+#include "densemap/ros2/tf_buffer.hpp"
+#include "densemap/server/ros2_bridge.hpp"
+#include "densemap/wire/dds.hpp"
+
+namespace densemap::server {
+
+struct Ros2Bridge::Dds {
+  std::vector<dds::Entity> cloud_topics, cloud_readers;
+  std::vector<std::string> cloud_names;  // ROS names, the scans' sensor ids
+  std::vector<std::uint64_t> cloud_seq;
+  dds::Entity tf_topic, tf_static_topic, tf_reader, tf_static_reader;
+  dds::Entity octomap_topic, grid_topic, centers_topic;
+  dds::Entity octomap_writer, grid_writer, centers_writer;
+  std::optional<dds::WaitSet> waitset;
+};
+
+struct Ros2Bridge::Waiting {
+  std::string frame, sensor_id;
+  std::int64_t stamp_ns = 0;
+  std::uint64_t seq = 0;
+  ros2::DecodedCloud cloud;
+  std::chrono::steady_clock::time_point received;
+  bool waited = false;  // its transform was missing once: a backlog, submitted as room frees
+};
+
+struct Ros2Bridge::Topics {
+  ros2::TfBuffer tf;
+  std::deque<Waiting> waiting;
+  std::unique_ptr<ros2::MapTopicsState> map;
+  std::shared_ptr<const MapView> published;  // the version `map` holds
+  /// The version last written to the map topics (kept while no one listens: a viewer that
+  /// returns gets it from the writers' transient-local history, not a second copy).
+  std::optional<std::uint64_t> written;
+  std::chrono::steady_clock::time_point next_publish = std::chrono::steady_clock::now();
+};
+
+}  // namespace densemap::server
