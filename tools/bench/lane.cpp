@@ -1,0 +1,62 @@
+#include "lane.hpp"
+
+#include <cstring>
+
+#include "densemap/map/octree_map.hpp"
+#include "densemap/map/update_rule.hpp"
+
+namespace densemap::bench {
+
+std::uint64_t evidenceDigest(const kernel::KernelEvidence& e) {
+  std::uint64_t h = 0xcbf29ce484222325ULL;
+  const auto mix = [&h](const void* data, std::size_t bytes) {
+    const auto* p = static_cast<const unsigned char*>(data);
+    for (std::size_t i = 0; i < bytes; ++i) h = (h ^ p[i]) * 0x100000001b3ULL;
+  };
+  for (std::size_t i = 0; i < e.keys.size(); ++i) {
+    const std::uint64_t key = e.keys[i].packed();
+    mix(&key, sizeof key);
+    mix(&e.alpha[i], sizeof(double));
+    mix(&e.beta[i], sizeof(double));
+  }
+  return h;
+}
+
+Expected<kernel::KernelOptions> kernelOptions(const std::string& method, const Options& o) {
+  const auto at = method.find('@');
+  const std::string kind = method.substr(0, at);
+  auto parsed = kernel::parseKernelMethod(kind);
+  if (!parsed) return std::unexpected(parsed.error());
+  kernel::KernelOptions k = kernel::KernelOptions::defaults(*parsed);
+  k.max_range = o.max_range;
+  if (auto ok = kernel::applySettings(k, o.kernel_settings); !ok)
+    return std::unexpected(ok.error());
+  if (at != std::string::npos) {  // after --kernel-set: the variant is what the name says
+    if (method.substr(at + 1) != "plain") return makeError("unknown variant in '" + method + "'");
+    k.free_traversal = false;
+    k.aggregate_hits = false;
+  }
+  return k;
+}
+
+Integrate makeIntegrator(const std::string& method, const Options& o) {
+  if (method == "octomap") {
+    return [range = o.max_range](OccupancyMap& map, const WorldScan& s) {
+      static_cast<OctreeMap&>(map).insertWithOctomap(s.points, s.origin, range);
+      return ScanStats{s.points.size(), 0, 0, 0};
+    };
+  }
+  const auto parsed = parseIntegrationMethod(method);
+  const auto rule = parseUpdateRule(o.rule);
+  if (!parsed || !rule) return nullptr;
+  auto integrator =
+      std::make_shared<Integrator>(IntegratorOptions{.method = *parsed,
+                                                     .rule = *rule,
+                                                     .max_range_m = o.max_range,
+                                                     .superray_min_points = o.min_points});
+  return [integrator](OccupancyMap& map, const WorldScan& s) {
+    return integrator->integrate(map, s.points, s.origin);
+  };
+}
+
+}  // namespace densemap::bench
