@@ -19,7 +19,7 @@ inline void copy3(float (&dst)[3], const Point3f& p) {
   for (int i = 0; i < 3; ++i) dst[i] = p[i];
 }
 
-inline std::string text(const char* s) { return s != nullptr ? s : ""; }
+using dds::text;
 
 /// An endpoint DDS Security did not grant is empty: the request fails here, clearly.
 inline Expected<void> permitted(const dds::Entity& endpoint, const std::string& what) {

@@ -77,7 +77,7 @@ void CommandRoom::answer() {
         } else if (kind == dds::CommandKind::kSave) {
           // A named file goes into the configured export directory, never where the request
           // says: a client must not overwrite what the server's user may write.
-          const std::string name = req.path != nullptr ? req.path : "";
+          const std::string name = dds::text(req.path);
           Expected<std::filesystem::path> target = std::filesystem::path();
           if (!name.empty()) {
             target = confineExportPath(export_dir_, name);

@@ -186,7 +186,7 @@ void MapService::ingestLoop() {
     dds_->ingest_waitset->wait(std::chrono::milliseconds(200));
     dds::takeAll<densemap_msgs_Scan>(dds_->scan_reader, [&](const densemap_msgs_Scan& msg) {
       RawScan raw;
-      raw.sensor_id = msg.sensor_id != nullptr ? msg.sensor_id : "";
+      raw.sensor_id = dds::text(msg.sensor_id);
       raw.seq = msg.seq;
       raw.stamp_ns = msg.stamp_ns;
       for (int i = 0; i < 3; ++i) raw.t_world_sensor[i] = msg.T_world_sensor.t[i];

@@ -266,7 +266,7 @@ void Ros2Bridge::takeClouds(std::size_t topic) {
           return;
         }
         Waiting w;
-        w.frame = m.header.frame_id != nullptr ? m.header.frame_id : "";
+        w.frame = dds::text(m.header.frame_id);
         w.sensor_id = dds_->cloud_names[topic];
         w.stamp_ns = stampNs(m.header.stamp);
         w.seq = seq;
@@ -311,10 +311,19 @@ void Ros2Bridge::resolveWaiting(Clock::time_point now) {
       std::lock_guard lock(counters_mutex_);
       ++counters_.no_transform;
     } else {
+      if (isHeld(it->sensor_id)) {
+        ++it;
+        continue;
+      }
       RawScan raw;
       raw.sensor_id = it->sensor_id;
-      if (isHeld(raw.sensor_id) || (it->waited && !ingest_.hasRoomFor(raw))) {
-        if (!isHeld(raw.sensor_id)) held.push_back(raw.sensor_id);
+      raw.xyz = std::move(it->cloud.xyz);
+      raw.intensity = std::move(it->cloud.intensity);
+      // The room check sees the cloud's bytes (the queue's byte budget counts them).
+      if (it->waited && !ingest_.hasRoomFor(raw)) {
+        it->cloud.xyz = std::move(raw.xyz);
+        it->cloud.intensity = std::move(raw.intensity);
+        held.push_back(it->sensor_id);
         ++it;
         continue;
       }
@@ -323,8 +332,6 @@ void Ros2Bridge::resolveWaiting(Clock::time_point now) {
       const ros2::ScanPose pose = ros2::toScanPose(*T);
       raw.t_world_sensor = pose.t;
       raw.q_world_sensor = pose.q;
-      raw.xyz = std::move(it->cloud.xyz);
-      raw.intensity = std::move(it->cloud.intensity);
       raw.received = it->received;
       ingest_.submit(std::move(raw));
       std::lock_guard lock(counters_mutex_);

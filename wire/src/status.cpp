@@ -5,7 +5,6 @@
 namespace densemap::dds {
 namespace {
 
-std::string text(const char* s) { return s != nullptr ? s : ""; }
 char* lend(const std::string& s) { return const_cast<char*>(s.c_str()); }
 
 }  // namespace
@@ -17,8 +16,8 @@ Expected<void> writeStatus(const Entity& writer, const ServerStatus& st) {
   s.dropped = st.dropped;
   s.rejected = st.rejected;
   // Lent for the write: DDS serialises the sample and never writes through these.
-  auto by_reason = st.rejected_by_reason;
-  s.rejected_by_reason = borrowSequence<dds_sequence_unsigned_long_long>(by_reason);
+  s.rejected_by_reason = borrowSequence<dds_sequence_unsigned_long_long>(
+      std::span<const std::uint64_t>(st.rejected_by_reason));
   s.last_reject_reason = lend(st.last_reject_reason);
   s.latency_p50_ms = st.latency_p50_ms;
   s.latency_p99_ms = st.latency_p99_ms;
@@ -47,8 +46,8 @@ Expected<void> writeStatus(const Entity& writer, const ServerStatus& st) {
   s.ros_submitted = st.ros_submitted;
   s.ros_rejected = st.ros_rejected;
   s.ros_no_transform = st.ros_no_transform;
-  auto ros_by_reason = st.ros_rejected_by_reason;
-  s.ros_rejected_by_reason = borrowSequence<dds_sequence_unsigned_long_long>(ros_by_reason);
+  s.ros_rejected_by_reason = borrowSequence<dds_sequence_unsigned_long_long>(
+      std::span<const std::uint64_t>(st.ros_rejected_by_reason));
   s.ros_last_reject = lend(st.ros_last_reject);
   s.ros_maps_published = st.ros_maps_published;
   std::vector<densemap_msgs_RosCloudTopic> clouds;

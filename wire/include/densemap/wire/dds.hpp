@@ -160,6 +160,9 @@ bool takeOneWithInfo(const Entity& reader, F&& f) {
   return check(dds_write(writer.get(), sample), "dds_write");
 }
 
+/// A string of a received sample (IDL strings may arrive as null): empty for null.
+[[nodiscard]] inline std::string text(const char* s) { return s != nullptr ? s : ""; }
+
 /// Wraps a vector's storage as a Cyclone sequence for writing (no copy; `v` must outlive it).
 template <class Seq, class V>
 Seq borrowSequence(V& v) {
