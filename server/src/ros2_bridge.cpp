@@ -7,13 +7,13 @@
 #include <cstring>
 #include <deque>
 
-#include "densemap/wire/topics.hpp"
-#include "ros2_bridge_state.hpp"
 #include "densemap/ros2/map_topics.hpp"
 #include "densemap/ros2/names.hpp"
 #include "densemap/ros2/tf_buffer.hpp"
+#include "densemap/wire/topics.hpp"
 #include "nav_msgs.h"
 #include "octomap_msgs.h"
+#include "ros2_bridge_state.hpp"
 #include "sensor_msgs.h"
 #include "tf2_msgs.h"
 
@@ -31,17 +31,28 @@ constexpr dds_attach_t kTfTag = 1, kTfStaticTag = 2, kCloudTag0 = 16;
 /// A QoS policy's name as DDS specifications spell it (status: why a writer was refused).
 std::string policyName(dds_qos_policy_id_t id) {
   switch (id) {
-    case DDS_RELIABILITY_QOS_POLICY_ID: return "reliability";
-    case DDS_DURABILITY_QOS_POLICY_ID: return "durability";
-    case DDS_DEADLINE_QOS_POLICY_ID: return "deadline";
-    case DDS_LIVELINESS_QOS_POLICY_ID: return "liveliness";
-    case DDS_OWNERSHIP_QOS_POLICY_ID: return "ownership";
-    case DDS_PRESENTATION_QOS_POLICY_ID: return "presentation";
-    case DDS_DESTINATIONORDER_QOS_POLICY_ID: return "destination order";
-    case DDS_LATENCYBUDGET_QOS_POLICY_ID: return "latency budget";
-    case DDS_DATA_REPRESENTATION_QOS_POLICY_ID: return "data representation";
-    case DDS_TYPE_CONSISTENCY_ENFORCEMENT_QOS_POLICY_ID: return "type consistency";
-    default: return "policy " + std::to_string(static_cast<int>(id));
+    case DDS_RELIABILITY_QOS_POLICY_ID:
+      return "reliability";
+    case DDS_DURABILITY_QOS_POLICY_ID:
+      return "durability";
+    case DDS_DEADLINE_QOS_POLICY_ID:
+      return "deadline";
+    case DDS_LIVELINESS_QOS_POLICY_ID:
+      return "liveliness";
+    case DDS_OWNERSHIP_QOS_POLICY_ID:
+      return "ownership";
+    case DDS_PRESENTATION_QOS_POLICY_ID:
+      return "presentation";
+    case DDS_DESTINATIONORDER_QOS_POLICY_ID:
+      return "destination order";
+    case DDS_LATENCYBUDGET_QOS_POLICY_ID:
+      return "latency budget";
+    case DDS_DATA_REPRESENTATION_QOS_POLICY_ID:
+      return "data representation";
+    case DDS_TYPE_CONSISTENCY_ENFORCEMENT_QOS_POLICY_ID:
+      return "type consistency";
+    default:
+      return "policy " + std::to_string(static_cast<int>(id));
   }
 }
 

@@ -53,8 +53,8 @@ Expected<void> writeStatus(const Entity& writer, const ServerStatus& st) {
   std::vector<densemap_msgs_RosCloudTopic> clouds;
   clouds.reserve(st.ros_clouds.size());
   for (const RosCloudTopicStatus& c : st.ros_clouds) {
-    clouds.push_back({lend(c.topic), c.matched_writers, c.incompatible_qos,
-                      lend(c.last_incompatible_policy)});
+    clouds.push_back(
+        {lend(c.topic), c.matched_writers, c.incompatible_qos, lend(c.last_incompatible_policy)});
   }
   s.ros_clouds = borrowSequence<dds_sequence_densemap_msgs_RosCloudTopic>(clouds);
   return write(writer, &s);
