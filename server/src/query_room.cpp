@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "densemap/wire/topics.hpp"
+#include "densemap/parallel/tbb_runner.hpp"
 #include "densemap/query/map_queries.hpp"
 #include "densemap_msgs.h"
 
@@ -33,7 +34,7 @@ void answerPoints(const dds::Entity& writer, const PointRequest& req, const MapV
   densemap_msgs_PointQueryReply rep{};
   rep.id = req.id;
   rep.map_version = view.version();
-  auto result = queryPoints(view, req.xyz);
+  auto result = queryPoints(view, req.xyz, dds::kMaxQueryPoints, tbbRunner());
   if (!result) {
     error = result.error().message;
     result = PointQueryResult{};

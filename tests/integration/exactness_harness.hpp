@@ -13,6 +13,7 @@
 #include "densemap/map/map_factory.hpp"
 #include "densemap/map/octree_map.hpp"
 #include "densemap/raycast/integrator.hpp"
+#include "densemap/parallel/tbb_runner.hpp"
 
 namespace densemap::test {
 
@@ -104,6 +105,7 @@ inline void expectMethodsAgree(const std::vector<WorldScan>& scans, double resol
   const auto referenceFor = [&](UpdateRule rule) -> const Subject& {
     return subjects[rule == UpdateRule::kSet ? 0 : 1];
   };
+  for (Subject& s : subjects) s.map->setRunner(tbbRunner());  // as the engine's: in the arena
   std::vector<CellChanges> changes(subjects.size());
   for (std::size_t i = 0; i < scans.size(); ++i) {
     oracle.insertWithOctomap(scans[i].points, scans[i].origin, max_range);

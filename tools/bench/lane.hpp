@@ -16,6 +16,7 @@
 #include "densemap/kernel/kernel_map.hpp"
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_factory.hpp"
+#include "densemap/parallel/tbb_runner.hpp"
 #include "densemap/raycast/integrator.hpp"
 
 namespace densemap::bench {
@@ -66,6 +67,7 @@ class Lane {
       : map_(std::move(*makeMap(backend, o.resolution))),
         integrate_(makeIntegrator(method, o)),
         arena_(method == "octomap" ? 1 : o.threads) {
+    map_->setRunner(tbbRunner());  // in the lane's arena of o.threads
     r_.method = method;
     r_.backend = std::string(backendName(backend));
     r_.threads = method == "octomap" ? 1 : o.threads;

@@ -29,6 +29,7 @@
 #include "densemap/io/scan_source.hpp"
 #include "densemap/kernel/kernel_map.hpp"
 #include "densemap/map/map_factory.hpp"
+#include "densemap/parallel/tbb_runner.hpp"
 #include "densemap/raycast/integrator.hpp"
 #include "densemap/sim/oracle_labels.hpp"
 #include "densemap/upsample/interpolation.hpp"
@@ -319,6 +320,7 @@ static int runMain(int argc, char** argv) {
       std::unique_ptr<densemap::OccupancyMap> log_odds_map;
       if (methods[m] == "raycast") {
         log_odds_map = std::move(*densemap::makeMap(densemap::Backend::kGrid, resolution));
+        log_odds_map->setRunner(densemap::tbbRunner());
         densemap::Integrator integrator({.max_range_m = max_range});
         for (std::size_t i = 0; i < scans.size(); ++i) {
           arena.execute(

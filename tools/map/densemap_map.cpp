@@ -12,6 +12,7 @@
 #include "densemap/io/octomap_export.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_factory.hpp"
+#include "densemap/parallel/tbb_runner.hpp"
 #include "densemap/raycast/integrator.hpp"
 
 static int runMain(int argc, char** argv) {
@@ -41,6 +42,7 @@ static int runMain(int argc, char** argv) {
   if (!backend) return fail(backend.error().message);
   auto map = densemap::makeMap(*backend, resolution);
   if (!map) return fail(map.error().message);
+  (*map)->setRunner(densemap::tbbRunner());
   if (out.empty() && graph_out.empty())
     return fail("nothing to write: give --out and/or --save-graph");
   auto source = densemap::openScanSource(data);

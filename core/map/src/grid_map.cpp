@@ -1,7 +1,6 @@
 #include "densemap/map/grid_map.hpp"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_reduce.h>
+#include <atomic>
 
 #include <vector>
 
@@ -61,21 +60,20 @@ ApplyStats GridMap::writeBlocks(std::span<BlockEntry* const> entries, CellChange
   using Counts = BlockWriter::Counts;
   // Each block records its changes in its own slot; slots are concatenated in block order.
   std::vector<CellChanges> block_changes(changes != nullptr ? entries.size() : 0);
-  const Counts total = tbb::parallel_reduce(
-      tbb::blocked_range<std::size_t>(0, entries.size(), 16), Counts{},
-      [&](const tbb::blocked_range<std::size_t>& range, Counts c) {
-        for (std::size_t j = range.begin(); j != range.end(); ++j) {
-          BlockWriter w(*this, *entries[j], c, changes != nullptr ? &block_changes[j] : nullptr);
-          write_block(j, w);
-        }
-        return c;
-      },
-      [](Counts a, const Counts& b) {
-        a.updated += b.updated;
-        a.changed += b.changed;
-        a.newly_known += b.newly_known;
-        return a;
-      });
+  // Chunks of blocks may run at once: each counts its own, added once per chunk.
+  std::atomic<std::size_t> updated{0}, changed{0}, newly_known{0};
+  runner().run(entries.size(), 16, [&](std::size_t begin, std::size_t end) {
+    Counts c;
+    for (std::size_t j = begin; j != end; ++j) {
+      BlockWriter w(*this, *entries[j], c, changes != nullptr ? &block_changes[j] : nullptr);
+      write_block(j, w);
+    }
+    updated += c.updated;
+    changed += c.changed;
+    newly_known += c.newly_known;
+  });
+  const Counts total{.updated = updated.load(), .changed = changed.load(),
+                     .newly_known = newly_known.load()};
   known_cells_ += total.newly_known;
   if (changes != nullptr) {
     for (auto& part : block_changes) changes->insert(changes->end(), part.begin(), part.end());

@@ -2,6 +2,8 @@
 
 #include "map_kind.hpp"
 
+#include "densemap/parallel/tbb_runner.hpp"
+
 namespace densemap {
 
 Expected<std::unique_ptr<Engine>> Engine::create(const PipelineOptions& options,
@@ -24,6 +26,7 @@ Expected<std::unique_ptr<Engine>> Engine::create(const PipelineOptions& options,
 Engine::Engine(const PipelineOptions& options, std::unique_ptr<OccupancyMap> map,
                std::uint64_t version)
     : options_(options) {
+  map->setRunner(tbbRunner());  // a restored map too: its blocks in parallel, in the arena
   if (options.kernel) {
     auto kernel_options = kernel::KernelOptions::defaults(*options.kernel);
     kernel_options.max_range = options.max_range_m;

@@ -13,6 +13,7 @@ MapKind::MapKind(std::unique_ptr<OccupancyMap> map) : map_(std::move(map)) {
   readable_ = dynamic_cast<GridMap*>(map_.get());
   if (readable_ == nullptr) {
     mirror_ = std::make_unique<GridMap>(map_->resolution(), map_->sensorModel());
+    mirror_->setRunner(map_->runner());
     map_->forEachKnown([this](const VoxelKey& k, float v) { mirror_->setLogOdds(k, v); });
     readable_ = mirror_.get();
   }

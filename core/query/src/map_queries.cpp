@@ -1,8 +1,5 @@
 #include "densemap/query/map_queries.hpp"
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -13,7 +10,7 @@
 namespace densemap {
 
 Expected<PointQueryResult> queryPoints(const MapView& view, std::span<const float> xyz,
-                                       std::size_t max_points) {
+                                       std::size_t max_points, const ChunkRunner& runner) {
   if (xyz.size() % 3 != 0) return makeError("point query length is not a multiple of 3");
   const std::size_t n = xyz.size() / 3;
   if (n > max_points) {
@@ -24,27 +21,26 @@ Expected<PointQueryResult> queryPoints(const MapView& view, std::span<const floa
   r.states.assign(n, 0);
   // Chunks in parallel; within a chunk, neighbouring points mostly share a block, so the last
   // block found is tried first.
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-                      std::uint64_t cached_key = ~std::uint64_t{0};
-                      const VoxelBlock* cached = nullptr;
-                      for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                        const Point3f p(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]);
-                        const auto key = p.allFinite() ? view.grid().pointToKey(p) : std::nullopt;
-                        std::optional<float> v;
-                        if (key) {
-                          const std::uint64_t bk = block::blockOf(*key);
-                          if (bk != cached_key) {
-                            cached_key = bk;
-                            cached = view.block(bk);
-                          }
-                          const int c = block::indexOf(*key);
-                          if (cached != nullptr && cached->isKnown(c)) v = cached->log_odds[c];
-                        }
-                        if (v) r.log_odds[i] = *v;
-                        r.states[i] = static_cast<std::uint8_t>(cellState(v));
-                      }
-                    });
+  runner.run(n, 4096, [&](std::size_t begin, std::size_t end) {
+    std::uint64_t cached_key = ~std::uint64_t{0};
+    const VoxelBlock* cached = nullptr;
+    for (std::size_t i = begin; i != end; ++i) {
+      const Point3f p(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]);
+      const auto key = p.allFinite() ? view.grid().pointToKey(p) : std::nullopt;
+      std::optional<float> v;
+      if (key) {
+        const std::uint64_t bk = block::blockOf(*key);
+        if (bk != cached_key) {
+          cached_key = bk;
+          cached = view.block(bk);
+        }
+        const int c = block::indexOf(*key);
+        if (cached != nullptr && cached->isKnown(c)) v = cached->log_odds[c];
+      }
+      if (v) r.log_odds[i] = *v;
+      r.states[i] = static_cast<std::uint8_t>(cellState(v));
+    }
+  });
   return r;
 }
 

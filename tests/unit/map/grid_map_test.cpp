@@ -10,6 +10,7 @@
 #include "densemap/map/map_diff.hpp"
 #include "densemap/map/map_factory.hpp"
 #include "densemap/map/octree_map.hpp"
+#include "densemap/parallel/tbb_runner.hpp"
 
 namespace densemap {
 namespace {
@@ -196,6 +197,8 @@ TEST(OccupancyMaps, FullyFreeBlocksInABoxAreTheWholeMapsBlocksInsideIt) {
 
 TEST(GridMap, OneAndTwoThreadsGiveTheSameMap) {
   GridMap one(0.2, SensorModel{}), two(0.2, SensorModel{});
+  one.setRunner(tbbRunner());  // TBB's chunks in arenas of 1 and 2 threads
+  two.setRunner(tbbRunner());
   std::mt19937 rng_a(3), rng_b(3);
   tbb::task_arena arena1(1), arena2(2);
   for (int scan = 0; scan < 6; ++scan) {
@@ -216,6 +219,7 @@ TEST(GridMap, AssignBlocksEqualsSettingCellByCellAndSkipsUnchangedCells) {
   std::uniform_real_distribution<float> value(-3.0F, 3.0F);
   GridMap plain(0.2, SensorModel{});
   std::array<GridMap, 2> maps{GridMap(0.2, SensorModel{}), GridMap(0.2, SensorModel{})};
+  for (GridMap& m : maps) m.setRunner(tbbRunner());
   std::map<std::uint64_t, BlockCells> by_block;
   std::map<std::uint64_t, float> wanted;  // packed key -> value
   for (int round = 0; round < 4; ++round) {

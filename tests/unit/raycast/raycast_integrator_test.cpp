@@ -6,6 +6,7 @@
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_diff.hpp"
 #include "densemap/map/octree_map.hpp"
+#include "densemap/parallel/tbb_runner.hpp"
 #include "densemap/test_support/random_rays.hpp"
 
 namespace densemap {
@@ -24,6 +25,7 @@ TEST_P(RaycastMatchesOctomap, CellForCellAfterEveryScanOnBothBackends) {
   const double far = c.max_range > 0 ? c.max_range : 6.0;
   OctreeMap oracle(c.resolution, SensorModel{});
   GridMap grid(c.resolution, SensorModel{});
+  grid.setRunner(tbbRunner());  // the grid's blocks in the arena's threads, as the engine's
   OctreeMap octree(c.resolution, SensorModel{});
   Integrator sut({.max_range_m = c.max_range});
   tbb::task_arena arena(c.threads);
@@ -66,6 +68,8 @@ INSTANTIATE_TEST_SUITE_P(ResolutionsRangesThreads, RaycastMatchesOctomap,
 
 TEST(Integrator, OneAndTwoThreadsGiveTheSameMapAndCounts) {
   GridMap one(0.1, SensorModel{}), two(0.1, SensorModel{});
+  one.setRunner(tbbRunner());
+  two.setRunner(tbbRunner());
   Integrator a({.max_range_m = 5.0}), b({.max_range_m = 5.0});
   tbb::task_arena arena1(1), arena2(2);
   for (int scan = 0; scan < 4; ++scan) {

@@ -6,6 +6,7 @@
 #include <string_view>
 #include <vector>
 
+#include "densemap/geometry/chunk_runner.hpp"
 #include "densemap/geometry/voxel_grid.hpp"
 #include "densemap/map/scan_update.hpp"
 #include "densemap/map/sensor_model.hpp"
@@ -33,9 +34,10 @@ struct ApplyStats {
 /// A log-odds occupancy map at one resolution: the storage behind every integration method.
 /// Each backend keeps OctoMap's per-cell semantics exactly (DESIGN.md, exactness contract).
 ///
-/// Thread-safety: single writer. `apply` may use TBB internally (in the caller's task arena)
-/// but must not run concurrently with any other call; const methods are safe to call
-/// concurrently with each other.
+/// Thread-safety: single writer. `apply` runs its blocks through the map's ChunkRunner (serial
+/// unless setRunner() gave another, such as tbbRunner() in the caller's task arena) but must
+/// not run concurrently with any other call; const methods are safe to call concurrently with
+/// each other.
 class OccupancyMap {
  public:
   OccupancyMap(double resolution_m, const SensorModel& model)
@@ -48,6 +50,9 @@ class OccupancyMap {
   [[nodiscard]] const VoxelGrid& grid() const { return grid_; }
   [[nodiscard]] double resolution() const { return grid_.resolution(); }
   [[nodiscard]] const SensorModel& sensorModel() const { return model_; }
+  /// What runs the map's per-block work (the runner must outlive the map).
+  void setRunner(const ChunkRunner& runner) { runner_ = &runner; }
+  [[nodiscard]] const ChunkRunner& runner() const { return *runner_; }
 
   /// Applies one scan under the update's rule (UpdateRule). When `changes` is
   /// given, the cells whose value changed (or became known) are appended to it.
@@ -83,6 +88,7 @@ class OccupancyMap {
  private:
   VoxelGrid grid_;
   SensorModel model_;
+  const ChunkRunner* runner_ = &serialRunner();
 };
 
 }  // namespace densemap

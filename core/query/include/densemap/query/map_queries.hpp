@@ -32,10 +32,11 @@ struct PointQueryResult {
 
 /// The cells of the points `xyz` (x y z per point, metres; a non-finite or out-of-range point is
 /// unknown). Errors for a length that is not a multiple of 3 or more than `max_points` points.
-/// Chunks run in parallel (in the caller's arena).
+/// Chunks of points run on `runner` (the server passes tbbRunner(), in its query arena).
 [[nodiscard]] Expected<PointQueryResult> queryPoints(const MapView& view,
                                                      std::span<const float> xyz,
-                                                     std::size_t max_points = 10'000'000);
+                                                     std::size_t max_points = 10'000'000,
+                                                     const ChunkRunner& runner = serialRunner());
 
 /// The keys of the box [min, max] (metres): the one check of a box from the wire (bbox queries,
 /// clear-bbox commands): errors for a non-finite corner, an inverted box, or a corner outside
