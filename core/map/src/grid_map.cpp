@@ -178,13 +178,26 @@ std::size_t GridMap::dropBlock(BlockEntry& e, CellChanges* changes) {
 EvictStats GridMap::evictBlocks(const std::function<bool(const Point3f&)>& keep,
                                 CellChanges* changes) {
   EvictStats stats;
-  store_->forEachEntryWriter([&](BlockEntry& e) {
-    if (BlockStore::latest(e) == nullptr) return;
-    if (keep(block::centreOf(grid(), e.key))) return;
-    const std::size_t cells = dropBlock(e, changes);
-    known_cells_ -= cells;
-    stats.cells += cells;
-    ++stats.blocks;
+  const auto keepsAll = [&](const block::BlockBox& box) {
+    for (int corner = 0; corner < 8; ++corner) {
+      std::uint64_t key = 0;
+      for (int a = 0; a < 3; ++a) {
+        key |= std::uint64_t{(corner >> a & 1) != 0 ? box.max[a] : box.min[a]} << (13 * a);
+      }
+      if (!keep(block::centreOf(grid(), key))) return false;
+    }
+    return true;
+  };
+  store_->forEachRegionWriter([&](const block::BlockBox& box, std::vector<BlockEntry*>& region) {
+    if (keepsAll(box)) return;
+    for (BlockEntry* e : region) {
+      if (BlockStore::latest(*e) == nullptr) continue;
+      if (keep(block::centreOf(grid(), e->key))) continue;
+      const std::size_t cells = dropBlock(*e, changes);
+      known_cells_ -= cells;
+      stats.cells += cells;
+      ++stats.blocks;
+    }
   });
   return stats;
 }

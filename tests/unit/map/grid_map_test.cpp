@@ -195,6 +195,54 @@ TEST(OccupancyMaps, FullyFreeBlocksInABoxAreTheWholeMapsBlocksInsideIt) {
   EXPECT_GT(found, 1000U);  // the boxes met the map
 }
 
+// Eviction passes over whole regions of 8^3 blocks whose corners are kept: against the plain
+// rule (a block stays exactly when its centre is kept), for windows (ball and box, and both)
+// that cut through regions, hold some whole and reject others whole.
+TEST(GridMap, EvictionKeepsExactlyTheBlocksWhoseCentresAreKept) {
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<int> coord(32768 - 400, 32768 + 400);  // 80 m at 0.1 m
+  for (int trial = 0; trial < 12; ++trial) {
+    GridMap grid(0.1, SensorModel{});
+    std::vector<std::uint64_t> blocks;
+    for (int i = 0; i < 4000; ++i) {
+      const VoxelKey k{static_cast<std::uint16_t>(coord(rng)),
+                       static_cast<std::uint16_t>(coord(rng)),
+                       static_cast<std::uint16_t>(coord(rng) / 4 + 3 * 32768 / 4)};
+      grid.setLogOdds(k, 1.0F);
+      blocks.push_back(block::blockOf(k));
+    }
+    std::sort(blocks.begin(), blocks.end());
+    blocks.erase(std::unique(blocks.begin(), blocks.end()), blocks.end());
+    std::uniform_real_distribution<float> centre(-30.0F, 30.0F), radius(5.0F, 40.0F);
+    const Point3f origin(centre(rng) / 2, centre(rng) / 2, centre(rng) / 4);
+    const float r = radius(rng);
+    const Point3f lo(centre(rng) - 20.0F, -25.0F, -40.0F), hi(lo.x() + 35.0F, 25.0F, 40.0F);
+    const int shape = trial % 3;  // ball, box, both
+    const auto keep = [&](const Point3f& c) {
+      if (shape != 1 && (c - origin).cast<double>().squaredNorm() > double(r) * r) return false;
+      if (shape != 0) return (c.array() >= lo.array()).all() && (c.array() <= hi.array()).all();
+      return true;
+    };
+    std::size_t expected_blocks = 0;
+    for (const std::uint64_t b : blocks) {
+      expected_blocks += keep(block::centreOf(grid.grid(), b)) ? 0 : 1;
+    }
+    const EvictStats stats = grid.evictBlocks(keep);
+    EXPECT_EQ(stats.blocks, expected_blocks) << "trial " << trial;
+    std::size_t kept = 0;
+    for (const std::uint64_t b : blocks) {
+      bool any = false;
+      for (int c = 0; c < block::kVoxels && !any; ++c) {
+        any = grid.logOdds(block::keyOf(b, c)).has_value();
+      }
+      ASSERT_EQ(any, keep(block::centreOf(grid.grid(), b))) << "trial " << trial << " block " << b;
+      kept += any ? 1 : 0;
+    }
+    EXPECT_GT(kept, 0U) << "trial " << trial;
+    EXPECT_GT(expected_blocks, 0U) << "trial " << trial;
+  }
+}
+
 TEST(GridMap, OneAndTwoThreadsGiveTheSameMap) {
   GridMap one(0.2, SensorModel{}), two(0.2, SensorModel{});
   one.setRunner(tbbRunner());  // TBB's chunks in arenas of 1 and 2 threads

@@ -138,6 +138,20 @@ class BlockStore {
       }
     }
   }
+  /// Calls f(box, entries) for every region of 8^3 blocks that holds entries (writer): the
+  /// region's box of blocks and its entries, so a caller can pass over a whole region at once.
+  template <typename F>
+  void forEachRegionWriter(F&& f) {
+    for (auto& [key, region] : regions_) {
+      block::BlockBox box;
+      for (int a = 0; a < 3; ++a) {
+        const auto c = static_cast<std::uint32_t>((key >> (10 * a)) & 0x3ff);
+        box.min[a] = c << kRegionShift;
+        box.max[a] = std::min<std::uint32_t>(((c + 1) << kRegionShift) - 1, 0x1fff);
+      }
+      f(box, region);
+    }
+  }
   /// Whether a version was ever published (writes then copy blocks readers may hold).
   [[nodiscard]] bool versioned() const { return versioned_; }
 

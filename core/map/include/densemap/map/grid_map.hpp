@@ -43,7 +43,11 @@ class GridMap final : public OccupancyMap {
 
   /// Drops every block whose centre `keep` rejects (a bounded window or box around the robot):
   /// their cells become unknown (appended to `changes` as erased) and their memory returns to
-  /// the pool once no reader holds an older version.
+  /// the pool once no reader holds an older version. `keep` must hold on every block centre of
+  /// a box of blocks when it holds on the box's 8 corner blocks (a ball, an axis-aligned box,
+  /// their intersection: a test per axis, monotone away from its centre), so a region of 8^3
+  /// blocks whose corners are kept is passed over whole: the cost follows the regions and the
+  /// blocks near the window's edge, not every block of the map.
   EvictStats evictBlocks(const std::function<bool(const Point3f&)>& keep,
                          CellChanges* changes = nullptr);
 
