@@ -6,6 +6,7 @@
 #include <string>
 
 #include "densemap/geometry/ray_traversal.hpp"
+#include "densemap/query/block_accessor.hpp"
 
 namespace densemap {
 
@@ -19,24 +20,13 @@ Expected<PointQueryResult> queryPoints(const MapView& view, std::span<const floa
   PointQueryResult r;
   r.log_odds.assign(n, std::numeric_limits<float>::quiet_NaN());
   r.states.assign(n, 0);
-  // Chunks in parallel; within a chunk, neighbouring points mostly share a block, so the last
-  // block found is tried first.
+  // Chunks on the runner; within a chunk neighbouring points mostly share a block.
   runner.run(n, 4096, [&](std::size_t begin, std::size_t end) {
-    std::uint64_t cached_key = ~std::uint64_t{0};
-    const VoxelBlock* cached = nullptr;
+    BlockAccessor cells(view);
     for (std::size_t i = begin; i != end; ++i) {
       const Point3f p(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]);
       const auto key = p.allFinite() ? view.grid().pointToKey(p) : std::nullopt;
-      std::optional<float> v;
-      if (key) {
-        const std::uint64_t bk = block::blockOf(*key);
-        if (bk != cached_key) {
-          cached_key = bk;
-          cached = view.block(bk);
-        }
-        const int c = block::indexOf(*key);
-        if (cached != nullptr && cached->isKnown(c)) v = cached->log_odds[c];
-      }
+      const std::optional<float> v = key ? cells.logOdds(*key) : std::nullopt;
       if (v) r.log_odds[i] = *v;
       r.states[i] = static_cast<std::uint8_t>(cellState(v));
     }
@@ -129,8 +119,9 @@ Expected<RayQueryResult> castRay(const MapView& view, const Point3f& origin,
   const Point3f end = origin + direction / norm * max_range;
   RayQueryResult r;
   std::optional<VoxelKey> first_hit;
+  BlockAccessor cells(view);  // a ray's cells share blocks
   auto check = [&](const VoxelKey& k) {
-    if (!first_hit && cellState(view.logOdds(k)) == CellState::kOccupied) first_hit = k;
+    if (!first_hit && cellState(cells.logOdds(k)) == CellState::kOccupied) first_hit = k;
   };
   if (!traverseRay(view.grid(), origin, end, check)) {
     return makeError("ray leaves the map's addressable range");

@@ -4,8 +4,10 @@
 
 #include <cmath>
 #include <limits>
+#include <random>
 
 #include "densemap/map/grid_map.hpp"
+#include "densemap/query/block_accessor.hpp"
 
 namespace densemap {
 namespace {
@@ -81,6 +83,47 @@ TEST(MapQueries, PointsGetTheirCellsAndUnknownForNonFiniteOrFarPoints) {
   auto many = queryPoints(*view, std::vector<float>(30, 0.5F), 9);
   ASSERT_FALSE(many);
   EXPECT_NE(many.error().message.find("more than 9"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace densemap
+
+namespace densemap {
+namespace {
+
+// The accessor's cached block gives what the view gives, cell by cell, on a walk that stays in
+// a block, crosses into known and unknown blocks and comes back (the cache must follow).
+TEST(BlockAccessor, EveryCellAsTheViewHasIt) {
+  GridMap map(0.1, SensorModel{});
+  std::mt19937 rng(9);
+  std::uniform_int_distribution<int> coord(32768 - 12, 32768 + 12);
+  std::uniform_real_distribution<float> value(-3.0F, 3.0F);
+  for (int i = 0; i < 3000; ++i) {
+    map.setLogOdds(VoxelKey{static_cast<std::uint16_t>(coord(rng)),
+                            static_cast<std::uint16_t>(coord(rng)),
+                            static_cast<std::uint16_t>(coord(rng))},
+                   value(rng));
+  }
+  const auto view = MapView::fromMap(map, 1);
+  BlockAccessor cells(*view);
+  std::size_t known = 0;
+  VoxelKey k{32768, 32768, 32768};
+  std::uniform_int_distribution<int> step(-1, 1), jump(0, 20);
+  for (int i = 0; i < 20000; ++i) {
+    if (jump(rng) == 0) {  // elsewhere now and then: another block, maybe none
+      const int far = jump(rng) < 5 ? 100 : 0;  // a block with no cells, or back
+      k = {static_cast<std::uint16_t>(coord(rng) + far), static_cast<std::uint16_t>(coord(rng)),
+           static_cast<std::uint16_t>(coord(rng))};
+    } else {
+      k.x = static_cast<std::uint16_t>(k.x + step(rng));
+      k.y = static_cast<std::uint16_t>(k.y + step(rng));
+    }
+    const auto expected = view->logOdds(k);
+    ASSERT_EQ(cells.logOdds(k), expected) << i;
+    known += expected ? 1 : 0;
+  }
+  EXPECT_GT(known, 500U);
+  EXPECT_LT(known, 19500U);
 }
 
 }  // namespace
