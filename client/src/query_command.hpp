@@ -1,0 +1,33 @@
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <cstdint>
+#include <vector>
+
+#include "densemap/client/client.hpp"
+
+namespace densemap::cli {
+
+/// `densemap query point | bbox | ray`: the map's cells at points, cell counts in a box, the
+/// first occupied cell along a ray.
+class QueryCommand {
+ public:
+  /// Adds the subcommands and their options to `app`.
+  explicit QueryCommand(CLI::App& app);
+  [[nodiscard]] bool parsed() const { return command_->parsed(); }
+  int run(Client& client);
+
+ private:
+  CLI::App* command_;
+  CLI::App *point_, *box_, *ray_;
+  std::vector<float> coords_;
+  std::uint32_t random_points_ = 0;
+  float random_spread_ = 20.0F;
+  std::vector<float> box_min_, box_max_;
+  std::uint32_t centers_ = 0;
+  std::vector<float> origin_, direction_;
+  float range_ = 30.0F;
+};
+
+}  // namespace densemap::cli
