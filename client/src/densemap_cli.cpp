@@ -17,7 +17,6 @@
 namespace densemap::cli {
 namespace {
 
-
 /// --pki DIR --role R fills the six files; an explicit file flag replaces its one. Without any
 /// of them: no DDS Security.
 Expected<std::optional<dds::SecurityFiles>> securityOptions(
