@@ -5,6 +5,7 @@
 #include <memory>
 
 #include "densemap/client/client.hpp"
+#include "densemap/load/runner.hpp"
 
 namespace densemap::cli {
 
@@ -18,6 +19,9 @@ class LoadCommand {
   int run(const ClientOptions& options, bool interface_given);
 
  private:
+  /// The runner's options: the client's, the work directory, and a child process's arguments.
+  [[nodiscard]] load::RunOptions runOptions(const ClientOptions& options) const;
+
   CLI::App* command_;
   std::string scenario_file_, out_dir_, work_dir_ = "/tmp/densemap-load";
   double duration_s_ = 0;
