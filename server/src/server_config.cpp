@@ -71,8 +71,10 @@ Expected<proto::ServerConfig> loadServerConfig(const std::filesystem::path& file
   return config;
 }
 
-Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
-  PipelineOptions o;
+namespace {
+
+/// The map block: backend, kind, resolution, eviction window, range, sensor model.
+Expected<void> mapOptions(const proto::ServerConfig& config, PipelineOptions& o) {
   auto backend = parseBackend(config.map().backend());
   if (!backend) return makeError("map.backend: " + backend.error().message);
   o.backend = *backend;
@@ -124,6 +126,11 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
         "map.sensor needs 0 < clamp_min < 0.5, prob_miss < 0.5 < prob_hit < 1, "
         "0.5 < clamp_max < 1");
   }
+  return {};
+}
+
+/// The pipeline block: threads, memory reserves and budgets, the queue, integration, limits.
+Expected<void> ingestOptions(const proto::ServerConfig& config, PipelineOptions& o) {
   const auto& p = config.pipeline();
   if (p.threads() < 1 || p.threads() > 256) return makeError("pipeline.threads must be in 1..256");
   // Faulted in at start: more than the machine can hold aborted with bad_alloc.
@@ -168,6 +175,11 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
   o.limits.max_points = p.max_points();
   o.limits.max_abs_position_m = std::min(p.max_abs_position_m(), 32767.0 * o.resolution_m);
   if (!(p.max_abs_position_m() > 0)) return makeError("pipeline.max_abs_position_m must be > 0");
+  return {};
+}
+
+/// The upsample block (ILN or interpolation before integration), when enabled.
+Expected<void> upsampleOptions(const proto::ServerConfig& config, PipelineOptions& o) {
   if (const auto& u = config.upsample(); u.enabled()) {
     const auto dim = [](std::uint32_t v) { return static_cast<int>(std::min(v, 1U << 20)); };
     auto up = upsample::makeUpsampleOptions(
@@ -176,6 +188,11 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
     if (!up) return makeError("upsample: " + up.error().message);
     o.upsample = std::move(*up);
   }
+  return {};
+}
+
+/// The snapshot and DDS blocks' checks (their values are the service's: serviceOptions).
+Expected<void> checkSnapshotAndDds(const proto::ServerConfig& config) {
   if (config.snapshot().keep() < 1 || config.snapshot().keep() > 100) {
     return makeError("snapshot.keep must be 1 .. 100");
   }
@@ -201,6 +218,17 @@ Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
                      "block (scripts/make-pki.sh makes its files), or set "
                      "dds.allow_insecure_remote: true to accept that");
   }
+  return {};
+}
+
+}  // namespace
+
+Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
+  PipelineOptions o;
+  for (auto* part : {&mapOptions, &ingestOptions, &upsampleOptions}) {
+    if (auto ok = part(config, o); !ok) return std::unexpected(ok.error());
+  }
+  if (auto ok = checkSnapshotAndDds(config); !ok) return std::unexpected(ok.error());
   return o;
 }
 
