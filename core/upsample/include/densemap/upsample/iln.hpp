@@ -54,6 +54,7 @@ class IlnModel {
   [[nodiscard]] RangeImage upsample(const RangeImage& input, const RangeLayout& output) const;
 
  private:
+  friend struct IlnLoader;  // reads a weights file into the members (iln_load.cpp)
   struct Conv {
     int in = 0, out = 0;
     std::vector<float> weight;  // out x (in * 9), PyTorch's (out, in, 3, 3) order
