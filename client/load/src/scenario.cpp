@@ -172,17 +172,10 @@ std::vector<ClientPlan> expandClients(const ClientTemplate& t) {
   return out;
 }
 
-Expected<Scenario> parseScenario(const std::string& text) {
-  proto::Scenario in;
-  if (auto parsed = parseTextFormat(text, in); !parsed) return std::unexpected(parsed.error());
-  Scenario s;
-  s.name = in.name().empty() ? "unnamed" : in.name();
-  if (!within(in.duration_s(), 1, kMaxDurationS))
-    return makeError("duration_s must be in 1 .. 86400");
-  if (!within(in.sample_period_s(), 0.1, 600))
-    return makeError("sample_period_s must be in 0.1 .. 600");
-  s.duration_s = in.duration_s();
-  s.sample_period_s = in.sample_period_s();
+namespace {
+
+/// The sensor and client blocks: templates, then their copies (ids, offsets, staggered starts).
+Expected<void> parseStreams(const proto::Scenario& in, Scenario& s) {
   for (int i = 0; i < in.sensors_size(); ++i) {
     auto t = sensorTemplate(in.sensors(i), static_cast<std::size_t>(i));
     if (!t) return std::unexpected(t.error());
@@ -217,6 +210,11 @@ Expected<Scenario> parseScenario(const std::string& text) {
     if (!ids.insert(p.sensor_id).second)
       return makeError("sensor id '" + p.sensor_id + "' repeats");
   }
+  return {};
+}
+
+/// The late joiners' start times.
+Expected<void> parseJoiners(const proto::Scenario& in, Scenario& s) {
   const auto& lj = in.late_joiners();
   if (lj.count() > kMaxJoiners) return makeError("late_joiners.count must be at most 1000");
   if (!within(lj.first_at_s(), 0, kMaxDurationS) || !within(lj.period_s(), 0.1, kMaxDurationS)) {
@@ -225,6 +223,66 @@ Expected<Scenario> parseScenario(const std::string& text) {
   for (std::uint32_t i = 0; i < lj.count(); ++i) {
     s.joiner_times_s.push_back(lj.first_at_s() + i * lj.period_s());
   }
+  return {};
+}
+
+/// The ramp block (after the streams: it copies one of them).
+Expected<RampPlan> parseRamp(const proto::Scenario& in, const Scenario& s) {
+  const auto& r = in.ramp();
+  RampPlan ramp;
+  if (r.vary() != "sensors" && r.vary() != "clients") {
+    return makeError("ramp.vary must be \"sensors\" or \"clients\"");
+  }
+  ramp.vary_sensors = r.vary() == "sensors";
+  if (ramp.vary_sensors ? s.sensor_templates.empty() : s.client_templates.empty()) {
+    return makeError("ramp.vary: the scenario has no " + r.vary() + " to copy");
+  }
+  if (r.start() < 1 || r.step() < 1 || r.max_steps() < 1 || r.max_steps() > 64) {
+    return makeError("ramp: start and step must be >= 1, max_steps in 1 .. 64");
+  }
+  if (!within(r.step_duration_s(), 1, 3600)) {
+    return makeError("ramp.step_duration_s must be in 1 .. 3600");
+  }
+  ramp.start = r.start();
+  ramp.step = r.step();
+  ramp.max_steps = r.max_steps();
+  ramp.step_duration_s = r.step_duration_s();
+  ramp.reset_between_steps = r.reset_between_steps();
+  const std::uint64_t most = rampCount(ramp, ramp.max_steps - 1);
+  if (most > (ramp.vary_sensors ? kMaxSensors : kMaxClients)) {
+    return makeError("ramp: the last step would run " + std::to_string(most) + " " + r.vary() +
+                     ", more than allowed");
+  }
+  return ramp;
+}
+
+/// The soak block.
+Expected<SoakPlan> parseSoak(const proto::Scenario& in) {
+  const auto& k = in.soak();
+  if (!within(k.warm_up_s(), 0, kMaxDurationS) || !within(k.max_rss_growth(), 0, 100) ||
+      !within(k.max_p99_drift(), 0, 100) || !within(k.window_s(), 1, kMaxDurationS) ||
+      !within(k.drift_floor_ms(), 0, 1e6)) {
+    return makeError("soak: warm_up_s >= 0, window_s >= 1, growth, drift and floor >= 0");
+  }
+  return SoakPlan{k.warm_up_s(), k.max_rss_growth(), k.max_p99_drift(), k.window_s(),
+                  k.drift_floor_ms()};
+}
+
+}  // namespace
+
+Expected<Scenario> parseScenario(const std::string& text) {
+  proto::Scenario in;
+  if (auto parsed = parseTextFormat(text, in); !parsed) return std::unexpected(parsed.error());
+  Scenario s;
+  s.name = in.name().empty() ? "unnamed" : in.name();
+  if (!within(in.duration_s(), 1, kMaxDurationS))
+    return makeError("duration_s must be in 1 .. 86400");
+  if (!within(in.sample_period_s(), 0.1, 600))
+    return makeError("sample_period_s must be in 0.1 .. 600");
+  s.duration_s = in.duration_s();
+  s.sample_period_s = in.sample_period_s();
+  if (auto ok = parseStreams(in, s); !ok) return std::unexpected(ok.error());
+  if (auto ok = parseJoiners(in, s); !ok) return std::unexpected(ok.error());
   if (s.sensors.empty() && s.clients.empty() && s.joiner_times_s.empty()) {
     return makeError("the scenario has no sensors, clients or late joiners");
   }
@@ -234,42 +292,14 @@ Expected<Scenario> parseScenario(const std::string& text) {
   }
   s.slo = {slo.e2e_p99_ms(), slo.max_dropped(), slo.query_p99_ms(), slo.max_failed_queries()};
   if (in.has_ramp()) {
-    const auto& r = in.ramp();
-    RampPlan ramp;
-    if (r.vary() != "sensors" && r.vary() != "clients") {
-      return makeError("ramp.vary must be \"sensors\" or \"clients\"");
-    }
-    ramp.vary_sensors = r.vary() == "sensors";
-    if (ramp.vary_sensors ? s.sensor_templates.empty() : s.client_templates.empty()) {
-      return makeError("ramp.vary: the scenario has no " + r.vary() + " to copy");
-    }
-    if (r.start() < 1 || r.step() < 1 || r.max_steps() < 1 || r.max_steps() > 64) {
-      return makeError("ramp: start and step must be >= 1, max_steps in 1 .. 64");
-    }
-    if (!within(r.step_duration_s(), 1, 3600)) {
-      return makeError("ramp.step_duration_s must be in 1 .. 3600");
-    }
-    ramp.start = r.start();
-    ramp.step = r.step();
-    ramp.max_steps = r.max_steps();
-    ramp.step_duration_s = r.step_duration_s();
-    ramp.reset_between_steps = r.reset_between_steps();
-    const std::uint64_t most = rampCount(ramp, ramp.max_steps - 1);
-    if (most > (ramp.vary_sensors ? kMaxSensors : kMaxClients)) {
-      return makeError("ramp: the last step would run " + std::to_string(most) + " " + r.vary() +
-                       ", more than allowed");
-    }
-    s.ramp = ramp;
+    auto ramp = parseRamp(in, s);
+    if (!ramp) return std::unexpected(ramp.error());
+    s.ramp = *ramp;
   }
   if (in.has_soak()) {
-    const auto& k = in.soak();
-    if (!within(k.warm_up_s(), 0, kMaxDurationS) || !within(k.max_rss_growth(), 0, 100) ||
-        !within(k.max_p99_drift(), 0, 100) || !within(k.window_s(), 1, kMaxDurationS) ||
-        !within(k.drift_floor_ms(), 0, 1e6)) {
-      return makeError("soak: warm_up_s >= 0, window_s >= 1, growth, drift and floor >= 0");
-    }
-    s.soak = SoakPlan{k.warm_up_s(), k.max_rss_growth(), k.max_p99_drift(), k.window_s(),
-                      k.drift_floor_ms()};
+    auto soak = parseSoak(in);
+    if (!soak) return std::unexpected(soak.error());
+    s.soak = *soak;
   }
   return s;
 }
