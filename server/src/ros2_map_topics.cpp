@@ -19,6 +19,67 @@ builtin_interfaces_msg_dds__Time_ rosNow() {
           static_cast<std::uint32_t>(ns % 1'000'000'000)};
 }
 
+/// /octomap_binary: the (pruned) OcTree's binary stream.
+void writeOctomap(const dds::Entity& writer, const std_msgs_msg_dds__Header_& header,
+                  double resolution, ros2::MapTopicsState& map) {
+  std::string bytes = map.binaryData();
+  octomap_msgs_msg_dds__Octomap_ msg{};
+  msg.header = header;
+  msg.binary = true;
+  msg.id = const_cast<char*>("OcTree");
+  msg.resolution = resolution;
+  msg.data._length = msg.data._maximum = static_cast<std::uint32_t>(bytes.size());
+  msg.data._buffer = reinterpret_cast<std::int8_t*>(bytes.data());
+  msg.data._release = false;
+  (void)dds::write(writer, &msg);
+}
+
+/// /projected_map: the 2D occupancy grid.
+void writeGrid(const dds::Entity& writer, const std_msgs_msg_dds__Header_& header,
+               ros2::MapTopicsState& map) {
+  ros2::GridImage grid = map.projectedGrid();
+  nav_msgs_msg_dds__OccupancyGrid_ msg{};
+  msg.header = header;
+  msg.info.map_load_time = header.stamp;
+  msg.info.resolution = static_cast<float>(grid.resolution);
+  msg.info.width = grid.width;
+  msg.info.height = grid.height;
+  msg.info.origin.position = {grid.origin_x, grid.origin_y, 0.0};
+  msg.info.origin.orientation = {0.0, 0.0, 0.0, 1.0};
+  msg.data._length = msg.data._maximum = static_cast<std::uint32_t>(grid.data.size());
+  msg.data._buffer = grid.data.data();
+  msg.data._release = false;
+  (void)dds::write(writer, &msg);
+}
+
+/// The occupied cells' centres as a PointCloud2 (x, y, z float32).
+void writeCenters(const dds::Entity& writer, const std_msgs_msg_dds__Header_& header,
+                  ros2::MapTopicsState& map) {
+  const std::vector<Point3f> centers = map.occupiedCenters();
+  std::vector<std::uint8_t> data(centers.size() * 12);
+  for (std::size_t i = 0; i < centers.size(); ++i) {
+    std::memcpy(data.data() + 12 * i, centers[i].data(), 12);
+  }
+  sensor_msgs_msg_dds__PointField_ fields[3] = {{const_cast<char*>("x"), 0, 7, 1},
+                                                {const_cast<char*>("y"), 4, 7, 1},
+                                                {const_cast<char*>("z"), 8, 7, 1}};
+  sensor_msgs_msg_dds__PointCloud2_ msg{};
+  msg.header = header;
+  msg.height = 1;
+  msg.width = static_cast<std::uint32_t>(centers.size());
+  msg.fields._length = msg.fields._maximum = 3;
+  msg.fields._buffer = fields;
+  msg.fields._release = false;
+  msg.is_bigendian = false;
+  msg.point_step = 12;
+  msg.row_step = static_cast<std::uint32_t>(data.size());
+  msg.data._length = msg.data._maximum = static_cast<std::uint32_t>(data.size());
+  msg.data._buffer = data.data();
+  msg.data._release = false;
+  msg.is_dense = true;
+  (void)dds::write(writer, &msg);
+}
+
 }  // namespace
 
 void Ros2Bridge::publishMaps() {
@@ -57,58 +118,10 @@ void Ros2Bridge::publishMaps() {
   const std::string frame = options_.world_frame;
   std_msgs_msg_dds__Header_ header{rosNow(), const_cast<char*>(frame.c_str())};
   const double resolution = latest->grid().resolution();
-  if (dds_->octomap_writer.get() > 0) {
-    std::string bytes = s.map->binaryData();
-    octomap_msgs_msg_dds__Octomap_ msg{};
-    msg.header = header;
-    msg.binary = true;
-    msg.id = const_cast<char*>("OcTree");
-    msg.resolution = resolution;
-    msg.data._length = msg.data._maximum = static_cast<std::uint32_t>(bytes.size());
-    msg.data._buffer = reinterpret_cast<std::int8_t*>(bytes.data());
-    msg.data._release = false;
-    (void)dds::write(dds_->octomap_writer, &msg);
-  }
-  if (dds_->grid_writer.get() > 0) {
-    ros2::GridImage grid = s.map->projectedGrid();
-    nav_msgs_msg_dds__OccupancyGrid_ msg{};
-    msg.header = header;
-    msg.info.map_load_time = header.stamp;
-    msg.info.resolution = static_cast<float>(grid.resolution);
-    msg.info.width = grid.width;
-    msg.info.height = grid.height;
-    msg.info.origin.position = {grid.origin_x, grid.origin_y, 0.0};
-    msg.info.origin.orientation = {0.0, 0.0, 0.0, 1.0};
-    msg.data._length = msg.data._maximum = static_cast<std::uint32_t>(grid.data.size());
-    msg.data._buffer = grid.data.data();
-    msg.data._release = false;
-    (void)dds::write(dds_->grid_writer, &msg);
-  }
-  if (dds_->centers_writer.get() > 0) {
-    const std::vector<Point3f> centers = s.map->occupiedCenters();
-    std::vector<std::uint8_t> data(centers.size() * 12);
-    for (std::size_t i = 0; i < centers.size(); ++i) {
-      std::memcpy(data.data() + 12 * i, centers[i].data(), 12);
-    }
-    sensor_msgs_msg_dds__PointField_ fields[3] = {{const_cast<char*>("x"), 0, 7, 1},
-                                                  {const_cast<char*>("y"), 4, 7, 1},
-                                                  {const_cast<char*>("z"), 8, 7, 1}};
-    sensor_msgs_msg_dds__PointCloud2_ msg{};
-    msg.header = header;
-    msg.height = 1;
-    msg.width = static_cast<std::uint32_t>(centers.size());
-    msg.fields._length = msg.fields._maximum = 3;
-    msg.fields._buffer = fields;
-    msg.fields._release = false;
-    msg.is_bigendian = false;
-    msg.point_step = 12;
-    msg.row_step = static_cast<std::uint32_t>(data.size());
-    msg.data._length = msg.data._maximum = static_cast<std::uint32_t>(data.size());
-    msg.data._buffer = data.data();
-    msg.data._release = false;
-    msg.is_dense = true;
-    (void)dds::write(dds_->centers_writer, &msg);
-  }
+  if (dds_->octomap_writer.get() > 0)
+    writeOctomap(dds_->octomap_writer, header, resolution, *s.map);
+  if (dds_->grid_writer.get() > 0) writeGrid(dds_->grid_writer, header, *s.map);
+  if (dds_->centers_writer.get() > 0) writeCenters(dds_->centers_writer, header, *s.map);
   std::lock_guard lock(counters_mutex_);
   ++counters_.maps_published;
 }
