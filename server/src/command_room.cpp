@@ -53,46 +53,40 @@ void CommandRoom::answer() {
           return;
         }
         Expected<std::string> outcome =
-            makeError("unknown command kind " + std::to_string(req.kind));
-        const VoxelGrid& grid = ingest_.view()->grid();
-        if (kind == dds::CommandKind::kReset || kind == dds::CommandKind::kClearBox) {
-          VoxelKey lo{0, 0, 0}, hi{65535, 65535, 65535};
-          bool valid = true;
-          if (kind == dds::CommandKind::kClearBox) {
-            const auto keys = boxKeys(grid, toPoint(req.min), toPoint(req.max));
-            if (!keys) {
-              outcome = makeError("clear-bbox: " + keys.error().message);
-              valid = false;
-            } else {
-              std::tie(lo, hi) = *keys;
-            }
-          }
-          if (valid) {
-            auto future = ingest_.command(
-                [lo, hi](OccupancyMap& map, CellChanges& changes) -> Expected<std::string> {
-                  return "erased " + std::to_string(map.clearBox(lo, hi, &changes)) + " cells";
-                });
-            outcome = future.get();
-          }
-        } else if (kind == dds::CommandKind::kSave) {
-          // A named file goes into the configured export directory, never where the request
-          // says: a client must not overwrite what the server's user may write.
-          const std::string name = dds::text(req.path);
-          Expected<std::filesystem::path> target = std::filesystem::path();
-          if (!name.empty()) {
-            target = confineExportPath(export_dir_, name);
-          }
-          auto saved = target ? saver_.save(*target)
-                              : Expected<std::size_t>(std::unexpected(target.error()));
-          if (saved)
-            outcome = "saved " + std::to_string(*saved) + " bytes" +
-                      (name.empty() ? "" : " to " + target->string());
-          else
-            outcome = std::unexpected(saved.error());
-        }
+            kind == dds::CommandKind::kReset || kind == dds::CommandKind::kClearBox ? clear(req)
+            : kind == dds::CommandKind::kSave
+                ? save(req)
+                : makeError("unknown command kind " + std::to_string(req.kind));
         reply(req.id, outcome);
       })) {
   }
+}
+
+Expected<std::string> CommandRoom::clear(const densemap_msgs_CommandRequest& req) {
+  VoxelKey lo{0, 0, 0}, hi{65535, 65535, 65535};
+  if (static_cast<dds::CommandKind>(req.kind) == dds::CommandKind::kClearBox) {
+    const auto keys = boxKeys(ingest_.view()->grid(), toPoint(req.min), toPoint(req.max));
+    if (!keys) return makeError("clear-bbox: " + keys.error().message);
+    std::tie(lo, hi) = *keys;
+  }
+  auto future =
+      ingest_.command([lo, hi](OccupancyMap& map, CellChanges& changes) -> Expected<std::string> {
+        return "erased " + std::to_string(map.clearBox(lo, hi, &changes)) + " cells";
+      });
+  return future.get();
+}
+
+Expected<std::string> CommandRoom::save(const densemap_msgs_CommandRequest& req) {
+  // A named file goes into the configured export directory, never where the request says: a
+  // client must not overwrite what the server's user may write.
+  const std::string name = dds::text(req.path);
+  Expected<std::filesystem::path> target = std::filesystem::path();
+  if (!name.empty()) target = confineExportPath(export_dir_, name);
+  if (!target) return std::unexpected(target.error());
+  auto saved = saver_.save(*target);
+  if (!saved) return std::unexpected(saved.error());
+  return "saved " + std::to_string(*saved) + " bytes" +
+         (name.empty() ? "" : " to " + target->string());
 }
 
 void CommandRoom::reply(const densemap_msgs_RequestId& id, const Expected<std::string>& outcome,

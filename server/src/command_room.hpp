@@ -44,6 +44,10 @@ class CommandRoom {
   void answer();
 
  private:
+  /// reset (the whole map) or clear-bbox (its box), through the ingest's command queue.
+  Expected<std::string> clear(const densemap_msgs_CommandRequest& req);
+  /// save: the snapshot, or a named file confined to snapshot.export_dir.
+  Expected<std::string> save(const densemap_msgs_CommandRequest& req);
   void reply(const densemap_msgs_RequestId& id, const Expected<std::string>& outcome,
              const SentMap& sent = {});
   /// Writes the latest version's tiles for `request` (send-map); returns what it wrote.

@@ -87,6 +87,22 @@ void answerRay(const dds::Entity& writer, const RayRequest& req, const MapView& 
   (void)dds::write(writer, &rep);
 }
 
+/// Why a point request is refused before it is read (empty: it is taken): more points than one
+/// request may hold, or more bytes than the whole request budget.
+std::string pointRefusal(std::size_t points, std::size_t bytes, std::size_t budget) {
+  if (points > dds::kMaxQueryPoints) {
+    return std::to_string(points) + " query points in one request: at most " +
+           std::to_string(dds::kMaxQueryPoints) +
+           " (densemap's client library splits larger batches)";
+  }
+  if (bytes > budget) {
+    return std::to_string(points) + " query points need " + std::to_string(bytes >> 20) +
+           " MiB, over the server's request budget of " + std::to_string(budget >> 20) +
+           " MiB (pipeline.request_budget_mb): send smaller batches";
+  }
+  return {};
+}
+
 }  // namespace
 
 std::size_t QueryRoom::pointRequestBytes(std::size_t coordinates) {
@@ -123,18 +139,7 @@ void QueryRoom::take() {
         readers_.point,
         [&](const densemap_msgs_PointQueryRequest& m, const dds_sample_info_t& info) {
           const std::size_t bytes = pointRequestBytes(m.points._length);
-          std::string refusal;
-          if (m.points._length / 3 > dds::kMaxQueryPoints) {
-            refusal = std::to_string(m.points._length / 3) +
-                      " query points in one request: at most " +
-                      std::to_string(dds::kMaxQueryPoints) +
-                      " (densemap's client library splits larger batches)";
-          } else if (bytes > tasks_.budgetBytes()) {
-            refusal = std::to_string(m.points._length / 3) + " query points need " +
-                      std::to_string(bytes >> 20) + " MiB, over the server's request budget of " +
-                      std::to_string(tasks_.budgetBytes() >> 20) +
-                      " MiB (pipeline.request_budget_mb): send smaller batches";
-          }
+          const std::string refusal = pointRefusal(m.points._length / 3, bytes, tasks_.budgetBytes());
           if (!refusal.empty()) {
             densemap_msgs_PointQueryReply rep{};
             rep.id = m.id;

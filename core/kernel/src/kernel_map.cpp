@@ -32,6 +32,36 @@ using detail::hitsOf;
 using detail::isotropicKernel;
 using detail::rayStop;
 
+namespace {
+
+/// One adaptive kernel per centre sample (kAkimap; kAkimapRays without aggregate_hits, which
+/// then also takes each hit's ray stop into `stops`), fitted to the other samples.
+void samplesKernels(const KernelOptions& options, double resolution,
+                    const std::vector<Sample>& samples, const std::vector<std::uint32_t>& centres,
+                    const SampleIndex& index, const Eigen::Vector3d& origin,
+                    std::vector<Kernel>& kernels, std::vector<RayStop>* stops) {
+  kernels.resize(centres.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, centres.size(), 256),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      std::vector<Neighbour> neighbours;
+                      Eigen::Vector3d normal;
+                      for (std::size_t c = range.begin(); c != range.end(); ++c) {
+                        const std::uint32_t i = centres[c];
+                        kernels[c] = adaptiveKernel(
+                            samples[i],
+                            [i](const SampleIndex::Entry& e) { return e.index == i; }, index,
+                            options, resolution, neighbours,
+                            stops != nullptr ? &normal : nullptr);
+                        if (stops != nullptr) {
+                          (*stops)[c] =
+                              rayStop((samples[i].x - origin).normalized(), normal, options);
+                        }
+                      }
+                    });
+}
+
+}  // namespace
+
 KernelMap::KernelMap(double resolution_m, const KernelOptions& options)
     : grid_(resolution_m),
       options_(options),
@@ -133,22 +163,8 @@ void KernelMap::fitKernels(const PointCloud& points_world, const Point3f& origin
       if (rays) {
         for (const std::uint32_t i : centres) hit_positions.push_back(samples[i].x);
       }
-      kernels.resize(centres.size());
-      tbb::parallel_for(
-          tbb::blocked_range<std::size_t>(0, centres.size(), 256),
-          [&](const tbb::blocked_range<std::size_t>& range) {
-            std::vector<Neighbour> neighbours;
-            Eigen::Vector3d normal;
-            for (std::size_t c = range.begin(); c != range.end(); ++c) {
-              const std::uint32_t i = centres[c];
-              kernels[c] = adaptiveKernel(
-                  samples[i], [i](const SampleIndex::Entry& e) { return e.index == i; },
-                  index, options_, grid_.resolution(), neighbours, rays ? &normal : nullptr);
-              if (rays) {
-                stops[c] = rayStop((samples[centres[c]].x - origin).normalized(), normal, options_);
-              }
-            }
-          });
+      samplesKernels(options_, grid_.resolution(), samples, centres, index, origin, kernels,
+                     rays ? &stops : nullptr);
     }
     // The fast path takes one capsule per ray (or per bundle of rays ending in one voxel),
     // walked by FreeTraversal, and its tip; the plain path a segment kernel per piece of ray.
