@@ -626,5 +626,60 @@ TEST(Ros2Wire, CloudsBeforeALateTfStaticWaitForItWithTheDefaultConfig) {
 }
 #endif
 
+#ifndef DENSEMAP_ROS2_REALDATA
+// Issue 32, item 2: a node that announces itself only by multicast (Humble with
+// ROS_LOCALHOST_ONLY=1) never reaches the server, which has multicast off on loopback: it is
+// found when the server's own unicast announcement reaches its discovery port. Such a node is
+// played by a Cyclone participant with no multicast whose one peer is a port nobody listens on
+// (it announces itself to no one, and listens on 7410 + 250 d + 2 i as every participant
+// does; with no peer at all Cyclone 0.10 announces to localhost); its cloud writer must match
+// the server's reader within about a second of being created. Before the server announced
+// every second it took 7.06 s (twice; Cyclone's default period).
+TEST(Ros2Wire, ANodeThatOnlyListensForUnicastDiscoveryFindsTheServerWithinASecond) {
+  constexpr std::uint32_t kDomain = 158;
+  test::TempDir dir;
+  test::ServerProcess server(dir.path(), kDomain,
+                             "ros2 { enabled: true reliable_clouds: false publish_period_s: 0 }\n");
+  // The server is up (a separate process asks: this process's domain must keep the silent
+  // configuration below, which its first participant fixes).
+  ASSERT_EQ(runCli("--domain-id " + std::to_string(kDomain) + " status"), 0);
+  const std::string silent =
+      "<CycloneDDS><Domain Id=\"any\"><General><Interfaces><NetworkInterface name=\"lo\"/>"
+      "</Interfaces><AllowMulticast>false</AllowMulticast></General><Discovery>"
+      "<ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>119"
+      "</MaxAutoParticipantIndex><Peers><Peer Address=\"127.0.0.1:9\"/></Peers></Discovery>"
+      "</Domain></CycloneDDS>";
+  const dds_entity_t domain = dds_create_domain(kDomain, silent.c_str());
+  ASSERT_GT(domain, 0) << dds_strretcode(domain);
+  const dds_entity_t participant = dds_create_participant(kDomain, nullptr, nullptr);
+  ASSERT_GT(participant, 0) << dds_strretcode(participant);
+  const dds_entity_t topic = dds_create_topic(participant, &sensor_msgs_msg_dds__PointCloud2__desc,
+                                              ros2::ddsTopicName("/points").c_str(), nullptr,
+                                              nullptr);
+  ASSERT_GT(topic, 0) << dds_strretcode(topic);
+  dds_qos_t* qos = dds_create_qos();
+  dds_qset_reliability(qos, DDS_RELIABILITY_BEST_EFFORT, 0);
+  dds_qset_history(qos, DDS_HISTORY_KEEP_LAST, 5);
+  const dds_entity_t writer = dds_create_writer(participant, topic, qos, nullptr);
+  dds_delete_qos(qos);
+  ASSERT_GT(writer, 0) << dds_strretcode(writer);
+  const auto start = std::chrono::steady_clock::now();
+  double matched_after_s = -1;
+  while (std::chrono::steady_clock::now() - start < std::chrono::seconds(15)) {
+    dds_publication_matched_status_t m{};
+    if (dds_get_publication_matched_status(writer, &m) >= 0 && m.current_count > 0) {
+      matched_after_s =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      break;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  dds_delete(domain);
+  ASSERT_GE(matched_after_s, 0.0) << "the server's cloud reader never matched in 15 s";
+  EXPECT_LT(matched_after_s, 2.0) << "matched after " << matched_after_s << " s";
+  EXPECT_EQ(server.stop(), 0);
+}
+#endif
+
 }  // namespace
 }  // namespace densemap
