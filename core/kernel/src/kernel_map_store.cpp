@@ -17,6 +17,14 @@ void KernelMap::erase(const VoxelKey& key) {
   block::clearBit(it->second.known, cell);
   it->second.alpha[cell] = 0.0F;
   it->second.beta[cell] = 0.0F;
+  // A block with no cell left goes (the published map drops it too; eviction follows it).
+  if (block::countBits(it->second.known) == 0) blocks_.erase(it);
+}
+
+std::size_t KernelMap::eraseBlocks(std::span<const std::uint64_t> blocks) {
+  std::size_t erased = 0;
+  for (const std::uint64_t b : blocks) erased += blocks_.erase(b);
+  return erased;
 }
 
 std::size_t KernelMap::evictBlocks(const std::function<bool(const Point3f&)>& keep) {

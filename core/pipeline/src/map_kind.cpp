@@ -34,8 +34,9 @@ void MapKind::beforePublish(const CellChanges& changes) {
 std::size_t MapKind::ownBytes() const { return mirror_ ? map_->memoryBytes() : 0; }
 
 EvictStats MapKind::evict(const Keep& keep, CellChanges* changes) {
-  const EvictStats stats = readable_->evictBlocks(keep, changes);
-  evictEvidence(keep);
+  std::vector<std::uint64_t> dropped;
+  const EvictStats stats = readable_->evictBlocks(keep, changes, &dropped);
+  if (!dropped.empty()) evictEvidence(dropped);
   return stats;
 }
 
@@ -140,9 +141,12 @@ class KernelKind final : public MapKind {
       if (!c.known) kernel_.erase(c.key);
     }
   }
-  // A kernel map drops the same blocks (its evidence and memory); its published map is the
-  // grid, whose changes say which cells became unknown.
-  void evictEvidence(const Keep& keep) override { kernel_.evictBlocks(keep); }
+  // A kernel map drops the blocks the grid dropped (its evidence and memory): every block with
+  // evidence has its cells on the grid (each scan publishes the cells it reached, and a block
+  // whose cells are all erased goes), so no walk over the evidence's blocks.
+  void evictEvidence(std::span<const std::uint64_t> blocks) override {
+    kernel_.eraseBlocks(blocks);
+  }
 
  private:
   kernel::KernelMap kernel_;

@@ -3,6 +3,7 @@
 #include <functional>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 
 #include "densemap/geometry/error.hpp"
@@ -61,7 +62,7 @@ class MapKind {
   /// Cells a command erased: their evidence goes too (kernel kinds).
   virtual void forget(const CellChanges& changes) { (void)changes; }
   /// The blocks eviction dropped: their evidence goes too (kernel kinds).
-  virtual void evictEvidence(const Keep& keep) { (void)keep; }
+  virtual void evictEvidence(std::span<const std::uint64_t> blocks) { (void)blocks; }
 
  private:
   std::unique_ptr<OccupancyMap> map_;

@@ -324,6 +324,20 @@ TEST(Pipeline, KernelMapEvictionEqualsTheOfflineMapMinusTheEvictedBlocks) {
   });
   EXPECT_EQ(mismatches, 0U);
   EXPECT_GT((*sut)->counters().evicted_blocks, 0U);
+  // The evidence itself went with the grid's blocks (not only the published cells): the same
+  // cells with the same alpha and beta as the offline map's.
+  const auto saved = (*sut)->savedState();
+  ASSERT_TRUE(saved.kernel.has_value());
+  const kernel::KernelEvidence expected = offline.evidence();
+  std::map<std::uint64_t, std::pair<double, double>> wanted, held;
+  for (std::size_t i = 0; i < expected.keys.size(); ++i) {
+    wanted[expected.keys[i].packed()] = {expected.alpha[i], expected.beta[i]};
+  }
+  for (std::size_t i = 0; i < saved.kernel->keys.size(); ++i) {
+    held[saved.kernel->keys[i].packed()] = {saved.kernel->alpha[i], saved.kernel->beta[i]};
+  }
+  EXPECT_EQ(held.size(), wanted.size());
+  EXPECT_TRUE(held == wanted);
   (*sut)->stop();
 }
 

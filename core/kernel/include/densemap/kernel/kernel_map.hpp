@@ -5,6 +5,7 @@
 #include <functional>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
 #include <unordered_map>
@@ -154,6 +155,8 @@ class KernelMap {
   /// Drops every block whose centre (block::centreOf) `keep` refuses, with its evidence and
   /// memory (bounded memory: map.keep_radius_m, map.bounds). Returns the blocks dropped.
   std::size_t evictBlocks(const std::function<bool(const Point3f&)>& keep);
+  /// Drops these blocks' evidence (those it holds); returns how many it held.
+  std::size_t eraseBlocks(std::span<const std::uint64_t> blocks);
 
   /// alpha / (alpha + beta); std::nullopt where no kernel reached the cell (unknown).
   [[nodiscard]] std::optional<double> probability(const VoxelKey& key) const;
