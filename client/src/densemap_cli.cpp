@@ -6,9 +6,9 @@
 #include <chrono>
 #include <cstdio>
 
+#include "cli_support.hpp"
 #include "densemap/cli/guarded_main.hpp"
 #include "densemap/client/client.hpp"
-#include "cli_support.hpp"
 #include "load_command.hpp"
 #include "map_commands.hpp"
 #include "query_command.hpp"

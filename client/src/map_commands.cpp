@@ -58,8 +58,8 @@ void printStatus(const ServerStatus& s) {
         static_cast<unsigned long long>(s.ros_no_transform),
         static_cast<unsigned long long>(s.ros_maps_published));
     for (const RosCloudTopicStatus& c : s.ros_clouds) {
-      std::printf("  ros2 cloud topic %s: %u writer%s matched", c.topic.c_str(),
-                  c.matched_writers, c.matched_writers == 1 ? "" : "s");
+      std::printf("  ros2 cloud topic %s: %u writer%s matched", c.topic.c_str(), c.matched_writers,
+                  c.matched_writers == 1 ? "" : "s");
       if (c.incompatible_qos > 0) {
         std::printf(", %llu refused for incompatible QoS (last: %s%s)",
                     static_cast<unsigned long long>(c.incompatible_qos),

@@ -3,11 +3,11 @@
 #include <tuple>
 #include <vector>
 
-#include "densemap/wire/delta_wire.hpp"
-#include "densemap/wire/topics.hpp"
 #include "densemap/query/map_queries.hpp"
 #include "densemap/query/version_delta.hpp"
 #include "densemap/server/export_path.hpp"
+#include "densemap/wire/delta_wire.hpp"
+#include "densemap/wire/topics.hpp"
 
 namespace densemap::server {
 

@@ -4,8 +4,8 @@
 #include <filesystem>
 #include <string>
 
-#include "densemap/wire/dds.hpp"
 #include "densemap/server/ingest.hpp"
+#include "densemap/wire/dds.hpp"
 #include "densemap_msgs.h"
 #include "replies.hpp"
 #include "request_tasks.hpp"

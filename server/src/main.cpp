@@ -70,8 +70,8 @@ void configureAllocator() {
 OrExit<densemap::server::ServiceOptions> serviceOptions(const densemap::proto::ServerConfig& config,
                                                         int domain_override) {
   densemap::server::ServiceOptions o;
-  o.domain_id = domain_override >= 0 ? static_cast<std::uint32_t>(domain_override)
-                                     : config.dds().domain_id();
+  o.domain_id =
+      domain_override >= 0 ? static_cast<std::uint32_t>(domain_override) : config.dds().domain_id();
   o.network_interface = config.dds().network_interface();
   o.snapshot_path = config.snapshot().path();
   o.autosave_period_s = config.snapshot().autosave_period_s();
@@ -110,21 +110,21 @@ struct Resumed {
 /// different resolution is.
 std::optional<Exit> refuseOtherSensor(const densemap::ResumedSnapshot& resumed,
                                       const densemap::PipelineOptions& options) {
-  const densemap::SensorProbabilities& was =
-      resumed.snapshot.map->sensorModel().probabilities();
+  const densemap::SensorProbabilities& was = resumed.snapshot.map->sensorModel().probabilities();
   const densemap::SensorProbabilities& now = options.sensor;
   const auto same = [](double a, double b) { return std::abs(a - b) <= 1e-9; };
   if (same(was.hit, now.hit) && same(was.miss, now.miss) && same(was.clamp_min, now.clamp_min) &&
       same(was.clamp_max, now.clamp_max)) {
     return std::nullopt;
   }
-  return Exit{fmt::format("snapshot {} was mapped with map.sensor {{ prob_hit: {} prob_miss: {} "
-                          "clamp_min: {} clamp_max: {} }} but the config says {{ prob_hit: {} "
-                          "prob_miss: {} clamp_min: {} clamp_max: {} }}: set map.sensor to the "
-                          "snapshot's values to resume it, or move the snapshot aside to start a "
-                          "new map",
-                          resumed.file.string(), was.hit, was.miss, was.clamp_min, was.clamp_max,
-                          now.hit, now.miss, now.clamp_min, now.clamp_max)};
+  return Exit{
+      fmt::format("snapshot {} was mapped with map.sensor {{ prob_hit: {} prob_miss: {} "
+                  "clamp_min: {} clamp_max: {} }} but the config says {{ prob_hit: {} "
+                  "prob_miss: {} clamp_min: {} clamp_max: {} }}: set map.sensor to the "
+                  "snapshot's values to resume it, or move the snapshot aside to start a "
+                  "new map",
+                  resumed.file.string(), was.hit, was.miss, was.clamp_min, was.clamp_max, now.hit,
+                  now.miss, now.clamp_min, now.clamp_max)};
 }
 
 /// A dense map resumes its kernel evidence (issue 29); a snapshot without it (a log-odds
@@ -136,18 +136,21 @@ void keepMatchingEvidence(densemap::ResumedSnapshot& resumed,
   const std::string file = resumed.file.string();
   using densemap::kernel::kernelMethodName;
   if (options.kernel && kernel && kernel->method != *options.kernel) {
-    spdlog::warn("snapshot {} holds {} evidence, map.kind is {}: its probabilities stand, "
-                 "its evidence is not resumed",
-                 file, kernelMethodName(kernel->method), kernelMethodName(*options.kernel));
+    spdlog::warn(
+        "snapshot {} holds {} evidence, map.kind is {}: its probabilities stand, "
+        "its evidence is not resumed",
+        file, kernelMethodName(kernel->method), kernelMethodName(*options.kernel));
     kernel.reset();
   } else if (options.kernel && !kernel) {
-    spdlog::warn("snapshot {} holds no {} evidence: its probabilities stand until new scans "
-                 "reach their cells, which then start again from the prior",
-                 file, kernelMethodName(*options.kernel));
+    spdlog::warn(
+        "snapshot {} holds no {} evidence: its probabilities stand until new scans "
+        "reach their cells, which then start again from the prior",
+        file, kernelMethodName(*options.kernel));
   } else if (!options.kernel && kernel) {
-    spdlog::warn("snapshot {} holds {} evidence, map.kind is log_odds: its probabilities go "
-                 "on as log-odds, the evidence is dropped at the next save",
-                 file, kernelMethodName(kernel->method));
+    spdlog::warn(
+        "snapshot {} holds {} evidence, map.kind is log_odds: its probabilities go "
+        "on as log-odds, the evidence is dropped at the next save",
+        file, kernelMethodName(kernel->method));
     kernel.reset();
   }
 }

@@ -4,9 +4,9 @@
 #include <string>
 #include <vector>
 
-#include "densemap/wire/topics.hpp"
 #include "densemap/parallel/tbb_runner.hpp"
 #include "densemap/query/map_queries.hpp"
+#include "densemap/wire/topics.hpp"
 #include "densemap_msgs.h"
 
 namespace densemap::server {
@@ -139,7 +139,8 @@ void QueryRoom::take() {
         readers_.point,
         [&](const densemap_msgs_PointQueryRequest& m, const dds_sample_info_t& info) {
           const std::size_t bytes = pointRequestBytes(m.points._length);
-          const std::string refusal = pointRefusal(m.points._length / 3, bytes, tasks_.budgetBytes());
+          const std::string refusal =
+              pointRefusal(m.points._length / 3, bytes, tasks_.budgetBytes());
           if (!refusal.empty()) {
             densemap_msgs_PointQueryReply rep{};
             rep.id = m.id;

@@ -12,8 +12,8 @@
 #include "densemap/map/map_diff.hpp"
 #include "densemap/map/map_factory.hpp"
 #include "densemap/map/octree_map.hpp"
-#include "densemap/raycast/integrator.hpp"
 #include "densemap/parallel/tbb_runner.hpp"
+#include "densemap/raycast/integrator.hpp"
 
 namespace densemap::test {
 

@@ -11,19 +11,19 @@
 #include <thread>
 
 #include "densemap/client/client.hpp"
-#include "densemap/wire/dds.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_diff.hpp"
-#include "densemap/server/ingest.hpp"
 #include "densemap/ros2/map_topics.hpp"
 #include "densemap/ros2/names.hpp"
 #include "densemap/ros2/point_cloud2.hpp"
 #include "densemap/ros2/replay_frames.hpp"
+#include "densemap/server/ingest.hpp"
 #include "densemap/server/server_config.hpp"
 #include "densemap/sim/sequence.hpp"
 #include "densemap/test_support/data_dir.hpp"
 #include "densemap/test_support/server_clients.hpp"
 #include "densemap/test_support/server_process.hpp"
+#include "densemap/wire/dds.hpp"
 #include "nav_msgs.h"
 #include "octomap_msgs.h"
 #include "sensor_msgs.h"
@@ -524,17 +524,15 @@ TEST(Ros2Wire, AnEmptyMapIsNotPublishedAndAReturningViewerGetsTheMapOnce) {
     ASSERT_EQ(runCli("--domain-id " + std::to_string(kDomain) + " replay --data " +
                      (dir.path() / "data").string() + " --rate 10"),
               0);
-    const ServerStatus s = waitForStatus(*client, [](const ServerStatus& st) {
-      return st.integrated >= 2;
-    });
+    const ServerStatus s =
+        waitForStatus(*client, [](const ServerStatus& st) { return st.integrated >= 2; });
     ASSERT_EQ(s.integrated, 2U);
     EXPECT_GE(samplesWithin(*viewer, 1500ms), 1U);
   }
   // The viewer left; the map is unchanged. A returning viewer gets it exactly once.
   std::this_thread::sleep_for(1s);
   // Depth 2: a second copy written right after the history's would be kept, not replace it.
-  auto returning =
-      dds::createReader(*participant, *topic, {.depth = 2, .transient_local = true});
+  auto returning = dds::createReader(*participant, *topic, {.depth = 2, .transient_local = true});
   ASSERT_TRUE(returning);
   EXPECT_EQ(samplesWithin(*returning, 2000ms), 1U);
   EXPECT_EQ(server.stop(), 0);
@@ -584,10 +582,10 @@ TEST(Ros2Wire, StatusSaysWhichCloudWritersMatchAndWhichWereRefusedForTheirQos) {
   // The CLI says it in words.
   std::string printed;
   {
-    FILE* pipe = popen((std::string(DENSEMAP_CLI_BIN) + " --domain-id " +
-                        std::to_string(kDomain) + " status 2>&1")
-                           .c_str(),
-                       "r");
+    FILE* pipe = popen(
+        (std::string(DENSEMAP_CLI_BIN) + " --domain-id " + std::to_string(kDomain) + " status 2>&1")
+            .c_str(),
+        "r");
     ASSERT_NE(pipe, nullptr);
     char buf[512];
     while (std::fgets(buf, sizeof buf, pipe) != nullptr) printed += buf;
@@ -653,9 +651,9 @@ TEST(Ros2Wire, ANodeThatOnlyListensForUnicastDiscoveryFindsTheServerWithinASecon
   ASSERT_GT(domain, 0) << dds_strretcode(domain);
   const dds_entity_t participant = dds_create_participant(kDomain, nullptr, nullptr);
   ASSERT_GT(participant, 0) << dds_strretcode(participant);
-  const dds_entity_t topic = dds_create_topic(participant, &sensor_msgs_msg_dds__PointCloud2__desc,
-                                              ros2::ddsTopicName("/points").c_str(), nullptr,
-                                              nullptr);
+  const dds_entity_t topic =
+      dds_create_topic(participant, &sensor_msgs_msg_dds__PointCloud2__desc,
+                       ros2::ddsTopicName("/points").c_str(), nullptr, nullptr);
   ASSERT_GT(topic, 0) << dds_strretcode(topic);
   dds_qos_t* qos = dds_create_qos();
   dds_qset_reliability(qos, DDS_RELIABILITY_BEST_EFFORT, 0);

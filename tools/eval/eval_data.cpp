@@ -12,8 +12,8 @@
 
 namespace densemap::tools {
 
-void split(const PointCloud& points, const Point3f& origin, std::uint64_t seed,
-           std::uint64_t scan, double resolution, EvalScan& out, std::vector<TestPoint>& tests) {
+void split(const PointCloud& points, const Point3f& origin, std::uint64_t seed, std::uint64_t scan,
+           double resolution, EvalScan& out, std::vector<TestPoint>& tests) {
   out.origin = origin;
   for (std::size_t i = 0; i < points.size(); ++i) {
     const std::uint64_t key = seed * 0x9E3779B97F4A7C15ULL ^ scan * 0xC2B2AE3D27D4EB4FULL ^ i;
@@ -88,7 +88,8 @@ Expected<EvalData> loadEvalData(const EvalOptions& o) {
     rejected += removeNonFinite(d.clouds.back());
     d.origins.push_back(scan->originWorld());
   }
-  if (rejected > 0) std::fprintf(stderr, "densemap-eval: dropped %zu non-finite points\n", rejected);
+  if (rejected > 0)
+    std::fprintf(stderr, "densemap-eval: dropped %zu non-finite points\n", rejected);
   d.frame = frameOf(d, o.resolution);
   return d;
 }
@@ -119,10 +120,10 @@ Expected<void> writeSlice(const EvalOptions& o, const SliceFrame& f, const std::
 }
 
 Expected<std::vector<TestPoint>> oracleTests(const EvalOptions& o, const SliceFrame& frame) {
-  const auto labels = readOracleLabels(o.labels_path.empty()
-                                           ? oracleLabelsPath(o.data, o.resolution)
-                                           : std::filesystem::path(o.labels_path),
-                                       o.resolution);
+  const auto labels =
+      readOracleLabels(o.labels_path.empty() ? oracleLabelsPath(o.data, o.resolution)
+                                             : std::filesystem::path(o.labels_path),
+                       o.resolution);
   if (!labels) return std::unexpected(labels.error());
   const VoxelGrid grid(o.resolution);
   std::vector<TestPoint> tests;

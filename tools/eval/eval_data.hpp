@@ -26,8 +26,8 @@ struct TestPoint {
 /// The hold-out split and the free test points, reproducible from the seed: each scan's points
 /// are split 80/20 by a seeded hash; the 20% are occupied test points, and one point drawn
 /// uniformly on each of their rays (short of the end voxel) is a free test point.
-void split(const PointCloud& points, const Point3f& origin, std::uint64_t seed,
-           std::uint64_t scan, double resolution, EvalScan& out, std::vector<TestPoint>& tests);
+void split(const PointCloud& points, const Point3f& origin, std::uint64_t seed, std::uint64_t scan,
+           double resolution, EvalScan& out, std::vector<TestPoint>& tests);
 
 /// The xy box of the data, for slice pictures.
 struct SliceFrame {

@@ -50,8 +50,8 @@ Expected<void> report(const UpsampleEvalOptions& o, const Methods& methods,
   std::printf(
       "densemap-upsample-eval: scenes %s, seeds %s, %d scans each, input %dx%d, FOV "
       "[%g, %g] deg, max range %g m, voxel %g m\n",
-      o.scenes_list.c_str(), o.seeds_list.c_str(), o.scans, input.rows, input.cols, o.bottom,
-      o.top, o.max_range, o.voxel);
+      o.scenes_list.c_str(), o.seeds_list.c_str(), o.scans, input.rows, input.cols, o.bottom, o.top,
+      o.max_range, o.voxel);
   std::printf("%-9s %-10s %8s %8s %7s %9s %7s %7s %9s %7s\n", "method", "target", "mae_m",
               "coverage", "iou", "precision", "recall", "f1", "ms/scan", "ms_p50");
   std::string json = "{\"results\": [";

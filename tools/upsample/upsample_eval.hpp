@@ -1,7 +1,7 @@
 #pragma once
 
-#include <CLI/CLI.hpp>
 #include <tbb/task_arena.h>
+#include <CLI/CLI.hpp>
 
 #include <cstddef>
 #include <map>
@@ -57,8 +57,7 @@ struct Score {
 /// points are `truth_points`) by range and by voxels of `voxel` metres.
 [[nodiscard]] Score scoreUpsampling(const upsample::RangeImage& input,
                                     const upsample::RangeImage& truth,
-                                    const PointCloud& truth_points,
-                                    upsample::Interpolation method,
+                                    const PointCloud& truth_points, upsample::Interpolation method,
                                     const upsample::IlnModel* model, double voxel);
 
 /// Scores summed over scans (means at the report).

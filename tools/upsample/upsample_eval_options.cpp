@@ -11,7 +11,8 @@ void addUpsampleEvalOptions(CLI::App& app, UpsampleEvalOptions& o) {
       ->capture_default_str()
       ->check(CLI::Range(1, 1000));
   app.add_option("--input", o.input_text, "Input grid ROWSxCOLS")->capture_default_str();
-  app.add_option("--targets", o.targets_list, "Target grids, comma-separated")->capture_default_str();
+  app.add_option("--targets", o.targets_list, "Target grids, comma-separated")
+      ->capture_default_str();
   app.add_option("--fov-top", o.top, "Top beam elevation, deg")->capture_default_str();
   app.add_option("--fov-bottom", o.bottom, "Bottom beam elevation, deg")->capture_default_str();
   app.add_option("--max-range", o.max_range, "Sensor range, m")->capture_default_str();

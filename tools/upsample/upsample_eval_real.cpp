@@ -106,7 +106,8 @@ class RealExport {
     std::filesystem::create_directories(o_.export_real_dir, ec);
     if (ec) return makeError("cannot create " + o_.export_real_dir + ": " + ec.message());
     std::vector<double> beams = layout_.beams_deg;
-    for (int r = 0; beams.empty() && r < layout_.rows; ++r) beams.push_back(layout_.elevationDeg(r));
+    for (int r = 0; beams.empty() && r < layout_.rows; ++r)
+      beams.push_back(layout_.elevationDeg(r));
     return writeFileAtomically(std::filesystem::path(o_.export_real_dir) / beams_file_,
                                upsample::formatBeamTable(beams, "beams of " + o_.real_path));
   }
@@ -115,8 +116,8 @@ class RealExport {
     const std::string file = "real_" + std::to_string(i) + ".f32";
     std::ostringstream row;
     row << std::setprecision(10) << "real," << i << ",0," << layout_.rows << ',' << layout_.cols
-        << ',' << layout_.top_deg << ',' << layout_.bottom_deg << ',' << file << ','
-        << beams_file_ << '\n';
+        << ',' << layout_.top_deg << ',' << layout_.bottom_deg << ',' << file << ',' << beams_file_
+        << '\n';
     index_ += row.str();
     return writeFileAtomically(std::filesystem::path(o_.export_real_dir) / file,
                                std::string(reinterpret_cast<const char*>(truth.range.data()),

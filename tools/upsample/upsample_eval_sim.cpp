@@ -82,8 +82,8 @@ Expected<SimSums> scoreSimulated(const UpsampleEvalOptions& o, const Methods& me
           const auto low = upsample::project(sparse.points, input);
           images.add(name, seed, i, low);
           for (std::size_t t = 0; t < targets.size(); ++t) {
-            const auto dense = simulateScan(*scene->scene, sensorFor(targets[t], o.max_range),
-                                            poses[i], i, seed);
+            const auto dense =
+                simulateScan(*scene->scene, sensorFor(targets[t], o.max_range), poses[i], i, seed);
             const auto truth = upsample::project(dense.points, targets[t]);
             images.add(name, seed, i, truth);
             const auto truth_points = upsample::backProject(truth);

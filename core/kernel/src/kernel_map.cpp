@@ -41,23 +41,21 @@ void samplesKernels(const KernelOptions& options, double resolution,
                     const SampleIndex& index, const Eigen::Vector3d& origin,
                     std::vector<Kernel>& kernels, std::vector<RayStop>* stops) {
   kernels.resize(centres.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, centres.size(), 256),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-                      std::vector<Neighbour> neighbours;
-                      Eigen::Vector3d normal;
-                      for (std::size_t c = range.begin(); c != range.end(); ++c) {
-                        const std::uint32_t i = centres[c];
-                        kernels[c] = adaptiveKernel(
-                            samples[i],
-                            [i](const SampleIndex::Entry& e) { return e.index == i; }, index,
-                            options, resolution, neighbours,
-                            stops != nullptr ? &normal : nullptr);
-                        if (stops != nullptr) {
-                          (*stops)[c] =
-                              rayStop((samples[i].x - origin).normalized(), normal, options);
-                        }
-                      }
-                    });
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, centres.size(), 256),
+      [&](const tbb::blocked_range<std::size_t>& range) {
+        std::vector<Neighbour> neighbours;
+        Eigen::Vector3d normal;
+        for (std::size_t c = range.begin(); c != range.end(); ++c) {
+          const std::uint32_t i = centres[c];
+          kernels[c] = adaptiveKernel(
+              samples[i], [i](const SampleIndex::Entry& e) { return e.index == i; }, index, options,
+              resolution, neighbours, stops != nullptr ? &normal : nullptr);
+          if (stops != nullptr) {
+            (*stops)[c] = rayStop((samples[i].x - origin).normalized(), normal, options);
+          }
+        }
+      });
 }
 
 }  // namespace

@@ -72,8 +72,8 @@ ApplyStats GridMap::writeBlocks(std::span<BlockEntry* const> entries, CellChange
     changed += c.changed;
     newly_known += c.newly_known;
   });
-  const Counts total{.updated = updated.load(), .changed = changed.load(),
-                     .newly_known = newly_known.load()};
+  const Counts total{
+      .updated = updated.load(), .changed = changed.load(), .newly_known = newly_known.load()};
   known_cells_ += total.newly_known;
   if (changes != nullptr) {
     for (auto& part : block_changes) changes->insert(changes->end(), part.begin(), part.end());

@@ -86,8 +86,7 @@ std::vector<float> toVector(const RowMatrixD& m) {
 
 struct IlnLoader {
   /// Version, sizes, range and prior.
-  static Expected<void> header(const proto::IlnModel& m, const std::string& what,
-                               IlnModel& model) {
+  static Expected<void> header(const proto::IlnModel& m, const std::string& what, IlnModel& model) {
     if (m.version() != 1) {
       return makeError(what + " has format version " + std::to_string(m.version()) +
                        "; this densemap reads version 1");

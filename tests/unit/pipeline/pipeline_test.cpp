@@ -1,5 +1,5 @@
-#include "densemap/server/ingest.hpp"
 #include "densemap/query/version_delta.hpp"
+#include "densemap/server/ingest.hpp"
 
 #include <gtest/gtest.h>
 
@@ -216,9 +216,9 @@ TEST(Pipeline, FallingBehindDropsOldScansNeverQueuesThem) {
 
 TEST(Pipeline, BadScansAreRejectedWithTheirReasonAndLeaveTheMapUnchanged) {
   auto sut = Ingest::create({.resolution_m = 0.2,
-                               .threads = 2,
-                               .queue_depth = 16,
-                               .limits = {.max_points = 5000, .max_abs_position_m = 100.0}});
+                             .threads = 2,
+                             .queue_depth = 16,
+                             .limits = {.max_points = 5000, .max_abs_position_m = 100.0}});
   ASSERT_TRUE(sut);
   std::vector<RejectReason> reasons;
   std::mutex m;
@@ -291,10 +291,10 @@ TEST(Pipeline, KernelMapEvictionEqualsTheOfflineMapMinusTheEvictedBlocks) {
   const auto method = kernel::KernelMethod::kAkimapRays;
   constexpr double kRadius = 3.0;
   auto sut = Ingest::create({.resolution_m = 0.2,
-                               .max_range_m = 5.0,
-                               .kernel = method,
-                               .threads = 2,
-                               .keep_radius_m = kRadius});
+                             .max_range_m = 5.0,
+                             .kernel = method,
+                             .threads = 2,
+                             .keep_radius_m = kRadius});
   ASSERT_TRUE(sut) << sut.error().message;
   (*sut)->start();
   std::vector<RawScan> raws = {rawScan(1, 1500), rawScan(30, 1500)};  // origins 3 m apart
@@ -486,8 +486,8 @@ TEST(LatestWinsQueue, PerKeyTheLatestWinsWithinItsOwnKeyAndTheTotalIsBounded) {
 // Issue 32, item 1: a backlog (clouds a late transform released) goes in only where it pushes
 // nothing out: hasRoomFor says so exactly when push would drop nothing.
 TEST(LatestWinsQueue, HasRoomForExactlyWhenAPushWouldDropNothing) {
-  const std::map<std::string, std::string> letter = {
-      {"a1", "a"}, {"a2", "a"}, {"a3", "a"}, {"b1", "b"}, {"b2", "b"}, {"c1", "c"}};
+  const std::map<std::string, std::string> letter = {{"a1", "a"}, {"a2", "a"}, {"a3", "a"},
+                                                     {"b1", "b"}, {"b2", "b"}, {"c1", "c"}};
   LatestWinsQueue<std::string> sut(
       2, 4, [&](const std::string& s) -> const std::string& { return letter.at(s); });
   for (const char* item : {"a1", "a2", "b1"}) {

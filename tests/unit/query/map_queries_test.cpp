@@ -99,10 +99,10 @@ TEST(BlockAccessor, EveryCellAsTheViewHasIt) {
   std::uniform_int_distribution<int> coord(32768 - 12, 32768 + 12);
   std::uniform_real_distribution<float> value(-3.0F, 3.0F);
   for (int i = 0; i < 3000; ++i) {
-    map.setLogOdds(VoxelKey{static_cast<std::uint16_t>(coord(rng)),
-                            static_cast<std::uint16_t>(coord(rng)),
-                            static_cast<std::uint16_t>(coord(rng))},
-                   value(rng));
+    map.setLogOdds(
+        VoxelKey{static_cast<std::uint16_t>(coord(rng)), static_cast<std::uint16_t>(coord(rng)),
+                 static_cast<std::uint16_t>(coord(rng))},
+        value(rng));
   }
   const auto view = MapView::fromMap(map, 1);
   BlockAccessor cells(*view);
@@ -110,7 +110,7 @@ TEST(BlockAccessor, EveryCellAsTheViewHasIt) {
   VoxelKey k{32768, 32768, 32768};
   std::uniform_int_distribution<int> step(-1, 1), jump(0, 20);
   for (int i = 0; i < 20000; ++i) {
-    if (jump(rng) == 0) {  // elsewhere now and then: another block, maybe none
+    if (jump(rng) == 0) {                       // elsewhere now and then: another block, maybe none
       const int far = jump(rng) < 5 ? 100 : 0;  // a block with no cells, or back
       k = {static_cast<std::uint16_t>(coord(rng) + far), static_cast<std::uint16_t>(coord(rng)),
            static_cast<std::uint16_t>(coord(rng))};
