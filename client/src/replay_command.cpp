@@ -290,16 +290,12 @@ ReplayCommand::ReplayCommand(CLI::App& app)
 }
 
 int ReplayCommand::run(const ClientOptions& o) {
-  std::optional<upsample::UpsampleOptions> densify;
-  if (!upsample_method_.empty()) {
-    auto in = upsample::parseRangeLayout(upsample_input_, fov_top_, fov_bottom_);
-    if (!in) return fail("--upsample-input: " + in.error().message);
-    auto out = upsample::parseRangeLayout(upsample_output_, fov_top_, fov_bottom_);
-    if (!out) return fail("--upsample-output: " + out.error().message);
-    auto options = upsample::makeUpsampleOptions(upsample_method_, *in, *out, upsample_model_);
-    if (!options) return fail("--upsample: " + options.error().message);
-    if (auto ok = options->validate(); !ok) return fail(ok.error().message);
-    densify = std::move(*options);
+  auto flags = upsample::upsampleFromFlags(upsample_method_, upsample_input_, upsample_output_,
+                                          fov_top_, fov_bottom_, upsample_model_);
+  if (!flags) return fail(flags.error().message);
+  std::optional<upsample::UpsampleOptions> densify = std::move(*flags);
+  if (densify) {
+    if (auto ok = densify->validate(); !ok) return fail(ok.error().message);
   }
   auto source = openScanSource(data_);
   if (!source) return fail(source.error().message);

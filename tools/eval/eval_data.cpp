@@ -33,17 +33,6 @@ void split(const PointCloud& points, const Point3f& origin, std::uint64_t seed, 
 
 namespace {
 
-Expected<std::optional<upsample::UpsampleOptions>> densifyOptions(const EvalOptions& o) {
-  if (o.upsample_method.empty()) return std::nullopt;
-  auto in = upsample::parseRangeLayout(o.upsample_input, o.fov_top, o.fov_bottom);
-  if (!in) return makeError("--upsample-input: " + in.error().message);
-  auto out = upsample::parseRangeLayout(o.upsample_output, o.fov_top, o.fov_bottom);
-  if (!out) return makeError("--upsample-output: " + out.error().message);
-  auto options = upsample::makeUpsampleOptions(o.upsample_method, *in, *out, o.upsample_model);
-  if (!options) return makeError("--upsample: " + options.error().message);
-  return std::optional<upsample::UpsampleOptions>(std::move(*options));
-}
-
 SliceFrame frameOf(const EvalData& d, double resolution) {
   SliceFrame frame;
   Eigen::AlignedBox3f box;
@@ -70,7 +59,9 @@ Expected<EvalData> loadEvalData(const EvalOptions& o) {
     return makeError("--first is past the dataset's " + std::to_string(total) + " scans");
   }
   const std::size_t end = o.limit == 0 ? total : std::min(total, o.first + o.limit);
-  auto densify = densifyOptions(o);
+  auto densify = upsample::upsampleFromFlags(o.upsample_method, o.upsample_input,
+                                             o.upsample_output, o.fov_top, o.fov_bottom,
+                                             o.upsample_model);
   if (!densify) return std::unexpected(densify.error());
   EvalData d;
   std::size_t rejected = 0;

@@ -116,4 +116,17 @@ PointCloud upsamplePoints(const PointCloud& points_sensor, const UpsampleOptions
                               options.method, options.iln.get()));
 }
 
+Expected<std::optional<UpsampleOptions>> upsampleFromFlags(
+    const std::string& method, const std::string& input, const std::string& output,
+    double top_deg, double bottom_deg, const std::string& model_path) {
+  if (method.empty()) return std::nullopt;
+  auto in = parseRangeLayout(input, top_deg, bottom_deg);
+  if (!in) return makeError("--upsample-input: " + in.error().message);
+  auto out = parseRangeLayout(output, top_deg, bottom_deg);
+  if (!out) return makeError("--upsample-output: " + out.error().message);
+  auto options = makeUpsampleOptions(method, *in, *out, model_path);
+  if (!options) return makeError("--upsample: " + options.error().message);
+  return std::optional<UpsampleOptions>(std::move(*options));
+}
+
 }  // namespace densemap::upsample

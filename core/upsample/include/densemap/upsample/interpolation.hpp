@@ -1,6 +1,7 @@
 #pragma once
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 
@@ -60,6 +61,14 @@ struct UpsampleOptions {
                                                             const RangeLayout& input,
                                                             const RangeLayout& output,
                                                             const std::string& model_path);
+
+/// The command line's densify flags as options (densemap replay, densemap-eval): `method`
+/// (--upsample; empty: none), the grids ROWSxCOLS (--upsample-input, --upsample-output) in the
+/// field of view [bottom_deg, top_deg] (--fov-top, --fov-bottom) and --upsample-model. Errors
+/// name the flag.
+[[nodiscard]] Expected<std::optional<UpsampleOptions>> upsampleFromFlags(
+    const std::string& method, const std::string& input, const std::string& output,
+    double top_deg, double bottom_deg, const std::string& model_path);
 
 /// Densifies one scan's sensor-frame points (UpsampleOptions); `stats` describes the projection.
 [[nodiscard]] PointCloud upsamplePoints(const PointCloud& points_sensor,
