@@ -254,13 +254,13 @@ TEST(Ros2Wire, ReplayedPointCloud2AndTfGiveTheOfflineMapAndTheMapTopicsAgree) {
   o.scans = 6;
   o.ground_truth_resolution_m = 0;
   ASSERT_TRUE(writeSimulatedSequence(o, dir.path() / "data"));
-  replayAndCompare(dir.path() / "data", 6, 151, dir.path());
+  replayAndCompare(dir.path() / "data", 6, 167, dir.path());
 }
 #else
 TEST(Ros2Wire, RealScansThroughPointCloud2AndTfGiveTheOfflineMap) {
   DENSEMAP_REQUIRE_DATA(balm, "balm-realworld");
   test::TempDir dir;
-  replayAndCompare(balm, 5, 153, dir.path());
+  replayAndCompare(balm, 5, 168, dir.path());
 }
 #endif
 
