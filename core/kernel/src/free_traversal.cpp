@@ -73,9 +73,9 @@ struct ThreadBlocks {
 /// slice by slice along the segment's dominant axis. In an interior slice (every point of it
 /// within `reach` has its nearest point of the line on the segment) the distance is the
 /// line's: a quadratic form in the centre's offset from where the line crosses the slice, fixed
-/// per segment, tested over a fixed window of rows and columns (as many voxel centres as the
-/// ellipse's box can hold) without a branch per candidate: a candidate is written, and kept
-/// when inside. The few end slices test the capsule's box with the segment's distance.
+/// per segment, tested over the rows and columns of centres inside the ellipse's box (at most
+/// as many as a box of its size can hold) without a branch per candidate: a candidate is
+/// written, and kept when inside. The few end slices test the capsule's box with the segment's distance.
 std::size_t collectVoxelsNear(const VoxelGrid& grid, const Eigen::Vector3d& a,
                               const Eigen::Vector3d& b, double reach, std::vector<Near>& out) {
   const Eigen::Vector3d seg = b - a;
@@ -137,6 +137,8 @@ std::size_t collectVoxelsNear(const VoxelGrid& grid, const Eigen::Vector3d& a,
       const double pb = a[bx] + (x - a[ax]) * slope_b, pc = a[cx] + (x - a[ax]) * slope_c;
       const int j0 = firstCentre(pb - half_b), k0 = firstCentre(pc - half_c);
       if (j0 + span_b > 65536 || k0 + span_c > 65536) continue;  // the addressable range's edge
+      const int rows = std::min(span_b, lastCentre(pb + half_b) - j0 + 1);
+      const int columns = std::min(span_c, lastCentre(pc + half_c) - k0 + 1);
       // End slices may have taken more than their share of `room`: keep a window's worth.
       const auto window = static_cast<std::size_t>(span_b * span_c);
       if (n + window > out.size()) out.resize(2 * (n + window));
@@ -144,11 +146,11 @@ std::size_t collectVoxelsNear(const VoxelGrid& grid, const Eigen::Vector3d& a,
       const double oc0 = grid.keyToCoord(static_cast<std::uint16_t>(k0)) - pc;
       const std::uint64_t step_c = std::uint64_t{1} << shift_c;
       Near* const window_out = out.data();
-      for (int dj = 0; dj < span_b; ++dj) {
+      for (int dj = 0; dj < rows; ++dj) {
         const double ob = ob0 + dj * res;
         const double row = qbb * ob * ob, cross = 2.0 * qbc * ob;
         std::uint64_t key = keyOf(i, j0 + dj, k0);
-        for (int dk = 0; dk < span_c; ++dk, key += step_c) {
+        for (int dk = 0; dk < columns; ++dk, key += step_c) {
           const double oc = oc0 + dk * res;
           const double d2 = row + (cross + qcc * oc) * oc;
           window_out[n] = {key, std::max(d2, 0.0)};
