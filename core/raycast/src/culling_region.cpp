@@ -1,6 +1,10 @@
 #include "densemap/raycast/culling_region.hpp"
 
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
+
 #include <algorithm>
+#include <array>
 #include <bit>
 
 namespace densemap {
@@ -44,34 +48,64 @@ void CullingRegion::loadFullyFree(const OccupancyMap& map) {
   const std::uint64_t bx0 = min_.x >> block::kShift, bx1 = (min_.x + nx_ - 1) >> block::kShift;
   const std::uint64_t by0 = min_.y >> block::kShift, by1 = (min_.y + ny_ - 1) >> block::kShift;
   const std::uint64_t bz0 = min_.z >> block::kShift, bz1 = (min_.z + nz_ - 1) >> block::kShift;
-  const block::BlockBox box{.min = {static_cast<std::uint32_t>(bx0), static_cast<std::uint32_t>(by0),
-                                     static_cast<std::uint32_t>(bz0)},
-                            .max = {static_cast<std::uint32_t>(bx1), static_cast<std::uint32_t>(by1),
-                                    static_cast<std::uint32_t>(bz1)}};
+  const block::BlockBox box{
+      .min = {static_cast<std::uint32_t>(bx0), static_cast<std::uint32_t>(by0),
+              static_cast<std::uint32_t>(bz0)},
+      .max = {static_cast<std::uint32_t>(bx1), static_cast<std::uint32_t>(by1),
+              static_cast<std::uint32_t>(bz1)}};
+  // The box's blocks with fully-free cells, then by layer of blocks along z (a counting sort):
+  // blocks of different layers write different rows, so the layers load side by side.
+  std::vector<FreeBlock>& found = scratch_.found;
+  found.clear();
   map.forEachFullyFreeBlock(box, [&](std::uint64_t block_key, const block::BlockMask& mask) {
-    const std::uint64_t bx = block_key & 0x1fff, by = (block_key >> 13) & 0x1fff,
-                        bz = (block_key >> 26) & 0x1fff;
-    // Mask word z holds the block's 8x8 voxels of layer z, byte y the row along x.
-    const int x0 = static_cast<int>(bx << block::kShift) - min_.x;
-    for (int z = 0; z < block::kEdge; ++z) {
-      const int gz = static_cast<int>(bz << block::kShift) + z - min_.z;
-      if (gz < 0 || gz >= static_cast<int>(nz_) || mask[z] == 0) continue;
-      for (int y = 0; y < block::kEdge; ++y) {
-        const int gy = static_cast<int>(by << block::kShift) + y - min_.y;
-        if (gy < 0 || gy >= static_cast<int>(ny_)) continue;
-        std::uint64_t bits8 = (mask[z] >> (8 * y)) & 0xffU;
-        if (x0 < 0) bits8 >>= -x0;  // the box starts inside this block
-        if (bits8 == 0) continue;
-        std::uint64_t* r = row(static_cast<unsigned>(gy), static_cast<unsigned>(gz));
-        const unsigned gx = static_cast<unsigned>(std::max(x0, 0));
-        if (gx + 8 > nx_) bits8 &= (std::uint64_t{1} << (nx_ - gx)) - 1;  // bits past the box
-        r[gx >> 6] |= bits8 << (gx & 63);
-        if ((gx & 63) > 56 && (gx >> 6) + 1 < words_per_row_) {
-          r[(gx >> 6) + 1] |= bits8 >> (64 - (gx & 63));
-        }
+    for (const std::uint64_t w : mask) {
+      if (w != 0) {
+        found.push_back({block_key, mask});
+        return;
       }
     }
   });
+  const auto layers = static_cast<std::size_t>(bz1 - bz0 + 1);
+  std::vector<std::size_t>& starts = scratch_.layer_starts;
+  starts.assign(layers + 1, 0);
+  const auto layerOf = [bz0](std::uint64_t block_key) {
+    return static_cast<std::size_t>(((block_key >> 26) & 0x1fff) - bz0);
+  };
+  for (const FreeBlock& b : found) ++starts[layerOf(b.key) + 1];
+  for (std::size_t l = 0; l < layers; ++l) starts[l + 1] += starts[l];
+  std::vector<FreeBlock>& by_layer = scratch_.by_layer;
+  by_layer.resize(found.size());
+  {
+    std::vector<std::size_t> next(starts.begin(), starts.end() - 1);
+    for (const FreeBlock& b : found) by_layer[next[layerOf(b.key)]++] = b;
+  }
+  tbb::parallel_for(std::size_t{0}, layers, [&](std::size_t l) {
+    for (std::size_t i = starts[l]; i < starts[l + 1]; ++i) loadBlock(by_layer[i]);
+  });
+}
+
+void CullingRegion::loadBlock(const FreeBlock& b) {
+  const std::uint64_t bx = b.key & 0x1fff, by = (b.key >> 13) & 0x1fff, bz = (b.key >> 26) & 0x1fff;
+  // Mask word z holds the block's 8x8 voxels of layer z, byte y the row along x.
+  const int x0 = static_cast<int>(bx << block::kShift) - min_.x;
+  for (int z = 0; z < block::kEdge; ++z) {
+    const int gz = static_cast<int>(bz << block::kShift) + z - min_.z;
+    if (gz < 0 || gz >= static_cast<int>(nz_) || b.mask[z] == 0) continue;
+    for (int y = 0; y < block::kEdge; ++y) {
+      const int gy = static_cast<int>(by << block::kShift) + y - min_.y;
+      if (gy < 0 || gy >= static_cast<int>(ny_)) continue;
+      std::uint64_t bits8 = (b.mask[z] >> (8 * y)) & 0xffU;
+      if (x0 < 0) bits8 >>= -x0;  // the box starts inside this block
+      if (bits8 == 0) continue;
+      std::uint64_t* r = row(static_cast<unsigned>(gy), static_cast<unsigned>(gz));
+      const unsigned gx = static_cast<unsigned>(std::max(x0, 0));
+      if (gx + 8 > nx_) bits8 &= (std::uint64_t{1} << (nx_ - gx)) - 1;  // bits past the box
+      r[gx >> 6] |= bits8 << (gx & 63);
+      if ((gx & 63) > 56 && (gx >> 6) + 1 < words_per_row_) {
+        r[(gx >> 6) + 1] |= bits8 >> (64 - (gx & 63));
+      }
+    }
+  }
 }
 
 void CullingRegion::toBricks(const KeyBox& frame) {
@@ -81,27 +115,34 @@ void CullingRegion::toBricks(const KeyBox& frame) {
   }
   bricks_.assign(static_cast<std::size_t>(bricks_n_[0]) * bricks_n_[1] * bricks_n_[2],
                  block::BlockMask{});
-  for (unsigned z = 0; z < nz_; ++z) {
-    for (unsigned y = 0; y < ny_; ++y) {
-      const std::uint64_t* r = row(y, z);
-      const unsigned gy = min_.y + y, gz = min_.z + z;
-      const std::size_t brick_row =
-          (static_cast<std::size_t>((gz >> block::kShift) - brick_min_[2]) * bricks_n_[1] +
-           ((gy >> block::kShift) - brick_min_[1])) *
-          bricks_n_[0];
-      const unsigned shift = 8 * (gy & (block::kEdge - 1));
-      for (unsigned w = 0; w < words_per_row_; ++w) {
-        std::uint64_t bits = r[w];
-        while (bits != 0) {
-          const unsigned x = w * 64 + static_cast<unsigned>(std::countr_zero(bits));
-          bits &= bits - 1;
-          const unsigned gx = min_.x + x;
-          bricks_[brick_row + ((gx >> block::kShift) - brick_min_[0])][gz & (block::kEdge - 1)] |=
-              std::uint64_t{1} << (shift + (gx & (block::kEdge - 1)));
+  // The rows of one layer of bricks along z write only that layer's bricks: layers in parallel.
+  const unsigned first_layer = min_.z >> block::kShift,
+                 last_layer = (min_.z + nz_ - 1) >> block::kShift;
+  tbb::parallel_for(first_layer, last_layer + 1, [&](unsigned layer) {
+    const unsigned z_from = std::max(layer << block::kShift, unsigned{min_.z}) - min_.z;
+    const unsigned z_to = std::min((layer + 1) << block::kShift, unsigned{min_.z} + nz_) - min_.z;
+    for (unsigned z = z_from; z < z_to; ++z) {
+      for (unsigned y = 0; y < ny_; ++y) {
+        const std::uint64_t* r = row(y, z);
+        const unsigned gy = min_.y + y, gz = min_.z + z;
+        const std::size_t brick_row =
+            (static_cast<std::size_t>((gz >> block::kShift) - brick_min_[2]) * bricks_n_[1] +
+             ((gy >> block::kShift) - brick_min_[1])) *
+            bricks_n_[0];
+        const unsigned shift = 8 * (gy & (block::kEdge - 1));
+        for (unsigned w = 0; w < words_per_row_; ++w) {
+          std::uint64_t bits = r[w];
+          while (bits != 0) {
+            const unsigned x = w * 64 + static_cast<unsigned>(std::countr_zero(bits));
+            bits &= bits - 1;
+            const unsigned gx = min_.x + x;
+            bricks_[brick_row + ((gx >> block::kShift) - brick_min_[0])][gz & (block::kEdge - 1)] |=
+                std::uint64_t{1} << (shift + (gx & (block::kEdge - 1)));
+          }
         }
       }
     }
-  }
+  });
 }
 
 void CullingRegion::keepRunThrough(std::uint64_t* r, unsigned x0) const {
@@ -177,27 +218,69 @@ void CullingRegion::build(const OccupancyMap& map, const VoxelKey& origin, const
     row(y, z)[x >> 6] &= ~(std::uint64_t{1} << (x & 63));
   }
 
-  // Sweep outward from O: a row (y, z) needs the rows one step closer to O in y and in z.
+  // Sweep outward from O: a row (y, z) needs the rows one step closer to O in y and in z. The
+  // row through O first, then its plane's rows along y and its column's along z (each needs
+  // only that row), then the four quadrants around them, each on its own (a quadrant's rows need
+  // only its own and the plane's or the column's).
   const unsigned ox = origin.x - min_.x, oy = origin.y - min_.y, oz = origin.z - min_.z;
+  const auto sweepRow = [&](unsigned y, unsigned z, unsigned y_prev, unsigned z_prev) {
+    std::uint64_t* r = row(y, z);
+    if (y != y_prev) {
+      const std::uint64_t* p = row(y_prev, z);
+      for (unsigned w = 0; w < words_per_row_; ++w) r[w] &= p[w];
+    }
+    if (z != z_prev) {
+      const std::uint64_t* p = row(y, z_prev);
+      for (unsigned w = 0; w < words_per_row_; ++w) r[w] &= p[w];
+    }
+    keepRunThrough(r, ox);
+    std::size_t n = 0;
+    for (unsigned w = 0; w < words_per_row_; ++w)
+      n += static_cast<std::size_t>(std::popcount(r[w]));
+    return n;
+  };
+  // The values from `o` outward (up, then down) with each one's neighbour toward `o`.
   const auto outward = [](unsigned o, unsigned n, auto&& f) {
-    for (unsigned v = o; v < n; ++v) f(v, v == o ? v : v - 1);
+    for (unsigned v = o + 1; v < n; ++v) f(v, v - 1);
     for (unsigned v = o; v-- > 0;) f(v, v + 1);
   };
-  outward(oz, nz_, [&](unsigned z, unsigned z_prev) {
-    outward(oy, ny_, [&](unsigned y, unsigned y_prev) {
-      std::uint64_t* r = row(y, z);
-      if (y != oy) {
-        const std::uint64_t* p = row(y_prev, z);
-        for (unsigned w = 0; w < words_per_row_; ++w) r[w] &= p[w];
+  size_ = sweepRow(oy, oz, oy, oz);
+  std::size_t plane = 0, column = 0;
+  tbb::parallel_invoke(
+      [&] {
+        outward(oy, ny_,
+                [&](unsigned y, unsigned y_prev) { plane += sweepRow(y, oz, y_prev, oz); });
+      },
+      [&] {
+        outward(oz, nz_,
+                [&](unsigned z, unsigned z_prev) { column += sweepRow(oy, z, oy, z_prev); });
+      });
+  std::array<std::size_t, 4> quadrants{};
+  const auto quadrant = [&](int q) {
+    const bool up_y = (q & 1) != 0, up_z = (q & 2) != 0;
+    std::size_t n = 0;
+    const auto ys = [&](auto&& f) {
+      if (up_y) {
+        for (unsigned y = oy + 1; y < ny_; ++y) f(y, y - 1);
+      } else {
+        for (unsigned y = oy; y-- > 0;) f(y, y + 1);
       }
-      if (z != oz) {
-        const std::uint64_t* p = row(y, z_prev);
-        for (unsigned w = 0; w < words_per_row_; ++w) r[w] &= p[w];
+    };
+    const auto zs = [&](auto&& f) {
+      if (up_z) {
+        for (unsigned z = oz + 1; z < nz_; ++z) f(z, z - 1);
+      } else {
+        for (unsigned z = oz; z-- > 0;) f(z, z + 1);
       }
-      keepRunThrough(r, ox);
-      for (unsigned w = 0; w < words_per_row_; ++w) size_ += std::popcount(r[w]);
+    };
+    zs([&](unsigned z, unsigned z_prev) {
+      ys([&](unsigned y, unsigned y_prev) { n += sweepRow(y, z, y_prev, z_prev); });
     });
-  });
+    quadrants[static_cast<std::size_t>(q)] = n;
+  };
+  tbb::parallel_invoke([&] { quadrant(0); }, [&] { quadrant(1); }, [&] { quadrant(2); },
+                       [&] { quadrant(3); });
+  size_ += plane + column + quadrants[0] + quadrants[1] + quadrants[2] + quadrants[3];
   bool inside = frame != nullptr;
   for (int a = 0; a < 3 && inside; ++a) {
     inside = frame->min[a] <= box.min[a] && box.max[a] <= frame->max[a];
