@@ -64,7 +64,22 @@ ApplyStats GridMap::writeBlocks(std::span<BlockEntry* const> entries, CellChange
   std::atomic<std::size_t> updated{0}, changed{0}, newly_known{0};
   runner().run(entries.size(), 16, [&](std::size_t begin, std::size_t end) {
     Counts c;
+    // Blocks come from all over the map (cache misses): the entry four blocks ahead and the
+    // newest node's first lines two ahead are fetched while this one is written.
+    const auto prefetchNode = [&](std::size_t k) {
+      if (k >= end) return;
+      const ChainLink* head = entries[k]->head.load(std::memory_order_relaxed);
+      if (head == nullptr) return;
+      const auto* bytes = reinterpret_cast<const char*>(head);
+      __builtin_prefetch(bytes);
+      __builtin_prefetch(bytes + 64);
+    };
+    for (std::size_t k = begin; k < std::min(begin + 4, end); ++k) __builtin_prefetch(entries[k]);
+    prefetchNode(begin);
+    prefetchNode(begin + 1);
     for (std::size_t j = begin; j != end; ++j) {
+      if (j + 4 < end) __builtin_prefetch(entries[j + 4]);
+      prefetchNode(j + 2);
       BlockWriter w(*this, *entries[j], c, changes != nullptr ? &block_changes[j] : nullptr);
       write_block(j, w);
     }
