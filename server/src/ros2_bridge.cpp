@@ -124,6 +124,17 @@ Expected<std::unique_ptr<Ros2Bridge>> Ros2Bridge::create(Ingest& ingest,
                              d.centers_topic, d.centers_writer)}) {
     if (!ok) return std::unexpected(ok.error());
   }
+  // The server as a ROS node with these readers and writers (as rmw_cyclonedds announces its
+  // nodes), so ROS tools list it and its topics.
+  std::vector<const dds::Entity*> readers{&d.tf_reader, &d.tf_static_reader}, writers;
+  for (const dds::Entity& r : d.cloud_readers) readers.push_back(&r);
+  for (const dds::Entity* w : {&d.octomap_writer, &d.grid_writer, &d.centers_writer}) {
+    if (w->get() > 0) writers.push_back(w);
+  }
+  auto node =
+      announceRosNode(participant, options.gid_layout, "/", options.node_name, readers, writers);
+  if (!node) return std::unexpected(node.error());
+  d.node = std::move(*node);
   auto ws = dds::WaitSet::create(participant);
   if (!ws) return std::unexpected(ws.error());
   d.waitset.emplace(std::move(*ws));

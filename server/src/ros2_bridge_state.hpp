@@ -14,6 +14,7 @@
 #include "densemap/ros2/tf_buffer.hpp"
 #include "densemap/server/ros2_bridge.hpp"
 #include "densemap/wire/dds.hpp"
+#include "ros2_discovery.hpp"
 
 namespace densemap::server {
 
@@ -25,6 +26,7 @@ struct Ros2Bridge::Dds {
   dds::Entity octomap_topic, grid_topic, centers_topic;
   dds::Entity octomap_writer, grid_writer, centers_writer;
   std::optional<dds::WaitSet> waitset;
+  RosNodeAnnouncement node;  // the server on ros_discovery_info (`ros2 node list`)
 };
 
 struct Ros2Bridge::Waiting {

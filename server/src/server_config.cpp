@@ -9,6 +9,7 @@
 #include "densemap/idl/text_format.hpp"
 #include "densemap/io/file_bytes.hpp"
 #include "densemap/ros2/names.hpp"
+#include "ros2_discovery.hpp"
 
 namespace densemap::server {
 namespace {
@@ -283,6 +284,15 @@ Expected<std::optional<Ros2Options>> ros2Options(const proto::ServerConfig& conf
   o.grid_min_z_m = r.grid_min_z_m();
   o.grid_max_z_m = r.grid_max_z_m();
   o.max_points = config.pipeline().max_points();
+  if (!ros2::isNodeName(r.node_name())) {
+    return makeError("ros2.node_name: '" + r.node_name() +
+                     "' is not a ROS node name (letters, digits and '_', not starting with a "
+                     "digit, at most 255)");
+  }
+  o.node_name = r.node_name();
+  auto layout = parseRosDistro(r.distro());
+  if (!layout) return std::unexpected(layout.error());
+  o.gid_layout = *layout;
   return std::optional<Ros2Options>(std::move(o));
 }
 

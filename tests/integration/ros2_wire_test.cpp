@@ -26,6 +26,7 @@
 #include "densemap/wire/dds.hpp"
 #include "nav_msgs.h"
 #include "octomap_msgs.h"
+#include "rmw_dds_common.h"
 #include "sensor_msgs.h"
 #include "tf2_msgs.h"
 
@@ -457,7 +458,9 @@ TEST(Ros2Wire, TopicAndTypeNamesFollowRmwCycloneddsConventions) {
 TEST(Ros2Wire, RosEndpointsOfferXcdr1OnlyAndNoTypeInformation) {
   for (const dds_topic_descriptor_t* d :
        {&sensor_msgs_msg_dds__PointCloud2__desc, &tf2_msgs_msg_dds__TFMessage__desc,
-        &octomap_msgs_msg_dds__Octomap__desc, &nav_msgs_msg_dds__OccupancyGrid__desc}) {
+        &octomap_msgs_msg_dds__Octomap__desc, &nav_msgs_msg_dds__OccupancyGrid__desc,
+        &rmw_dds_common_msg_dds__ParticipantEntitiesInfo__desc,
+        &densemap_rmw_gid16_msg_dds__ParticipantEntitiesInfo__desc}) {
     EXPECT_EQ(d->m_flagset & DDS_TOPIC_XTYPES_METADATA, 0U) << d->m_typename;
     EXPECT_EQ(d->type_information.sz, 0U) << d->m_typename;
   }
@@ -490,6 +493,99 @@ TEST(Ros2Wire, RosEndpointsOfferXcdr1OnlyAndNoTypeInformation) {
   }
 }
 
+#endif
+
+#ifndef DENSEMAP_ROS2_REALDATA
+/// The DDS GUIDs of the endpoints on `topic` that the builtin topic `builtin` (DCPSPublication
+/// or DCPSSubscription) reports, with their participants', within 10 s of the first.
+std::vector<std::pair<dds_guid_t, dds_guid_t>> endpointsOn(const dds::Entity& participant,
+                                                           dds_entity_t builtin,
+                                                           const std::string& topic) {
+  const dds_entity_t reader = dds_create_reader(participant.get(), builtin, nullptr, nullptr);
+  std::vector<std::pair<dds_guid_t, dds_guid_t>> found;
+  for (int i = 0; i < 100 && found.empty(); ++i) {
+    std::this_thread::sleep_for(100ms);
+    void* samples[64] = {};
+    dds_sample_info_t infos[64];
+    const dds_return_t n = dds_read(reader, samples, infos, 64, 64);
+    for (dds_return_t k = 0; k < n; ++k) {
+      const auto* e = static_cast<const dds_builtintopic_endpoint_t*>(samples[k]);
+      if (infos[k].valid_data && e->topic_name != nullptr && topic == e->topic_name) {
+        found.emplace_back(e->key, e->participant_key);
+      }
+    }
+    if (n > 0) dds_return_loan(reader, samples, n);
+  }
+  dds_delete(reader);
+  return found;
+}
+
+/// Whether `gid` (a Gid's bytes) is `guid` followed by zeros.
+bool gidIs(const unsigned char* gid, std::size_t size, const dds_guid_t& guid) {
+  if (std::memcmp(gid, guid.v, sizeof guid.v) != 0) return false;
+  return std::all_of(gid + sizeof guid.v, gid + size, [](unsigned char b) { return b == 0; });
+}
+
+/// The server's ros_discovery_info in `layout`'s message (Humble's or Iron's), checked against
+/// the endpoints discovery reports: the participant, the node's name, its cloud reader and its
+/// map writers.
+template <class Info>
+void checkRosNode(std::uint32_t domain, const std::string& ros2_extra,
+                  const dds_topic_descriptor_t& descriptor, const std::string& node_name) {
+  test::TempDir dir;
+  test::ServerProcess server(dir.path(), domain,
+                             "ros2 { enabled: true publish_period_s: 0.2 " + ros2_extra + " }\n");
+  auto participant = dds::createParticipant({domain, "lo", std::nullopt});
+  ASSERT_TRUE(participant);
+  dds_topic_descriptor_t named = descriptor;  // the type name ROS nodes use, whatever the layout
+  named.m_typename = rmw_dds_common_msg_dds__ParticipantEntitiesInfo__desc.m_typename;
+  auto topic = dds::createTopic(*participant, named, "ros_discovery_info");
+  ASSERT_TRUE(topic);
+  auto reader = dds::createReader(*participant, *topic, dds::kLatchedQos);
+  ASSERT_TRUE(reader);
+  const auto writers = endpointsOn(*participant, DDS_BUILTIN_TOPIC_DCPSPUBLICATION,
+                                   ros2::ddsTopicName("/octomap_binary"));
+  const auto readers =
+      endpointsOn(*participant, DDS_BUILTIN_TOPIC_DCPSSUBSCRIPTION, ros2::ddsTopicName("/points"));
+  ASSERT_EQ(writers.size(), 1U);
+  ASSERT_EQ(readers.size(), 1U);
+  const dds_guid_t server_participant = writers[0].second;
+  bool got = false;
+  for (int i = 0; i < 100 && !got; ++i) {
+    std::this_thread::sleep_for(100ms);
+    dds::forEachSample<Info>(*reader, false, [&](const Info& info) {
+      got = true;
+      EXPECT_TRUE(gidIs(info.gid.data, sizeof info.gid.data, server_participant));
+      ASSERT_EQ(info.node_entities_info_seq._length, 1U);
+      const auto& node = info.node_entities_info_seq._buffer[0];
+      EXPECT_STREQ(node.node_namespace, "/");
+      EXPECT_EQ(std::string(node.node_name), node_name);
+      const auto contains = [](const auto& seq, const dds_guid_t& guid) {
+        for (std::uint32_t k = 0; k < seq._length; ++k) {
+          if (gidIs(seq._buffer[k].data, sizeof seq._buffer[k].data, guid)) return true;
+        }
+        return false;
+      };
+      EXPECT_TRUE(contains(node.writer_gid_seq, writers[0].first));
+      EXPECT_TRUE(contains(node.reader_gid_seq, readers[0].first));
+      EXPECT_EQ(node.writer_gid_seq._length, 3U);  // octomap, grid, centres
+      EXPECT_EQ(node.reader_gid_seq._length, 3U);  // /points, /tf, /tf_static
+    });
+  }
+  EXPECT_TRUE(got) << "no ros_discovery_info from the server in 10 s";
+  EXPECT_EQ(server.stop(), 0);
+}
+
+// Issue 32, item 7: `ros2 node list` lists what rmw implementations announce on
+// ros_discovery_info; the server announces itself there in its robot's layout (Humble's gids
+// have 24 bytes, Iron's and later 16).
+TEST(Ros2Wire, TheServerIsARosNodeOnRosDiscoveryInfoInItsDistributionsLayout) {
+  checkRosNode<rmw_dds_common_msg_dds__ParticipantEntitiesInfo_>(
+      174, "distro: \"humble\" node_name: \"mapper_1\"",
+      rmw_dds_common_msg_dds__ParticipantEntitiesInfo__desc, "mapper_1");
+  checkRosNode<densemap_rmw_gid16_msg_dds__ParticipantEntitiesInfo_>(
+      175, "", densemap_rmw_gid16_msg_dds__ParticipantEntitiesInfo__desc, "densemap_server");
+}
 #endif
 
 #ifndef DENSEMAP_ROS2_REALDATA

@@ -1,5 +1,6 @@
 #include "densemap/ros2/names.hpp"
 
+#include <algorithm>
 #include <cctype>
 
 namespace densemap::ros2 {
@@ -11,6 +12,14 @@ std::string ddsTopicName(std::string_view ros_name) {
   }
   if (ros_name.find("//") != std::string_view::npos) return {};
   return ros_name.front() == '/' ? "rt" + std::string(ros_name) : "rt/" + std::string(ros_name);
+}
+
+bool isNodeName(std::string_view name) {
+  if (name.empty() || name.size() > 255) return false;
+  if (std::isdigit(static_cast<unsigned char>(name.front())) != 0) return false;
+  return std::all_of(name.begin(), name.end(), [](char c) {
+    return std::isalnum(static_cast<unsigned char>(c)) != 0 || c == '_';
+  });
 }
 
 ScanPose toScanPose(const Eigen::Isometry3d& T) {

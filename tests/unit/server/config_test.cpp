@@ -2,7 +2,6 @@
 
 #include <fstream>
 
-#include "densemap/wire/dds.hpp"
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_diff.hpp"
 #include "densemap/raycast/integrator.hpp"
@@ -10,6 +9,7 @@
 #include "densemap/store/snapshot.hpp"
 #include "densemap/test_support/data_dir.hpp"
 #include "densemap/test_support/random_rays.hpp"
+#include "densemap/wire/dds.hpp"
 
 namespace densemap::server {
 namespace {
@@ -58,12 +58,22 @@ TEST(ServerConfig, Ros2OptionsAndTheirErrors) {
   ASSERT_TRUE(two && *two);
   EXPECT_EQ((*two)->clouds.size(), 2U);
   EXPECT_EQ((*two)->world_frame, "odom");
+  // The ROS node's name and the gid layout of the robot's distribution (issue 32, item 7).
+  EXPECT_EQ((*on)->node_name, "densemap_server");
+  EXPECT_EQ((*on)->gid_layout, RosGidLayout::kIronAndLater);
+  auto humble = options("ros2 { enabled: true distro: \"humble\" node_name: \"map_2\" }\n");
+  ASSERT_TRUE(humble && *humble);
+  EXPECT_EQ((*humble)->gid_layout, RosGidLayout::kHumble);
+  EXPECT_EQ((*humble)->node_name, "map_2");
   for (const char* bad :
        {"ros2 { enabled: true clouds: \"/bad topic\" }\n",
         "ros2 { enabled: true world_frame: \"\" }\n", "ros2 { enabled: true tf_wait_s: -1 }\n",
         "ros2 { enabled: true max_waiting_clouds: 0 }\n",
         "ros2 { enabled: true grid_min_z_m: 2 grid_max_z_m: 1 }\n",
-        "ros2 { enabled: true octomap_topic: \"/a//b\" }\n"}) {
+        "ros2 { enabled: true octomap_topic: \"/a//b\" }\n",
+        "ros2 { enabled: true distro: \"foxy\" }\n", "ros2 { enabled: true node_name: \"\" }\n",
+        "ros2 { enabled: true node_name: \"2d_map\" }\n",
+        "ros2 { enabled: true node_name: \"a/b\" }\n"}) {
     // Refused at load, with the file's name (issue 28, item 15: ros2 errors had none).
     const auto file = writeConfig(dir, bad);
     auto r = loadServerConfig(file);

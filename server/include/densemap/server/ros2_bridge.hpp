@@ -10,12 +10,16 @@
 #include <thread>
 #include <vector>
 
-#include "densemap/wire/dds.hpp"
-#include "densemap/server/ingest.hpp"
-#include "densemap/wire/status.hpp"
 #include "densemap/ros2/point_cloud2.hpp"
+#include "densemap/server/ingest.hpp"
+#include "densemap/wire/dds.hpp"
+#include "densemap/wire/status.hpp"
 
 namespace densemap::server {
+
+/// rmw_dds_common's Gid: 24 bytes on Humble, 16 from Iron on (one DDS type name for both, so
+/// the server must be told which its robot runs: ros2.distro).
+enum class RosGidLayout { kHumble, kIronAndLater };
 
 struct Ros2Options {
   std::vector<std::string> clouds{"/points"};  // ROS topic names
@@ -35,6 +39,9 @@ struct Ros2Options {
               centers_topic = "/octomap_point_cloud_centers";
   double grid_min_z_m = -1000.0, grid_max_z_m = 1000.0;
   std::size_t max_points = 2'000'000;
+  /// The ROS 2 node the server shows on ros_discovery_info (`ros2 node list`): "/" + name.
+  std::string node_name = "densemap_server";
+  RosGidLayout gid_layout = RosGidLayout::kIronAndLater;
 };
 
 struct Ros2Counters {
