@@ -12,6 +12,7 @@
 #include "densemap/cli/progress.hpp"
 #include "densemap/geometry/percentile.hpp"
 #include "densemap/io/scan_source.hpp"
+#include "densemap/ros2/recording.hpp"
 #include "densemap/upsample/interpolation.hpp"
 
 namespace densemap::cli {
@@ -241,7 +242,7 @@ void printServerCounts(const Expected<ServerStatus>& before, const Expected<Serv
 ReplayCommand::ReplayCommand(CLI::App& app)
     : command_(app.add_subcommand("replay", "Publish a dataset's scans to the server")) {
   CLI::App& c = *command_;
-  c.add_option("--data", data_, "Dataset (any format densemap reads)")->required();
+  c.add_option("--data", data_, "Dataset (any format densemap reads, a ROS 2 .mcap bag too)")->required();
   c.add_option("--rate", rate_, "Scans per second (0: as fast as possible)")->capture_default_str();
   c.add_option("--first", first_, "Skip this many scans")->capture_default_str();
   c.add_option("--query-bbox-edge", bbox_edge_m_,
@@ -297,7 +298,7 @@ int ReplayCommand::run(const ClientOptions& o) {
   if (densify) {
     if (auto ok = densify->validate(); !ok) return fail(ok.error().message);
   }
-  auto source = openScanSource(data_);
+  auto source = ros2::openAnyScanSource(data_);
   if (!source) return fail(source.error().message);
   auto client = connect(o);
   if (!client) return fail(client.error().message);

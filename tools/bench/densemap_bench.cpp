@@ -18,6 +18,7 @@
 #include "densemap/cli/progress.hpp"
 #include "densemap/geometry/percentile.hpp"
 #include "densemap/io/scan_source.hpp"
+#include "densemap/ros2/recording.hpp"
 #include "densemap/kernel/kernel_map.hpp"
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_diff.hpp"
@@ -43,7 +44,7 @@ std::string machineDescription() {
 }
 
 Expected<std::vector<WorldScan>> loadScans(const Options& o) {
-  auto source = openScanSource(o.data);
+  auto source = ros2::openAnyScanSource(o.data);
   if (!source) return std::unexpected(source.error());
   const std::size_t total = (*source)->size();
   if (o.first >= total)
@@ -249,7 +250,7 @@ static int runMain(int argc, char** argv) {
   mallopt(M_TRIM_THRESHOLD, 256 << 20);
   densemap::bench::Options o;
   CLI::App app{"densemap-bench: integration speed and exactness against OctoMap, one run"};
-  app.add_option("--data", o.data, "Dataset (directory, .graph, .pcd dir, scan.dat[.bz2])")
+  app.add_option("--data", o.data, "Dataset (directory, .graph, .pcd dir, scan.dat[.bz2], ROS 2 .mcap bag)")
       ->required();
   app.add_option("--resolution", o.resolution, "Voxel size, m")->capture_default_str();
   app.add_option("--max-range", o.max_range, "Rays are cut at this range, m (< 0: unlimited)")

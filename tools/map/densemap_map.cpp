@@ -11,6 +11,7 @@
 #include "densemap/cli/progress.hpp"
 #include "densemap/io/octomap_export.hpp"
 #include "densemap/io/scan_source.hpp"
+#include "densemap/ros2/recording.hpp"
 #include "densemap/map/map_factory.hpp"
 #include "densemap/parallel/tbb_runner.hpp"
 #include "densemap/raycast/integrator.hpp"
@@ -21,7 +22,7 @@ static int runMain(int argc, char** argv) {
   double resolution = 0.1, max_range = -1.0;
   int threads = 0;
   CLI::App app{"densemap-map: integrate a dataset into an occupancy map and export it"};
-  app.add_option("--data", data, "Dataset (any format densemap reads)")->required();
+  app.add_option("--data", data, "Dataset (any format densemap reads, a ROS 2 .mcap bag too)")->required();
   app.add_option("--out", out, "Output map file: .bt or .ot");
   app.add_option("--save-graph", graph_out,
                  "Also (or only, without --out) write the scans as an OctoMap ScanGraph (.graph)");
@@ -45,7 +46,7 @@ static int runMain(int argc, char** argv) {
   (*map)->setRunner(densemap::tbbRunner());
   if (out.empty() && graph_out.empty())
     return fail("nothing to write: give --out and/or --save-graph");
-  auto source = densemap::openScanSource(data);
+  auto source = densemap::ros2::openAnyScanSource(data);
   if (!source) return fail(source.error().message);
   const std::size_t total = (*source)->size();
   if (first >= total) {

@@ -6,6 +6,8 @@
 
 #include "densemap/cli/guarded_main.hpp"
 #include "densemap/cli/progress.hpp"
+#include "densemap/io/scan_source.hpp"
+#include "densemap/ros2/recording.hpp"
 #include "densemap/sim/sequence.hpp"
 
 static int runMain(int argc, char** argv) {
@@ -53,7 +55,19 @@ static int runMain(int argc, char** argv) {
       ->delimiter(',')
       ->capture_default_str();
   app.add_option("--threads", threads, "Worker threads (0: all cores)")->capture_default_str();
+  std::string mcap, mcap_compression = "zstd";
+  app.add_option("--mcap", mcap,
+                 "Also write the scans as a ROS 2 MCAP bag: PointCloud2 on /points and TF, as "
+                 "densemap replay --ros publishes them (what densemap replay, densemap-map and "
+                 "densemap-bench read back)");
+  app.add_option("--mcap-compression", mcap_compression, "The bag's chunks: none, zstd or lz4")
+      ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
+  const auto compression = densemap::ros2::parseMcapCompression(mcap_compression);
+  if (!compression) {
+    std::fprintf(stderr, "densemap-sim: error: %s\n", compression.error().message.c_str());
+    return 2;
+  }
 
   tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
   densemap::Expected<densemap::SequenceSummary> summary;
@@ -72,6 +86,21 @@ static int runMain(int argc, char** argv) {
               summary->ground_truth.string().c_str());
   for (const auto& path : summary->oracle_labels) {
     std::printf("oracle labels %s\n", path.string().c_str());
+  }
+  if (!mcap.empty()) {
+    auto source = densemap::openScanSource(out);
+    densemap::Expected<void> written =
+        source ? densemap::Expected<void>{} : std::unexpected(source.error());
+    if (source) {
+      densemap::tools::Progress progress("densemap-sim: bag scan", (*source)->size());
+      written = densemap::ros2::writeRecording(**source, 0, (*source)->size(), mcap, *compression,
+                                              [&](std::size_t n) { progress.update(n); });
+    }
+    if (!written) {
+      std::fprintf(stderr, "densemap-sim: error: %s\n", written.error().message.c_str());
+      return 1;
+    }
+    std::printf("ROS 2 bag %s (%s chunks)\n", mcap.c_str(), mcap_compression.c_str());
   }
   return 0;
 }

@@ -116,6 +116,17 @@ std::int64_t TfBuffer::latestCommon(const std::string& a, const std::string& b) 
   return moving ? latest : 0;
 }
 
+std::string TfBuffer::rootOf(std::string_view frame) const {
+  std::string f(stripSlash(frame));
+  // set() refuses cycles, so the walk ends; the bound is for safety only.
+  for (std::size_t step = 0; step <= links_.size(); ++step) {
+    const auto it = links_.find(f);
+    if (it == links_.end()) break;
+    f = it->second.parent;
+  }
+  return f;
+}
+
 std::expected<Eigen::Isometry3d, TfFailure> TfBuffer::lookup(std::string_view target_name,
                                                              std::string_view source_name,
                                                              std::int64_t stamp_ns) const {

@@ -32,6 +32,9 @@ struct Scan {
   /// with OctoMap's float arithmetic (liboctomath) as graph2tree does, so that densemap-map and
   /// graph2tree build the same tree. T_world_sensor holds the same pose in double.
   std::optional<OctomapPose> octomap_pose;
+  /// When the scan was taken (ns), where the format records it (ROS 2 recordings); replay's
+  /// --recorded-rate paces by it.
+  std::optional<std::int64_t> stamp_ns;
 
   /// The points in the world frame: transformed once, in double (or as graph2tree does, with
   /// `octomap_pose`), if they are sensor-frame.

@@ -46,6 +46,8 @@ class TfBuffer {
                                                                    std::int64_t stamp_ns) const;
 
   [[nodiscard]] std::size_t links() const { return links_.size(); }
+  /// The top of `frame`'s tree (the frame itself when nothing is its parent).
+  [[nodiscard]] std::string rootOf(std::string_view frame) const;
 
  private:
   struct Link {

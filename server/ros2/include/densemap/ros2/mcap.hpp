@@ -1,0 +1,113 @@
+#pragma once
+
+// MCAP (mcap.dev, the format rosbag2 records by default since Iron), read and written from the
+// published specification: the records of the data section, messages at top level or in
+// chunks (uncompressed, zstd or lz4 frames). Untrusted input: every length is checked against
+// what is left and against the limits below before anything is allocated.
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "densemap/geometry/error.hpp"
+
+namespace densemap::ros2 {
+
+struct McapChannel {
+  std::uint16_t id = 0;
+  std::string topic, message_encoding;
+  std::string schema_name, schema_encoding;  // empty when the channel names no schema
+};
+
+/// Where a message's data lies: in the file (chunk < 0) or in chunk `chunk`'s records.
+struct McapMessage {
+  std::uint16_t channel = 0;
+  std::uint64_t log_time = 0;
+  std::int64_t chunk = -1;
+  std::uint64_t offset = 0, length = 0;
+};
+
+struct McapLimits {
+  std::uint64_t max_chunk_bytes = std::uint64_t{512} << 20;  // a chunk, compressed or not
+  std::size_t max_messages = 10'000'000;
+  std::size_t max_channels = 4096;
+};
+
+/// The index of an MCAP file's data section (its summary section is not needed and not read).
+/// A file cut short (a recorder that died) keeps the messages before the cut (truncated() says
+/// where); anything else malformed is refused at open.
+class McapReader {
+ public:
+  [[nodiscard]] static Expected<std::unique_ptr<McapReader>> open(
+      const std::filesystem::path& path, const McapLimits& limits = {});
+  /// The same over bytes in memory (tests, fuzzing).
+  [[nodiscard]] static Expected<std::unique_ptr<McapReader>> fromBytes(
+      std::string bytes, const McapLimits& limits = {});
+  ~McapReader();
+
+  [[nodiscard]] const std::vector<McapChannel>& channels() const { return channels_; }
+  [[nodiscard]] const McapChannel* channel(std::uint16_t id) const;
+  [[nodiscard]] const std::vector<McapMessage>& messages() const { return messages_; }
+  /// A message's data (thread-safe; the last chunk read is kept).
+  [[nodiscard]] Expected<std::string> data(const McapMessage& m) const;
+  /// Empty, or why the file ends early ("cut inside a record at byte N").
+  [[nodiscard]] const std::string& truncated() const { return truncated_; }
+  [[nodiscard]] const std::string& name() const { return name_; }
+
+ private:
+  struct Source;
+  struct Chunk {
+    std::uint64_t records_offset = 0, records_length = 0, uncompressed_size = 0;
+    std::uint32_t crc = 0;
+    std::string compression;
+  };
+  McapReader() = default;
+  Expected<void> index();
+  Expected<void> indexRecords(const std::string& records, std::int64_t chunk);
+  Expected<std::string> chunkRecords(const Chunk& c) const;
+
+  std::unique_ptr<Source> source_;
+  McapLimits limits_;
+  std::string name_;
+  std::vector<McapChannel> channels_;
+  std::vector<std::pair<std::uint16_t, std::pair<std::string, std::string>>> schemas_;
+  std::vector<McapMessage> messages_;
+  std::vector<Chunk> chunks_;
+  std::string truncated_;
+  mutable std::mutex cache_mutex_;
+  mutable std::int64_t cached_chunk_ = -1;
+  mutable std::string cached_records_;
+};
+
+enum class McapCompression { kNone, kZstd, kLz4 };
+
+/// Writes an MCAP file (profile "ros2"): schemas, channels, then messages in chunks of about
+/// `chunk_bytes` (compressed as asked), a data end and a footer; no summary section.
+class McapWriter {
+ public:
+  explicit McapWriter(McapCompression compression, std::size_t chunk_bytes = std::size_t{1} << 20);
+  std::uint16_t addSchema(const std::string& name, const std::string& encoding,
+                          const std::string& data);
+  std::uint16_t addChannel(std::uint16_t schema, const std::string& topic,
+                           const std::string& message_encoding);
+  void write(std::uint16_t channel, std::uint64_t log_time, const std::string& data);
+  /// The whole file's bytes; the writer is spent.
+  [[nodiscard]] Expected<std::string> finish();
+
+ private:
+  void flushChunk();
+  McapCompression compression_;
+  std::size_t chunk_bytes_;
+  std::string out_, chunk_;
+  std::uint64_t chunk_start_ = 0, chunk_end_ = 0;
+  std::uint16_t next_schema_ = 1, next_channel_ = 0;
+  std::uint32_t sequence_ = 0;
+  std::string error_;
+};
+
+/// "none", "zstd", "lz4".
+[[nodiscard]] Expected<McapCompression> parseMcapCompression(const std::string& name);
+
+}  // namespace densemap::ros2

@@ -1,0 +1,233 @@
+#include "densemap/ros2/recording.hpp"
+
+#include <algorithm>
+#include <limits>
+#include <span>
+
+#include "densemap/io/file_bytes.hpp"
+#include "densemap/ros2/cdr.hpp"
+#include "densemap/ros2/point_cloud2.hpp"
+#include "densemap/ros2/replay_frames.hpp"
+#include "densemap/ros2/tf_buffer.hpp"
+
+namespace densemap::ros2 {
+namespace {
+
+constexpr const char* kCloudType = "sensor_msgs/msg/PointCloud2";
+constexpr const char* kTfType = "tf2_msgs/msg/TFMessage";
+
+std::span<const std::uint8_t> bytesOf(const std::string& s) {
+  return {reinterpret_cast<const std::uint8_t*>(s.data()), s.size()};
+}
+
+/// One cloud of the bag, posed.
+struct Cloud {
+  McapMessage message;
+  Transform T_world_sensor;
+  std::int64_t stamp_ns = 0;
+};
+
+class RecordingSource final : public ScanSource {
+ public:
+  RecordingSource(std::unique_ptr<McapReader> reader, std::vector<Cloud> clouds,
+                  std::string description, std::size_t max_points)
+      : reader_(std::move(reader)),
+        clouds_(std::move(clouds)),
+        description_(std::move(description)),
+        max_points_(max_points) {}
+  [[nodiscard]] std::size_t size() const override { return clouds_.size(); }
+  [[nodiscard]] std::string describe() const override { return description_; }
+  [[nodiscard]] Expected<Scan> load(std::size_t index) const override {
+    if (index >= clouds_.size()) return makeError("no scan " + std::to_string(index));
+    const Cloud& c = clouds_[index];
+    const auto where = [&] {
+      return reader_->name() + ": cloud " + std::to_string(index) + " (log time " +
+             std::to_string(c.message.log_time) + "): ";
+    };
+    auto bytes = reader_->data(c.message);
+    if (!bytes) return makeError(where() + bytes.error().message);
+    auto cloud = decodeCdrPointCloud2(bytesOf(*bytes));
+    if (!cloud) return makeError(where() + cloud.error().message);
+    auto points = decodePointCloud2(cloud->view(), max_points_);
+    if (!points) return makeError(where() + std::string(cloudRejectName(points.error())));
+    Scan scan;
+    scan.id = index;
+    scan.frame = PointFrame::kSensor;
+    scan.T_world_sensor = c.T_world_sensor;
+    scan.stamp_ns = c.stamp_ns;
+    scan.points.reserve(points->xyz.size() / 3);
+    for (std::size_t i = 0; i + 2 < points->xyz.size(); i += 3) {
+      scan.points.emplace_back(points->xyz[i], points->xyz[i + 1], points->xyz[i + 2]);
+    }
+    scan.intensities = std::move(points->intensity);
+    return scan;
+  }
+
+ private:
+  std::unique_ptr<McapReader> reader_;
+  std::vector<Cloud> clouds_;
+  std::string description_;
+  std::size_t max_points_;
+};
+
+const std::string kRule(80, '=');
+
+std::string withDependencies(const std::string& main,
+                             std::initializer_list<std::pair<const char*, const char*>> deps) {
+  std::string s = main;
+  for (const auto& [name, text] : deps) s += kRule + "\nMSG: " + name + "\n" + text;
+  return s;
+}
+
+const char* kHeaderMsg = "builtin_interfaces/Time stamp\nstring frame_id\n";
+const char* kTimeMsg = "int32 sec\nuint32 nanosec\n";
+
+}  // namespace
+
+Expected<std::unique_ptr<ScanSource>> openRecording(const std::filesystem::path& path,
+                                                    const RecordingOptions& options) {
+  auto reader = McapReader::open(path);
+  if (!reader) return std::unexpected(reader.error());
+  const McapReader& r = **reader;
+  // The whole bag's transforms (a bag holds minutes, not the server's 10 s).
+  TfBuffer tf(std::numeric_limits<std::int64_t>::max() / 4);
+  std::size_t tf_refused = 0;
+  std::vector<const McapMessage*> clouds;
+  std::vector<std::string> cloud_topics;
+  for (const McapMessage& m : r.messages()) {
+    const McapChannel* c = r.channel(m.channel);
+    if (c == nullptr || c->message_encoding != "cdr") continue;
+    if (c->schema_name == kTfType && (c->topic == "/tf" || c->topic == "/tf_static")) {
+      auto bytes = r.data(m);
+      if (!bytes) return fileError(path, bytes.error().message);
+      auto transforms = decodeCdrTfMessage(bytesOf(*bytes));
+      if (!transforms) {
+        return fileError(path, c->topic + " at log time " + std::to_string(m.log_time) + ": " +
+                                   transforms.error().message);
+      }
+      for (const CdrTransform& t : *transforms) {
+        if (!tf.set(t.header.frame_id, t.child_frame_id, t.sample, c->topic == "/tf_static")) {
+          ++tf_refused;
+        }
+      }
+    } else if (c->schema_name == kCloudType &&
+               (options.cloud_topic.empty() || options.cloud_topic == c->topic)) {
+      clouds.push_back(&m);
+      if (std::find(cloud_topics.begin(), cloud_topics.end(), c->topic) == cloud_topics.end()) {
+        cloud_topics.push_back(c->topic);
+      }
+    }
+  }
+  if (clouds.empty()) {
+    return fileError(path, "no " + std::string(kCloudType) + " messages in CDR" +
+                               (options.cloud_topic.empty() ? "" : " on " + options.cloud_topic));
+  }
+  std::stable_sort(clouds.begin(), clouds.end(), [](const McapMessage* a, const McapMessage* b) {
+    return a->log_time < b->log_time;
+  });
+  std::vector<Cloud> posed;
+  std::size_t untransformed = 0;
+  std::string world;
+  for (const McapMessage* m : clouds) {
+    auto bytes = r.data(*m);
+    if (!bytes) return fileError(path, bytes.error().message);
+    auto header = decodeCdrCloudHeader(bytesOf(*bytes));
+    if (!header) return fileError(path, "a cloud's header: " + header.error().message);
+    if (world.empty()) {
+      auto direct = tf.lookup(options.world_frame, header->frame_id, header->stamp_ns);
+      world = direct || direct.error() == TfFailure::kNotYet || direct.error() == TfFailure::kTooOld
+                  ? options.world_frame
+                  : tf.rootOf(header->frame_id);
+    }
+    // Stamp 0 would mean "the latest" to the TF buffer: such a cloud has no time of its own.
+    auto T = header->stamp_ns == 0 ? std::unexpected(TfFailure::kNotYet)
+                                   : tf.lookup(world, header->frame_id, header->stamp_ns);
+    if (!T) {
+      ++untransformed;
+      continue;
+    }
+    posed.push_back({*m, *T, header->stamp_ns});
+  }
+  std::string description = "MCAP bag " + path.string() + ": " + std::to_string(posed.size()) +
+                            " clouds on";
+  for (const std::string& t : cloud_topics) description += " " + t;
+  description += " in frame " + world;
+  if (untransformed > 0) {
+    description += " (" + std::to_string(untransformed) + " without a transform skipped)";
+  }
+  if (tf_refused > 0) description += " (" + std::to_string(tf_refused) + " transforms refused)";
+  if (!r.truncated().empty()) description += " (truncated: " + r.truncated() + ")";
+  return std::make_unique<RecordingSource>(std::move(*reader), std::move(posed),
+                                           std::move(description), options.max_points);
+}
+
+Expected<std::unique_ptr<ScanSource>> openAnyScanSource(const std::filesystem::path& path) {
+  if (path.extension() == ".mcap") return openRecording(path);
+  return openScanSource(path);
+}
+
+Expected<void> writeRecording(const ScanSource& source, std::size_t first, std::size_t count,
+                              const std::filesystem::path& file, McapCompression compression,
+                              const std::function<void(std::size_t)>& progress) {
+  McapWriter w(compression);
+  const std::uint16_t cloud_schema = w.addSchema(
+      "sensor_msgs/msg/PointCloud2", "ros2msg",
+      withDependencies("std_msgs/Header header\nuint32 height\nuint32 width\nPointField[] "
+                       "fields\nbool is_bigendian\nuint32 point_step\nuint32 row_step\nuint8[] "
+                       "data\nbool is_dense\n",
+                       {{"std_msgs/Header", kHeaderMsg},
+                        {"builtin_interfaces/Time", kTimeMsg},
+                        {"sensor_msgs/PointField",
+                         "uint8 INT8 = 1\nuint8 UINT8 = 2\nuint8 INT16 = 3\nuint8 UINT16 = 4\n"
+                         "uint8 INT32 = 5\nuint8 UINT32 = 6\nuint8 FLOAT32 = 7\nuint8 FLOAT64 = "
+                         "8\nstring name\nuint32 offset\nuint8 datatype\nuint32 count\n"}}));
+  const std::uint16_t tf_schema = w.addSchema(
+      "tf2_msgs/msg/TFMessage", "ros2msg",
+      withDependencies("geometry_msgs/TransformStamped[] transforms\n",
+                       {{"geometry_msgs/TransformStamped",
+                         "std_msgs/Header header\nstring child_frame_id\nTransform transform\n"},
+                        {"std_msgs/Header", kHeaderMsg},
+                        {"builtin_interfaces/Time", kTimeMsg},
+                        {"geometry_msgs/Transform", "Vector3 translation\nQuaternion rotation\n"},
+                        {"geometry_msgs/Vector3", "float64 x\nfloat64 y\nfloat64 z\n"},
+                        {"geometry_msgs/Quaternion",
+                         "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"}}));
+  const std::uint16_t points = w.addChannel(cloud_schema, "/points", "cdr");
+  const std::uint16_t tf = w.addChannel(tf_schema, "/tf", "cdr");
+  const std::uint16_t tf_static = w.addChannel(tf_schema, "/tf_static", "cdr");
+  ReplayFrames frames;
+  frames.stamp_base_ns = 1'700'000'000'000'000'000;  // a real time: stamp 0 means "latest"
+  const auto stamped = [](const std::string& parent, const std::string& child, TfSample s,
+                          std::int64_t stamp) {
+    s.stamp_ns = stamp;
+    return CdrTransform{{stamp, parent}, child, s};
+  };
+  const std::int64_t t0 = frames.stampOf(0);
+  const CdrTransform statics[] = {stamped(frames.map, frames.odom, TfSample{}, t0),
+                                  stamped(frames.base, frames.sensor, sensorMount(), t0)};
+  w.write(tf_static, static_cast<std::uint64_t>(t0), encodeCdrTfMessage(statics));
+  const std::size_t end = std::min(source.size(), first + count);
+  for (std::size_t i = first; i < end; ++i) {
+    auto scan = source.load(i);
+    if (!scan) return std::unexpected(scan.error());
+    if (scan->frame != PointFrame::kSensor) {
+      return makeError(source.describe() + ": a recording needs sensor-frame scans");
+    }
+    const std::size_t k = i - first;
+    const std::int64_t stamp = frames.stampOf(k);
+    const CdrTransform moving[] = {
+        stamped(frames.odom, frames.base, odomToBase(scan->T_world_sensor, stamp), stamp)};
+    w.write(tf, static_cast<std::uint64_t>(stamp), encodeCdrTfMessage(moving));
+    std::vector<float> xyz;
+    xyz.reserve(3 * scan->points.size());
+    for (const Point3f& p : scan->points) xyz.insert(xyz.end(), {p.x(), p.y(), p.z()});
+    w.write(points, static_cast<std::uint64_t>(stamp),
+            encodeCdrPointCloud2({stamp, frames.sensor}, xyz));
+    if (progress) progress(k + 1);
+  }
+  auto bytes = w.finish();
+  if (!bytes) return fileError(file, bytes.error().message);
+  return writeFileAtomically(file, *bytes);
+}
+
+}  // namespace densemap::ros2
