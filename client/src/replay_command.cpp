@@ -244,6 +244,9 @@ ReplayCommand::ReplayCommand(CLI::App& app)
   CLI::App& c = *command_;
   c.add_option("--data", data_, "Dataset (any format densemap reads, a ROS 2 .mcap bag too)")->required();
   c.add_option("--rate", rate_, "Scans per second (0: as fast as possible)")->capture_default_str();
+  c.add_flag("--recorded-rate", recorded_rate_,
+             "Send each scan when its stamp says, relative to the first (a ROS 2 bag's clouds, "
+             "as recorded), instead of --rate");
   c.add_option("--first", first_, "Skip this many scans")->capture_default_str();
   c.add_option("--query-bbox-edge", bbox_edge_m_,
                "While replaying, a second client sends bbox queries back to back: cubes of "
@@ -317,12 +320,22 @@ int ReplayCommand::run(const ClientOptions& o) {
   tools::Progress progress("replay: scan", end - first_);
   const auto period = std::chrono::duration_cast<Clock::duration>(
       std::chrono::duration<double>(rate_ > 0 ? 1.0 / rate_ : 0.0));
-  auto slot = Clock::now();
+  const auto start = Clock::now();
+  auto slot = start;
+  std::optional<std::int64_t> first_stamp;
   std::size_t sent = 0, dropped_points = 0;
   std::optional<RawScan> last_raw;
   for (std::size_t i = first_; i < end; ++i, slot += period) {
     auto scan = (*source)->load(i);
     if (!scan) return fail(scan.error().message);
+    if (recorded_rate_) {
+      if (!scan->stamp_ns) {
+        return fail("--recorded-rate needs scans with stamps (a ROS 2 .mcap bag); " + data_ +
+                    " has none");
+      }
+      if (!first_stamp) first_stamp = *scan->stamp_ns;
+      slot = start + std::chrono::nanoseconds(std::max<std::int64_t>(0, *scan->stamp_ns - *first_stamp));
+    }
     // A sensor's missing returns are dropped here, as the ROS path and the offline tools do:
     // the server refuses a whole scan with one NaN (from a broken or hostile publisher).
     dropped_points += scan->removeNonFinitePoints();

@@ -23,6 +23,7 @@ class ReplayCommand {
   CLI::App* command_;
   std::string data_;
   double rate_ = 10.0;
+  bool recorded_rate_ = false;  // pace by the scans' own stamps (recordings)
   std::size_t first_ = 0, limit_ = 0, query_points_ = 0;
   std::string csv_;
   double bbox_edge_m_ = 0;
