@@ -13,7 +13,7 @@ PACKAGES=(
   cyclonedds-dev cyclonedds-tools
   libprotobuf-dev protobuf-compiler
   libcli11-dev libspdlog-dev
-  libbz2-dev zlib1g-dev libzstd-dev liblz4-dev iproute2 util-linux
+  libbz2-dev zlib1g-dev libzstd-dev liblz4-dev libsqlite3-dev iproute2 util-linux
   clang-format clang-tidy
   dpkg-dev fakeroot lintian adduser help2man
   clang-16 libclang-rt-16-dev libsystemd-dev

@@ -242,7 +242,8 @@ void printServerCounts(const Expected<ServerStatus>& before, const Expected<Serv
 ReplayCommand::ReplayCommand(CLI::App& app)
     : command_(app.add_subcommand("replay", "Publish a dataset's scans to the server")) {
   CLI::App& c = *command_;
-  c.add_option("--data", data_, "Dataset (any format densemap reads, a ROS 2 .mcap bag too)")->required();
+  c.add_option("--data", data_, "Dataset (any format densemap reads, a ROS 2 .mcap bag too)")
+      ->required();
   c.add_option("--rate", rate_, "Scans per second (0: as fast as possible)")->capture_default_str();
   c.add_flag("--recorded-rate", recorded_rate_,
              "Send each scan when its stamp says, relative to the first (a ROS 2 bag's clouds, "
@@ -295,7 +296,7 @@ ReplayCommand::ReplayCommand(CLI::App& app)
 
 int ReplayCommand::run(const ClientOptions& o) {
   auto flags = upsample::upsampleFromFlags(upsample_method_, upsample_input_, upsample_output_,
-                                          fov_top_, fov_bottom_, upsample_model_);
+                                           fov_top_, fov_bottom_, upsample_model_);
   if (!flags) return fail(flags.error().message);
   std::optional<upsample::UpsampleOptions> densify = std::move(*flags);
   if (densify) {
@@ -308,8 +309,8 @@ int ReplayCommand::run(const ClientOptions& o) {
   const auto before = (*client)->status();
   std::unique_ptr<RosReplayPublisher> ros_out;
   if (ros_) {
-    auto p = rosPublisher(o, ros_topic_, ros_frames_, ros_reliable_, rate_, ros_static_delay_s_,
-                          before);
+    auto p =
+        rosPublisher(o, ros_topic_, ros_frames_, ros_reliable_, rate_, ros_static_delay_s_, before);
     if (!p) return fail(p.error().message);
     ros_out = std::move(*p);
   }
@@ -334,7 +335,8 @@ int ReplayCommand::run(const ClientOptions& o) {
                     " has none");
       }
       if (!first_stamp) first_stamp = *scan->stamp_ns;
-      slot = start + std::chrono::nanoseconds(std::max<std::int64_t>(0, *scan->stamp_ns - *first_stamp));
+      slot = start +
+             std::chrono::nanoseconds(std::max<std::int64_t>(0, *scan->stamp_ns - *first_stamp));
     }
     // A sensor's missing returns are dropped here, as the ROS path and the offline tools do:
     // the server refuses a whole scan with one NaN (from a broken or hostile publisher).

@@ -13,7 +13,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   auto reader = densemap::ros2::McapReader::fromBytes(
       std::string(reinterpret_cast<const char*>(data), size), limits);
   if (!reader) return 0;
-  for (const densemap::ros2::McapMessage& m : (*reader)->messages()) {
+  for (const densemap::ros2::BagMessage& m : (*reader)->messages()) {
     auto bytes = (*reader)->data(m);
     if (!bytes) continue;
     const std::span<const std::uint8_t> span(reinterpret_cast<const std::uint8_t*>(bytes->data()),

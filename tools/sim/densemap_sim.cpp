@@ -59,7 +59,7 @@ static int runMain(int argc, char** argv) {
   app.add_option("--mcap", mcap,
                  "Also write the scans as a ROS 2 MCAP bag: PointCloud2 on /points and TF, as "
                  "densemap replay --ros publishes them (what densemap replay, densemap-map and "
-                 "densemap-bench read back)");
+                 "densemap-bench read back); FILE.db3: rosbag2's SQLite storage instead");
   app.add_option("--mcap-compression", mcap_compression, "The bag's chunks: none, zstd or lz4")
       ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
@@ -94,7 +94,7 @@ static int runMain(int argc, char** argv) {
     if (source) {
       densemap::tools::Progress progress("densemap-sim: bag scan", (*source)->size());
       written = densemap::ros2::writeRecording(**source, 0, (*source)->size(), mcap, *compression,
-                                              [&](std::size_t n) { progress.update(n); });
+                                               [&](std::size_t n) { progress.update(n); });
     }
     if (!written) {
       std::fprintf(stderr, "densemap-sim: error: %s\n", written.error().message.c_str());

@@ -88,8 +88,8 @@ class CdrReader {
   bool swap_ = false;
 };
 
-#define DENSEMAP_CDR_TRY(var, expr)                        \
-  auto var = (expr);                                       \
+#define DENSEMAP_CDR_TRY(var, expr) \
+  auto var = (expr);                \
   if (!var) return std::unexpected(var.error())
 
 Expected<CdrHeader> readHeader(CdrReader& r) {

@@ -97,9 +97,10 @@ std::vector<Point3f> MapTopicsState::occupiedCenters() const {
     for (unsigned dz = 0; dz < cells; ++dz) {
       for (unsigned dy = 0; dy < cells; ++dy) {
         for (unsigned dx = 0; dx < cells; ++dx) {
-          const octomap::point3d c = tree_.keyToCoord(octomap::OcTreeKey(
-              static_cast<octomap::key_type>(base_x + dx), static_cast<octomap::key_type>(base_y + dy),
-              static_cast<octomap::key_type>(base_z + dz)));
+          const octomap::point3d c =
+              tree_.keyToCoord(octomap::OcTreeKey(static_cast<octomap::key_type>(base_x + dx),
+                                                  static_cast<octomap::key_type>(base_y + dy),
+                                                  static_cast<octomap::key_type>(base_z + dz)));
           centers.emplace_back(c.x(), c.y(), c.z());
         }
       }

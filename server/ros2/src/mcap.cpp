@@ -182,13 +182,6 @@ Expected<std::unique_ptr<McapReader>> McapReader::fromBytes(std::string bytes,
   return r;
 }
 
-const McapChannel* McapReader::channel(std::uint16_t id) const {
-  for (const McapChannel& c : channels_) {
-    if (c.id == id) return &c;
-  }
-  return nullptr;
-}
-
 Expected<void> McapReader::index() {
   const Source& s = *source_;
   DENSEMAP_MCAP_TRY(magic, s.read(0, std::min<std::uint64_t>(s.size, kMagic.size())));
@@ -250,8 +243,8 @@ Expected<void> McapReader::index() {
       chunks_.push_back(c);
       DENSEMAP_MCAP_TRY(plain, chunkRecords(c));
       if (auto ok = indexRecords(*plain, static_cast<std::int64_t>(chunks_.size() - 1)); !ok) {
-        return std::unexpected(Error{"chunk " + std::to_string(chunks_.size()) + ": " +
-                                     ok.error().message});
+        return std::unexpected(
+            Error{"chunk " + std::to_string(chunks_.size()) + ": " + ok.error().message});
       }
     }
   }
@@ -282,7 +275,8 @@ Expected<void> McapReader::indexRecords(const std::string& records, std::int64_t
       DENSEMAP_MCAP_TRY(encoding, f.prefixed(4));
       DENSEMAP_MCAP_TRY(data, f.prefixed(4));
       (void)data;
-      schemas_.push_back({static_cast<std::uint16_t>(*id), {std::string(*name), std::string(*encoding)}});
+      schemas_.push_back(
+          {static_cast<std::uint16_t>(*id), {std::string(*name), std::string(*encoding)}});
     } else if (op == kChannel) {
       DENSEMAP_MCAP_TRY(id, f.uint(2));
       DENSEMAP_MCAP_TRY(schema, f.uint(2));
@@ -292,7 +286,7 @@ Expected<void> McapReader::indexRecords(const std::string& records, std::int64_t
       (void)metadata;
       if (channel(static_cast<std::uint16_t>(*id)) != nullptr) continue;  // repeated: same
       if (channels_.size() >= limits_.max_channels) return makeError("too many channels");
-      McapChannel c;
+      BagChannel c;
       c.id = static_cast<std::uint16_t>(*id);
       c.topic = std::string(*topic);
       c.message_encoding = std::string(*encoding);
@@ -315,7 +309,7 @@ Expected<void> McapReader::indexRecords(const std::string& records, std::int64_t
   return {};
 }
 
-Expected<std::string> McapReader::data(const McapMessage& m) const {
+Expected<std::string> McapReader::data(const BagMessage& m) const {
   if (m.chunk < 0) return source_->read(m.offset, m.length);
   if (m.chunk >= static_cast<std::int64_t>(chunks_.size())) return makeError("no such chunk");
   std::lock_guard lock(cache_mutex_);

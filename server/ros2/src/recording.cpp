@@ -6,6 +6,7 @@
 
 #include "densemap/io/file_bytes.hpp"
 #include "densemap/ros2/cdr.hpp"
+#include "densemap/ros2/db3.hpp"
 #include "densemap/ros2/point_cloud2.hpp"
 #include "densemap/ros2/replay_frames.hpp"
 #include "densemap/ros2/tf_buffer.hpp"
@@ -22,14 +23,14 @@ std::span<const std::uint8_t> bytesOf(const std::string& s) {
 
 /// One cloud of the bag, posed.
 struct Cloud {
-  McapMessage message;
+  BagMessage message;
   Transform T_world_sensor;
   std::int64_t stamp_ns = 0;
 };
 
 class RecordingSource final : public ScanSource {
  public:
-  RecordingSource(std::unique_ptr<McapReader> reader, std::vector<Cloud> clouds,
+  RecordingSource(std::unique_ptr<BagReader> reader, std::vector<Cloud> clouds,
                   std::string description, std::size_t max_points)
       : reader_(std::move(reader)),
         clouds_(std::move(clouds)),
@@ -64,7 +65,7 @@ class RecordingSource final : public ScanSource {
   }
 
  private:
-  std::unique_ptr<McapReader> reader_;
+  std::unique_ptr<BagReader> reader_;
   std::vector<Cloud> clouds_;
   std::string description_;
   std::size_t max_points_;
@@ -84,18 +85,58 @@ const char* kTimeMsg = "int32 sec\nuint32 nanosec\n";
 
 }  // namespace
 
+namespace {
+
+/// The storage of a bag: .mcap, .db3, or a rosbag2 directory's one storage file.
+Expected<std::unique_ptr<BagReader>> openBag(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) {
+    // A rosbag2 directory: metadata.yaml beside one storage file (split bags: not read).
+    std::vector<std::filesystem::path> files;
+    for (const auto& e : std::filesystem::directory_iterator(path, ec)) {
+      if (e.is_regular_file(ec) &&
+          (e.path().extension() == ".mcap" || e.path().extension() == ".db3")) {
+        files.push_back(e.path());
+      }
+    }
+    if (files.size() != 1) {
+      return fileError(path, "a rosbag2 directory needs exactly one .mcap or .db3 file (it has " +
+                                 std::to_string(files.size()) + ")");
+    }
+    return openBag(files.front());
+  }
+  if (path.extension() == ".db3") {
+    auto r = Db3Reader::open(path);
+    if (!r) return std::unexpected(r.error());
+    return std::unique_ptr<BagReader>(std::move(*r));
+  }
+  auto r = McapReader::open(path);
+  if (!r) return std::unexpected(r.error());
+  return std::unique_ptr<BagReader>(std::move(*r));
+}
+
+bool isRecording(const std::filesystem::path& path) {
+  const auto ext = path.extension();
+  if (ext == ".mcap" || ext == ".db3") return true;
+  std::error_code ec;
+  return std::filesystem::is_directory(path, ec) &&
+         std::filesystem::exists(path / "metadata.yaml", ec);
+}
+
+}  // namespace
+
 Expected<std::unique_ptr<ScanSource>> openRecording(const std::filesystem::path& path,
                                                     const RecordingOptions& options) {
-  auto reader = McapReader::open(path);
+  auto reader = openBag(path);
   if (!reader) return std::unexpected(reader.error());
-  const McapReader& r = **reader;
+  const BagReader& r = **reader;
   // The whole bag's transforms (a bag holds minutes, not the server's 10 s).
   TfBuffer tf(std::numeric_limits<std::int64_t>::max() / 4);
   std::size_t tf_refused = 0;
-  std::vector<const McapMessage*> clouds;
+  std::vector<const BagMessage*> clouds;
   std::vector<std::string> cloud_topics;
-  for (const McapMessage& m : r.messages()) {
-    const McapChannel* c = r.channel(m.channel);
+  for (const BagMessage& m : r.messages()) {
+    const BagChannel* c = r.channel(m.channel);
     if (c == nullptr || c->message_encoding != "cdr") continue;
     if (c->schema_name == kTfType && (c->topic == "/tf" || c->topic == "/tf_static")) {
       auto bytes = r.data(m);
@@ -122,13 +163,13 @@ Expected<std::unique_ptr<ScanSource>> openRecording(const std::filesystem::path&
     return fileError(path, "no " + std::string(kCloudType) + " messages in CDR" +
                                (options.cloud_topic.empty() ? "" : " on " + options.cloud_topic));
   }
-  std::stable_sort(clouds.begin(), clouds.end(), [](const McapMessage* a, const McapMessage* b) {
+  std::stable_sort(clouds.begin(), clouds.end(), [](const BagMessage* a, const BagMessage* b) {
     return a->log_time < b->log_time;
   });
   std::vector<Cloud> posed;
   std::size_t untransformed = 0;
   std::string world;
-  for (const McapMessage* m : clouds) {
+  for (const BagMessage* m : clouds) {
     auto bytes = r.data(*m);
     if (!bytes) return fileError(path, bytes.error().message);
     auto header = decodeCdrCloudHeader(bytesOf(*bytes));
@@ -148,8 +189,8 @@ Expected<std::unique_ptr<ScanSource>> openRecording(const std::filesystem::path&
     }
     posed.push_back({*m, *T, header->stamp_ns});
   }
-  std::string description = "MCAP bag " + path.string() + ": " + std::to_string(posed.size()) +
-                            " clouds on";
+  std::string description =
+      r.kind() + " " + r.name() + ": " + std::to_string(posed.size()) + " clouds on";
   for (const std::string& t : cloud_topics) description += " " + t;
   description += " in frame " + world;
   if (untransformed > 0) {
@@ -162,39 +203,35 @@ Expected<std::unique_ptr<ScanSource>> openRecording(const std::filesystem::path&
 }
 
 Expected<std::unique_ptr<ScanSource>> openAnyScanSource(const std::filesystem::path& path) {
-  if (path.extension() == ".mcap") return openRecording(path);
+  if (isRecording(path)) return openRecording(path);
   return openScanSource(path);
 }
 
 Expected<void> writeRecording(const ScanSource& source, std::size_t first, std::size_t count,
                               const std::filesystem::path& file, McapCompression compression,
                               const std::function<void(std::size_t)>& progress) {
-  McapWriter w(compression);
-  const std::uint16_t cloud_schema = w.addSchema(
-      "sensor_msgs/msg/PointCloud2", "ros2msg",
-      withDependencies("std_msgs/Header header\nuint32 height\nuint32 width\nPointField[] "
-                       "fields\nbool is_bigendian\nuint32 point_step\nuint32 row_step\nuint8[] "
-                       "data\nbool is_dense\n",
-                       {{"std_msgs/Header", kHeaderMsg},
-                        {"builtin_interfaces/Time", kTimeMsg},
-                        {"sensor_msgs/PointField",
-                         "uint8 INT8 = 1\nuint8 UINT8 = 2\nuint8 INT16 = 3\nuint8 UINT16 = 4\n"
-                         "uint8 INT32 = 5\nuint8 UINT32 = 6\nuint8 FLOAT32 = 7\nuint8 FLOAT64 = "
-                         "8\nstring name\nuint32 offset\nuint8 datatype\nuint32 count\n"}}));
-  const std::uint16_t tf_schema = w.addSchema(
-      "tf2_msgs/msg/TFMessage", "ros2msg",
-      withDependencies("geometry_msgs/TransformStamped[] transforms\n",
-                       {{"geometry_msgs/TransformStamped",
-                         "std_msgs/Header header\nstring child_frame_id\nTransform transform\n"},
-                        {"std_msgs/Header", kHeaderMsg},
-                        {"builtin_interfaces/Time", kTimeMsg},
-                        {"geometry_msgs/Transform", "Vector3 translation\nQuaternion rotation\n"},
-                        {"geometry_msgs/Vector3", "float64 x\nfloat64 y\nfloat64 z\n"},
-                        {"geometry_msgs/Quaternion",
-                         "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"}}));
-  const std::uint16_t points = w.addChannel(cloud_schema, "/points", "cdr");
-  const std::uint16_t tf = w.addChannel(tf_schema, "/tf", "cdr");
-  const std::uint16_t tf_static = w.addChannel(tf_schema, "/tf_static", "cdr");
+  const std::string cloud_definition = withDependencies(
+      "std_msgs/Header header\nuint32 height\nuint32 width\nPointField[] fields\nbool "
+      "is_bigendian\nuint32 point_step\nuint32 row_step\nuint8[] data\nbool is_dense\n",
+      {{"std_msgs/Header", kHeaderMsg},
+       {"builtin_interfaces/Time", kTimeMsg},
+       {"sensor_msgs/PointField",
+        "uint8 INT8 = 1\nuint8 UINT8 = 2\nuint8 INT16 = 3\nuint8 UINT16 = 4\nuint8 INT32 = "
+        "5\nuint8 UINT32 = 6\nuint8 FLOAT32 = 7\nuint8 FLOAT64 = 8\nstring name\nuint32 "
+        "offset\nuint8 datatype\nuint32 count\n"}});
+  const std::string tf_definition = withDependencies(
+      "geometry_msgs/TransformStamped[] transforms\n",
+      {{"geometry_msgs/TransformStamped",
+        "std_msgs/Header header\nstring child_frame_id\nTransform transform\n"},
+       {"std_msgs/Header", kHeaderMsg},
+       {"builtin_interfaces/Time", kTimeMsg},
+       {"geometry_msgs/Transform", "Vector3 translation\nQuaternion rotation\n"},
+       {"geometry_msgs/Vector3", "float64 x\nfloat64 y\nfloat64 z\n"},
+       {"geometry_msgs/Quaternion", "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"}});
+  // Topics 0 /points, 1 /tf, 2 /tf_static; the messages in the order they are recorded.
+  const std::vector<Db3Topic> topics{
+      {"/points", kCloudType}, {"/tf", kTfType}, {"/tf_static", kTfType}};
+  std::vector<Db3Row> rows;
   ReplayFrames frames;
   frames.stamp_base_ns = 1'700'000'000'000'000'000;  // a real time: stamp 0 means "latest"
   const auto stamped = [](const std::string& parent, const std::string& child, TfSample s,
@@ -205,7 +242,7 @@ Expected<void> writeRecording(const ScanSource& source, std::size_t first, std::
   const std::int64_t t0 = frames.stampOf(0);
   const CdrTransform statics[] = {stamped(frames.map, frames.odom, TfSample{}, t0),
                                   stamped(frames.base, frames.sensor, sensorMount(), t0)};
-  w.write(tf_static, static_cast<std::uint64_t>(t0), encodeCdrTfMessage(statics));
+  rows.push_back({2, t0, encodeCdrTfMessage(statics)});
   const std::size_t end = std::min(source.size(), first + count);
   for (std::size_t i = first; i < end; ++i) {
     auto scan = source.load(i);
@@ -217,13 +254,28 @@ Expected<void> writeRecording(const ScanSource& source, std::size_t first, std::
     const std::int64_t stamp = frames.stampOf(k);
     const CdrTransform moving[] = {
         stamped(frames.odom, frames.base, odomToBase(scan->T_world_sensor, stamp), stamp)};
-    w.write(tf, static_cast<std::uint64_t>(stamp), encodeCdrTfMessage(moving));
+    rows.push_back({1, stamp, encodeCdrTfMessage(moving)});
     std::vector<float> xyz;
     xyz.reserve(3 * scan->points.size());
     for (const Point3f& p : scan->points) xyz.insert(xyz.end(), {p.x(), p.y(), p.z()});
-    w.write(points, static_cast<std::uint64_t>(stamp),
-            encodeCdrPointCloud2({stamp, frames.sensor}, xyz));
+    rows.push_back({0, stamp, encodeCdrPointCloud2({stamp, frames.sensor}, xyz)});
     if (progress) progress(k + 1);
+  }
+  if (file.extension() == ".db3") {
+    std::error_code ec;
+    std::filesystem::remove(file, ec);  // a new bag replaces an old one, as the MCAP writer's
+    return writeDb3(file, topics, rows);
+  }
+  McapWriter w(compression);
+  const std::uint16_t cloud_schema = w.addSchema(kCloudType, "ros2msg", cloud_definition);
+  const std::uint16_t tf_schema = w.addSchema(kTfType, "ros2msg", tf_definition);
+  std::vector<std::uint16_t> channels;
+  for (const Db3Topic& t : topics) {
+    channels.push_back(
+        w.addChannel(t.type == kCloudType ? cloud_schema : tf_schema, t.name, "cdr"));
+  }
+  for (const Db3Row& r : rows) {
+    w.write(channels[r.topic], static_cast<std::uint64_t>(r.timestamp), r.data);
   }
   auto bytes = w.finish();
   if (!bytes) return fileError(file, bytes.error().message);

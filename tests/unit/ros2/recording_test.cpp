@@ -7,6 +7,7 @@
 
 #include "densemap/io/file_bytes.hpp"
 #include "densemap/ros2/cdr.hpp"
+#include "densemap/ros2/db3.hpp"
 #include "densemap/ros2/mcap.hpp"
 #include "densemap/ros2/recording.hpp"
 #include "densemap/sim/sequence.hpp"
@@ -36,7 +37,8 @@ TEST(Cdr, PointCloud2AndTfMessageRoundTrip) {
   ASSERT_TRUE(header);
   EXPECT_EQ(header->frame_id, "lidar");
 
-  CdrTransform t{{42, "odom"}, "base_link", {42, {1, 2, 3}, Eigen::Quaterniond(0.5, 0.5, 0.5, 0.5)}};
+  CdrTransform t{
+      {42, "odom"}, "base_link", {42, {1, 2, 3}, Eigen::Quaterniond(0.5, 0.5, 0.5, 0.5)}};
   const std::vector<CdrTransform> in{t, t};
   auto out = decodeCdrTfMessage(bytesOf(encodeCdrTfMessage(in)));
   ASSERT_TRUE(out) << out.error().message;
@@ -73,8 +75,9 @@ TEST(Cdr, EveryCutAndOversizedLengthIsAnErrorNotARead) {
 /// A small simulated dataset and its bag in `compression`.
 struct Bag {
   test::TempDir dir;
-  std::filesystem::path data = dir.path() / "data", bag = dir.path() / "run.mcap";
-  explicit Bag(McapCompression compression, int scans = 4) {
+  std::filesystem::path data = dir.path() / "data", bag;
+  explicit Bag(McapCompression compression, int scans = 4, const std::string& name = "run.mcap")
+      : bag(dir.path() / name) {
     SequenceOptions o;
     o.scene = "indoor";
     o.sensor = "vlp16";
@@ -90,7 +93,8 @@ struct Bag {
 };
 
 TEST(Mcap, ABagReadsBackTheDatasetsScansInEveryChunkKind) {
-  for (McapCompression c : {McapCompression::kNone, McapCompression::kZstd, McapCompression::kLz4}) {
+  for (McapCompression c :
+       {McapCompression::kNone, McapCompression::kZstd, McapCompression::kLz4}) {
     Bag b(c);
     auto dataset = openScanSource(b.data);
     auto bag = openAnyScanSource(b.bag);
@@ -112,11 +116,49 @@ TEST(Mcap, ABagReadsBackTheDatasetsScansInEveryChunkKind) {
   }
 }
 
+TEST(Db3, ARosbag2SqliteBagReadsBackTheDatasetsScansAsADirectoryToo) {
+  Bag b(McapCompression::kNone, 4, "run_0.db3");
+  auto dataset = openScanSource(b.data);
+  // rosbag2's layout: a directory with metadata.yaml and the storage file.
+  const auto directory = b.dir.path() / "bag";
+  std::filesystem::create_directories(directory);
+  std::filesystem::copy_file(b.bag, directory / "run_0.db3");
+  std::ofstream(directory / "metadata.yaml") << "rosbag2_bagfile_information:\n";
+  for (const auto& path : {b.bag, directory}) {
+    auto bag = openAnyScanSource(path);
+    ASSERT_TRUE(dataset && bag) << (bag ? "" : bag.error().message);
+    ASSERT_EQ((*bag)->size(), 4U);
+    EXPECT_NE((*bag)->describe().find("rosbag2 SQLite bag"), std::string::npos)
+        << (*bag)->describe();
+    for (std::size_t i = 0; i < 4; ++i) {
+      auto expected = (*dataset)->load(i);
+      auto got = (*bag)->load(i);
+      ASSERT_TRUE(expected && got) << (got ? "" : got.error().message);
+      EXPECT_EQ(got->points, expected->points);
+      EXPECT_TRUE(got->T_world_sensor.isApprox(expected->T_world_sensor, 1e-12));
+    }
+  }
+  // Not SQLite, and SQLite without rosbag2's tables: refused with the reason.
+  const auto junk = b.dir.path() / "junk.db3";
+  ASSERT_TRUE(writeFileAtomically(junk, std::string(5000, 'x')));
+  auto refused = openAnyScanSource(junk);
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.error().message.find("junk.db3"), std::string::npos)
+      << refused.error().message;
+  const auto other = b.dir.path() / "other.db3";
+  ASSERT_TRUE(writeDb3(other, {}, {}));
+  auto no_clouds = openAnyScanSource(other);
+  ASSERT_FALSE(no_clouds);
+  EXPECT_NE(no_clouds.error().message.find("no sensor_msgs/msg/PointCloud2"), std::string::npos)
+      << no_clouds.error().message;
+}
+
 TEST(Mcap, ABagCutShortKeepsItsCompleteChunks) {
   McapWriter w(McapCompression::kZstd, 1);  // a chunk per message
   const std::uint16_t schema = w.addSchema("std_msgs/msg/String", "ros2msg", "string data\n");
   const std::uint16_t channel = w.addChannel(schema, "/chatter", "cdr");
-  for (int i = 0; i < 10; ++i) w.write(channel, 100 + i, std::string(50 + i, static_cast<char>('a' + i)));
+  for (int i = 0; i < 10; ++i)
+    w.write(channel, 100 + i, std::string(50 + i, static_cast<char>('a' + i)));
   auto whole = w.finish();
   ASSERT_TRUE(whole);
   auto all = McapReader::fromBytes(*whole);

@@ -49,8 +49,7 @@ struct CdrTransform {
     std::span<const std::uint8_t> bytes);
 
 /// Encoders (little-endian CDR with its 4-byte encapsulation header).
-[[nodiscard]] std::string encodeCdrPointCloud2(const CdrHeader& header,
-                                               std::span<const float> xyz);
+[[nodiscard]] std::string encodeCdrPointCloud2(const CdrHeader& header, std::span<const float> xyz);
 [[nodiscard]] std::string encodeCdrTfMessage(std::span<const CdrTransform> transforms);
 
 /// The bounds the decoders keep (refused beyond): characters of a string, fields of a cloud,

@@ -12,22 +12,9 @@
 #include <vector>
 
 #include "densemap/geometry/error.hpp"
+#include "densemap/ros2/bag_reader.hpp"
 
 namespace densemap::ros2 {
-
-struct McapChannel {
-  std::uint16_t id = 0;
-  std::string topic, message_encoding;
-  std::string schema_name, schema_encoding;  // empty when the channel names no schema
-};
-
-/// Where a message's data lies: in the file (chunk < 0) or in chunk `chunk`'s records.
-struct McapMessage {
-  std::uint16_t channel = 0;
-  std::uint64_t log_time = 0;
-  std::int64_t chunk = -1;
-  std::uint64_t offset = 0, length = 0;
-};
 
 struct McapLimits {
   std::uint64_t max_chunk_bytes = std::uint64_t{512} << 20;  // a chunk, compressed or not
@@ -38,23 +25,18 @@ struct McapLimits {
 /// The index of an MCAP file's data section (its summary section is not needed and not read).
 /// A file cut short (a recorder that died) keeps the messages before the cut (truncated() says
 /// where); anything else malformed is refused at open.
-class McapReader {
+class McapReader final : public BagReader {
  public:
-  [[nodiscard]] static Expected<std::unique_ptr<McapReader>> open(
-      const std::filesystem::path& path, const McapLimits& limits = {});
+  [[nodiscard]] static Expected<std::unique_ptr<McapReader>> open(const std::filesystem::path& path,
+                                                                  const McapLimits& limits = {});
   /// The same over bytes in memory (tests, fuzzing).
   [[nodiscard]] static Expected<std::unique_ptr<McapReader>> fromBytes(
       std::string bytes, const McapLimits& limits = {});
   ~McapReader();
 
-  [[nodiscard]] const std::vector<McapChannel>& channels() const { return channels_; }
-  [[nodiscard]] const McapChannel* channel(std::uint16_t id) const;
-  [[nodiscard]] const std::vector<McapMessage>& messages() const { return messages_; }
-  /// A message's data (thread-safe; the last chunk read is kept).
-  [[nodiscard]] Expected<std::string> data(const McapMessage& m) const;
-  /// Empty, or why the file ends early ("cut inside a record at byte N").
-  [[nodiscard]] const std::string& truncated() const { return truncated_; }
-  [[nodiscard]] const std::string& name() const { return name_; }
+  /// A message's data (the last chunk read is kept).
+  [[nodiscard]] Expected<std::string> data(const BagMessage& m) const override;
+  [[nodiscard]] std::string kind() const override { return "MCAP bag"; }
 
  private:
   struct Source;
@@ -70,12 +52,8 @@ class McapReader {
 
   std::unique_ptr<Source> source_;
   McapLimits limits_;
-  std::string name_;
-  std::vector<McapChannel> channels_;
   std::vector<std::pair<std::uint16_t, std::pair<std::string, std::string>>> schemas_;
-  std::vector<McapMessage> messages_;
   std::vector<Chunk> chunks_;
-  std::string truncated_;
   mutable std::mutex cache_mutex_;
   mutable std::int64_t cached_chunk_ = -1;
   mutable std::string cached_records_;
