@@ -18,6 +18,7 @@ PACKAGES=(
   dpkg-dev fakeroot lintian adduser help2man
   clang-16 libclang-rt-16-dev libsystemd-dev
   openssl tcpdump
+  libfastrtps-dev fastddsgen  # the foreign-vendor test: eProsima Fast DDS, ROS 2's default
 )
 if [ "${1:-}" = "--iln" ]; then
   PACKAGES+=(python3-torch python3-protobuf libopenblas0-pthread)
