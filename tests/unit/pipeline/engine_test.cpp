@@ -12,6 +12,14 @@
 namespace densemap {
 namespace {
 
+/// The engine's options: every default but the map's resolution and range.
+PipelineOptions engineOptions(double resolution_m, double max_range_m) {
+  PipelineOptions o;
+  o.resolution_m = resolution_m;
+  o.max_range_m = max_range_m;
+  return o;
+}
+
 RawScan rawScan(std::uint64_t seq) {
   const PointCloud cloud = test::adversarialScan(0.2, Point3f::Zero(), 3000, 6.0, 1000 + seq);
   RawScan raw;
@@ -24,7 +32,7 @@ RawScan rawScan(std::uint64_t seq) {
 }
 
 TEST(Engine, IntegratesOnTheCallersThreadAsTheOfflineIntegratorDoes) {
-  auto engine = Engine::create({.resolution_m = 0.2, .max_range_m = 5.0});
+  auto engine = Engine::create(engineOptions(0.2, 5.0));
   ASSERT_TRUE(engine);
   GridMap offline(0.2, SensorModel{});
   Integrator integrator({.max_range_m = 5.0});
@@ -54,7 +62,9 @@ TEST(Engine, IntegratesOnTheCallersThreadAsTheOfflineIntegratorDoes) {
 }
 
 TEST(Engine, ARejectedScanSaysWhyAndPublishesNothing) {
-  auto engine = Engine::create({.resolution_m = 0.2, .limits = {.max_points = 2000}});
+  PipelineOptions options = engineOptions(0.2, -1.0);
+  options.limits.max_points = 2000;
+  auto engine = Engine::create(options);
   ASSERT_TRUE(engine);
   const auto before = (*engine)->view();
   const auto too_many = (*engine)->integrate(rawScan(1));  // 3000 points
@@ -70,7 +80,7 @@ TEST(Engine, ARejectedScanSaysWhyAndPublishesNothing) {
 }
 
 TEST(Engine, ACommandWithChangesPublishesAVersionAndOneWithoutDoesNot) {
-  auto engine = Engine::create({.resolution_m = 0.2, .max_range_m = 5.0});
+  auto engine = Engine::create(engineOptions(0.2, 5.0));
   ASSERT_TRUE(engine);
   ASSERT_TRUE((*engine)->integrate(rawScan(1)));
   IntegrationResult quiet;
