@@ -11,21 +11,25 @@
 #include "densemap/cli/progress.hpp"
 #include "densemap/io/octomap_export.hpp"
 #include "densemap/io/scan_source.hpp"
-#include "densemap/ros2/recording.hpp"
 #include "densemap/map/map_factory.hpp"
 #include "densemap/parallel/tbb_runner.hpp"
 #include "densemap/raycast/integrator.hpp"
+#include "densemap/ros2/recording.hpp"
 
 static int runMain(int argc, char** argv) {
-  std::string data, out, graph_out, backend_name = "grid";
+  std::string data, out, graph_out, bag_out, backend_name = "grid";
   std::size_t first = 0, limit = 0;
   double resolution = 0.1, max_range = -1.0;
   int threads = 0;
   CLI::App app{"densemap-map: integrate a dataset into an occupancy map and export it"};
-  app.add_option("--data", data, "Dataset (any format densemap reads, a ROS 2 .mcap bag too)")->required();
+  app.add_option("--data", data, "Dataset (any format densemap reads, a ROS 2 .mcap bag too)")
+      ->required();
   app.add_option("--out", out, "Output map file: .bt or .ot");
   app.add_option("--save-graph", graph_out,
                  "Also (or only, without --out) write the scans as an OctoMap ScanGraph (.graph)");
+  app.add_option("--save-bag", bag_out,
+                 "Also (or only) write the scans (sensor frame) as a ROS 2 bag: .mcap (zstd "
+                 "chunks) or .db3, PointCloud2 + TF as densemap replay --ros publishes them");
   app.add_option("--first", first, "First scan to use (0-based)")->capture_default_str();
   app.add_option("--limit", limit, "Number of scans to use (0: all)")->capture_default_str();
   app.add_option("--resolution", resolution, "Voxel size, m")->capture_default_str();
@@ -44,8 +48,8 @@ static int runMain(int argc, char** argv) {
   auto map = densemap::makeMap(*backend, resolution);
   if (!map) return fail(map.error().message);
   (*map)->setRunner(densemap::tbbRunner());
-  if (out.empty() && graph_out.empty())
-    return fail("nothing to write: give --out and/or --save-graph");
+  if (out.empty() && graph_out.empty() && bag_out.empty())
+    return fail("nothing to write: give --out, --save-graph and/or --save-bag");
   auto source = densemap::ros2::openAnyScanSource(data);
   if (!source) return fail(source.error().message);
   const std::size_t total = (*source)->size();
@@ -60,8 +64,16 @@ static int runMain(int argc, char** argv) {
                                        [&](std::size_t n) { progress.update(n); });
     if (!ok) return fail(ok.error().message);
     std::printf("wrote %s (%zu scans)\n", graph_out.c_str(), count);
-    if (out.empty()) return 0;
   }
+  if (!bag_out.empty()) {
+    densemap::tools::Progress progress("densemap-map: bag scan", count);
+    auto ok = densemap::ros2::writeRecording(**source, first, count, bag_out,
+                                             densemap::ros2::McapCompression::kZstd,
+                                             [&](std::size_t n) { progress.update(n); });
+    if (!ok) return fail(ok.error().message);
+    std::printf("wrote %s (%zu scans)\n", bag_out.c_str(), count);
+  }
+  if (out.empty()) return 0;
 
   densemap::Integrator integrator({.max_range_m = max_range});
   tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
