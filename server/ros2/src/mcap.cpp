@@ -213,12 +213,8 @@ Expected<void> McapReader::index() {
       record += *content;
       if (auto ok = indexRecords(record, -1); !ok) return ok;
     } else if (op == kMessage) {
-      if (length < kMessageHeader) return makeError("a message record shorter than its header");
-      DENSEMAP_MCAP_TRY(content, s.read(at, kMessageHeader));
-      if (messages_.size() >= limits_.max_messages) return makeError("too many messages");
-      messages_.push_back({static_cast<std::uint16_t>(le(content->data(), 2)),
-                           le(content->data() + 6, 8), -1, at + kMessageHeader,
-                           length - kMessageHeader});
+      DENSEMAP_MCAP_TRY(content, s.read(at, std::min(length, kMessageHeader)));
+      if (auto ok = addMessage(*content, -1, at, length); !ok) return ok;
     } else if (op == kChunk) {
       if (length > limits_.max_chunk_bytes) {
         return makeError("a chunk of " + std::to_string(length) + " bytes (at most " +
@@ -248,6 +244,18 @@ Expected<void> McapReader::index() {
       }
     }
   }
+  return {};
+}
+
+Expected<void> McapReader::addMessage(std::string_view content, std::int64_t chunk,
+                                      std::uint64_t at, std::uint64_t length) {
+  // channel id (2), sequence (4), log time (8), publish time (8), then the data.
+  if (length < kMessageHeader || content.size() < kMessageHeader) {
+    return makeError("a message record shorter than its header");
+  }
+  if (messages_.size() >= limits_.max_messages) return makeError("too many messages");
+  messages_.push_back({static_cast<std::uint16_t>(le(content.data(), 2)), le(content.data() + 6, 8),
+                       chunk, at + kMessageHeader, length - kMessageHeader});
   return {};
 }
 
@@ -299,11 +307,7 @@ Expected<void> McapReader::indexRecords(const std::string& records, std::int64_t
       channels_.push_back(std::move(c));
     } else if (op == kMessage) {
       if (chunk < 0) continue;  // top-level messages are indexed by index()
-      if (length < kMessageHeader) return makeError("a message record shorter than its header");
-      if (messages_.size() >= limits_.max_messages) return makeError("too many messages");
-      messages_.push_back({static_cast<std::uint16_t>(le(content.data(), 2)),
-                           le(content.data() + 6, 8), chunk, at + kMessageHeader,
-                           length - kMessageHeader});
+      if (auto ok = addMessage(content, chunk, at, length); !ok) return ok;
     }
   }
   return {};

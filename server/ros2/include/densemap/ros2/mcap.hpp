@@ -9,6 +9,7 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "densemap/geometry/error.hpp"
@@ -49,6 +50,10 @@ class McapReader final : public BagReader {
   Expected<void> index();
   Expected<void> indexRecords(const std::string& records, std::int64_t chunk);
   Expected<std::string> chunkRecords(const Chunk& c) const;
+  /// Indexes the message record of `length` bytes at `at` (in the file, or in `chunk`'s
+  /// records) whose content starts with `content` (its header at least).
+  Expected<void> addMessage(std::string_view content, std::int64_t chunk, std::uint64_t at,
+                            std::uint64_t length);
 
   std::unique_ptr<Source> source_;
   McapLimits limits_;
