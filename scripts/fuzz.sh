@@ -11,7 +11,7 @@ SECONDS_PER=${1:-10}
 shift || true
 BUILD=${DENSEMAP_FUZZ_BUILD_DIR:-build-fuzz}
 ALL=(fuzz_snapshot fuzz_scan_graph fuzz_scan_dat fuzz_pcd fuzz_dataset fuzz_config fuzz_iln_weights
-  fuzz_scan_validation fuzz_point_cloud2 fuzz_queries fuzz_mcap)
+  fuzz_scan_validation fuzz_point_cloud2 fuzz_queries fuzz_mcap fuzz_db3)
 TARGETS=("$@")
 [ ${#TARGETS[@]} -gt 0 ] || TARGETS=("${ALL[@]}")
 # Debian 12's clang 16 with libstdc++ 12: <expected> wants __cpp_concepts >= 202002, which clang
@@ -60,8 +60,10 @@ if [ -x "$TOOLS/densemap-sim" ] && [ -x "$TOOLS/densemap-map" ]; then
       --scans 2 --gt-resolution 0 --mcap "$SEEDS/fuzz_mcap/sim_$compression.mcap" \
       --mcap-compression "$compression" >/dev/null 2>&1
   done
+  "$TOOLS/densemap-sim" --out "$BUILD/seed-sim" --scene indoor --sensor vlp16 --columns 40 \
+    --scans 2 --gt-resolution 0 --mcap "$SEEDS/fuzz_db3/sim.db3" >/dev/null 2>&1
 else
-  echo "fuzz.sh: no $TOOLS/densemap-sim: fuzz_scan_graph and fuzz_mcap start without seeds"
+  echo "fuzz.sh: no $TOOLS/densemap-sim: fuzz_scan_graph, fuzz_mcap and fuzz_db3 start without seeds"
 fi
 mkdir -p "$BUILD/artifacts"
 total_runs=0
