@@ -5,9 +5,8 @@
 #include <cstdio>
 #include <string>
 
-#include "densemap/ros2/cdr.hpp"
 #include "densemap/ros2/db3.hpp"
-#include "densemap/ros2/point_cloud2.hpp"
+#include "fuzz_bag.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   // SQLite reads files: the input goes to this process's own file.
@@ -23,15 +22,6 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   }
   auto reader = densemap::ros2::Db3Reader::open(path, 4096);
   if (!reader) return 0;
-  for (const densemap::ros2::BagMessage& m : (*reader)->messages()) {
-    auto bytes = (*reader)->data(m);
-    if (!bytes) continue;
-    const std::span<const std::uint8_t> span(reinterpret_cast<const std::uint8_t*>(bytes->data()),
-                                             bytes->size());
-    if (auto cloud = densemap::ros2::decodeCdrPointCloud2(span)) {
-      (void)densemap::ros2::decodePointCloud2(cloud->view(), 1 << 16);
-    }
-    (void)densemap::ros2::decodeCdrTfMessage(span);
-  }
+  densemap::fuzz::decodeEveryMessage(**reader);
   return 0;
 }

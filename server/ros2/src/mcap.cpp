@@ -254,6 +254,10 @@ Expected<void> McapReader::addMessage(std::string_view content, std::int64_t chu
     return makeError("a message record shorter than its header");
   }
   if (messages_.size() >= limits_.max_messages) return makeError("too many messages");
+  if (length - kMessageHeader > limits_.max_message_bytes) {
+    return makeError("a message of " + std::to_string(length - kMessageHeader) +
+                     " bytes (at most " + std::to_string(limits_.max_message_bytes) + ")");
+  }
   messages_.push_back({static_cast<std::uint16_t>(le(content.data(), 2)), le(content.data() + 6, 8),
                        chunk, at + kMessageHeader, length - kMessageHeader});
   return {};

@@ -132,7 +132,8 @@ Expected<std::unique_ptr<ScanSource>> openRecording(const std::filesystem::path&
   const BagReader& r = **reader;
   // The whole bag's transforms (a bag holds minutes, not the server's 10 s).
   TfBuffer tf(std::numeric_limits<std::int64_t>::max() / 4);
-  std::size_t tf_refused = 0;
+  std::size_t tf_refused = 0, transforms_kept = 0;
+  constexpr std::size_t kMaxTransforms = 10'000'000;  // ~640 MB of TF samples
   std::vector<const BagMessage*> clouds;
   std::vector<std::string> cloud_topics;
   for (const BagMessage& m : r.messages()) {
@@ -145,6 +146,11 @@ Expected<std::unique_ptr<ScanSource>> openRecording(const std::filesystem::path&
       if (!transforms) {
         return fileError(path, c->topic + " at log time " + std::to_string(m.log_time) + ": " +
                                    transforms.error().message);
+      }
+      transforms_kept += transforms->size();
+      if (transforms_kept > kMaxTransforms) {
+        return fileError(path, "more than " + std::to_string(kMaxTransforms) +
+                                   " transforms (a bag's TF is kept whole while it is read)");
       }
       for (const CdrTransform& t : *transforms) {
         if (!tf.set(t.header.frame_id, t.child_frame_id, t.sample, c->topic == "/tf_static")) {

@@ -317,9 +317,13 @@ TEST(GridMap, AssignBlocksEqualsSettingCellByCellAndSkipsUnchangedCells) {
       EXPECT_EQ(diffMaps(maps[t], plain).differing(), 0U);
       EXPECT_EQ(maps[t].knownCells(), plain.knownCells());
       const auto published = maps[t].publishVersion();
-      if (round == 3) EXPECT_TRUE(published.written_blocks.empty());
+      if (round == 3) {
+        EXPECT_TRUE(published.written_blocks.empty());
+      }
     }
-    if (round == 3) EXPECT_TRUE(expected.empty());
+    if (round == 3) {
+      EXPECT_TRUE(expected.empty());
+    }
   }
   expectFullyFreeMasksMatchValues(maps[1]);
 }

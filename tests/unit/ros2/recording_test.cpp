@@ -143,8 +143,7 @@ TEST(Db3, ARosbag2SqliteBagReadsBackTheDatasetsScansAsADirectoryToo) {
   ASSERT_TRUE(writeFileAtomically(junk, std::string(5000, 'x')));
   auto refused = openAnyScanSource(junk);
   ASSERT_FALSE(refused);
-  EXPECT_NE(refused.error().message.find("junk.db3"), std::string::npos)
-      << refused.error().message;
+  EXPECT_NE(refused.error().message.find("junk.db3"), std::string::npos) << refused.error().message;
   const auto other = b.dir.path() / "other.db3";
   ASSERT_TRUE(writeDb3(other, {}, {}));
   auto no_clouds = openAnyScanSource(other);
@@ -228,6 +227,13 @@ TEST(Mcap, CorruptBagsAreRefusedWithTheirReason) {
   ASSERT_FALSE(limited);
   EXPECT_NE(limited.error().message.find("at most 1000"), std::string::npos)
       << limited.error().message;
+  // A message over the limit of one message's data.
+  McapLimits one_message;
+  one_message.max_message_bytes = 100;
+  auto too_big = McapReader::fromBytes(*bytes, one_message);
+  ASSERT_FALSE(too_big);
+  EXPECT_NE(too_big.error().message.find("at most 100"), std::string::npos)
+      << too_big.error().message;
   // Not a bag at all, and an empty file.
   refused("", "not an MCAP file");
   refused(std::string(100, '\0'), "not an MCAP file");

@@ -19,6 +19,7 @@ namespace densemap::ros2 {
 
 struct McapLimits {
   std::uint64_t max_chunk_bytes = std::uint64_t{512} << 20;  // a chunk, compressed or not
+  std::uint64_t max_message_bytes = std::uint64_t{1} << 30;  // one message's data
   std::size_t max_messages = 10'000'000;
   std::size_t max_channels = 4096;
 };
