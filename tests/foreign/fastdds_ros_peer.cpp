@@ -78,7 +78,6 @@ DataWriterQos writerQos(bool reliable, bool transient_local, int depth) {
   return q;
 }
 
-template <class Sample>
 bool waitForMatch(DataWriter* w, std::chrono::seconds timeout) {
   const auto end = std::chrono::steady_clock::now() + timeout;
   PublicationMatchedStatus s;
@@ -139,7 +138,7 @@ int robot(int domain, const std::string& data, std::size_t scans, bool shm, bool
   statics.transforms().push_back(
       transform(frames.base, frames.sensor, densemap::ros2::sensorMount(), frames.stampOf(0)));
   if (early) static_w->write(&statics);
-  if (!waitForMatch<int>(cloud_w, 20s) || !waitForMatch<int>(tf_w, 20s)) {
+  if (!waitForMatch(cloud_w, 20s) || !waitForMatch(tf_w, 20s)) {
     std::fprintf(stderr, "robot: the server's readers were not matched in 20 s\n");
     return 1;
   }

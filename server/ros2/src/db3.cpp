@@ -63,15 +63,15 @@ Expected<std::unique_ptr<Db3Reader>> Db3Reader::open(const std::filesystem::path
   std::map<std::int64_t, std::uint16_t> channel_of;
   int rc = SQLITE_ROW;
   while ((rc = sqlite3_step(topics.get())) == SQLITE_ROW) {
-    if (r->channels_.size() >= 65535) return fileError(path, "more than 65535 topics");
+    if (r->channels().size() >= 65535) return fileError(path, "more than 65535 topics");
     BagChannel c;
-    c.id = static_cast<std::uint16_t>(r->channels_.size());
+    c.id = static_cast<std::uint16_t>(r->channels().size());
     c.topic = text(topics.get(), 1);
     c.schema_name = text(topics.get(), 2);
     c.message_encoding = text(topics.get(), 3);
     c.schema_encoding = "ros2msg";
     channel_of[sqlite3_column_int64(topics.get(), 0)] = c.id;
-    r->channels_.push_back(std::move(c));
+    r->addChannel(std::move(c));
   }
   if (rc != SQLITE_DONE) return failed("its topics");
   Statement messages(db,
@@ -92,11 +92,15 @@ Expected<std::unique_ptr<Db3Reader>> Db3Reader::open(const std::filesystem::path
   return r;
 }
 
-Expected<std::string> Db3Reader::data(const BagMessage& m) const {
+Expected<std::string> Db3Reader::data(const BagMessage& m, std::uint64_t max_bytes) const {
   std::lock_guard lock(db_->mutex);
-  Statement s(db_->handle, "SELECT data FROM messages WHERE id = ?");
+  // A prefix is cut by SQLite (substr of a blob): the rest is never copied out.
+  const bool whole = max_bytes >= m.length;
+  Statement s(db_->handle, whole ? "SELECT data FROM messages WHERE id = ?"
+                                 : "SELECT substr(data, 1, ?2) FROM messages WHERE id = ?1");
   if (!s.ok()) return makeError(name_ + ": " + sqlite3_errmsg(db_->handle));
   sqlite3_bind_int64(s.get(), 1, static_cast<sqlite3_int64>(m.offset));
+  if (!whole) sqlite3_bind_int64(s.get(), 2, static_cast<sqlite3_int64>(max_bytes));
   if (sqlite3_step(s.get()) != SQLITE_ROW) {
     return makeError(name_ + ": message " + std::to_string(m.offset) + " is gone (" +
                      sqlite3_errmsg(db_->handle) + ")");

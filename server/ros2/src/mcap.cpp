@@ -297,7 +297,7 @@ Expected<void> McapReader::indexRecords(const std::string& records, std::int64_t
       DENSEMAP_MCAP_TRY(metadata, f.prefixed(4));
       (void)metadata;
       if (channel(static_cast<std::uint16_t>(*id)) != nullptr) continue;  // repeated: same
-      if (channels_.size() >= limits_.max_channels) return makeError("too many channels");
+      if (channels().size() >= limits_.max_channels) return makeError("too many channels");
       BagChannel c;
       c.id = static_cast<std::uint16_t>(*id);
       c.topic = std::string(*topic);
@@ -308,7 +308,7 @@ Expected<void> McapReader::indexRecords(const std::string& records, std::int64_t
           c.schema_encoding = named.second;
         }
       }
-      channels_.push_back(std::move(c));
+      addChannel(std::move(c));
     } else if (op == kMessage) {
       if (chunk < 0) continue;  // top-level messages are indexed by index()
       if (auto ok = addMessage(content, chunk, at, length); !ok) return ok;
@@ -317,8 +317,9 @@ Expected<void> McapReader::indexRecords(const std::string& records, std::int64_t
   return {};
 }
 
-Expected<std::string> McapReader::data(const BagMessage& m) const {
-  if (m.chunk < 0) return source_->read(m.offset, m.length);
+Expected<std::string> McapReader::data(const BagMessage& m, std::uint64_t max_bytes) const {
+  const std::uint64_t length = std::min(m.length, max_bytes);
+  if (m.chunk < 0) return source_->read(m.offset, length);
   if (m.chunk >= static_cast<std::int64_t>(chunks_.size())) return makeError("no such chunk");
   std::lock_guard lock(cache_mutex_);
   if (cached_chunk_ != m.chunk) {
@@ -329,7 +330,7 @@ Expected<std::string> McapReader::data(const BagMessage& m) const {
   if (m.offset > cached_records_.size() || m.length > cached_records_.size() - m.offset) {
     return makeError("a message past its chunk");
   }
-  return cached_records_.substr(m.offset, m.length);
+  return cached_records_.substr(m.offset, length);
 }
 
 Expected<McapCompression> parseMcapCompression(const std::string& name) {

@@ -83,10 +83,6 @@ std::string withDependencies(const std::string& main,
 const char* kHeaderMsg = "builtin_interfaces/Time stamp\nstring frame_id\n";
 const char* kTimeMsg = "int32 sec\nuint32 nanosec\n";
 
-}  // namespace
-
-namespace {
-
 /// The storage of a bag: .mcap, .db3, or a rosbag2 directory's one storage file.
 Expected<std::unique_ptr<BagReader>> openBag(const std::filesystem::path& path) {
   std::error_code ec;
@@ -175,8 +171,11 @@ Expected<std::unique_ptr<ScanSource>> openRecording(const std::filesystem::path&
   std::vector<Cloud> posed;
   std::size_t untransformed = 0;
   std::string world;
+  // A cloud's header lies in its first bytes: the encapsulation, the stamp and a frame name of
+  // at most kCdrMaxString characters (the points are read when the scan is loaded).
+  constexpr std::uint64_t kHeaderBytes = 4 + 8 + 4 + kCdrMaxString + 1;
   for (const BagMessage* m : clouds) {
-    auto bytes = r.data(*m);
+    auto bytes = r.data(*m, kHeaderBytes);
     if (!bytes) return fileError(path, bytes.error().message);
     auto header = decodeCdrCloudHeader(bytesOf(*bytes));
     if (!header) return fileError(path, "a cloud's header: " + header.error().message);

@@ -4,6 +4,7 @@
 // with their types and serialization, and messages by topic and time, read one at a time.
 #include <cstdint>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "densemap/geometry/error.hpp"
@@ -29,15 +30,16 @@ class BagReader {
  public:
   virtual ~BagReader() = default;
   [[nodiscard]] const std::vector<BagChannel>& channels() const { return channels_; }
+  /// The channel with `id`, or null (looked up for every message: a hash, not a walk).
   [[nodiscard]] const BagChannel* channel(std::uint16_t id) const {
-    for (const BagChannel& c : channels_) {
-      if (c.id == id) return &c;
-    }
-    return nullptr;
+    const auto it = channel_at_.find(id);
+    return it == channel_at_.end() ? nullptr : &channels_[it->second];
   }
   [[nodiscard]] const std::vector<BagMessage>& messages() const { return messages_; }
-  /// A message's data (thread-safe).
-  [[nodiscard]] virtual Expected<std::string> data(const BagMessage& m) const = 0;
+  /// A message's data, or at most its first `max_bytes` (thread-safe).
+  [[nodiscard]] virtual Expected<std::string> data(const BagMessage& m,
+                                                   std::uint64_t max_bytes = ~std::uint64_t{
+                                                       0}) const = 0;
   /// Empty, or why the recording ends early.
   [[nodiscard]] const std::string& truncated() const { return truncated_; }
   [[nodiscard]] const std::string& name() const { return name_; }
@@ -45,9 +47,16 @@ class BagReader {
   [[nodiscard]] virtual std::string kind() const = 0;
 
  protected:
-  std::vector<BagChannel> channels_;
+  /// Adds a channel (the first one of an id counts; a repeated id is ignored).
+  void addChannel(BagChannel c) {
+    if (channel_at_.emplace(c.id, channels_.size()).second) channels_.push_back(std::move(c));
+  }
   std::vector<BagMessage> messages_;
   std::string truncated_, name_;
+
+ private:
+  std::vector<BagChannel> channels_;
+  std::unordered_map<std::uint16_t, std::size_t> channel_at_;
 };
 
 }  // namespace densemap::ros2

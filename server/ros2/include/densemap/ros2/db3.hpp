@@ -19,7 +19,9 @@ class Db3Reader final : public BagReader {
   [[nodiscard]] static Expected<std::unique_ptr<Db3Reader>> open(
       const std::filesystem::path& path, std::size_t max_messages = 10'000'000);
   ~Db3Reader() override;
-  [[nodiscard]] Expected<std::string> data(const BagMessage& m) const override;
+  [[nodiscard]] Expected<std::string> data(const BagMessage& m,
+                                           std::uint64_t max_bytes = ~std::uint64_t{
+                                               0}) const override;
   [[nodiscard]] std::string kind() const override { return "rosbag2 SQLite bag"; }
 
  private:

@@ -37,7 +37,9 @@ class McapReader final : public BagReader {
   ~McapReader();
 
   /// A message's data (the last chunk read is kept).
-  [[nodiscard]] Expected<std::string> data(const BagMessage& m) const override;
+  [[nodiscard]] Expected<std::string> data(const BagMessage& m,
+                                           std::uint64_t max_bytes = ~std::uint64_t{
+                                               0}) const override;
   [[nodiscard]] std::string kind() const override { return "MCAP bag"; }
 
  private:
