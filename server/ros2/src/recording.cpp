@@ -89,12 +89,16 @@ Expected<std::unique_ptr<BagReader>> openBag(const std::filesystem::path& path) 
   if (std::filesystem::is_directory(path, ec)) {
     // A rosbag2 directory: metadata.yaml beside one storage file (split bags: not read).
     std::vector<std::filesystem::path> files;
-    for (const auto& e : std::filesystem::directory_iterator(path, ec)) {
-      if (e.is_regular_file(ec) &&
-          (e.path().extension() == ".mcap" || e.path().extension() == ".db3")) {
-        files.push_back(e.path());
+    // Advanced with an error code: a directory that changes or turns unreadable while it is
+    // listed is an error here, not an exception.
+    for (std::filesystem::directory_iterator it(path, ec), end; !ec && it != end;
+         it.increment(ec)) {
+      if (it->is_regular_file(ec) &&
+          (it->path().extension() == ".mcap" || it->path().extension() == ".db3")) {
+        files.push_back(it->path());
       }
     }
+    if (ec) return fileError(path, "cannot list: " + ec.message());
     if (files.size() != 1) {
       return fileError(path, "a rosbag2 directory needs exactly one .mcap or .db3 file (it has " +
                                  std::to_string(files.size()) + ")");
