@@ -47,10 +47,12 @@ if [ "${SNAPSHOT:-0}" = 1 ]; then  # a late joiner fetches the whole map
   echo "late-joiner fetch took $(echo "$(date +%s.%N) - $start" | bc) s"
 fi
 [ -n "${PERF_PID:-}" ] && kill -INT "$PERF_PID" && wait "$PERF_PID" || true
+# The kernel's high-water mark: the true peak, not just the 0.5 s samples' largest.
+HWM=$(awk '/VmHWM/ {print $2}' /proc/$SERVER/status 2>/dev/null || echo 0)
 echo "server minor page faults: $(awk '{print $10}' /proc/$SERVER/stat), CPU s: $(awk '{printf "%.1f", ($14 + $15) / 100}' /proc/$SERVER/stat)"
 kill -TERM $SERVER; wait $SERVER || true
 trap - EXIT
-echo "server peak RSS: $(sort -n "$OUT/rss.txt" | tail -1) KiB"
+echo "server peak RSS: $(sort -n "$OUT/rss.txt" | tail -1) KiB (sampled), high-water mark $HWM KiB"
 if [ "${BENCH:-1}" = 1 ]; then
   method=superray+culling
   [ "${KIND:-log_odds}" != log_odds ] && method=$KIND

@@ -31,7 +31,7 @@ struct CapsuleShape {
 /// unstructured scene's lead over BGKOctoMap-L). A voxel hit by one ray gives that ray's own
 /// capsule, bit for bit; cut rays are never bundled. The extents come in a fixed order (by
 /// voxel: its rays' tips in ray order, then its capsule) whatever the thread count.
-/// freeExtents' per-scan arrays, kept by the caller between scans (no fresh pages a scan).
+/// freeExtents' per-scan arrays (the caller releases them once the extents are made).
 struct FreeBundleBuffers {
   std::vector<std::uint32_t> hit_of, takes;
   std::vector<std::pair<std::uint64_t, std::uint32_t>> rays, rays_other;

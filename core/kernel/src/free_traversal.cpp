@@ -22,9 +22,9 @@ struct Near {
   double d2 = 0.0;
 };
 
-/// One thread's blocks of one scan: a slot per block (a deque: slots never move, and are kept
-/// between scans), a hash from block key to slot, and in front of it a small direct-mapped
-/// cache (a capsule's slices and rows alternate between a few neighbouring blocks).
+/// One thread's blocks of one scan: a slot per block (a deque: slots never move), a hash from
+/// block key to slot, and in front of it a small direct-mapped cache (a capsule's slices and
+/// rows alternate between a few neighbouring blocks).
 struct ThreadBlocks {
   static constexpr int kCacheSize = 16;
   std::deque<FreeTraversal::Block> slots;
@@ -202,6 +202,11 @@ std::size_t FreeTraversal::memoryBytes() const {
              t.index.size() * (sizeof(std::uint64_t) + 3 * sizeof(void*));
   }
   return bytes;
+}
+
+void FreeTraversal::release() {
+  std::vector<const Block*>().swap(merged_);
+  buffers_->threads.clear();
 }
 
 double FreeTraversal::evidenceShare(double reach) {

@@ -28,7 +28,7 @@ struct FreeExtent {
 /// bounding box), and each such voxel gets weight * k(d / radius_m), k the sparse kernel
 /// (Eq. 3.5) of d, its centre's distance from the extent.
 ///
-/// Sums are fixed point in per-thread block buffers kept between scans: integer sums do not
+/// Sums are fixed point in per-thread block buffers (released by release()): integer sums do not
 /// depend on the order of the rays, so the map does not depend on the thread count. They are
 /// 32-bit (half the bytes and cache lines of 64-bit sums), so each scan takes the finest step
 /// 2^-k (k <= 30) at which no voxel's sum can exceed 2^31 - 1: a voxel gets at most every
@@ -61,8 +61,11 @@ class FreeTraversal {
   /// The share of a capsule's free evidence (per metre of ray, the kernel integrated over the
   /// disc across it) within `reach` of its axis (a fraction of its radius): 1 at reach >= 1.
   [[nodiscard]] static double evidenceShare(double reach);
-  /// Bytes its buffers hold (kept between scans).
+  /// Bytes its buffers hold.
   [[nodiscard]] std::size_t memoryBytes() const;
+  /// Gives the buffers' memory back once blocks() is done with (for the next scan's other
+  /// stages; they are made again by the next accumulate()).
+  void release();
   /// The blocks reached by the last accumulate(), in ascending key order, sums merged (valid
   /// until the next accumulate()).
   [[nodiscard]] const std::vector<const Block*>& blocks() const { return merged_; }

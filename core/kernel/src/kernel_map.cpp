@@ -96,6 +96,8 @@ KernelScanStats KernelMap::integrate(const PointCloud& points_world, const Point
   }
   if (touched != nullptr) mergeReached(reached, *touched);
   if (!free_extents.empty()) stats.ms_apply = msSince(t0);
+  free_->release();
+  scratch_->releaseFree();
   return stats;
 }
 
@@ -138,12 +140,9 @@ void KernelMap::fitKernels(const PointCloud& points_world, const Point3f& origin
   free_extents.clear();
   if (options_.method == KernelMethod::kAkimap || rays) {
     // Buckets about the smallest search box (a voxel), at most 8 per sample and 2^21 in all
-    // (coarser over a large scan: the counting sort writes every bucket each scan, and the
-    // table is kept between scans).
+    // (coarser over a large scan: the counting sort writes every bucket each scan).
     const std::size_t max_buckets =
         std::clamp(8 * samples.size(), std::size_t{1} << 16, std::size_t{1} << 21);
-    const SampleIndex index(samples, std::max(grid_.resolution(), 0.25 * options_.search_max),
-                            max_buckets, scratch_->index);
     // kAkimapRays: kernels for the occupied samples only (then the free segments).
     std::vector<std::uint32_t> centres;
     for (std::uint32_t i = 0; i < samples.size(); ++i) {
@@ -154,16 +153,24 @@ void KernelMap::fitKernels(const PointCloud& points_world, const Point3f& origin
     std::vector<Eigen::Vector3d> hit_positions;  // kAkimapRays' direct hit evidence
     std::vector<double> hit_counts;
     const bool aggregate = rays && options_.aggregate_hits;
-    if (aggregate) {
-      adaptiveVoxelKernels(grid_, options_, samples, centres, index, origin, kernels, stops,
-                           hit_positions, hit_counts);
-    } else {
-      if (rays) {
-        for (const std::uint32_t i : centres) hit_positions.push_back(samples[i].x);
+    {
+      const SampleIndex index(samples, std::max(grid_.resolution(), 0.25 * options_.search_max),
+                              max_buckets, scratch_->index);
+      if (aggregate) {
+        adaptiveVoxelKernels(grid_, options_, samples, centres, index, origin, kernels, stops,
+                             hit_positions, hit_counts);
+      } else {
+        if (rays) {
+          for (const std::uint32_t i : centres) hit_positions.push_back(samples[i].x);
+        }
+        samplesKernels(options_, grid_.resolution(), samples, centres, index, origin, kernels,
+                       rays ? &stops : nullptr);
       }
-      samplesKernels(options_, grid_.resolution(), samples, centres, index, origin, kernels,
-                     rays ? &stops : nullptr);
     }
+    // The samples and their index are done with: their memory serves the stages after.
+    release(centres);
+    release(samples_);
+    scratch_->releaseSamples();
     // The fast path takes one capsule per ray (or per bundle of rays ending in one voxel),
     // walked by FreeTraversal, and its tip; the plain path a segment kernel per piece of ray.
     const bool traverse = rays && options_.free_traversal;
@@ -192,10 +199,14 @@ void KernelMap::fitKernels(const PointCloud& points_world, const Point3f& origin
                                .tip_weight = options_.sf2};
       freeExtents(points_world, origin, options_.max_range, stops, grid_, shape,
                   options_.free_bundles, scratch_->bundles, free_extents);
+      scratch_->releaseBundles();
     }
+    release(segments_);
   } else {
     kernels.reserve(samples.size());
     for (const Sample& s : samples) kernels.push_back(isotropicKernel(s, options_));
+    release(samples_);
+    scratch_->releaseSamples();
   }
 }
 
@@ -357,6 +368,7 @@ std::size_t KernelMap::accumulateKernels(
       reached_blocks->emplace_back(pairs[starts[g]].first, reached[g]);
     }
   }
+  scratch_->releaseKernels();
   return cell_updates.load();
 }
 

@@ -28,7 +28,7 @@ class SampleIndex {
     std::uint32_t index = 0;
     bool occupied = false;
   };
-  /// The index's arrays, kept by the caller between scans (no fresh pages every scan).
+  /// The index's arrays, owned by the caller.
   struct Storage {
     std::vector<std::uint32_t> starts;            // per bucket, into entries; see the constructor
     std::vector<Entry> entries;                   // the point samples by bucket
@@ -42,8 +42,7 @@ class SampleIndex {
   SampleIndex(const std::vector<Sample>& samples, double cell, std::size_t max_cells,
               Storage& storage)
       : starts_(storage.starts), entries_(storage.entries) {
-    // entries_ keeps its elements between scans (resized below, never cleared: constructing
-    // 500k entries again cost 2 ms a scan); empty means no index.
+    // entries_ is resized below (empty means no index).
     const Eigen::AlignedBox3d box = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, samples.size(), 16384), Eigen::AlignedBox3d(),
         [&](const tbb::blocked_range<std::size_t>& r, Eigen::AlignedBox3d b) {

@@ -440,6 +440,23 @@ TEST(KernelMapEviction, KeepsExactlyTheBlocksItIsToldToKeep) {
   EXPECT_LT(evicted.knownCells(), whole.knownCells());
 }
 
+// Issue 29 (memory): a scan's buffers are released as its stages end, so between scans a kernel
+// map holds its evidence and nothing else: what a map restored from that evidence (which never
+// integrated a scan) holds.
+TEST(KernelMapMemory, BetweenScansAMapHoldsOnlyItsEvidence) {
+  KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
+  options.max_range = 15.0;
+  KernelMap map(0.1, options);
+  for (const Point3f& origin : {Point3f(0, 0, 0), Point3f(0.4F, -0.3F, 0.2F)}) {
+    map.integrate(roomScan(), origin);
+    KernelMap restored(0.1, options);
+    ASSERT_TRUE(restored.restore(map.evidence()).has_value());
+    ASSERT_EQ(restored.knownCells(), map.knownCells());
+    EXPECT_LE(static_cast<double>(map.memoryBytes()),
+              1.05 * static_cast<double>(restored.memoryBytes()) + 65536.0);
+  }
+}
+
 TEST(KernelMethodNames, ParseAndReject) {
   EXPECT_EQ(*parseKernelMethod("bgkl"), KernelMethod::kBgkl);
   EXPECT_EQ(*parseKernelMethod("akimap_rays"), KernelMethod::kAkimapRays);

@@ -166,7 +166,8 @@ class KernelMap {
                     std::array<float, block::kVoxels>& log_odds) const;
   void forEachKnown(const std::function<void(const VoxelKey&, double)>& f) const;
   [[nodiscard]] std::size_t knownCells() const;
-  /// Bytes held: the evidence blocks (with the hash's nodes) and the per-scan buffers kept.
+  /// Bytes held: the evidence blocks (with the hash's nodes) and the per-scan buffers held
+  /// (none between scans: each stage's are released when it ends).
   [[nodiscard]] std::size_t memoryBytes() const;
   [[nodiscard]] std::size_t scans() const { return scans_; }
 
@@ -199,8 +200,8 @@ class KernelMap {
   KernelOptions options_;
   std::unordered_map<std::uint64_t, Block> blocks_;
   std::size_t scans_ = 0;
-  std::unique_ptr<FreeTraversal> free_;     // its buffers, kept between scans
-  std::vector<Sample> samples_, segments_;  // per-scan buffers, kept between scans
+  std::unique_ptr<FreeTraversal> free_;     // its buffers
+  std::vector<Sample> samples_, segments_;  // per-scan buffers (see Scratch)
   struct Scratch;                           // the other per-scan buffers (kernel_map.cpp)
   std::unique_ptr<Scratch> scratch_;
 };
