@@ -108,14 +108,15 @@ TEST(BoundedMemory, ALongDriveWithAKeepRadiusKeepsRssFlatWithoutItRssGrows) {
 }
 
 // Issue 29: a dense map evicts with the grid, so a kernel map kind keeps the same promise: flat
-// RSS once the heap has grown to the largest scans' stages.
+// RSS.
 TEST(BoundedMemory, ADenseMapWithAKeepRadiusKeepsRssFlat) {
   test::TempDir dir;
-  // The heap grows in steps of a few MiB as larger scans come: 1000 scans (issue 29's figure)
-  // gave 114.2 .. 131.6 MiB over the second half (stop 41; the build before it, which kept its
-  // per-scan buffers, 121.3 .. 138.3), and 300-scan runs ranged from +6% to +16% over theirs.
-  // So this gate is the map's size (evicted, flat) and RSS within 25% over the second half:
-  // without eviction the kernel map alone grows several times over.
+  // The issue's figure: RSS within 10% over the second half (1,000 scans: 93.9 .. 95.7 MiB;
+  // 300 scans: 92.0 .. 93.4). Before stop 41 the kernel map kept the blocks that a kernel's box
+  // overlapped without reaching a cell, which eviction never saw: RSS crept 3.7 MiB per 100
+  // scans (121 .. 138 MiB over the second half of 1,000; KernelMapMemory's unit test guards
+  // that), and this gate allowed 25%. Without eviction the kernel map alone grows several times
+  // over.
   std::string scene;
   const auto raws = streetDrive(dir.path(), 300, scene);
   const int scans = static_cast<int>(raws.size());
@@ -137,7 +138,7 @@ TEST(BoundedMemory, ADenseMapWithAKeepRadiusKeepsRssFlat) {
   for (const Sample& s : windowed)
     std::printf("  scan %ju: RSS %.1f MiB, %ju cells\n", static_cast<std::uintmax_t>(s.scans),
                 s.rss / 1048576.0, static_cast<std::uintmax_t>(s.known));
-  EXPECT_LE(static_cast<double>(*wmax), 1.25 * static_cast<double>(*wmin));
+  EXPECT_LE(static_cast<double>(*wmax), 1.10 * static_cast<double>(*wmin));
   EXPECT_GT(windowed.back().evicted_blocks, 1000U);
   std::uint64_t most = 0, least = ~std::uint64_t{0};
   for (std::size_t i = windowed.size() / 4; i < windowed.size(); ++i) {
