@@ -76,10 +76,10 @@ void expectEveryScanAccountedFor(const RunResult& r) {
 
 TEST(LoadRun, TwoSensorsTwoClientsAndALateJoinerAreAllCounted) {
   test::TempDir dir;
-  test::ServerProcess server(dir.path(), 161, "pipeline { queue_depth: 8 }\n");
+  test::ServerProcess server(dir.path(), 186, "pipeline { queue_depth: 8 }\n");
   const Scenario s = smallScenario(simulate(dir.path()));
   RunOptions o;
-  o.client = {.domain_id = 161, .timeout = 10s};
+  o.client = {.domain_id = 186, .timeout = 10s};
   o.work_dir = dir.path() / "work";
   o.progress = false;
   const auto start = std::chrono::steady_clock::now();
@@ -94,19 +94,19 @@ TEST(LoadRun, TwoSensorsTwoClientsAndALateJoinerAreAllCounted) {
 
 TEST(LoadRun, QueryClientsAsProcesses) {
   test::TempDir dir;
-  test::ServerProcess server(dir.path(), 162, "pipeline { queue_depth: 8 }\n");
+  test::ServerProcess server(dir.path(), 187, "pipeline { queue_depth: 8 }\n");
   const auto data = simulate(dir.path());
   const Scenario s = smallScenario(data);
   // The children rebuild the scenario from a file, as `densemap load --processes` does.
   const auto file = dir.path() / "small.textproto";
   std::ofstream(file) << smallScenarioText(data);
   RunOptions o;
-  o.client = {.domain_id = 162, .timeout = 10s};
+  o.client = {.domain_id = 187, .timeout = 10s};
   o.work_dir = dir.path() / "work";
   o.progress = false;
   o.processes = true;
   o.self_exe = DENSEMAP_CLI_BIN;
-  o.child_args = {"--domain-id", "162",        "--timeout-ms",     "10000", "load", "--scenario",
+  o.child_args = {"--domain-id", "187",        "--timeout-ms",     "10000", "load", "--scenario",
                   file.string(), "--work-dir", o.work_dir.string()};
   auto r = runScenario(s, o);
   ASSERT_TRUE(r) << r.error().message;

@@ -320,7 +320,7 @@ void publish(const dds::Entity& writer, RawCloud c) {
 }
 
 TEST(Ros2Wire, MalformedCloudsAreCountedByReasonAndTheServerKeepsMapping) {
-  constexpr std::uint32_t kDomain = 152;
+  constexpr std::uint32_t kDomain = 188;
   test::TempDir dir;
   test::ServerProcess server(
       dir.path(), kDomain,
