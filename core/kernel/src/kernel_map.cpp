@@ -373,7 +373,10 @@ std::size_t KernelMap::accumulateKernels(
   }
   if (reached_blocks != nullptr) {
     for (std::size_t g = 0; g + 1 < starts.size(); ++g) {
-      reached_blocks->emplace_back(pairs[starts[g]].first, reached[g]);
+      // A block no cell of which was reached is not the published map's business either.
+      if (block::countBits(reached[g]) != 0) {
+        reached_blocks->emplace_back(pairs[starts[g]].first, reached[g]);
+      }
     }
   }
   scratch_->releaseKernels();
