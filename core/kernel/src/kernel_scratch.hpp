@@ -26,8 +26,8 @@ void release(std::vector<T>& v) {
 /// hands the same memory to the next stage's buffers: a scan's peak is its largest stage, not
 /// the sum of all its buffers, and between scans the map holds its evidence. Kept between
 /// scans, as they were to spare page faults, they took more memory and more faults: server
-/// peak RSS at BALM 0.2 m 154-169 -> 108-113 MiB, minor faults 36-41k -> 25-26k for its 80
-/// scans (stop 41, 9 runs each).
+/// peak RSS at BALM 0.2 m 150-169 -> 107-113 MiB, minor faults 36-41k -> 24-26k for its 80
+/// scans (stop 41, 16 and 18 runs), for about 3% more CPU in the server.
 struct KernelMap::Scratch {
   std::vector<std::vector<Sample>> sample_parts;
   SampleIndex::Storage index;
