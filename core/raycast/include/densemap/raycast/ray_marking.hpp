@@ -65,6 +65,8 @@ struct DenseSink {
   ScanUpdate& update;
   void markFree(const VoxelKey& k, std::uint32_t /*weight*/) { dense.markFree(k, update); }
   void markOccupied(const VoxelKey& k, std::uint32_t weight) { update.markOccupied(k, weight); }
+  /// A ray's marker (markRay, markRayCulled): the free marks' hot state in locals.
+  [[nodiscard]] DenseFreeMarks::Marker marker() { return DenseFreeMarks::Marker(dense, update); }
 };
 
 /// A DenseSink whose culling region shares the dense box's block indexing
@@ -103,10 +105,22 @@ void markEnd(const RayEnd& ray, Sink& update, MarkCounts& counts) {
 template <class Sink>
 void markRay(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray, Sink& update,
              MarkCounts& counts) {
-  traverseRay(grid, origin, ray.end, [&](const VoxelKey& k) {
-    update.markFree(k, ray.weight);
-    ++counts.visits;
-  });
+  // Counted in a local (a count in memory was reloaded and stored at every voxel).
+  std::size_t visits = 0;
+  if constexpr (requires { update.marker(); }) {
+    auto marker = update.marker();
+    traverseRay(grid, origin, ray.end, [&](const VoxelKey& k) {
+      marker.markFree(k);
+      ++visits;
+    });
+    marker.finish();
+  } else {
+    traverseRay(grid, origin, ray.end, [&](const VoxelKey& k) {
+      update.markFree(k, ray.weight);
+      ++visits;
+    });
+  }
+  counts.visits += visits;
   markEnd(ray, update, counts);
 }
 
@@ -121,12 +135,30 @@ void markRayCulled(const VoxelGrid& grid, const Point3f& origin, const RayEnd& r
                    const Region& region, BackwardScratch& scratch, Sink& update,
                    MarkCounts& counts) {
   std::size_t marked = 0;
-  const std::size_t total =
-      traverseRayBackward(grid, origin, ray.end, scratch, [&](const VoxelKey& k) {
-        if (!markFreeUnlessIn(region, update, k, ray.weight)) return false;
-        ++marked;
-        return true;
-      });
+  std::size_t total = 0;
+  if constexpr (requires { update.marker(); }) {
+    auto marker = update.marker();
+    const auto visit = [&](const VoxelKey& k) {
+      bool fresh = false;
+      if constexpr (requires { update.markFreeUnlessIn(region, k, ray.weight); }) {
+        fresh = marker.markFreeUnlessIn(region, k);  // the region shares the marks' indexing
+      } else if (!region.contains(k)) {
+        marker.markFree(k);
+        fresh = true;
+      }
+      if (!fresh) return false;
+      ++marked;
+      return true;
+    };
+    total = traverseRayBackward(grid, origin, ray.end, scratch, visit);
+    marker.finish();
+  } else {
+    total = traverseRayBackward(grid, origin, ray.end, scratch, [&](const VoxelKey& k) {
+      if (!markFreeUnlessIn(region, update, k, ray.weight)) return false;
+      ++marked;
+      return true;
+    });
+  }
   counts.visits += marked;
   counts.culled += total - marked;
   markEnd(ray, update, counts);
