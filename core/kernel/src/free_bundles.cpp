@@ -10,9 +10,11 @@
 
 namespace densemap::kernel {
 void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, double max_range,
-                 std::span<const RayStop> stops, const VoxelGrid& grid, const CapsuleShape& shape,
-                 bool bundle, FreeBundleBuffers& buffers, std::vector<FreeExtent>& out) {
+                 std::span<const RayStop> stops, const CapsuleShape& shape,
+                 const VoxelGrid* bundle_grid, FreeBundleBuffers& buffers,
+                 std::vector<FreeExtent>& out) {
   out.clear();
+  const bool bundle = bundle_grid != nullptr;
   const std::size_t n = points_world.size();
   // Each ray's hit number (the stop it takes: rays with a length that are not cut, in order).
   std::vector<std::uint32_t>& hit_of = buffers.hit_of;
@@ -26,7 +28,7 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
     takes[i] = hit_of[i + 1];
     hit_of[i + 1] += hit_of[i];
   }
-  // Rays by the voxel of their hit (a cut ray, or one outside the addressable range, alone:
+  // Rays by the cube of their hit (a cut ray, or one outside the addressable range, alone:
   // its own key).
   constexpr std::uint64_t kAlone = std::uint64_t{1} << 48;  // above every packed voxel
   std::vector<std::pair<std::uint64_t, std::uint32_t>>& rays = buffers.rays;
@@ -34,7 +36,7 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
   tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
     std::uint64_t key = kAlone;
     if (bundle && takes[i] != 0) {
-      if (const auto voxel = grid.pointToKey(points_world[i])) key = voxel->packed();
+      if (const auto voxel = bundle_grid->pointToKey(points_world[i])) key = voxel->packed();
     }
     rays[i] = {key, static_cast<std::uint32_t>(i)};
   });

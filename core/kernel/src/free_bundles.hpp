@@ -39,8 +39,10 @@ struct FreeBundleBuffers {
   std::vector<std::size_t> group_starts, offsets;
 };
 
+/// `bundle_grid`: the cubes whose hits' rays are bundled (null: no bundles).
 void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, double max_range,
-                 std::span<const RayStop> stops, const VoxelGrid& grid, const CapsuleShape& shape,
-                 bool bundle, FreeBundleBuffers& buffers, std::vector<FreeExtent>& out);
+                 std::span<const RayStop> stops, const CapsuleShape& shape,
+                 const VoxelGrid* bundle_grid, FreeBundleBuffers& buffers,
+                 std::vector<FreeExtent>& out);
 
 }  // namespace densemap::kernel

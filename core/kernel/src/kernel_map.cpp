@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -197,8 +198,15 @@ void KernelMap::fitKernels(const PointCloud& points_world, const Point3f& origin
                                .free_weight = options_.sf2 * joints,
                                .tip_radius_m = options_.tip_length_scale,
                                .tip_weight = options_.sf2};
-      freeExtents(points_world, origin, options_.max_range, stops, grid_, shape,
-                  options_.free_bundles, scratch_->bundles, free_extents);
+      // Bundled by the map's voxels, or by coarser cubes (free_bundle_m).
+      const std::optional<VoxelGrid> cubes =
+          options_.free_bundle_m > grid_.resolution()
+              ? std::optional<VoxelGrid>(VoxelGrid(options_.free_bundle_m))
+              : std::nullopt;
+      const VoxelGrid* bundle_grid =
+          !options_.free_bundles ? nullptr : cubes ? &*cubes : &grid_;
+      freeExtents(points_world, origin, options_.max_range, stops, shape, bundle_grid,
+                  scratch_->bundles, free_extents);
       scratch_->releaseBundles();
     }
     release(segments_);

@@ -85,6 +85,9 @@ struct KernelOptions {
   /// per ray (free_bundles.hpp). A voxel hit by one ray gives that ray's own capsule. Setting
   /// free_bundles=0 (or 1).
   bool free_bundles = false;
+  /// kAkimapRays with free_bundles: the edge of the cubes whose hits' rays are bundled, m
+  /// (<= the resolution: the map's voxels).
+  double free_bundle_m = 0.0;
   /// kAkimapRays: one adaptive kernel per voxel of at least `aggregate_min_hits` hits (3 in
   /// KernelOptions::defaults) (at their
   /// mean, weighing their count, fitted to the neighbourhood outside the voxel; its normal sets
@@ -104,7 +107,7 @@ struct KernelOptions {
 /// Applies "NAME=VALUE" settings to `options`: any double field above by its name (free_step,
 /// length_scale, sf2, prior, free_margin, max_margin, tip_margin, tip_length_scale,
 /// occupied_weight, hit_weight, hit_kernel_weight, hit_length_voxels, negative_step,
-/// search_max, search_range, min_thickness, aggregate_min_hits, free_reach), and
+/// search_max, search_range, min_thickness, aggregate_min_hits, free_reach, free_bundle_m), and
 /// free_traversal=0|1, aggregate_hits=0|1, free_bundles=0|1; errors name the setting.
 [[nodiscard]] Expected<void> applySettings(KernelOptions& options,
                                            const std::vector<std::string>& settings);
