@@ -228,6 +228,22 @@ double totalBeta(const KernelMap& map) {
   return sum;
 }
 
+/// Cells that are clearly free or occupied (p beyond 0.5 +- 0.3) in map b are so in map a too,
+/// but for under 1% of them (over 500 compared).
+template <class Cells>
+void expectTheSameShape(const Cells& a, const Cells& b) {
+  std::map<std::uint64_t, double> other(b.begin(), b.end());
+  std::size_t compared = 0, flipped = 0;
+  for (const auto& [key, p] : a) {
+    const auto it = other.find(key);
+    if (it == other.end() || std::abs(it->second - 0.5) < 0.3) continue;
+    ++compared;
+    flipped += (p > 0.5) != (it->second > 0.5);
+  }
+  ASSERT_GT(compared, 500U);
+  EXPECT_LT(static_cast<double>(flipped), 0.01 * static_cast<double>(compared));
+}
+
 TEST(FreeBundles, AVoxelHitByOneRayGivesThatRaysCapsuleBitForBit) {
   // A wall's hits 0.31 m apart: one hit per voxel, nothing to bundle.
   PointCloud sparse;
@@ -249,17 +265,7 @@ TEST(FreeBundles, RaysEndingInOneVoxelKeepTheirEvidenceAndTheMapsShape) {
   // The same evidence per metre of ray: the total free evidence within 3%.
   EXPECT_NEAR(totalBeta(bundled) / totalBeta(each), 1.0, 0.03);
   // Cells that are clearly free or occupied in one map are so in the other.
-  const auto a = cellsOf(bundled), b = cellsOf(each);
-  std::map<std::uint64_t, double> other(b.begin(), b.end());
-  std::size_t compared = 0, flipped = 0;
-  for (const auto& [key, p] : a) {
-    const auto it = other.find(key);
-    if (it == other.end() || std::abs(it->second - 0.5) < 0.3) continue;
-    ++compared;
-    flipped += (p > 0.5) != (it->second > 0.5);
-  }
-  ASSERT_GT(compared, 500U);
-  EXPECT_LT(static_cast<double>(flipped), 0.01 * static_cast<double>(compared));
+  expectTheSameShape(cellsOf(bundled), cellsOf(each));
 }
 
 // Issue 29's fifth stop: where voxels are finer than free_bundle_m, the rays whose hits share
@@ -282,17 +288,8 @@ TEST(FreeBundles, CubesBundleTheRaysOfNeighbouringVoxels) {
   const KernelMap cubes = run(0.2, &cube_visits);
   EXPECT_LT(static_cast<double>(cube_visits), 0.8 * static_cast<double>(voxel_visits));
   EXPECT_NEAR(totalBeta(cubes) / totalBeta(voxels), 1.0, 0.03);
-  const auto a = cellsOf(cubes), b = cellsOf(voxels);
-  std::map<std::uint64_t, double> other(b.begin(), b.end());
-  std::size_t compared = 0, flipped = 0;
-  for (const auto& [key, p] : a) {
-    const auto it = other.find(key);
-    if (it == other.end() || std::abs(it->second - 0.5) < 0.3) continue;
-    ++compared;
-    flipped += (p > 0.5) != (it->second > 0.5);
-  }
-  ASSERT_GT(compared, 500U);
-  EXPECT_LT(static_cast<double>(flipped), 0.01 * static_cast<double>(compared));
+  const auto b = cellsOf(voxels);
+  expectTheSameShape(cellsOf(cubes), b);
   EXPECT_EQ(cellsOf(run(0.1, &same_visits)), b);
   EXPECT_EQ(same_visits, voxel_visits);
 }

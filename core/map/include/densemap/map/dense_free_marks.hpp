@@ -30,26 +30,17 @@ class DenseFreeMarks {
   /// box's block indexing (CullingRegion::sharesFrame): one index serves both lookups.
   template <class Region>
   bool markFreeUnlessIn(const Region& region, const VoxelKey& k, ScanUpdate& outside) {
-    const std::uint32_t i = blockIndex(k);
-    if (i == kOutside) {
-      if (region.contains(k)) return false;
-      outside.markFree(k);
-      return true;
-    }
-    const int index = block::indexOf(k);
-    if (region.culledAt(i, index)) return false;
-    setAt(i, index);
-    return true;
+    Marker marker(*this, outside);
+    const bool marked = marker.markFreeUnlessIn(region, k);
+    marker.finish();
+    return marked;
   }
 
   /// Marks `k` free when inside the box; otherwise into `outside`.
   void markFree(const VoxelKey& k, ScanUpdate& outside) {
-    const std::uint32_t i = blockIndex(k);
-    if (i == kOutside) {
-      outside.markFree(k);
-      return;
-    }
-    setAt(i, block::indexOf(k));
+    Marker marker(*this, outside);
+    marker.markFree(k);
+    marker.finish();
   }
 
   /// ORs the marks into `update` (as free marks) and clears them.
@@ -130,22 +121,6 @@ class DenseFreeMarks {
 
  private:
   static constexpr std::uint32_t kOutside = ~std::uint32_t{0};
-  /// The index of `k`'s block in the box, or kOutside.
-  [[nodiscard]] std::uint32_t blockIndex(const VoxelKey& k) const {
-    const unsigned bx = static_cast<unsigned>(k.x >> block::kShift) - min_[0];
-    const unsigned by = static_cast<unsigned>(k.y >> block::kShift) - min_[1];
-    const unsigned bz = static_cast<unsigned>(k.z >> block::kShift) - min_[2];
-    if (bx >= n_[0] || by >= n_[1] || bz >= n_[2]) return kOutside;
-    return (bz * n_[1] + by) * n_[0] + bx;
-  }
-  /// Sets voxel `index` of block `i`, with branch-free first-touch bookkeeping: the touched
-  /// slot is overwritten until the count moves.
-  void setAt(std::uint32_t i, int index) {
-    touched_[touched_count_] = i;
-    touched_count_ += seen_[i] ^ 1U;
-    seen_[i] = 1;
-    block::setBit(masks_[i], index);
-  }
 
   unsigned min_[3] = {0, 0, 0};
   unsigned n_[3] = {0, 0, 0};
