@@ -59,7 +59,7 @@ struct ThreadBlocks {
       FreeTraversal::Block& b = slots[used++];
       b.key = key;
       b.sum.fill(0);
-      b.visited.fill(0);
+      b.mask.fill(0);
       it->second = &b;
     }
     cache_keys[line] = key;
@@ -203,7 +203,7 @@ struct CapsuleCells {
     ++visits;
     // w >= 0: rounding half up without llround's call.
     blk.sum[static_cast<std::size_t>(cell)] += static_cast<std::int32_t>(w * scaled_weight + 0.5);
-    blk.visited[static_cast<std::size_t>(cell)] = 1;
+    block::setBit(blk.mask, cell);
   }
 };
 
@@ -307,33 +307,17 @@ std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const Fre
     for (std::size_t s = 0; s < t.used; ++s) all.push_back(&t.slots[s]);
   }
   std::sort(all.begin(), all.end(), [](const Block* x, const Block* y) { return x->key < y->key; });
-  std::vector<Block*> firsts;
+  merged_.clear();
   for (std::size_t i = 0; i < all.size();) {
     Block& m = *all[i];
-    firsts.push_back(&m);
+    merged_.push_back(&m);
     for (++i; i < all.size() && all[i]->key == m.key; ++i) {
-      for (int c = 0; c < block::kVoxels; ++c) {
+      for (int c = 0; c < block::kVoxels; ++c)
         m.sum[static_cast<std::size_t>(c)] += all[i]->sum[static_cast<std::size_t>(c)];
-        m.visited[static_cast<std::size_t>(c)] |= all[i]->visited[static_cast<std::size_t>(c)];
-      }
+      for (int w = 0; w < block::kMaskWords; ++w)
+        m.mask[static_cast<std::size_t>(w)] |= all[i]->mask[static_cast<std::size_t>(w)];
     }
   }
-  // Each merged block's mask from its visited cells (in parallel: a pass over 512 bytes each).
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, firsts.size(), 64),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-                      for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                        Block& m = *firsts[i];
-                        for (int w = 0; w < block::kMaskWords; ++w) {
-                          std::uint64_t bits = 0;
-                          for (int c = 0; c < 64; ++c) {
-                            bits |= std::uint64_t{m.visited[static_cast<std::size_t>(64 * w + c)]}
-                                    << c;
-                          }
-                          m.mask[static_cast<std::size_t>(w)] = bits;
-                        }
-                      }
-                    });
-  merged_.assign(firsts.begin(), firsts.end());
   return visits.load();
 }
 

@@ -39,10 +39,7 @@ class FreeTraversal {
   struct Block {
     std::uint64_t key = 0;
     std::array<std::int32_t, block::kVoxels> sum{};
-    block::BlockMask mask{};  // the cells visited (made from `visited` once the rays are done)
-    /// 1 for each cell visited: a byte's store per visit, where a mask bit's read-modify-write
-    /// made the visits along a row wait on each other.
-    std::array<std::uint8_t, block::kVoxels> visited{};
+    block::BlockMask mask{};
   };
   static constexpr double kMaxScale = 1073741824.0;  // 2^30 per unit of evidence at most
   /// The fixed-point scale for extents whose weights (after the reach's compensation) sum to
