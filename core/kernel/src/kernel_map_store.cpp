@@ -156,7 +156,7 @@ std::size_t KernelMap::memoryBytes() const {
 std::size_t KernelMap::knownCells() const {
   std::size_t n = 0;
   for (const auto& [block_key, b] : blocks_) {
-    for (const std::uint64_t w : b.known) n += static_cast<std::size_t>(std::popcount(w));
+    n += block::countBits(b.known);
   }
   return n;
 }

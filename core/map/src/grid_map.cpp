@@ -235,12 +235,13 @@ void GridMap::forEachKnown(const std::function<void(const VoxelKey&, float)>& f)
   });
 }
 
-void GridMap::forEachFullyFreeBlock(
-    const block::BlockBox& box,
-    const std::function<void(std::uint64_t, const block::BlockMask&)>& f) const {
+void GridMap::appendFullyFreeBlocks(const block::BlockBox& box,
+                                    std::vector<FullyFreeBlock>& out) const {
   store_->forEachEntryIn(box, [&](const BlockEntry& e) {
     const BlockNode* n = BlockStore::latest(e);
-    if (n != nullptr) f(e.key, n->fully_free);
+    if (n != nullptr && block::anyBit(n->fully_free)) {
+      out.push_back({e.key, n->fully_free});
+    }
   });
 }
 

@@ -144,12 +144,11 @@ void OctreeMap::setLogOdds(const VoxelKey& key, float log_odds) {
   noteValue(key, log_odds);
 }
 
-void OctreeMap::forEachFullyFreeBlock(
-    const block::BlockBox& box,
-    const std::function<void(std::uint64_t, const block::BlockMask&)>& f) const {
+void OctreeMap::appendFullyFreeBlocks(const block::BlockBox& box,
+                                      std::vector<FullyFreeBlock>& out) const {
   refreshFullyFree();
   for (const auto& [block_key, mask] : fully_free_) {
-    if (box.contains(block_key)) f(block_key, mask);
+    if (box.contains(block_key) && block::anyBit(mask)) out.push_back({block_key, mask});
   }
 }
 

@@ -73,7 +73,7 @@ std::size_t ScanUpdate::freeCount() const {
 std::size_t ScanUpdate::occupiedCount() const {
   std::size_t n = 0;
   for (const auto& [block_key, b] : blocks_) {
-    for (int w = 0; w < block::kMaskWords; ++w) n += std::popcount(b.occupied[w]);
+    n += block::countBits(b.occupied);
   }
   return n;
 }

@@ -57,14 +57,7 @@ void CullingRegion::loadFullyFree(const OccupancyMap& map) {
   // blocks of different layers write different rows, so the layers load side by side.
   std::vector<FreeBlock>& found = scratch_.found;
   found.clear();
-  map.forEachFullyFreeBlock(box, [&](std::uint64_t block_key, const block::BlockMask& mask) {
-    for (const std::uint64_t w : mask) {
-      if (w != 0) {
-        found.push_back({block_key, mask});
-        return;
-      }
-    }
-  });
+  map.appendFullyFreeBlocks(box, found);
   const auto layers = static_cast<std::size_t>(bz1 - bz0 + 1);
   std::vector<std::size_t>& starts = scratch_.layer_starts;
   starts.assign(layers + 1, 0);
@@ -234,10 +227,7 @@ void CullingRegion::build(const OccupancyMap& map, const VoxelKey& origin, const
       for (unsigned w = 0; w < words_per_row_; ++w) r[w] &= p[w];
     }
     keepRunThrough(r, ox);
-    std::size_t n = 0;
-    for (unsigned w = 0; w < words_per_row_; ++w)
-      n += static_cast<std::size_t>(std::popcount(r[w]));
-    return n;
+    return block::countBits(r, words_per_row_);
   };
   // The values from `o` outward (up, then down) with each one's neighbour toward `o`.
   const auto outward = [](unsigned o, unsigned n, auto&& f) {

@@ -32,16 +32,18 @@ ScanUpdate randomUpdate(std::mt19937& rng, double p_occupied, UpdateRule rule = 
 /// The fully-free masks a map reports equal "known and at the lower bound", cell by cell.
 void expectFullyFreeMasksMatchValues(const OccupancyMap& map) {
   std::size_t from_masks = 0;
-  map.forEachFullyFreeBlock(block::BlockBox::all(),
-                            [&](std::uint64_t block_key, const block::BlockMask& mask) {
-                              for (int i = 0; i < block::kVoxels; ++i) {
-                                if (!block::testBit(mask, i)) continue;
-                                ++from_masks;
-                                const auto v = map.logOdds(block::keyOf(block_key, i));
-                                ASSERT_TRUE(v.has_value());
-                                EXPECT_LE(*v, map.sensorModel().clampMin());
-                              }
-                            });
+  std::vector<FullyFreeBlock> blocks;
+  map.appendFullyFreeBlocks(block::BlockBox::all(), blocks);
+  for (const auto& [block_key, mask] : blocks) {
+    EXPECT_NE(block::countBits(mask), 0U) << "a block without fully-free cells";
+    for (int i = 0; i < block::kVoxels; ++i) {
+      if (!block::testBit(mask, i)) continue;
+      ++from_masks;
+      const auto v = map.logOdds(block::keyOf(block_key, i));
+      ASSERT_TRUE(v.has_value());
+      EXPECT_LE(*v, map.sensorModel().clampMin());
+    }
+  }
   std::size_t from_values = 0;
   map.forEachKnown([&](const VoxelKey&, float v) {
     if (map.sensorModel().isFullyFree(v)) ++from_values;
@@ -138,10 +140,39 @@ TEST(OccupancyMaps, FullyFreeMasksFollowUpdatesSetsAndClears) {
 std::map<std::uint64_t, block::BlockMask> fullyFreeIn(const OccupancyMap& map,
                                                       const block::BlockBox& box) {
   std::map<std::uint64_t, block::BlockMask> out;
-  map.forEachFullyFreeBlock(box, [&](std::uint64_t key, const block::BlockMask& mask) {
+  std::vector<FullyFreeBlock> blocks;
+  map.appendFullyFreeBlocks(box, blocks);
+  for (const auto& [key, mask] : blocks) {
     EXPECT_TRUE(out.emplace(key, mask).second) << "block " << key << " reported twice";
-  });
+  }
   return out;
+}
+
+// Issue 31: countBits takes the POPCNT instruction where the processor has it; every variant
+// counts what a bit-by-bit loop counts.
+TEST(BlockLayout, CountBitsEqualsABitByBitCount) {
+  std::mt19937_64 rng(7);
+  std::vector<std::uint64_t> words(70);
+  for (std::size_t n = 0; n <= words.size(); ++n) {
+    for (auto& w : words) w = rng() & rng();  // about a quarter of the bits set
+    if (n > 2) words[1] = ~std::uint64_t{0};
+    std::size_t expected = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      for (int b = 0; b < 64; ++b) expected += (words[i] >> b) & 1U;
+    }
+    EXPECT_EQ(block::countBits(words.data(), n), expected) << n;
+    EXPECT_EQ(block::detail::countBitsPortable(words.data(), n), expected) << n;
+#if defined(__x86_64__) && defined(__GNUC__)
+    if (block::detail::hasPopcnt()) {
+      EXPECT_EQ(block::detail::countBitsPopcnt(words.data(), n), expected) << n;
+    }
+#endif
+  }
+  block::BlockMask m{};
+  block::setBit(m, 0);
+  block::setBit(m, 511);
+  block::setBit(m, 200);
+  EXPECT_EQ(block::countBits(m), 3U);
 }
 
 TEST(OccupancyMaps, FullyFreeBlocksInABoxAreTheWholeMapsBlocksInsideIt) {
@@ -160,15 +191,11 @@ TEST(OccupancyMaps, FullyFreeBlocksInABoxAreTheWholeMapsBlocksInsideIt) {
   octree.setLogOdds(VoxelKey{1000, 2000, 3000}, -3.0F);
   grid.setLogOdds(VoxelKey{60000, 200, 32768}, -3.0F);  // then dropped (the grid only)
   ASSERT_EQ(grid.evictBlocks([](const Point3f& c) { return c.x() < 2000.0F; }).blocks, 1U);
-  const auto nonEmpty = [](std::map<std::uint64_t, block::BlockMask> blocks) {
-    std::erase_if(blocks, [](const auto& b) { return block::countBits(b.second) == 0; });
-    return blocks;
-  };
   const auto all_grid = fullyFreeIn(grid, block::BlockBox::all());
   const auto all_octree = fullyFreeIn(octree, block::BlockBox::all());
-  ASSERT_GT(all_grid.size(), 100U);
-  ASSERT_GT(nonEmpty(all_grid).size(), 5U);
-  EXPECT_EQ(nonEmpty(all_grid), nonEmpty(all_octree));
+  ASSERT_GT(all_grid.size(), 5U);
+  for (const auto& [key, mask] : all_grid) EXPECT_NE(block::countBits(mask), 0U) << key;
+  EXPECT_EQ(all_grid, all_octree);
   const auto inside = [](const std::map<std::uint64_t, block::BlockMask>& blocks,
                          const block::BlockBox& box) {
     std::map<std::uint64_t, block::BlockMask> out;
@@ -192,7 +219,7 @@ TEST(OccupancyMaps, FullyFreeBlocksInABoxAreTheWholeMapsBlocksInsideIt) {
     ASSERT_EQ(fullyFreeIn(octree, box), inside(all_octree, box)) << "trial " << trial;
     found += expected.size();
   }
-  EXPECT_GT(found, 1000U);  // the boxes met the map
+  EXPECT_GT(found, 100U);  // the boxes met the map (302 blocks with fully-free cells)
 }
 
 // Eviction passes over whole regions of 8^3 blocks whose corners are kept: against the plain

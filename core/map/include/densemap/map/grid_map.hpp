@@ -34,9 +34,8 @@ class GridMap final : public OccupancyMap {
   [[nodiscard]] std::optional<float> logOdds(const VoxelKey& key) const override;
   void forEachKnown(const std::function<void(const VoxelKey&, float)>& f) const override;
   void setLogOdds(const VoxelKey& key, float log_odds) override;
-  void forEachFullyFreeBlock(
-      const block::BlockBox& box,
-      const std::function<void(std::uint64_t, const block::BlockMask&)>& f) const override;
+  void appendFullyFreeBlocks(const block::BlockBox& box,
+                             std::vector<FullyFreeBlock>& out) const override;
   [[nodiscard]] std::size_t knownCells() const override { return known_cells_; }
   [[nodiscard]] std::size_t memoryBytes() const override { return store_->memoryBytes(); }
   void clear() override;

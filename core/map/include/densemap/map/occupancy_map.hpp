@@ -31,6 +31,12 @@ struct ApplyStats {
   std::size_t changed_cells = 0;  // cells whose log-odds changed or that became known
 };
 
+/// A block with fully-free cells (OccupancyMap::appendFullyFreeBlocks): its key and their mask.
+struct FullyFreeBlock {
+  std::uint64_t key = 0;
+  block::BlockMask mask{};
+};
+
 /// A log-odds occupancy map at one resolution: the storage behind every integration method.
 /// Each backend keeps OctoMap's per-cell semantics exactly (DESIGN.md, exactness contract).
 ///
@@ -73,12 +79,13 @@ class OccupancyMap {
   /// Sets a cell's log-odds directly (loading snapshots, building maps in tests).
   virtual void setLogOdds(const VoxelKey& key, float log_odds) = 0;
 
-  /// Calls f(block_key, mask) for every block in `box` with cells at the lower clamping bound
-  /// (a free update cannot change them): the input of the culling region. Blocks may come with
-  /// an empty mask. The grid's cost follows the blocks in and near the box, not the map's size.
-  virtual void forEachFullyFreeBlock(
-      const block::BlockBox& box,
-      const std::function<void(std::uint64_t, const block::BlockMask&)>& f) const = 0;
+  /// Appends to `out` every block in `box` with cells at the lower clamping bound (a free
+  /// update cannot change them), once each, with its mask of those cells: the input of the
+  /// culling region. One call per scan (a callback per block, through std::function, was a
+  /// call per fully-free block of the box on every scan). The grid's cost follows the blocks in
+  /// and near the box, not the map's size.
+  virtual void appendFullyFreeBlocks(const block::BlockBox& box,
+                                     std::vector<FullyFreeBlock>& out) const = 0;
 
   [[nodiscard]] virtual std::size_t knownCells() const = 0;
   /// Bytes held by the map's storage (approximate for the octree: OctoMap's own estimate).

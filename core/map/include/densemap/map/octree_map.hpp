@@ -25,9 +25,8 @@ class OctreeMap final : public OccupancyMap {
   void forEachKnown(const std::function<void(const VoxelKey&, float)>& f) const override;
   void setLogOdds(const VoxelKey& key, float log_odds) override;
   /// After insertWithOctomap the first call rebuilds the masks (not concurrently with others).
-  void forEachFullyFreeBlock(
-      const block::BlockBox& box,
-      const std::function<void(std::uint64_t, const block::BlockMask&)>& f) const override;
+  void appendFullyFreeBlocks(const block::BlockBox& box,
+                             std::vector<FullyFreeBlock>& out) const override;
   [[nodiscard]] std::size_t knownCells() const override;
   [[nodiscard]] std::size_t memoryBytes() const override;
   void clear() override;

@@ -72,10 +72,7 @@ class CullingRegion {
     return bits_.data() + (static_cast<std::size_t>(z) * ny_ + y) * words_per_row_;
   }
   /// A block of the map with fully-free cells (its mask), as loadFullyFree collects them.
-  struct FreeBlock {
-    std::uint64_t key = 0;
-    block::BlockMask mask{};
-  };
+  using FreeBlock = FullyFreeBlock;
   /// Sets the bits of the box's fully-free voxels (the blocks' layers along z in parallel).
   void loadFullyFree(const OccupancyMap& map);
   /// Sets the bits of one block's fully-free voxels inside the box.

@@ -65,7 +65,7 @@ struct DenseSink {
   ScanUpdate& update;
   void markFree(const VoxelKey& k, std::uint32_t /*weight*/) { dense.markFree(k, update); }
   void markOccupied(const VoxelKey& k, std::uint32_t weight) { update.markOccupied(k, weight); }
-  /// A ray's marker (markRay, markRayCulled): the free marks' hot state in locals.
+  /// A ray's marker (markRay): the free marks' hot state in locals.
   [[nodiscard]] DenseFreeMarks::Marker marker() { return DenseFreeMarks::Marker(dense, update); }
 };
 
@@ -134,31 +134,15 @@ template <class Region, class Sink>
 void markRayCulled(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray,
                    const Region& region, BackwardScratch& scratch, Sink& update,
                    MarkCounts& counts) {
+  // Per voxel through the sink: a ray's Marker (as markRay takes) made this walk's marking
+  // 9% slower (BALM 0.1 m, 1 thread, side by side, 3 pairs).
   std::size_t marked = 0;
-  std::size_t total = 0;
-  if constexpr (requires { update.marker(); }) {
-    auto marker = update.marker();
-    const auto visit = [&](const VoxelKey& k) {
-      bool fresh = false;
-      if constexpr (requires { update.markFreeUnlessIn(region, k, ray.weight); }) {
-        fresh = marker.markFreeUnlessIn(region, k);  // the region shares the marks' indexing
-      } else if (!region.contains(k)) {
-        marker.markFree(k);
-        fresh = true;
-      }
-      if (!fresh) return false;
-      ++marked;
-      return true;
-    };
-    total = traverseRayBackward(grid, origin, ray.end, scratch, visit);
-    marker.finish();
-  } else {
-    total = traverseRayBackward(grid, origin, ray.end, scratch, [&](const VoxelKey& k) {
-      if (!markFreeUnlessIn(region, update, k, ray.weight)) return false;
-      ++marked;
-      return true;
-    });
-  }
+  const std::size_t total =
+      traverseRayBackward(grid, origin, ray.end, scratch, [&](const VoxelKey& k) {
+        if (!markFreeUnlessIn(region, update, k, ray.weight)) return false;
+        ++marked;
+        return true;
+      });
   counts.visits += marked;
   counts.culled += total - marked;
   markEnd(ray, update, counts);
