@@ -42,7 +42,7 @@ struct ThreadBlocks {
   }
   std::uint64_t last_key = ~std::uint64_t{0};
   FreeTraversal::Block* last = nullptr;
-  std::vector<Near> near;  // one capsule's voxels (collectVoxelsNear), kept
+  std::vector<Near> near;  // one capsule's voxels (collectVoxelsNearOn), kept
 
   FreeTraversal::Block& blockFor(std::uint64_t key) {
     if (key == last_key) return *last;
@@ -190,39 +190,27 @@ std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
   return n;
 }
 
-/// One capsule's evidence into a thread's blocks.
-struct CapsuleCells {
-  ThreadBlocks& blocks;
-  const SquaredKernelTable& table;
-  double inverse_length2, scaled_weight;
+/// The capsule's cells into `blocks` along the segment's dominant axis AX, each getting
+/// scaled_weight * k(d / radius) in fixed point; returns the visits.
+template <int AX>
+std::size_t rasterise(const VoxelGrid& grid, const FreeExtent& e, double reach,
+                      double scaled_weight, const SquaredKernelTable& table, ThreadBlocks& blocks) {
+  const double inverse_length2 = 1.0 / (e.radius_m * e.radius_m);
+  const std::size_t count = collectVoxelsNearOn<AX>(grid, e.from, e.to, reach, blocks.near);
   std::size_t visits = 0;
-
-  void add(FreeTraversal::Block& blk, int cell, double d2) {
-    const double w = table(d2 * inverse_length2);
-    if (!(w > 0.0)) return;
+  for (std::size_t q = 0; q < count; ++q) {
+    const Near& v = blocks.near[q];
+    const double w = table(v.d2 * inverse_length2);
+    if (!(w > 0.0)) continue;
     ++visits;
+    const VoxelKey key = VoxelKey::fromPacked(v.key);
+    FreeTraversal::Block& blk = blocks.blockFor(block::blockOf(key));
+    const int cell = block::indexOf(key);
     // w >= 0: rounding half up without llround's call.
     blk.sum[static_cast<std::size_t>(cell)] += static_cast<std::int32_t>(w * scaled_weight + 0.5);
     block::setBit(blk.mask, cell);
   }
-};
-
-/// The capsule's cells into `blocks` along the segment's dominant axis (none for a point);
-/// returns the visits.
-template <int AX>
-std::size_t rasterise(const VoxelGrid& grid, const FreeExtent& e, double reach,
-                      double scaled_weight, const SquaredKernelTable& table, ThreadBlocks& blocks) {
-  CapsuleCells cells{.blocks = blocks,
-                     .table = table,
-                     .inverse_length2 = 1.0 / (e.radius_m * e.radius_m),
-                     .scaled_weight = scaled_weight};
-  const std::size_t count = collectVoxelsNearOn<AX>(grid, e.from, e.to, reach, blocks.near);
-  for (std::size_t q = 0; q < count; ++q) {
-    const Near& v = blocks.near[q];
-    const VoxelKey key = VoxelKey::fromPacked(v.key);
-    cells.add(blocks.blockFor(block::blockOf(key)), block::indexOf(key), v.d2);
-  }
-  return cells.visits;
+  return visits;
 }
 
 }  // namespace
