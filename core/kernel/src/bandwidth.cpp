@@ -22,12 +22,26 @@ Eigen::Matrix3d neighbourCovariance(const Eigen::Vector3d& centre,
   }
   if (count < 4) return fallback_variance * Eigen::Matrix3d::Identity();
   const Eigen::Vector3d mean = sum / count;
-  Eigen::Matrix3d cov = (centre - mean) * (centre - mean).transpose();
+  // The six distinct entries, summed in neighbour order (d_i d_j and d_j d_i are the same
+  // product: the same matrix as the full outer products, in 6 of their 9 terms).
+  std::array<double, 6> c{};  // xx, xy, xz, yy, yz, zz
+  const auto add = [&c](const Eigen::Vector3d& d) {
+    c[0] += d.x() * d.x();
+    c[1] += d.x() * d.y();
+    c[2] += d.x() * d.z();
+    c[3] += d.y() * d.y();
+    c[4] += d.y() * d.z();
+    c[5] += d.z() * d.z();
+  };
+  add(centre - mean);
   for (const Neighbour& n : neighbours) {
-    if (n.same_label) cov += (n.x - mean) * (n.x - mean).transpose();
+    if (n.same_label) add(n.x - mean);
   }
-  cov /= count;
-  return cov + regulariser * Eigen::Matrix3d::Identity();
+  for (double& v : c) v /= count;
+  Eigen::Matrix3d cov;
+  cov << c[0] + regulariser, c[1], c[2], c[1], c[3] + regulariser, c[4], c[2], c[4],
+      c[5] + regulariser;
+  return cov;
 }
 
 namespace {
@@ -36,9 +50,10 @@ namespace {
 /// A neighbour with q_j >= s_max lies outside k(.; s Sigma) for every s <= s_max: its term is
 /// the constant target_j^2 (0 for a positive one, whose target is 0 there too), summed once
 /// into `outside` instead of evaluated at every s of the search.
+/// The arrays are the caller's (fitScale keeps them per thread: no allocation per kernel).
 struct Prepared {
-  std::vector<double> q;
-  std::vector<double> target;
+  std::vector<double>& q;
+  std::vector<double>& target;
   double outside = 0.0;
   double det = 1.0;
 };
@@ -46,8 +61,11 @@ struct Prepared {
 template <class KernelOfSquared>
 Prepared prepare(const Eigen::Matrix3d& sigma, const Eigen::Vector3d& centre,
                  std::span<const Neighbour> neighbours, const KernelOfSquared& kernel,
+                 std::vector<double>& q_buffer, std::vector<double>& target_buffer,
                  double s_max = std::numeric_limits<double>::infinity()) {
-  Prepared p;
+  Prepared p{q_buffer, target_buffer};
+  p.q.clear();
+  p.target.clear();
   const Eigen::Matrix3d inverse = sigma.inverse();
   p.det = sigma.determinant();
   p.q.reserve(neighbours.size());
@@ -85,12 +103,14 @@ double objective(double s, const Prepared& p) { return objective(s, p, squaredKe
 double scaleObjective(double s, const Eigen::Matrix3d& sigma, const Eigen::Vector3d& centre,
                       std::span<const Neighbour> neighbours) {
   const auto exact = [](double u) { return sparseKernel(std::sqrt(std::max(u, 0.0))); };
-  return objective(s, prepare(sigma, centre, neighbours, exact), exact);
+  std::vector<double> q, target;
+  return objective(s, prepare(sigma, centre, neighbours, exact, q, target), exact);
 }
 
 double fitScale(const Eigen::Matrix3d& sigma, const Eigen::Vector3d& centre,
                 std::span<const Neighbour> neighbours, double s_min, double s_max) {
-  const Prepared p = prepare(sigma, centre, neighbours, squaredKernel(), s_max);
+  thread_local std::vector<double> q, target;
+  const Prepared p = prepare(sigma, centre, neighbours, squaredKernel(), q, target, s_max);
   constexpr double kPerDoubling = 8.0;
   const int i_min = static_cast<int>(std::ceil(std::log2(s_min) * kPerDoubling));
   const int i_max = static_cast<int>(std::floor(std::log2(s_max) * kPerDoubling));

@@ -111,6 +111,13 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
   kernels.resize(outputs.back());
   means.resize(outputs.back());
   counts.resize(outputs.back());
+  // Each hit's group (other samples: none), read by the parallel fits below.
+  std::vector<std::uint32_t> group_of(samples.size(), ~std::uint32_t{0});
+  for (std::size_t g = 0; g < groups; ++g) {
+    for (std::uint32_t p = group_starts[g]; p < group_starts[g + 1]; ++p) {
+      group_of[hits[by_voxel[p].second]] = static_cast<std::uint32_t>(g);
+    }
+  }
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, groups, 64),
       [&](const tbb::blocked_range<std::size_t>& range) {
@@ -142,23 +149,12 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
           centre.x /= count;
           centre.to = centre.x;
           centre.range /= count;
-          const std::uint64_t own = by_voxel[first].first;
-          // The voxel's own hits, recognised by their position (no lookup per neighbour): a
-          // point clearly outside the voxel's cube (by more than a millimetre and a float's
-          // rounding at that distance from the origin) is not one; only points near its faces
-          // take the key's own test.
-          const VoxelKey own_key = VoxelKey::fromPacked(own);
-          const Eigen::Vector3d own_centre(grid.keyToCoord(own_key.x), grid.keyToCoord(own_key.y),
-                                           grid.keyToCoord(own_key.z));
-          const double clearly_out = 0.5 * grid.resolution() + 1e-3 +
-                                     2e-7 * own_centre.cwiseAbs().maxCoeff();  // float's step
+          // The voxel's own hits are not its neighbours: recognised by their group (they had
+          // been by position, with the key's own test near the voxel's faces: a float-to-key
+          // conversion per neighbour there).
+          const auto own = static_cast<std::uint32_t>(g);
           Kernel k = adaptiveKernel(
-              centre,
-              [&](const SampleIndex::Entry& e) {
-                if (!e.occupied) return false;
-                if (((e.x - own_centre).array().abs() > clearly_out).any()) return false;
-                return voxelOf(e.x) == own;
-              },
+              centre, [&](const SampleIndex::Entry& e) { return group_of[e.index] == own; },
               index, options, grid.resolution(), neighbours, &normal);
           k.weight *= count;
           kernels[out] = k;

@@ -116,23 +116,27 @@ Kernel adaptiveKernel(const Sample& s, LeftOut&& left_out, const SampleIndex& in
   const double range_ref = o.max_range > 0.0 ? o.max_range : o.search_range;
   const double half =
       resolution + (o.search_max - resolution) * std::clamp(s.range / range_ref, 0.0, 1.0);
-  neighbours.clear();
-  index.forEachInBox(s.x, half, [&](const SampleIndex::Entry& e) {
-    if (!left_out(e)) neighbours.push_back({e.x, e.occupied == s.occupied});
-  });
+  const std::size_t found = index.neighboursInBox(
+      s.x, half, s.occupied, [&](const SampleIndex::Entry& e) { return !left_out(e); },
+      neighbours);
+  const std::span<const Neighbour> near(neighbours.data(), found);
   // The regulariser keeps flat kernels at least `min_thickness` (and a voxel) thick, one
   // standard deviation, so a surface's samples reach the centres of the cells they lie in; the
   // isotropic fallback spans half the search box.
   const double thickness = std::max(o.min_thickness, resolution);
   const double regulariser = thickness * thickness;
-  const Eigen::Matrix3d sigma =
-      neighbourCovariance(s.x, neighbours, regulariser, 0.25 * half * half);
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(
-      sigma, normal != nullptr ? Eigen::ComputeEigenvectors : Eigen::EigenvaluesOnly);
+  const Eigen::Matrix3d sigma = neighbourCovariance(s.x, near, regulariser, 0.25 * half * half);
+  // The closed form for 3 x 3 (Eigen's computeDirect; the iterative QR took a quarter of a
+  // BALM kernel's fit): the same maps on every accuracy row to the digits printed, not bit for
+  // bit. Its eigenvectors of a well-separated least eigenvalue (the only ones used, as normals)
+  // are accurate; a normal's sign does not matter (rayStop takes |cos|).
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen;
+  eigen.computeDirect(sigma,
+                      normal != nullptr ? Eigen::ComputeEigenvectors : Eigen::EigenvaluesOnly);
   const double largest = eigen.eigenvalues().maxCoeff();  // ascending: [0] least, [2] largest
   if (normal != nullptr) {
     const std::size_t same = static_cast<std::size_t>(std::count_if(
-        neighbours.begin(), neighbours.end(), [](const Neighbour& n) { return n.same_label; }));
+        near.begin(), near.end(), [](const Neighbour& n) { return n.same_label; }));
     const double least = eigen.eigenvalues()[0] - regulariser;
     const double middle = eigen.eigenvalues()[1] - regulariser;
     *normal = same >= 3 && middle > 4.0 * std::max(least, 0.0) && middle > 0.0
@@ -141,7 +145,7 @@ Kernel adaptiveKernel(const Sample& s, LeftOut&& left_out, const SampleIndex& in
   }
   // The support (sqrt(s * lambda) along each axis) stays inside the search box.
   const double s_max = std::max(1.0, half * half / largest);
-  const double scale = fitScale(sigma, s.x, neighbours, 1.0 / 16.0, s_max);
+  const double scale = fitScale(sigma, s.x, near, 1.0 / 16.0, s_max);
   const Eigen::Matrix3d h = scale * sigma;
   Kernel k;
   k.x = s.x;

@@ -12,6 +12,7 @@
 #include <limits>
 #include <vector>
 
+#include "densemap/kernel/bandwidth.hpp"
 #include "densemap/kernel/occupancy_samples.hpp"
 #include "radix_sort.hpp"
 
@@ -110,23 +111,35 @@ class SampleIndex {
               static_cast<std::uint32_t>(keys.size()));
   }
 
-  /// Calls f(entry) for every point sample in the box centre +- half, in a fixed order.
-  template <class F>
-  void forEachInBox(const Eigen::Vector3d& centre, double half, F&& f) const {
-    if (entries_.empty()) return;
+  /// Writes the point samples in the box centre +- half that `keep(entry)` accepts into
+  /// `out` from index 0, in a fixed order, as Neighbours (same_label: the entry's label is
+  /// `occupied`), and returns how many; `out` only grows, its elements past the count are
+  /// scratch. No branch per entry: each is written, and kept when inside and accepted (the box
+  /// test, passed by about a third of the entries, had been mispredicted about every other).
+  template <class Keep>
+  std::size_t neighboursInBox(const Eigen::Vector3d& centre, double half, bool occupied,
+                              Keep&& keep, std::vector<Neighbour>& out) const {
+    if (entries_.empty()) return 0;
     const auto lo = cellOf(centre.array() - half);
     const auto hi = cellOf(centre.array() + half);
+    std::size_t n = 0;
     for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
       for (std::int64_t y = lo[1]; y <= hi[1]; ++y) {
         const std::int64_t row = (z * n_[1] + y) * n_[0];
         const std::uint32_t from = starts_[static_cast<std::size_t>(row + lo[0])];
         const std::uint32_t to = starts_[static_cast<std::size_t>(row + hi[0] + 1)];
+        if (out.size() < n + (to - from)) out.resize(2 * (n + (to - from)));
+        Neighbour* const written = out.data();
         for (std::uint32_t o = from; o < to; ++o) {
           const Entry& e = entries_[o];
-          if (((e.x - centre).array().abs() <= half).all()) f(e);
+          const Eigen::Array3d d = (e.x - centre).array().abs();
+          const bool inside = (d[0] <= half) & (d[1] <= half) & (d[2] <= half);
+          written[n] = {e.x, e.occupied == occupied};
+          n += static_cast<std::size_t>(inside & keep(e));
         }
       }
     }
+    return n;
   }
 
  private:
