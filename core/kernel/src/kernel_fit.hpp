@@ -65,9 +65,10 @@ struct Kernel {
       c = m(1, 1) * dy * dy + 2.0 * m(1, 2) * dy * dz + m(2, 2) * dz * dz;
     } else {
       const Eigen::Vector3d seg = to - x;
-      const double length = seg.norm();
+      const double length2 = seg.squaredNorm();  // a point kernel (0) takes no square root
       const double r2 = inverse_length * inverse_length;
-      if (length > 0.0) {
+      if (length2 > 0.0) {
+        const double length = std::sqrt(length2);  // seg.norm()
         const Eigen::Vector3d u = seg / length;
         const double along_yz = dy * u.y() + dz * u.z();
         a = (1.0 - u.x() * u.x()) * r2;
