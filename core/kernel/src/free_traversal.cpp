@@ -10,6 +10,7 @@
 #include <cmath>
 #include <deque>
 
+#include "densemap/geometry/rounding.hpp"
 #include "densemap/kernel/kernel_function.hpp"
 
 namespace densemap::kernel {
@@ -93,11 +94,7 @@ std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
   // The keys of the first voxel centre at or after v and of the last at or before it, clamped
   // into the addressable range ([0, 65535]; a clamped candidate lies farther than `reach`).
   const auto firstCentre = [&](double v) {
-    // ceil of a value in [0, 65535]: the truncation, one up where it cut something off (as
-    // std::ceil, without its ~25-instruction sequence on a processor without SSE4.1).
-    const double c = std::clamp(v * inverse_res + 32767.5, 0.0, 65535.0);
-    const int t = static_cast<int>(c);
-    return t + (static_cast<double>(t) < c ? 1 : 0);
+    return ceilToInt(std::clamp(v * inverse_res + 32767.5, 0.0, 65535.0));
   };
   const auto lastCentre = [&](double v) {
     return static_cast<int>(std::clamp(v * inverse_res + 32767.5, 0.0, 65535.0));

@@ -15,6 +15,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "densemap/geometry/rounding.hpp"
 #include "densemap/geometry/stopwatch.hpp"
 #include "densemap/kernel/bandwidth.hpp"
 #include "densemap/kernel/kernel_function.hpp"
@@ -339,11 +340,13 @@ std::size_t KernelMap::accumulateKernels(
                                           hi)) {
                   continue;
                 }
-                const int from = lo <= base_x ? x0
-                                              : static_cast<int>(std::min<double>(
-                                                    x1 + 1, x0 + std::ceil((lo - base_x) / res)));
-                const int to = static_cast<int>(
-                    std::clamp<double>(x0 + std::floor((hi - base_x) / res), x0 - 1, x1));
+                // The row's cells [from, to] within [x0, x1]: ceil and floor of the interval's
+                // ends in cells, clamped first (an end may be infinite).
+                const int from =
+                    lo <= base_x ? x0
+                                 : x0 + ceilToInt(std::min<double>(x1 + 1 - x0, (lo - base_x) / res));
+                const int to =
+                    x0 + floorToInt(std::clamp<double>((hi - base_x) / res, -1.0, x1 - x0));
                 const double cy = grid_.keyToCoord(static_cast<std::uint16_t>(y));
                 const double cz = grid_.keyToCoord(static_cast<std::uint16_t>(z));
                 for (int x = from; x <= to; ++x) {
