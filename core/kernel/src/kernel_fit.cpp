@@ -154,8 +154,8 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
           // conversion per neighbour there).
           const auto own = static_cast<std::uint32_t>(g);
           Kernel k = adaptiveKernel(
-              centre, [&](const SampleIndex::Entry& e) { return group_of[e.index] == own; },
-              index, options, grid.resolution(), neighbours, &normal);
+              centre, [&](const SampleIndex::Entry& e) { return group_of[e.index] == own; }, index,
+              options, grid.resolution(), neighbours, &normal);
           k.weight *= count;
           kernels[out] = k;
           means[out] = centre.x;

@@ -118,8 +118,7 @@ Kernel adaptiveKernel(const Sample& s, LeftOut&& left_out, const SampleIndex& in
   const double half =
       resolution + (o.search_max - resolution) * std::clamp(s.range / range_ref, 0.0, 1.0);
   const std::size_t found = index.neighboursInBox(
-      s.x, half, s.occupied, [&](const SampleIndex::Entry& e) { return !left_out(e); },
-      neighbours);
+      s.x, half, s.occupied, [&](const SampleIndex::Entry& e) { return !left_out(e); }, neighbours);
   const std::span<const Neighbour> near(neighbours.data(), found);
   // The regulariser keeps flat kernels at least `min_thickness` (and a voxel) thick, one
   // standard deviation, so a surface's samples reach the centres of the cells they lie in; the
@@ -136,8 +135,8 @@ Kernel adaptiveKernel(const Sample& s, LeftOut&& left_out, const SampleIndex& in
                       normal != nullptr ? Eigen::ComputeEigenvectors : Eigen::EigenvaluesOnly);
   const double largest = eigen.eigenvalues().maxCoeff();  // ascending: [0] least, [2] largest
   if (normal != nullptr) {
-    const std::size_t same = static_cast<std::size_t>(std::count_if(
-        near.begin(), near.end(), [](const Neighbour& n) { return n.same_label; }));
+    const std::size_t same = static_cast<std::size_t>(
+        std::count_if(near.begin(), near.end(), [](const Neighbour& n) { return n.same_label; }));
     const double least = eigen.eigenvalues()[0] - regulariser;
     const double middle = eigen.eigenvalues()[1] - regulariser;
     *normal = same >= 3 && middle > 4.0 * std::max(least, 0.0) && middle > 0.0

@@ -343,8 +343,9 @@ std::size_t KernelMap::accumulateKernels(
                 // The row's cells [from, to] within [x0, x1]: ceil and floor of the interval's
                 // ends in cells, clamped first (an end may be infinite).
                 const int from =
-                    lo <= base_x ? x0
-                                 : x0 + ceilToInt(std::min<double>(x1 + 1 - x0, (lo - base_x) / res));
+                    lo <= base_x
+                        ? x0
+                        : x0 + ceilToInt(std::min<double>(x1 + 1 - x0, (lo - base_x) / res));
                 const int to =
                     x0 + floorToInt(std::clamp<double>((hi - base_x) / res, -1.0, x1 - x0));
                 const double cy = grid_.keyToCoord(static_cast<std::uint16_t>(y));
