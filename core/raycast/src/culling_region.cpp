@@ -55,7 +55,7 @@ void CullingRegion::loadFullyFree(const OccupancyMap& map) {
               static_cast<std::uint32_t>(bz1)}};
   // The box's blocks with fully-free cells, then by layer of blocks along z (a counting sort):
   // blocks of different layers write different rows, so the layers load side by side.
-  std::vector<FreeBlock>& found = scratch_.found;
+  std::vector<FullyFreeBlock>& found = scratch_.found;
   found.clear();
   map.appendFullyFreeBlocks(box, found);
   const auto layers = static_cast<std::size_t>(bz1 - bz0 + 1);
@@ -64,20 +64,20 @@ void CullingRegion::loadFullyFree(const OccupancyMap& map) {
   const auto layerOf = [bz0](std::uint64_t block_key) {
     return static_cast<std::size_t>(((block_key >> 26) & 0x1fff) - bz0);
   };
-  for (const FreeBlock& b : found) ++starts[layerOf(b.key) + 1];
+  for (const FullyFreeBlock& b : found) ++starts[layerOf(b.key) + 1];
   for (std::size_t l = 0; l < layers; ++l) starts[l + 1] += starts[l];
-  std::vector<FreeBlock>& by_layer = scratch_.by_layer;
+  std::vector<FullyFreeBlock>& by_layer = scratch_.by_layer;
   by_layer.resize(found.size());
   {
     std::vector<std::size_t> next(starts.begin(), starts.end() - 1);
-    for (const FreeBlock& b : found) by_layer[next[layerOf(b.key)]++] = b;
+    for (const FullyFreeBlock& b : found) by_layer[next[layerOf(b.key)]++] = b;
   }
   tbb::parallel_for(std::size_t{0}, layers, [&](std::size_t l) {
     for (std::size_t i = starts[l]; i < starts[l + 1]; ++i) loadBlock(by_layer[i]);
   });
 }
 
-void CullingRegion::loadBlock(const FreeBlock& b) {
+void CullingRegion::loadBlock(const FullyFreeBlock& b) {
   const std::uint64_t bx = b.key & 0x1fff, by = (b.key >> 13) & 0x1fff, bz = (b.key >> 26) & 0x1fff;
   // Mask word z holds the block's 8x8 voxels of layer z, byte y the row along x.
   const int x0 = static_cast<int>(bx << block::kShift) - min_.x;

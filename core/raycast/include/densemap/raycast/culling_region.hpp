@@ -71,12 +71,10 @@ class CullingRegion {
   std::uint64_t* row(unsigned y, unsigned z) {
     return bits_.data() + (static_cast<std::size_t>(z) * ny_ + y) * words_per_row_;
   }
-  /// A block of the map with fully-free cells (its mask), as loadFullyFree collects them.
-  using FreeBlock = FullyFreeBlock;
   /// Sets the bits of the box's fully-free voxels (the blocks' layers along z in parallel).
   void loadFullyFree(const OccupancyMap& map);
   /// Sets the bits of one block's fully-free voxels inside the box.
-  void loadBlock(const FreeBlock& b);
+  void loadBlock(const FullyFreeBlock& b);
   /// Copies the swept rows into bricks_ (the query layout) over the blocks of `frame`.
   void toBricks(const KeyBox& frame);
   /// Keeps the run of set bits of `r` that contains bit `x0` (none if it is clear).
@@ -90,7 +88,7 @@ class CullingRegion {
   unsigned bricks_n_[3] = {0, 0, 0};
   std::vector<block::BlockMask> bricks_;
   struct Scratch {  // loadFullyFree's arrays, kept between builds
-    std::vector<FreeBlock> found, by_layer;
+    std::vector<FullyFreeBlock> found, by_layer;
     std::vector<std::size_t> layer_starts;
   };
   Scratch scratch_;
