@@ -62,9 +62,11 @@ void samplesKernels(const KernelOptions& options, double resolution,
 
 }  // namespace
 
-KernelMap::KernelMap(double resolution_m, const KernelOptions& options)
+KernelMap::KernelMap(double resolution_m, const KernelOptions& options, BlockStore* store)
     : grid_(resolution_m),
       options_(options),
+      own_store_(store == nullptr ? std::make_unique<BlockStore>() : nullptr),
+      store_(store == nullptr ? own_store_.get() : store),
       free_(std::make_unique<FreeTraversal>()),
       scratch_(std::make_unique<Scratch>()) {}
 KernelMap::~KernelMap() = default;
@@ -288,20 +290,18 @@ std::size_t KernelMap::accumulateKernels(
   const std::vector<Kernel>& kernels = scratch_->kernels;
   const std::vector<std::pair<std::uint64_t, std::uint32_t>>& pairs = scratch_->pairs;
   std::vector<std::size_t> starts;
+  std::vector<BlockEntry*>& entries = scratch_->targets;
+  entries.clear();
   for (std::size_t p = 0; p < pairs.size(); ++p) {
     if (p == 0 || pairs[p].first != pairs[p - 1].first) {
       starts.push_back(p);
-      blocks_.try_emplace(pairs[p].first);  // created here, filled in parallel below
+      entries.push_back(&store_->entry(pairs[p].first));  // found or made here, filled below
     }
   }
   starts.push_back(pairs.size());
   std::atomic<std::size_t> cell_updates{0};
   const SquaredKernelTable& table = squaredKernel();
   std::vector<block::BlockMask> reached(reached_blocks != nullptr ? starts.size() - 1 : 0);
-  // Blocks a kernel's box overlaps but none of whose cells it reaches hold no evidence: made
-  // above, they are dropped below (the published map never hears of them, so eviction would
-  // never drop them: on a long drive they piled up, a few MiB per 100 scans at a flat map).
-  std::vector<std::uint8_t> empty(starts.size() - 1, 0);
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, starts.size() - 1, 4),
       [&](const tbb::blocked_range<std::size_t>& range) {
@@ -311,7 +311,6 @@ std::size_t KernelMap::accumulateKernels(
         std::array<double, block::kVoxels> sum_alpha{}, sum_beta{};
         for (std::size_t g = range.begin(); g != range.end(); ++g) {
           const std::uint64_t block_key = pairs[starts[g]].first;
-          Block& b = blocks_.find(block_key)->second;
           block::BlockMask summed{};
           for (std::size_t p = starts[g]; p < starts[g + 1]; ++p) {
             const Kernel& k = kernels[pairs[p].second];
@@ -368,6 +367,10 @@ std::size_t KernelMap::accumulateKernels(
               }
             }
           }
+          // A block whose cells no kernel reached gets no evidence (its entry, made above, has
+          // none: the store forgets it below).
+          if (block::countBits(summed) == 0) continue;
+          BlockEvidence& b = store_->evidence(*entries[g]);
           block::forEachSetBit(summed, [&](int cell) {
             b.alpha[cell] += static_cast<float>(sum_alpha[cell]);
             b.beta[cell] += static_cast<float>(sum_beta[cell]);
@@ -375,14 +378,13 @@ std::size_t KernelMap::accumulateKernels(
             sum_beta[cell] = 0.0;
           });
           for (int w = 0; w < block::kMaskWords; ++w) b.known[w] |= summed[w];
-          empty[g] = block::countBits(b.known) == 0 ? 1 : 0;
           if (reached_blocks != nullptr) reached[g] = summed;
         }
         cell_updates += updates;
       });
-  for (std::size_t g = 0; g + 1 < starts.size(); ++g) {
-    if (empty[g] != 0) blocks_.erase(pairs[starts[g]].first);
-  }
+  // Entries made for blocks a kernel's box overlaps but none of whose cells it reaches: the
+  // published map never hears of them (on a long drive they piled up when kept).
+  for (const BlockEntry* e : entries) store_->forgetIfEmpty(*e);
   if (reached_blocks != nullptr) {
     for (std::size_t g = 0; g + 1 < starts.size(); ++g) {
       // A block no cell of which was reached is not the published map's business either.
@@ -400,17 +402,17 @@ std::size_t KernelMap::accumulateKernels(
 void KernelMap::applyFree(std::vector<std::pair<std::uint64_t, block::BlockMask>>* reached_blocks) {
   // The blocks found (or made) one by one, then filled in parallel: one block per task.
   const std::vector<const FreeTraversal::Block*>& free_blocks = free_->blocks();
-  std::vector<Block*>& targets = scratch_->free_targets;
+  std::vector<BlockEntry*>& targets = scratch_->targets;
   targets.resize(free_blocks.size());
   const double inverse_scale = 1.0 / free_->scale();
   for (std::size_t i = 0; i < free_blocks.size(); ++i) {
-    targets[i] = &blocks_[free_blocks[i]->key];
+    targets[i] = &store_->entry(free_blocks[i]->key);
     if (reached_blocks != nullptr)
       reached_blocks->emplace_back(free_blocks[i]->key, free_blocks[i]->mask);
   }
   tbb::parallel_for(std::size_t{0}, free_blocks.size(), [&](std::size_t i) {
     const FreeTraversal::Block& f = *free_blocks[i];
-    Block& b = *targets[i];
+    BlockEvidence& b = store_->evidence(*targets[i]);
     block::forEachSetBit(f.mask, [&](int cell) {
       b.beta[cell] += static_cast<float>(static_cast<double>(f.sum[cell]) * inverse_scale);
       block::setBit(b.known, cell);

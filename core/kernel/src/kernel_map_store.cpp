@@ -1,8 +1,10 @@
 #include "densemap/kernel/kernel_map.hpp"
 
+#include <algorithm>
 #include <bit>
 #include <cmath>
 #include <limits>
+#include <utility>
 
 #include "kernel_scratch.hpp"
 
@@ -10,49 +12,63 @@
 /// snapshots' evidence, memory.
 namespace densemap::kernel {
 
-void KernelMap::erase(const VoxelKey& key) {
-  const auto it = blocks_.find(block::blockOf(key));
-  if (it == blocks_.end()) return;
-  const int cell = block::indexOf(key);
-  block::clearBit(it->second.known, cell);
-  it->second.alpha[cell] = 0.0F;
-  it->second.beta[cell] = 0.0F;
-  // A block with no cell left goes (the published map drops it too; eviction follows it).
-  if (block::countBits(it->second.known) == 0) blocks_.erase(it);
+const BlockEvidence* KernelMap::find(std::uint64_t block_key) const {
+  const BlockEntry* e = std::as_const(*store_).findEntry(block_key);
+  return e != nullptr ? e->evidence.get() : nullptr;
 }
 
-std::size_t KernelMap::eraseBlocks(std::span<const std::uint64_t> blocks) {
-  std::size_t erased = 0;
-  for (const std::uint64_t b : blocks) erased += blocks_.erase(b);
-  return erased;
+template <typename F>
+void KernelMap::forEachBlock(F&& f) const {
+  std::vector<std::pair<std::uint64_t, const BlockEvidence*>> order;
+  order.reserve(store_->evidenceBlocks());
+  store_->forEachEntryWriter([&](const BlockEntry& e) {
+    if (e.evidence) order.emplace_back(e.key, e.evidence.get());
+  });
+  std::sort(order.begin(), order.end());  // a file does not depend on the store's order
+  for (const auto& [block_key, b] : order) f(block_key, *b);
+}
+
+void KernelMap::erase(const VoxelKey& key) {
+  BlockEntry* e = store_->findEntry(block::blockOf(key));
+  if (e == nullptr || !e->evidence) return;
+  BlockEvidence& b = *e->evidence;
+  const int cell = block::indexOf(key);
+  block::clearBit(b.known, cell);
+  b.alpha[cell] = 0.0F;
+  b.beta[cell] = 0.0F;
+  // A block with no cell left goes (the published map drops it too; eviction follows it).
+  if (block::countBits(b.known) == 0) store_->dropEvidence(*e);
 }
 
 std::size_t KernelMap::evictBlocks(const std::function<bool(const Point3f&)>& keep) {
-  const std::size_t before = blocks_.size();
-  std::erase_if(blocks_,
-                [&](const auto& entry) { return !keep(block::centreOf(grid_, entry.first)); });
-  return before - blocks_.size();
+  std::size_t dropped = 0;
+  store_->forEachEntryWriter([&](BlockEntry& e) {
+    if (e.evidence && !keep(block::centreOf(grid_, e.key))) {
+      store_->dropEvidence(e);
+      ++dropped;
+    }
+  });
+  return dropped;
 }
 
 std::optional<double> KernelMap::probability(const VoxelKey& key) const {
-  const auto it = blocks_.find(block::blockOf(key));
-  if (it == blocks_.end()) return std::nullopt;
+  const BlockEvidence* b = find(block::blockOf(key));
   const int cell = block::indexOf(key);
-  if (!block::testBit(it->second.known, cell)) return std::nullopt;
-  const double alpha = options_.prior + it->second.alpha[cell];
-  const double beta = options_.prior + it->second.beta[cell];
+  if (b == nullptr || !block::testBit(b->known, cell)) return std::nullopt;
+  const double alpha = options_.prior + b->alpha[cell];
+  const double beta = options_.prior + b->beta[cell];
   return alpha / (alpha + beta);
 }
 
 void KernelMap::blockLogOdds(std::uint64_t block_key, const block::BlockMask& cells,
                              std::array<float, block::kVoxels>& log_odds) const {
-  const auto it = blocks_.find(block_key);
+  const BlockEvidence* b = find(block_key);
   block::forEachSetBit(cells, [&](int cell) {
     // probability(), cell by cell: unknown is p = 0.5
     double p = 0.5;
-    if (it != blocks_.end() && block::testBit(it->second.known, cell)) {
-      const double alpha = options_.prior + it->second.alpha[cell];
-      const double beta = options_.prior + it->second.beta[cell];
+    if (b != nullptr && block::testBit(b->known, cell)) {
+      const double alpha = options_.prior + b->alpha[cell];
+      const double beta = options_.prior + b->beta[cell];
       p = alpha / (alpha + beta);
     }
     log_odds[cell] = static_cast<float>(std::log(p / (1.0 - p)));
@@ -60,14 +76,13 @@ void KernelMap::blockLogOdds(std::uint64_t block_key, const block::BlockMask& ce
 }
 
 void KernelMap::forEachKnown(const std::function<void(const VoxelKey&, double)>& f) const {
-  for (const auto& [block_key, b] : blocks_) {
-    for (int cell = 0; cell < block::kVoxels; ++cell) {
-      if (!block::testBit(b.known, cell)) continue;
+  forEachBlock([&](std::uint64_t block_key, const BlockEvidence& b) {
+    block::forEachSetBit(b.known, [&](int cell) {
       const double alpha = options_.prior + b.alpha[cell];
       const double beta = options_.prior + b.beta[cell];
       f(block::keyOf(block_key, cell), alpha / (alpha + beta));
-    }
-  }
+    });
+  });
 }
 
 KernelEvidence KernelMap::evidence() const {
@@ -75,22 +90,17 @@ KernelEvidence KernelMap::evidence() const {
   e.method = options_.method;
   e.resolution_m = grid_.resolution();
   e.scans = scans_;
-  std::vector<std::uint64_t> order;
-  order.reserve(blocks_.size());
-  for (const auto& entry : blocks_) order.push_back(entry.first);
-  std::sort(order.begin(), order.end());  // a file does not depend on the hash's order
   const std::size_t n = knownCells();
   e.keys.reserve(n);
   e.alpha.reserve(n);
   e.beta.reserve(n);
-  for (const std::uint64_t block_key : order) {
-    const Block& b = blocks_.at(block_key);
+  forEachBlock([&](std::uint64_t block_key, const BlockEvidence& b) {
     block::forEachSetBit(b.known, [&](int cell) {
       e.keys.push_back(block::keyOf(block_key, cell));
       e.alpha.push_back(b.alpha[static_cast<std::size_t>(cell)]);
       e.beta.push_back(b.beta[static_cast<std::size_t>(cell)]);
     });
-  }
+  });
   return e;
 }
 
@@ -115,9 +125,9 @@ Expected<void> KernelMap::restore(const KernelEvidence& e) {
       return makeError("kernel evidence has a negative or non-finite value");
     }
   }
-  blocks_.clear();
+  store_->forEachEntryWriter([&](BlockEntry& entry) { store_->dropEvidence(entry); });
   for (std::size_t i = 0; i < e.keys.size(); ++i) {
-    Block& b = blocks_[block::blockOf(e.keys[i])];
+    BlockEvidence& b = store_->evidence(store_->entry(block::blockOf(e.keys[i])));
     const int cell = block::indexOf(e.keys[i]);
     b.alpha[static_cast<std::size_t>(cell)] = static_cast<float>(e.alpha[i]);
     b.beta[static_cast<std::size_t>(cell)] = static_cast<float>(e.beta[i]);
@@ -128,9 +138,8 @@ Expected<void> KernelMap::restore(const KernelEvidence& e) {
 }
 
 std::size_t KernelMap::memoryBytes() const {
-  // A node of the hash (the block, its key, the next pointer) and a bucket per block.
-  std::size_t bytes = blocks_.size() * (sizeof(Block) + 2 * sizeof(void*) + sizeof(std::uint64_t)) +
-                      blocks_.bucket_count() * sizeof(void*);
+  std::size_t bytes = own_store_ ? own_store_->memoryBytes() : 0;
+  bytes += scratch_->targets.capacity() * sizeof(BlockEntry*);
   bytes += (samples_.capacity() + segments_.capacity()) * sizeof(Sample);
   for (const auto& part : scratch_->sample_parts) bytes += part.capacity() * sizeof(Sample);
   bytes += scratch_->index.starts.capacity() * sizeof(std::uint32_t) +
@@ -155,9 +164,9 @@ std::size_t KernelMap::memoryBytes() const {
 
 std::size_t KernelMap::knownCells() const {
   std::size_t n = 0;
-  for (const auto& [block_key, b] : blocks_) {
-    n += block::countBits(b.known);
-  }
+  store_->forEachEntryWriter([&](const BlockEntry& e) {
+    if (e.evidence) n += block::countBits(e.evidence->known);
+  });
   return n;
 }
 

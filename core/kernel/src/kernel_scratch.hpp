@@ -37,7 +37,7 @@ struct KernelMap::Scratch {
   std::vector<std::size_t> pair_offsets;
   std::vector<std::pair<std::uint64_t, std::uint32_t>> pairs_other;
   std::vector<std::uint32_t> radix_counts;
-  std::vector<Block*> free_targets;
+  std::vector<BlockEntry*> targets;  // the entries an accumulation writes evidence to
   FreeBundleBuffers bundles;
 
   /// After the kernels are fitted: the samples' chunks and index.
@@ -71,7 +71,7 @@ struct KernelMap::Scratch {
   /// After the free evidence is applied: the extents.
   void releaseFree() {
     release(free_extents);
-    release(free_targets);
+    release(targets);
   }
 };
 

@@ -202,7 +202,29 @@ BlockNode& BlockStore::writable(BlockEntry& e) {
   return *node;
 }
 
+BlockEvidence& BlockStore::evidence(BlockEntry& e) {
+  if (!e.evidence) {
+    e.evidence = std::make_unique<BlockEvidence>();
+    evidence_blocks_.fetch_add(1, std::memory_order_relaxed);
+  }
+  return *e.evidence;
+}
+
+void BlockStore::dropEvidence(BlockEntry& e) {
+  if (!e.evidence) return;
+  e.evidence.reset();
+  evidence_blocks_.fetch_sub(1, std::memory_order_relaxed);
+  if (e.head.load(std::memory_order_relaxed) == nullptr) ++retired_since_compaction_;
+}
+
+void BlockStore::forgetIfEmpty(const BlockEntry& e) {
+  if (!e.evidence && e.head.load(std::memory_order_relaxed) == nullptr) {
+    ++retired_since_compaction_;
+  }
+}
+
 bool BlockStore::drop(BlockEntry& e) {
+  dropEvidence(e);
   ChainLink* head = e.head.load(std::memory_order_relaxed);
   if (contents(head) == nullptr) return false;
   std::lock_guard lock(pool_mutex_);
@@ -246,7 +268,10 @@ void BlockStore::compactIfWorthIt() {
   if (retired_since_compaction_ < 4096 || retired_since_compaction_ * 4 < entries_.size()) return;
   retired_since_compaction_ = 0;
   std::size_t alive = 0;
-  for (const BlockEntry& e : entries_) alive += e.head.load(std::memory_order_relaxed) != nullptr;
+  const auto live = [](const BlockEntry& e) {
+    return e.head.load(std::memory_order_relaxed) != nullptr || e.evidence != nullptr;
+  };
+  for (const BlockEntry& e : entries_) alive += live(e) ? 1 : 0;
   if (alive * 4 > entries_.size() * 3) return;  // fewer than a quarter dead: not worth it
   auto garbage = std::make_shared<Garbage>();
   garbage->entries = std::move(entries_);
@@ -256,11 +281,11 @@ void BlockStore::compactIfWorthIt() {
   int bits = kInitialTableBits;
   while ((std::size_t{1} << bits) < alive * 2 + 2) ++bits;
   auto table = std::make_unique<Table>(bits);
-  for (const BlockEntry& old : garbage->entries) {
-    ChainLink* head = old.head.load(std::memory_order_relaxed);
-    if (head == nullptr) continue;
+  for (BlockEntry& old : garbage->entries) {
+    if (!live(old)) continue;
     BlockEntry& e = entries_.emplace_back(old.key);
-    e.head.store(head, std::memory_order_relaxed);
+    e.head.store(old.head.load(std::memory_order_relaxed), std::memory_order_relaxed);
+    e.evidence = std::move(old.evidence);  // the writer's alone: readers never look at it
     index(e);
     std::size_t i = slotOf(*table, e.key);
     while (table->slots[i].load(std::memory_order_relaxed) != nullptr) i = (i + 1) & table->mask;
@@ -377,6 +402,7 @@ void BlockStore::clearUnversioned() {
   tables_.push_back(std::make_unique<Table>(kInitialTableBits));
   table_.store(tables_.back().get(), std::memory_order_release);
   entries_.clear();
+  evidence_blocks_.store(0);
   regions_.clear();
 }
 
@@ -396,7 +422,8 @@ std::size_t BlockStore::memoryBytes() const {
   std::lock_guard lock(pool_mutex_);
   return slabs_.size() * kSlabNodes * sizeof(BlockNode) + table_bytes +
          entries_.size() * sizeof(BlockEntry) + indexBytes() + free_.capacity() * sizeof(void*) +
-         tombs_.size() * sizeof(ChainLink);
+         tombs_.size() * sizeof(ChainLink) +
+         evidence_blocks_.load(std::memory_order_relaxed) * (sizeof(BlockEvidence) + 16);
 }
 
 }  // namespace densemap

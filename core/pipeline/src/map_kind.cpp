@@ -34,10 +34,7 @@ void MapKind::beforePublish(const CellChanges& changes) {
 std::size_t MapKind::ownBytes() const { return mirror_ ? map_->memoryBytes() : 0; }
 
 EvictStats MapKind::evict(const Keep& keep, CellChanges* changes) {
-  std::vector<std::uint64_t> dropped;
-  const EvictStats stats = readable_->evictBlocks(keep, changes, &dropped);
-  if (!dropped.empty()) evictEvidence(dropped);
-  return stats;
+  return readable_->evictBlocks(keep, changes);
 }
 
 namespace {
@@ -89,7 +86,7 @@ class LogOddsKind final : public MapKind {
 class KernelKind final : public MapKind {
  public:
   KernelKind(std::unique_ptr<OccupancyMap> map, const kernel::KernelOptions& options)
-      : MapKind(std::move(map)), kernel_(published().resolution(), options) {}
+      : MapKind(std::move(map)), kernel_(published().resolution(), options, evidenceStore()) {}
 
   ScanStats integrate(const PointCloud& points_world, const Point3f& origin,
                       CellChanges* changes) override {
@@ -141,14 +138,15 @@ class KernelKind final : public MapKind {
       if (!c.known) kernel_.erase(c.key);
     }
   }
-  // A kernel map drops the blocks the grid dropped (its evidence and memory): every block with
-  // evidence has its cells on the grid (each scan publishes the cells it reached, and a block
-  // whose cells are all erased goes), so no walk over the evidence's blocks.
-  void evictEvidence(std::span<const std::uint64_t> blocks) override {
-    kernel_.eraseBlocks(blocks);
-  }
 
  private:
+  /// The grid's store when the map is the grid (canEvict: eviction drops a block's evidence
+  /// with its cells), else none (the kernel map's own, beside an octree).
+  BlockStore* evidenceStore() {
+    auto* grid = dynamic_cast<GridMap*>(&map());
+    return grid != nullptr ? &grid->writerStore() : nullptr;
+  }
+
   kernel::KernelMap kernel_;
 };
 

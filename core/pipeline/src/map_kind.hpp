@@ -3,7 +3,6 @@
 #include <functional>
 #include <memory>
 #include <optional>
-#include <span>
 #include <string>
 
 #include "densemap/geometry/error.hpp"
@@ -18,8 +17,9 @@ namespace densemap {
 /// act on and a GridMap readers see: the map itself when it is a grid, else a mirror that
 /// follows its changes cell for cell (the octree backend). The log-odds kind integrates with
 /// OctoMap's semantics (raycast, super rays, culling region); a kernel kind (AKIMap,
-/// BGKOctoMap, BGKOctoMap-L, akimap_rays) keeps its alpha/beta evidence and publishes
-/// logit(p) of the cells each scan reaches.
+/// BGKOctoMap, BGKOctoMap-L, akimap_rays) keeps its alpha/beta evidence in the grid's own
+/// block entries (one store: eviction, reset and erasure take both; beside an octree, in a
+/// store of its own) and publishes logit(p) of the cells each scan reaches.
 class MapKind {
  public:
   using Command = std::function<Expected<std::string>(OccupancyMap&, CellChanges&)>;
@@ -59,10 +59,9 @@ class MapKind {
 
  protected:
   [[nodiscard]] OccupancyMap& map() { return *map_; }
-  /// Cells a command erased: their evidence goes too (kernel kinds).
+  /// Cells a command erased: their evidence goes too (kernel kinds; a block the grid drops
+  /// loses its evidence with it, BlockStore::drop).
   virtual void forget(const CellChanges& changes) { (void)changes; }
-  /// The blocks eviction dropped: their evidence goes too (kernel kinds).
-  virtual void evictEvidence(std::span<const std::uint64_t> blocks) { (void)blocks; }
 
  private:
   std::unique_ptr<OccupancyMap> map_;

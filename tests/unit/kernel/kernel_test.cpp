@@ -16,6 +16,7 @@
 #include "densemap/kernel/kernel_function.hpp"
 #include "densemap/kernel/kernel_map.hpp"
 #include "densemap/kernel/occupancy_samples.hpp"
+#include "densemap/map/grid_map.hpp"
 
 namespace densemap::kernel {
 namespace {
@@ -504,6 +505,59 @@ TEST(KernelMapMemory, EveryEvidenceBlockHoldsAKnownCell) {
   ASSERT_GT(blocks.size(), 10U);
   EXPECT_EQ(map.evictBlocks([](const Point3f&) { return false; }), blocks.size());
   EXPECT_EQ(map.knownCells(), 0U);
+}
+
+// Issue 29 (one copy): a kernel map whose evidence lives in a GridMap's block entries holds the
+// same evidence as one with a store of its own, bit for bit, through a published version; the
+// grid's eviction and reset take the evidence with the cells (no second index to keep in step),
+// and the grid's memory counts it.
+TEST(KernelMapInAGrid, SharesTheGridsEntriesAndLosesEvidenceWithItsBlocks) {
+  KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
+  options.max_range = 15.0;
+  GridMap grid(0.1, SensorModel{});
+  const std::size_t empty_bytes = grid.memoryBytes();
+  KernelMap shared(0.1, options, &grid.writerStore()), own(0.1, options);
+  const auto publishTouched = [&](const std::vector<BlockCells>& touched) {
+    (void)grid.assignBlocks(touched, [&](std::uint64_t key, const block::BlockMask& cells,
+                                         std::array<float, block::kVoxels>& values) {
+      shared.blockLogOdds(key, cells, values);
+    });
+    (void)grid.publishVersion();  // versioned from here: writes copy the published nodes
+  };
+  for (const Point3f& origin : {Point3f(0, 0, 0), Point3f(0.4F, -0.3F, 0.2F)}) {
+    std::vector<BlockCells> touched;
+    shared.integrate(roomScan(), origin, &touched);
+    own.integrate(roomScan(), origin);
+    publishTouched(touched);
+  }
+  const KernelEvidence a = shared.evidence(), b = own.evidence();
+  ASSERT_GT(a.keys.size(), 1000U);
+  EXPECT_EQ(a.keys, b.keys);
+  EXPECT_EQ(a.alpha, b.alpha);
+  EXPECT_EQ(a.beta, b.beta);
+  // Every block with evidence is a published block, and the other way round.
+  std::set<std::uint64_t> published;
+  grid.forEachKnown([&](const VoxelKey& k, float) { published.insert(block::blockOf(k)); });
+  EXPECT_EQ(grid.writerStore().evidenceBlocks(), published.size());
+  EXPECT_EQ(grid.knownCells(), shared.knownCells());
+  EXPECT_GT(grid.memoryBytes(),
+            empty_bytes + grid.writerStore().evidenceBlocks() * sizeof(BlockEvidence));
+  EXPECT_LT(shared.memoryBytes(), grid.memoryBytes() / 4);  // its buffers only
+  // The grid evicts: the evidence goes with its blocks, as the offline map's own eviction.
+  const auto keep = [](const Point3f& centre) { return centre.x() < 2.0F; };
+  EXPECT_GT(grid.evictBlocks(keep).blocks, 0U);
+  EXPECT_GT(own.evictBlocks(keep), 0U);
+  EXPECT_EQ(cellsOf(shared), cellsOf(own));
+  EXPECT_EQ(grid.knownCells(), shared.knownCells());
+  // The next scan on both: the same again.
+  std::vector<BlockCells> touched;
+  shared.integrate(roomScan(), Point3f(0.2F, 0.1F, 0), &touched);
+  own.integrate(roomScan(), Point3f(0.2F, 0.1F, 0));
+  publishTouched(touched);
+  EXPECT_EQ(cellsOf(shared), cellsOf(own));
+  grid.clear();
+  EXPECT_EQ(shared.knownCells(), 0U);
+  EXPECT_EQ(grid.writerStore().evidenceBlocks(), 0U);
 }
 
 TEST(KernelMethodNames, ParseAndReject) {

@@ -214,6 +214,36 @@ TEST(MapView, DroppedBlocksLeaveNewVersionsAndStayInHeldOnesThroughCompaction) {
   EXPECT_LE(sut.store()->entryCount(), 2 * with_contents + 4096);
 }
 
+// Issue 29 (one copy): a dense map's evidence lives in its blocks' entries: a drop takes it, a
+// compaction keeps it (with contents or without) and leaves out the entries that have neither.
+TEST(BlockStore, EvidenceGoesWithDropsAndSurvivesCompaction) {
+  BlockStore store;
+  (void)store.publish();  // versioned from here
+  for (std::uint64_t k = 0; k < 6000; ++k) store.writable(store.entry(k)).voxels.markKnown(0);
+  const std::size_t without_evidence = store.memoryBytes();
+  for (std::uint64_t k = 0; k < 10; ++k) store.evidence(store.entry(k)).alpha[3] = 1.0F;
+  for (std::uint64_t k = 100000; k < 100100; ++k) {
+    store.evidence(store.entry(k)).alpha[3] = static_cast<float>(k);
+  }
+  for (std::uint64_t k = 200000; k < 201000; ++k) store.forgetIfEmpty(store.entry(k));
+  EXPECT_EQ(store.evidenceBlocks(), 110U);
+  EXPECT_GE(store.memoryBytes(), without_evidence + 110 * sizeof(BlockEvidence));
+  (void)store.publish();
+  for (std::uint64_t k = 0; k < 6000; ++k) EXPECT_TRUE(store.drop(*store.findEntry(k)));
+  EXPECT_EQ(store.evidenceBlocks(), 100U);
+  for (int v = 0; v < 4; ++v) (void)store.publish();
+  EXPECT_GE(store.compactions(), 1U);
+  EXPECT_EQ(store.entryCount(), 100U);
+  for (std::uint64_t k = 100000; k < 100100; ++k) {
+    const BlockEntry* e = store.findEntry(k);
+    ASSERT_NE(e, nullptr);
+    ASSERT_NE(e->evidence, nullptr);
+    EXPECT_EQ(e->evidence->alpha[3], static_cast<float>(k));
+  }
+  EXPECT_EQ(store.findEntry(5), nullptr);
+  EXPECT_EQ(store.findEntry(200000), nullptr);
+}
+
 TEST(MapView, AWindowedDriveKeepsMemoryFlat) {
   GridMap sut(0.1, SensorModel{});
   sut.reserveBlocks(2048);

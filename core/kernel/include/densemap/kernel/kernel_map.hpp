@@ -15,6 +15,7 @@
 #include "densemap/geometry/voxel_grid.hpp"
 #include "densemap/kernel/occupancy_samples.hpp"
 #include "densemap/map/block_layout.hpp"
+#include "densemap/map/block_store.hpp"
 
 namespace densemap::kernel {
 
@@ -140,7 +141,10 @@ class FreeTraversal;
 
 class KernelMap {
  public:
-  KernelMap(double resolution_m, const KernelOptions& options);
+  /// `store`: where the evidence lives, a block per entry (BlockStore::evidence): a GridMap's
+  /// store, so that the evidence and the log-odds it publishes share one index and a block the
+  /// grid drops loses both; null: a store of its own (offline).
+  KernelMap(double resolution_m, const KernelOptions& options, BlockStore* store = nullptr);
   ~KernelMap();
   KernelMap(KernelMap&&) noexcept;
   KernelMap& operator=(KernelMap&&) noexcept;
@@ -155,11 +159,10 @@ class KernelMap {
                             std::vector<BlockCells>* touched = nullptr);
   /// Forgets a cell's evidence (it becomes unknown).
   void erase(const VoxelKey& key);
-  /// Drops every block whose centre (block::centreOf) `keep` refuses, with its evidence and
-  /// memory (bounded memory: map.keep_radius_m, map.bounds). Returns the blocks dropped.
+  /// Drops the evidence of every block whose centre (block::centreOf) `keep` refuses, with its
+  /// memory. Returns the blocks dropped. (A map in a GridMap's store loses a block's evidence
+  /// when the grid evicts the block: GridMap::evictBlocks.)
   std::size_t evictBlocks(const std::function<bool(const Point3f&)>& keep);
-  /// Drops these blocks' evidence (those it holds); returns how many it held.
-  std::size_t eraseBlocks(std::span<const std::uint64_t> blocks);
 
   /// alpha / (alpha + beta); std::nullopt where no kernel reached the cell (unknown).
   [[nodiscard]] std::optional<double> probability(const VoxelKey& key) const;
@@ -169,8 +172,9 @@ class KernelMap {
                     std::array<float, block::kVoxels>& log_odds) const;
   void forEachKnown(const std::function<void(const VoxelKey&, double)>& f) const;
   [[nodiscard]] std::size_t knownCells() const;
-  /// Bytes held: the evidence blocks (with the hash's nodes) and the per-scan buffers held
-  /// (none between scans: each stage's are released when it ends).
+  /// Bytes held: the evidence blocks when the store is its own (a GridMap's counts them in its
+  /// own memoryBytes) and the per-scan buffers held (none between scans: each stage's are
+  /// released when it ends).
   [[nodiscard]] std::size_t memoryBytes() const;
   [[nodiscard]] std::size_t scans() const { return scans_; }
 
@@ -182,13 +186,11 @@ class KernelMap {
   [[nodiscard]] Expected<void> restore(const KernelEvidence& evidence);
 
  private:
-  /// A block's evidence, float (a scan's kernels are summed in double, then added): half the
-  /// memory of double, and a Beta posterior's mean does not need more digits.
-  struct Block {
-    std::array<float, block::kVoxels> alpha{};
-    std::array<float, block::kVoxels> beta{};
-    block::BlockMask known{};
-  };
+  /// The evidence of `block_key`, or null (writer).
+  [[nodiscard]] const BlockEvidence* find(std::uint64_t block_key) const;
+  /// Calls f(block_key, evidence) for every block with evidence, in block-key order.
+  template <typename F>
+  void forEachBlock(F&& f) const;
 
   // integrate()'s stages, in order; they pass their results through the scan buffers.
   void drawSamples(const PointCloud& points_world, const Point3f& origin_world);
@@ -201,7 +203,8 @@ class KernelMap {
 
   VoxelGrid grid_;
   KernelOptions options_;
-  std::unordered_map<std::uint64_t, Block> blocks_;
+  std::unique_ptr<BlockStore> own_store_;  // when no store was given
+  BlockStore* store_;                      // the evidence's store
   std::size_t scans_ = 0;
   std::unique_ptr<FreeTraversal> free_;     // its buffers
   std::vector<Sample> samples_, segments_;  // per-scan buffers (see Scratch)

@@ -27,11 +27,13 @@ struct BlockNode : ChainLink {
   block::BlockMask fully_free{};  // known cells at the lower clamping bound
 };
 
-/// A block's place in the store: its key and its newest link.
+/// A block's place in the store: its key, its newest link, and a dense map's evidence (the
+/// writer's alone: readers see the log-odds it publishes, never the evidence itself).
 struct BlockEntry {
   explicit BlockEntry(std::uint64_t block_key) : key(block_key) {}
   const std::uint64_t key;
   std::atomic<ChainLink*> head{nullptr};
+  std::unique_ptr<BlockEvidence> evidence;
 };
 
 /// The blocks of a GridMap: ONE copy of the map, readable at every published version while the
@@ -44,6 +46,11 @@ struct BlockEntry {
 /// pin keeps the next version's pin alive, so the chain unwinds from the oldest reader. So a
 /// scan costs O(changed blocks) whatever the map's size, readers never wait for the writer
 /// (no locks on the read path) and the writer never waits for readers.
+///
+/// A dense kernel map keeps its alpha/beta evidence in the entries (evidence(), dropEvidence()):
+/// one index for the evidence and the log-odds it publishes, and a block dropped (eviction,
+/// reset) loses both. The evidence is not versioned: only the writer reads it (a copy per
+/// version would cost 4 KiB more per block a scan touches).
 ///
 /// Until the first publish() the store is unversioned: every write goes in place (the offline
 /// tools and benchmarks pay nothing for versioning).
@@ -79,9 +86,24 @@ class BlockStore {
   [[nodiscard]] static const BlockNode* latest(const BlockEntry& entry) {
     return contents(entry.head.load(std::memory_order_relaxed));
   }
+  /// The entry of `block_key` (writer), or null.
+  [[nodiscard]] BlockEntry* findEntry(std::uint64_t block_key) { return lookup(block_key); }
+  [[nodiscard]] const BlockEntry* findEntry(std::uint64_t block_key) const {
+    return lookup(block_key);
+  }
   /// Removes the block's contents from the version being written (readers of older versions
-  /// keep them). Returns whether it had any.
+  /// keep them), and its evidence. Returns whether it had contents.
   bool drop(BlockEntry& entry);
+  /// The entry's evidence, created (all zero) if missing. Safe from parallel tasks for
+  /// distinct entries.
+  BlockEvidence& evidence(BlockEntry& entry);
+  /// Drops the entry's evidence (its contents stay).
+  void dropEvidence(BlockEntry& entry);
+  /// An entry made for a block that got neither contents nor evidence: counted so that a
+  /// compaction drops it with the others (the table is insert-only).
+  void forgetIfEmpty(const BlockEntry& entry);
+  /// Entries with evidence.
+  [[nodiscard]] std::size_t evidenceBlocks() const { return evidence_blocks_.load(); }
   /// The node that writes of the current version go to: the head itself when this version
   /// already wrote it (or the store is unversioned), else a copy of the head (or an empty node)
   /// that becomes the new head. Safe from parallel tasks for distinct entries.
@@ -239,6 +261,7 @@ class BlockStore {
   std::deque<ChainLink> tombs_;  // tombstone storage
   std::vector<ChainLink*> free_tombs_;
   std::atomic<std::size_t> live_nodes_{0};
+  std::atomic<std::size_t> evidence_blocks_{0};
   std::size_t reserve_nodes_ = 0;
   std::size_t trim_threshold_ = 0;  // trim when more nodes than this are free
   // Of the version being written: (old, new) link pairs and the blocks written.

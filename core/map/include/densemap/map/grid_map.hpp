@@ -76,6 +76,9 @@ class GridMap final : public OccupancyMap {
   /// Ends the version being written; readers of it hold the returned pin.
   BlockStore::Published publishVersion() { return store_->publish(); }
   [[nodiscard]] std::shared_ptr<const BlockStore> store() const { return store_; }
+  /// The writer's own access to the store: a dense kernel map keeps its evidence in the
+  /// blocks' entries (BlockStore::evidence), so one index serves both.
+  [[nodiscard]] BlockStore& writerStore() { return *store_; }
 
  private:
   void store(BlockNode& node, int index, float log_odds) const;
