@@ -217,12 +217,6 @@ void BlockStore::dropEvidence(BlockEntry& e) {
   if (e.head.load(std::memory_order_relaxed) == nullptr) ++retired_since_compaction_;
 }
 
-void BlockStore::forgetIfEmpty(const BlockEntry& e) {
-  if (!e.evidence && e.head.load(std::memory_order_relaxed) == nullptr) {
-    ++retired_since_compaction_;
-  }
-}
-
 bool BlockStore::drop(BlockEntry& e) {
   dropEvidence(e);
   ChainLink* head = e.head.load(std::memory_order_relaxed);

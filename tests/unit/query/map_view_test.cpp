@@ -225,7 +225,10 @@ TEST(BlockStore, EvidenceGoesWithDropsAndSurvivesCompaction) {
   for (std::uint64_t k = 100000; k < 100100; ++k) {
     store.evidence(store.entry(k)).alpha[3] = static_cast<float>(k);
   }
-  for (std::uint64_t k = 200000; k < 201000; ++k) store.forgetIfEmpty(store.entry(k));
+  for (std::uint64_t k = 200000; k < 201000; ++k) {
+    (void)store.evidence(store.entry(k));
+    store.dropEvidence(*store.findEntry(k));  // neither contents nor evidence left
+  }
   EXPECT_EQ(store.evidenceBlocks(), 110U);
   EXPECT_GE(store.memoryBytes(), without_evidence + 110 * sizeof(BlockEvidence));
   (void)store.publish();

@@ -94,14 +94,11 @@ class BlockStore {
   /// Removes the block's contents from the version being written (readers of older versions
   /// keep them), and its evidence. Returns whether it had contents.
   bool drop(BlockEntry& entry);
-  /// The entry's evidence, created (all zero) if missing. Safe from parallel tasks for
-  /// distinct entries.
+  /// The entry's evidence, created (all zero) if missing.
   BlockEvidence& evidence(BlockEntry& entry);
-  /// Drops the entry's evidence (its contents stay).
+  /// Drops the entry's evidence (its contents stay; an entry left with neither is counted for
+  /// the next compaction, the table being insert-only).
   void dropEvidence(BlockEntry& entry);
-  /// An entry made for a block that got neither contents nor evidence: counted so that a
-  /// compaction drops it with the others (the table is insert-only).
-  void forgetIfEmpty(const BlockEntry& entry);
   /// Entries with evidence.
   [[nodiscard]] std::size_t evidenceBlocks() const { return evidence_blocks_.load(); }
   /// The node that writes of the current version go to: the head itself when this version
