@@ -28,18 +28,22 @@ struct Near {
 /// rows alternate between a few neighbouring blocks).
 struct ThreadBlocks {
   static constexpr int kCacheSize = 16;
+  static constexpr std::uint64_t kNone = ~std::uint64_t{0};
   std::deque<FreeTraversal::Block> slots;
   std::size_t used = 0;
-  std::unordered_map<std::uint64_t, FreeTraversal::Block*> index;
+  /// Block key -> slot: open addressing, linear probing, a power of two at most half full (a
+  /// std::unordered_map's prime modulo and node per block cost about a tenth of the free
+  /// stage: a capsule's rows leave the cache below for another block about every tenth visit).
+  std::vector<std::pair<std::uint64_t, FreeTraversal::Block*>> index;
   std::array<std::uint64_t, kCacheSize> cache_keys{};
   std::array<FreeTraversal::Block*, kCacheSize> cache_blocks{};
 
-  ThreadBlocks() { cache_keys.fill(~std::uint64_t{0}); }
+  ThreadBlocks() { cache_keys.fill(kNone); }
   void reset() {
     used = 0;
-    index.clear();
-    cache_keys.fill(~std::uint64_t{0});
-    last_key = ~std::uint64_t{0};
+    std::fill(index.begin(), index.end(), std::pair<std::uint64_t, FreeTraversal::Block*>{kNone, nullptr});
+    cache_keys.fill(kNone);
+    last_key = kNone;
   }
   std::uint64_t last_key = ~std::uint64_t{0};
   FreeTraversal::Block* last = nullptr;
@@ -54,18 +58,41 @@ struct ThreadBlocks {
   FreeTraversal::Block& lookup(std::uint64_t key) {
     const std::size_t line = (key ^ (key >> 13) ^ (key >> 26)) & (kCacheSize - 1);
     if (cache_keys[line] == key) return *cache_blocks[line];
-    auto [it, fresh] = index.try_emplace(key, nullptr);
-    if (fresh) {
-      if (used == slots.size()) slots.emplace_back();
-      FreeTraversal::Block& b = slots[used++];
-      b.key = key;
-      b.sum.fill(0);
-      b.mask.fill(0);
-      it->second = &b;
-    }
+    FreeTraversal::Block* b = find(key);
     cache_keys[line] = key;
-    cache_blocks[line] = it->second;
-    return *it->second;
+    cache_blocks[line] = b;
+    return *b;
+  }
+  /// The slot of `key`, made (zeroed) when the scan had none.
+  FreeTraversal::Block* find(std::uint64_t key) {
+    if (2 * (used + 1) > index.size()) grow();
+    const std::size_t mask = index.size() - 1;
+    std::size_t i = static_cast<std::size_t>((key * 0x9E3779B97F4A7C15ULL) >> 20) & mask;
+    while (index[i].first != key) {
+      if (index[i].first == kNone) {
+        if (used == slots.size()) slots.emplace_back();
+        FreeTraversal::Block& b = slots[used++];
+        b.key = key;
+        b.sum.fill(0);
+        b.mask.fill(0);
+        index[i] = {key, &b};
+        break;
+      }
+      i = (i + 1) & mask;
+    }
+    return index[i].second;
+  }
+  void grow() {
+    std::vector<std::pair<std::uint64_t, FreeTraversal::Block*>> old(
+        std::max<std::size_t>(1024, 2 * index.size()), {kNone, nullptr});
+    old.swap(index);
+    const std::size_t mask = index.size() - 1;
+    for (const auto& [key, block] : old) {
+      if (key == kNone) continue;
+      std::size_t i = static_cast<std::size_t>((key * 0x9E3779B97F4A7C15ULL) >> 20) & mask;
+      while (index[i].first != kNone) i = (i + 1) & mask;
+      index[i] = {key, block};
+    }
   }
 };
 
@@ -223,7 +250,7 @@ std::size_t FreeTraversal::memoryBytes() const {
   std::size_t bytes = merged_.capacity() * sizeof(Block*);
   for (const ThreadBlocks& t : buffers_->threads) {
     bytes += t.slots.size() * sizeof(Block) + t.near.capacity() * sizeof(Near) +
-             t.index.size() * (sizeof(std::uint64_t) + 3 * sizeof(void*));
+             t.index.capacity() * sizeof(t.index[0]);
   }
   return bytes;
 }
