@@ -191,7 +191,7 @@ std::size_t GridMap::dropBlock(BlockEntry& e, CellChanges* changes) {
 }
 
 EvictStats GridMap::evictBlocks(const std::function<bool(const Point3f&)>& keep,
-                                CellChanges* changes, std::vector<std::uint64_t>* dropped) {
+                                CellChanges* changes) {
   EvictStats stats;
   const auto keepsAll = [&](const block::BlockBox& box) {
     for (int corner = 0; corner < 8; ++corner) {
@@ -212,7 +212,6 @@ EvictStats GridMap::evictBlocks(const std::function<bool(const Point3f&)>& keep,
       known_cells_ -= cells;
       stats.cells += cells;
       ++stats.blocks;
-      if (dropped != nullptr) dropped->push_back(e->key);
     }
   });
   return stats;

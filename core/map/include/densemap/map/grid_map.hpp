@@ -47,10 +47,9 @@ class GridMap final : public OccupancyMap {
   /// their intersection: a test per axis, monotone away from its centre), so a region of 8^3
   /// blocks whose corners are kept is passed over whole: the cost follows the regions and the
   /// blocks near the window's edge, not every block of the map.
-  /// `dropped`, when given, receives the keys of the blocks dropped.
+  /// A dense map's evidence in the dropped blocks' entries goes with them.
   EvictStats evictBlocks(const std::function<bool(const Point3f&)>& keep,
-                         CellChanges* changes = nullptr,
-                         std::vector<std::uint64_t>* dropped = nullptr);
+                         CellChanges* changes = nullptr);
 
   /// Forgets one cell (a no-op for an unknown cell).
   void erase(const VoxelKey& key);
