@@ -120,6 +120,10 @@ std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
   const double r2 = reach * reach;
   const double res = grid.resolution();
   const double inverse_res = 1.0 / res;
+  // grid.keyToCoord(key) (its arithmetic, with the resolution in a register).
+  const auto centreOf = [res](int key) {
+    return (static_cast<double>(key - VoxelGrid::kMaxKey) + 0.5) * res;
+  };
   // The keys of the first voxel centre at or after v and of the last at or before it, clamped
   // into the addressable range ([0, 65535]; a clamped candidate lies farther than `reach`).
   const auto firstCentre = [&](double v) {
@@ -147,6 +151,14 @@ std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
   const int span_b = static_cast<int>(2.0 * half_b * inverse_res) + 1;
   const int span_c = static_cast<int>(2.0 * half_c * inverse_res) + 1;
   const double slope_b = seg[bx] / seg[ax], slope_c = seg[cx] / seg[ax];
+  // Every interior window lies inside the addressable range when the capsule's box along b and
+  // c does (a voxel to spare for the crossings' rounding): then its keys need neither the
+  // clamp nor the edge test (the same keys: the clamp leaves such values as they are).
+  const auto inRange = [&](int axis, double half, int span) {
+    return (std::min(a[axis], b[axis]) - half - res) * inverse_res + 32767.5 >= 0.0 &&
+           (std::max(a[axis], b[axis]) + half + res) * inverse_res + 32767.5 <= 65534.0 - span;
+  };
+  const bool inside = inRange(bx, half_b, span_b) && inRange(cx, half_c, span_c);
   const double inverse_seg_ax = 1.0 / seg[ax];
   const int i0 = firstCentre(std::min(a[ax], b[ax]) - reach),
             i1 = lastCentre(std::max(a[ax], b[ax]) + reach);
@@ -156,21 +168,31 @@ std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
       static_cast<std::size_t>(i1 - i0 + 1) * static_cast<std::size_t>(span_b * span_c);
   if (out.size() < room) out.resize(room);
   for (int i = i0; i <= i1; ++i) {
-    const double x = grid.keyToCoord(static_cast<std::uint16_t>(i));
+    const double x = centreOf(i);
     // The part of the segment within `reach` of this slice along ax.
     double t0 = (x - reach - a[ax]) * inverse_seg_ax, t1 = (x + reach - a[ax]) * inverse_seg_ax;
     if (t0 > t1) std::swap(t0, t1);
     if (t0 > 0.0 && t1 < 1.0) {
       const double pb = a[bx] + (x - a[ax]) * slope_b, pc = a[cx] + (x - a[ax]) * slope_c;
-      const int j0 = firstCentre(pb - half_b), k0 = firstCentre(pc - half_c);
-      if (j0 + span_b > 65536 || k0 + span_c > 65536) continue;  // the addressable range's edge
-      const int rows = std::min(span_b, lastCentre(pb + half_b) - j0 + 1);
-      const int columns = std::min(span_c, lastCentre(pc + half_c) - k0 + 1);
+      int j0 = 0, k0 = 0, rows = 0, columns = 0;
+      if (inside) {
+        j0 = ceilToInt((pb - half_b) * inverse_res + 32767.5);
+        k0 = ceilToInt((pc - half_c) * inverse_res + 32767.5);
+        rows = std::min(span_b, static_cast<int>((pb + half_b) * inverse_res + 32767.5) - j0 + 1);
+        columns =
+            std::min(span_c, static_cast<int>((pc + half_c) * inverse_res + 32767.5) - k0 + 1);
+      } else {
+        // Clamped at the addressable range's edge, the window keeps its voxels inside it (it
+        // had skipped the whole slice there, and lost those voxels' evidence).
+        j0 = firstCentre(pb - half_b), k0 = firstCentre(pc - half_c);
+        rows = std::min(span_b, lastCentre(pb + half_b) - j0 + 1);
+        columns = std::min(span_c, lastCentre(pc + half_c) - k0 + 1);
+      }
       // End slices may have taken more than their share of `room`: keep a window's worth.
       const auto window = static_cast<std::size_t>(span_b * span_c);
       if (n + window > out.size()) out.resize(2 * (n + window));
-      const double ob0 = grid.keyToCoord(static_cast<std::uint16_t>(j0)) - pb;
-      const double oc0 = grid.keyToCoord(static_cast<std::uint16_t>(k0)) - pc;
+      const double ob0 = centreOf(j0) - pb;
+      const double oc0 = centreOf(k0) - pc;
       Near* const window_out = out.data();
       for (int dj = 0; dj < rows; ++dj) {
         const double ob = ob0 + dj * res;
@@ -201,10 +223,10 @@ std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
     Eigen::Vector3d c;
     c[ax] = x;
     for (int j = j0; j <= j1; ++j) {
-      c[bx] = grid.keyToCoord(static_cast<std::uint16_t>(j));
+      c[bx] = centreOf(j);
       std::uint64_t key = keyOf(i, j, k0);
       for (int k = k0; k <= k1; ++k, key += step_c) {
-        c[cx] = grid.keyToCoord(static_cast<std::uint16_t>(k));
+        c[cx] = centreOf(k);
         const Eigen::Vector3d w = c - a;
         const double t = std::clamp(w.dot(seg) * inverse_len2, 0.0, 1.0);
         const double d2 = (w - t * seg).squaredNorm();
@@ -229,9 +251,8 @@ std::size_t rasterise(const VoxelGrid& grid, const FreeExtent& e, double reach,
     const double w = table(v.d2 * inverse_length2);
     if (!(w > 0.0)) continue;
     ++visits;
-    const VoxelKey key = VoxelKey::fromPacked(v.key);
-    FreeTraversal::Block& blk = blocks.blockFor(block::blockOf(key));
-    const int cell = block::indexOf(key);
+    FreeTraversal::Block& blk = blocks.blockFor(block::blockOfPacked(v.key));
+    const int cell = block::indexOfPacked(v.key);
     // w >= 0: rounding half up without llround's call.
     blk.sum[static_cast<std::size_t>(cell)] += static_cast<std::int32_t>(w * scaled_weight + 0.5);
     block::setBit(blk.mask, cell);

@@ -93,8 +93,11 @@ struct Kernel {
     const double disc = b * b - a * (c - 1.0);
     if (disc < 0.0) return false;
     const double root = std::sqrt(disc);
-    lo = std::max(lo, x.x() + (-b - root) / a - kSlack);
-    hi = std::min(hi, x.x() + (-b + root) / a + kSlack);
+    // One division: the product differs from the quotient by an ulp, far inside the slack, so
+    // every cell the kernel reaches stays inside (and one let in lies outside its support).
+    const double inverse_a = 1.0 / a;
+    lo = std::max(lo, x.x() + (-b - root) * inverse_a - kSlack);
+    hi = std::min(hi, x.x() + (-b + root) * inverse_a + kSlack);
     return lo <= hi;
   }
 };

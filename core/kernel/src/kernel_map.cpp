@@ -332,6 +332,7 @@ std::size_t KernelMap::accumulateKernels(
             const auto [y0, y1] = range_of(1, klo.y, khi.y);
             const auto [z0, z1] = range_of(2, klo.z, khi.z);
             const double res = grid_.resolution();
+            const double inverse_res = 1.0 / res;
             const double base_x = grid_.keyToCoord(static_cast<std::uint16_t>(x0));
             for (int z = z0; z <= z1; ++z) {
               for (int y = y0; y <= y1; ++y) {
@@ -346,12 +347,13 @@ std::size_t KernelMap::accumulateKernels(
                 }
                 // The row's cells [from, to] within [x0, x1]: ceil and floor of the interval's
                 // ends in cells, clamped first (an end may be infinite).
-                const int from =
-                    lo <= base_x
-                        ? x0
-                        : x0 + ceilToInt(std::min<double>(x1 + 1 - x0, (lo - base_x) / res));
+                // (A product by 1 / res, not a quotient: an ulp apart, inside the interval's
+                // slack, so the same cells get evidence.)
+                const int from = lo <= base_x ? x0
+                                              : x0 + ceilToInt(std::min<double>(
+                                                         x1 + 1 - x0, (lo - base_x) * inverse_res));
                 const int to =
-                    x0 + floorToInt(std::clamp<double>((hi - base_x) / res, -1.0, x1 - x0));
+                    x0 + floorToInt(std::clamp<double>((hi - base_x) * inverse_res, -1.0, x1 - x0));
                 const double cy = grid_.keyToCoord(static_cast<std::uint16_t>(y));
                 const double cz = grid_.keyToCoord(static_cast<std::uint16_t>(z));
                 for (int x = from; x <= to; ++x) {

@@ -323,7 +323,9 @@ INSTANTIATE_TEST_SUITE_P(All, KernelMapMethods,
 // evidence only (no hit, no tip, no occupied kernel), so each voxel's beta is exactly the sum of
 // its distances' kernels: checked against a plain reference (every voxel of each ray's box,
 // sparseKernel, double sums).
-TEST(FreeTraversal, CutRaysGiveEveryVoxelInReachTheKernelOfItsDistance) {
+/// Rays cut at max range from `origin`, each voxel's free evidence against the kernel of its
+/// distance from the rays, summed by brute force over every addressable voxel of their boxes.
+void expectCutRaysGiveEveryVoxelInReachTheKernelOfItsDistance(const Point3f& origin) {
   KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
   ASSERT_TRUE(options.free_traversal);
   options.max_range = 4.0;
@@ -332,10 +334,10 @@ TEST(FreeTraversal, CutRaysGiveEveryVoxelInReachTheKernelOfItsDistance) {
   PointCloud points;
   for (int i = 0; i < 60; ++i) {  // directions over a cone, all ending beyond max range
     const double a = 0.1 * i, b = 0.05 * (i % 7) - 0.15;
-    points.emplace_back(static_cast<float>(9.0 * std::cos(a)),
-                        static_cast<float>(9.0 * std::sin(a)), static_cast<float>(9.0 * b));
+    points.emplace_back(origin.x() + static_cast<float>(9.0 * std::cos(a)),
+                        origin.y() + static_cast<float>(9.0 * std::sin(a)),
+                        origin.z() + static_cast<float>(9.0 * b));
   }
-  const Point3f origin(0.03F, -0.02F, 0.01F);
   map.integrate(points, origin);
   const double joints = 1.0 + 2.0 * options.length_scale / 3.0 / options.free_step;
   // Capsules reach free_reach of their radius, their weight scaled by the evidence share there
@@ -357,8 +359,12 @@ TEST(FreeTraversal, CutRaysGiveEveryVoxelInReachTheKernelOfItsDistance) {
     const Eigen::Vector3d dir = (p.cast<double>() - o).normalized();
     const Eigen::Vector3d end = o + options.max_range * dir;
     // Every voxel of the segment's bounding box, widened by the kernel's reach.
-    const Eigen::Vector3d lo = o.cwiseMin(end).array() - options.length_scale;
-    const Eigen::Vector3d hi = o.cwiseMax(end).array() + options.length_scale;
+    // (Clamped into the addressable range: the voxels beyond it do not exist.)
+    const double edge = grid.halfExtent() - 1e-3;  // still inside as a float
+    const Eigen::Vector3d lo =
+        (o.cwiseMin(end).array() - options.length_scale).cwiseMax(-edge).cwiseMin(edge);
+    const Eigen::Vector3d hi =
+        (o.cwiseMax(end).array() + options.length_scale).cwiseMax(-edge).cwiseMin(edge);
     const VoxelKey klo = *grid.pointToKey(lo.cast<float>()),
                    khi = *grid.pointToKey(hi.cast<float>());
     for (int z = klo.z; z <= khi.z; ++z) {
@@ -390,6 +396,16 @@ TEST(FreeTraversal, CutRaysGiveEveryVoxelInReachTheKernelOfItsDistance) {
   // Voxels at the very edge of the reach (d within rounding of the radius) may differ.
   EXPECT_GE(checked, beta.size() - beta.size() / 200);
   EXPECT_LE(checked, beta.size());
+}
+
+TEST(FreeTraversal, CutRaysGiveEveryVoxelInReachTheKernelOfItsDistance) {
+  expectCutRaysGiveEveryVoxelInReachTheKernelOfItsDistance(Point3f(0.03F, -0.02F, 0.01F));
+}
+
+// At the addressable range's edge (0.1 m voxels: 3276.8 m), where some capsules leave it along
+// their slices' axis and others across it (the rasteriser's clamped keys).
+TEST(FreeTraversal, CutRaysAtTheEdgeOfTheAddressableRangeGiveTheKernelOfTheirDistance) {
+  expectCutRaysGiveEveryVoxelInReachTheKernelOfItsDistance(Point3f(3276.72F, -0.02F, 0.01F));
 }
 
 // The free sums are 32-bit fixed point at a step chosen per scan: a voxel crossed by thousands of

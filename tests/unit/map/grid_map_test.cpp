@@ -175,6 +175,24 @@ TEST(BlockLayout, CountBitsEqualsABitByBitCount) {
   EXPECT_EQ(block::countBits(m), 3U);
 }
 
+// The kernel map's free stage takes a voxel's block and cell straight from its packed key: the
+// same as through the key, at every bit of every axis (the edges 0 and 65535 among them).
+TEST(BlockLayout, BlockAndCellOfAPackedKeyAreThoseOfItsKey) {
+  std::mt19937_64 rng(11);
+  std::vector<VoxelKey> keys = {{0, 0, 0}, {65535, 65535, 65535}, {7, 8, 65528}, {32768, 32767, 1}};
+  for (int i = 0; i < 100000; ++i) {
+    const std::uint64_t r = rng();
+    keys.push_back({static_cast<std::uint16_t>(r), static_cast<std::uint16_t>(r >> 16),
+                    static_cast<std::uint16_t>(r >> 32)});
+  }
+  for (const VoxelKey& k : keys) {
+    ASSERT_EQ(block::blockOfPacked(k.packed()), block::blockOf(k))
+        << k.x << " " << k.y << " " << k.z;
+    ASSERT_EQ(block::indexOfPacked(k.packed()), block::indexOf(k))
+        << k.x << " " << k.y << " " << k.z;
+  }
+}
+
 TEST(OccupancyMaps, FullyFreeBlocksInABoxAreTheWholeMapsBlocksInsideIt) {
   // Issue 30: the culling region asks for the blocks of its box; the grid answers from its
   // region index, whatever the box's size against the map's.

@@ -96,6 +96,19 @@ void forEachSetBit(const BlockMask& m, F&& f) {
   return (k.x & m) | ((k.y & m) << kShift) | ((k.z & m) << (2 * kShift));
 }
 
+/// blockOf(VoxelKey::fromPacked(packed)) and indexOf(..) straight from the packed key (16 bits an
+/// axis: x, y, z from bit 0): masks and shifts, for loops over many packed keys.
+[[nodiscard]] inline std::uint64_t blockOfPacked(std::uint64_t packed) {
+  static_assert(kShift == 3);
+  return ((packed >> 3) & 0x1fff) | ((packed >> 6) & (std::uint64_t{0x1fff} << 13)) |
+         ((packed >> 9) & (std::uint64_t{0x1fff} << 26));
+}
+
+[[nodiscard]] inline int indexOfPacked(std::uint64_t packed) {
+  static_assert(kShift == 3);
+  return static_cast<int>((packed & 7) | ((packed >> 13) & (7 << 3)) | ((packed >> 26) & (7 << 6)));
+}
+
 [[nodiscard]] inline VoxelKey keyOf(std::uint64_t block, int index) {
   constexpr int m = kEdge - 1;
   return {
