@@ -17,7 +17,8 @@ namespace densemap::kernel {
 namespace {
 
 /// A voxel within reach of a capsule: its key (VoxelKey::packed) and squared distance from the
-/// capsule's axis.
+/// capsule's axis (on the axis it may round a little below 0, which the kernel table reads as
+/// 0).
 struct Near {
   std::uint64_t key = 0;
   double d2 = 0.0;
@@ -194,14 +195,18 @@ std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
       const double ob0 = centreOf(j0) - pb;
       const double oc0 = centreOf(k0) - pc;
       Near* const window_out = out.data();
-      for (int dj = 0; dj < rows; ++dj) {
-        const double ob = ob0 + dj * res;
+      // The offsets' counters in doubles (the same small integers: no conversion a candidate).
+      // d2 may round below 0 on the line: the kernel table reads it as 0.
+      double fj = 0.0;
+      for (int dj = 0; dj < rows; ++dj, fj += 1.0) {
+        const double ob = ob0 + fj * res;
         const double row = qbb * ob * ob, cross = 2.0 * qbc * ob;
         std::uint64_t key = keyOf(i, j0 + dj, k0);
-        for (int dk = 0; dk < columns; ++dk, key += step_c) {
-          const double oc = oc0 + dk * res;
+        double fk = 0.0;
+        for (int dk = 0; dk < columns; ++dk, key += step_c, fk += 1.0) {
+          const double oc = oc0 + fk * res;
           const double d2 = row + (cross + qcc * oc) * oc;
-          window_out[n] = {key, std::max(d2, 0.0)};
+          window_out[n] = {key, d2};
           n += d2 < r2;
         }
       }
