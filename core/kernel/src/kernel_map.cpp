@@ -33,6 +33,7 @@ using detail::appendHitKernels;
 using detail::hitsOf;
 using detail::isotropicKernel;
 using detail::rayStop;
+using detail::RowIntervals;
 
 namespace {
 
@@ -334,15 +335,15 @@ std::size_t KernelMap::accumulateKernels(
             const double res = grid_.resolution();
             const double inverse_res = 1.0 / res;
             const double base_x = grid_.keyToCoord(static_cast<std::uint16_t>(x0));
+            const RowIntervals rows(k);
             for (int z = z0; z <= z1; ++z) {
               for (int y = y0; y <= y1; ++y) {
                 double lo = 0.0, hi = 0.0;
                 if (options_.whole_boxes) {
                   lo = -std::numeric_limits<double>::infinity();
                   hi = std::numeric_limits<double>::infinity();
-                } else if (!k.rowInterval(grid_.keyToCoord(static_cast<std::uint16_t>(y)),
-                                          grid_.keyToCoord(static_cast<std::uint16_t>(z)), lo,
-                                          hi)) {
+                } else if (!rows(grid_.keyToCoord(static_cast<std::uint16_t>(y)),
+                                 grid_.keyToCoord(static_cast<std::uint16_t>(z)), lo, hi)) {
                   continue;
                 }
                 // The row's cells [from, to] within [x0, x1]: ceil and floor of the interval's
