@@ -78,7 +78,10 @@ class RowIntervals {
     inverse_a_ = 1.0 / a_;
   }
 
-  [[nodiscard]] bool operator()(double y, double z, double& lo, double& hi) const {
+  // Inlined into the accumulation's row loop (GCC kept it a call: callgrind, BALM 0.2 m, the
+  // accumulation 508M -> 456M instructions in 3 scans, the same maps).
+  [[nodiscard]] [[gnu::always_inline]] bool operator()(double y, double z, double& lo,
+                                                       double& hi) const {
     constexpr double kSlack = 1e-6;
     lo = -std::numeric_limits<double>::infinity();
     hi = std::numeric_limits<double>::infinity();
