@@ -321,10 +321,8 @@ INSTANTIATE_TEST_SUITE_P(All, KernelMapMethods,
 
 // Issue 29: akimap_rays' free evidence by one capsule per ray. Rays cut at max range carry free
 // evidence only (no hit, no tip, no occupied kernel), so each voxel's beta is exactly the sum of
-// its distances' kernels: checked against a plain reference (every voxel of each ray's box,
-// sparseKernel, double sums).
-/// Rays cut at max range from `origin`, each voxel's free evidence against the kernel of its
-/// distance from the rays, summed by brute force over every addressable voxel of their boxes.
+// its distances' kernels: checked against a plain reference (every addressable voxel of each
+// ray's box, sparseKernel, double sums), for rays from `origin`.
 void expectCutRaysGiveEveryVoxelInReachTheKernelOfItsDistance(const Point3f& origin) {
   KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
   ASSERT_TRUE(options.free_traversal);
