@@ -121,10 +121,8 @@ std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
   const double r2 = reach * reach;
   const double res = grid.resolution();
   const double inverse_res = 1.0 / res;
-  // grid.keyToCoord(key) (its arithmetic, with the resolution in a register).
-  const auto centreOf = [res](int key) {
-    return (static_cast<double>(key - VoxelGrid::kMaxKey) + 0.5) * res;
-  };
+  // grid.keyToCoord(key), with the resolution in a register.
+  const auto centreOf = [res](int key) { return VoxelGrid::keyToCoord(key, res); };
   // The keys of the first voxel centre at or after v and of the last at or before it, clamped
   // into the addressable range ([0, 65535]; a clamped candidate lies farther than `reach`).
   const auto firstCentre = [&](double v) {

@@ -43,7 +43,11 @@ class VoxelGrid {
 
   /// Centre of the voxel along one axis (double, as OctoMap computes it).
   [[nodiscard]] double keyToCoord(std::uint16_t key) const {
-    return (static_cast<double>(static_cast<int>(key) - kMaxKey) + 0.5) * resolution_m_;
+    return keyToCoord(static_cast<int>(key), resolution_m_);
+  }
+  /// The same at `resolution_m` (for loops that keep the resolution in a register).
+  [[nodiscard]] static double keyToCoord(int key, double resolution_m) {
+    return (static_cast<double>(key - kMaxKey) + 0.5) * resolution_m;
   }
   [[nodiscard]] Point3f keyToPoint(const VoxelKey& k) const {
     return {static_cast<float>(keyToCoord(k.x)), static_cast<float>(keyToCoord(k.y)),
