@@ -35,11 +35,21 @@ fi
 ( while kill -0 $SERVER 2>/dev/null; do
     awk '/VmRSS/ {print $2}' /proc/$SERVER/status 2>/dev/null || true; sleep 0.5
   done > "$OUT/rss.txt" ) &
+# The machine's CPU ticks (all, stolen) from /proc/stat's cpu line, for the replay's steal
+# share (densemap-bench prints its own: tools/bench/cpu_steal.hpp).
+cpu_ticks() { awk '/^cpu / {t = 0; for (i = 2; i <= 9; ++i) t += $i; print t, $9; exit}' /proc/stat; }
+read -r ticks0 steal0 < <(cpu_ticks)
 extra=(--query-bbox-edge "${BBOX_EDGE:-0}" --csv "$OUT/scans.csv")
 [ "${LEGACY:-0}" = 1 ] && extra=()  # a densemap from before these options (A/B runs)
 "$BIN/densemap" --domain-id "$DOMAIN" replay --data "$DATA" --rate "$RATE" --first "$FIRST" \
   --limit "$LIMIT" --query-points "$QUERY" "${extra[@]}" 2> "$OUT/replay.log" \
   | tee "$OUT/replay.txt"
+read -r ticks1 steal1 < <(cpu_ticks)
+awk -v t="$((ticks1 - ticks0))" -v s="$((steal1 - steal0))" 'BEGIN {
+  share = t > 0 ? 100 * s / t : 0
+  printf "CPU steal during the replay: %.1f%% of the machine'"'"'s CPU time\n", share
+  if (share > 5) print "warning: over 5% stolen by the hypervisor: these times are not comparable with a quieter run'"'"'s"
+}' | tee -a "$OUT/replay.txt"
 "$BIN/densemap" --domain-id "$DOMAIN" status | tee -a "$OUT/replay.txt"
 if [ "${SNAPSHOT:-0}" = 1 ]; then  # a late joiner fetches the whole map
   start=$(date +%s.%N)

@@ -113,6 +113,8 @@ std::string formatJson(const std::vector<RunResult>& runs, const std::string& da
         << (r.diff_cells_vs_octomap < 0 ? "null" : std::to_string(r.diff_cells_vs_octomap))
         << ", \"speedup_vs_octomap\": "
         << (r.speedup_vs_octomap > 0 ? number(r.speedup_vs_octomap) : "null")
+        << ", \"cpu_steal_share\": "
+        << (r.cpu_steal_share >= 0 ? number(r.cpu_steal_share) : "null")
         << ", \"total_s\": " << number(r.total_s) << ", \"known_cells\": " << r.known_cells
         << ", \"memory_bytes\": " << r.memory_bytes << "}" << (i + 1 < runs.size() ? "," : "")
         << "\n";

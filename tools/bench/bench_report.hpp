@@ -42,6 +42,9 @@ struct RunResult {
   std::size_t memory_bytes = 0;
   /// Dense methods: FNV-1a of the evidence (keys, alpha, beta), to compare builds bit for bit.
   std::uint64_t evidence_digest = 0;
+  /// The share of the machine's CPU time stolen by the hypervisor while this method's scans
+  /// ran (cpu_steal.hpp); negative when unknown.
+  double cpu_steal_share = -1;
 
   [[nodiscard]] double percentile(double q) const;
   [[nodiscard]] double pointsPerSecond() const { return total_s > 0 ? points / total_s : 0; }

@@ -10,15 +10,16 @@
 #include <cstdio>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <sstream>
 #include <thread>
 
 #include "bench_report.hpp"
+#include "cpu_steal.hpp"
 #include "densemap/cli/guarded_main.hpp"
 #include "densemap/cli/progress.hpp"
 #include "densemap/geometry/percentile.hpp"
 #include "densemap/io/scan_source.hpp"
-#include "densemap/ros2/recording.hpp"
 #include "densemap/kernel/kernel_map.hpp"
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_diff.hpp"
@@ -26,6 +27,7 @@
 #include "densemap/map/octree_map.hpp"
 #include "densemap/map/update_rule.hpp"
 #include "densemap/raycast/integrator.hpp"
+#include "densemap/ros2/recording.hpp"
 #include "lane.hpp"
 
 namespace densemap::bench {
@@ -126,34 +128,43 @@ std::vector<std::unique_ptr<Lane>> makeLanes(const Options& o,
 
 /// Lanes take turns, `turn` scans at a time (0: all of them), and the lane that starts a
 /// turn rotates: none always follows OctoMap's long serial run (caches evicted, idle workers).
-void runLanes(std::vector<std::unique_ptr<Lane>>& lanes, const std::vector<WorldScan>& scans,
-              std::size_t turn) {
+/// Returns each lane's CPU steal over its turns (by lane index).
+std::vector<StealMeter> runLanes(std::vector<std::unique_ptr<Lane>>& lanes,
+                                 const std::vector<WorldScan>& scans, std::size_t turn) {
+  std::vector<StealMeter> steal(lanes.size());
   if (turn == 0) turn = scans.size();
   tools::Progress progress("integrating (method, scan) pair", scans.size() * lanes.size());
   std::size_t done = 0;
   for (std::size_t first = 0, t = 0; first < scans.size(); first += turn, ++t) {
     const std::size_t last = std::min(scans.size(), first + turn);
     for (std::size_t k = 0; k < lanes.size(); ++k) {
-      auto& lane = lanes[(t + k) % lanes.size()];
+      const std::size_t index = (t + k) % lanes.size();
+      auto& lane = lanes[index];
+      const std::optional<CpuTimes> before = readCpuTimes();
       for (std::size_t i = first; i < last; ++i) {
         char detail[96];
         std::snprintf(detail, sizeof(detail), "(%s, scan %zu: %.1f ms)", lane->name().c_str(),
                       i + 1, lane->step(scans[i]));
         progress.update(++done, detail);
       }
+      steal[index].add(before, readCpuTimes());
     }
   }
+  return steal;
 }
 
 /// Each lane's result, its map compared cell by cell with its reference's (the reference lanes
 /// come first) and its speed with OctoMap's.
-std::vector<RunResult> compareLanes(std::vector<std::unique_ptr<Lane>>& lanes, bool per_ray) {
+std::vector<RunResult> compareLanes(std::vector<std::unique_ptr<Lane>>& lanes,
+                                    const std::vector<StealMeter>& steal, bool per_ray) {
   const std::string reference_method = per_ray ? "raycast" : "octomap";
   std::vector<RunResult> runs;
   std::map<std::string, const OccupancyMap*> references;  // by backend
   double octomap_p50 = 0;
-  for (auto& lane : lanes) {
+  for (std::size_t index = 0; index < lanes.size(); ++index) {
+    auto& lane = lanes[index];
     RunResult r = lane->finish();
+    r.cpu_steal_share = steal[index].share();
     const OccupancyMap& map = lane->map();
     if (r.method == "octomap") octomap_p50 = r.percentile(0.5);
     if (r.dense) {  // a kernel map: no cell-by-cell comparison with a log-odds map
@@ -204,7 +215,18 @@ int report(const Options& o, const std::vector<RunResult>& runs,
                 r.known_cells ? r.memory_bytes / 1048576.0 / (r.known_cells / 1e6) : 0.0);
     if (r.dense)
       std::printf(", evidence digest %016llx", static_cast<unsigned long long>(r.evidence_digest));
+    if (r.cpu_steal_share >= 0) std::printf("; CPU steal %.1f%%", 100.0 * r.cpu_steal_share);
     std::printf("\n");
+  }
+  // Above this the times say more about the host's other guests than about the method.
+  constexpr double kNoisySteal = 0.05;
+  for (const RunResult& r : runs) {
+    if (r.cpu_steal_share > kNoisySteal) {
+      std::printf(
+          "warning: %.1f%% of the CPU time was stolen by the hypervisor while %s/%s ran: its "
+          "times are not comparable with a quieter run's\n",
+          100.0 * r.cpu_steal_share, r.method.c_str(), r.backend.c_str());
+    }
   }
   if (o.growth > 0) {
     std::printf(
@@ -235,8 +257,8 @@ int run(const Options& o) {
     return 1;
   }
   auto lanes = makeLanes(o, backends);
-  runLanes(lanes, *scans, o.turn);
-  const std::vector<RunResult> runs = compareLanes(lanes, o.rule != "set");
+  const std::vector<StealMeter> steal = runLanes(lanes, *scans, o.turn);
+  const std::vector<RunResult> runs = compareLanes(lanes, steal, o.rule != "set");
   return report(o, runs, lanes, scans->size());
 }
 
