@@ -30,13 +30,15 @@ struct CapsuleShape {
 /// (0.15 m) at 0.1 m maps were 17% faster there but cost the oracle scenes 1.2-1.7% MSE (the
 /// unstructured scene's lead over BGKOctoMap-L). A voxel hit by one ray gives that ray's own
 /// capsule, bit for bit; cut rays are never bundled. The extents come in a fixed order (by
-/// voxel: its rays' tips in ray order, then its capsule) whatever the thread count.
+/// voxel: its rays' tips in ray order, then its capsule) whatever the thread count, with a
+/// hole (no length, weight 0) for each ray without a tip and each voxel whose
+/// rays have no free extent: a slot per ray and per voxel, written in one pass.
 /// freeExtents' per-scan arrays (the caller releases them once the extents are made).
 struct FreeBundleBuffers {
   std::vector<std::uint32_t> hit_of, takes;
   std::vector<std::pair<std::uint64_t, std::uint32_t>> rays, rays_other;
   std::vector<std::uint32_t> radix_counts;
-  std::vector<std::size_t> group_starts, offsets;
+  std::vector<std::size_t> group_starts;
 };
 
 /// `bundle_grid`: the cubes whose hits' rays are bundled (null: no bundles).

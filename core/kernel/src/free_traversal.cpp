@@ -315,9 +315,13 @@ std::size_t FreeTraversal::accumulate(const VoxelGrid& grid, std::span<const Fre
   const SquaredKernelTable& table = squaredKernel();
   reach = std::clamp(reach, 1e-3, 1.0);
   const double compensation = 1.0 / evidenceShare(reach);
-  double total_weight = 0.0;
-  for (const FreeExtent& e : extents) total_weight += e.weight * compensation;
-  scale_ = scaleFor(total_weight + static_cast<double>(extents.size()));
+  // The rounding margin: a unit per extent of weight (holes, of none, round nothing).
+  double total_weight = 0.0, weighted = 0.0;
+  for (const FreeExtent& e : extents) {
+    total_weight += e.weight * compensation;
+    weighted += e.weight > 0.0 ? 1.0 : 0.0;
+  }
+  scale_ = scaleFor(total_weight + weighted);
   const double scale = scale_;
   std::atomic<std::size_t> visits{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, extents.size(), 512),

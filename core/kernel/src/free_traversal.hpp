@@ -51,7 +51,8 @@ class FreeTraversal {
   FreeTraversal(const FreeTraversal&) = delete;
   FreeTraversal& operator=(const FreeTraversal&) = delete;
 
-  /// Rasterises every extent; returns the (extent, voxel) pairs that got evidence. The result
+  /// Rasterises every extent (one of no length is skipped: freeExtents' holes); returns the
+  /// (extent, voxel) pairs that got evidence. The result
   /// (blocks()) replaces the last scan's. `reach` (0, 1]: only voxels within reach * radius_m
   /// of an extent are visited, and the weights are scaled by 1 / evidenceShare(reach), so a
   /// ray leaves the same evidence per metre: the kernel's outer part holds little of it (0.85:

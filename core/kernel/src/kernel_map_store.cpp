@@ -153,7 +153,7 @@ std::size_t KernelMap::memoryBytes() const {
            (fb.rays.capacity() + fb.rays_other.capacity()) *
                sizeof(std::pair<std::uint64_t, std::uint32_t>) +
            fb.radix_counts.capacity() * sizeof(std::uint32_t) +
-           (fb.group_starts.capacity() + fb.offsets.capacity()) * sizeof(std::size_t);
+           fb.group_starts.capacity() * sizeof(std::size_t);
   bytes += scratch_->kernels.capacity() * sizeof(Kernel) +
            scratch_->free_extents.capacity() * sizeof(FreeExtent) +
            (scratch_->pairs.capacity() + scratch_->pairs_other.capacity()) *

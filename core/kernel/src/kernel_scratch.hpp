@@ -58,7 +58,6 @@ struct KernelMap::Scratch {
     release(bundles.rays_other);
     release(bundles.radix_counts);
     release(bundles.group_starts);
-    release(bundles.offsets);
   }
   /// After the kernels are summed: the kernels and their (block, kernel) pairs.
   void releaseKernels() {
