@@ -32,6 +32,7 @@ using detail::adaptiveVoxelKernels;
 using detail::appendHitKernels;
 using detail::hitsOf;
 using detail::isotropicKernel;
+using detail::Kernel;
 using detail::rayStop;
 using detail::RowIntervals;
 
@@ -59,6 +60,52 @@ void samplesKernels(const KernelOptions& options, double resolution,
           }
         }
       });
+}
+
+/// An isotropic point kernel's values on the cells [x0, x1] x [y0, y1] x [z0, z1] of one block
+/// (in z, y, x order), added to the block's sums: each axis' squared offsets once, then per
+/// cell the squared distance as squaredNorm sums it ((dx^2 + dy^2) + dz^2, then times 1 / l
+/// twice: the same value, bit for bit), no row interval and no centre per cell. A row whose
+/// dy^2 + dz^2 is already outside the support is skipped (adding dx^2 >= 0 cannot bring it
+/// back). The hits' 2-voxel kernels (one per voxel of hits) took 60% of the occupied stage on
+/// BALM at 0.2 m through the rows' square roots and each cell's centre.
+void accumulatePointKernel(const VoxelGrid& grid, const Kernel& k, int x0, int x1, int y0, int y1,
+                           int z0, int z1, const SquaredKernelTable& table,
+                           std::array<double, block::kVoxels>& sum_alpha,
+                           std::array<double, block::kVoxels>& sum_beta, block::BlockMask& summed,
+                           std::size_t& updates) {
+  std::array<double, block::kEdge> sx{}, sy{}, sz{};
+  const auto squares = [&](int axis, int from, int to, std::array<double, block::kEdge>& out) {
+    for (int i = from; i <= to; ++i) {
+      const double d = grid.keyToCoord(static_cast<std::uint16_t>(i)) - k.x[axis];
+      out[static_cast<std::size_t>(i - from)] = d * d;
+    }
+  };
+  squares(0, x0, x1, sx);
+  squares(1, y0, y1, sy);
+  squares(2, z0, z1, sz);
+  const double inverse_length = k.inverse_length;
+  std::array<double, block::kVoxels>& sums = k.occupied ? sum_alpha : sum_beta;
+  for (int z = z0; z <= z1; ++z) {
+    const double dz2 = sz[static_cast<std::size_t>(z - z0)];
+    for (int y = y0; y <= y1; ++y) {
+      const double dy2 = sy[static_cast<std::size_t>(y - y0)];
+      if (!((dy2 + dz2) * inverse_length * inverse_length < 1.0)) continue;
+      const int row =
+          block::indexOf(VoxelKey{static_cast<std::uint16_t>(x0), static_cast<std::uint16_t>(y),
+                                  static_cast<std::uint16_t>(z)});
+      for (int x = x0; x <= x1; ++x) {
+        const double u =
+            (sx[static_cast<std::size_t>(x - x0)] + dy2 + dz2) * inverse_length * inverse_length;
+        const double v = k.weight * table(u);
+        if (!(v > 0.0)) continue;
+        const int cell = row + (x - x0);
+        sums[static_cast<std::size_t>(cell)] += v;
+        block::setBit(summed, cell);
+        ++updates;
+      }
+    }
+  }
 }
 
 }  // namespace
@@ -332,6 +379,11 @@ std::size_t KernelMap::accumulateKernels(
             const auto [x0, x1] = range_of(0, klo.x, khi.x);
             const auto [y0, y1] = range_of(1, klo.y, khi.y);
             const auto [z0, z1] = range_of(2, klo.z, khi.z);
+            if (point && !options_.whole_boxes) {
+              accumulatePointKernel(grid_, k, x0, x1, y0, y1, z0, z1, table, sum_alpha, sum_beta,
+                                    summed, updates);
+              continue;
+            }
             const double res = grid_.resolution();
             const double inverse_res = 1.0 / res;
             const double base_x = grid_.keyToCoord(static_cast<std::uint16_t>(x0));

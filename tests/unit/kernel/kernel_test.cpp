@@ -295,7 +295,9 @@ TEST(FreeBundles, CubesBundleTheRaysOfNeighbouringVoxels) {
   EXPECT_EQ(same_visits, voxel_visits);
 }
 
-TEST_P(KernelMapMethods, RowStretchesGiveTheWholeBoxesMapBitForBit) {
+// The fast path (each row's stretch; point kernels by per-axis squared offsets) against the
+// plain one (every cell of each kernel's box, each kernel by Kernel::at).
+TEST_P(KernelMapMethods, RowStretchesAndPointKernelsGiveTheWholeBoxesMapBitForBit) {
   for (const double resolution : {0.1, 0.07}) {
     KernelOptions options = KernelOptions::defaults(GetParam());
     options.max_range = 15.0;

@@ -96,8 +96,9 @@ struct KernelOptions {
   bool aggregate_hits = false;
   double aggregate_min_hits = 4.0;
   std::uint64_t seed = 1;
-  /// The plain path, for tests: visit every cell of each kernel's bounding box instead of
-  /// only each row's stretch that the kernel can reach (the results are the same, bit for bit).
+  /// The plain path, for tests: visit every cell of each kernel's bounding box and evaluate it
+  /// there by Kernel::at, instead of only each row's stretch that the kernel can reach (and
+  /// isotropic point kernels from per-axis squared offsets): the same results, bit for bit.
   bool whole_boxes = false;
 
   /// The published settings of each method (la3dm's for the baselines); for kAkimapRays the
