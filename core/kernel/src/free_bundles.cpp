@@ -28,28 +28,28 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
     takes[i] = hit_of[i + 1];
     hit_of[i + 1] += hit_of[i];
   }
-  // Rays by the cube of their hit (a cut ray, or one outside the addressable range, alone:
-  // its own key).
-  constexpr std::uint64_t kAlone = std::uint64_t{1} << 48;  // above every packed voxel
+  // Rays by the cube of their hit (a cut ray, or one outside the addressable range, alone: the
+  // key `alone`), rays in order within each, lone rays last; the cubes ranked in the window of
+  // the max range around the origin.
   std::vector<std::pair<std::uint64_t, std::uint32_t>>& rays = buffers.rays;
-  rays.resize(n);
-  tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
-    std::uint64_t key = kAlone;
-    if (bundle && takes[i] != 0) {
-      if (const auto voxel = bundle_grid->pointToKey(points_world[i])) key = voxel->packed();
-    }
-    rays[i] = {key, static_cast<std::uint32_t>(i)};
-  });
-  // By voxel, rays in order within each (stable; made in ray order); lone rays last.
+  std::uint64_t alone = std::uint64_t{1} << 48;
   if (bundle) {
-    radixSort(
-        rays, buffers.rays_other, 49, [](const auto& ray) { return ray.first; },
+    alone = sortByVoxel(
+        n,
+        [&](std::size_t i) {
+          return takes[i] != 0 ? bundle_grid->pointToKey(points_world[i])
+                               : std::optional<VoxelKey>();
+        },
+        KeyWindow::around(*bundle_grid, origin, max_range), rays, buffers.rays_other,
         buffers.radix_counts);
+  } else {
+    rays.resize(n);
+    for (std::size_t i = 0; i < n; ++i) rays[i] = {alone, static_cast<std::uint32_t>(i)};
   }
   std::vector<std::size_t>& group_starts = buffers.group_starts;
   group_starts.clear();
   for (std::size_t p = 0; p < n; ++p) {
-    if (p == 0 || rays[p].first != rays[p - 1].first || rays[p].first == kAlone) {
+    if (p == 0 || rays[p].first != rays[p - 1].first || rays[p].first == alone) {
       group_starts.push_back(p);
     }
   }

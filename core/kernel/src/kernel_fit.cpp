@@ -82,19 +82,13 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
                           const Eigen::Vector3d& origin, std::vector<Kernel>& kernels,
                           std::vector<RayStop>& stops, std::vector<Eigen::Vector3d>& means,
                           std::vector<double>& counts) {
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> by_voxel(hits.size());
-  // A hit's voxel, packed in 48 bits (outside the addressable range: one reserved value
-  // above them, so such hits sort last).
-  const auto voxelOf = [&grid](const Eigen::Vector3d& x) {
-    const auto key = grid.pointToKey(x.cast<float>());
-    return key ? key->packed() : std::uint64_t{1} << 48;
-  };
-  for (std::uint32_t h = 0; h < hits.size(); ++h) by_voxel[h] = {voxelOf(samples[hits[h]].x), h};
-  // By voxel, hits in order within each (stable; made in hit order).
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> by_voxel_other;
+  // By voxel (outside the addressable range: none, sorted last), hits in order within each;
+  // the voxels ranked in the window of the max range around the origin.
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> by_voxel, by_voxel_other;
   std::vector<std::uint32_t> radix_counts;
-  radixSort(
-      by_voxel, by_voxel_other, 49, [](const auto& pair) { return pair.first; }, radix_counts);
+  sortByVoxel(
+      hits.size(), [&](std::size_t h) { return grid.pointToKey(samples[hits[h]].x.cast<float>()); },
+      KeyWindow::around(grid, origin, options.max_range), by_voxel, by_voxel_other, radix_counts);
   // Groups of hits by voxel, and where each group's kernels go (one, or one per hit).
   const auto min_hits = static_cast<std::uint32_t>(std::max(1.0, options.aggregate_min_hits));
   std::vector<std::uint32_t> group_starts, outputs{0};

@@ -1,11 +1,18 @@
 #pragma once
 
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
+#include <bit>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <vector>
+
+#include "densemap/geometry/voxel_grid.hpp"
 
 namespace densemap::kernel {
 
@@ -50,6 +57,87 @@ void radixSort(std::vector<T>& items, std::vector<T>& scratch, int key_bits, Key
     });
     items.swap(scratch);
   }
+}
+
+/// Voxel keys ranked in a window of the grid: the keys within `reach` voxels of a centre, each
+/// axis' offset in just the bits the window needs, z major, then y, then x: the order of
+/// VoxelKey::packed, so a radix sort by rank puts the keys in the packed keys' order, and a
+/// scan's hits (within max range of its origin) sort in 3 passes of 11 bits, not 5 for the
+/// packing's 48 and the one above it. outside() ranks above every key of the window.
+class KeyWindow {
+ public:
+  /// The window of the keys within max_range (m) of `centre` on `grid`, when it needs fewer
+  /// bits than the packing (nullopt: no max range, or the centre is outside the grid).
+  [[nodiscard]] static std::optional<KeyWindow> around(const VoxelGrid& grid,
+                                                       const Eigen::Vector3d& centre,
+                                                       double max_range) {
+    if (!(max_range >= 0.0) || !std::isfinite(max_range)) return std::nullopt;
+    const auto key = grid.pointToKey(centre.cast<float>());
+    const double voxels = std::ceil(max_range / grid.resolution()) + 2.0;
+    if (!key || !(voxels < 16384.0)) return std::nullopt;
+    return KeyWindow(*key, static_cast<int>(voxels));
+  }
+  /// Bits of a rank (outside() included).
+  [[nodiscard]] int bits() const { return 3 * axis_bits_ + 1; }
+  [[nodiscard]] std::uint64_t outside() const { return std::uint64_t{1} << (3 * axis_bits_); }
+  /// The rank of `key`; nullopt when it lies outside the window.
+  [[nodiscard]] std::optional<std::uint64_t> rank(const VoxelKey& key) const {
+    const int offset[3] = {key.x - low_[0], key.y - low_[1], key.z - low_[2]};
+    std::uint64_t r = 0;
+    for (int a = 2; a >= 0; --a) {
+      if (offset[a] < 0 || offset[a] > span_) return std::nullopt;
+      r = (r << axis_bits_) | static_cast<std::uint64_t>(offset[a]);
+    }
+    return r;
+  }
+
+ private:
+  KeyWindow(const VoxelKey& centre, int reach)
+      : low_{centre.x - reach, centre.y - reach, centre.z - reach},
+        span_(2 * reach),
+        axis_bits_(static_cast<int>(std::bit_width(static_cast<unsigned>(2 * reach)))) {}
+  int low_[3];
+  int span_;
+  int axis_bits_;
+};
+
+/// Items 0 .. n - 1 by voxel: pairs[p] = (a voxel's key, item), sorted by voxel (the packed
+/// keys' order), items in order within each; key_of(i) is item i's voxel (nullopt: none; those
+/// come last, their keys all equal to the value returned). Ranked in `window` where every
+/// voxel lies in it (see KeyWindow), else packed (VoxelKey::packed, none 2^48): only equality
+/// and that value are to be read from the keys.
+template <class KeyOf>
+std::uint64_t sortByVoxel(std::size_t n, KeyOf&& key_of, const std::optional<KeyWindow>& window,
+                          std::vector<std::pair<std::uint64_t, std::uint32_t>>& pairs,
+                          std::vector<std::pair<std::uint64_t, std::uint32_t>>& scratch,
+                          std::vector<std::uint32_t>& counts) {
+  pairs.resize(n);
+  const auto fill = [&](auto&& keyOfVoxel, std::uint64_t none) {
+    std::atomic<bool> escaped{false};
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                          std::uint64_t k = none;
+                          if (const std::optional<VoxelKey> voxel = key_of(i)) {
+                            const std::optional<std::uint64_t> ranked = keyOfVoxel(*voxel);
+                            if (!ranked) escaped = true;
+                            k = ranked.value_or(none);
+                          }
+                          pairs[i] = {k, static_cast<std::uint32_t>(i)};
+                        }
+                      });
+    return !escaped.load();
+  };
+  if (window && fill([&](const VoxelKey& v) { return window->rank(v); }, window->outside())) {
+    radixSort(
+        pairs, scratch, window->bits(), [](const auto& pair) { return pair.first; }, counts);
+    return window->outside();
+  }
+  const std::uint64_t none = std::uint64_t{1} << 48;
+  fill([](const VoxelKey& v) { return std::optional<std::uint64_t>(v.packed()); }, none);
+  radixSort(
+      pairs, scratch, 49, [](const auto& pair) { return pair.first; }, counts);
+  return none;
 }
 
 }  // namespace densemap::kernel
