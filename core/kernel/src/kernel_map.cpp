@@ -271,60 +271,82 @@ void KernelMap::fitKernels(const PointCloud& points_world, const Point3f& origin
 
 /// The (block, kernel) pairs of every block each kernel's box overlaps, into scratch_->pairs
 /// sorted by block, kernels in order within each (counts, offsets, then the pairs in place, in
-/// parallel; a stable radix sort).
+/// parallel; a stable radix sort); the blocks as ranks in their box (scratch_->block_ranks).
 void KernelMap::sortKernelPairs() {
   std::vector<Kernel>& kernels = scratch_->kernels;  // their key boxes are set here
   std::vector<std::pair<std::uint64_t, std::uint32_t>>& pairs = scratch_->pairs;
-  // Each kernel's box of blocks (in parallel: counts, offsets, then the pairs in place).
+  // Each kernel's box of blocks (in parallel: counts, offsets, then the pairs in place), and
+  // the box of them all (block coordinates: least x, y, z, then greatest).
   std::vector<std::size_t>& pair_offsets = scratch_->pair_offsets;
   pair_offsets.assign(kernels.size() + 1, 0);
+  using Box = std::array<std::uint64_t, 6>;
+  constexpr std::uint64_t kMost = 0x1fff;  // block coordinates are 13 bits
+  const Box box = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, kernels.size(), 1024), Box{kMost, kMost, kMost, 0, 0, 0},
+      [&](const tbb::blocked_range<std::size_t>& range, Box b) {
+        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+          Kernel& k = kernels[i];
+          // a cell kernel: x itself
+          const Eigen::Vector3d lo = k.x.cwiseMin(k.to) - k.half_extent;
+          const Eigen::Vector3d hi = k.x.cwiseMax(k.to) + k.half_extent;
+          const auto klo = grid_.pointToKey(lo.cast<float>());
+          const auto khi = grid_.pointToKey(hi.cast<float>());
+          if (!klo || !khi) continue;  // outside the addressable range
+          k.key_min = *klo;
+          k.key_max = *khi;
+          std::size_t n = 1;
+          for (int a = 0; a < 3; ++a) {
+            const std::uint64_t from = (*klo)[a] >> block::kShift, to = (*khi)[a] >> block::kShift;
+            n *= static_cast<std::size_t>(to - from + 1);
+            b[a] = std::min(b[a], from);
+            b[3 + a] = std::max(b[3 + a], to);
+          }
+          pair_offsets[i + 1] = n;
+        }
+        return b;
+      },
+      [](Box x, const Box& y) {
+        for (int a = 0; a < 3; ++a) {
+          x[a] = std::min(x[a], y[a]);
+          x[3 + a] = std::max(x[3 + a], y[3 + a]);
+        }
+        return x;
+      });
+  BlockRanks& ranks = scratch_->block_ranks;
+  ranks = BlockRanks{};
+  if (box[0] <= box[3]) {
+    ranks.low = {box[0], box[1], box[2]};
+    ranks.bits_x = static_cast<int>(std::bit_width(box[3] - box[0]));
+    ranks.bits_y = static_cast<int>(std::bit_width(box[4] - box[1]));
+    ranks.bits_z = static_cast<int>(std::bit_width(box[5] - box[2]));
+  }
+  for (std::size_t i = 0; i < kernels.size(); ++i) pair_offsets[i + 1] += pair_offsets[i];
+  pairs.resize(pair_offsets.back());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, kernels.size(), 1024),
                     [&](const tbb::blocked_range<std::size_t>& range) {
                       for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                        Kernel& k = kernels[i];
-                        // a cell kernel: x itself
-                        const Eigen::Vector3d lo = k.x.cwiseMin(k.to) - k.half_extent;
-                        const Eigen::Vector3d hi = k.x.cwiseMax(k.to) + k.half_extent;
-                        const auto klo = grid_.pointToKey(lo.cast<float>());
-                        const auto khi = grid_.pointToKey(hi.cast<float>());
-                        if (!klo || !khi) continue;  // outside the addressable range
-                        k.key_min = *klo;
-                        k.key_max = *khi;
-                        std::size_t n = 1;
-                        for (int a = 0; a < 3; ++a) {
-                          n *= static_cast<std::size_t>(((*khi)[a] >> block::kShift) -
-                                                        ((*klo)[a] >> block::kShift) + 1);
+                        std::size_t out = pair_offsets[i];
+                        if (out == pair_offsets[i + 1]) continue;
+                        const VoxelKey& klo = kernels[i].key_min;
+                        const VoxelKey& khi = kernels[i].key_max;
+                        for (std::uint64_t bz = klo.z >> block::kShift;
+                             bz <= std::uint64_t{khi.z} >> block::kShift; ++bz) {
+                          for (std::uint64_t by = klo.y >> block::kShift;
+                               by <= std::uint64_t{khi.y} >> block::kShift; ++by) {
+                            for (std::uint64_t bx = klo.x >> block::kShift;
+                                 bx <= std::uint64_t{khi.x} >> block::kShift; ++bx) {
+                              pairs[out++] = {ranks.rank(bx, by, bz),
+                                              static_cast<std::uint32_t>(i)};
+                            }
+                          }
                         }
-                        pair_offsets[i + 1] = n;
                       }
                     });
-  for (std::size_t i = 0; i < kernels.size(); ++i) pair_offsets[i + 1] += pair_offsets[i];
-  pairs.resize(pair_offsets.back());
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, kernels.size(), 1024),
-      [&](const tbb::blocked_range<std::size_t>& range) {
-        for (std::size_t i = range.begin(); i != range.end(); ++i) {
-          std::size_t out = pair_offsets[i];
-          if (out == pair_offsets[i + 1]) continue;
-          const VoxelKey& klo = kernels[i].key_min;
-          const VoxelKey& khi = kernels[i].key_max;
-          for (int bz = klo.z >> block::kShift; bz <= khi.z >> block::kShift; ++bz) {
-            for (int by = klo.y >> block::kShift; by <= khi.y >> block::kShift; ++by) {
-              for (int bx = klo.x >> block::kShift; bx <= khi.x >> block::kShift; ++bx) {
-                const VoxelKey corner{static_cast<std::uint16_t>(bx << block::kShift),
-                                      static_cast<std::uint16_t>(by << block::kShift),
-                                      static_cast<std::uint16_t>(bz << block::kShift)};
-                pairs[out++] = {block::blockOf(corner), static_cast<std::uint32_t>(i)};
-              }
-            }
-          }
-        }
-      });
-  // By block, kernels in order within each (the pairs were made in kernel order): block keys
-  // are 39 bits.
+  // By block (the ranks' order is the block keys'), kernels in order within each (the pairs
+  // were made in kernel order).
   radixSort(
-      pairs, scratch_->pairs_other, 39, [](const auto& pair) { return pair.first; },
-      scratch_->radix_counts);
+      pairs, scratch_->pairs_other, std::max(1, ranks.bits()),
+      [](const auto& pair) { return pair.first; }, scratch_->radix_counts);
 }
 
 /// Sums the kernels into their blocks: each block's kernels in kernel order, blocks in
@@ -340,13 +362,16 @@ std::size_t KernelMap::accumulateKernels(
   std::vector<std::size_t> starts;
   std::vector<BlockEntry*>& entries = scratch_->targets;
   entries.clear();
+  const BlockRanks& ranks = scratch_->block_ranks;
+  std::vector<std::uint64_t> block_keys;  // each group's block
   for (std::size_t p = 0; p < pairs.size(); ++p) {
     if (p == 0 || pairs[p].first != pairs[p - 1].first) {
       starts.push_back(p);
+      block_keys.push_back(ranks.blockKey(pairs[p].first));
       // Found or made here with its evidence (allocated by this thread, as a scan's other
       // blocks: from parallel tasks they came from every worker's malloc arena, +3 MiB of
       // server RSS at BALM 0.2 m), filled in parallel below.
-      BlockEntry& e = store_->entry(pairs[p].first);
+      BlockEntry& e = store_->entry(block_keys.back());
       (void)store_->evidence(e);
       entries.push_back(&e);
     }
@@ -363,7 +388,7 @@ std::size_t KernelMap::accumulateKernels(
         // once the block is done.
         std::array<double, block::kVoxels> sum_alpha{}, sum_beta{};
         for (std::size_t g = range.begin(); g != range.end(); ++g) {
-          const std::uint64_t block_key = pairs[starts[g]].first;
+          const std::uint64_t block_key = block_keys[g];
           block::BlockMask summed{};
           for (std::size_t p = starts[g]; p < starts[g + 1]; ++p) {
             const Kernel& k = kernels[pairs[p].second];
@@ -449,7 +474,7 @@ std::size_t KernelMap::accumulateKernels(
     for (std::size_t g = 0; g + 1 < starts.size(); ++g) {
       // A block no cell of which was reached is not the published map's business either.
       if (block::countBits(reached[g]) != 0) {
-        reached_blocks->emplace_back(pairs[starts[g]].first, reached[g]);
+        reached_blocks->emplace_back(block_keys[g], reached[g]);
       }
     }
   }

@@ -8,6 +8,7 @@
 #include "free_bundles.hpp"
 #include "free_traversal.hpp"
 #include "kernel_fit.hpp"
+#include "radix_sort.hpp"
 #include "sample_index.hpp"
 
 namespace densemap::kernel {
@@ -33,7 +34,8 @@ struct KernelMap::Scratch {
   SampleIndex::Storage index;
   std::vector<Kernel> kernels;
   std::vector<FreeExtent> free_extents;
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> pairs;
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> pairs;  // (block rank, kernel)
+  BlockRanks block_ranks;
   std::vector<std::size_t> pair_offsets;
   std::vector<std::pair<std::uint64_t, std::uint32_t>> pairs_other;
   std::vector<std::uint32_t> radix_counts;

@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <bit>
 #include <cmath>
@@ -99,6 +100,25 @@ class KeyWindow {
   int low_[3];
   int span_;
   int axis_bits_;
+};
+
+/// Blocks ranked in a box of them (each axis' offset in the bits the box needs, z major: the
+/// order of block keys, block::blockOf), so that a scan's (block, kernel) pairs sort in two
+/// radix passes of 11 bits instead of four for the keys' 39.
+struct BlockRanks {
+  std::array<std::uint64_t, 3> low{};  // the box's least block coordinates
+  int bits_x = 0, bits_y = 0, bits_z = 0;
+  [[nodiscard]] int bits() const { return bits_x + bits_y + bits_z; }
+  [[nodiscard]] std::uint64_t rank(std::uint64_t bx, std::uint64_t by, std::uint64_t bz) const {
+    return ((bz - low[2]) << (bits_x + bits_y)) | ((by - low[1]) << bits_x) | (bx - low[0]);
+  }
+  /// The block key (block::blockOf) of a rank.
+  [[nodiscard]] std::uint64_t blockKey(std::uint64_t rank) const {
+    const std::uint64_t mask_x = (std::uint64_t{1} << bits_x) - 1;
+    const std::uint64_t mask_y = (std::uint64_t{1} << bits_y) - 1;
+    return ((rank & mask_x) + low[0]) | ((((rank >> bits_x) & mask_y) + low[1]) << 13) |
+           (((rank >> (bits_x + bits_y)) + low[2]) << 26);
+  }
 };
 
 /// Items 0 .. n - 1 by voxel: pairs[p] = (a voxel's key, item), sorted by voxel (the packed

@@ -100,5 +100,29 @@ TEST(KeyWindow, RanksTheWindowsKeysInPackedOrderAndNothingElse) {
   EXPECT_FALSE(KeyWindow::around(grid, Eigen::Vector3d(0, 0, 0), -1.0).has_value());
 }
 
+TEST(BlockRanks, RankInBlockKeysOrderAndGiveTheirKeysBack) {
+  BlockRanks ranks;
+  ranks.low = {4000, 17, 8100};
+  ranks.bits_x = 6;  // spans of up to 64, 32 and 16 blocks
+  ranks.bits_y = 5;
+  ranks.bits_z = 4;
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> key_and_rank;
+  for (std::uint64_t bz = 8100; bz < 8116; bz += 3) {
+    for (std::uint64_t by = 17; by < 49; by += 5) {
+      for (std::uint64_t bx = 4000; bx < 4064; bx += 7) {
+        const std::uint64_t key = bx | (by << 13) | (bz << 26);  // block::blockOf's packing
+        const std::uint64_t rank = ranks.rank(bx, by, bz);
+        EXPECT_LT(rank, std::uint64_t{1} << ranks.bits());
+        EXPECT_EQ(ranks.blockKey(rank), key);
+        key_and_rank.emplace_back(key, rank);
+      }
+    }
+  }
+  std::sort(key_and_rank.begin(), key_and_rank.end());
+  for (std::size_t i = 1; i < key_and_rank.size(); ++i) {
+    EXPECT_LT(key_and_rank[i - 1].second, key_and_rank[i].second);
+  }
+}
+
 }  // namespace
 }  // namespace densemap::kernel
