@@ -31,8 +31,8 @@ struct CapsuleShape {
 /// unstructured scene's lead over BGKOctoMap-L). A voxel hit by one ray gives that ray's own
 /// capsule, bit for bit; cut rays are never bundled. The extents come in a fixed order (by
 /// voxel: its rays' tips in ray order, then its capsule) whatever the thread count, with a
-/// hole (no length, weight 0) for each ray without a tip and each voxel whose
-/// rays have no free extent: a slot per ray and per voxel, written in one pass.
+/// hole (no length, weight 0) for each ray without a tip and each voxel whose rays have no
+/// free extent: a slot per ray and per voxel, written in one pass.
 /// freeExtents' per-scan arrays (the caller releases them once the extents are made).
 struct FreeBundleBuffers {
   std::vector<std::uint32_t> hit_of, takes;

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "densemap/geometry/voxel_grid.hpp"
+#include "densemap/map/block_layout.hpp"
 
 namespace densemap::kernel {
 
@@ -116,8 +117,12 @@ struct BlockRanks {
   [[nodiscard]] std::uint64_t blockKey(std::uint64_t rank) const {
     const std::uint64_t mask_x = (std::uint64_t{1} << bits_x) - 1;
     const std::uint64_t mask_y = (std::uint64_t{1} << bits_y) - 1;
-    return ((rank & mask_x) + low[0]) | ((((rank >> bits_x) & mask_y) + low[1]) << 13) |
-           (((rank >> (bits_x + bits_y)) + low[2]) << 26);
+    const auto corner = [](std::uint64_t coordinate) {
+      return static_cast<std::uint16_t>(coordinate << block::kShift);
+    };
+    return block::blockOf(VoxelKey{corner((rank & mask_x) + low[0]),
+                                   corner(((rank >> bits_x) & mask_y) + low[1]),
+                                   corner((rank >> (bits_x + bits_y)) + low[2])});
   }
 };
 

@@ -110,7 +110,10 @@ TEST(BlockRanks, RankInBlockKeysOrderAndGiveTheirKeysBack) {
   for (std::uint64_t bz = 8100; bz < 8116; bz += 3) {
     for (std::uint64_t by = 17; by < 49; by += 5) {
       for (std::uint64_t bx = 4000; bx < 4064; bx += 7) {
-        const std::uint64_t key = bx | (by << 13) | (bz << 26);  // block::blockOf's packing
+        const std::uint64_t key =
+            block::blockOf(VoxelKey{static_cast<std::uint16_t>(bx << block::kShift),
+                                    static_cast<std::uint16_t>(by << block::kShift),
+                                    static_cast<std::uint16_t>(bz << block::kShift)});
         const std::uint64_t rank = ranks.rank(bx, by, bz);
         EXPECT_LT(rank, std::uint64_t{1} << ranks.bits());
         EXPECT_EQ(ranks.blockKey(rank), key);
