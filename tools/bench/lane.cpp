@@ -1,5 +1,6 @@
 #include "lane.hpp"
 
+#include <charconv>
 #include <cstring>
 
 #include "densemap/map/octree_map.hpp"
@@ -46,14 +47,38 @@ Integrate makeIntegrator(const std::string& method, const Options& o) {
       return ScanStats{s.points.size(), 0, 0, 0};
     };
   }
-  const auto parsed = parseIntegrationMethod(method);
+  // `method@nogrow`: the culling region from the map only (no growth by the scan's marks);
+  // `method@grow=A:B:..`: these strides instead of --grow-strides.
+  const std::size_t at = method.find('@');
+  std::vector<std::size_t> strides = o.grow_strides;
+  if (at != std::string::npos) {
+    const std::string variant = method.substr(at + 1);
+    if (variant == "nogrow") {
+      strides.clear();
+    } else if (variant.starts_with("grow=")) {
+      strides.clear();
+      for (std::size_t p = 5; p < variant.size();) {
+        std::size_t end = variant.find(':', p);
+        if (end == std::string::npos) end = variant.size();
+        std::size_t value = 0;
+        const auto [ptr, ec] = std::from_chars(variant.data() + p, variant.data() + end, value);
+        if (ec != std::errc() || ptr != variant.data() + end) return nullptr;
+        strides.push_back(value);
+        p = end + 1;
+      }
+    } else {
+      return nullptr;
+    }
+  }
+  const auto parsed = parseIntegrationMethod(method.substr(0, at));
   const auto rule = parseUpdateRule(o.rule);
   if (!parsed || !rule) return nullptr;
-  auto integrator =
-      std::make_shared<Integrator>(IntegratorOptions{.method = *parsed,
-                                                     .rule = *rule,
-                                                     .max_range_m = o.max_range,
-                                                     .superray_min_points = o.min_points});
+  IntegratorOptions options{.method = *parsed,
+                            .rule = *rule,
+                            .max_range_m = o.max_range,
+                            .superray_min_points = o.min_points};
+  options.grow_strides = strides;
+  auto integrator = std::make_shared<Integrator>(options);
   return [integrator](OccupancyMap& map, const WorldScan& s) {
     return integrator->integrate(map, s.points, s.origin);
   };

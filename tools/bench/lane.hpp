@@ -13,6 +13,7 @@
 
 #include "bench_report.hpp"
 #include "densemap/geometry/percentile.hpp"
+#include "densemap/raycast/integrator.hpp"
 #include "densemap/kernel/kernel_map.hpp"
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_factory.hpp"
@@ -33,6 +34,7 @@ struct Options {
   std::vector<std::string> methods{"octomap", "raycast", "superray+culling"};
   std::string rule = "set";
   std::size_t min_points = 20;
+  std::vector<std::size_t> grow_strides = IntegratorOptions{}.grow_strides;
   std::vector<std::string> backends{"grid", "octree"};
   int threads = static_cast<int>(std::max(1U, std::thread::hardware_concurrency()));
   std::size_t first = 0;

@@ -23,16 +23,20 @@ bool DenseFreeMarks::reset(const VoxelKey& min, const VoxelKey& max, std::size_t
   return true;
 }
 
+std::uint64_t DenseFreeMarks::blockKeyAt(std::uint32_t i) const {
+  const std::uint32_t bx = i % n_[0];
+  const std::uint32_t by = (i / n_[0]) % n_[1];
+  const std::uint32_t bz = i / (n_[0] * n_[1]);
+  const VoxelKey first{static_cast<std::uint16_t>((bx + min_[0]) << block::kShift),
+                       static_cast<std::uint16_t>((by + min_[1]) << block::kShift),
+                       static_cast<std::uint16_t>((bz + min_[2]) << block::kShift)};
+  return block::blockOf(first);
+}
+
 void DenseFreeMarks::flushInto(ScanUpdate& update) {
   for (std::size_t t = 0; t < touched_count_; ++t) {
     const std::uint32_t i = touched_[t];
-    const std::uint32_t bx = i % n_[0];
-    const std::uint32_t by = (i / n_[0]) % n_[1];
-    const std::uint32_t bz = i / (n_[0] * n_[1]);
-    const VoxelKey first{static_cast<std::uint16_t>((bx + min_[0]) << block::kShift),
-                         static_cast<std::uint16_t>((by + min_[1]) << block::kShift),
-                         static_cast<std::uint16_t>((bz + min_[2]) << block::kShift)};
-    update.orFree(block::blockOf(first), masks_[i]);
+    update.orFree(blockKeyAt(i), masks_[i]);
     masks_[i] = {};
     seen_[i] = 0;
   }

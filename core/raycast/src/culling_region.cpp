@@ -182,20 +182,28 @@ void CullingRegion::keepRunThrough(std::uint64_t* r, unsigned x0) const {
 }
 
 void CullingRegion::build(const OccupancyMap& map, const VoxelKey& origin, const KeyBox& box,
-                          std::span<const VoxelKey> hit, const KeyBox* frame) {
+                          std::span<const VoxelKey> hit, const KeyBox* frame, bool growable) {
   min_ = box.min;
   nx_ = static_cast<unsigned>(box.max.x - box.min.x) + 1;
   ny_ = static_cast<unsigned>(box.max.y - box.min.y) + 1;
   nz_ = static_cast<unsigned>(box.max.z - box.min.z) + 1;
   words_per_row_ = (nx_ + 63) / 64;
   size_ = 0;
+  origin_ = origin;
+  growable_ = false;
+  bool inside = frame != nullptr;
+  for (int a = 0; a < 3 && inside; ++a) {
+    inside = frame->min[a] <= box.min[a] && box.max[a] <= frame->max[a];
+  }
+  frame_ = inside ? *frame : box;
 
   // The region grows from O: when O itself cannot be in it (not fully free — always so for a
   // sensor that moved to a cell it has not crossed often enough — or ended in by a ray), it is
-  // empty, and loading the box is skipped.
+  // empty, and loading the box is skipped (unless the region is to grow by a scan's marks).
   const auto origin_value = map.logOdds(origin);
   const bool origin_hit = std::find(hit.begin(), hit.end(), origin) != hit.end();
-  if (!origin_value || !map.sensorModel().isFullyFree(*origin_value) || origin_hit) {
+  const bool origin_free = origin_value && map.sensorModel().isFullyFree(*origin_value);
+  if (!growable && (!origin_free || origin_hit)) {
     bits_.clear();
     bricks_.clear();
     for (unsigned& n : bricks_n_) n = 0;
@@ -210,11 +218,27 @@ void CullingRegion::build(const OccupancyMap& map, const VoxelKey& origin, const
     if (x >= nx_ || y >= ny_ || z >= nz_) continue;
     row(y, z)[x >> 6] &= ~(std::uint64_t{1} << (x & 63));
   }
+  if (growable) {
+    loaded_ = bits_;
+    growable_ = true;
+  }
+  sweepAndIndex();
+}
 
+void CullingRegion::grow(std::span<const FullyFreeBlock> covered) {
+  if (!growable_) return;
+  bits_ = loaded_;
+  for (const FullyFreeBlock& b : covered) loadBlock(b);
+  loaded_ = bits_;
+  sweepAndIndex();
+}
+
+void CullingRegion::sweepAndIndex() {
   // Sweep outward from O: a row (y, z) needs the rows one step closer to O in y and in z. The
   // row through O first, then its plane's rows along y and its column's along z (each needs
   // only that row), then the four quadrants around them, each on its own (a quadrant's rows need
   // only its own and the plane's or the column's).
+  const VoxelKey& origin = origin_;
   const unsigned ox = origin.x - min_.x, oy = origin.y - min_.y, oz = origin.z - min_.z;
   const auto sweepRow = [&](unsigned y, unsigned z, unsigned y_prev, unsigned z_prev) {
     std::uint64_t* r = row(y, z);
@@ -271,11 +295,7 @@ void CullingRegion::build(const OccupancyMap& map, const VoxelKey& origin, const
   tbb::parallel_invoke([&] { quadrant(0); }, [&] { quadrant(1); }, [&] { quadrant(2); },
                        [&] { quadrant(3); });
   size_ += plane + column + quadrants[0] + quadrants[1] + quadrants[2] + quadrants[3];
-  bool inside = frame != nullptr;
-  for (int a = 0; a < 3 && inside; ++a) {
-    inside = frame->min[a] <= box.min[a] && box.max[a] <= frame->max[a];
-  }
-  toBricks(inside ? *frame : box);
+  toBricks(frame_);
 }
 
 }  // namespace densemap

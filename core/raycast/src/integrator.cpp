@@ -88,6 +88,14 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
   const bool share_frame =
       dense && box_blocks <= std::min(options_.dense_marks_max_blocks,
                                       options_.culling_max_voxels / block::kVoxels);
+  // The region grows by the scan's own marks between levels of rays (kSet with dense marks
+  // sharing its frame only).
+  std::vector<std::size_t> strides;
+  for (const std::size_t s : options_.grow_strides) {
+    if (s > 1) strides.push_back(s);
+  }
+  const bool grow_levels = build_region && share_frame && !strides.empty();
+  if (!grow_levels) strides.clear();
   double ms_region_only = 0;
   const auto group = [&] {
     if (!grouping) return;
@@ -100,7 +108,7 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
     if (!build_region) return;
     auto t_region = std::chrono::steady_clock::now();
     region_.build(map, *origin_key, cullingBox(*origin_key, box, options_.culling_max_voxels), hit_,
-                  share_frame ? &box : nullptr);
+                  share_frame ? &box : nullptr, grow_levels);
     ms_region_only = msSince(t_region);
   };
   if (grouping && build_region) {
@@ -125,35 +133,59 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
     local.counts = {};
     local.dense_ok = dense && local.dense.reset(box.min, box.max, options_.dense_marks_max_blocks);
   }
-  const auto mark_all = [&](const tbb::blocked_range<std::size_t>& range, auto& sink,
-                            Local& local) {
-    for (std::size_t i = range.begin(); i != range.end(); ++i) {
-      if (region != nullptr) {
-        markRayCulled(grid, origin_world, rays_[i], *region, local.scratch, sink, local.counts);
-      } else {
-        markRay(grid, origin_world, rays_[i], sink, local.counts);
-      }
+  const auto mark_one = [&](std::size_t i, auto& sink, Local& local) {
+    if (region != nullptr) {
+      markRayCulled(grid, origin_world, rays_[i], *region, local.scratch, sink, local.counts);
+    } else {
+      markRay(grid, origin_world, rays_[i], sink, local.counts);
     }
   };
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rays_.size(), 256),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-                      Local& local = locals_.local();
-                      if (!local.dense_ok) {
-                        // A worker that joined after the reset above (or no dense box).
-                        local.dense_ok =
-                            dense &&
-                            local.dense.reset(box.min, box.max, options_.dense_marks_max_blocks);
-                      }
-                      if (local.dense_ok && region != nullptr && region->sharesFrame(local.dense)) {
-                        SharedFrameSink sink{{local.dense, local.update}};
-                        mark_all(range, sink, local);
-                      } else if (local.dense_ok) {
-                        DenseSink sink{local.dense, local.update};
-                        mark_all(range, sink, local);
-                      } else {
-                        mark_all(range, local.update, local);
-                      }
-                    });
+  // Level l marks the rays whose index is a multiple of strides[l] but not of strides[l - 1]
+  // (those were marked by level l - 1 or earlier): each ray once, at the first level whose
+  // stride divides its index; the last level (stride 1) takes the rest.
+  strides.push_back(1);
+  for (std::size_t level = 0; level < strides.size(); ++level) {
+    const std::size_t stride = strides[level];
+    const std::size_t previous = level == 0 ? 0 : strides[level - 1];
+    const std::size_t count = (rays_.size() + stride - 1) / stride;
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, count, std::max<std::size_t>(1, 256 / stride)),
+        [&](const tbb::blocked_range<std::size_t>& range) {
+          Local& local = locals_.local();
+          if (!local.dense_ok) {
+            // A worker that joined after the reset above (or no dense box).
+            local.dense_ok =
+                dense && local.dense.reset(box.min, box.max, options_.dense_marks_max_blocks);
+          }
+          const auto mark_all = [&](auto& sink) {
+            for (std::size_t j = range.begin(); j != range.end(); ++j) {
+              const std::size_t i = j * stride;
+              if (previous != 0 && i % previous == 0) continue;
+              mark_one(i, sink, local);
+            }
+          };
+          if (local.dense_ok && region != nullptr && region->sharesFrame(local.dense)) {
+            SharedFrameSink sink{{local.dense, local.update}};
+            mark_all(sink);
+          } else if (local.dense_ok) {
+            DenseSink sink{local.dense, local.update};
+            mark_all(sink);
+          } else {
+            mark_all(local.update);
+          }
+        });
+    if (level + 1 == strides.size()) break;
+    covered_.clear();
+    for (Local& local : locals_) {
+      if (!local.dense_ok) continue;
+      local.dense.forEachMarked([&](std::uint64_t key, const block::BlockMask& mask) {
+        covered_.push_back({key, mask});
+      });
+    }
+    region_.grow(covered_);
+    region = region_.size() != 0 ? &region_ : nullptr;
+    stats.region_voxels = region_.size();
+  }
   stats.ms_mark = msSince(t0);
   update.reset(options_.rule);
   for (Local& local : locals_) {

@@ -54,12 +54,15 @@ TEST(TraverseRayBackward, IsTheForwardTraversalReversedOnAdversarialRays) {
 
 /// Alg. 3 as written: breadth-first from the sensor's voxel over fully-free voxels whose test
 /// cells are all in the region.
+/// With `marked`, grown by the voxels the scan marked free too (CullingRegion::grow).
 std::set<std::uint64_t> bfsRegion(const OccupancyMap& map, const VoxelKey& o, const KeyBox& box,
-                                  const std::set<std::uint64_t>& hit) {
+                                  const std::set<std::uint64_t>& hit,
+                                  const std::set<std::uint64_t>& marked = {}) {
   const auto free = [&](const VoxelKey& k) {
     for (int a = 0; a < 3; ++a) {
       if (k[a] < box.min[a] || k[a] > box.max[a]) return false;
     }
+    if (marked.contains(k.packed())) return true;
     const auto v = map.logOdds(k);
     return v && map.sensorModel().isFullyFree(*v) && !hit.contains(k.packed());
   };
@@ -163,6 +166,86 @@ TEST(CullingRegion, EqualsBreadthFirstAlgorithm3OnRandomMaps) {
     EXPECT_EQ(sut.size(), expected.size());
     if (trial % 2 == 0) {
       EXPECT_GT(expected.size(), 300U);
+    }
+  }
+}
+
+TEST(CullingRegion, GrowsByTheScansMarksAsBreadthFirstOverFullyFreeOrMarkedVoxels) {
+  std::mt19937 rng(5);
+  for (int trial = 0; trial < 8; ++trial) {
+    GridMap map(0.1, SensorModel{});
+    const VoxelKey o{32771, 32766, 32768};
+    std::bernoulli_distribution fully_free(trial % 2 == 0 ? 0.6 : 0.3);
+    std::bernoulli_distribution mark(0.5);
+    std::uniform_int_distribution<int> off(-10, 10);
+    std::set<std::uint64_t> marked_once, marked_twice, hit_set;
+    for (int dz = -12; dz <= 12; ++dz) {
+      for (int dy = -12; dy <= 12; ++dy) {
+        for (int dx = -12; dx <= 12; ++dx) {
+          const VoxelKey k{static_cast<std::uint16_t>(o.x + dx),
+                           static_cast<std::uint16_t>(o.y + dy),
+                           static_cast<std::uint16_t>(o.z + dz)};
+          // Trials 2 and 3: the sensor's voxel is not fully free, only marked.
+          const bool free = fully_free(rng) && !(trial / 2 == 1 && k == o);
+          map.setLogOdds(k, free ? map.sensorModel().clampMin() : -0.4F);
+          if (mark(rng)) marked_once.insert(k.packed());
+          if (mark(rng)) marked_twice.insert(k.packed());
+        }
+      }
+    }
+    marked_once.insert(o.packed());
+    std::vector<VoxelKey> hit;
+    for (int i = 0; i < 25; ++i) {
+      const VoxelKey k{static_cast<std::uint16_t>(o.x + off(rng)),
+                       static_cast<std::uint16_t>(o.y + off(rng)),
+                       static_cast<std::uint16_t>(o.z + off(rng))};
+      hit.push_back(k);
+      hit_set.insert(k.packed());
+    }
+    const KeyBox box{{static_cast<std::uint16_t>(o.x - 10), static_cast<std::uint16_t>(o.y - 13),
+                      static_cast<std::uint16_t>(o.z - 9)},
+                     {static_cast<std::uint16_t>(o.x + 14), static_cast<std::uint16_t>(o.y + 11),
+                      static_cast<std::uint16_t>(o.z + 12)}};
+    const KeyBox frame{{static_cast<std::uint16_t>(o.x - 20), static_cast<std::uint16_t>(o.y - 20),
+                        static_cast<std::uint16_t>(o.z - 20)},
+                       {static_cast<std::uint16_t>(o.x + 20), static_cast<std::uint16_t>(o.y + 20),
+                        static_cast<std::uint16_t>(o.z + 20)}};
+    CullingRegion sut;
+    sut.build(map, o, box, hit, &frame, /*growable=*/true);
+    // Before growing: the map's region (empty when the sensor's voxel is not fully free).
+    const auto from_map = bfsRegion(map, o, box, hit_set);
+    ASSERT_EQ(sut.size(), from_map.size()) << "trial " << trial;
+    // The marks as DenseFreeMarks hands them over, in two calls (the second ORed in).
+    std::set<std::uint64_t> marked;
+    for (const auto* set : {&marked_once, &marked_twice}) {
+      DenseFreeMarks marks;
+      ASSERT_TRUE(marks.reset(frame.min, frame.max, 1U << 20));
+      ScanUpdate outside;
+      outside.reset(UpdateRule::kSet);
+      for (const std::uint64_t packed : *set) marks.markFree(VoxelKey::fromPacked(packed), outside);
+      std::vector<FullyFreeBlock> covered;
+      marks.forEachMarked([&](std::uint64_t key, const block::BlockMask& mask) {
+        covered.push_back({key, mask});
+      });
+      sut.grow(covered);
+      marked.insert(set->begin(), set->end());
+      const auto expected = bfsRegion(map, o, box, hit_set, marked);
+      std::size_t found = 0;
+      for (int dz = -14; dz <= 14; ++dz) {
+        for (int dy = -14; dy <= 14; ++dy) {
+          for (int dx = -14; dx <= 16; ++dx) {
+            const VoxelKey k{static_cast<std::uint16_t>(o.x + dx),
+                             static_cast<std::uint16_t>(o.y + dy),
+                             static_cast<std::uint16_t>(o.z + dz)};
+            ASSERT_EQ(sut.contains(k), expected.contains(k.packed()))
+                << "trial " << trial << " at " << dx << "," << dy << "," << dz;
+            found += sut.contains(k) ? 1 : 0;
+          }
+        }
+      }
+      EXPECT_EQ(found, expected.size());
+      EXPECT_EQ(sut.size(), expected.size());
+      EXPECT_GT(expected.size(), from_map.size()) << "trial " << trial;
     }
   }
 }

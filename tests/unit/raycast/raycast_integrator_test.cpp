@@ -86,17 +86,23 @@ TEST(Integrator, OneAndTwoThreadsGiveTheSameMapAndCounts) {
 }
 
 TEST(Integrator, DenseMarksAndTheHashGiveTheSameMap) {
-  GridMap dense(0.1, SensorModel{}), hashed(0.1, SensorModel{});
-  Integrator a({.max_range_m = 5.0}), b({.max_range_m = 5.0, .dense_marks_max_blocks = 0});
+  // The same culling region for both (the region grows by the scan's marks only with dense
+  // marks: growing, the default, visits fewer voxels for the same map).
+  GridMap dense(0.1, SensorModel{}), hashed(0.1, SensorModel{}), grown(0.1, SensorModel{});
+  Integrator a({.max_range_m = 5.0, .grow_strides = {}}),
+      b({.max_range_m = 5.0, .dense_marks_max_blocks = 0}), c({.max_range_m = 5.0});
   for (int scan = 0; scan < 4; ++scan) {
     const Point3f origin(0.25F * scan, -0.1F, 0.2F);
     const PointCloud cloud = test::adversarialScan(0.1, origin, 8000, 5.0, 40 + scan);
     const ScanStats sa = a.integrate(dense, cloud, origin);
     const ScanStats sb = b.integrate(hashed, cloud, origin);
+    const ScanStats sc = c.integrate(grown, cloud, origin);
     EXPECT_EQ(sa.visits, sb.visits);
     EXPECT_EQ(sa.changed, sb.changed);
+    EXPECT_EQ(sc.changed, sb.changed);
   }
   EXPECT_EQ(diffMaps(dense, hashed).differing(), 0U);
+  EXPECT_EQ(diffMaps(grown, hashed).differing(), 0U);
 }
 
 TEST(Integrator, CullingWithAndWithoutTheSharedBrickFrameGivesTheRaycastMap) {
@@ -122,6 +128,49 @@ TEST(Integrator, CullingWithAndWithoutTheSharedBrickFrameGivesTheRaycastMap) {
   }
   EXPECT_GT(culled_a, 0U);
   EXPECT_GT(culled_b, 0U);
+}
+
+TEST(Integrator, GrowingTheRegionByTheScansMarksGivesTheRaycastMapWithFewerVisits) {
+  // The region grown between levels of rays (grow_strides) against the region from the map
+  // only: the same map, and fewer voxels visited; it culls already in the first scans, where
+  // no voxel is fully free yet, and after the sensor moves. Under kPerRay it is not grown.
+  for (const UpdateRule rule : {UpdateRule::kSet, UpdateRule::kPerRay}) {
+    GridMap plain(0.1, SensorModel{}), grown(0.1, SensorModel{}), map_only(0.1, SensorModel{});
+    Integrator r({.method = IntegrationMethod::kRaycast, .rule = rule, .max_range_m = 5.0});
+    Integrator g({.method = IntegrationMethod::kSuperRayCulling,
+                  .rule = rule,
+                  .max_range_m = 5.0,
+                  .superray_min_points = 4,
+                  .grow_strides = {16, 4}});
+    Integrator m({.method = IntegrationMethod::kSuperRayCulling,
+                  .rule = rule,
+                  .max_range_m = 5.0,
+                  .superray_min_points = 4,
+                  .grow_strides = {}});
+    std::size_t visits_grown = 0, visits_map_only = 0, culled_first = 0;
+    const VoxelGrid grid(0.1);
+    for (int scan = 0; scan < 10; ++scan) {
+      const Point3f origin = scan < 6 ? Point3f(0.05F, -0.05F, 0.05F) : Point3f(0.43F, 0.21F, 0.0F);
+      PointCloud cloud = test::adversarialScan(0.1, origin, 6000, 5.0, 170 + scan);
+      std::erase_if(cloud,
+                    [&](const Point3f& p) { return grid.pointToKey(p) == grid.pointToKey(origin); });
+      r.integrate(plain, cloud, origin);
+      const ScanStats sg = g.integrate(grown, cloud, origin);
+      const ScanStats sm = m.integrate(map_only, cloud, origin);
+      if (scan == 0) culled_first = sg.culled;
+      visits_grown += sg.visits;
+      visits_map_only += sm.visits;
+      ASSERT_EQ(diffMaps(grown, plain).differing(), 0U) << "scan " << scan;
+      ASSERT_EQ(diffMaps(map_only, plain).differing(), 0U) << "scan " << scan;
+      if (rule == UpdateRule::kPerRay) {
+        EXPECT_EQ(sg.visits, sm.visits) << "scan " << scan;
+      }
+    }
+    if (rule == UpdateRule::kSet) {
+      EXPECT_GT(culled_first, 0U);
+      EXPECT_LT(visits_grown, visits_map_only * 9 / 10);
+    }
+  }
 }
 
 TEST(Integrator, NonFinitePointsAreIgnoredNotCrashing) {

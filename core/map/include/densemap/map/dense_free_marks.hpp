@@ -55,6 +55,15 @@ class DenseFreeMarks {
   /// ORs the marks into `update` (as free marks) and clears them.
   void flushInto(ScanUpdate& update);
 
+  /// Calls f(block key, mask) for each block marked so far (the marks stay).
+  template <class F>
+  void forEachMarked(F&& f) const {
+    for (std::size_t t = 0; t < touched_count_; ++t) {
+      const std::uint32_t i = touched_[t];
+      f(blockKeyAt(i), masks_[i]);
+    }
+  }
+
   /// Marks one ray's voxels as markFree does, with the hot state (the arrays' pointers, the
   /// box, the touched count, the ray's last block) in locals until finish(): markFree's members
   /// are reloaded and stored around every mark (a mask word's store may alias a size_t
@@ -112,6 +121,8 @@ class DenseFreeMarks {
     if (bx >= n[0] || by >= n[1] || bz >= n[2]) return kOutside;
     return (bz * n[1] + by) * n[0] + bx;
   }
+  /// The block key (block::blockOf) of block `i` of the box.
+  [[nodiscard]] std::uint64_t blockKeyAt(std::uint32_t i) const;
   /// The index of `k`'s block in the box, or kOutside.
   [[nodiscard]] std::uint32_t blockIndex(const VoxelKey& k) const {
     return blockIndexIn(k, min_, n_);

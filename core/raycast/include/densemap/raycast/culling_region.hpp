@@ -35,8 +35,17 @@ class CullingRegion {
   /// `frame`, when given, must contain `box`: the query bricks then cover the blocks of
   /// `frame` (voxels outside `box` are not in the region), so that a DenseFreeMarks reset to the
   /// same box shares their indexing (see sharesFrame and culledAt).
+  /// `growable`: the box is loaded even when the region is empty, and kept for grow().
   void build(const OccupancyMap& map, const VoxelKey& origin, const KeyBox& box,
-             std::span<const VoxelKey> hit, const KeyBox* frame = nullptr);
+             std::span<const VoxelKey> hit, const KeyBox* frame = nullptr,
+             bool growable = false);
+
+  /// Under UpdateRule::kSet only: grows the region (built growable) by voxels this scan has
+  /// already marked free (`covered`: blocks' masks, cumulative over calls): the region is then
+  /// the voxels fully free or marked whose test cells are in it, so a traversal that reaches it
+  /// has its remaining voxels marked already or unchangeable. A voxel rays end in may be in it
+  /// (its free marks do not count under kSet). The region's frame stays the build's.
+  void grow(std::span<const FullyFreeBlock> covered);
 
   [[nodiscard]] bool contains(const VoxelKey& k) const {
     // Queried in the map's 8^3 block layout: a traversal stays in one cache line for a while.
@@ -77,6 +86,8 @@ class CullingRegion {
   void loadBlock(const FullyFreeBlock& b);
   /// Copies the swept rows into bricks_ (the query layout) over the blocks of `frame`.
   void toBricks(const KeyBox& frame);
+  /// The sweep from O over bits_, then toBricks(frame_).
+  void sweepAndIndex();
   /// Keeps the run of set bits of `r` that contains bit `x0` (none if it is clear).
   void keepRunThrough(std::uint64_t* r, unsigned x0) const;
 
@@ -93,6 +104,10 @@ class CullingRegion {
   };
   Scratch scratch_;
   std::size_t size_ = 0;
+  VoxelKey origin_{};
+  KeyBox frame_{};
+  bool growable_ = false;
+  std::vector<std::uint64_t> loaded_;  // bits_ before the sweep (growable builds)
 };
 
 /// The box the culling region is built in for a scan: the bounding box of the sensor's voxel

@@ -41,6 +41,13 @@ struct IntegratorOptions {
   /// Under UpdateRule::kSet each worker marks free voxels in a dense array of 8^3 blocks over
   /// the scan's box (64 bytes per block) when the box has at most this many blocks; 0: never.
   std::size_t dense_marks_max_blocks = std::size_t{1} << 21;
+  /// With a culling region under UpdateRule::kSet (and dense marks sharing its frame), the
+  /// rays are marked in levels: first those whose index is a multiple of grow_strides[0], then
+  /// of grow_strides[1] (not already marked), ..., then the rest; after each level the region
+  /// grows by the voxels marked so far (CullingRegion::grow), so later rays stop sooner.
+  /// Each ray is marked once, at the first level whose stride divides its index (strides <= 1
+  /// are ignored); empty: one level (the region from the map only).
+  std::vector<std::size_t> grow_strides{64, 8};
 };
 
 /// What integrating one scan did; the benchmark's per-scan figures.
@@ -93,6 +100,7 @@ class Integrator {
   IntegratorOptions options_;
   std::vector<RayEnd> rays_;
   std::vector<VoxelKey> hit_;
+  std::vector<FullyFreeBlock> covered_;
   SuperRayBuilder super_rays_;
   CullingRegion region_;
   tbb::enumerable_thread_specific<Local> locals_;
