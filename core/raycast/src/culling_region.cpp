@@ -53,24 +53,39 @@ void CullingRegion::loadFullyFree(const OccupancyMap& map) {
               static_cast<std::uint32_t>(bz0)},
       .max = {static_cast<std::uint32_t>(bx1), static_cast<std::uint32_t>(by1),
               static_cast<std::uint32_t>(bz1)}};
-  // The box's blocks with fully-free cells, then by layer of blocks along z (a counting sort):
-  // blocks of different layers write different rows, so the layers load side by side.
   std::vector<FullyFreeBlock>& found = scratch_.found;
   found.clear();
   map.appendFullyFreeBlocks(box, found);
+  loadBlocks(found);
+}
+
+void CullingRegion::loadBlocks(std::span<const FullyFreeBlock> blocks) {
+  // The box's blocks, by layer of blocks along z (a counting sort; blocks outside the box are
+  // dropped): blocks of different layers write different rows, so the layers load side by side.
+  const std::uint64_t bx0 = min_.x >> block::kShift, bx1 = (min_.x + nx_ - 1) >> block::kShift;
+  const std::uint64_t by0 = min_.y >> block::kShift, by1 = (min_.y + ny_ - 1) >> block::kShift;
+  const std::uint64_t bz0 = min_.z >> block::kShift, bz1 = (min_.z + nz_ - 1) >> block::kShift;
+  const auto inside = [&](std::uint64_t key) {
+    const std::uint64_t bx = key & 0x1fff, by = (key >> 13) & 0x1fff, bz = (key >> 26) & 0x1fff;
+    return bx >= bx0 && bx <= bx1 && by >= by0 && by <= by1 && bz >= bz0 && bz <= bz1;
+  };
   const auto layers = static_cast<std::size_t>(bz1 - bz0 + 1);
   std::vector<std::size_t>& starts = scratch_.layer_starts;
   starts.assign(layers + 1, 0);
   const auto layerOf = [bz0](std::uint64_t block_key) {
     return static_cast<std::size_t>(((block_key >> 26) & 0x1fff) - bz0);
   };
-  for (const FullyFreeBlock& b : found) ++starts[layerOf(b.key) + 1];
+  for (const FullyFreeBlock& b : blocks) {
+    if (inside(b.key)) ++starts[layerOf(b.key) + 1];
+  }
   for (std::size_t l = 0; l < layers; ++l) starts[l + 1] += starts[l];
   std::vector<FullyFreeBlock>& by_layer = scratch_.by_layer;
-  by_layer.resize(found.size());
+  by_layer.resize(starts[layers]);
   {
     std::vector<std::size_t> next(starts.begin(), starts.end() - 1);
-    for (const FullyFreeBlock& b : found) by_layer[next[layerOf(b.key)]++] = b;
+    for (const FullyFreeBlock& b : blocks) {
+      if (inside(b.key)) by_layer[next[layerOf(b.key)]++] = b;
+    }
   }
   tbb::parallel_for(std::size_t{0}, layers, [&](std::size_t l) {
     for (std::size_t i = starts[l]; i < starts[l + 1]; ++i) loadBlock(by_layer[i]);
@@ -79,35 +94,49 @@ void CullingRegion::loadFullyFree(const OccupancyMap& map) {
 
 void CullingRegion::loadBlock(const FullyFreeBlock& b) {
   const std::uint64_t bx = b.key & 0x1fff, by = (b.key >> 13) & 0x1fff, bz = (b.key >> 26) & 0x1fff;
-  // Mask word z holds the block's 8x8 voxels of layer z, byte y the row along x.
+  // Mask word z holds the block's 8x8 voxels of layer z, byte y the row along x: only the
+  // non-zero bytes are visited (a ray's marks fill a few rows of a block).
   const int x0 = static_cast<int>(bx << block::kShift) - min_.x;
+  const unsigned gx = static_cast<unsigned>(std::max(x0, 0));
+  // The box's part of the row: bits before the box (it starts inside this block) and past it.
+  std::uint64_t keep = 0xffU;
+  if (x0 < 0) keep >>= -x0;
+  if (gx + 8 > nx_) keep &= (std::uint64_t{1} << (nx_ - gx)) - 1;
+  const unsigned word = gx >> 6, bit = gx & 63;
+  const bool spills = bit > 56 && word + 1 < words_per_row_;
   for (int z = 0; z < block::kEdge; ++z) {
+    std::uint64_t layer = b.mask[static_cast<std::size_t>(z)];
+    if (layer == 0) continue;
     const int gz = static_cast<int>(bz << block::kShift) + z - min_.z;
-    if (gz < 0 || gz >= static_cast<int>(nz_) || b.mask[z] == 0) continue;
-    for (int y = 0; y < block::kEdge; ++y) {
+    if (gz < 0 || gz >= static_cast<int>(nz_)) continue;
+    while (layer != 0) {
+      const int y = std::countr_zero(layer) >> 3;
+      std::uint64_t bits8 = (layer >> (8 * y)) & 0xffU;
+      layer &= ~(std::uint64_t{0xff} << (8 * y));
       const int gy = static_cast<int>(by << block::kShift) + y - min_.y;
       if (gy < 0 || gy >= static_cast<int>(ny_)) continue;
-      std::uint64_t bits8 = (b.mask[z] >> (8 * y)) & 0xffU;
-      if (x0 < 0) bits8 >>= -x0;  // the box starts inside this block
+      if (x0 < 0) bits8 >>= -x0;
+      bits8 &= keep;
       if (bits8 == 0) continue;
       std::uint64_t* r = row(static_cast<unsigned>(gy), static_cast<unsigned>(gz));
-      const unsigned gx = static_cast<unsigned>(std::max(x0, 0));
-      if (gx + 8 > nx_) bits8 &= (std::uint64_t{1} << (nx_ - gx)) - 1;  // bits past the box
-      r[gx >> 6] |= bits8 << (gx & 63);
-      if ((gx & 63) > 56 && (gx >> 6) + 1 < words_per_row_) {
-        r[(gx >> 6) + 1] |= bits8 >> (64 - (gx & 63));
-      }
+      r[word] |= bits8 << bit;
+      if (spills) r[word + 1] |= bits8 >> (64 - bit);
     }
   }
 }
 
-void CullingRegion::toBricks(const KeyBox& frame) {
+void CullingRegion::toBricks(const KeyBox& frame, bool clear) {
   for (int a = 0; a < 3; ++a) {
     brick_min_[a] = static_cast<unsigned>(frame.min[a] >> block::kShift);
     bricks_n_[a] = static_cast<unsigned>(frame.max[a] >> block::kShift) - brick_min_[a] + 1;
   }
-  bricks_.assign(static_cast<std::size_t>(bricks_n_[0]) * bricks_n_[1] * bricks_n_[2],
-                 block::BlockMask{});
+  const std::size_t bricks = static_cast<std::size_t>(bricks_n_[0]) * bricks_n_[1] * bricks_n_[2];
+  if (clear || bricks_.size() != bricks) bricks_.assign(bricks, block::BlockMask{});
+  // A row's voxels go to its bricks a byte (8 voxels along x, one brick's row) at a time: the
+  // row's bit x is voxel min_.x + x, so brick byte k holds row bits [8k - offset, 8k - offset
+  // + 8) with offset = min_.x % 8. Each non-zero byte once, per set bit's first byte.
+  const unsigned offset = min_.x & (block::kEdge - 1);
+  const unsigned first_brick = (min_.x >> block::kShift) - brick_min_[0];
   // The rows of one layer of bricks along z write only that layer's bricks: layers in parallel.
   const unsigned first_layer = min_.z >> block::kShift,
                  last_layer = (min_.z + nz_ - 1) >> block::kShift;
@@ -123,14 +152,26 @@ void CullingRegion::toBricks(const KeyBox& frame) {
              ((gy >> block::kShift) - brick_min_[1])) *
             bricks_n_[0];
         const unsigned shift = 8 * (gy & (block::kEdge - 1));
+        const unsigned layer_z = gz & (block::kEdge - 1);
         for (unsigned w = 0; w < words_per_row_; ++w) {
           std::uint64_t bits = r[w];
           while (bits != 0) {
             const unsigned x = w * 64 + static_cast<unsigned>(std::countr_zero(bits));
-            bits &= bits - 1;
-            const unsigned gx = min_.x + x;
-            bricks_[brick_row + ((gx >> block::kShift) - brick_min_[0])][gz & (block::kEdge - 1)] |=
-                std::uint64_t{1} << (shift + (gx & (block::kEdge - 1)));
+            const unsigned k = (x + offset) >> block::kShift;  // its brick byte
+            const int start = static_cast<int>(8 * k) - static_cast<int>(offset);
+            std::uint64_t byte = 0;
+            if (start < 0) {
+              byte = r[0] << -start;
+            } else {
+              const unsigned sw = static_cast<unsigned>(start) >> 6,
+                             sb = static_cast<unsigned>(start) & 63;
+              byte = r[sw] >> sb;
+              if (sb > 56 && sw + 1 < words_per_row_) byte |= r[sw + 1] << (64 - sb);
+            }
+            bricks_[brick_row + first_brick + k][layer_z] |= (byte & 0xffU) << shift;
+            // This word's bits of that byte are done.
+            const int end = start + 8 - static_cast<int>(w * 64);  // first bit past the byte
+            bits = end >= 64 ? 0 : bits & (~std::uint64_t{0} << end);
           }
         }
       }
@@ -228,12 +269,13 @@ void CullingRegion::build(const OccupancyMap& map, const VoxelKey& origin, const
 void CullingRegion::grow(std::span<const FullyFreeBlock> covered) {
   if (!growable_) return;
   bits_ = loaded_;
-  for (const FullyFreeBlock& b : covered) loadBlock(b);
+  loadBlocks(covered);
   loaded_ = bits_;
-  sweepAndIndex();
+  // The region only grows (its voxels stay covered): the bricks keep theirs.
+  sweepAndIndex(/*clear=*/false);
 }
 
-void CullingRegion::sweepAndIndex() {
+void CullingRegion::sweepAndIndex(bool clear) {
   // Sweep outward from O: a row (y, z) needs the rows one step closer to O in y and in z. The
   // row through O first, then its plane's rows along y and its column's along z (each needs
   // only that row), then the four quadrants around them, each on its own (a quadrant's rows need
@@ -295,7 +337,7 @@ void CullingRegion::sweepAndIndex() {
   tbb::parallel_invoke([&] { quadrant(0); }, [&] { quadrant(1); }, [&] { quadrant(2); },
                        [&] { quadrant(3); });
   size_ += plane + column + quadrants[0] + quadrants[1] + quadrants[2] + quadrants[3];
-  toBricks(frame_);
+  toBricks(frame_, clear);
 }
 
 }  // namespace densemap

@@ -141,7 +141,8 @@ TEST(Integrator, GrowingTheRegionByTheScansMarksGivesTheRaycastMapWithFewerVisit
                   .rule = rule,
                   .max_range_m = 5.0,
                   .superray_min_points = 4,
-                  .grow_strides = {16, 4}});
+                  .grow_strides = {16, 4},
+                  .grow_min_share = 0.0});  // every scan grows
     Integrator m({.method = IntegrationMethod::kSuperRayCulling,
                   .rule = rule,
                   .max_range_m = 5.0,
@@ -170,6 +171,33 @@ TEST(Integrator, GrowingTheRegionByTheScansMarksGivesTheRaycastMapWithFewerVisit
       EXPECT_GT(culled_first, 0U);
       EXPECT_LT(visits_grown, visits_map_only * 9 / 10);
     }
+  }
+}
+
+TEST(Integrator, GrowsOnlyOnProbeScansWhileGrowingCullsTooLittle) {
+  // A share no scan reaches: the first scan grows (nothing measured yet), then every third.
+  GridMap grown(0.1, SensorModel{}), map_only(0.1, SensorModel{});
+  Integrator g({.method = IntegrationMethod::kCulling,
+                .max_range_m = 5.0,
+                .grow_strides = {8},
+                .grow_min_share = 1.5,
+                .grow_probe_every = 3});
+  Integrator m({.method = IntegrationMethod::kCulling, .max_range_m = 5.0, .grow_strides = {}});
+  const VoxelGrid grid(0.1);
+  for (int scan = 0; scan < 8; ++scan) {
+    const Point3f origin(0.05F, -0.05F, 0.05F);
+    PointCloud cloud = test::adversarialScan(0.1, origin, 4000, 5.0, 190 + scan);
+    std::erase_if(cloud,
+                  [&](const Point3f& p) { return grid.pointToKey(p) == grid.pointToKey(origin); });
+    const ScanStats sg = g.integrate(grown, cloud, origin);
+    const ScanStats sm = m.integrate(map_only, cloud, origin);
+    const bool probe = scan % 3 == 0;
+    if (probe) {
+      EXPECT_LT(sg.visits, sm.visits) << "scan " << scan;
+    } else {
+      EXPECT_EQ(sg.visits, sm.visits) << "scan " << scan;
+    }
+    ASSERT_EQ(diffMaps(grown, map_only).differing(), 0U) << "scan " << scan;
   }
 }
 

@@ -82,12 +82,16 @@ class CullingRegion {
   }
   /// Sets the bits of the box's fully-free voxels (the blocks' layers along z in parallel).
   void loadFullyFree(const OccupancyMap& map);
+  /// Sets the bits of these blocks' voxels inside the box (the blocks' layers along z in
+  /// parallel; blocks outside the box skipped).
+  void loadBlocks(std::span<const FullyFreeBlock> blocks);
   /// Sets the bits of one block's fully-free voxels inside the box.
   void loadBlock(const FullyFreeBlock& b);
-  /// Copies the swept rows into bricks_ (the query layout) over the blocks of `frame`.
-  void toBricks(const KeyBox& frame);
-  /// The sweep from O over bits_, then toBricks(frame_).
-  void sweepAndIndex();
+  /// Copies the swept rows into bricks_ (the query layout) over the blocks of `frame`; without
+  /// `clear` (the same frame), ORs them into the bricks already there.
+  void toBricks(const KeyBox& frame, bool clear);
+  /// The sweep from O over bits_, then toBricks(frame_, clear).
+  void sweepAndIndex(bool clear = true);
   /// Keeps the run of set bits of `r` that contains bit `x0` (none if it is clear).
   void keepRunThrough(std::uint64_t* r, unsigned x0) const;
 

@@ -3,6 +3,7 @@
 #include <tbb/enumerable_thread_specific.h>
 
 #include <cstddef>
+#include <limits>
 #include <string_view>
 #include <vector>
 
@@ -47,7 +48,16 @@ struct IntegratorOptions {
   /// grows by the voxels marked so far (CullingRegion::grow), so later rays stop sooner.
   /// Each ray is marked once, at the first level whose stride divides its index (strides <= 1
   /// are ignored); empty: one level (the region from the map only).
-  std::vector<std::size_t> grow_strides{64, 8};
+  std::vector<std::size_t> grow_strides{16};
+  /// A growing region's box is shrunk around the sensor to at most this many voxels (each
+  /// growth loads and sweeps it: a 64-beam drive at 0.1 m / 80 m had a 2^27-voxel box, whose
+  /// growths cost more than they saved).
+  std::size_t grow_max_voxels = std::size_t{1} << 24;
+  /// Growth continues while the last growing scan's later levels (after the first) had at
+  /// least this share of their traversal steps culled; below it, only every
+  /// grow_probe_every-th scan grows (to measure again).
+  double grow_min_share = 0.25;
+  std::size_t grow_probe_every = 8;
 };
 
 /// What integrating one scan did; the benchmark's per-scan figures.
@@ -105,6 +115,9 @@ class Integrator {
   CullingRegion region_;
   tbb::enumerable_thread_specific<Local> locals_;
   ScanUpdate merged_;
+  // The culled share of the last growing scan's later levels (none yet: grow).
+  double grow_share_ = std::numeric_limits<double>::infinity();
+  std::size_t scans_since_grown_ = 0;
 };
 
 }  // namespace densemap
