@@ -27,7 +27,8 @@ TEST_P(RaycastMatchesOctomap, CellForCellAfterEveryScanOnBothBackends) {
   GridMap grid(c.resolution, SensorModel{});
   grid.setRunner(tbbRunner());  // the grid's blocks in the arena's threads, as the engine's
   OctreeMap octree(c.resolution, SensorModel{});
-  Integrator sut({.max_range_m = c.max_range});
+  // One integrator per map: an integrator's region growth follows its own past scans.
+  Integrator sut({.max_range_m = c.max_range}), sut_octree({.max_range_m = c.max_range});
   tbb::task_arena arena(c.threads);
   test::RandomRays origins(c.resolution, 1.0, 17);
   for (int scan = 0; scan < 8; ++scan) {
@@ -37,7 +38,7 @@ TEST_P(RaycastMatchesOctomap, CellForCellAfterEveryScanOnBothBackends) {
     oracle.insertWithOctomap(cloud, origin, c.max_range);
     arena.execute([&] {
       const ScanStats a = sut.integrate(grid, cloud, origin);
-      const ScanStats b = sut.integrate(octree, cloud, origin);
+      const ScanStats b = sut_octree.integrate(octree, cloud, origin);
       EXPECT_EQ(a.visits, b.visits);
       EXPECT_EQ(a.changed, b.changed);
       EXPECT_GT(a.updated, 0U);
