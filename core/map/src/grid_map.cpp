@@ -2,6 +2,7 @@
 
 #include <atomic>
 
+#include <type_traits>
 #include <vector>
 
 namespace densemap {
@@ -54,9 +55,9 @@ struct GridMap::BlockWriter {
   }
 };
 
-template <class WriteBlock>
+template <class WriteBlock, class CellsOf>
 ApplyStats GridMap::writeBlocks(std::span<BlockEntry* const> entries, CellChanges* changes,
-                                WriteBlock&& write_block) {
+                                WriteBlock&& write_block, CellsOf&& cells_of) {
   using Counts = BlockWriter::Counts;
   // Each block records its changes in its own slot; slots are concatenated in block order.
   std::vector<CellChanges> block_changes(changes != nullptr ? entries.size() : 0);
@@ -73,6 +74,18 @@ ApplyStats GridMap::writeBlocks(std::span<BlockEntry* const> entries, CellChange
       const auto* bytes = reinterpret_cast<const char*>(head);
       __builtin_prefetch(bytes);
       __builtin_prefetch(bytes + 64);
+      if constexpr (!std::is_same_v<std::decay_t<CellsOf>, std::nullptr_t>) {
+        // The lines (16 values each) holding the cells to write.
+        const float* values = static_cast<const BlockNode*>(head)->voxels.log_odds.data();
+        const block::BlockMask cells = cells_of(k);
+        for (int w = 0; w < block::kMaskWords; ++w) {
+          for (int q = 0; q < 4; ++q) {
+            if (((cells[static_cast<std::size_t>(w)] >> (16 * q)) & 0xffffU) != 0) {
+              __builtin_prefetch(values + 64 * w + 16 * q);
+            }
+          }
+        }
+      }
     };
     for (std::size_t k = begin; k < std::min(begin + 4, end); ++k) __builtin_prefetch(entries[k]);
     prefetchNode(begin);
@@ -107,13 +120,22 @@ ApplyStats GridMap::apply(const ScanUpdate& update, CellChanges* changes) {
   }
   const SensorModel& model = sensorModel();
   const UpdateRule rule = update.rule();
-  return writeBlocks(entries, changes, [&](std::size_t j, BlockWriter& w) {
-    ScanUpdate::forEachCellInBlock(
-        blocks[j].first, *blocks[j].second, [&](const VoxelKey& key, const CellHits& hits) {
-          const int i = block::indexOf(key);
-          w.set(key, i, updatedLogOdds(model, rule, w.known(i) ? w.value(i) : 0.0F, hits));
-        });
-  });
+  return writeBlocks(
+      entries, changes,
+      [&](std::size_t j, BlockWriter& w) {
+        ScanUpdate::forEachCellInBlock(
+            blocks[j].first, *blocks[j].second, [&](const VoxelKey& key, const CellHits& hits) {
+              const int i = block::indexOf(key);
+              w.set(key, i, updatedLogOdds(model, rule, w.known(i) ? w.value(i) : 0.0F, hits));
+            });
+      },
+      [&](std::size_t j) {
+        block::BlockMask cells;
+        for (std::size_t w = 0; w < cells.size(); ++w) {
+          cells[w] = blocks[j].second->free[w] | blocks[j].second->occupied[w];
+        }
+        return cells;
+      });
 }
 
 std::size_t GridMap::clearBox(const VoxelKey& min, const VoxelKey& max, CellChanges* changes) {

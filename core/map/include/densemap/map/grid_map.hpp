@@ -84,9 +84,11 @@ class GridMap final : public OccupancyMap {
   struct BlockWriter;  // one block's writes in a parallel update (grid_map.cpp)
   /// Runs write_block(j, writer) for every entry in parallel, a block per task; counts, newly
   /// known cells and the changes (in entry order) gathered.
-  template <class WriteBlock>
+  /// `cells_of(j)`, when given, is the mask of the cells block j's writes touch: their lines of
+  /// the block's values are fetched ahead too.
+  template <class WriteBlock, class CellsOf = std::nullptr_t>
   ApplyStats writeBlocks(std::span<BlockEntry* const> entries, CellChanges* changes,
-                         WriteBlock&& write_block);
+                         WriteBlock&& write_block, CellsOf&& cells_of = nullptr);
   /// Drops a block (BlockStore::drop); returns its known cells. known_cells_ is the caller's.
   std::size_t dropBlock(BlockEntry& entry, CellChanges* changes);
 
