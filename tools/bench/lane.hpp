@@ -13,7 +13,6 @@
 
 #include "bench_report.hpp"
 #include "densemap/geometry/percentile.hpp"
-#include "densemap/raycast/integrator.hpp"
 #include "densemap/kernel/kernel_map.hpp"
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_factory.hpp"

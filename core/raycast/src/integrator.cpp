@@ -222,8 +222,8 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
   if (grow_levels) {
     const double later_visits = static_cast<double>(stats.visits - visits_before_later);
     const double later_culled = static_cast<double>(stats.culled - culled_before_later);
-    grow_share_ = later_visits + later_culled > 0 ? later_culled / (later_visits + later_culled)
-                                                  : 1.0;
+    grow_share_ =
+        later_visits + later_culled > 0 ? later_culled / (later_visits + later_culled) : 1.0;
     scans_since_grown_ = 0;
   }
   stats.ms_merge = msSince(t0);

@@ -154,8 +154,8 @@ TEST(Integrator, GrowingTheRegionByTheScansMarksGivesTheRaycastMapWithFewerVisit
     for (int scan = 0; scan < 10; ++scan) {
       const Point3f origin = scan < 6 ? Point3f(0.05F, -0.05F, 0.05F) : Point3f(0.43F, 0.21F, 0.0F);
       PointCloud cloud = test::adversarialScan(0.1, origin, 6000, 5.0, 170 + scan);
-      std::erase_if(cloud,
-                    [&](const Point3f& p) { return grid.pointToKey(p) == grid.pointToKey(origin); });
+      std::erase_if(
+          cloud, [&](const Point3f& p) { return grid.pointToKey(p) == grid.pointToKey(origin); });
       r.integrate(plain, cloud, origin);
       const ScanStats sg = g.integrate(grown, cloud, origin);
       const ScanStats sm = m.integrate(map_only, cloud, origin);

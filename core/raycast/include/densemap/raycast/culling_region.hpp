@@ -35,13 +35,13 @@ class CullingRegion {
   /// `frame`, when given, must contain `box`: the query bricks then cover the blocks of
   /// `frame` (voxels outside `box` are not in the region), so that a DenseFreeMarks reset to the
   /// same box shares their indexing (see sharesFrame and culledAt).
-  /// `growable`: the box is loaded even when the region is empty, and kept for grow().
+  /// `growable` (UpdateRule::kSet only): the box is loaded even when the region is empty (the
+  /// sensor's voxel not fully free), and kept for grow().
   void build(const OccupancyMap& map, const VoxelKey& origin, const KeyBox& box,
-             std::span<const VoxelKey> hit, const KeyBox* frame = nullptr,
-             bool growable = false);
+             std::span<const VoxelKey> hit, const KeyBox* frame = nullptr, bool growable = false);
 
   /// Under UpdateRule::kSet only: grows the region (built growable) by voxels this scan has
-  /// already marked free (`covered`: blocks' masks, cumulative over calls): the region is then
+  /// already marked free (`covered`: blocks' masks, ORed into the earlier calls'): the region is then
   /// the voxels fully free or marked whose test cells are in it, so a traversal that reaches it
   /// has its remaining voxels marked already or unchangeable. A voxel rays end in may be in it
   /// (its free marks do not count under kSet). The region's frame stays the build's.
