@@ -59,16 +59,18 @@ void CullingRegion::loadFullyFree(const OccupancyMap& map) {
   loadBlocks(found);
 }
 
+bool CullingRegion::boxHasBlock(std::uint64_t key) const {
+  const std::uint64_t bx = key & 0x1fff, by = (key >> 13) & 0x1fff, bz = (key >> 26) & 0x1fff;
+  return bx >= (min_.x >> block::kShift) && bx <= ((min_.x + nx_ - 1) >> block::kShift) &&
+         by >= (min_.y >> block::kShift) && by <= ((min_.y + ny_ - 1) >> block::kShift) &&
+         bz >= (min_.z >> block::kShift) && bz <= ((min_.z + nz_ - 1) >> block::kShift);
+}
+
 void CullingRegion::loadBlocks(std::span<const FullyFreeBlock> blocks) {
   // The box's blocks, by layer of blocks along z (a counting sort; blocks outside the box are
   // dropped): blocks of different layers write different rows, so the layers load side by side.
-  const std::uint64_t bx0 = min_.x >> block::kShift, bx1 = (min_.x + nx_ - 1) >> block::kShift;
-  const std::uint64_t by0 = min_.y >> block::kShift, by1 = (min_.y + ny_ - 1) >> block::kShift;
   const std::uint64_t bz0 = min_.z >> block::kShift, bz1 = (min_.z + nz_ - 1) >> block::kShift;
-  const auto inside = [&](std::uint64_t key) {
-    const std::uint64_t bx = key & 0x1fff, by = (key >> 13) & 0x1fff, bz = (key >> 26) & 0x1fff;
-    return bx >= bx0 && bx <= bx1 && by >= by0 && by <= by1 && bz >= bz0 && bz <= bz1;
-  };
+  const auto inside = [&](std::uint64_t key) { return boxHasBlock(key); };
   const auto layers = static_cast<std::size_t>(bz1 - bz0 + 1);
   std::vector<std::size_t>& starts = scratch_.layer_starts;
   starts.assign(layers + 1, 0);

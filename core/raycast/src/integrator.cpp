@@ -199,8 +199,10 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
     covered_.clear();
     for (Local& local : locals_) {
       if (!local.dense_ok) continue;
+      // Only the blocks of the region's box (it may be smaller than the rays' box): the list
+      // is bounded by the box, not by how far the rays reach.
       local.dense.forEachMarked([&](std::uint64_t key, const block::BlockMask& mask) {
-        covered_.push_back({key, mask});
+        if (region_.boxHasBlock(key)) covered_.push_back({key, mask});
       });
     }
     auto t_grow = std::chrono::steady_clock::now();

@@ -41,11 +41,14 @@ class CullingRegion {
              std::span<const VoxelKey> hit, const KeyBox* frame = nullptr, bool growable = false);
 
   /// Under UpdateRule::kSet only: grows the region (built growable) by voxels this scan has
-  /// already marked free (`covered`: blocks' masks, ORed into the earlier calls'): the region is then
-  /// the voxels fully free or marked whose test cells are in it, so a traversal that reaches it
-  /// has its remaining voxels marked already or unchangeable. A voxel rays end in may be in it
+  /// already marked free (`covered`: blocks' masks, ORed into the earlier calls'): the region is
+  /// then the voxels fully free or marked whose test cells are in it, so a traversal that reaches
+  /// it has its remaining voxels marked already or unchangeable. A voxel rays end in may be in it
   /// (its free marks do not count under kSet). The region's frame stays the build's.
   void grow(std::span<const FullyFreeBlock> covered);
+
+  /// Whether block `key` (block::blockOf) has voxels in the box of the last build.
+  [[nodiscard]] bool boxHasBlock(std::uint64_t key) const;
 
   [[nodiscard]] bool contains(const VoxelKey& k) const {
     // Queried in the map's 8^3 block layout: a traversal stays in one cache line for a while.
