@@ -70,7 +70,6 @@ void CullingRegion::loadBlocks(std::span<const FullyFreeBlock> blocks) {
   // The box's blocks, by layer of blocks along z (a counting sort; blocks outside the box are
   // dropped): blocks of different layers write different rows, so the layers load side by side.
   const std::uint64_t bz0 = min_.z >> block::kShift, bz1 = (min_.z + nz_ - 1) >> block::kShift;
-  const auto inside = [&](std::uint64_t key) { return boxHasBlock(key); };
   const auto layers = static_cast<std::size_t>(bz1 - bz0 + 1);
   std::vector<std::size_t>& starts = scratch_.layer_starts;
   starts.assign(layers + 1, 0);
@@ -78,7 +77,7 @@ void CullingRegion::loadBlocks(std::span<const FullyFreeBlock> blocks) {
     return static_cast<std::size_t>(((block_key >> 26) & 0x1fff) - bz0);
   };
   for (const FullyFreeBlock& b : blocks) {
-    if (inside(b.key)) ++starts[layerOf(b.key) + 1];
+    if (boxHasBlock(b.key)) ++starts[layerOf(b.key) + 1];
   }
   for (std::size_t l = 0; l < layers; ++l) starts[l + 1] += starts[l];
   std::vector<FullyFreeBlock>& by_layer = scratch_.by_layer;
@@ -86,7 +85,7 @@ void CullingRegion::loadBlocks(std::span<const FullyFreeBlock> blocks) {
   {
     std::vector<std::size_t> next(starts.begin(), starts.end() - 1);
     for (const FullyFreeBlock& b : blocks) {
-      if (inside(b.key)) by_layer[next[layerOf(b.key)]++] = b;
+      if (boxHasBlock(b.key)) by_layer[next[layerOf(b.key)]++] = b;
     }
   }
   tbb::parallel_for(std::size_t{0}, layers, [&](std::size_t l) {

@@ -162,7 +162,9 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
   for (std::size_t level = 0; level < strides.size(); ++level) {
     const std::size_t stride = strides[level];
     const std::size_t previous = level == 0 ? 0 : strides[level - 1];
-    const std::size_t count = (rays_.size() + stride - 1) / stride;
+    // Indices 0, stride, 2 stride, ... below the ray count (no `size + stride - 1`: a stride
+    // near SIZE_MAX would wrap it and leave ray 0 unmarked).
+    const std::size_t count = rays_.empty() ? 0 : (rays_.size() - 1) / stride + 1;
     tbb::parallel_for(
         tbb::blocked_range<std::size_t>(0, count, std::max<std::size_t>(1, 256 / stride)),
         [&](const tbb::blocked_range<std::size_t>& range) {

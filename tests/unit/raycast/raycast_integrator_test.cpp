@@ -1,7 +1,10 @@
 #include "densemap/raycast/integrator.hpp"
 
 #include <gtest/gtest.h>
+
 #include <tbb/task_arena.h>
+
+#include <limits>
 
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_diff.hpp"
@@ -199,6 +202,29 @@ TEST(Integrator, GrowsOnlyOnProbeScansWhileGrowingCullsTooLittle) {
       EXPECT_EQ(sg.visits, sm.visits) << "scan " << scan;
     }
     ASSERT_EQ(diffMaps(grown, map_only).differing(), 0U) << "scan " << scan;
+  }
+}
+
+TEST(Integrator, AnyGrowStrideMarksEveryRayOnce) {
+  // Strides of every size, up to SIZE_MAX (a level's ray count must not wrap): the raycast map.
+  const VoxelGrid grid(0.1);
+  const Point3f origin(0.05F, -0.05F, 0.05F);
+  for (const std::size_t stride :
+       {std::size_t{2}, std::size_t{4097}, std::numeric_limits<std::size_t>::max()}) {
+    GridMap plain(0.1, SensorModel{}), grown(0.1, SensorModel{});
+    Integrator r({.method = IntegrationMethod::kRaycast, .max_range_m = 5.0});
+    Integrator g({.method = IntegrationMethod::kCulling,
+                  .max_range_m = 5.0,
+                  .grow_strides = {stride},
+                  .grow_min_share = 0.0});
+    for (int scan = 0; scan < 2; ++scan) {
+      PointCloud cloud = test::adversarialScan(0.1, origin, 3000, 5.0, 210 + scan);
+      std::erase_if(
+          cloud, [&](const Point3f& p) { return grid.pointToKey(p) == grid.pointToKey(origin); });
+      r.integrate(plain, cloud, origin);
+      g.integrate(grown, cloud, origin);
+      ASSERT_EQ(diffMaps(grown, plain).differing(), 0U) << "stride " << stride << " scan " << scan;
+    }
   }
 }
 

@@ -50,8 +50,7 @@ struct IntegratorOptions {
   /// are ignored); empty: one level (the region from the map only).
   std::vector<std::size_t> grow_strides{16};
   /// A growing region's box is shrunk around the sensor to at most this many voxels: each
-  /// growth copies, loads and sweeps it (2 MiB at 2^24; a 64-beam drive at 0.1 m / 80 m has
-  /// rays boxes of 2^27 and more).
+  /// growth copies, loads and sweeps it (one bit a voxel: 2 MiB at 2^24).
   std::size_t grow_max_voxels = std::size_t{1} << 24;
   /// Growth continues while the last growing scan's later levels (after the first) had at
   /// least this share of their traversal steps culled; below it, only every
