@@ -42,18 +42,99 @@ RayStop rayStop(const Eigen::Vector3d& ray, const Eigen::Vector3d& normal, const
   return {along(o.free_margin), along(o.tip_margin)};
 }
 
+HitStencils::HitStencils(double length_voxels, int steps, double kernel_weight,
+                         double cell_weight, const SquaredKernelTable& table,
+                         std::size_t max_values) {
+  if (steps <= 0 || !(length_voxels > 0.0) || length_voxels > 64.0) return;
+  // A centre in its voxel (faces included) reaches the cells within length_voxels of it:
+  // offsets up to ceil(length) + 1 on each side.
+  reach_ = static_cast<int>(std::ceil(length_voxels)) + 1;
+  width_ = static_cast<std::size_t>(2 * reach_ + 1);
+  const auto subs = static_cast<std::size_t>(steps + 1) * (steps + 1) * (steps + 1);
+  if (subs * width_ * width_ * width_ > max_values) return;
+  steps_ = steps;
+  values_.assign(subs * width_ * width_ * width_, 0.0);
+  extents_.assign(subs * width_ * width_, {1, 0});
+  const double inverse_length2 = 1.0 / (length_voxels * length_voxels);
+  for (std::int32_t sub = 0; sub < static_cast<std::int32_t>(subs); ++sub) {
+    const Eigen::Vector3d c = centreOf(sub);
+    for (int dz = -reach_; dz <= reach_; ++dz) {
+      for (int dy = -reach_; dy <= reach_; ++dy) {
+        double* const values = values_.data() + rowIndex(sub, dy, dz) * width_;
+        std::pair<int, int>& extent = extents_[rowIndex(sub, dy, dz)];
+        extent = {reach_ + 1, -reach_ - 1};
+        for (int dx = -reach_; dx <= reach_; ++dx) {
+          const Eigen::Vector3d d = Eigen::Vector3d(dx + 0.5, dy + 0.5, dz + 0.5) - c;
+          const double v = kernel_weight * table(d.squaredNorm() * inverse_length2) +
+                           (dx == 0 && dy == 0 && dz == 0 ? cell_weight : 0.0);
+          values[dx + reach_] = v;
+          if (v > 0.0) extent = {std::min(extent.first, dx), std::max(extent.second, dx)};
+        }
+      }
+    }
+  }
+}
+
+std::int32_t HitStencils::subPosition(const Eigen::Vector3d& f) const {
+  std::int32_t sub = 0;
+  for (int a = 2; a >= 0; --a) {
+    const int i = std::clamp(static_cast<int>(std::lround(f[a] * steps_)), 0, steps_);
+    sub = sub * (steps_ + 1) + i;
+  }
+  return sub;
+}
+
+Eigen::Vector3d HitStencils::centreOf(std::int32_t sub) const {
+  Eigen::Vector3d c;
+  for (int a = 0; a < 3; ++a) {
+    c[a] = static_cast<double>(sub % (steps_ + 1)) / steps_;
+    sub /= steps_ + 1;
+  }
+  return c;
+}
+
 /// kAkimapRays' direct hit evidence: per hit, its cell (hit_weight) and an isotropic kernel of
 /// hit_length_voxels (hit_kernel_weight); with `counts`, `positions` are voxels' mean hits, each
-/// standing for that many hits (the cell's evidence is then exactly the hits' sum).
+/// standing for that many hits (the cell's evidence is then exactly the hits' sum). With
+/// usable `stencils`, one tabled kernel holds both, weighing the hits' count; consecutive
+/// positions in the same voxel and sub-position share one.
 void appendHitKernels(const std::vector<Eigen::Vector3d>& positions,
-                      const std::vector<double>* counts, const KernelOptions& o, double resolution,
+                      const std::vector<double>* counts, const KernelOptions& o,
+                      const VoxelGrid& grid, const HitStencils* stencils,
                       std::vector<Kernel>& kernels) {
+  const double resolution = grid.resolution();
   const double radius = o.hit_length_voxels * resolution;
+  const bool tabled = stencils != nullptr && stencils->usable();
+  std::size_t last_tabled = kernels.size();  // none yet
   for (std::size_t i = 0; i < positions.size(); ++i) {
     const double count = counts != nullptr ? (*counts)[i] : 1.0;
     Kernel k;
     k.x = k.to = positions[i];
     k.occupied = true;
+    const std::optional<VoxelKey> key =
+        tabled ? grid.pointToKey(positions[i].cast<float>()) : std::nullopt;
+    if (key) {
+      // The voxel's lower corner, then the position's offsets inside it (voxels).
+      Eigen::Vector3d corner;
+      for (int a = 0; a < 3; ++a) corner[a] = grid.keyToCoord((*key)[a]) - 0.5 * resolution;
+      const std::int32_t sub = stencils->subPosition((positions[i] - corner) / resolution);
+      if (last_tabled < kernels.size() && kernels[last_tabled].stencil_key == *key &&
+          kernels[last_tabled].stencil == sub) {
+        kernels[last_tabled].weight += count;
+        continue;
+      }
+      k.stencil = sub;
+      k.stencil_key = *key;
+      k.x = k.to = corner + stencils->centreOf(sub) * resolution;
+      k.weight = count;
+      // The box the pairs are made from: the kernel's support around its centre (the cell is
+      // inside it).
+      k.half_extent.setConstant(radius);
+      k.inverse_length = 1.0 / radius;
+      last_tabled = kernels.size();
+      kernels.push_back(k);
+      continue;
+    }
     if (o.hit_weight > 0.0) {
       k.weight = o.hit_weight * count;
       k.cell = true;

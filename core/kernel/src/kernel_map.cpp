@@ -108,6 +108,37 @@ void accumulatePointKernel(const VoxelGrid& grid, const Kernel& k, int x0, int x
   }
 }
 
+/// A tabled hit kernel's values (HitStencils) on the cells [x0, x1] x [y0, y1] x [z0, z1] of
+/// one block, added to the block's alpha sums: per row only the stretch where the kernel is
+/// not 0, per cell a product.
+void accumulateStencilKernel(const detail::HitStencils& stencils, const Kernel& k, int x0, int x1,
+                             int y0, int y1, int z0, int z1,
+                             std::array<double, block::kVoxels>& sum_alpha,
+                             block::BlockMask& summed, std::size_t& updates) {
+  const VoxelKey& c = k.stencil_key;
+  for (int z = z0; z <= z1; ++z) {
+    for (int y = y0; y <= y1; ++y) {
+      const int dy = y - c.y, dz = z - c.z;
+      const auto [first, last] = stencils.rowExtent(k.stencil, dy, dz);
+      const int from = std::max(x0, c.x + first), to = std::min(x1, c.x + last);
+      if (from > to) continue;
+      const double* const values = stencils.row(k.stencil, dy, dz);
+      const int shift = stencils.reach() - c.x;  // values[x + shift]: offset x - c.x
+      const int row =
+          block::indexOf(VoxelKey{static_cast<std::uint16_t>(x0), static_cast<std::uint16_t>(y),
+                                  static_cast<std::uint16_t>(z)}) -
+          x0;
+      for (int x = from; x <= to; ++x) {
+        const double v = k.weight * values[x + shift];
+        if (!(v > 0.0)) continue;
+        sum_alpha[static_cast<std::size_t>(row + x)] += v;
+        block::setBit(summed, row + x);
+        ++updates;
+      }
+    }
+  }
+}
+
 }  // namespace
 
 KernelMap::KernelMap(double resolution_m, const KernelOptions& options, BlockStore* store)
@@ -235,8 +266,16 @@ void KernelMap::fitKernels(const PointCloud& points_world, const Point3f& origin
     // Two hit kernels per position (a voxel's mean when aggregated: far fewer than the hits).
     kernels.reserve(kernels.size() + 2 * hit_positions.size() + segments.size());
     if (rays) {
-      appendHitKernels(hit_positions, aggregate ? &hit_counts : nullptr, options_,
-                       grid_.resolution(), kernels);
+      // Tabled (hit_stencil_steps) where there is a hit kernel.
+      const int steps = static_cast<int>(options_.hit_stencil_steps);
+      const bool tabled = steps > 0 && options_.hit_kernel_weight > 0.0;
+      if (tabled && !scratch_->hit_stencils) {
+        scratch_->hit_stencils.emplace(options_.hit_length_voxels, steps,
+                                       options_.hit_kernel_weight, options_.hit_weight,
+                                       squaredKernel());
+      }
+      appendHitKernels(hit_positions, aggregate ? &hit_counts : nullptr, options_, grid_,
+                       tabled ? &*scratch_->hit_stencils : nullptr, kernels);
     }
     for (const Sample& s : segments) kernels.push_back(isotropicKernel(s, options_));
     if (traverse) {
@@ -404,6 +443,11 @@ std::size_t KernelMap::accumulateKernels(
             const auto [x0, x1] = range_of(0, klo.x, khi.x);
             const auto [y0, y1] = range_of(1, klo.y, khi.y);
             const auto [z0, z1] = range_of(2, klo.z, khi.z);
+            if (k.stencil >= 0 && !options_.whole_boxes) {
+              accumulateStencilKernel(*scratch_->hit_stencils, k, x0, x1, y0, y1, z0, z1,
+                                      sum_alpha, summed, updates);
+              continue;
+            }
             if (point && !options_.whole_boxes) {
               accumulatePointKernel(grid_, k, x0, x1, y0, y1, z0, z1, table, sum_alpha, sum_beta,
                                     summed, updates);
@@ -440,9 +484,17 @@ std::size_t KernelMap::accumulateKernels(
                   const Eigen::Vector3d c(grid_.keyToCoord(key.x), cy, cz);
                   // A point kernel (x == to) skips the segment's projection: t = 0 there, so
                   // the same value, bit for bit.
-                  const double v = point ? k.weight * table((c - k.x).squaredNorm() *
-                                                            k.inverse_length * k.inverse_length)
-                                         : k.at(c, table);
+                  // A tabled hit kernel evaluated (the plain path of the table's values).
+                  const double v =
+                      k.stencil >= 0
+                          ? k.weight *
+                                (options_.hit_kernel_weight *
+                                     table((c - k.x).squaredNorm() * k.inverse_length *
+                                           k.inverse_length) +
+                                 (key == k.stencil_key ? options_.hit_weight : 0.0))
+                      : point ? k.weight * table((c - k.x).squaredNorm() * k.inverse_length *
+                                                 k.inverse_length)
+                              : k.at(c, table);
                   if (!(v > 0.0)) continue;
                   const int cell = block::indexOf(key);
                   (k.occupied ? sum_alpha : sum_beta)[cell] += v;

@@ -47,6 +47,16 @@ KernelOptions KernelOptions::defaults(KernelMethod method) {
     o.hit_weight = 0.7;
     o.hit_kernel_weight = 0.3;
     o.hit_length_voxels = 2.0;
+    // Issue 29's thirteenth stop: the hit kernels tabled (HitStencils), their centres moved to
+    // the nearest of 5^3 points across each voxel (and a hit's cell in the same table): the
+    // occupied stage about 29% cheaper (BALM 0.2 m, 2 threads: occupied / kernels stage 0.42
+    // -> 0.30). Accuracy (3 seeds), against the hits' own centres: every row within 0.0001 AUC;
+    // MSE within +0.3% (AKIMap's sample 0.0350 -> 0.0351, oracle unstructured 0.1 m 0.0595 ->
+    // 0.0597), la3dm and BALM's hold-out unchanged. 3 steps: AKIMap's sample +0.9%; 2: +1.7%,
+    // la3dm +0.6%. Centres inside the voxels only ((i + 0.5) / 4) did better on the oracle
+    // scenes (unstructured 0.1 m MSE 0.0552) but moved a surface lying on a voxel face by 1/8
+    // voxel, and the grazing floor (AkimapRays test) lost its cells.
+    o.hit_stencil_steps = 4.0;
     o.free_margin = 0.2;
     o.max_margin = 1.0;
     o.tip_margin = 0.05;
@@ -102,6 +112,7 @@ Expected<void> applySettings(KernelOptions& options, const std::vector<std::stri
       {"hit_weight", &KernelOptions::hit_weight},
       {"hit_length_voxels", &KernelOptions::hit_length_voxels},
       {"hit_kernel_weight", &KernelOptions::hit_kernel_weight},
+      {"hit_stencil_steps", &KernelOptions::hit_stencil_steps},
       {"negative_step", &KernelOptions::negative_step},
       {"search_max", &KernelOptions::search_max},
       {"search_range", &KernelOptions::search_range},
@@ -136,8 +147,10 @@ Expected<void> applySettings(KernelOptions& options, const std::vector<std::stri
     // Steps, scales and the prior must be positive; margins and hit weights may be 0.
     if (!std::isfinite(value) || value < 0.0 ||
         (value == 0.0 && name != "free_margin" && name != "tip_margin" && name != "hit_weight" &&
-         name != "hit_kernel_weight" && name != "free_bundle_m") ||
-        value > (name == "free_reach" ? 1.0 : 1000.0)) {
+         name != "hit_kernel_weight" && name != "free_bundle_m" &&
+         name != "hit_stencil_steps") ||
+        value > (name == "free_reach" ? 1.0 : 1000.0) ||
+        (name == "hit_stencil_steps" && (value > 4.0 || value != std::floor(value)))) {
       return makeError("'" + setting + "': out of range");
     }
     options.*(field->second) = value;

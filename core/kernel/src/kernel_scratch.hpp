@@ -1,6 +1,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -41,6 +42,8 @@ struct KernelMap::Scratch {
   std::vector<std::uint32_t> radix_counts;
   std::vector<BlockEntry*> targets;  // the entries an accumulation writes evidence to
   FreeBundleBuffers bundles;
+  /// The hit kernels' tables (hit_stencil_steps), made on the first scan that needs them.
+  std::optional<detail::HitStencils> hit_stencils;
 
   /// After the kernels are fitted: the samples' chunks and index.
   void releaseSamples() {

@@ -17,6 +17,7 @@
 #include "densemap/kernel/kernel_map.hpp"
 #include "densemap/kernel/occupancy_samples.hpp"
 #include "densemap/map/grid_map.hpp"
+#include "kernel_fit.hpp"
 
 namespace densemap::kernel {
 namespace {
@@ -167,7 +168,10 @@ TEST_P(KernelMapMethods, WallIsOccupiedFreeSpaceIsFreeFarAwayIsUnknown) {
   options.max_range = 10.0;
   KernelMap map(0.1, options);
   const auto stats = map.integrate(wallScan(), Point3f(0, 0, 0));
-  EXPECT_GT(stats.samples, wallScan().size());
+  // A kernel per sample (free ones too), but akimap_rays': per voxel of hits (adaptive, and a
+  // tabled hit kernel per sub-position), so fewer than the points.
+  EXPECT_GT(stats.samples,
+            GetParam() == KernelMethod::kAkimapRays ? wallScan().size() / 4 : wallScan().size());
   EXPECT_GT(stats.cell_updates, 0U);
   const auto at = [&](float x, float y, float z) {
     return map.probability(*map.grid().pointToKey(Point3f(x, y, z)));
@@ -296,11 +300,13 @@ TEST(FreeBundles, CubesBundleTheRaysOfNeighbouringVoxels) {
 }
 
 // The fast path (each row's stretch; point kernels by per-axis squared offsets) against the
-// plain one (every cell of each kernel's box, each kernel by Kernel::at).
+// plain one (every cell of each kernel's box, each kernel by Kernel::at). akimap_rays' hit
+// kernels evaluated (hit_stencil_steps=0): the tabled ones are checked below.
 TEST_P(KernelMapMethods, RowStretchesAndPointKernelsGiveTheWholeBoxesMapBitForBit) {
   for (const double resolution : {0.1, 0.07}) {
     KernelOptions options = KernelOptions::defaults(GetParam());
     options.max_range = 15.0;
+    options.hit_stencil_steps = 0.0;
     KernelMap fast(resolution, options);
     options.whole_boxes = true;
     KernelMap plain(resolution, options);
@@ -311,6 +317,103 @@ TEST_P(KernelMapMethods, RowStretchesAndPointKernelsGiveTheWholeBoxesMapBitForBi
     const auto a = cellsOf(fast);
     ASSERT_GT(a.size(), 1000U);
     EXPECT_EQ(a, cellsOf(plain)) << "resolution " << resolution;
+  }
+}
+
+// Issue 29: akimap_rays' hit kernels read from tables (HitStencils) give the map of the same
+// kernels evaluated cell by cell at their sub-positions (the plain path), to rounding.
+TEST(HitStencils, TabledHitKernelsGiveTheEvaluatedMap) {
+  for (const double steps : {1.0, 2.0, 4.0}) {
+    for (const double resolution : {0.1, 0.07}) {
+      KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
+      options.max_range = 15.0;
+      options.hit_stencil_steps = steps;
+      KernelMap fast(resolution, options);
+      options.whole_boxes = true;
+      KernelMap plain(resolution, options);
+      for (const Point3f& origin : {Point3f(0, 0, 0), Point3f(0.4F, -0.3F, 0.2F)}) {
+        fast.integrate(roomScan(), origin);
+        plain.integrate(roomScan(), origin);
+      }
+      const KernelEvidence a = fast.evidence(), b = plain.evidence();
+      SCOPED_TRACE("steps " + std::to_string(steps) + ", resolution " +
+                   std::to_string(resolution));
+      ASSERT_GT(a.keys.size(), 1000U);
+      ASSERT_EQ(a.keys, b.keys);
+      for (std::size_t i = 0; i < a.keys.size(); ++i) {
+        ASSERT_NEAR(a.alpha[i], b.alpha[i], 1e-6 * (1.0 + std::abs(b.alpha[i]))) << i;
+        ASSERT_EQ(a.beta[i], b.beta[i]) << i;  // the free evidence is not tabled
+      }
+    }
+  }
+}
+
+// The tables quantise a hit kernel's centre to its voxel's sub-positions (faces included) and
+// merge the hits of one sub-position (with their cell's evidence); a map made so classifies as
+// the kernels at the hits do, with the same total occupied evidence.
+TEST(HitStencils, QuantiseCentresMergeHitsAndKeepTheMapsShape) {
+  const KernelOptions o = KernelOptions::defaults(KernelMethod::kAkimapRays);
+  const VoxelGrid grid(0.2);
+  const detail::HitStencils halves(o.hit_length_voxels, 2, o.hit_kernel_weight, o.hit_weight,
+                                   squaredKernel());
+  ASSERT_TRUE(halves.usable());
+  // Voxel [1.0, 1.2) x [0, 0.2) x [-0.2, 0): two hits nearest its lower corner, one nearest its
+  // centre; one in the next voxel, nearest that one's lower corner.
+  const std::vector<Eigen::Vector3d> hits = {{1.01, 0.02, -0.19},
+                                             {1.04, 0.04, -0.16},
+                                             {1.11, 0.09, -0.11},
+                                             {1.23, 0.03, -0.17}};
+  std::vector<detail::Kernel> kernels;
+  detail::appendHitKernels(hits, nullptr, o, grid, &halves, kernels);
+  ASSERT_EQ(kernels.size(), 3U);
+  EXPECT_EQ(kernels[0].weight, 2.0);
+  EXPECT_EQ(kernels[1].weight, 1.0);
+  EXPECT_EQ(kernels[2].weight, 1.0);
+  EXPECT_EQ(kernels[0].stencil_key, kernels[1].stencil_key);
+  EXPECT_NE(kernels[1].stencil_key, kernels[2].stencil_key);
+  EXPECT_TRUE(kernels[0].x.isApprox(Eigen::Vector3d(1.0, 0.0, -0.2), 1e-12));
+  EXPECT_TRUE(kernels[1].x.isApprox(Eigen::Vector3d(1.1, 0.1, -0.1), 1e-12));
+  EXPECT_TRUE(kernels[2].x.isApprox(Eigen::Vector3d(1.2, 0.0, -0.2), 1e-12));
+  // The centre's table: the cell's evidence at offset 0, |dx| < 2 voxels on its row.
+  const std::int32_t centre = kernels[1].stencil;
+  EXPECT_TRUE(halves.centreOf(centre).isApprox(Eigen::Vector3d::Constant(0.5), 1e-12));
+  EXPECT_NEAR(halves.row(centre, 0, 0)[halves.reach()], o.hit_kernel_weight + o.hit_weight,
+              1e-12);
+  EXPECT_NEAR(halves.row(centre, 0, 0)[halves.reach() + 1],
+              o.hit_kernel_weight * squaredKernel()(1.0 / 4.0), 1e-12);
+  EXPECT_EQ(halves.rowExtent(centre, 0, 0), std::make_pair(-1, 1));
+  // One step: the corners; the third hit is nearest the voxel's (1.2, 0, -0.2) corner.
+  const detail::HitStencils corners(o.hit_length_voxels, 1, o.hit_kernel_weight, o.hit_weight,
+                                    squaredKernel());
+  kernels.clear();
+  detail::appendHitKernels(hits, nullptr, o, grid, &corners, kernels);
+  ASSERT_EQ(kernels.size(), 3U);
+  EXPECT_EQ(kernels[0].weight, 2.0);
+  EXPECT_TRUE(kernels[1].x.isApprox(Eigen::Vector3d(1.2, 0.0, -0.2), 1e-12));
+  EXPECT_TRUE(kernels[2].x.isApprox(Eigen::Vector3d(1.2, 0.0, -0.2), 1e-12));
+  EXPECT_NE(kernels[1].stencil_key, kernels[2].stencil_key);
+  // Without tables: a cell kernel and a kernel per hit.
+  kernels.clear();
+  detail::appendHitKernels(hits, nullptr, o, grid, nullptr, kernels);
+  EXPECT_EQ(kernels.size(), 8U);
+
+  for (const double resolution : {0.1, 0.2}) {
+    KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
+    options.max_range = 15.0;
+    KernelMap tabled(resolution, options);
+    options.hit_stencil_steps = 0.0;
+    KernelMap evaluated(resolution, options);
+    for (const Point3f& origin : {Point3f(0, 0, 0), Point3f(0.4F, -0.3F, 0.2F)}) {
+      tabled.integrate(roomScan(), origin);
+      evaluated.integrate(roomScan(), origin);
+    }
+    double alpha_tabled = 0.0, alpha_evaluated = 0.0;
+    for (const double a : tabled.evidence().alpha) alpha_tabled += a;
+    for (const double a : evaluated.evidence().alpha) alpha_evaluated += a;
+    SCOPED_TRACE("resolution " + std::to_string(resolution));
+    EXPECT_NE(cellsOf(tabled), cellsOf(evaluated));
+    EXPECT_NEAR(alpha_tabled / alpha_evaluated, 1.0, 0.02);
+    expectTheSameShape(cellsOf(tabled), cellsOf(evaluated));
   }
 }
 
@@ -668,12 +771,16 @@ TEST(KernelSettings, ApplyKnownNamesAndRejectTheRest) {
   EXPECT_DOUBLE_EQ(o.hit_weight, 2.0);
   ASSERT_TRUE(applySettings(o, {"free_reach=1"}));
   EXPECT_DOUBLE_EQ(o.free_reach, 1.0);
+  ASSERT_TRUE(applySettings(o, {"hit_stencil_steps=0", "hit_stencil_steps=3"}));
+  EXPECT_DOUBLE_EQ(o.hit_stencil_steps, 3.0);
   for (const char* bad : {"sf2", "nope=1", "sf2=abc", "sf2=1x", "sf2=-1", "sf2=0", "sf2=nan",
-                          "free_reach=0", "free_reach=1.01"}) {
+                          "free_reach=0", "free_reach=1.01", "hit_stencil_steps=5",
+                          "hit_stencil_steps=1.5", "hit_stencil_steps=-1"}) {
     EXPECT_FALSE(applySettings(o, {bad})) << bad;
   }
   EXPECT_DOUBLE_EQ(o.sf2, 0.7);
 }
+
 
 }  // namespace
 }  // namespace densemap::kernel
