@@ -201,6 +201,36 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
         for (std::size_t g = range.begin(); g != range.end(); ++g) {
           const std::uint32_t first = group_starts[g], last = group_starts[g + 1];
           std::uint32_t out = outputs[g];
+          const bool shared = options.shared_fit_min_hits > 0.0 &&
+                              last - first >= options.shared_fit_min_hits;
+          if (last - first < min_hits && shared) {
+            // A kernel per hit, their shape fitted once, at their mean, to the neighbourhood
+            // outside the voxel.
+            Sample centre;
+            centre.occupied = true;
+            for (std::uint32_t p = first; p < last; ++p) {
+              const Sample& h = samples[hits[by_voxel[p].second]];
+              centre.x += h.x;
+              centre.range += h.range;
+            }
+            const double count = last - first;
+            centre.x /= count;
+            centre.to = centre.x;
+            centre.range /= count;
+            const auto own = static_cast<std::uint32_t>(g);
+            const Kernel k = adaptiveKernel(
+                centre, [&](const SampleIndex::Entry& e) { return group_of[e.index] == own; },
+                index, options, grid.resolution(), neighbours, &normal);
+            for (std::uint32_t p = first; p < last; ++p, ++out) {
+              const std::uint32_t h = by_voxel[p].second, i = hits[h];
+              kernels[out] = k;
+              kernels[out].x = kernels[out].to = samples[i].x;
+              means[out] = samples[i].x;
+              counts[out] = 1.0;
+              stops[h] = rayStop((samples[i].x - origin).normalized(), normal, options);
+            }
+            continue;
+          }
           if (last - first < min_hits) {  // a kernel per hit, as without aggregation
             for (std::uint32_t p = first; p < last; ++p, ++out) {
               const std::uint32_t h = by_voxel[p].second, i = hits[h];

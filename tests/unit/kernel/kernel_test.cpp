@@ -417,6 +417,30 @@ TEST(HitStencils, QuantiseCentresMergeHitsAndKeepTheMapsShape) {
   }
 }
 
+// A voxel of 2 hits (shared_fit_min_hits): still a kernel per hit, their shape fitted once; the
+// map classifies as with a fit per hit.
+TEST(AkimapRays, VoxelsOfTwoHitsShareOneFitAndKeepTheMapsShape) {
+  for (const double resolution : {0.1, 0.07}) {  // (at 0.2 m every voxel of the room has 3+)
+    KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
+    ASSERT_EQ(options.shared_fit_min_hits, 2.0);
+    options.max_range = 15.0;
+    KernelMap shared(resolution, options);
+    options.shared_fit_min_hits = 0.0;
+    KernelMap each(resolution, options);
+    for (const Point3f& origin : {Point3f(0, 0, 0), Point3f(0.4F, -0.3F, 0.2F)}) {
+      EXPECT_EQ(shared.integrate(roomScan(), origin).samples,
+                each.integrate(roomScan(), origin).samples);
+    }
+    double alpha_shared = 0.0, alpha_each = 0.0;
+    for (const double a : shared.evidence().alpha) alpha_shared += a;
+    for (const double a : each.evidence().alpha) alpha_each += a;
+    SCOPED_TRACE("resolution " + std::to_string(resolution));
+    EXPECT_NE(cellsOf(shared), cellsOf(each));
+    EXPECT_NEAR(alpha_shared / alpha_each, 1.0, 0.02);
+    expectTheSameShape(cellsOf(shared), cellsOf(each));
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(All, KernelMapMethods,
                          ::testing::Values(KernelMethod::kAkimap, KernelMethod::kBgk,
                                            KernelMethod::kBgkl, KernelMethod::kAkimapRays),

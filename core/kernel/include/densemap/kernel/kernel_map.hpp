@@ -100,6 +100,10 @@ struct KernelOptions {
   /// its rays' stops) instead of one per hit. Setting aggregate_hits=0 (or 1).
   bool aggregate_hits = false;
   double aggregate_min_hits = 4.0;
+  /// kAkimapRays with aggregate_hits: a voxel of at least this many hits but fewer than
+  /// aggregate_min_hits keeps a kernel per hit, all of one shape fitted once at their mean to
+  /// the neighbourhood outside the voxel (0: a fit per hit).
+  double shared_fit_min_hits = 0.0;
   std::uint64_t seed = 1;
   /// The plain path, for tests: visit every cell of each kernel's bounding box and evaluate it
   /// there by Kernel::at, instead of only each row's stretch that the kernel can reach (and
