@@ -47,7 +47,7 @@ KernelOptions KernelOptions::defaults(KernelMethod method) {
     o.hit_weight = 0.7;
     o.hit_kernel_weight = 0.3;
     o.hit_length_voxels = 2.0;
-    // Issue 29's thirteenth stop: the hit kernels tabled (HitStencils), their centres moved to
+    // Issue 29 (stop 48): the hit kernels tabled (HitStencils), their centres moved to
     // the nearest of 5^3 points across each voxel (and a hit's cell in the same table): the
     // occupied stage about 29% cheaper (BALM 0.2 m, 2 threads: occupied / kernels stage 0.42
     // -> 0.30). Accuracy (3 seeds), against the hits' own centres: every row within 0.0001 AUC;
@@ -88,7 +88,7 @@ KernelOptions KernelOptions::defaults(KernelMethod method) {
     // kernels on a BALM scan. At 2 the grazing floor (AkimapRays test) lost its cells under
     // 22-degree rays, and la3dm's AUC fell 0.0001-0.0002.
     o.aggregate_min_hits = 3.0;
-    // Issue 29's thirteenth stop: a voxel of 2 hits keeps its two kernels, but of one shape
+    // Issue 29 (stop 48): a voxel of 2 hits keeps its two kernels, but of one shape
     // fitted once at their mean (a fit per hit before): 7% fewer instructions in the fits
     // (BALM 0.2 m); every row of the dense-map benchmark within 0.0001 AUC, MSE within 0.9%
     // (AKIMap's sample 0.0351 -> 0.0354; others equal or lower), BALM's hold-out unchanged.
