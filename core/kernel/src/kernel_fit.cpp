@@ -42,9 +42,8 @@ RayStop rayStop(const Eigen::Vector3d& ray, const Eigen::Vector3d& normal, const
   return {along(o.free_margin), along(o.tip_margin)};
 }
 
-HitStencils::HitStencils(double length_voxels, int steps, double kernel_weight,
-                         double cell_weight, const SquaredKernelTable& table,
-                         std::size_t max_values) {
+HitStencils::HitStencils(double length_voxels, int steps, double kernel_weight, double cell_weight,
+                         const SquaredKernelTable& table, std::size_t max_values) {
   if (steps <= 0 || !(length_voxels > 0.0) || length_voxels > 64.0) return;
   // A centre in its voxel (faces included) reaches the cells within length_voxels of it:
   // offsets up to ceil(length) + 1 on each side.
@@ -201,8 +200,8 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
         for (std::size_t g = range.begin(); g != range.end(); ++g) {
           const std::uint32_t first = group_starts[g], last = group_starts[g + 1];
           std::uint32_t out = outputs[g];
-          const bool shared = options.shared_fit_min_hits > 0.0 &&
-                              last - first >= options.shared_fit_min_hits;
+          const bool shared =
+              options.shared_fit_min_hits > 0.0 && last - first >= options.shared_fit_min_hits;
           if (last - first < min_hits && shared) {
             // A kernel per hit, their shape fitted once, at their mean, to the neighbourhood
             // outside the voxel.

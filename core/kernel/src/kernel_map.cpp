@@ -444,8 +444,8 @@ std::size_t KernelMap::accumulateKernels(
             const auto [y0, y1] = range_of(1, klo.y, khi.y);
             const auto [z0, z1] = range_of(2, klo.z, khi.z);
             if (k.stencil >= 0 && !options_.whole_boxes) {
-              accumulateStencilKernel(*scratch_->hit_stencils, k, x0, x1, y0, y1, z0, z1,
-                                      sum_alpha, summed, updates);
+              accumulateStencilKernel(*scratch_->hit_stencils, k, x0, x1, y0, y1, z0, z1, sum_alpha,
+                                      summed, updates);
               continue;
             }
             if (point && !options_.whole_boxes) {
@@ -487,11 +487,10 @@ std::size_t KernelMap::accumulateKernels(
                   // A tabled hit kernel evaluated (the plain path of the table's values).
                   const double v =
                       k.stencil >= 0
-                          ? k.weight *
-                                (options_.hit_kernel_weight *
-                                     table((c - k.x).squaredNorm() * k.inverse_length *
-                                           k.inverse_length) +
-                                 (key == k.stencil_key ? options_.hit_weight : 0.0))
+                          ? k.weight * (options_.hit_kernel_weight *
+                                            table((c - k.x).squaredNorm() * k.inverse_length *
+                                                  k.inverse_length) +
+                                        (key == k.stencil_key ? options_.hit_weight : 0.0))
                       : point ? k.weight * table((c - k.x).squaredNorm() * k.inverse_length *
                                                  k.inverse_length)
                               : k.at(c, table);

@@ -153,8 +153,8 @@ Expected<void> applySettings(KernelOptions& options, const std::vector<std::stri
     // Steps, scales and the prior must be positive; margins and hit weights may be 0.
     if (!std::isfinite(value) || value < 0.0 ||
         (value == 0.0 && name != "free_margin" && name != "tip_margin" && name != "hit_weight" &&
-         name != "hit_kernel_weight" && name != "free_bundle_m" &&
-         name != "hit_stencil_steps" && name != "shared_fit_min_hits") ||
+         name != "hit_kernel_weight" && name != "free_bundle_m" && name != "hit_stencil_steps" &&
+         name != "shared_fit_min_hits") ||
         value > (name == "free_reach" ? 1.0 : 1000.0) ||
         (name == "hit_stencil_steps" && (value > 4.0 || value != std::floor(value)))) {
       return makeError("'" + setting + "': out of range");

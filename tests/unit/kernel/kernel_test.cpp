@@ -336,8 +336,7 @@ TEST(HitStencils, TabledHitKernelsGiveTheEvaluatedMap) {
         plain.integrate(roomScan(), origin);
       }
       const KernelEvidence a = fast.evidence(), b = plain.evidence();
-      SCOPED_TRACE("steps " + std::to_string(steps) + ", resolution " +
-                   std::to_string(resolution));
+      SCOPED_TRACE("steps " + std::to_string(steps) + ", resolution " + std::to_string(resolution));
       ASSERT_GT(a.keys.size(), 1000U);
       ASSERT_EQ(a.keys, b.keys);
       for (std::size_t i = 0; i < a.keys.size(); ++i) {
@@ -359,10 +358,8 @@ TEST(HitStencils, QuantiseCentresMergeHitsAndKeepTheMapsShape) {
   ASSERT_TRUE(halves.usable());
   // Voxel [1.0, 1.2) x [0, 0.2) x [-0.2, 0): two hits nearest its lower corner, one nearest its
   // centre; one in the next voxel, nearest that one's lower corner.
-  const std::vector<Eigen::Vector3d> hits = {{1.01, 0.02, -0.19},
-                                             {1.04, 0.04, -0.16},
-                                             {1.11, 0.09, -0.11},
-                                             {1.23, 0.03, -0.17}};
+  const std::vector<Eigen::Vector3d> hits = {
+      {1.01, 0.02, -0.19}, {1.04, 0.04, -0.16}, {1.11, 0.09, -0.11}, {1.23, 0.03, -0.17}};
   std::vector<detail::Kernel> kernels;
   detail::appendHitKernels(hits, nullptr, o, grid, &halves, kernels);
   ASSERT_EQ(kernels.size(), 3U);
@@ -377,8 +374,7 @@ TEST(HitStencils, QuantiseCentresMergeHitsAndKeepTheMapsShape) {
   // The centre's table: the cell's evidence at offset 0, |dx| < 2 voxels on its row.
   const std::int32_t centre = kernels[1].stencil;
   EXPECT_TRUE(halves.centreOf(centre).isApprox(Eigen::Vector3d::Constant(0.5), 1e-12));
-  EXPECT_NEAR(halves.row(centre, 0, 0)[halves.reach()], o.hit_kernel_weight + o.hit_weight,
-              1e-12);
+  EXPECT_NEAR(halves.row(centre, 0, 0)[halves.reach()], o.hit_kernel_weight + o.hit_weight, 1e-12);
   EXPECT_NEAR(halves.row(centre, 0, 0)[halves.reach() + 1],
               o.hit_kernel_weight * squaredKernel()(1.0 / 4.0), 1e-12);
   EXPECT_EQ(halves.rowExtent(centre, 0, 0), std::make_pair(-1, 1));
@@ -804,7 +800,6 @@ TEST(KernelSettings, ApplyKnownNamesAndRejectTheRest) {
   }
   EXPECT_DOUBLE_EQ(o.sf2, 0.7);
 }
-
 
 }  // namespace
 }  // namespace densemap::kernel
