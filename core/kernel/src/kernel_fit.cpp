@@ -3,6 +3,9 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <array>
+#include <deque>
+#include <mutex>
 #include <unordered_map>
 
 namespace densemap::kernel::detail {
@@ -72,6 +75,22 @@ HitStencils::HitStencils(double length_voxels, int steps, double kernel_weight, 
       }
     }
   }
+}
+
+const HitStencils* sharedHitStencils(double length_voxels, int steps, double kernel_weight,
+                                     double cell_weight) {
+  static std::mutex mutex;
+  static std::deque<std::pair<std::array<double, 4>, HitStencils>> made;  // never moved
+  const std::array<double, 4> key{length_voxels, static_cast<double>(steps), kernel_weight,
+                                  cell_weight};
+  const std::lock_guard lock(mutex);
+  for (const auto& [settings, stencils] : made) {
+    if (settings == key) return &stencils;
+  }
+  if (made.size() >= 64) return nullptr;
+  made.emplace_back(key,
+                    HitStencils(length_voxels, steps, kernel_weight, cell_weight, squaredKernel()));
+  return &made.back().second;
 }
 
 std::int32_t HitStencils::subPosition(const Eigen::Vector3d& f) const {
@@ -154,7 +173,8 @@ void appendHitKernels(const std::vector<Eigen::Vector3d>& positions,
 /// the occupied samples) and each hit's ray stop. A voxel with at least `aggregate_min_hits`
 /// hits gets one kernel at their mean, weighing their count, fitted to the neighbourhood
 /// outside the voxel; its normal sets its rays' stops. Other voxels keep a kernel per hit (a
-/// mean would lose the spread of a few hits, which is their shape: a grazing floor's).
+/// mean would lose the spread of a few hits, which is their shape: a grazing floor's), each
+/// fitted alone, or, from `shared_fit_min_hits` hits, all of the shape fitted at their mean.
 /// `means` and `counts`: where the direct hit evidence goes and how many hits it stands for.
 void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
                           const std::vector<Sample>& samples,
@@ -200,37 +220,9 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
         for (std::size_t g = range.begin(); g != range.end(); ++g) {
           const std::uint32_t first = group_starts[g], last = group_starts[g + 1];
           std::uint32_t out = outputs[g];
-          const bool shared =
-              options.shared_fit_min_hits > 0.0 && last - first >= options.shared_fit_min_hits;
-          if (last - first < min_hits && shared) {
-            // A kernel per hit, their shape fitted once, at their mean, to the neighbourhood
-            // outside the voxel.
-            Sample centre;
-            centre.occupied = true;
-            for (std::uint32_t p = first; p < last; ++p) {
-              const Sample& h = samples[hits[by_voxel[p].second]];
-              centre.x += h.x;
-              centre.range += h.range;
-            }
-            const double count = last - first;
-            centre.x /= count;
-            centre.to = centre.x;
-            centre.range /= count;
-            const auto own = static_cast<std::uint32_t>(g);
-            const Kernel k = adaptiveKernel(
-                centre, [&](const SampleIndex::Entry& e) { return group_of[e.index] == own; },
-                index, options, grid.resolution(), neighbours, &normal);
-            for (std::uint32_t p = first; p < last; ++p, ++out) {
-              const std::uint32_t h = by_voxel[p].second, i = hits[h];
-              kernels[out] = k;
-              kernels[out].x = kernels[out].to = samples[i].x;
-              means[out] = samples[i].x;
-              counts[out] = 1.0;
-              stops[h] = rayStop((samples[i].x - origin).normalized(), normal, options);
-            }
-            continue;
-          }
-          if (last - first < min_hits) {  // a kernel per hit, as without aggregation
+          const std::uint32_t n = last - first;
+          const bool shared = options.shared_fit_min_hits > 0.0 && n >= options.shared_fit_min_hits;
+          if (n < min_hits && !shared) {  // a kernel per hit, as without aggregation
             for (std::uint32_t p = first; p < last; ++p, ++out) {
               const std::uint32_t h = by_voxel[p].second, i = hits[h];
               kernels[out] = adaptiveKernel(
@@ -242,6 +234,8 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
             }
             continue;
           }
+          // One fit at the hits' mean: one kernel weighing their count, or (fewer than
+          // min_hits, shared) a kernel per hit of that shape.
           Sample centre;
           centre.occupied = true;
           for (std::uint32_t p = first; p < last; ++p) {
@@ -249,7 +243,7 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
             centre.x += h.x;
             centre.range += h.range;
           }
-          const double count = last - first;
+          const double count = n;
           centre.x /= count;
           centre.to = centre.x;
           centre.range /= count;
@@ -260,6 +254,17 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
           Kernel k = adaptiveKernel(
               centre, [&](const SampleIndex::Entry& e) { return group_of[e.index] == own; }, index,
               options, grid.resolution(), neighbours, &normal);
+          if (n < min_hits) {
+            for (std::uint32_t p = first; p < last; ++p, ++out) {
+              const std::uint32_t h = by_voxel[p].second, i = hits[h];
+              kernels[out] = k;
+              kernels[out].x = kernels[out].to = samples[i].x;
+              means[out] = samples[i].x;
+              counts[out] = 1.0;
+              stops[h] = rayStop((samples[i].x - origin).normalized(), normal, options);
+            }
+            continue;
+          }
           k.weight *= count;
           kernels[out] = k;
           means[out] = centre.x;

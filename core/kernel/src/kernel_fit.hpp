@@ -170,6 +170,12 @@ class HitStencils {
   std::vector<std::pair<int, int>> extents_;
 };
 
+/// The tables for these settings, made on first use and shared by every map of the process
+/// (as squaredKernel(): they are constants, up to 2 MiB each); null after 64 distinct
+/// settings (the caller then evaluates the kernels).
+[[nodiscard]] const HitStencils* sharedHitStencils(double length_voxels, int steps,
+                                                   double kernel_weight, double cell_weight);
+
 /// BGK's isotropic kernel for sample s (its length scale: o.length_scale, tips
 /// o.tip_length_scale).
 [[nodiscard]] Kernel isotropicKernel(const Sample& s, const KernelOptions& o);

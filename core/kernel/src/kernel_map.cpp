@@ -35,6 +35,7 @@ using detail::isotropicKernel;
 using detail::Kernel;
 using detail::rayStop;
 using detail::RowIntervals;
+using detail::sharedHitStencils;
 
 namespace {
 
@@ -116,14 +117,17 @@ void accumulateStencilKernel(const detail::HitStencils& stencils, const Kernel& 
                              std::array<double, block::kVoxels>& sum_alpha,
                              block::BlockMask& summed, std::size_t& updates) {
   const VoxelKey& c = k.stencil_key;
-  for (int z = z0; z <= z1; ++z) {
-    for (int y = y0; y <= y1; ++y) {
+  const int reach = stencils.reach();
+  // The pairs' box comes from the kernel's support in float: a row past the table (at the
+  // support's edge, where the kernel is 0) is skipped, never read.
+  for (int z = std::max(z0, c.z - reach); z <= std::min(z1, c.z + reach); ++z) {
+    for (int y = std::max(y0, c.y - reach); y <= std::min(y1, c.y + reach); ++y) {
       const int dy = y - c.y, dz = z - c.z;
       const auto [first, last] = stencils.rowExtent(k.stencil, dy, dz);
       const int from = std::max(x0, c.x + first), to = std::min(x1, c.x + last);
       if (from > to) continue;
       const double* const values = stencils.row(k.stencil, dy, dz);
-      const int shift = stencils.reach() - c.x;  // values[x + shift]: offset x - c.x
+      const int shift = reach - c.x;  // values[x + shift]: offset x - c.x
       const int row =
           block::indexOf(VoxelKey{static_cast<std::uint16_t>(x0), static_cast<std::uint16_t>(y),
                                   static_cast<std::uint16_t>(z)}) -
@@ -269,13 +273,12 @@ void KernelMap::fitKernels(const PointCloud& points_world, const Point3f& origin
       // Tabled (hit_stencil_steps) where there is a hit kernel.
       const int steps = static_cast<int>(options_.hit_stencil_steps);
       const bool tabled = steps > 0 && options_.hit_kernel_weight > 0.0;
-      if (tabled && !scratch_->hit_stencils) {
-        scratch_->hit_stencils.emplace(options_.hit_length_voxels, steps,
-                                       options_.hit_kernel_weight, options_.hit_weight,
-                                       squaredKernel());
+      if (tabled && scratch_->hit_stencils == nullptr) {
+        scratch_->hit_stencils = sharedHitStencils(options_.hit_length_voxels, steps,
+                                                   options_.hit_kernel_weight, options_.hit_weight);
       }
       appendHitKernels(hit_positions, aggregate ? &hit_counts : nullptr, options_, grid_,
-                       tabled ? &*scratch_->hit_stencils : nullptr, kernels);
+                       tabled ? scratch_->hit_stencils : nullptr, kernels);
     }
     for (const Sample& s : segments) kernels.push_back(isotropicKernel(s, options_));
     if (traverse) {

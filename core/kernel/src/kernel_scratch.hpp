@@ -1,7 +1,6 @@
 #pragma once
 
 #include <cstdint>
-#include <optional>
 #include <utility>
 #include <vector>
 
@@ -42,8 +41,9 @@ struct KernelMap::Scratch {
   std::vector<std::uint32_t> radix_counts;
   std::vector<BlockEntry*> targets;  // the entries an accumulation writes evidence to
   FreeBundleBuffers bundles;
-  /// The hit kernels' tables (hit_stencil_steps), made on the first scan that needs them.
-  std::optional<detail::HitStencils> hit_stencils;
+  /// The hit kernels' tables (hit_stencil_steps; sharedHitStencils, not owned), set on the
+  /// first scan that needs them.
+  const detail::HitStencils* hit_stencils = nullptr;
 
   /// After the kernels are fitted: the samples' chunks and index.
   void releaseSamples() {

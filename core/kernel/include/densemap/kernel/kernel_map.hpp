@@ -62,10 +62,11 @@ struct KernelOptions {
   /// every resolution), weighing `hit_kernel_weight` at its centre (0: none).
   double hit_kernel_weight = 0.0;
   double hit_length_voxels = 2.0;
-  /// kAkimapRays: > 0: each hit kernel is centred on the nearest of this many sub-positions per
-  /// axis of its voxel (1: the voxel's centre) and read from a table made once, not evaluated
-  /// cell by cell (0: at the hit itself, evaluated). An integer, at most 4; evaluated as with
-  /// 0 where the tables would pass 2^18 values (hit_length_voxels over 14 at 4 steps).
+  /// kAkimapRays: > 0: each hit kernel (and its cell's hit_weight) is read from a table made
+  /// once, its centre moved to the nearest of steps + 1 points per axis across its voxel (i /
+  /// steps of a voxel, faces included; 1: the voxel's corners), not evaluated cell by cell
+  /// (0: at the hit itself, evaluated). An integer, at most 4; evaluated as with 0 where the
+  /// tables would pass 2^18 values (hit_length_voxels over 4 at 4 steps, over 9 at 2).
   double hit_stencil_steps = 0.0;
   /// kAkimapRays: the spacing of AKIMap's random free samples that shape the occupied kernels
   /// (<= 0: none, the occupied kernels fitted to the hits alone; 0 in defaults()).
@@ -118,9 +119,9 @@ struct KernelOptions {
 /// Applies "NAME=VALUE" settings to `options`: any double field above by its name (free_step,
 /// length_scale, sf2, prior, free_margin, max_margin, tip_margin, tip_length_scale,
 /// occupied_weight, hit_weight, hit_kernel_weight, hit_length_voxels, hit_stencil_steps,
-/// negative_step, search_max, search_range, min_thickness, aggregate_min_hits, free_reach,
-/// free_bundle_m), and
-/// free_traversal=0|1, aggregate_hits=0|1, free_bundles=0|1; errors name the setting.
+/// negative_step, search_max, search_range, min_thickness, aggregate_min_hits,
+/// shared_fit_min_hits, free_reach, free_bundle_m), and free_traversal=0|1, aggregate_hits=0|1,
+/// free_bundles=0|1; errors name the setting.
 [[nodiscard]] Expected<void> applySettings(KernelOptions& options,
                                            const std::vector<std::string>& settings);
 
