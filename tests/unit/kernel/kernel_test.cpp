@@ -313,18 +313,24 @@ TEST(FreeBundles, CubesBundleTheRaysOfNeighbouringVoxels) {
 // The fast path (each row's stretch; point kernels by per-axis squared offsets) against the
 // plain one (every cell of each kernel's box, each kernel by Kernel::at). akimap_rays' hit
 // kernels evaluated (hit_stencil_steps=0): the tabled ones are checked below.
+/// Two room scans into a map by the fast path and one by the plain path (whole_boxes).
+std::pair<KernelMap, KernelMap> fastAndPlainMaps(KernelOptions options, double resolution) {
+  options.max_range = 15.0;
+  KernelMap fast(resolution, options);
+  options.whole_boxes = true;
+  KernelMap plain(resolution, options);
+  for (const Point3f& origin : {Point3f(0, 0, 0), Point3f(0.4F, -0.3F, 0.2F)}) {
+    fast.integrate(roomScan(), origin);
+    plain.integrate(roomScan(), origin);
+  }
+  return {std::move(fast), std::move(plain)};
+}
+
 TEST_P(KernelMapMethods, RowStretchesAndPointKernelsGiveTheWholeBoxesMapBitForBit) {
   for (const double resolution : {0.1, 0.07}) {
     KernelOptions options = KernelOptions::defaults(GetParam());
-    options.max_range = 15.0;
     options.hit_stencil_steps = 0.0;
-    KernelMap fast(resolution, options);
-    options.whole_boxes = true;
-    KernelMap plain(resolution, options);
-    for (const Point3f& origin : {Point3f(0, 0, 0), Point3f(0.4F, -0.3F, 0.2F)}) {
-      fast.integrate(roomScan(), origin);
-      plain.integrate(roomScan(), origin);
-    }
+    const auto [fast, plain] = fastAndPlainMaps(options, resolution);
     const auto a = cellsOf(fast);
     ASSERT_GT(a.size(), 1000U);
     EXPECT_EQ(a, cellsOf(plain)) << "resolution " << resolution;
@@ -337,15 +343,8 @@ TEST(HitStencils, TabledHitKernelsGiveTheEvaluatedMap) {
   for (const double steps : {1.0, 2.0, 4.0}) {
     for (const double resolution : {0.1, 0.07}) {
       KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
-      options.max_range = 15.0;
       options.hit_stencil_steps = steps;
-      KernelMap fast(resolution, options);
-      options.whole_boxes = true;
-      KernelMap plain(resolution, options);
-      for (const Point3f& origin : {Point3f(0, 0, 0), Point3f(0.4F, -0.3F, 0.2F)}) {
-        fast.integrate(roomScan(), origin);
-        plain.integrate(roomScan(), origin);
-      }
+      const auto [fast, plain] = fastAndPlainMaps(options, resolution);
       const KernelEvidence a = fast.evidence(), b = plain.evidence();
       SCOPED_TRACE("steps " + std::to_string(steps) + ", resolution " + std::to_string(resolution));
       ASSERT_GT(a.keys.size(), 1000U);
