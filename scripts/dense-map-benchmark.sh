@@ -16,7 +16,9 @@
 # ROC curves and reliability diagrams (SVG + CSV) into OUT_DIR, and OUT_DIR/summary.md.
 # Usage: scripts/dense-map-benchmark.sh OUT_DIR [RUNS [DATA]]   (after scripts/build.sh)
 #   RUNS: seeds per case (default 3: every table prints the mean and spread), except BALM's
-#   (BALM_RUNS, default 1: slow); BENCH_SKIP_BALM=1 leaves BALM out.
+#   (BALM_RUNS, default 1: slow); BENCH_SKIP_BALM=1 leaves BALM out. METHODS=a,b scores only
+#   those (e.g. METHODS=akimap_rays with EVAL_ARGS="--kernel-set NAME=VALUE" to judge a setting
+#   on every row in a few minutes); EVAL_ARGS goes to every densemap-eval call.
 balm_scans=${BALM_SCANS:-40}
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -24,7 +26,8 @@ out=${1:?usage: scripts/dense-map-benchmark.sh OUT_DIR [RUNS [DATA]]}
 runs=${2:-3}
 data=${3:-${DENSEMAP_DATA_DIR:-../shared/data}}
 bin=${DENSEMAP_BUILD_DIR:-build}/bin
-methods=akimap,bgk,bgkl,raycast,akimap_rays
+methods=${METHODS:-akimap,bgk,bgkl,raycast,akimap_rays}
+read -r -a eval_args <<<"${EVAL_ARGS:-}"
 mkdir -p "$out"
 : >"$out/summary.md"
 score() {  # NAME ARGS...: one densemap-eval run, its table appended to the summary
@@ -32,7 +35,8 @@ score() {  # NAME ARGS...: one densemap-eval run, its table appended to the summ
   shift
   echo "dense-map-benchmark: $name"
   "$bin/densemap-eval" --method "$methods" --threads 2 --json "$out/$name.json" \
-    --roc "$out/roc_$name" --reliability "$out/reliability_$name" "$@" | tee "$out/$name.txt"
+    --roc "$out/roc_$name" --reliability "$out/reliability_$name" "${eval_args[@]}" "$@" |
+    tee "$out/$name.txt"
   { echo "### $name"; echo '```'; cat "$out/$name.txt"; echo '```'; } >>"$out/summary.md"
 }
 for scene in structured unstructured; do
@@ -53,9 +57,11 @@ if [ ! -f "$out/outdoor_hdl64/oracle_0.2.bt" ]; then
     --seed 3 --oracle-factor 2 --oracle-resolutions 0.2 --gt-resolution 0.2
 fi
 all_methods=$methods
-methods=bgk,bgkl,raycast,akimap_rays
-score oracle_outdoor_hdl64_0.2 --data "$out/outdoor_hdl64" --protocol oracle --resolution 0.2 \
-  --max-range 80 --runs "$runs"
+methods=$(tr ',' '\n' <<<"$methods" | { grep -vx akimap || true; } | paste -sd, -)
+if [ -n "$methods" ]; then
+  score oracle_outdoor_hdl64_0.2 --data "$out/outdoor_hdl64" --protocol oracle \
+    --resolution 0.2 --max-range 80 --runs "$runs"
+fi
 methods=$all_methods
 for scene in structured unstructured; do
   if [ -d "$data/la3dm/sim_$scene" ]; then
