@@ -51,14 +51,14 @@ for scene in structured unstructured; do
       --max-range 8 --runs "$runs" --slice "$out/slice_${scene}_$res" --slice-z 1.0
   done
 done
-if [ ! -f "$out/outdoor_hdl64/oracle_0.2.bt" ]; then
-  echo "dense-map-benchmark: simulating outdoor_hdl64"
-  "$bin/densemap-sim" --out "$out/outdoor_hdl64" --scene outdoor --sensor hdl64 --scans 12 \
-    --seed 3 --oracle-factor 2 --oracle-resolutions 0.2 --gt-resolution 0.2
-fi
 all_methods=$methods
 methods=$(tr ',' '\n' <<<"$methods" | { grep -vx akimap || true; } | paste -sd, -)
 if [ -n "$methods" ]; then
+  if [ ! -f "$out/outdoor_hdl64/oracle_0.2.bt" ]; then
+    echo "dense-map-benchmark: simulating outdoor_hdl64"
+    "$bin/densemap-sim" --out "$out/outdoor_hdl64" --scene outdoor --sensor hdl64 --scans 12 \
+      --seed 3 --oracle-factor 2 --oracle-resolutions 0.2 --gt-resolution 0.2
+  fi
   score oracle_outdoor_hdl64_0.2 --data "$out/outdoor_hdl64" --protocol oracle \
     --resolution 0.2 --max-range 80 --runs "$runs"
 fi
