@@ -79,7 +79,13 @@ int checkOptions(const Options& o, std::vector<Backend>& backends) {
     return 2;
   }
   for (const auto& m : o.methods) {
-    if (!makeIntegrator(m, o) && !kernelOptions(m, o)) {
+    if (makeIntegrator(m, o)) continue;
+    const auto dense = kernelOptions(m, o);
+    if (!dense && m.find("@set=") != std::string::npos) {  // a known kind, a bad setting
+      std::fprintf(stderr, "densemap-bench: %s\n", dense.error().message.c_str());
+      return 2;
+    }
+    if (!dense) {
       std::fprintf(stderr,
                    "densemap-bench: unknown method '%s' or rule '%s' (methods: octomap, raycast, "
                    "superray, culling, superray+culling, and the dense kinds akimap_rays, "
@@ -280,7 +286,8 @@ static int runMain(int argc, char** argv) {
   app.add_option("--methods", o.methods,
                  "Comma-separated: octomap, raycast, superray, culling, superray+culling; dense "
                  "(kernel) maps: akimap_rays, akimap_rays@plain (its earlier path), akimap, "
-                 "bgk, bgkl")
+                 "bgk, bgkl; KIND@set=NAME=VALUE[:NAME=VALUE...]: a dense kind with these "
+                 "settings on its lane only (a setting against the default in one run)")
       ->delimiter(',')
       ->capture_default_str();
   app.add_option("--rule", o.rule,

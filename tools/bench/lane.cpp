@@ -33,9 +33,25 @@ Expected<kernel::KernelOptions> kernelOptions(const std::string& method, const O
   if (auto ok = kernel::applySettings(k, o.kernel_settings); !ok)
     return std::unexpected(ok.error());
   if (at != std::string::npos) {  // after --kernel-set: the variant is what the name says
-    if (method.substr(at + 1) != "plain") return makeError("unknown variant in '" + method + "'");
-    k.free_traversal = false;
-    k.aggregate_hits = false;
+    const std::string variant = method.substr(at + 1);
+    if (variant == "plain") {
+      k.free_traversal = false;
+      k.aggregate_hits = false;
+    } else if (variant.starts_with("set=")) {
+      // `kind@set=NAME=VALUE:NAME=VALUE`: settings for this lane only (a setting against the
+      // default in one run; methods are comma-separated, so settings are colon-separated).
+      std::vector<std::string> settings;
+      for (std::size_t from = 4; from <= variant.size();) {
+        const std::size_t colon = std::min(variant.find(':', from), variant.size());
+        settings.push_back(variant.substr(from, colon - from));
+        from = colon + 1;
+      }
+      if (auto ok = kernel::applySettings(k, settings); !ok) {
+        return makeError("'" + method + "': " + ok.error().message);
+      }
+    } else {
+      return makeError("unknown variant in '" + method + "'");
+    }
   }
   return k;
 }
