@@ -99,25 +99,30 @@ struct ThreadBlocks {
   }
 };
 
-/// Writes into `out` from index 0 every voxel whose centre lies within `reach` of the segment
-/// [a, b], once, and returns how many (`out` only grows: no element is constructed twice),
-/// slice by slice along the segment's dominant axis AX (a template argument: the axes' indices
-/// and the keys' shifts are constants). In an interior slice (every point of it within
-/// `reach` has its nearest point of the line on the segment) the distance is the line's: a
-/// quadratic form in the centre's offset from where the line crosses the slice, fixed per
-/// segment, tested over the rows and columns of centres inside the ellipse's box (at most as
-/// many as a box of its size can hold). The few end slices test the capsule's box with the
-/// segment's distance. Neither has a branch per candidate: a candidate is written, and kept
-/// when inside (the end slices' test had been a branch, mispredicted about every other
-/// candidate: half this function's time at BALM 0.1 m went to them).
-template <int AX>
+/// Candidates at most in a capsule's box for collectVoxelsNearOn to test the box whole.
+constexpr long kShortBox = 32;
+
+/// Every voxel whose centre lies within `reach` of the segment [a, b], once, slice by slice along
+/// its dominant axis AX (a template argument: the axes' indices and the keys' shifts are
+/// constants): the interior slices' voxels go straight to `sink` (u = d^2 * u_per_m2), the
+/// others are written into `out` from index 0 (their count returned; `out` only grows: no
+/// element is constructed twice) for the caller to add. In an interior slice (every point of it
+/// within `reach` has its nearest point of the line on the segment) the distance is the line's:
+/// a quadratic form in the centre's offset from where the line crosses the slice, fixed per
+/// segment (in key units: no coordinate per candidate), tested over the rows and columns of
+/// centres inside the ellipse's box (at most as many as a box of its size can hold). The few
+/// end slices test the capsule's box with the segment's distance, without a branch per
+/// candidate: a candidate is written, and kept when inside (a branch there had been
+/// mispredicted about every other candidate: half this function's time at BALM 0.1 m). A short
+/// capsule (a ray's tip) is its box, tested whole the same way.
+template <int AX, class Sink>
 std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
-                                const Eigen::Vector3d& b, double reach, std::vector<Near>& out) {
+                                const Eigen::Vector3d& b, double reach, std::vector<Near>& out,
+                                double u_per_m2, Sink& sink) {
   constexpr int ax = AX, bx = (AX + 1) % 3, cx = (AX + 2) % 3;
   const Eigen::Vector3d seg = b - a;
   const double len2 = seg.squaredNorm();
   const double inverse_len2 = 1.0 / len2;
-  const Eigen::Vector3d u = seg / std::sqrt(len2);
   const double r2 = reach * reach;
   const double res = grid.resolution();
   const double inverse_res = 1.0 / res;
@@ -139,6 +144,41 @@ std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
            (std::uint64_t(static_cast<std::uint32_t>(k)) << shift_c);
   };
   constexpr std::uint64_t step_c = std::uint64_t{1} << shift_c;
+  // A short capsule (a ray's tip: its box a few voxels a side) is its box, each centre tested
+  // with the segment's distance: slicing it cost a slice's set-up for a voxel or two.
+  std::size_t n = 0;
+  const int i0_box = firstCentre(std::min(a[ax], b[ax]) - reach),
+            i1_box = lastCentre(std::max(a[ax], b[ax]) + reach);
+  const int j0_box = firstCentre(std::min(a[bx], b[bx]) - reach),
+            j1_box = lastCentre(std::max(a[bx], b[bx]) + reach);
+  const int k0_box = firstCentre(std::min(a[cx], b[cx]) - reach),
+            k1_box = lastCentre(std::max(a[cx], b[cx]) + reach);
+  const long box_size =
+      long{i1_box - i0_box + 1} * long{j1_box - j0_box + 1} * long{k1_box - k0_box + 1};
+  if (box_size <= kShortBox) {
+    if (box_size <= 0) return 0;
+    if (out.size() < static_cast<std::size_t>(box_size))
+      out.resize(static_cast<std::size_t>(box_size));
+    Near* const box_out = out.data();
+    for (int i = i0_box; i <= i1_box; ++i) {
+      const double wa = centreOf(i) - a[ax];
+      for (int j = j0_box; j <= j1_box; ++j) {
+        const double wb = centreOf(j) - a[bx];
+        const double dot_ab = wa * seg[ax] + wb * seg[bx];
+        std::uint64_t key = keyOf(i, j, k0_box);
+        for (int k = k0_box; k <= k1_box; ++k, key += step_c) {
+          const double wc = centreOf(k) - a[cx];
+          const double t = std::clamp((dot_ab + wc * seg[cx]) * inverse_len2, 0.0, 1.0);
+          const double da = wa - t * seg[ax], db = wb - t * seg[bx], dc = wc - t * seg[cx];
+          const double d2 = da * da + db * db + dc * dc;
+          box_out[n] = {key, d2};
+          n += d2 < r2;
+        }
+      }
+    }
+    return n;
+  }
+  const Eigen::Vector3d u = seg / std::sqrt(len2);
   // The squared distance from the line of a centre offset (0, ob, oc) from the line's crossing
   // of its slice: |o|^2 - (o.u)^2 = qbb ob^2 + 2 qbc ob oc + qcc oc^2; the ellipse qform < r2
   // spans reach * sqrt(1 + u_b^2 / u_a^2) along b (and likewise c) around the crossing.
@@ -158,35 +198,61 @@ std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
            (std::max(a[axis], b[axis]) + half + res) * inverse_res + 32767.5 <= 65534.0 - span;
   };
   const bool inside = inRange(bx, half_b, span_b) && inRange(cx, half_c, span_c);
+  const double half_b_keys = half_b * inverse_res, half_c_keys = half_c * inverse_res;
+  const double r2_keys = r2 * inverse_res * inverse_res;
+  const double u_per_key2 = res * res * u_per_m2;
   const double inverse_seg_ax = 1.0 / seg[ax];
-  const int i0 = firstCentre(std::min(a[ax], b[ax]) - reach),
-            i1 = lastCentre(std::max(a[ax], b[ax]) + reach);
+  const int i0 = i0_box, i1 = i1_box;
   // Room for every interior window (written before being kept); the end slices make their own.
-  std::size_t n = 0;
   const std::size_t room =
       static_cast<std::size_t>(i1 - i0 + 1) * static_cast<std::size_t>(span_b * span_c);
   if (out.size() < room) out.resize(room);
-  for (int i = i0; i <= i1; ++i) {
-    const double x = centreOf(i);
+  // Per slice, by steps: its centre x, the segment's parameter there, and where the line
+  // crosses it (pb, pc).
+  const double x0 = centreOf(i0);
+  const double t_step = res * inverse_seg_ax, t_reach = reach * std::abs(inverse_seg_ax);
+  const double pb_step = res * slope_b, pc_step = res * slope_c;
+  double x = x0, t_mid = (x0 - a[ax]) * inverse_seg_ax;
+  double pb = a[bx] + (x0 - a[ax]) * slope_b, pc = a[cx] + (x0 - a[ax]) * slope_c;
+  for (int i = i0; i <= i1; ++i, x += res, t_mid += t_step, pb += pb_step, pc += pc_step) {
     // The part of the segment within `reach` of this slice along ax.
-    double t0 = (x - reach - a[ax]) * inverse_seg_ax, t1 = (x + reach - a[ax]) * inverse_seg_ax;
-    if (t0 > t1) std::swap(t0, t1);
+    double t0 = t_mid - t_reach, t1 = t_mid + t_reach;
     if (t0 > 0.0 && t1 < 1.0) {
-      const double pb = a[bx] + (x - a[ax]) * slope_b, pc = a[cx] + (x - a[ax]) * slope_c;
-      int j0 = 0, k0 = 0, rows = 0, columns = 0;
       if (inside) {
-        j0 = ceilToInt((pb - half_b) * inverse_res + 32767.5);
-        k0 = ceilToInt((pc - half_c) * inverse_res + 32767.5);
-        rows = std::min(span_b, static_cast<int>((pb + half_b) * inverse_res + 32767.5) - j0 + 1);
-        columns =
-            std::min(span_c, static_cast<int>((pc + half_c) * inverse_res + 32767.5) - k0 + 1);
-      } else {
-        // Clamped at the addressable range's edge, the window keeps its voxels inside it (it
-        // had skipped the whole slice there, and lost those voxels' evidence).
-        j0 = firstCentre(pb - half_b), k0 = firstCentre(pc - half_c);
-        rows = std::min(span_b, lastCentre(pb + half_b) - j0 + 1);
-        columns = std::min(span_c, lastCentre(pc + half_c) - k0 + 1);
+        // In key units (a centre's key k lies at (k - 32767.5) * res): the crossing qb, qc and a
+        // centre's offsets from it, so a candidate needs no coordinate of its own.
+        const double qb = pb * inverse_res + 32767.5, qc = pc * inverse_res + 32767.5;
+        const int j0 = ceilToInt(qb - half_b_keys), k0 = ceilToInt(qc - half_c_keys);
+        const int j_last = std::min(j0 + span_b - 1, static_cast<int>(qb + half_b_keys));
+        const int k_last = std::min(k0 + span_c - 1, static_cast<int>(qc + half_c_keys));
+        // Added here, not listed: the block and cell from the slice's, row's and column's bits
+        // (a thin capsule keeps a voxel or two a slice, where the list's round trip and a
+        // packed key's unpacking per voxel had cost as much as the window).
+        const std::uint64_t block_i = std::uint64_t(static_cast<std::uint32_t>(i) >> 3)
+                                      << (13 * ax);
+        const int cell_i = (i & 7) << (3 * ax);
+        for (int j = j0; j <= j_last; ++j) {
+          const double ob = static_cast<double>(j) - qb;
+          const double row = qbb * ob * ob, cross = 2.0 * qbc * ob;
+          const std::uint64_t block_ij =
+              block_i | (std::uint64_t(static_cast<std::uint32_t>(j) >> 3) << (13 * bx));
+          const int cell_ij = cell_i | ((j & 7) << (3 * bx));
+          for (int k = k0; k <= k_last; ++k) {
+            const double oc = static_cast<double>(k) - qc;
+            const double d2 = row + (cross + qcc * oc) * oc;  // in voxels^2
+            if (!(d2 < r2_keys)) continue;
+            sink.add(block_ij | (std::uint64_t(static_cast<std::uint32_t>(k) >> 3) << (13 * cx)),
+                     cell_ij | ((k & 7) << (3 * cx)), d2 * u_per_key2);
+          }
+        }
+        continue;
       }
+      int j0 = 0, k0 = 0, rows = 0, columns = 0;
+      // Clamped at the addressable range's edge, the window keeps its voxels inside it (it
+      // had skipped the whole slice there, and lost those voxels' evidence).
+      j0 = firstCentre(pb - half_b), k0 = firstCentre(pc - half_c);
+      rows = std::min(span_b, lastCentre(pb + half_b) - j0 + 1);
+      columns = std::min(span_c, lastCentre(pc + half_c) - k0 + 1);
       // End slices may have taken more than their share of `room`: keep a window's worth.
       const auto window = static_cast<std::size_t>(span_b * span_c);
       if (n + window > out.size()) out.resize(2 * (n + window));
@@ -243,24 +309,39 @@ std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
 
 /// The capsule's cells into `blocks` along the segment's dominant axis AX, each getting
 /// scaled_weight * k(d / radius) in fixed point; returns the visits.
-template <int AX>
-std::size_t rasterise(const VoxelGrid& grid, const FreeExtent& e, double reach,
-                      double scaled_weight, const SquaredKernelTable& table, ThreadBlocks& blocks) {
-  const double inverse_length2 = 1.0 / (e.radius_m * e.radius_m);
-  const std::size_t count = collectVoxelsNearOn<AX>(grid, e.from, e.to, reach, blocks.near);
+/// A capsule's evidence into one thread's blocks: scaled_weight * k(d / radius) per voxel, in
+/// fixed point.
+struct CapsuleSink {
+  ThreadBlocks& blocks;
+  const SquaredKernelTable& table;
+  double scaled_weight = 0.0;
   std::size_t visits = 0;
-  for (std::size_t q = 0; q < count; ++q) {
-    const Near& v = blocks.near[q];
-    const double w = table(v.d2 * inverse_length2);
-    if (!(w > 0.0)) continue;
+  /// `u`: the voxel's squared distance over the radius'.
+  void add(std::uint64_t block_key, int cell, double u) {
+    const double w = table(u);
+    if (!(w > 0.0)) return;
     ++visits;
-    FreeTraversal::Block& blk = blocks.blockFor(block::blockOfPacked(v.key));
-    const int cell = block::indexOfPacked(v.key);
+    FreeTraversal::Block& blk = blocks.blockFor(block_key);
     // w >= 0: rounding half up without llround's call.
     blk.sum[static_cast<std::size_t>(cell)] += static_cast<std::int32_t>(w * scaled_weight + 0.5);
     block::setBit(blk.mask, cell);
   }
-  return visits;
+};
+
+/// The capsule's cells into `blocks` along the segment's dominant axis AX, each getting
+/// scaled_weight * k(d / radius) in fixed point; returns the visits.
+template <int AX>
+std::size_t rasterise(const VoxelGrid& grid, const FreeExtent& e, double reach,
+                      double scaled_weight, const SquaredKernelTable& table, ThreadBlocks& blocks) {
+  const double u_per_m2 = 1.0 / (e.radius_m * e.radius_m);
+  CapsuleSink sink{blocks, table, scaled_weight};
+  const std::size_t count =
+      collectVoxelsNearOn<AX>(grid, e.from, e.to, reach, blocks.near, u_per_m2, sink);
+  for (std::size_t q = 0; q < count; ++q) {
+    const Near& v = blocks.near[q];
+    sink.add(block::blockOfPacked(v.key), block::indexOfPacked(v.key), v.d2 * u_per_m2);
+  }
+  return sink.visits;
 }
 
 }  // namespace
