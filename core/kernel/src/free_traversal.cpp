@@ -115,6 +115,46 @@ constexpr long kShortBox = 32;
 /// candidate: a candidate is written, and kept when inside (a branch there had been
 /// mispredicted about every other candidate: half this function's time at BALM 0.1 m). A short
 /// capsule (a ray's tip) is its box, tested whole the same way.
+/// A capsule's axis in its slices' planes, in key units (a centre's key k lies at
+/// (k - 32767.5) * res): the line's squared distance qbb ob^2 + 2 qbc ob oc + qcc oc^2 of a
+/// centre offset (ob, oc) from where it crosses the slice, and the box of its ellipse.
+struct SliceLine {
+  double qbb = 0.0, qbc = 0.0, qcc = 0.0;
+  double half_b = 0.0, half_c = 0.0;  // the ellipse's half box
+  int span_b = 0, span_c = 0;         // the most centres 2 * half holds
+  double r2 = 0.0;                    // reach^2
+  double u_per_key2 = 0.0;            // u per key unit^2 (res^2 / radius^2)
+};
+
+/// The voxels of interior slice i (crossed at qb, qc) within reach of the line, added to `sink`
+/// as found: the block and cell from the slice's, row's and column's bits (a thin capsule keeps
+/// a voxel or two a slice, where a list's round trip and a packed key's unpacking per voxel had
+/// cost as much as the window). The window is inside the addressable range.
+template <int AX, class Sink>
+[[gnu::always_inline]] inline void interiorWindow(int i, double qb, double qc, const SliceLine& l,
+                                                  Sink& sink) {
+  constexpr int ax = AX, bx = (AX + 1) % 3, cx = (AX + 2) % 3;
+  const int j0 = ceilToInt(qb - l.half_b), k0 = ceilToInt(qc - l.half_c);
+  const int j_last = std::min(j0 + l.span_b - 1, static_cast<int>(qb + l.half_b));
+  const int k_last = std::min(k0 + l.span_c - 1, static_cast<int>(qc + l.half_c));
+  const std::uint64_t block_i = std::uint64_t(static_cast<std::uint32_t>(i) >> 3) << (13 * ax);
+  const int cell_i = (i & 7) << (3 * ax);
+  for (int j = j0; j <= j_last; ++j) {
+    const double ob = static_cast<double>(j) - qb;
+    const double row = l.qbb * ob * ob, cross = 2.0 * l.qbc * ob;
+    const std::uint64_t block_ij =
+        block_i | (std::uint64_t(static_cast<std::uint32_t>(j) >> 3) << (13 * bx));
+    const int cell_ij = cell_i | ((j & 7) << (3 * bx));
+    for (int k = k0; k <= k_last; ++k) {
+      const double oc = static_cast<double>(k) - qc;
+      const double d2 = row + (cross + l.qcc * oc) * oc;
+      if (!(d2 < l.r2)) continue;
+      sink.add(block_ij | (std::uint64_t(static_cast<std::uint32_t>(k) >> 3) << (13 * cx)),
+               cell_ij | ((k & 7) << (3 * cx)), d2 * l.u_per_key2);
+    }
+  }
+}
+
 template <int AX, class Sink>
 std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
                                 const Eigen::Vector3d& b, double reach, std::vector<Near>& out,
@@ -198,53 +238,42 @@ std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
            (std::max(a[axis], b[axis]) + half + res) * inverse_res + 32767.5 <= 65534.0 - span;
   };
   const bool inside = inRange(bx, half_b, span_b) && inRange(cx, half_c, span_c);
-  const double half_b_keys = half_b * inverse_res, half_c_keys = half_c * inverse_res;
-  const double r2_keys = r2 * inverse_res * inverse_res;
-  const double u_per_key2 = res * res * u_per_m2;
+  SliceLine line;
+  line.qbb = qbb, line.qbc = qbc, line.qcc = qcc;
+  line.half_b = half_b * inverse_res, line.half_c = half_c * inverse_res;
+  line.span_b = span_b, line.span_c = span_c;
+  line.r2 = r2 * inverse_res * inverse_res;
+  line.u_per_key2 = res * res * u_per_m2;
   const double inverse_seg_ax = 1.0 / seg[ax];
   const int i0 = i0_box, i1 = i1_box;
-  // Room for every interior window (written before being kept); the end slices make their own.
-  const std::size_t room =
-      static_cast<std::size_t>(i1 - i0 + 1) * static_cast<std::size_t>(span_b * span_c);
-  if (out.size() < room) out.resize(room);
-  // Per slice, by steps: its centre x, the segment's parameter there, and where the line
-  // crosses it (pb, pc).
-  const double x0 = centreOf(i0);
-  const double t_step = res * inverse_seg_ax, t_reach = reach * std::abs(inverse_seg_ax);
-  const double pb_step = res * slope_b, pc_step = res * slope_c;
-  double x = x0, t_mid = (x0 - a[ax]) * inverse_seg_ax;
-  double pb = a[bx] + (x0 - a[ax]) * slope_b, pc = a[cx] + (x0 - a[ax]) * slope_c;
-  for (int i = i0; i <= i1; ++i, x += res, t_mid += t_step, pb += pb_step, pc += pc_step) {
+  // The interior slices (their centres more than `reach` inside the segment's extent along
+  // ax; a slice to spare at each end, as the test below may round either way) in one run: the
+  // crossing stepped, no test per slice. The others, and every slice at the addressable
+  // range's edge, one by one.
+  const int run_first =
+      inside ? std::max(i0, ceilToInt((std::min(a[ax], b[ax]) + reach) * inverse_res + 32767.5) + 1)
+             : i1 + 1;
+  const int run_last =
+      std::min(i1, floorToInt((std::max(a[ax], b[ax]) - reach) * inverse_res + 32767.5) - 1);
+  for (int i = i0; i <= i1; ++i) {
+    if (i == run_first && run_first <= run_last) {
+      const double x = centreOf(i);
+      double qb = (a[bx] + (x - a[ax]) * slope_b) * inverse_res + 32767.5;
+      double qc = (a[cx] + (x - a[ax]) * slope_c) * inverse_res + 32767.5;
+      for (; i <= run_last; ++i, qb += slope_b, qc += slope_c) {
+        interiorWindow<AX>(i, qb, qc, line, sink);
+      }
+      i = run_last;
+      continue;
+    }
+    const double x = centreOf(i);
     // The part of the segment within `reach` of this slice along ax.
-    double t0 = t_mid - t_reach, t1 = t_mid + t_reach;
+    double t0 = (x - reach - a[ax]) * inverse_seg_ax, t1 = (x + reach - a[ax]) * inverse_seg_ax;
+    if (t0 > t1) std::swap(t0, t1);
     if (t0 > 0.0 && t1 < 1.0) {
+      const double pb = a[bx] + (x - a[ax]) * slope_b, pc = a[cx] + (x - a[ax]) * slope_c;
       if (inside) {
-        // In key units (a centre's key k lies at (k - 32767.5) * res): the crossing qb, qc and a
-        // centre's offsets from it, so a candidate needs no coordinate of its own.
-        const double qb = pb * inverse_res + 32767.5, qc = pc * inverse_res + 32767.5;
-        const int j0 = ceilToInt(qb - half_b_keys), k0 = ceilToInt(qc - half_c_keys);
-        const int j_last = std::min(j0 + span_b - 1, static_cast<int>(qb + half_b_keys));
-        const int k_last = std::min(k0 + span_c - 1, static_cast<int>(qc + half_c_keys));
-        // Added here, not listed: the block and cell from the slice's, row's and column's bits
-        // (a thin capsule keeps a voxel or two a slice, where the list's round trip and a
-        // packed key's unpacking per voxel had cost as much as the window).
-        const std::uint64_t block_i = std::uint64_t(static_cast<std::uint32_t>(i) >> 3)
-                                      << (13 * ax);
-        const int cell_i = (i & 7) << (3 * ax);
-        for (int j = j0; j <= j_last; ++j) {
-          const double ob = static_cast<double>(j) - qb;
-          const double row = qbb * ob * ob, cross = 2.0 * qbc * ob;
-          const std::uint64_t block_ij =
-              block_i | (std::uint64_t(static_cast<std::uint32_t>(j) >> 3) << (13 * bx));
-          const int cell_ij = cell_i | ((j & 7) << (3 * bx));
-          for (int k = k0; k <= k_last; ++k) {
-            const double oc = static_cast<double>(k) - qc;
-            const double d2 = row + (cross + qcc * oc) * oc;  // in voxels^2
-            if (!(d2 < r2_keys)) continue;
-            sink.add(block_ij | (std::uint64_t(static_cast<std::uint32_t>(k) >> 3) << (13 * cx)),
-                     cell_ij | ((k & 7) << (3 * cx)), d2 * u_per_key2);
-          }
-        }
+        interiorWindow<AX>(i, pb * inverse_res + 32767.5, pc * inverse_res + 32767.5, line, sink);
         continue;
       }
       int j0 = 0, k0 = 0, rows = 0, columns = 0;
@@ -253,7 +282,7 @@ std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
       j0 = firstCentre(pb - half_b), k0 = firstCentre(pc - half_c);
       rows = std::min(span_b, lastCentre(pb + half_b) - j0 + 1);
       columns = std::min(span_c, lastCentre(pc + half_c) - k0 + 1);
-      // End slices may have taken more than their share of `room`: keep a window's worth.
+      // Room for the window (written before being kept).
       const auto window = static_cast<std::size_t>(span_b * span_c);
       if (n + window > out.size()) out.resize(2 * (n + window));
       const double ob0 = centreOf(j0) - pb;
