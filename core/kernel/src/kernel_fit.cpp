@@ -129,13 +129,21 @@ void appendHitKernels(const std::vector<Eigen::Vector3d>& positions,
     Kernel k;
     k.x = k.to = positions[i];
     k.occupied = true;
-    const std::optional<VoxelKey> key =
-        tabled ? grid.pointToKey(positions[i].cast<float>()) : std::nullopt;
-    if (key) {
-      // The voxel's lower corner, then the position's offsets inside it (voxels).
+    const std::optional<VoxelKey> key = tabled || o.hit_centre_pull > 0.0
+                                            ? grid.pointToKey(positions[i].cast<float>())
+                                            : std::nullopt;
+    // The hit kernel's centre (hit_centre_pull of the way to the voxel's centre).
+    Eigen::Vector3d centre = positions[i];
+    if (key && o.hit_centre_pull > 0.0) {
+      const Eigen::Vector3d voxel_centre(grid.keyToCoord(key->x), grid.keyToCoord(key->y),
+                                         grid.keyToCoord(key->z));
+      centre += o.hit_centre_pull * (voxel_centre - centre);
+    }
+    if (key && tabled) {
+      // The voxel's lower corner, then the centre's offsets inside it (voxels).
       Eigen::Vector3d corner;
       for (int a = 0; a < 3; ++a) corner[a] = grid.keyToCoord((*key)[a]) - 0.5 * resolution;
-      const std::int32_t sub = stencils->subPosition((positions[i] - corner) / resolution);
+      const std::int32_t sub = stencils->subPosition((centre - corner) / resolution);
       if (last_tabled < kernels.size() && kernels[last_tabled].stencil_key == *key &&
           kernels[last_tabled].stencil == sub) {
         kernels[last_tabled].weight += count;
@@ -161,6 +169,7 @@ void appendHitKernels(const std::vector<Eigen::Vector3d>& positions,
     }
     if (o.hit_kernel_weight > 0.0) {
       k.weight = o.hit_kernel_weight * count;
+      k.x = k.to = centre;
       k.cell = false;
       k.half_extent.setConstant(radius);
       k.inverse_length = 1.0 / radius;

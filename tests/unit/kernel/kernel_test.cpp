@@ -360,6 +360,33 @@ TEST(HitStencils, TabledHitKernelsGiveTheEvaluatedMap) {
 // The tables quantise a hit kernel's centre to its voxel's sub-positions (faces included) and
 // merge the hits of one sub-position (with their cell's evidence); a map made so classifies as
 // the kernels at the hits do, with the same total occupied evidence.
+// hit_centre_pull moves a hit kernel's centre that share of the way to its voxel's centre
+// (evaluated, and before the tables quantise it); the cell's own evidence stays at the hit.
+TEST(HitStencils, CentrePullMovesTheHitKernelTowardItsVoxelsCentre) {
+  KernelOptions o = KernelOptions::defaults(KernelMethod::kAkimapRays);
+  const VoxelGrid grid(0.2);
+  const std::vector<Eigen::Vector3d> hit = {{1.01, 0.02, -0.19}};  // voxel centre (1.1, 0.1, -0.1)
+  const Eigen::Vector3d voxel_centre(1.1, 0.1, -0.1);
+  for (const double pull : {0.0, 0.5, 1.0}) {
+    o.hit_centre_pull = pull;
+    std::vector<detail::Kernel> evaluated;
+    detail::appendHitKernels(hit, nullptr, o, grid, nullptr, evaluated);
+    ASSERT_EQ(evaluated.size(), 2U);  // the cell, then the kernel
+    EXPECT_TRUE(evaluated[0].cell);
+    EXPECT_LT((evaluated[0].x - hit[0]).norm(), 1e-12);
+    EXPECT_LT((evaluated[1].x - (hit[0] + pull * (voxel_centre - hit[0]))).norm(), 1e-12) << pull;
+    // Tabled at 2 steps: the hit is nearest its voxel's lower corner; from half way on, nearest
+    // its centre.
+    const detail::HitStencils halves(o.hit_length_voxels, 2, o.hit_kernel_weight, o.hit_weight,
+                                     squaredKernel());
+    std::vector<detail::Kernel> tabled;
+    detail::appendHitKernels(hit, nullptr, o, grid, &halves, tabled);
+    ASSERT_EQ(tabled.size(), 1U);
+    const Eigen::Vector3d expected = pull < 0.5 ? Eigen::Vector3d(1.0, 0.0, -0.2) : voxel_centre;
+    EXPECT_LT((tabled[0].x - expected).norm(), 1e-12) << pull;
+  }
+}
+
 TEST(HitStencils, QuantiseCentresMergeHitsAndKeepTheMapsShape) {
   const KernelOptions o = KernelOptions::defaults(KernelMethod::kAkimapRays);
   const VoxelGrid grid(0.2);
@@ -793,9 +820,12 @@ TEST(KernelSettings, ApplyKnownNamesAndRejectTheRest) {
   EXPECT_DOUBLE_EQ(o.free_reach, 1.0);
   ASSERT_TRUE(applySettings(o, {"hit_stencil_steps=0", "hit_stencil_steps=3"}));
   EXPECT_DOUBLE_EQ(o.hit_stencil_steps, 3.0);
-  for (const char* bad : {"sf2", "nope=1", "sf2=abc", "sf2=1x", "sf2=-1", "sf2=0", "sf2=nan",
-                          "free_reach=0", "free_reach=1.01", "hit_stencil_steps=5",
-                          "hit_stencil_steps=1.5", "hit_stencil_steps=-1"}) {
+  ASSERT_TRUE(applySettings(o, {"hit_centre_pull=0", "hit_centre_pull=0.5"}));
+  EXPECT_DOUBLE_EQ(o.hit_centre_pull, 0.5);
+  for (const char* bad :
+       {"sf2", "nope=1", "sf2=abc", "sf2=1x", "sf2=-1", "sf2=0", "sf2=nan", "free_reach=0",
+        "free_reach=1.01", "hit_stencil_steps=5", "hit_stencil_steps=1.5", "hit_stencil_steps=-1",
+        "hit_centre_pull=1.5", "hit_centre_pull=-0.1"}) {
     EXPECT_FALSE(applySettings(o, {bad})) << bad;
   }
   EXPECT_DOUBLE_EQ(o.sf2, 0.7);

@@ -68,6 +68,10 @@ struct KernelOptions {
   /// (0: at the hit itself, evaluated). An integer, at most 4; evaluated as with 0 where the
   /// tables would pass 2^18 values (hit_length_voxels over 4 at 4 steps, over 9 at 2).
   double hit_stencil_steps = 0.0;
+  /// kAkimapRays: each hit kernel's centre moved this share of the way from the hit (or its
+  /// voxel's mean hit) to its voxel's centre, in [0, 1] (0: at the hit; 1: the voxel's centre),
+  /// before the tables quantise it. The cell's own evidence does not move.
+  double hit_centre_pull = 0.0;
   /// kAkimapRays: the spacing of AKIMap's random free samples that shape the occupied kernels
   /// (<= 0: none, the occupied kernels fitted to the hits alone; 0 in defaults()).
   double negative_step = 0.5;
@@ -119,6 +123,7 @@ struct KernelOptions {
 /// Applies "NAME=VALUE" settings to `options`: any double field above by its name (free_step,
 /// length_scale, sf2, prior, free_margin, max_margin, tip_margin, tip_length_scale,
 /// occupied_weight, hit_weight, hit_kernel_weight, hit_length_voxels, hit_stencil_steps,
+/// hit_centre_pull,
 /// negative_step, search_max, search_range, min_thickness, aggregate_min_hits,
 /// shared_fit_min_hits, free_reach, free_bundle_m), and free_traversal=0|1, aggregate_hits=0|1,
 /// free_bundles=0|1; errors name the setting.
