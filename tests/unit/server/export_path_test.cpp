@@ -24,7 +24,7 @@ TEST(ExportPath, PlainNamesLandInTheExportDirectory) {
 
 TEST(ExportPath, PathsTraversalHiddenNamesAndOtherKindsAreRefused) {
   test::TempDir dir;
-  for (const std::string name :
+  for (const std::string& name :
        {std::string("/etc/passwd"), std::string("../x.dmap"), std::string("a/b.dmap"),
         std::string(".."), std::string("."), std::string(".x.dmap"), std::string(""),
         std::string("x.txt"), std::string("x"), std::string("a b.dmap"), std::string("x.dmap\n"),

@@ -13,8 +13,8 @@
 #include "densemap/kernel/kernel_map.hpp"
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_diff.hpp"
-#include "densemap/server/ingest.hpp"
 #include "densemap/raycast/integrator.hpp"
+#include "densemap/server/ingest.hpp"
 #include "densemap/store/snapshot.hpp"
 #include "densemap/test_support/data_dir.hpp"
 #include "densemap/test_support/random_rays.hpp"
@@ -258,8 +258,9 @@ INSTANTIATE_TEST_SUITE_P(
                       KindCase{"akimap", Backend::kGrid}, KindCase{"bgk", Backend::kGrid},
                       KindCase{"bgkl", Backend::kGrid}, KindCase{"akimap_rays", Backend::kGrid},
                       KindCase{"akimap_rays", Backend::kOctree}),
-    [](const ::testing::TestParamInfo<KindCase>& info) {
-      return info.param.kind + (info.param.backend == Backend::kGrid ? "_grid" : "_octree");
+    [](const ::testing::TestParamInfo<KindCase>& param_info) {
+      return param_info.param.kind +
+             (param_info.param.backend == Backend::kGrid ? "_grid" : "_octree");
     });
 
 // Issue 29: a dense map's snapshot keeps its kernel evidence, so a restart resumes the kernel
