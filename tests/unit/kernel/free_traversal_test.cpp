@@ -12,6 +12,7 @@
 #include "densemap/kernel/kernel_function.hpp"
 #include "densemap/map/block_layout.hpp"
 #include "free_traversal.hpp"
+#include "segment_voxels.hpp"
 
 namespace densemap::kernel {
 namespace {
@@ -24,24 +25,9 @@ std::map<std::uint64_t, double> plainSums(const VoxelGrid& grid,
   const double compensation = 1.0 / FreeTraversal::evidenceShare(reach);
   for (const FreeExtent& e : extents) {
     const double r = reach * e.radius_m;
-    const Eigen::Vector3d seg = e.to - e.from;
-    const VoxelKey lo =
-        *grid.pointToKey((e.from.cwiseMin(e.to).array() - r).matrix().cast<float>());
-    const VoxelKey hi =
-        *grid.pointToKey((e.from.cwiseMax(e.to).array() + r).matrix().cast<float>());
-    for (int z = lo.z; z <= hi.z; ++z) {
-      for (int y = lo.y; y <= hi.y; ++y) {
-        for (int x = lo.x; x <= hi.x; ++x) {
-          const VoxelKey k{static_cast<std::uint16_t>(x), static_cast<std::uint16_t>(y),
-                           static_cast<std::uint16_t>(z)};
-          const Eigen::Vector3d c(grid.keyToCoord(k.x), grid.keyToCoord(k.y), grid.keyToCoord(k.z));
-          const double t = std::clamp((c - e.from).dot(seg) / seg.squaredNorm(), 0.0, 1.0);
-          const double d = (c - (e.from + t * seg)).norm();
-          if (d >= r) continue;
-          sums[k.packed()] += e.weight * compensation * sparseKernel(d / e.radius_m);
-        }
-      }
-    }
+    test::forEachVoxelOfSegmentBox(grid, e.from, e.to, r, [&](const VoxelKey& k, double d) {
+      if (d < r) sums[k.packed()] += e.weight * compensation * sparseKernel(d / e.radius_m);
+    });
   }
   return sums;
 }

@@ -18,6 +18,7 @@
 #include "densemap/kernel/occupancy_samples.hpp"
 #include "densemap/map/grid_map.hpp"
 #include "kernel_fit.hpp"
+#include "segment_voxels.hpp"
 
 namespace densemap::kernel {
 namespace {
@@ -509,30 +510,13 @@ void expectCutRaysGiveEveryVoxelInReachTheKernelOfItsDistance(const Point3f& ori
     const Eigen::Vector3d dir = (p.cast<double>() - o).normalized();
     const Eigen::Vector3d end = o + options.max_range * dir;
     // Every voxel of the segment's bounding box, widened by the kernel's reach.
-    // (Clamped into the addressable range: the voxels beyond it do not exist.)
-    const double edge = grid.halfExtent() - 1e-3;  // still inside as a float
-    const Eigen::Vector3d lo =
-        (o.cwiseMin(end).array() - options.length_scale).cwiseMax(-edge).cwiseMin(edge);
-    const Eigen::Vector3d hi =
-        (o.cwiseMax(end).array() + options.length_scale).cwiseMax(-edge).cwiseMin(edge);
-    const VoxelKey klo = *grid.pointToKey(lo.cast<float>()),
-                   khi = *grid.pointToKey(hi.cast<float>());
-    for (int z = klo.z; z <= khi.z; ++z) {
-      for (int y = klo.y; y <= khi.y; ++y) {
-        for (int x = klo.x; x <= khi.x; ++x) {
-          const VoxelKey k{static_cast<std::uint16_t>(x), static_cast<std::uint16_t>(y),
-                           static_cast<std::uint16_t>(z)};
-          const Eigen::Vector3d c(grid.keyToCoord(k.x), grid.keyToCoord(k.y), grid.keyToCoord(k.z));
-          const Eigen::Vector3d seg = end - o;
-          const double t = std::clamp((c - o).dot(seg) / seg.squaredNorm(), 0.0, 1.0);
-          const double d = (c - (o + t * seg)).norm();
-          if (d >= options.free_reach * options.length_scale) continue;
+    test::forEachVoxelOfSegmentBox(
+        grid, o, end, options.length_scale, [&](const VoxelKey& k, double d) {
+          if (d >= options.free_reach * options.length_scale) return;
           const double w =
               options.sf2 * joints * compensation * sparseKernel(d / options.length_scale);
           if (w > 0.0) beta[k.packed()] += w;
-        }
-      }
-    }
+        });
   }
   ASSERT_GT(beta.size(), 500U);
   std::size_t checked = 0;
