@@ -102,19 +102,6 @@ struct ThreadBlocks {
 /// Candidates at most in a capsule's box for collectVoxelsNearOn to test the box whole.
 constexpr long kShortBox = 32;
 
-/// Every voxel whose centre lies within `reach` of the segment [a, b], once, slice by slice along
-/// its dominant axis AX (a template argument: the axes' indices and the keys' shifts are
-/// constants): the interior slices' voxels go straight to `sink` (u = d^2 * u_per_m2), the
-/// others are written into `out` from index 0 (their count returned; `out` only grows: no
-/// element is constructed twice) for the caller to add. In an interior slice (every point of it
-/// within `reach` has its nearest point of the line on the segment) the distance is the line's:
-/// a quadratic form in the centre's offset from where the line crosses the slice, fixed per
-/// segment (in key units: no coordinate per candidate), tested over the rows and columns of
-/// centres inside the ellipse's box (at most as many as a box of its size can hold). The few
-/// end slices test the capsule's box with the segment's distance, without a branch per
-/// candidate: a candidate is written, and kept when inside (a branch there had been
-/// mispredicted about every other candidate: half this function's time at BALM 0.1 m). A short
-/// capsule (a ray's tip) is its box, tested whole the same way.
 /// A capsule's axis in its slices' planes, in key units (a centre's key k lies at
 /// (k - 32767.5) * res): the line's squared distance qbb ob^2 + 2 qbc ob oc + qcc oc^2 of a
 /// centre offset (ob, oc) from where it crosses the slice, and the box of its ellipse.
@@ -155,6 +142,19 @@ template <int AX, class Sink>
   }
 }
 
+/// Every voxel whose centre lies within `reach` of the segment [a, b], once, slice by slice along
+/// its dominant axis AX (a template argument: the axes' indices and the keys' shifts are
+/// constants): the interior slices' voxels go straight to `sink` (u = d^2 * u_per_m2), the
+/// others are written into `out` from index 0 (their count returned; `out` only grows: no
+/// element is constructed twice) for the caller to add. In an interior slice (every point of it
+/// within `reach` has its nearest point of the line on the segment) the distance is the line's:
+/// a quadratic form in the centre's offset from where the line crosses the slice, fixed per
+/// segment (in key units: no coordinate per candidate), tested over the rows and columns of
+/// centres inside the ellipse's box (at most as many as a box of its size can hold). The few
+/// end slices test the capsule's box with the segment's distance, without a branch per
+/// candidate: a candidate is written, and kept when inside (a branch there had been
+/// mispredicted about every other candidate: half this function's time at BALM 0.1 m). A short
+/// capsule (a ray's tip) is its box, tested whole the same way.
 template <int AX, class Sink>
 std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
                                 const Eigen::Vector3d& b, double reach, std::vector<Near>& out,
@@ -336,8 +336,6 @@ std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
   return n;
 }
 
-/// The capsule's cells into `blocks` along the segment's dominant axis AX, each getting
-/// scaled_weight * k(d / radius) in fixed point; returns the visits.
 /// A capsule's evidence into one thread's blocks: scaled_weight * k(d / radius) per voxel, in
 /// fixed point.
 struct CapsuleSink {

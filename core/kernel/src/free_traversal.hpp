@@ -24,9 +24,9 @@ struct FreeExtent {
 /// kAkimapRays' fast free evidence (issue 29): instead of one capsule kernel per 0.3 m piece of
 /// every ray (millions per 64-beam scan, each scheduled, sorted and evaluated over its bounding
 /// box), each ray's free extent (and its tip) is one capsule, rasterised slice by slice (every
-/// voxel whose centre lies within `radius_m` of the extent is visited once per ray, no sort, no
-/// bounding box), and each such voxel gets weight * k(d / radius_m), k the sparse kernel
-/// (Eq. 3.5) of d, its centre's distance from the extent.
+/// voxel whose centre lies within `radius_m` of the extent is visited once per ray, no sort;
+/// a short capsule, such as a tip, is its box tested whole), and each such voxel gets weight *
+/// k(d / radius_m), k the sparse kernel (Eq. 3.5) of d, its centre's distance from the extent.
 ///
 /// Sums are fixed point in per-thread block buffers (released by release()): integer sums do not
 /// depend on the order of the rays, so the map does not depend on the thread count. They are
