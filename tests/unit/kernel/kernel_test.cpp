@@ -358,9 +358,6 @@ TEST(HitStencils, TabledHitKernelsGiveTheEvaluatedMap) {
   }
 }
 
-// The tables quantise a hit kernel's centre to its voxel's sub-positions (faces included) and
-// merge the hits of one sub-position (with their cell's evidence); a map made so classifies as
-// the kernels at the hits do, with the same total occupied evidence.
 // hit_centre_pull moves a hit kernel's centre that share of the way to its voxel's centre
 // (evaluated, and before the tables quantise it); the cell's own evidence stays at the hit.
 TEST(HitStencils, CentrePullMovesTheHitKernelTowardItsVoxelsCentre) {
@@ -388,6 +385,9 @@ TEST(HitStencils, CentrePullMovesTheHitKernelTowardItsVoxelsCentre) {
   }
 }
 
+// The tables quantise a hit kernel's centre to its voxel's sub-positions (faces included) and
+// merge the hits of one sub-position (with their cell's evidence); a map made so classifies as
+// the kernels at the hits do, with the same total occupied evidence.
 TEST(HitStencils, QuantiseCentresMergeHitsAndKeepTheMapsShape) {
   const KernelOptions o = KernelOptions::defaults(KernelMethod::kAkimapRays);
   const VoxelGrid grid(0.2);
