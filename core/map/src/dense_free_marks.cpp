@@ -36,7 +36,8 @@ std::uint64_t DenseFreeMarks::blockKeyAt(std::uint32_t i) const {
 void DenseFreeMarks::flushInto(ScanUpdate& update) {
   for (std::size_t t = 0; t < touched_count_; ++t) {
     const std::uint32_t i = touched_[t];
-    update.orFree(blockKeyAt(i), masks_[i]);
+    // A StepMarker enters blocks before marking: a walk may stop in one without a mark.
+    if (block::anyBit(masks_[i])) update.orFree(blockKeyAt(i), masks_[i]);
     masks_[i] = {};
     seen_[i] = 0;
   }

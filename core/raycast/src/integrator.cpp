@@ -148,7 +148,8 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
   }
   const auto mark_one = [&](std::size_t i, auto& sink, Local& local) {
     if (region != nullptr) {
-      markRayCulled(grid, origin_world, rays_[i], *region, local.scratch, sink, local.counts);
+      markRayCulled(grid, origin_world, rays_[i], *region, local.scratch, sink, local.counts,
+                    &*origin_key);
     } else {
       markRay(grid, origin_world, rays_[i], sink, local.counts);
     }

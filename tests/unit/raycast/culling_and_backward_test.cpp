@@ -2,7 +2,9 @@
 // and the culling region (exactly Alg. 3's fixed point, grown by breadth-first search).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <deque>
+#include <optional>
 #include <random>
 #include <set>
 
@@ -12,6 +14,7 @@
 #include "densemap/map/map_diff.hpp"
 #include "densemap/raycast/culling_region.hpp"
 #include "densemap/raycast/integrator.hpp"
+#include "densemap/raycast/ray_marking.hpp"
 #include "densemap/test_support/random_rays.hpp"
 
 namespace densemap {
@@ -50,6 +53,99 @@ TEST(TraverseRayBackward, IsTheForwardTraversalReversedOnAdversarialRays) {
     }
   }
   EXPECT_GT(nonempty, rays / 2);
+}
+
+/// Follows a walk's steps (begin, first, step<A>) back to keys, as the step visitors of
+/// traverseRay and traverseRayBackward are driven; keys from the exact backward walk come as
+/// keys.
+struct StepTracker {
+  std::vector<VoxelKey>& keys;
+  VoxelKey at{};
+  int moves[3] = {0, 0, 0};
+  void begin(const VoxelKey& k, const int (&delta)[3]) {
+    at = k;
+    for (int a = 0; a < 3; ++a) moves[a] = delta[a];
+  }
+  void first() { keys.push_back(at); }
+  template <int A>
+  bool step(int coord) {
+    // The coordinate is the last one's moved by the walk's delta, in 16 bits.
+    EXPECT_EQ(coord, (at[A] + moves[A]) & 0xffff);
+    at[A] = static_cast<std::uint16_t>(coord);
+    keys.push_back(at);
+    return true;
+  }
+  bool operator()(const VoxelKey& k) {
+    keys.push_back(k);
+    return true;
+  }
+};
+
+TEST(TraverseRay, StepVisitorsFollowTheKeysOfKeyVisitorsBothWays) {
+  BackwardScratch scratch;
+  std::size_t stepped = 0;
+  for (const double resolution : {0.05, 0.2, 1.0 / 3.0}) {
+    const VoxelGrid grid(resolution);
+    test::RandomRays random(resolution, 12.0, 11);
+    for (const test::RayKind kind : test::kAllRayKinds) {
+      for (int i = 0; i < 2000; ++i) {
+        const test::Ray ray = random.next(kind);
+        std::vector<VoxelKey> forward, by_steps, backward_by_steps;
+        const bool ok = computeRayKeys(grid, ray.origin, ray.end, forward);
+        StepTracker tracker{by_steps};
+        ASSERT_EQ(traverseRay(grid, ray.origin, ray.end, tracker), ok);
+        ASSERT_EQ(by_steps, forward) << "forward, kind " << static_cast<int>(kind) << " ray " << i;
+        StepTracker back{backward_by_steps};
+        const auto keys = [&]() -> std::optional<RayKeys> {
+          const auto o = grid.pointToKey(ray.origin);
+          const auto e = grid.pointToKey(ray.end);
+          if (!o || !e) return std::nullopt;
+          return RayKeys{*o, *e};
+        }();
+        traverseRayBackward(grid, ray.origin, ray.end, scratch, back, keys ? &*keys : nullptr);
+        std::reverse(backward_by_steps.begin(), backward_by_steps.end());
+        ASSERT_EQ(backward_by_steps, forward)
+            << "backward, kind " << static_cast<int>(kind) << " ray " << i;
+        stepped += forward.size();
+      }
+    }
+  }
+  EXPECT_GT(stepped, 100000U);
+}
+
+TEST(DenseFreeMarks, StepMarkerMarksAsTheHashOnWalksInsideAndLeavingItsBox) {
+  const VoxelGrid grid(0.2);
+  test::RandomRays random(0.2, 12.0, 13);
+  DenseFreeMarks dense;
+  for (int round = 0; round < 3; ++round) {
+    // A box around the origin's side of the rays: many walks leave it, some start outside.
+    const VoxelKey lo = *grid.pointToKey(Point3f(-6.0F, -5.0F, -4.0F));
+    const VoxelKey hi = *grid.pointToKey(Point3f(5.0F, 6.0F, 3.0F));
+    ASSERT_TRUE(dense.reset(lo, hi, 1U << 20));
+    ScanUpdate plain, sut;
+    DenseSink sink{dense, sut};
+    MarkCounts plain_counts, sut_counts;
+    for (int i = 0; i < 3000; ++i) {
+      const test::Ray ray = random.next(test::kAllRayKinds[i % 8]);
+      const RayEnd end = rayEndFor(grid, ray.origin, ray.end, 8.0);
+      markRay(grid, ray.origin, end, plain, plain_counts);
+      markRay(grid, ray.origin, end, sink, sut_counts);
+    }
+    dense.flushInto(sut);
+    ASSERT_EQ(sut_counts.visits, plain_counts.visits);
+    EXPECT_GT(plain.freeCount(), 10000U);
+    EXPECT_EQ(sut.freeCount(), plain.freeCount()) << "round " << round;
+    std::vector<std::pair<std::uint64_t, bool>> a, b;
+    plain.forEachCell([&](const VoxelKey& k, const CellHits& h) {
+      a.emplace_back(k.packed(), h.occupied > 0);
+    });
+    sut.forEachCell([&](const VoxelKey& k, const CellHits& h) {
+      b.emplace_back(k.packed(), h.occupied > 0);
+    });
+    std::sort(a.begin(), a.end());
+    std::sort(b.begin(), b.end());
+    EXPECT_EQ(a, b) << "round " << round;
+  }
 }
 
 /// Alg. 3 as written: breadth-first from the sensor's voxel over fully-free voxels whose test

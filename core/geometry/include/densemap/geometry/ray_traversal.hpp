@@ -28,14 +28,14 @@ enum class TraversalKind { kInvalid, kSameVoxel, kRay };
 
 /// kInvalid: origin or end outside the addressable range (nothing is visited);
 /// kSameVoxel: both in one voxel (nothing is visited); kRay: `start` is filled.
+/// The same with the ends' keys given (grid.pointToKey of origin and end, both in range): a
+/// scan's rays share the origin's, and a ray's end key is known before it is walked.
 inline TraversalKind startTraversal(const VoxelGrid& grid, const Point3f& origin,
-                                    const Point3f& end, TraversalStart& start) {
-  const auto key_origin = grid.pointToKey(origin);
-  const auto key_end = grid.pointToKey(end);
-  if (!key_origin || !key_end) return TraversalKind::kInvalid;
-  if (*key_origin == *key_end) return TraversalKind::kSameVoxel;
-  start.origin = *key_origin;
-  start.end = *key_end;
+                                    const VoxelKey& key_origin, const Point3f& end,
+                                    const VoxelKey& key_end, TraversalStart& start) {
+  if (key_origin == key_end) return TraversalKind::kSameVoxel;
+  start.origin = key_origin;
+  start.end = key_end;
 
   // Vector3 arithmetic of OctoMap, one float operation at a time.
   float dir[3] = {end.x() - origin.x(), end.y() - origin.y(), end.z() - origin.z()};
@@ -64,6 +64,14 @@ inline TraversalKind startTraversal(const VoxelGrid& grid, const Point3f& origin
   return TraversalKind::kRay;
 }
 
+inline TraversalKind startTraversal(const VoxelGrid& grid, const Point3f& origin,
+                                    const Point3f& end, TraversalStart& start) {
+  const auto key_origin = grid.pointToKey(origin);
+  const auto key_end = grid.pointToKey(end);
+  if (!key_origin || !key_end) return TraversalKind::kInvalid;
+  return startTraversal(grid, origin, *key_origin, end, *key_end, start);
+}
+
 /// Visits the voxels that OctoMap 1.9.7's `OcTreeBaseImpl::computeRayKeys(origin, end)` returns,
 /// in the same order: the origin's voxel first, the end point's voxel excluded.
 /// (Amanatides & Woo, "A Fast Voxel Traversal Algorithm for Ray Tracing", 1987.)
@@ -76,7 +84,15 @@ bool traverseRay(const VoxelGrid& grid, const Point3f& origin, const Point3f& en
   TraversalStart s;
   const TraversalKind kind = startTraversal(grid, origin, end, s);
   if (kind != TraversalKind::kRay) return kind == TraversalKind::kSameVoxel;
-  visit(s.origin);
+  // A visitor that follows the steps is told the start (begin(origin key, steps), first())
+  // and then which axis moved (step<AXIS>(new coordinate)) instead of each key.
+  constexpr bool kSteps = requires { visit.template step<0>(0); };
+  if constexpr (kSteps) {
+    visit.begin(s.origin, s.step);
+    visit.first();
+  } else {
+    visit(s.origin);
+  }
   // Each step crosses the border with the smallest tMax, ties to the higher axis. The key lives
   // in three registers (updating one 16-bit field of a VoxelKey in memory and comparing the
   // whole key measured ~13% slower on BALM).
@@ -85,27 +101,43 @@ bool traverseRay(const VoxelGrid& grid, const Point3f& origin, const Point3f& en
   double t0 = s.t_max[0], t1 = s.t_max[1], t2 = s.t_max[2];
   const double length = static_cast<double>(s.length);
   while (true) {
+    int axis;
     if (t0 < t1) {
       if (t0 < t2) {
         key[0] = (key[0] + s.step[0]) & 0xffff;  // OctoMap's uint16 key arithmetic
         t0 += s.t_delta[0];
+        axis = 0;
       } else {
         key[2] = (key[2] + s.step[2]) & 0xffff;
         t2 += s.t_delta[2];
+        axis = 2;
       }
     } else if (t1 < t2) {
       key[1] = (key[1] + s.step[1]) & 0xffff;
       t1 += s.t_delta[1];
+      axis = 1;
     } else {
       key[2] = (key[2] + s.step[2]) & 0xffff;
       t2 += s.t_delta[2];
+      axis = 2;
     }
     if (key[0] == last[0] && key[1] == last[1] && key[2] == last[2]) break;
     // Accumulated rounding can step past the end voxel without entering it; OctoMap stops
     // once the travelled distance exceeds the ray length.
     if (std::min(std::min(t0, t1), t2) > length) break;
-    visit(VoxelKey{static_cast<std::uint16_t>(key[0]), static_cast<std::uint16_t>(key[1]),
-                   static_cast<std::uint16_t>(key[2])});
+    if constexpr (kSteps) {
+      if (axis == 0) {
+        visit.template step<0>(key[0]);
+      } else if (axis == 1) {
+        visit.template step<1>(key[1]);
+      } else {
+        visit.template step<2>(key[2]);
+      }
+    } else {
+      (void)axis;
+      visit(VoxelKey{static_cast<std::uint16_t>(key[0]), static_cast<std::uint16_t>(key[1]),
+                     static_cast<std::uint16_t>(key[2])});
+    }
   }
   return true;
 }
@@ -210,6 +242,12 @@ struct BackwardWalk {
   std::size_t total = 0;   // voxels of the forward traversal
 };
 
+/// A ray's ends' keys (grid.pointToKey of its origin and end, both in range).
+struct RayKeys {
+  VoxelKey origin;
+  VoxelKey end;
+};
+
 enum class BackwardMode {
   kNothing,         // no voxels (origin or end outside the range, or both in one voxel)
   kExactIrregular,  // replay the recorded forward traversal
@@ -219,10 +257,15 @@ enum class BackwardMode {
 
 /// Sets up the backward walk of ray (origin, end); decides with margins whether the fast path
 /// may start (see traverseRayBackward).
+/// (`keys`, when given: the ends' keys, as startTraversal takes them.)
 inline BackwardMode prepareBackward(const VoxelGrid& grid, const Point3f& origin,
-                                    const Point3f& end, BackwardWalk& walk) {
+                                    const Point3f& end, BackwardWalk& walk,
+                                    const RayKeys* keys = nullptr) {
   TraversalStart& s = walk.s;
-  if (startTraversal(grid, origin, end, s) != TraversalKind::kRay) return BackwardMode::kNothing;
+  const TraversalKind kind = keys != nullptr
+                                 ? startTraversal(grid, origin, keys->origin, end, keys->end, s)
+                                 : startTraversal(grid, origin, end, s);
+  if (kind != TraversalKind::kRay) return BackwardMode::kNothing;
   int* crossings = walk.crossings;
   bool regular = true;
   for (int a = 0; a < 3; ++a) {
@@ -300,11 +343,13 @@ inline BackwardMode prepareBackward(const VoxelGrid& grid, const Point3f& origin
 /// walk, which accumulates the times as traverseRay does. When the forward loop would not end by
 /// entering the end voxel (an end within rounding of a border: OctoMap's `dist > length` stop),
 /// the forward traversal is recorded and replayed backwards.
+/// `keys`, when given, are the ends' keys (RayKeys), not computed again.
 template <class Visitor>
 std::size_t traverseRayBackward(const VoxelGrid& grid, const Point3f& origin, const Point3f& end,
-                                BackwardScratch& scratch, Visitor&& visit) {
+                                BackwardScratch& scratch, Visitor&& visit,
+                                const RayKeys* keys = nullptr) {
   BackwardWalk walk;
-  const BackwardMode mode = prepareBackward(grid, origin, end, walk);
+  const BackwardMode mode = prepareBackward(grid, origin, end, walk, keys);
   if (mode == BackwardMode::kNothing) return 0;
   if (mode != BackwardMode::kFast) {
     return detail::backwardExact(grid, origin, end, walk.s, walk.crossings,
@@ -314,12 +359,19 @@ std::size_t traverseRayBackward(const VoxelGrid& grid, const Point3f& origin, co
   // (-inf when an axis has none left) by the bound; else the exact walk takes over. Heads,
   // counts and key are locals with one branch per axis, as in traverseRay: stepping through
   // `walk` in memory, branch-free, measured 48% slower (mark 14.2 -> 9.6 ms on BALM at 0.2 m).
+  // A visitor that follows the steps (begin(end key, deltas), step<AXIS>(new coordinate)) is
+  // told which axis moved instead of the new key; the exact walk calls it with keys.
+  constexpr bool kSteps = requires { visit.template step<0>(0); };
   constexpr double kNone = -std::numeric_limits<double>::infinity();
   const TraversalStart& s = walk.s;
   const double bound = walk.bound;
   double h0 = walk.head[0], h1 = walk.head[1], h2 = walk.head[2];
   int n0 = walk.next[0], n1 = walk.next[1], n2 = walk.next[2];
   int k0 = walk.key[0], k1 = walk.key[1], k2 = walk.key[2];
+  if constexpr (kSteps) {
+    const int delta[3] = {-s.step[0], -s.step[1], -s.step[2]};
+    visit.begin(s.end, delta);
+  }
   for (std::size_t done = 0; done < walk.total; ++done) {
     const double high01 = std::max(h0, h1);
     const double latest = std::max(high01, h2);
@@ -331,16 +383,30 @@ std::size_t traverseRayBackward(const VoxelGrid& grid, const Point3f& origin, co
     if (h2 > high01) {
       h2 = --n2 >= 0 ? h2 - s.t_delta[2] : kNone;
       k2 = (k2 - s.step[2]) & 0xffff;  // uint16_t, as OcTreeKey's
+      if constexpr (kSteps) {
+        if (!visit.template step<2>(k2)) break;
+        continue;
+      }
     } else if (h0 >= h1) {
       h0 = --n0 >= 0 ? h0 - s.t_delta[0] : kNone;
       k0 = (k0 - s.step[0]) & 0xffff;
+      if constexpr (kSteps) {
+        if (!visit.template step<0>(k0)) break;
+        continue;
+      }
     } else {
       h1 = --n1 >= 0 ? h1 - s.t_delta[1] : kNone;
       k1 = (k1 - s.step[1]) & 0xffff;
+      if constexpr (kSteps) {
+        if (!visit.template step<1>(k1)) break;
+        continue;
+      }
     }
-    if (!visit(VoxelKey{static_cast<std::uint16_t>(k0), static_cast<std::uint16_t>(k1),
-                        static_cast<std::uint16_t>(k2)})) {
-      break;
+    if constexpr (!kSteps) {
+      if (!visit(VoxelKey{static_cast<std::uint16_t>(k0), static_cast<std::uint16_t>(k1),
+                          static_cast<std::uint16_t>(k2)})) {
+        break;
+      }
     }
   }
   return walk.total;

@@ -64,50 +64,105 @@ class DenseFreeMarks {
     }
   }
 
-  /// Marks one ray's voxels as markFree does, with the hot state (the arrays' pointers, the
-  /// box, the touched count, the ray's last block) in locals until finish(): markFree's members
-  /// are reloaded and stored around every mark (a mask word's store may alias a size_t
-  /// member), and its first-touch bookkeeping runs at every voxel, here once per block the ray
-  /// enters. For the forward walks (markRay); the culled backward walk was 9% slower with it.
-  /// Not to outlive the scan's reset; one Marker at a time.
-  class Marker {
+  /// Marks one ray's voxels as markFree does, following the ray's walk step by step: the
+  /// voxel's block in the box and its index in the block are updated from the axis stepped and
+  /// its new key (a block border every 8 steps), not computed from the key; the box test and
+  /// the first-touch bookkeeping run once per block the walk enters; the hot state (arrays,
+  /// box, touched count) is in locals until finish() (markFree's members are reloaded and stored
+  /// around every mark: a mask word's store may alias a size_t member). With a culling region
+  /// sharing this box's frame (`culled`: its bits in the box's block layout, block b's at
+  /// [b]), markUnlessCulled tests the region's bit one word address from the mark.
+  /// A walk moves monotonically (each axis one way), so once it leaves the box it stays out:
+  /// its marks then go to `outside` by key. One at a time; not to outlive the scan's reset.
+  class StepMarker {
    public:
-    Marker(DenseFreeMarks& marks, ScanUpdate& outside)
+    StepMarker(DenseFreeMarks& marks, ScanUpdate& outside,
+               const block::BlockMask* culled = nullptr)
         : marks_(marks),
           outside_(outside),
+          culled_(culled),
           masks_(marks.masks_.data()),
           seen_(marks.seen_.data()),
           touched_(marks.touched_.data()),
           count_(marks.touched_count_),
-          min_{marks.min_[0], marks.min_[1], marks.min_[2]},
-          n_{marks.n_[0], marks.n_[1], marks.n_[2]} {}
+          n_{marks.n_[0], marks.n_[1], marks.n_[2]},
+          stride_{1, marks.n_[0], marks.n_[0] * marks.n_[1]} {}
     /// Writes the touched count back (the marks are in place already).
     void finish() { marks_.touched_count_ = count_; }
 
-    void markFree(const VoxelKey& k) {
-      const std::uint32_t i = blockIndexIn(k, min_, n_);
-      if (i == kOutside) {
-        outside_.markFree(k);
+    /// Starts a walk in voxel `k` (not marked) that moves by `delta[a]` (-1, 0 or 1) along
+    /// axis a.
+    void begin(const VoxelKey& k, const int (&delta)[3]) {
+      key_ = k;
+      for (int a = 0; a < 3; ++a) {
+        block_at_[a] = static_cast<unsigned>(k[a] >> block::kShift) - marks_.min_[a];
+        block_delta_[a] = delta[a];
+        block_step_[a] = delta[a] * static_cast<std::int32_t>(stride_[a]);
+        wrap_[a] = delta[a] < 0 ? block::kEdge - 1 : 0;
+      }
+      out_ = block_at_[0] >= n_[0] || block_at_[1] >= n_[1] || block_at_[2] >= n_[2];
+      block_ = out_ ? 0 : (block_at_[2] * n_[1] + block_at_[1]) * n_[0] + block_at_[0];
+      index_ = static_cast<unsigned>(block::indexOf(k));
+      if (!out_) enter();
+    }
+    /// The walk stepped along axis A to key coordinate `coord`.
+    template <int A>
+    void move(int coord) {
+      constexpr unsigned kField = (block::kEdge - 1U) << (block::kShift * A);
+      key_[A] = static_cast<std::uint16_t>(coord);
+      const unsigned c = static_cast<unsigned>(coord) & (block::kEdge - 1U);
+      index_ = (index_ & ~kField) | (c << (block::kShift * A));
+      if (c == wrap_[A]) {  // a new block
+        block_at_[A] += static_cast<unsigned>(block_delta_[A]);
+        block_ = static_cast<std::uint32_t>(static_cast<std::int32_t>(block_) + block_step_[A]);
+        if (block_at_[A] >= n_[A]) {
+          out_ = true;
+        } else if (!out_) {
+          enter();
+        }
+      }
+    }
+    /// Marks the walk's voxel free.
+    void mark() {
+      if (out_) {
+        outside_.markFree(key_);
         return;
       }
-      if (i != last_) {  // a block the ray enters: first touch of the scan?
-        touched_[count_] = i;
-        count_ += seen_[i] ^ 1U;
-        seen_[i] = 1;
-        last_ = i;
-      }
-      block::setBit(masks_[i], block::indexOf(k));
+      masks_[block_][index_ >> 6] |= std::uint64_t{1} << (index_ & 63U);
+    }
+    /// Marks the walk's voxel free unless the region (`culled`) holds it; returns whether it
+    /// marked. For walks inside the box (a traversal between two voxels of the box).
+    bool markUnlessCulled() {
+      const unsigned word = index_ >> 6;
+      const std::uint64_t bit = std::uint64_t{1} << (index_ & 63U);
+      if ((culled_[block_][word] & bit) != 0) return false;
+      masks_[block_][word] |= bit;
+      return true;
     }
 
    private:
+    void enter() {  // the walk entered block_: first touch of the scan?
+      touched_[count_] = block_;
+      count_ += seen_[block_] ^ 1U;
+      seen_[block_] = 1;
+    }
     DenseFreeMarks& marks_;
     ScanUpdate& outside_;
+    const block::BlockMask* culled_;
     block::BlockMask* masks_;
     std::uint8_t* seen_;
     std::uint32_t* touched_;
     std::size_t count_;
-    unsigned min_[3], n_[3];
-    std::uint32_t last_ = kOutside;
+    unsigned n_[3];
+    std::uint32_t stride_[3];
+    unsigned block_at_[3] = {0, 0, 0};  // the voxel's block in the box, per axis
+    std::int32_t block_delta_[3] = {0, 0, 0};
+    std::int32_t block_step_[3] = {0, 0, 0};
+    unsigned wrap_[3] = {0, 0, 0};
+    std::uint32_t block_ = 0;
+    unsigned index_ = 0;
+    VoxelKey key_{};
+    bool out_ = false;
   };
 
  private:

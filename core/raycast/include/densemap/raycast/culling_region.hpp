@@ -74,6 +74,9 @@ class CullingRegion {
     return block::testBit(bricks_[brick], index);
   }
 
+  /// The region's bits in the shared frame's block layout (culledAt's): block b's at [b].
+  [[nodiscard]] const block::BlockMask* frameMasks() const { return bricks_.data(); }
+
   /// Voxels in the region.
   [[nodiscard]] std::size_t size() const { return size_; }
   /// Voxels of the box the region was built in.
