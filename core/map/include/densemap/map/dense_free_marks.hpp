@@ -84,7 +84,7 @@ class DenseFreeMarks {
           masks_(marks.masks_.data()),
           seen_(marks.seen_.data()),
           touched_(marks.touched_.data()),
-          count_(marks.touched_count_),
+          count_(static_cast<std::uint32_t>(marks.touched_count_)),
           n_{marks.n_[0], marks.n_[1], marks.n_[2]},
           stride_{1, marks.n_[0], marks.n_[0] * marks.n_[1]} {}
     /// Writes the touched count back (the marks are in place already).
@@ -152,7 +152,9 @@ class DenseFreeMarks {
     block::BlockMask* masks_;
     std::uint8_t* seen_;
     std::uint32_t* touched_;
-    std::size_t count_;
+    // 32 bits, not size_t: a mask word's store (uint64_t) cannot alias it, so it stays in a
+    // register across marks.
+    std::uint32_t count_;
     unsigned n_[3];
     std::uint32_t stride_[3];
     unsigned block_at_[3] = {0, 0, 0};  // the voxel's block in the box, per axis

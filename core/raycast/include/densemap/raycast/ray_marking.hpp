@@ -118,7 +118,7 @@ class SharedFrameWalk {
   DenseFreeMarks::StepMarker marker_;
   const Region& region_;
   SharedFrameSink& sink_;
-  std::size_t marked_ = 0;
+  std::uint32_t marked_ = 0;  // not size_t: see StepMarker's count
   bool stepping_ = true;
 };
 
@@ -146,7 +146,7 @@ class ForwardWalk {
 
  private:
   DenseFreeMarks::StepMarker marker_;
-  std::size_t marked_ = 0;
+  std::uint32_t marked_ = 0;  // not size_t: see StepMarker's count
 };
 
 /// Marks `k` free unless `region` holds it; returns whether it marked.
