@@ -136,12 +136,10 @@ TEST(DenseFreeMarks, StepMarkerMarksAsTheHashOnWalksInsideAndLeavingItsBox) {
     EXPECT_GT(plain.freeCount(), 10000U);
     EXPECT_EQ(sut.freeCount(), plain.freeCount()) << "round " << round;
     std::vector<std::pair<std::uint64_t, bool>> a, b;
-    plain.forEachCell([&](const VoxelKey& k, const CellHits& h) {
-      a.emplace_back(k.packed(), h.occupied > 0);
-    });
-    sut.forEachCell([&](const VoxelKey& k, const CellHits& h) {
-      b.emplace_back(k.packed(), h.occupied > 0);
-    });
+    plain.forEachCell(
+        [&](const VoxelKey& k, const CellHits& h) { a.emplace_back(k.packed(), h.occupied > 0); });
+    sut.forEachCell(
+        [&](const VoxelKey& k, const CellHits& h) { b.emplace_back(k.packed(), h.occupied > 0); });
     std::sort(a.begin(), a.end());
     std::sort(b.begin(), b.end());
     EXPECT_EQ(a, b) << "round " << round;

@@ -76,8 +76,7 @@ class DenseFreeMarks {
   /// its marks then go to `outside` by key. One at a time; not to outlive the scan's reset.
   class StepMarker {
    public:
-    StepMarker(DenseFreeMarks& marks, ScanUpdate& outside,
-               const block::BlockMask* culled = nullptr)
+    StepMarker(DenseFreeMarks& marks, ScanUpdate& outside, const block::BlockMask* culled = nullptr)
         : marks_(marks),
           outside_(outside),
           culled_(culled),

@@ -200,8 +200,8 @@ void markRay(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray, Si
 /// `Region` needs `bool contains(const VoxelKey&) const`.
 template <class Region, class Sink>
 void markRayCulled(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray,
-                   const Region& region, BackwardScratch& scratch, Sink& update,
-                   MarkCounts& counts, const VoxelKey* origin_key = nullptr) {
+                   const Region& region, BackwardScratch& scratch, Sink& update, MarkCounts& counts,
+                   const VoxelKey* origin_key = nullptr) {
   // The ends' keys when the caller has the origin's (the end's is the ray's).
   RayKeys keys;
   const RayKeys* known = nullptr;
@@ -210,8 +210,7 @@ void markRayCulled(const VoxelGrid& grid, const Point3f& origin, const RayEnd& r
     known = &keys;
   }
   std::size_t marked = 0, total = 0;
-  if constexpr (std::is_same_v<Sink, SharedFrameSink> &&
-                requires { region.frameMasks(); }) {
+  if constexpr (std::is_same_v<Sink, SharedFrameSink> && requires { region.frameMasks(); }) {
     SharedFrameWalk<Region> walk(region, update);
     total = traverseRayBackward(grid, origin, ray.end, scratch, walk, known);
     marked = walk.finish();
