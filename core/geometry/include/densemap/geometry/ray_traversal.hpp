@@ -26,10 +26,9 @@ struct TraversalStart {
 
 enum class TraversalKind { kInvalid, kSameVoxel, kRay };
 
-/// kInvalid: origin or end outside the addressable range (nothing is visited);
-/// kSameVoxel: both in one voxel (nothing is visited); kRay: `start` is filled.
-/// The same with the ends' keys given (grid.pointToKey of origin and end, both in range): a
-/// scan's rays share the origin's, and a ray's end key is known before it is walked.
+/// startTraversal (below) with the ends' keys given (grid.pointToKey of origin and end, both in
+/// range, so never kInvalid): a scan's rays share the origin's, and a ray's end key is known
+/// before it is walked.
 inline TraversalKind startTraversal(const VoxelGrid& grid, const Point3f& origin,
                                     const VoxelKey& key_origin, const Point3f& end,
                                     const VoxelKey& key_end, TraversalStart& start) {
@@ -64,6 +63,8 @@ inline TraversalKind startTraversal(const VoxelGrid& grid, const Point3f& origin
   return TraversalKind::kRay;
 }
 
+/// kInvalid: origin or end outside the addressable range (nothing is visited);
+/// kSameVoxel: both in one voxel (nothing is visited); kRay: `start` is filled.
 inline TraversalKind startTraversal(const VoxelGrid& grid, const Point3f& origin,
                                     const Point3f& end, TraversalStart& start) {
   const auto key_origin = grid.pointToKey(origin);

@@ -89,8 +89,8 @@ class DenseFreeMarks {
     /// Writes the touched count back (the marks are in place already).
     void finish() { marks_.touched_count_ = count_; }
 
-    /// Starts a walk in voxel `k` (not marked) that moves by `delta[a]` (-1, 0 or 1) along
-    /// axis a.
+    /// Starts a walk in voxel `k` (not marked here: mark() marks the walk's voxel) that moves
+    /// by `delta[a]` (-1, 0 or 1) along axis a.
     void begin(const VoxelKey& k, const int (&delta)[3]) {
       key_ = k;
       for (int a = 0; a < 3; ++a) {
