@@ -84,8 +84,7 @@ class DenseFreeMarks {
           seen_(marks.seen_.data()),
           touched_(marks.touched_.data()),
           count_(static_cast<std::uint32_t>(marks.touched_count_)),
-          n_{marks.n_[0], marks.n_[1], marks.n_[2]},
-          stride_{1, marks.n_[0], marks.n_[0] * marks.n_[1]} {}
+          n_{marks.n_[0], marks.n_[1], marks.n_[2]} {}
     /// Writes the touched count back (the marks are in place already).
     void finish() { marks_.touched_count_ = count_; }
 
@@ -93,14 +92,16 @@ class DenseFreeMarks {
     /// by `delta[a]` (-1, 0 or 1) along axis a.
     void begin(const VoxelKey& k, const int (&delta)[3]) {
       key_ = k;
+      const std::int32_t stride[3] = {1, static_cast<std::int32_t>(n_[0]),
+                                      static_cast<std::int32_t>(n_[0] * n_[1])};
       for (int a = 0; a < 3; ++a) {
         block_at_[a] = static_cast<unsigned>(k[a] >> block::kShift) - marks_.min_[a];
         block_delta_[a] = delta[a];
-        block_step_[a] = delta[a] * static_cast<std::int32_t>(stride_[a]);
+        block_step_[a] = delta[a] * stride[a];
         wrap_[a] = delta[a] < 0 ? block::kEdge - 1 : 0;
       }
-      out_ = block_at_[0] >= n_[0] || block_at_[1] >= n_[1] || block_at_[2] >= n_[2];
-      block_ = out_ ? 0 : (block_at_[2] * n_[1] + block_at_[1]) * n_[0] + block_at_[0];
+      block_ = blockIndexIn(k, marks_.min_, n_);
+      out_ = block_ == kOutside;
       index_ = static_cast<unsigned>(block::indexOf(k));
       if (!out_) enter();
     }
@@ -155,7 +156,6 @@ class DenseFreeMarks {
     // register across marks.
     std::uint32_t count_;
     unsigned n_[3];
-    std::uint32_t stride_[3];
     unsigned block_at_[3] = {0, 0, 0};  // the voxel's block in the box, per axis
     std::int32_t block_delta_[3] = {0, 0, 0};
     std::int32_t block_step_[3] = {0, 0, 0};
