@@ -204,7 +204,7 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
       if (!local.dense_ok) continue;
       // Only the blocks of the region's box (it may be smaller than the rays' box): the list
       // is bounded by the box, not by how far the rays reach.
-      local.dense.forEachMarked([&](std::uint64_t key, const block::BlockMask& mask) {
+      local.dense.forEachMarkedFree([&](std::uint64_t key, const block::BlockMask& mask) {
         if (region_.boxHasBlock(key)) covered_.push_back({key, mask});
       });
     }

@@ -9,7 +9,7 @@
 #include <set>
 
 #include "densemap/geometry/ray_traversal.hpp"
-#include "densemap/map/dense_free_marks.hpp"
+#include "densemap/map/dense_marks.hpp"
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_diff.hpp"
 #include "densemap/raycast/culling_region.hpp"
@@ -113,10 +113,10 @@ TEST(TraverseRay, StepVisitorsFollowTheKeysOfKeyVisitorsBothWays) {
   EXPECT_GT(stepped, 100000U);
 }
 
-TEST(DenseFreeMarks, StepMarkerMarksAsTheHashOnWalksInsideAndLeavingItsBox) {
+TEST(DenseMarks, StepMarkerMarksAsTheHashOnWalksInsideAndLeavingItsBox) {
   const VoxelGrid grid(0.2);
   test::RandomRays random(0.2, 12.0, 13);
-  DenseFreeMarks dense;
+  DenseMarks dense;
   for (int round = 0; round < 3; ++round) {
     // A box around the origin's side of the rays: many walks leave it, some start outside.
     const VoxelKey lo = *grid.pointToKey(Point3f(-6.0F, -5.0F, -4.0F));
@@ -222,7 +222,7 @@ TEST(CullingRegion, EqualsBreadthFirstAlgorithm3OnRandomMaps) {
                       static_cast<std::uint16_t>(o.z + 16)}};
     CullingRegion sut;
     sut.build(map, o, box, hit);
-    // The same region indexed in a larger frame, shared with a DenseFreeMarks of that box:
+    // The same region indexed in a larger frame, shared with a DenseMarks of that box:
     // markFreeUnlessIn refuses exactly the region's voxels.
     const KeyBox frame{{static_cast<std::uint16_t>(o.x - 30), static_cast<std::uint16_t>(o.y - 21),
                         static_cast<std::uint16_t>(o.z - 17)},
@@ -230,7 +230,7 @@ TEST(CullingRegion, EqualsBreadthFirstAlgorithm3OnRandomMaps) {
                         static_cast<std::uint16_t>(o.z + 18)}};
     CullingRegion framed;
     framed.build(map, o, box, hit, &frame);
-    DenseFreeMarks marks;
+    DenseMarks marks;
     ASSERT_TRUE(marks.reset(frame.min, frame.max, 1U << 20));
     const bool shared = framed.sharesFrame(marks);  // an empty region has no bricks
     ASSERT_EQ(shared, sut.size() != 0);
@@ -309,16 +309,16 @@ TEST(CullingRegion, GrowsByTheScansMarksAsBreadthFirstOverFullyFreeOrMarkedVoxel
     // Before growing: the map's region (empty when the sensor's voxel is not fully free).
     const auto from_map = bfsRegion(map, o, box, hit_set);
     ASSERT_EQ(sut.size(), from_map.size()) << "trial " << trial;
-    // The marks as DenseFreeMarks hands them over, in two calls (the second ORed in).
+    // The marks as DenseMarks hands them over, in two calls (the second ORed in).
     std::set<std::uint64_t> marked;
     for (const auto* set : {&marked_once, &marked_twice}) {
-      DenseFreeMarks marks;
+      DenseMarks marks;
       ASSERT_TRUE(marks.reset(frame.min, frame.max, 1U << 20));
       ScanUpdate outside;
       outside.reset(UpdateRule::kSet);
       for (const std::uint64_t packed : *set) marks.markFree(VoxelKey::fromPacked(packed), outside);
       std::vector<FullyFreeBlock> covered;
-      marks.forEachMarked([&](std::uint64_t key, const block::BlockMask& mask) {
+      marks.forEachMarkedFree([&](std::uint64_t key, const block::BlockMask& mask) {
         covered.push_back({key, mask});
       });
       sut.grow(covered);

@@ -52,10 +52,14 @@ class ScanUpdate {
     if (b.counts) b.counts->occupied[i] += weight;
   }
 
-  /// ORs a block's worth of free marks in (UpdateRule::kSet only: no counts).
-  void orFree(std::uint64_t block_key, const block::BlockMask& mask) {
+  /// ORs a block's worth of free and occupied marks in (UpdateRule::kSet only: no counts).
+  void orMarks(std::uint64_t block_key, const block::BlockMask& free,
+               const block::BlockMask& occupied) {
     Block& b = blockFor(block_key);
-    for (int w = 0; w < block::kMaskWords; ++w) b.free[w] |= mask[w];
+    for (int w = 0; w < block::kMaskWords; ++w) {
+      b.free[w] |= free[w];
+      b.occupied[w] |= occupied[w];
+    }
   }
 
   /// Adds another update (same rule) into this one.

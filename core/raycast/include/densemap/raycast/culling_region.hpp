@@ -33,7 +33,7 @@ class CullingRegion {
   /// Builds the region inside `box` (which must contain `origin`; voxels outside are never in
   /// the region). `hit` lists the voxels rays of this scan end in.
   /// `frame`, when given, must contain `box`: the query bricks then cover the blocks of
-  /// `frame` (voxels outside `box` are not in the region), so that a DenseFreeMarks reset to the
+  /// `frame` (voxels outside `box` are not in the region), so that a DenseMarks reset to the
   /// same box shares their indexing (see sharesFrame and culledAt).
   /// `growable` (UpdateRule::kSet only): the box is loaded even when the region is empty (the
   /// sensor's voxel not fully free), and kept for grow().

@@ -103,7 +103,7 @@ class Integrator {
     ScanUpdate update;
     MarkCounts counts;
     BackwardScratch scratch;
-    DenseFreeMarks dense;
+    DenseMarks dense;
     bool dense_ok = false;  // `dense` covers this scan's box
   };
   IntegratorOptions options_;

@@ -6,7 +6,7 @@
 #include <type_traits>
 
 #include "densemap/geometry/ray_traversal.hpp"
-#include "densemap/map/dense_free_marks.hpp"
+#include "densemap/map/dense_marks.hpp"
 #include "densemap/map/scan_update.hpp"
 
 namespace densemap {
@@ -59,16 +59,18 @@ struct MarkCounts {
   std::size_t culled = 0;
 };
 
-/// Where marks go under UpdateRule::kSet with a dense box: free marks into `dense` (or
-/// `update` outside its box), occupied marks into `update`. ScanUpdate is the other sink.
+/// Where marks go under UpdateRule::kSet with a dense box: into `dense` (or `update` outside
+/// its box). ScanUpdate is the other sink.
 struct DenseSink {
-  DenseFreeMarks& dense;
+  DenseMarks& dense;
   ScanUpdate& update;
   void markFree(const VoxelKey& k, std::uint32_t /*weight*/) { dense.markFree(k, update); }
-  void markOccupied(const VoxelKey& k, std::uint32_t weight) { update.markOccupied(k, weight); }
+  void markOccupied(const VoxelKey& k, std::uint32_t /*weight*/) {
+    dense.markOccupied(k, update);
+  }
   /// A ray's marker (markRay): the free marks' hot state in locals.
-  [[nodiscard]] DenseFreeMarks::StepMarker marker() {
-    return DenseFreeMarks::StepMarker(dense, update);
+  [[nodiscard]] DenseMarks::StepMarker marker() {
+    return DenseMarks::StepMarker(dense, update);
   }
 };
 
@@ -82,7 +84,7 @@ struct SharedFrameSink : DenseSink {
 };
 
 /// markRayCulled's walk through a SharedFrameSink: the fast backward walk's steps go to a
-/// DenseFreeMarks::StepMarker (the voxel's address followed step by step, its region bit and
+/// DenseMarks::StepMarker (the voxel's address followed step by step, its region bit and
 /// mark one word address apart); when the walk hands over to the exact one, keys go to the
 /// sink as markFreeUnlessIn takes them.
 template <class Region>
@@ -115,7 +117,7 @@ class SharedFrameWalk {
   }
 
  private:
-  DenseFreeMarks::StepMarker marker_;
+  DenseMarks::StepMarker marker_;
   const Region& region_;
   SharedFrameSink& sink_;
   std::uint32_t marked_ = 0;  // not size_t: see StepMarker's count
@@ -123,10 +125,10 @@ class SharedFrameWalk {
 };
 
 /// markRay's forward walk through a DenseSink: the walk's steps to a
-/// DenseFreeMarks::StepMarker, every voxel marked.
+/// DenseMarks::StepMarker, every voxel marked.
 class ForwardWalk {
  public:
-  explicit ForwardWalk(DenseFreeMarks::StepMarker marker) : marker_(marker) {}
+  explicit ForwardWalk(DenseMarks::StepMarker marker) : marker_(marker) {}
   void begin(const VoxelKey& k, const int (&delta)[3]) { marker_.begin(k, delta); }
   void first() {
     marker_.mark();
@@ -145,7 +147,7 @@ class ForwardWalk {
   }
 
  private:
-  DenseFreeMarks::StepMarker marker_;
+  DenseMarks::StepMarker marker_;
   std::uint32_t marked_ = 0;  // not size_t: see StepMarker's count
 };
 

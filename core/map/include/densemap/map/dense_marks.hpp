@@ -9,14 +9,15 @@
 
 namespace densemap {
 
-/// The free marks of one scan under UpdateRule::kSet, in a dense array of 8^3 blocks over a
-/// box of block coordinates: marking a voxel is an index computation and a bit set, with no
-/// hash probe and no branch on block changes (a ray changes block every few voxels, which the
-/// ScanUpdate's last-block cache mispredicts). Voxels outside the box go to a ScanUpdate given
-/// by the caller, so any box is correct; a box around every ray is fast.
+/// The marks of one scan under UpdateRule::kSet, free and occupied, in dense arrays of 8^3
+/// blocks over a box of block coordinates: marking a voxel is an index computation and a bit
+/// set, with no hash probe and no branch on block changes (a ray changes block every few
+/// voxels, which the ScanUpdate's last-block cache mispredicts; consecutive rays end in
+/// different blocks, a probe each). Voxels outside the box go to a ScanUpdate given by the
+/// caller, so any box is correct; a box around every ray is fast.
 /// Single-writer, like ScanUpdate; the array is kept between scans and only touched blocks are
 /// cleared.
-class DenseFreeMarks {
+class DenseMarks {
  public:
   /// Starts a scan over the blocks of voxels [min, max]. Returns false (and covers nothing)
   /// when that is more than `max_blocks` blocks.
@@ -52,15 +53,26 @@ class DenseFreeMarks {
     setAt(i, block::indexOf(k));
   }
 
-  /// ORs the marks into `update` (as free marks) and clears them.
+  /// Marks `k` occupied when inside the box; otherwise into `outside`.
+  void markOccupied(const VoxelKey& k, ScanUpdate& outside) {
+    const std::uint32_t i = blockIndex(k);
+    if (i == kOutside) {
+      outside.markOccupied(k);
+      return;
+    }
+    touch(i);
+    block::setBit(occupied_[i], block::indexOf(k));
+  }
+
+  /// ORs the marks into `update` and clears them.
   void flushInto(ScanUpdate& update);
 
-  /// Calls f(block key, mask) for each block marked so far (the marks stay).
+  /// Calls f(block key, free mask) for each block with free marks so far (the marks stay).
   template <class F>
-  void forEachMarked(F&& f) const {
+  void forEachMarkedFree(F&& f) const {
     for (std::size_t t = 0; t < touched_count_; ++t) {
       const std::uint32_t i = touched_[t];
-      f(blockKeyAt(i), masks_[i]);
+      if (block::anyBit(masks_[i])) f(blockKeyAt(i), masks_[i]);
     }
   }
 
@@ -76,7 +88,7 @@ class DenseFreeMarks {
   /// its marks then go to `outside` by key. One at a time; not to outlive the scan's reset.
   class StepMarker {
    public:
-    StepMarker(DenseFreeMarks& marks, ScanUpdate& outside, const block::BlockMask* culled = nullptr)
+    StepMarker(DenseMarks& marks, ScanUpdate& outside, const block::BlockMask* culled = nullptr)
         : marks_(marks),
           outside_(outside),
           culled_(culled),
@@ -146,7 +158,7 @@ class DenseFreeMarks {
       count_ += seen_[block_] ^ 1U;
       seen_[block_] = 1;
     }
-    DenseFreeMarks& marks_;
+    DenseMarks& marks_;
     ScanUpdate& outside_;
     const block::BlockMask* culled_;
     block::BlockMask* masks_;
@@ -186,15 +198,19 @@ class DenseFreeMarks {
   /// Sets voxel `index` of block `i`, with branch-free first-touch bookkeeping: the touched
   /// slot is overwritten until the count moves.
   void setAt(std::uint32_t i, int index) {
+    touch(i);
+    block::setBit(masks_[i], index);
+  }
+  void touch(std::uint32_t i) {
     touched_[touched_count_] = i;
     touched_count_ += seen_[i] ^ 1U;
     seen_[i] = 1;
-    block::setBit(masks_[i], index);
   }
 
   unsigned min_[3] = {0, 0, 0};
   unsigned n_[3] = {0, 0, 0};
-  std::vector<block::BlockMask> masks_;
+  std::vector<block::BlockMask> masks_;     // free marks
+  std::vector<block::BlockMask> occupied_;  // occupied marks
   std::vector<std::uint8_t> seen_;
   std::vector<std::uint32_t> touched_;  // one spare slot for the branch-free append
   std::size_t touched_count_ = 0;

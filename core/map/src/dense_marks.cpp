@@ -1,8 +1,8 @@
-#include "densemap/map/dense_free_marks.hpp"
+#include "densemap/map/dense_marks.hpp"
 
 namespace densemap {
 
-bool DenseFreeMarks::reset(const VoxelKey& min, const VoxelKey& max, std::size_t max_blocks) {
+bool DenseMarks::reset(const VoxelKey& min, const VoxelKey& max, std::size_t max_blocks) {
   std::size_t blocks = 1;
   for (int a = 0; a < 3; ++a) {
     const unsigned lo = static_cast<unsigned>(min[a] >> block::kShift);
@@ -17,13 +17,14 @@ bool DenseFreeMarks::reset(const VoxelKey& min, const VoxelKey& max, std::size_t
   }
   if (masks_.size() < blocks) {
     masks_.resize(blocks);
+    occupied_.resize(blocks);
     seen_.resize(blocks, 0);
     touched_.resize(blocks + 1);
   }
   return true;
 }
 
-std::uint64_t DenseFreeMarks::blockKeyAt(std::uint32_t i) const {
+std::uint64_t DenseMarks::blockKeyAt(std::uint32_t i) const {
   const std::uint32_t bx = i % n_[0];
   const std::uint32_t by = (i / n_[0]) % n_[1];
   const std::uint32_t bz = i / (n_[0] * n_[1]);
@@ -33,12 +34,14 @@ std::uint64_t DenseFreeMarks::blockKeyAt(std::uint32_t i) const {
   return block::blockOf(first);
 }
 
-void DenseFreeMarks::flushInto(ScanUpdate& update) {
+void DenseMarks::flushInto(ScanUpdate& update) {
   for (std::size_t t = 0; t < touched_count_; ++t) {
     const std::uint32_t i = touched_[t];
     // A StepMarker enters blocks before marking: a walk may stop in one without a mark.
-    if (block::anyBit(masks_[i])) update.orFree(blockKeyAt(i), masks_[i]);
+    const bool free = block::anyBit(masks_[i]), occupied = block::anyBit(occupied_[i]);
+    if (free || occupied) update.orMarks(blockKeyAt(i), masks_[i], occupied_[i]);
     masks_[i] = {};
+    occupied_[i] = {};
     seen_[i] = 0;
   }
   touched_count_ = 0;
