@@ -73,6 +73,68 @@ inline TraversalKind startTraversal(const VoxelGrid& grid, const Point3f& origin
   return startTraversal(grid, origin, *key_origin, end, *key_end, start);
 }
 
+/// How traverseRay's loop from `s` ends (see endOf).
+enum class TraversalEnd {
+  kIrregular,  // the keys' differences disagree with the steps' signs: no count of crossings
+  kUnsure,     // it may stop by the length test, or the crossing counts are decided by near-ties
+  kClean,      // by entering the end voxel after exactly crossings[0..2] crossings per axis
+};
+
+/// How traverseRay's loop from `s` ends, decided with margins; fills `crossings` (per axis, the
+/// borders between the origin's and the end's voxel). kClean: the loop's crossings are, in
+/// time order (each axis' times accumulated by repeated addition, ties to the higher axis), the
+/// first crossings[a] of each axis — the last of them (the end voxel's entry) before the first
+/// one beyond them and within the ray's length, each by more than the bound on the accumulated
+/// sums' rounding, (k + 8) * 2^-50 * |t| — so the loop enters the end voxel at its
+/// (crossings[0] + crossings[1] + crossings[2])-th step and stops there.
+inline TraversalEnd endOf(const TraversalStart& s, int (&crossings)[3]) {
+  bool regular = true;
+  for (int a = 0; a < 3; ++a) {
+    crossings[a] = (static_cast<int>(s.end[a]) - static_cast<int>(s.origin[a])) * s.step[a];
+    if (s.step[a] == 0 ? s.end[a] != s.origin[a] : crossings[a] < 0) regular = false;
+  }
+  if (!regular) return TraversalEnd::kIrregular;
+  constexpr double kRel = 0x1p-50;
+  const auto time = [&](int a, int k) { return s.t_max[a] + k * s.t_delta[a]; };
+  const auto tolerance = [&](int a, int k, double v) {
+    return (k + 8) * kRel * (std::fabs(v) + std::fabs(s.t_max[a]));
+  };
+  int last_axis = -1, exit_axis = -1;
+  double last_time = 0, last_tol = 0, exit_time = 0, exit_tol = 0;
+  for (int a = 0; a < 3; ++a) {
+    if (s.step[a] == 0) continue;
+    if (crossings[a] > 0) {
+      const double v = time(a, crossings[a] - 1);
+      const double tol = tolerance(a, crossings[a] - 1, v);
+      if (last_axis >= 0 && std::fabs(v - last_time) <= tol + last_tol) {
+        return TraversalEnd::kUnsure;
+      }
+      if (last_axis < 0 || v > last_time) {
+        last_axis = a;
+        last_time = v;
+        last_tol = tol;
+      }
+    }
+    const double x = time(a, crossings[a]);
+    const double tol = tolerance(a, crossings[a], x);
+    if (exit_axis >= 0 && std::fabs(x - exit_time) <= tol + exit_tol) return TraversalEnd::kUnsure;
+    if (exit_axis < 0 || x < exit_time) {
+      exit_axis = a;
+      exit_time = x;
+      exit_tol = tol;
+    }
+  }
+  if (last_axis < 0 || (exit_axis >= 0 && !(exit_time - last_time > exit_tol + last_tol)) ||
+      !(static_cast<double>(s.length) - last_time > last_tol)) {
+    return TraversalEnd::kUnsure;
+  }
+  return TraversalEnd::kClean;
+}
+
+/// traverseRay's step visitors count a ray's steps from this many (endOf's test costs about as
+/// much as the end tests of a few steps).
+inline constexpr int kCountedStepsFrom = 8;
+
 /// Visits the voxels that OctoMap 1.9.7's `OcTreeBaseImpl::computeRayKeys(origin, end)` returns,
 /// in the same order: the origin's voxel first, the end point's voxel excluded.
 /// (Amanatides & Woo, "A Fast Voxel Traversal Algorithm for Ray Tracing", 1987.)
@@ -100,6 +162,37 @@ bool traverseRay(const VoxelGrid& grid, const Point3f& origin, const Point3f& en
   int key[3] = {s.origin.x, s.origin.y, s.origin.z};
   const int last[3] = {s.end.x, s.end.y, s.end.z};
   double t0 = s.t_max[0], t1 = s.t_max[1], t2 = s.t_max[2];
+  if constexpr (kSteps) {
+    // A long ray whose loop ends cleanly (endOf) takes a known number of steps: no end test
+    // per step (the key's three comparisons and the length test).
+    int crossings[3];
+    const int total = std::abs(last[0] - key[0]) + std::abs(last[1] - key[1]) +
+                      std::abs(last[2] - key[2]);
+    if (total >= kCountedStepsFrom && endOf(s, crossings) == TraversalEnd::kClean) {
+      for (int n = 1; n < total; ++n) {  // the last crossing enters the end voxel
+        if (t0 < t1) {
+          if (t0 < t2) {
+            key[0] = (key[0] + s.step[0]) & 0xffff;
+            t0 += s.t_delta[0];
+            visit.template step<0>(key[0]);
+          } else {
+            key[2] = (key[2] + s.step[2]) & 0xffff;
+            t2 += s.t_delta[2];
+            visit.template step<2>(key[2]);
+          }
+        } else if (t1 < t2) {
+          key[1] = (key[1] + s.step[1]) & 0xffff;
+          t1 += s.t_delta[1];
+          visit.template step<1>(key[1]);
+        } else {
+          key[2] = (key[2] + s.step[2]) & 0xffff;
+          t2 += s.t_delta[2];
+          visit.template step<2>(key[2]);
+        }
+      }
+      return true;
+    }
+  }
   const double length = static_cast<double>(s.length);
   while (true) {
     int axis;
@@ -267,49 +360,18 @@ inline BackwardMode prepareBackward(const VoxelGrid& grid, const Point3f& origin
                                  ? startTraversal(grid, origin, keys->origin, end, keys->end, s)
                                  : startTraversal(grid, origin, end, s);
   if (kind != TraversalKind::kRay) return BackwardMode::kNothing;
-  int* crossings = walk.crossings;
-  bool regular = true;
-  for (int a = 0; a < 3; ++a) {
-    crossings[a] = (static_cast<int>(s.end[a]) - static_cast<int>(s.origin[a])) * s.step[a];
-    if (s.step[a] == 0 ? s.end[a] != s.origin[a] : crossings[a] < 0) regular = false;
+  int (&crossings)[3] = walk.crossings;
+  // Termination as in backwardExact, decided with margins.
+  switch (endOf(s, crossings)) {
+    case TraversalEnd::kIrregular:
+      return BackwardMode::kExactIrregular;
+    case TraversalEnd::kUnsure:
+      return BackwardMode::kExact;
+    case TraversalEnd::kClean:
+      break;
   }
-  if (!regular) return BackwardMode::kExactIrregular;
-
   constexpr double kRel = 0x1p-50;
   const auto time = [&](int a, int k) { return s.t_max[a] + k * s.t_delta[a]; };
-  const auto tolerance = [&](int a, int k, double v) {
-    return (k + 8) * kRel * (std::fabs(v) + std::fabs(s.t_max[a]));
-  };
-  // Termination as in backwardExact, decided with margins.
-  int last_axis = -1, exit_axis = -1;
-  double last_time = 0, last_tol = 0, exit_time = 0, exit_tol = 0;
-  for (int a = 0; a < 3; ++a) {
-    if (s.step[a] == 0) continue;
-    if (crossings[a] > 0) {
-      const double v = time(a, crossings[a] - 1);
-      const double tol = tolerance(a, crossings[a] - 1, v);
-      if (last_axis >= 0 && std::fabs(v - last_time) <= tol + last_tol) {
-        return BackwardMode::kExact;
-      }
-      if (last_axis < 0 || v > last_time) {
-        last_axis = a;
-        last_time = v;
-        last_tol = tol;
-      }
-    }
-    const double x = time(a, crossings[a]);
-    const double tol = tolerance(a, crossings[a], x);
-    if (exit_axis >= 0 && std::fabs(x - exit_time) <= tol + exit_tol) return BackwardMode::kExact;
-    if (exit_axis < 0 || x < exit_time) {
-      exit_axis = a;
-      exit_time = x;
-      exit_tol = tol;
-    }
-  }
-  if (last_axis < 0 || (exit_axis >= 0 && !(exit_time - last_time > exit_tol + last_tol)) ||
-      !(static_cast<double>(s.length) - last_time > last_tol)) {
-    return BackwardMode::kExact;
-  }
 
   // One bound for the whole walk: heads are computed t0 + k * delta, then decremented.
   walk.total = static_cast<std::size_t>(crossings[0] + crossings[1] + crossings[2]);
