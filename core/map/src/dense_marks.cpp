@@ -3,6 +3,7 @@
 namespace densemap {
 
 bool DenseMarks::reset(const VoxelKey& min, const VoxelKey& max, std::size_t max_blocks) {
+  discard();  // marks a scan left unflushed (it threw) are not the next scan's
   std::size_t blocks = 1;
   for (int a = 0; a < 3; ++a) {
     const unsigned lo = static_cast<unsigned>(min[a] >> block::kShift);
@@ -16,12 +17,24 @@ bool DenseMarks::reset(const VoxelKey& min, const VoxelKey& max, std::size_t max
     return false;
   }
   if (masks_.size() < blocks) {
-    masks_.resize(blocks);
-    occupied_.resize(blocks);
-    seen_.resize(blocks, 0);
-    touched_.resize(blocks + 1);
+    if (!masks_.assign(blocks) || !occupied_.assign(blocks) || !seen_.assign(blocks) ||
+        !touched_.assign(blocks + 1)) {
+      masks_.assign(0);
+      n_[0] = n_[1] = n_[2] = 0;
+      return false;
+    }
   }
   return true;
+}
+
+void DenseMarks::discard() {
+  for (std::size_t t = 0; t < touched_count_; ++t) {
+    const std::uint32_t i = touched_[t];
+    masks_[i] = {};
+    occupied_[i] = {};
+    seen_[i] = 0;
+  }
+  touched_count_ = 0;
 }
 
 std::uint64_t DenseMarks::blockKeyAt(std::uint32_t i) const {
@@ -40,11 +53,8 @@ void DenseMarks::flushInto(ScanUpdate& update) {
     // A StepMarker enters blocks before marking: a walk may stop in one without a mark.
     const bool free = block::anyBit(masks_[i]), occupied = block::anyBit(occupied_[i]);
     if (free || occupied) update.orMarks(blockKeyAt(i), masks_[i], occupied_[i]);
-    masks_[i] = {};
-    occupied_[i] = {};
-    seen_[i] = 0;
   }
-  touched_count_ = 0;
+  discard();
 }
 
 }  // namespace densemap

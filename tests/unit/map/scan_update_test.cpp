@@ -133,6 +133,22 @@ TEST(DenseMarks, GivesTheSameUpdateAsTheHashInsideAndOutsideItsBox) {
   }
 }
 
+TEST(DenseMarks, AResetDropsMarksAScanLeftUnflushed) {
+  DenseMarks dense;
+  ASSERT_TRUE(dense.reset({32720, 32730, 32740}, {32790, 32780, 32770}, 1000));
+  ScanUpdate outside;
+  dense.markFree({32750, 32750, 32750}, outside);
+  dense.markOccupied({32751, 32750, 32750}, outside);
+  // The scan threw before its flush: the next scan starts empty.
+  ASSERT_TRUE(dense.reset({32720, 32730, 32740}, {32790, 32780, 32770}, 1000));
+  dense.markFree({32760, 32760, 32760}, outside);
+  ScanUpdate sut;
+  dense.flushInto(sut);
+  EXPECT_EQ(sut.freeCount(), 1U);
+  EXPECT_EQ(sut.occupiedCount(), 0U);
+  EXPECT_TRUE(outside.empty());
+}
+
 TEST(DenseMarks, RefusesABoxOverItsBlockLimit) {
   DenseMarks dense;
   EXPECT_FALSE(dense.reset({0, 0, 0}, {799, 799, 799}, 100 * 100 * 99));

@@ -2,7 +2,8 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <vector>
+#include <cstdlib>
+#include <memory>
 
 #include "densemap/map/block_layout.hpp"
 #include "densemap/map/scan_update.hpp"
@@ -209,10 +210,37 @@ class DenseMarks {
 
   unsigned min_[3] = {0, 0, 0};
   unsigned n_[3] = {0, 0, 0};
-  std::vector<block::BlockMask> masks_;     // free marks
-  std::vector<block::BlockMask> occupied_;  // occupied marks
-  std::vector<std::uint8_t> seen_;
-  std::vector<std::uint32_t> touched_;  // one spare slot for the branch-free append
+  /// Clears the marks made since the last flush (none when every scan was flushed).
+  void discard();
+
+  /// An array of zeroed Ts from calloc: the pages a scan never touches stay unmapped (the
+  /// largest box, 2^21 blocks, is 128 MiB of masks per array), where a vector writes them all.
+  template <class T>
+  class ZeroedArray {
+   public:
+    /// Replaces the contents by n zeroed elements; false when out of memory (then empty).
+    bool assign(std::size_t n) {
+      data_.reset(static_cast<T*>(std::calloc(n, sizeof(T))));
+      size_ = data_ != nullptr ? n : 0;
+      return data_ != nullptr;
+    }
+    [[nodiscard]] std::size_t size() const { return size_; }
+    [[nodiscard]] T* data() { return data_.get(); }
+    T& operator[](std::size_t i) { return data_[i]; }
+    const T& operator[](std::size_t i) const { return data_[i]; }
+
+   private:
+    struct Free {
+      void operator()(T* p) const { std::free(p); }
+    };
+    std::unique_ptr<T[], Free> data_;
+    std::size_t size_ = 0;
+  };
+
+  ZeroedArray<block::BlockMask> masks_;     // free marks
+  ZeroedArray<block::BlockMask> occupied_;  // occupied marks
+  ZeroedArray<std::uint8_t> seen_;
+  ZeroedArray<std::uint32_t> touched_;  // one spare slot for the branch-free append
   std::size_t touched_count_ = 0;
 };
 
