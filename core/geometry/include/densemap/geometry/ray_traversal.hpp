@@ -84,48 +84,43 @@ enum class TraversalEnd {
 /// borders between the origin's and the end's voxel). kClean: the loop's crossings are, in
 /// time order (each axis' times accumulated by repeated addition, ties to the higher axis), the
 /// first crossings[a] of each axis — the last of them (the end voxel's entry) before the first
-/// one beyond them and within the ray's length, each by more than the bound on the accumulated
-/// sums' rounding, (k + 8) * 2^-50 * |t| — so the loop enters the end voxel at its
-/// (crossings[0] + crossings[1] + crossings[2])-th step and stops there.
+/// one beyond them and within the ray's length — so the loop enters the end voxel at its
+/// (crossings[0] + crossings[1] + crossings[2])-th step and stops there. Each decision must win
+/// by more than one bound on the rounding of two times: an accumulated sum is within
+/// (k + 8) * 2^-50 * (|t| + |t0|) of t0 + k * delta, below 2 (total + 8) 2^-50 scale (scale: the
+/// largest time involved, plus a step); near-ties among the axes' last or first-beyond
+/// crossings are kUnsure too (the backward walk's first decisions).
 inline TraversalEnd endOf(const TraversalStart& s, int (&crossings)[3]) {
-  bool regular = true;
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  double last[3], beyond[3];  // per axis: the last crossing's time, the next one's
+  double scale = 0;
+  int total = 0;
   for (int a = 0; a < 3; ++a) {
-    crossings[a] = (static_cast<int>(s.end[a]) - static_cast<int>(s.origin[a])) * s.step[a];
-    if (s.step[a] == 0 ? s.end[a] != s.origin[a] : crossings[a] < 0) regular = false;
-  }
-  if (!regular) return TraversalEnd::kIrregular;
-  constexpr double kRel = 0x1p-50;
-  const auto time = [&](int a, int k) { return s.t_max[a] + k * s.t_delta[a]; };
-  const auto tolerance = [&](int a, int k, double v) {
-    return (k + 8) * kRel * (std::fabs(v) + std::fabs(s.t_max[a]));
-  };
-  int last_axis = -1, exit_axis = -1;
-  double last_time = 0, last_tol = 0, exit_time = 0, exit_tol = 0;
-  for (int a = 0; a < 3; ++a) {
-    if (s.step[a] == 0) continue;
-    if (crossings[a] > 0) {
-      const double v = time(a, crossings[a] - 1);
-      const double tol = tolerance(a, crossings[a] - 1, v);
-      if (last_axis >= 0 && std::fabs(v - last_time) <= tol + last_tol) {
-        return TraversalEnd::kUnsure;
-      }
-      if (last_axis < 0 || v > last_time) {
-        last_axis = a;
-        last_time = v;
-        last_tol = tol;
-      }
+    const int c = (static_cast<int>(s.end[a]) - static_cast<int>(s.origin[a])) * s.step[a];
+    crossings[a] = c;
+    if (s.step[a] == 0) {
+      if (s.end[a] != s.origin[a]) return TraversalEnd::kIrregular;
+      last[a] = -kInf;
+      beyond[a] = kInf;
+      continue;
     }
-    const double x = time(a, crossings[a]);
-    const double tol = tolerance(a, crossings[a], x);
-    if (exit_axis >= 0 && std::fabs(x - exit_time) <= tol + exit_tol) return TraversalEnd::kUnsure;
-    if (exit_axis < 0 || x < exit_time) {
-      exit_axis = a;
-      exit_time = x;
-      exit_tol = tol;
-    }
+    if (c < 0) return TraversalEnd::kIrregular;
+    total += c;
+    beyond[a] = s.t_max[a] + c * s.t_delta[a];
+    last[a] = c > 0 ? s.t_max[a] + (c - 1) * s.t_delta[a] : -kInf;
+    scale = std::max(scale, std::fabs(s.t_max[a]) + (c + 1) * s.t_delta[a]);
   }
-  if (last_axis < 0 || (exit_axis >= 0 && !(exit_time - last_time > exit_tol + last_tol)) ||
-      !(static_cast<double>(s.length) - last_time > last_tol)) {
+  const double bound = 4 * (total + 8) * 0x1p-50 * scale;
+  // (inf - inf is NaN: never near.)
+  const auto near = [bound](double x, double y) { return std::fabs(x - y) <= bound; };
+  if (near(last[0], last[1]) || near(last[0], last[2]) || near(last[1], last[2]) ||
+      near(beyond[0], beyond[1]) || near(beyond[0], beyond[2]) || near(beyond[1], beyond[2])) {
+    return TraversalEnd::kUnsure;
+  }
+  const double last_max = std::max(std::max(last[0], last[1]), last[2]);
+  const double beyond_min = std::min(std::min(beyond[0], beyond[1]), beyond[2]);
+  if (!(last_max > -kInf) || !(beyond_min - last_max > bound) ||
+      !(static_cast<double>(s.length) - last_max > bound)) {
     return TraversalEnd::kUnsure;
   }
   return TraversalEnd::kClean;
