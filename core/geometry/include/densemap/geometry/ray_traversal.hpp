@@ -430,15 +430,15 @@ std::size_t traverseRayBackward(const VoxelGrid& grid, const Point3f& origin, co
     const int delta[3] = {-s.step[0], -s.step[1], -s.step[2]};
     visit.begin(s.end, delta);
   }
+  // The runner-up is known in each branch: the other of h0, h1 for axis 2, and the larger of
+  // the two others for axes 0 and 1.
+  const auto exact = [&](std::size_t done) {
+    return detail::backwardExact(grid, origin, end, s, walk.crossings, true, scratch, done, visit);
+  };
   for (std::size_t done = 0; done < walk.total; ++done) {
     const double high01 = std::max(h0, h1);
-    const double latest = std::max(high01, h2);
-    const double second = std::max(std::min(high01, h2), std::min(h0, h1));
-    if (!(latest - second > bound)) {
-      return detail::backwardExact(grid, origin, end, s, walk.crossings, true, scratch, done,
-                                   visit);
-    }
     if (h2 > high01) {
+      if (!(h2 - high01 > bound)) return exact(done);
       h2 = --n2 >= 0 ? h2 - s.t_delta[2] : kNone;
       k2 = (k2 - s.step[2]) & 0xffff;  // uint16_t, as OcTreeKey's
       if constexpr (kSteps) {
@@ -446,6 +446,7 @@ std::size_t traverseRayBackward(const VoxelGrid& grid, const Point3f& origin, co
         continue;
       }
     } else if (h0 >= h1) {
+      if (!(h0 - std::max(h1, h2) > bound)) return exact(done);
       h0 = --n0 >= 0 ? h0 - s.t_delta[0] : kNone;
       k0 = (k0 - s.step[0]) & 0xffff;
       if constexpr (kSteps) {
@@ -453,6 +454,7 @@ std::size_t traverseRayBackward(const VoxelGrid& grid, const Point3f& origin, co
         continue;
       }
     } else {
+      if (!(h1 - std::max(h0, h2) > bound)) return exact(done);
       h1 = --n1 >= 0 ? h1 - s.t_delta[1] : kNone;
       k1 = (k1 - s.step[1]) & 0xffff;
       if constexpr (kSteps) {
