@@ -47,6 +47,22 @@ std::uint64_t DenseMarks::blockKeyAt(std::uint32_t i) const {
   return block::blockOf(first);
 }
 
+bool DenseMarks::absorb(DenseMarks& other) {
+  for (int a = 0; a < 3; ++a) {
+    if (other.min_[a] != min_[a] || other.n_[a] != n_[a]) return false;
+  }
+  for (std::size_t t = 0; t < other.touched_count_; ++t) {
+    const std::uint32_t i = other.touched_[t];
+    touch(i);
+    for (int w = 0; w < block::kMaskWords; ++w) {
+      masks_[i][w] |= other.masks_[i][w];
+      occupied_[i][w] |= other.occupied_[i][w];
+    }
+  }
+  other.discard();
+  return true;
+}
+
 void DenseMarks::flushInto(ScanUpdate& update) {
   for (std::size_t t = 0; t < touched_count_; ++t) {
     const std::uint32_t i = touched_[t];

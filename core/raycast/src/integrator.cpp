@@ -218,8 +218,19 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
   stats.ms_region += ms_grow;
   stats.ms_mark = msSince(t0) - ms_grow;
   update.reset(options_.rule);
+  // The workers' dense marks (all over the same box) ORed into one by block index, then one
+  // flush into the update; each worker's own update holds only its marks outside the box.
+  DenseMarks* dense_marks = nullptr;
   for (Local& local : locals_) {
-    if (local.dense_ok) local.dense.flushInto(local.update);
+    if (!local.dense_ok) continue;
+    if (dense_marks == nullptr) {
+      dense_marks = &local.dense;
+    } else if (!dense_marks->absorb(local.dense)) {
+      local.dense.flushInto(update);  // another box (not so today: every worker resets to it)
+    }
+  }
+  if (dense_marks != nullptr) dense_marks->flushInto(update);
+  for (Local& local : locals_) {
     update.merge(local.update);
     stats.visits += local.counts.visits;
     stats.culled += local.counts.culled;

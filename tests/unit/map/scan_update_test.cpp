@@ -149,6 +149,38 @@ TEST(DenseMarks, AResetDropsMarksAScanLeftUnflushed) {
   EXPECT_TRUE(outside.empty());
 }
 
+TEST(DenseMarks, AbsorbingAnotherWorkersMarksGivesTheUpdateOfBoth) {
+  std::mt19937 rng(8);
+  std::uniform_int_distribution<int> coord(32700, 32800);
+  const VoxelKey lo{32720, 32730, 32740}, hi{32790, 32780, 32770};
+  DenseMarks a, b, other_box;
+  ASSERT_TRUE(a.reset(lo, hi, 1000));
+  ASSERT_TRUE(b.reset(lo, hi, 1000));
+  ASSERT_TRUE(other_box.reset(lo, {32800, 32780, 32770}, 1000));  // one block wider
+  ScanUpdate plain, outside;
+  for (int i = 0; i < 6000; ++i) {
+    const VoxelKey k{static_cast<std::uint16_t>(coord(rng)), static_cast<std::uint16_t>(coord(rng)),
+                     static_cast<std::uint16_t>(coord(rng))};
+    DenseMarks& into = i % 2 == 0 ? a : b;
+    if (i % 5 == 0) {
+      plain.markOccupied(k);
+      into.markOccupied(k, outside);
+    } else {
+      plain.markFree(k);
+      into.markFree(k, outside);
+    }
+  }
+  EXPECT_FALSE(a.absorb(other_box));  // another box: refused
+  ASSERT_TRUE(a.absorb(b));
+  ScanUpdate sut;
+  a.flushInto(sut);
+  sut.merge(outside);
+  EXPECT_EQ(cellsOf(sut), cellsOf(plain));
+  ScanUpdate left;
+  b.flushInto(left);  // absorbed: nothing left
+  EXPECT_TRUE(left.empty());
+}
+
 TEST(DenseMarks, RefusesABoxOverItsBlockLimit) {
   DenseMarks dense;
   EXPECT_FALSE(dense.reset({0, 0, 0}, {799, 799, 799}, 100 * 100 * 99));

@@ -67,6 +67,10 @@ class DenseMarks {
 
   /// ORs the marks into `update` and clears them.
   void flushInto(ScanUpdate& update);
+  /// ORs `other`'s marks into these and clears them there, when `other` covers the same blocks
+  /// (else false, nothing done). Cheaper than flushing both: a block index, not a hash probe,
+  /// per block.
+  [[nodiscard]] bool absorb(DenseMarks& other);
 
   /// Calls f(block key, free mask) for each block with free marks so far (the marks stay).
   template <class F>
