@@ -151,7 +151,8 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
       markRayCulled(grid, origin_world, rays_[i], *region, local.scratch, sink, local.counts,
                     &*origin_key);
     } else {
-      markRay(grid, origin_world, rays_[i], sink, local.counts);
+      markRay(grid, origin_world, rays_[i], sink, local.counts,
+              origin_key ? &*origin_key : nullptr);
     }
   };
   // Level l marks the rays whose index is a multiple of strides[l] but not of strides[l - 1]

@@ -129,7 +129,10 @@ TEST(DenseMarks, StepMarkerMarksAsTheHashOnWalksInsideAndLeavingItsBox) {
       const test::Ray ray = random.next(test::kAllRayKinds[i % 8]);
       const RayEnd end = rayEndFor(grid, ray.origin, ray.end, 8.0);
       markRay(grid, ray.origin, end, plain, plain_counts);
-      markRay(grid, ray.origin, end, sink, sut_counts);
+      // Every other ray with its origin's key given (the integrator's call).
+      const auto origin_key = grid.pointToKey(ray.origin);
+      markRay(grid, ray.origin, end, sink, sut_counts,
+              i % 2 == 0 && origin_key ? &*origin_key : nullptr);
     }
     dense.flushInto(sut);
     ASSERT_EQ(sut_counts.visits, plain_counts.visits);

@@ -63,6 +63,12 @@ inline TraversalKind startTraversal(const VoxelGrid& grid, const Point3f& origin
   return TraversalKind::kRay;
 }
 
+/// A ray's ends' keys (grid.pointToKey of its origin and end, both in range).
+struct RayKeys {
+  VoxelKey origin;
+  VoxelKey end;
+};
+
 /// kInvalid: origin or end outside the addressable range (nothing is visited);
 /// kSameVoxel: both in one voxel (nothing is visited); kRay: `start` is filled.
 inline TraversalKind startTraversal(const VoxelGrid& grid, const Point3f& origin,
@@ -136,11 +142,14 @@ inline constexpr int kCountedStepsFrom = 8;
 ///
 /// Returns false (visiting nothing) when origin or end lies outside the addressable range.
 /// `visit(const VoxelKey&)` is called once per voxel. Thread-safe (pure).
+/// `keys`, when given, are the ends' keys (RayKeys), not computed again.
 template <class Visitor>
 bool traverseRay(const VoxelGrid& grid, const Point3f& origin, const Point3f& end,
-                 Visitor&& visit) {
+                 Visitor&& visit, const RayKeys* keys = nullptr) {
   TraversalStart s;
-  const TraversalKind kind = startTraversal(grid, origin, end, s);
+  const TraversalKind kind = keys != nullptr
+                                 ? startTraversal(grid, origin, keys->origin, end, keys->end, s)
+                                 : startTraversal(grid, origin, end, s);
   if (kind != TraversalKind::kRay) return kind == TraversalKind::kSameVoxel;
   // A visitor that follows the steps is told the start (begin(origin key, steps), first())
   // and then which axis moved (step<AXIS>(new coordinate)) instead of each key.
@@ -329,12 +338,6 @@ struct BackwardWalk {
   int key[3] = {0, 0, 0};  // the voxel the walk is in
   double bound = 0;        // decisions must win by more than this
   std::size_t total = 0;   // voxels of the forward traversal
-};
-
-/// A ray's ends' keys (grid.pointToKey of its origin and end, both in range).
-struct RayKeys {
-  VoxelKey origin;
-  VoxelKey end;
 };
 
 enum class BackwardMode {

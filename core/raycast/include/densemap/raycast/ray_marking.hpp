@@ -174,15 +174,22 @@ void markEnd(const RayEnd& ray, Sink& update, MarkCounts& counts) {
 
 /// Marks one ray into a scan's update set (a ScanUpdate or a DenseSink) as OctoMap's
 /// computeUpdate does — the cells crossed (traverseRay) free, the end voxel occupied when the
-/// ray is — each `weight` times.
+/// ray is — each `weight` times. `origin_key`, when given, is the origin's key (as in
+/// markRayCulled).
 template <class Sink>
 void markRay(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray, Sink& update,
-             MarkCounts& counts) {
+             MarkCounts& counts, const VoxelKey* origin_key = nullptr) {
   // Counted in a local (a count in memory was reloaded and stored at every voxel).
   std::size_t visits = 0;
   if constexpr (requires { update.marker(); }) {
     ForwardWalk walk(update.marker());
-    traverseRay(grid, origin, ray.end, walk);
+    RayKeys keys;
+    const RayKeys* known = nullptr;
+    if (origin_key != nullptr && ray.key_valid) {
+      keys = {*origin_key, ray.key};
+      known = &keys;
+    }
+    traverseRay(grid, origin, ray.end, walk, known);
     visits = walk.finish();
   } else {
     traverseRay(grid, origin, ray.end, [&](const VoxelKey& k) {
