@@ -144,8 +144,8 @@ inline constexpr int kCountedStepsFrom = 8;
 /// `visit(const VoxelKey&)` is called once per voxel. Thread-safe (pure).
 /// `keys`, when given, are the ends' keys (RayKeys), not computed again.
 template <class Visitor>
-bool traverseRay(const VoxelGrid& grid, const Point3f& origin, const Point3f& end,
-                 Visitor&& visit, const RayKeys* keys = nullptr) {
+bool traverseRay(const VoxelGrid& grid, const Point3f& origin, const Point3f& end, Visitor&& visit,
+                 const RayKeys* keys = nullptr) {
   TraversalStart s;
   const TraversalKind kind = keys != nullptr
                                  ? startTraversal(grid, origin, keys->origin, end, keys->end, s)
@@ -170,8 +170,8 @@ bool traverseRay(const VoxelGrid& grid, const Point3f& origin, const Point3f& en
     // A long ray whose loop ends cleanly (endOf) takes a known number of steps: no end test
     // per step (the key's three comparisons and the length test).
     int crossings[3];
-    const int total = std::abs(last[0] - key[0]) + std::abs(last[1] - key[1]) +
-                      std::abs(last[2] - key[2]);
+    const int total =
+        std::abs(last[0] - key[0]) + std::abs(last[1] - key[1]) + std::abs(last[2] - key[2]);
     if (total >= kCountedStepsFrom && endOf(s, crossings) == TraversalEnd::kClean) {
       for (int n = 1; n < total; ++n) {  // the last crossing enters the end voxel
         if (t0 < t1) {
@@ -358,7 +358,7 @@ inline BackwardMode prepareBackward(const VoxelGrid& grid, const Point3f& origin
                                  ? startTraversal(grid, origin, keys->origin, end, keys->end, s)
                                  : startTraversal(grid, origin, end, s);
   if (kind != TraversalKind::kRay) return BackwardMode::kNothing;
-  int (&crossings)[3] = walk.crossings;
+  int(&crossings)[3] = walk.crossings;
   // Termination as in backwardExact, decided with margins.
   switch (endOf(s, crossings)) {
     case TraversalEnd::kIrregular:

@@ -65,13 +65,9 @@ struct DenseSink {
   DenseMarks& dense;
   ScanUpdate& update;
   void markFree(const VoxelKey& k, std::uint32_t /*weight*/) { dense.markFree(k, update); }
-  void markOccupied(const VoxelKey& k, std::uint32_t /*weight*/) {
-    dense.markOccupied(k, update);
-  }
+  void markOccupied(const VoxelKey& k, std::uint32_t /*weight*/) { dense.markOccupied(k, update); }
   /// A ray's marker (markRay): the free marks' hot state in locals.
-  [[nodiscard]] DenseMarks::StepMarker marker() {
-    return DenseMarks::StepMarker(dense, update);
-  }
+  [[nodiscard]] DenseMarks::StepMarker marker() { return DenseMarks::StepMarker(dense, update); }
 };
 
 /// A DenseSink whose culling region shares the dense box's block indexing
