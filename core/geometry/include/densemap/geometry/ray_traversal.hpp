@@ -86,6 +86,12 @@ enum class TraversalEnd {
   kClean,      // by entering the end voxel after exactly crossings[0..2] crossings per axis
 };
 
+/// endOf's times (see there).
+struct TraversalEndTimes {
+  double last[3];
+  double scale;
+};
+
 /// How traverseRay's loop from `s` ends, decided with margins; fills `crossings` (per axis, the
 /// borders between the origin's and the end's voxel). kClean: the loop's crossings are, in
 /// time order (each axis' times accumulated by repeated addition, ties to the higher axis), the
@@ -96,7 +102,10 @@ enum class TraversalEnd {
 /// (k + 8) * 2^-50 * (|t| + |t0|) of t0 + k * delta, below 2 (total + 8) 2^-50 scale (scale: the
 /// largest time involved, plus a step); near-ties among the axes' last or first-beyond
 /// crossings are kUnsure too (the backward walk's first decisions).
-inline TraversalEnd endOf(const TraversalStart& s, int (&crossings)[3]) {
+/// `times`, when given and the end is kClean: each axis' last crossing time (-inf for none) and
+/// the scale, for the backward walk's start.
+inline TraversalEnd endOf(const TraversalStart& s, int (&crossings)[3],
+                          TraversalEndTimes* times = nullptr) {
   constexpr double kInf = std::numeric_limits<double>::infinity();
   double last[3], beyond[3];  // per axis: the last crossing's time, the next one's
   double scale = 0;
@@ -128,6 +137,10 @@ inline TraversalEnd endOf(const TraversalStart& s, int (&crossings)[3]) {
   if (!(last_max > -kInf) || !(beyond_min - last_max > bound) ||
       !(static_cast<double>(s.length) - last_max > bound)) {
     return TraversalEnd::kUnsure;
+  }
+  if (times != nullptr) {
+    for (int a = 0; a < 3; ++a) times->last[a] = last[a];
+    times->scale = scale;
   }
   return TraversalEnd::kClean;
 }
@@ -360,7 +373,8 @@ inline BackwardMode prepareBackward(const VoxelGrid& grid, const Point3f& origin
   if (kind != TraversalKind::kRay) return BackwardMode::kNothing;
   int(&crossings)[3] = walk.crossings;
   // Termination as in backwardExact, decided with margins.
-  switch (endOf(s, crossings)) {
+  TraversalEndTimes times;
+  switch (endOf(s, crossings, &times)) {
     case TraversalEnd::kIrregular:
       return BackwardMode::kExactIrregular;
     case TraversalEnd::kUnsure:
@@ -368,22 +382,14 @@ inline BackwardMode prepareBackward(const VoxelGrid& grid, const Point3f& origin
     case TraversalEnd::kClean:
       break;
   }
+  // One bound for the whole walk: heads are computed t0 + k * delta (the last crossings' times,
+  // -inf for an axis with none), then decremented.
   constexpr double kRel = 0x1p-50;
-  const auto time = [&](int a, int k) { return s.t_max[a] + k * s.t_delta[a]; };
-
-  // One bound for the whole walk: heads are computed t0 + k * delta, then decremented.
   walk.total = static_cast<std::size_t>(crossings[0] + crossings[1] + crossings[2]);
-  double scale = 0;
-  for (int a = 0; a < 3; ++a) {
-    if (s.step[a] != 0) {
-      scale = std::max(scale, std::fabs(s.t_max[a]) + (crossings[a] + 1) * s.t_delta[a]);
-    }
-  }
-  walk.bound = 2 * (static_cast<double>(walk.total) + 16) * kRel * scale;
+  walk.bound = 2 * (static_cast<double>(walk.total) + 16) * kRel * times.scale;
   for (int a = 0; a < 3; ++a) {
     walk.next[a] = crossings[a] - 1;
-    walk.head[a] = s.step[a] != 0 && walk.next[a] >= 0 ? time(a, walk.next[a])
-                                                       : -std::numeric_limits<double>::infinity();
+    walk.head[a] = times.last[a];
     walk.key[a] = s.end[a];
   }
   return BackwardMode::kFast;
