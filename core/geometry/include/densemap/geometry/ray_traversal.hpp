@@ -187,17 +187,12 @@ bool traverseRay(const VoxelGrid& grid, const Point3f& origin, const Point3f& en
         std::abs(last[0] - key[0]) + std::abs(last[1] - key[1]) + std::abs(last[2] - key[2]);
     if (total >= kCountedStepsFrom && endOf(s, crossings) == TraversalEnd::kClean) {
       for (int n = 1; n < total; ++n) {  // the last crossing enters the end voxel
-        if (t0 < t1) {
-          if (t0 < t2) {
-            key[0] = (key[0] + s.step[0]) & 0xffff;
-            t0 += s.t_delta[0];
-            visit.template step<0>(key[0]);
-          } else {
-            key[2] = (key[2] + s.step[2]) & 0xffff;
-            t2 += s.t_delta[2];
-            visit.template step<2>(key[2]);
-          }
-        } else if (t1 < t2) {
+        // The same choice as the loop below: the smallest tMax, ties to the higher axis.
+        if (t0 < t1 && t0 < t2) {
+          key[0] = (key[0] + s.step[0]) & 0xffff;
+          t0 += s.t_delta[0];
+          visit.template step<0>(key[0]);
+        } else if (!(t0 < t1) && t1 < t2) {
           key[1] = (key[1] + s.step[1]) & 0xffff;
           t1 += s.t_delta[1];
           visit.template step<1>(key[1]);
