@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <type_traits>
 #include <vector>
 
 #include "densemap/geometry/voxel_grid.hpp"
@@ -149,6 +150,64 @@ inline TraversalEnd endOf(const TraversalStart& s, int (&crossings)[3],
 /// much as the end tests of a few steps).
 inline constexpr int kCountedStepsFrom = 8;
 
+/// The steps of a clean ray's loop (endOf: it enters the end voxel after exactly `total`
+/// crossings) before the end voxel: total - 1 of them, each crossing the border with the
+/// smallest tMax, ties to the higher axis (traverseRay's choice), told to `steps` as
+/// `steps.template step<AXIS>()`. Inlined, so that a `steps` held in the caller's locals stays
+/// in registers.
+template <class Steps>
+[[gnu::always_inline]] inline void countedSteps(const TraversalStart& s, int total, Steps& steps) {
+  double t0 = s.t_max[0], t1 = s.t_max[1], t2 = s.t_max[2];
+  const double d0 = s.t_delta[0], d1 = s.t_delta[1], d2 = s.t_delta[2];
+  for (int n = 1; n < total; ++n) {
+    if (t0 < t1 && t0 < t2) {
+      t0 += d0;
+      steps.template step<0>();
+    } else if (!(t0 < t1) && t1 < t2) {
+      t1 += d1;
+      steps.template step<1>();
+    } else {
+      t2 += d2;
+      steps.template step<2>();
+    }
+  }
+}
+
+namespace detail {
+
+/// Steps to a step visitor (step<AXIS>(new coordinate), returning R): the key followed.
+template <class Visitor, class R = void>
+struct KeyedSteps {
+  Visitor& visit;
+  int key[3];
+  int step_by[3];
+  template <int A>
+  R step() {
+    key[A] = (key[A] + step_by[A]) & 0xffff;  // OctoMap's uint16 key arithmetic
+    if constexpr (std::is_void_v<R>) {
+      visit.template step<A>(key[A]);
+    } else {
+      return visit.template step<A>(key[A]);
+    }
+  }
+};
+
+/// Steps to a key visitor (bool(const VoxelKey&)): the key followed and visited.
+template <class Visitor>
+struct KeyVisits {
+  Visitor& visit;
+  int key[3];
+  int step_by[3];
+  template <int A>
+  bool step() {
+    key[A] = (key[A] + step_by[A]) & 0xffff;
+    return visit(VoxelKey{static_cast<std::uint16_t>(key[0]), static_cast<std::uint16_t>(key[1]),
+                          static_cast<std::uint16_t>(key[2])});
+  }
+};
+
+}  // namespace detail
+
 /// Visits the voxels that OctoMap 1.9.7's `OcTreeBaseImpl::computeRayKeys(origin, end)` returns,
 /// in the same order: the origin's voxel first, the end point's voxel excluded.
 /// (Amanatides & Woo, "A Fast Voxel Traversal Algorithm for Ray Tracing", 1987.)
@@ -167,44 +226,43 @@ bool traverseRay(const VoxelGrid& grid, const Point3f& origin, const Point3f& en
   // A visitor that follows the steps is told the start (begin(origin key, steps), first())
   // and then which axis moved (step<AXIS>(new coordinate)) instead of each key.
   constexpr bool kSteps = requires { visit.template step<0>(0); };
-  if constexpr (kSteps) {
-    visit.begin(s.origin, s.step);
-    visit.first();
-  } else {
-    visit(s.origin);
-  }
   // Each step crosses the border with the smallest tMax, ties to the higher axis. The key lives
   // in three registers (updating one 16-bit field of a VoxelKey in memory and comparing the
   // whole key measured ~13% slower on BALM).
   int key[3] = {s.origin.x, s.origin.y, s.origin.z};
   const int last[3] = {s.end.x, s.end.y, s.end.z};
-  double t0 = s.t_max[0], t1 = s.t_max[1], t2 = s.t_max[2];
   if constexpr (kSteps) {
     // A long ray whose loop ends cleanly (endOf) takes a known number of steps: no end test
     // per step (the key's three comparisons and the length test).
     int crossings[3];
     const int total =
         std::abs(last[0] - key[0]) + std::abs(last[1] - key[1]) + std::abs(last[2] - key[2]);
-    if (total >= kCountedStepsFrom && endOf(s, crossings) == TraversalEnd::kClean) {
-      for (int n = 1; n < total; ++n) {  // the last crossing enters the end voxel
-        // The same choice as the loop below: the smallest tMax, ties to the higher axis.
-        if (t0 < t1 && t0 < t2) {
-          key[0] = (key[0] + s.step[0]) & 0xffff;
-          t0 += s.t_delta[0];
-          visit.template step<0>(key[0]);
-        } else if (!(t0 < t1) && t1 < t2) {
-          key[1] = (key[1] + s.step[1]) & 0xffff;
-          t1 += s.t_delta[1];
-          visit.template step<1>(key[1]);
-        } else {
-          key[2] = (key[2] + s.step[2]) & 0xffff;
-          t2 += s.t_delta[2];
-          visit.template step<2>(key[2]);
+    const bool counted = total >= kCountedStepsFrom && endOf(s, crossings) == TraversalEnd::kClean;
+    // A visitor with fastSteps(first voxel, steps, last voxel) may hand the counted loop a value
+    // of its own steps in place of begin() (kept in registers: first(), step<AXIS>()), taken
+    // back by endFastSteps(steps).
+    if constexpr (requires { visit.fastSteps(s.origin, s.step, s.end); }) {
+      if (counted) {
+        if (auto steps = visit.fastSteps(s.origin, s.step, s.end)) {
+          steps->first();
+          countedSteps(s, total, *steps);
+          visit.endFastSteps(*steps);
+          return true;
         }
       }
+    }
+    visit.begin(s.origin, s.step);
+    visit.first();
+    if (counted) {
+      detail::KeyedSteps<Visitor> keyed{visit, {key[0], key[1], key[2]},
+                                        {s.step[0], s.step[1], s.step[2]}};
+      countedSteps(s, total, keyed);
       return true;
     }
+  } else {
+    visit(s.origin);
   }
+  double t0 = s.t_max[0], t1 = s.t_max[1], t2 = s.t_max[2];
   const double length = static_cast<double>(s.length);
   while (true) {
     int axis;
@@ -343,7 +401,6 @@ struct BackwardWalk {
   int crossings[3] = {0, 0, 0};
   double head[3] = {0, 0, 0};
   int next[3] = {0, 0, 0};
-  int key[3] = {0, 0, 0};  // the voxel the walk is in
   double bound = 0;        // decisions must win by more than this
   std::size_t total = 0;   // voxels of the forward traversal
 };
@@ -385,10 +442,56 @@ inline BackwardMode prepareBackward(const VoxelGrid& grid, const Point3f& origin
   for (int a = 0; a < 3; ++a) {
     walk.next[a] = crossings[a] - 1;
     walk.head[a] = times.last[a];
-    walk.key[a] = s.end[a];
   }
   return BackwardMode::kFast;
 }
+
+namespace detail {
+
+/// traverseRayBackward's fast loop from `walk` (kFast): steps.template step<AXIS>() per step
+/// (false: stop). Returns the steps taken; `handover` is set when a decision did not win by the
+/// bound (the exact walk goes on from there). Inlined, so that a `steps` held in the caller's
+/// locals stays in registers; heads and counts are locals with one branch per axis, as in
+/// traverseRay (stepping through `walk` in memory, branch-free, measured 48% slower).
+template <class Steps>
+[[gnu::always_inline]] inline std::size_t backwardSteps(const BackwardWalk& walk, Steps& steps,
+                                                        bool& handover) {
+  constexpr double kNone = -std::numeric_limits<double>::infinity();
+  const double bound = walk.bound;
+  const double d0 = walk.s.t_delta[0], d1 = walk.s.t_delta[1], d2 = walk.s.t_delta[2];
+  double h0 = walk.head[0], h1 = walk.head[1], h2 = walk.head[2];
+  int n0 = walk.next[0], n1 = walk.next[1], n2 = walk.next[2];
+  // The runner-up is known in each branch: the other of h0, h1 for axis 2, and the larger of
+  // the two others for axes 0 and 1.
+  for (std::size_t done = 0; done < walk.total; ++done) {
+    const double high01 = std::max(h0, h1);
+    if (h2 > high01) {
+      if (!(h2 - high01 > bound)) {
+        handover = true;
+        return done;
+      }
+      h2 = --n2 >= 0 ? h2 - d2 : kNone;
+      if (!steps.template step<2>()) return done + 1;
+    } else if (h0 >= h1) {
+      if (!(h0 - std::max(h1, h2) > bound)) {
+        handover = true;
+        return done;
+      }
+      h0 = --n0 >= 0 ? h0 - d0 : kNone;
+      if (!steps.template step<0>()) return done + 1;
+    } else {
+      if (!(h1 - std::max(h0, h2) > bound)) {
+        handover = true;
+        return done;
+      }
+      h1 = --n1 >= 0 ? h1 - d1 : kNone;
+      if (!steps.template step<1>()) return done + 1;
+    }
+  }
+  return walk.total;
+}
+
+}  // namespace detail
 
 /// Visits the voxels traverseRay(origin, end) visits in reverse order — end side first, the
 /// origin's voxel last — for as long as `visit(key)` returns true. Returns how many voxels the
@@ -418,60 +521,38 @@ std::size_t traverseRayBackward(const VoxelGrid& grid, const Point3f& origin, co
                                  mode == BackwardMode::kExact, scratch, 0, visit);
   }
   // Each fast step undoes the latest crossing (ties to the lower axis) if it beats the runner-up
-  // (-inf when an axis has none left) by the bound; else the exact walk takes over. Heads,
-  // counts and key are locals with one branch per axis, as in traverseRay: stepping through
-  // `walk` in memory, branch-free, measured 48% slower (mark 14.2 -> 9.6 ms on BALM at 0.2 m).
-  // A visitor that follows the steps (begin(end key, deltas), step<AXIS>(new coordinate)) is
-  // told which axis moved instead of the new key; the exact walk calls it with keys.
+  // (-inf when an axis has none left) by the bound; else the exact walk takes over (from the
+  // step it did not take). A visitor that follows the steps (begin(end key, deltas),
+  // step<AXIS>(new coordinate)) is told which axis moved instead of the new key, or hands the
+  // loop a value of its own steps in place of begin() (fastSteps(first voxel, deltas, last
+  // voxel): kept in registers, taken back by endFastSteps); the exact walk calls it with keys.
   constexpr bool kSteps = requires { visit.template step<0>(0); };
-  constexpr double kNone = -std::numeric_limits<double>::infinity();
   const TraversalStart& s = walk.s;
-  const double bound = walk.bound;
-  double h0 = walk.head[0], h1 = walk.head[1], h2 = walk.head[2];
-  int n0 = walk.next[0], n1 = walk.next[1], n2 = walk.next[2];
-  int k0 = walk.key[0], k1 = walk.key[1], k2 = walk.key[2];
-  if constexpr (kSteps) {
-    const int delta[3] = {-s.step[0], -s.step[1], -s.step[2]};
-    visit.begin(s.end, delta);
+  const int delta[3] = {-s.step[0], -s.step[1], -s.step[2]};
+  std::size_t done = 0;
+  bool handover = false;
+  bool ran = false;
+  if constexpr (requires { visit.fastSteps(s.end, delta, s.origin); }) {
+    if (auto steps = visit.fastSteps(s.end, delta, s.origin)) {
+      done = detail::backwardSteps(walk, *steps, handover);
+      visit.endFastSteps(*steps);
+      ran = true;
+    }
   }
-  // The runner-up is known in each branch: the other of h0, h1 for axis 2, and the larger of
-  // the two others for axes 0 and 1.
-  const auto exact = [&](std::size_t done) {
-    return detail::backwardExact(grid, origin, end, s, walk.crossings, true, scratch, done, visit);
-  };
-  for (std::size_t done = 0; done < walk.total; ++done) {
-    const double high01 = std::max(h0, h1);
-    if (h2 > high01) {
-      if (!(h2 - high01 > bound)) return exact(done);
-      h2 = --n2 >= 0 ? h2 - s.t_delta[2] : kNone;
-      k2 = (k2 - s.step[2]) & 0xffff;  // uint16_t, as OcTreeKey's
-      if constexpr (kSteps) {
-        if (!visit.template step<2>(k2)) break;
-        continue;
-      }
-    } else if (h0 >= h1) {
-      if (!(h0 - std::max(h1, h2) > bound)) return exact(done);
-      h0 = --n0 >= 0 ? h0 - s.t_delta[0] : kNone;
-      k0 = (k0 - s.step[0]) & 0xffff;
-      if constexpr (kSteps) {
-        if (!visit.template step<0>(k0)) break;
-        continue;
-      }
+  if (!ran) {
+    if constexpr (kSteps) {
+      visit.begin(s.end, delta);
+      detail::KeyedSteps<Visitor, bool> keyed{visit, {s.end[0], s.end[1], s.end[2]},
+                                              {delta[0], delta[1], delta[2]}};
+      done = detail::backwardSteps(walk, keyed, handover);
     } else {
-      if (!(h1 - std::max(h0, h2) > bound)) return exact(done);
-      h1 = --n1 >= 0 ? h1 - s.t_delta[1] : kNone;
-      k1 = (k1 - s.step[1]) & 0xffff;
-      if constexpr (kSteps) {
-        if (!visit.template step<1>(k1)) break;
-        continue;
-      }
+      detail::KeyVisits<Visitor> keyed{visit, {s.end[0], s.end[1], s.end[2]},
+                                       {delta[0], delta[1], delta[2]}};
+      done = detail::backwardSteps(walk, keyed, handover);
     }
-    if constexpr (!kSteps) {
-      if (!visit(VoxelKey{static_cast<std::uint16_t>(k0), static_cast<std::uint16_t>(k1),
-                          static_cast<std::uint16_t>(k2)})) {
-        break;
-      }
-    }
+  }
+  if (handover) {
+    return detail::backwardExact(grid, origin, end, s, walk.crossings, true, scratch, done, visit);
   }
   return walk.total;
 }

@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <cstdlib>
 #include <memory>
+#include <optional>
 
 #include "densemap/map/block_layout.hpp"
 #include "densemap/map/scan_update.hpp"
@@ -81,6 +82,53 @@ class DenseMarks {
     }
   }
 
+  /// A walk's voxel in the box as a value, for a walk's loop to keep in registers (a
+  /// StepMarker lives in memory, and its loop reloaded and stored its state at every step): the
+  /// voxel's block and its index in the block followed step by step as StepMarker::move does
+  /// (a block border every 8 steps, counted down per axis), the first-touch bookkeeping once per
+  /// block entered. Only for walks whose voxels are all in the box — a walk between two voxels
+  /// of the box (it moves monotonically) — so there is no box test. Made by
+  /// StepMarker::cursorTo; its touched count goes back by StepMarker::resume.
+  class Cursor {
+   public:
+    /// The walk stepped along axis A.
+    template <int A>
+    void move() {
+      index_ = static_cast<unsigned>(static_cast<int>(index_) + index_step_[A]);
+      if (--left_[A] == 0) {  // into the next block along A: the coordinate wraps
+        left_[A] = block::kEdge;
+        index_ = static_cast<unsigned>(static_cast<int>(index_) - block::kEdge * index_step_[A]);
+        block_ = static_cast<std::uint32_t>(static_cast<std::int32_t>(block_) + block_step_[A]);
+        touched_[count_] = block_;
+        count_ += seen_[block_] ^ 1U;
+        seen_[block_] = 1;
+      }
+    }
+    /// Marks the walk's voxel free.
+    void mark() { masks_[block_][index_ >> 6] |= std::uint64_t{1} << (index_ & 63U); }
+    /// StepMarker::markUnlessCulled.
+    bool markUnlessCulled() {
+      const unsigned word = index_ >> 6;
+      const std::uint64_t bit = std::uint64_t{1} << (index_ & 63U);
+      if ((culled_[block_][word] & bit) != 0) return false;
+      masks_[block_][word] |= bit;
+      return true;
+    }
+
+   private:
+    friend class DenseMarks;
+    block::BlockMask* masks_ = nullptr;
+    const block::BlockMask* culled_ = nullptr;
+    std::uint8_t* seen_ = nullptr;
+    std::uint32_t* touched_ = nullptr;
+    std::uint32_t count_ = 0;
+    std::uint32_t block_ = 0;
+    unsigned index_ = 0;
+    int left_[3] = {0, 0, 0};        // steps along the axis until the next block border
+    int index_step_[3] = {0, 0, 0};  // a step's change of the index
+    std::int32_t block_step_[3] = {0, 0, 0};
+  };
+
   /// Marks one ray's voxels as markFree does, following the ray's walk step by step: the
   /// voxel's block in the box and its index in the block are updated from the axis stepped and
   /// its new key (a block border every 8 steps), not computed from the key; the box test and
@@ -139,6 +187,41 @@ class DenseMarks {
         }
       }
     }
+    /// A cursor (same marks, same region) for a walk from voxel `first` — entered here, not
+    /// marked — moving by `delta[a]` (-1, 0 or 1) along axis a to voxel `last`, when both are in
+    /// the box; else none (the walk may leave the box: then begin() and steps here). In place of
+    /// begin().
+    [[nodiscard]] std::optional<Cursor> cursorFor(const VoxelKey& first, const int (&delta)[3],
+                                                  const VoxelKey& last) {
+      const std::uint32_t block = blockIndexIn(first, marks_.min_, n_);
+      if (block == kOutside || blockIndexIn(last, marks_.min_, n_) == kOutside) {
+        return std::nullopt;
+      }
+      Cursor c;
+      c.masks_ = masks_;
+      c.culled_ = culled_;
+      c.seen_ = seen_;
+      c.touched_ = touched_;
+      c.block_ = block;
+      c.index_ = static_cast<unsigned>(block::indexOf(first));
+      const std::int32_t stride[3] = {1, static_cast<std::int32_t>(n_[0]),
+                                      static_cast<std::int32_t>(n_[0] * n_[1])};
+      for (int a = 0; a < 3; ++a) {
+        const int in_block = first[a] & (block::kEdge - 1);
+        c.left_[a] = delta[a] > 0 ? block::kEdge - in_block : in_block + 1;
+        c.index_step_[a] = delta[a] * (1 << (block::kShift * a));
+        c.block_step_[a] = delta[a] * stride[a];
+      }
+      touched_[count_] = block;  // entered: the first-touch bookkeeping, as enter()
+      count_ += seen_[block] ^ 1U;
+      seen_[block] = 1;
+      c.count_ = count_;
+      return c;
+    }
+    /// Takes back a cursor's touched count (its marks are in place); the walk ends or goes on
+    /// by keys (the marker's own voxel is where cursorTo left it).
+    void resume(const Cursor& c) { count_ = c.count_; }
+
     /// Marks the walk's voxel free.
     void mark() {
       if (out_) {

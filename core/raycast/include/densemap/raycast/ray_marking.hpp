@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <type_traits>
 
 #include "densemap/geometry/ray_traversal.hpp"
@@ -96,6 +97,29 @@ class SharedFrameWalk {
     ++marked_;
     return true;
   }
+  /// The fast walk's steps through a cursor (in registers) when the walk stays in the box (in
+  /// place of begin()).
+  struct MarkUnlessCulled {
+    DenseMarks::Cursor cursor;
+    std::uint32_t marked = 0;
+    template <int A>
+    bool step() {
+      cursor.template move<A>();
+      if (!cursor.markUnlessCulled()) return false;
+      ++marked;
+      return true;
+    }
+  };
+  [[nodiscard]] std::optional<MarkUnlessCulled> fastSteps(const VoxelKey& first,
+                                                          const int (&delta)[3],
+                                                          const VoxelKey& last) {
+    if (auto c = marker_.cursorFor(first, delta, last)) return MarkUnlessCulled{*c};
+    return std::nullopt;
+  }
+  void endFastSteps(const MarkUnlessCulled& steps) {
+    marker_.resume(steps.cursor);
+    marked_ += steps.marked;
+  }
   bool operator()(const VoxelKey& k) {
     if (stepping_) {  // the exact walk took over: the marks' own state from here on
       marker_.finish();
@@ -135,6 +159,31 @@ class ForwardWalk {
     marker_.template move<A>(coord);
     marker_.mark();
     ++marked_;
+  }
+  /// traverseRay's counted loop marks through a cursor (in registers) when the walk stays in
+  /// the box (in place of begin(); the first voxel is marked by first()).
+  struct MarkAll {
+    DenseMarks::Cursor cursor;
+    std::uint32_t marked = 0;
+    void first() {
+      cursor.mark();
+      ++marked;
+    }
+    template <int A>
+    void step() {
+      cursor.template move<A>();
+      cursor.mark();
+      ++marked;
+    }
+  };
+  [[nodiscard]] std::optional<MarkAll> fastSteps(const VoxelKey& first, const int (&delta)[3],
+                                                 const VoxelKey& last) {
+    if (auto c = marker_.cursorFor(first, delta, last)) return MarkAll{*c};
+    return std::nullopt;
+  }
+  void endFastSteps(const MarkAll& steps) {
+    marker_.resume(steps.cursor);
+    marked_ += steps.marked;
   }
   /// Voxels marked; ends the walk.
   std::size_t finish() {
