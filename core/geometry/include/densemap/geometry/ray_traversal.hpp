@@ -48,10 +48,12 @@ inline TraversalKind startTraversal(const VoxelGrid& grid, const Point3f& origin
   for (float& d : dir) d /= start.length;
 
   const double resolution = grid.resolution();
+  // (The key's coordinates as an array: VoxelKey's operator[] is a branch chain in a loop.)
+  const std::uint16_t origin_coord[3] = {key_origin.x, key_origin.y, key_origin.z};
   for (int i = 0; i < 3; ++i) {
     start.step[i] = dir[i] > 0.0F ? 1 : (dir[i] < 0.0F ? -1 : 0);
     if (start.step[i] != 0) {
-      double voxel_border = grid.keyToCoord(start.origin[i]);
+      double voxel_border = grid.keyToCoord(origin_coord[i]);
       voxel_border += static_cast<float>(start.step[i] * resolution * 0.5);
       start.t_max[i] =
           (voxel_border - static_cast<double>(origin[i])) / static_cast<double>(dir[i]);
@@ -111,11 +113,14 @@ inline TraversalEnd endOf(const TraversalStart& s, int (&crossings)[3],
   double last[3], beyond[3];  // per axis: the last crossing's time, the next one's
   double scale = 0;
   int total = 0;
+  // The keys' coordinates as ints (VoxelKey's operator[] is a branch chain in a loop).
+  const int key_end[3] = {s.end.x, s.end.y, s.end.z};
+  const int key_origin[3] = {s.origin.x, s.origin.y, s.origin.z};
   for (int a = 0; a < 3; ++a) {
-    const int c = (static_cast<int>(s.end[a]) - static_cast<int>(s.origin[a])) * s.step[a];
+    const int c = (key_end[a] - key_origin[a]) * s.step[a];
     crossings[a] = c;
     if (s.step[a] == 0) {
-      if (s.end[a] != s.origin[a]) return TraversalEnd::kIrregular;
+      if (key_end[a] != key_origin[a]) return TraversalEnd::kIrregular;
       last[a] = -kInf;
       beyond[a] = kInf;
       continue;

@@ -102,25 +102,42 @@ class DenseMarks {
         touched_[count_] = block_;
         count_ += seen_[block_] ^ 1U;
         seen_[block_] = 1;
+        load();
+      } else if constexpr (A == 2) {
+        load();  // a z step changes the mask word (a word holds one layer of the block)
       }
     }
     /// Marks the walk's voxel free.
-    void mark() { masks_[block_][index_ >> 6] |= std::uint64_t{1} << (index_ & 63U); }
+    void mark() { bits_ |= std::uint64_t{1} << (index_ & 63U); }
     /// StepMarker::markUnlessCulled.
     bool markUnlessCulled() {
-      const unsigned word = index_ >> 6;
       const std::uint64_t bit = std::uint64_t{1} << (index_ & 63U);
-      if ((culled_[block_][word] & bit) != 0) return false;
-      masks_[block_][word] |= bit;
+      if ((culled_bits_ & bit) != 0) return false;
+      bits_ |= bit;
       return true;
     }
+    /// Writes the marks not yet in the mask array (before the cursor is dropped).
+    void flush() const { *word_ |= bits_; }
 
    private:
     friend class DenseMarks;
+    /// The voxel's mask word changed: the marks gathered for the last one are ORed into it
+    /// (one store per word, not a load and store per voxel, each waiting on the one before),
+    /// and the region's word for the new one is read.
+    void load() {
+      *word_ |= bits_;
+      bits_ = 0;
+      const unsigned w = index_ >> 6;
+      word_ = &masks_[block_][w];
+      culled_bits_ = culled_ != nullptr ? culled_[block_][w] : 0;
+    }
     block::BlockMask* masks_ = nullptr;
     const block::BlockMask* culled_ = nullptr;
     std::uint8_t* seen_ = nullptr;
     std::uint32_t* touched_ = nullptr;
+    std::uint64_t* word_ = nullptr;  // the voxel's mask word
+    std::uint64_t bits_ = 0;         // marks for *word_ not yet written
+    std::uint64_t culled_bits_ = 0;  // the region's bits of the voxel's word
     std::uint32_t count_ = 0;
     std::uint32_t block_ = 0;
     unsigned index_ = 0;
@@ -204,23 +221,33 @@ class DenseMarks {
       c.touched_ = touched_;
       c.block_ = block;
       c.index_ = static_cast<unsigned>(block::indexOf(first));
-      const std::int32_t stride[3] = {1, static_cast<std::int32_t>(n_[0]),
-                                      static_cast<std::int32_t>(n_[0] * n_[1])};
-      for (int a = 0; a < 3; ++a) {
-        const int in_block = first[a] & (block::kEdge - 1);
-        c.left_[a] = delta[a] > 0 ? block::kEdge - in_block : in_block + 1;
-        c.index_step_[a] = delta[a] * (1 << (block::kShift * a));
-        c.block_step_[a] = delta[a] * stride[a];
-      }
+      // Per axis (written out: a loop over VoxelKey's operator[] took ~175 instructions a ray).
+      constexpr int m = block::kEdge - 1;
+      const auto left = [](int d, int in_block) { return d > 0 ? block::kEdge - in_block : in_block + 1; };
+      c.left_[0] = left(delta[0], first.x & m);
+      c.left_[1] = left(delta[1], first.y & m);
+      c.left_[2] = left(delta[2], first.z & m);
+      c.index_step_[0] = delta[0];
+      c.index_step_[1] = delta[1] * block::kEdge;
+      c.index_step_[2] = delta[2] * (block::kEdge * block::kEdge);
+      c.block_step_[0] = delta[0];
+      c.block_step_[1] = delta[1] * static_cast<std::int32_t>(n_[0]);
+      c.block_step_[2] = delta[2] * static_cast<std::int32_t>(n_[0] * n_[1]);
       touched_[count_] = block;  // entered: the first-touch bookkeeping, as enter()
       count_ += seen_[block] ^ 1U;
       seen_[block] = 1;
       c.count_ = count_;
+      const unsigned w = c.index_ >> 6;
+      c.word_ = &masks_[block][w];
+      c.culled_bits_ = culled_ != nullptr ? culled_[block][w] : 0;
       return c;
     }
-    /// Takes back a cursor's touched count (its marks are in place); the walk ends or goes on
-    /// by keys (the marker's own voxel is where cursorTo left it).
-    void resume(const Cursor& c) { count_ = c.count_; }
+    /// Takes back a cursor: writes its last marks and its touched count; the walk ends or goes
+    /// on by keys (the marker's own voxel is not the cursor's).
+    void resume(const Cursor& c) {
+      c.flush();
+      count_ = c.count_;
+    }
 
     /// Marks the walk's voxel free.
     void mark() {
