@@ -48,18 +48,25 @@ struct GridMap::BlockWriter {
   /// model.update(value, occupied wins), as set() would, a mask word at a time and the key
   /// computed only for a change list (through forEachCellInBlock and set(), apply took ~14 ns
   /// a cell at 0.1 m; this, ~8).
+  /// A cell already at the clamping bound its update moves toward keeps its value, as
+  /// OctoMap's updateNode returns early for it ("no change: node already at threshold"; so does
+  /// OctreeMap::apply): crossed-only cells that are fully free are dropped a mask word at a time.
   void applySet(std::uint64_t block_key, const ScanUpdate::Block& b, const SensorModel& model) {
+    const float clamp_max = model.clampMax();
     for (int wd = 0; wd < block::kMaskWords; ++wd) {
       const std::uint64_t occupied = b.occupied[wd];
       std::uint64_t todo = b.free[wd] | occupied;
       counts.updated += static_cast<std::size_t>(std::popcount(todo));
+      todo &= ~(read->fully_free[wd] & ~occupied);
       while (todo != 0) {
         const int bit = std::countr_zero(todo);
         todo &= todo - 1;
         const int i = wd * 64 + bit;
         const bool was_known = ((read->voxels.known[wd] >> bit) & 1U) != 0;
         const float old = was_known ? read->voxels.log_odds[i] : 0.0F;
-        const float v = model.update(old, ((occupied >> bit) & 1U) != 0);
+        const bool hit = ((occupied >> bit) & 1U) != 0;
+        if (was_known && hit && old >= clamp_max) continue;
+        const float v = model.update(old, hit);
         if (was_known && old == v) continue;
         change(i, v, was_known, [&] { return block::keyOf(block_key, i); });
       }

@@ -110,6 +110,50 @@ TEST(GridMap, MatchesTheOctreeBackendOverManyUpdates) {
   expectFullyFreeMasksMatchValues(grid);
 }
 
+TEST(GridMap, CellsAtOrBeyondTheBoundTheirUpdateMovesTowardKeepTheirValueAsInOctoMap) {
+  // OctoMap's updateNode returns early for such a cell ("no change: node already at
+  // threshold"), whatever its value: the kSet block writer leaves it too. Within the clamps the
+  // octree backend (OctoMap's own updateNode) is the reference; beyond them (a map loaded with
+  // other clamps) only the grid can hold the value (OctoMap's setNodeValue clamps it).
+  GridMap grid(0.1, SensorModel{});
+  OctreeMap octree(0.1, SensorModel{});
+  const SensorModel model;
+  const float within[] = {model.clampMin(), -0.3F, 0.3F, model.clampMax()};
+  const float beyond[] = {model.clampMin() - 1.0F, model.clampMax() + 0.5F};
+  ScanUpdate u(UpdateRule::kSet);
+  std::vector<VoxelKey> keys;
+  const auto add = [&](float v, bool hit) {
+    const VoxelKey k{static_cast<std::uint16_t>(32768 + 3 * keys.size()), 32770, 32771};
+    keys.push_back(k);
+    grid.setLogOdds(k, v);
+    octree.setLogOdds(k, v);
+    if (hit) {
+      u.markOccupied(k);
+    } else {
+      u.markFree(k);
+    }
+  };
+  for (const float v : within) {
+    add(v, false);
+    add(v, true);
+  }
+  add(beyond[0], false);  // crossed below the lower bound
+  add(beyond[0], true);
+  add(beyond[1], true);  // hit above the upper bound
+  add(beyond[1], false);
+  grid.apply(u);
+  octree.apply(u);
+  for (std::size_t i = 0; i < 2 * std::size(within); ++i) {
+    EXPECT_EQ(*grid.logOdds(keys[i]), *octree.logOdds(keys[i])) << "cell " << i;
+  }
+  const std::size_t b = 2 * std::size(within);
+  EXPECT_EQ(*grid.logOdds(keys[b]), beyond[0]);
+  EXPECT_EQ(*grid.logOdds(keys[b + 1]), model.update(beyond[0], true));
+  EXPECT_EQ(*grid.logOdds(keys[b + 2]), beyond[1]);
+  EXPECT_EQ(*grid.logOdds(keys[b + 3]), model.update(beyond[1], false));
+  expectFullyFreeMasksMatchValues(grid);
+}
+
 TEST(OccupancyMaps, PerRayRuleIsTheSameOnBothBackendsAndSumsEveryRay) {
   std::mt19937 rng(12);
   GridMap grid(0.1, SensorModel{});
