@@ -50,6 +50,7 @@ inline TraversalKind startTraversal(const VoxelGrid& grid, const Point3f& origin
   const double resolution = grid.resolution();
   // (The key's coordinates as an array: VoxelKey's operator[] is a branch chain in a loop.)
   const std::uint16_t origin_coord[3] = {key_origin.x, key_origin.y, key_origin.z};
+#pragma GCC unroll 3  // the axes in registers (unrolled loops are -O3's, not -O2's)
   for (int i = 0; i < 3; ++i) {
     start.step[i] = dir[i] > 0.0F ? 1 : (dir[i] < 0.0F ? -1 : 0);
     if (start.step[i] != 0) {
@@ -116,6 +117,7 @@ inline TraversalEnd endOf(const TraversalStart& s, int (&crossings)[3],
   // The keys' coordinates as ints (VoxelKey's operator[] is a branch chain in a loop).
   const int key_end[3] = {s.end.x, s.end.y, s.end.z};
   const int key_origin[3] = {s.origin.x, s.origin.y, s.origin.z};
+#pragma GCC unroll 3  // as in startTraversal
   for (int a = 0; a < 3; ++a) {
     const int c = (key_end[a] - key_origin[a]) * s.step[a];
     crossings[a] = c;
