@@ -119,7 +119,7 @@ void CullingRegion::loadBlock(const FullyFreeBlock& b) {
       if (x0 < 0) bits8 >>= -x0;
       bits8 &= keep;
       if (bits8 == 0) continue;
-      std::uint64_t* r = row(static_cast<unsigned>(gy), static_cast<unsigned>(gz));
+      std::uint64_t* r = loadRow(static_cast<unsigned>(gy), static_cast<unsigned>(gz));
       r[word] |= bits8 << bit;
       if (spills) r[word + 1] |= bits8 >> (64 - bit);
     }
@@ -251,27 +251,28 @@ void CullingRegion::build(const OccupancyMap& map, const VoxelKey& origin, const
     for (unsigned& n : bricks_n_) n = 0;
     return;
   }
-  bits_.assign(static_cast<std::size_t>(ny_) * nz_ * words_per_row_, 0);
+  const std::size_t words = static_cast<std::size_t>(ny_) * nz_ * words_per_row_;
+  growable_ = growable;
+  if (growable) {
+    loaded_.assign(words, 0);
+    bits_.resize(words);  // every row is written by the sweep
+  } else {
+    bits_.assign(words, 0);
+  }
   loadFullyFree(map);
   for (const VoxelKey& k : hit) {
     const unsigned x = static_cast<unsigned>(k.x) - min_.x;
     const unsigned y = static_cast<unsigned>(k.y) - min_.y;
     const unsigned z = static_cast<unsigned>(k.z) - min_.z;
     if (x >= nx_ || y >= ny_ || z >= nz_) continue;
-    row(y, z)[x >> 6] &= ~(std::uint64_t{1} << (x & 63));
-  }
-  if (growable) {
-    loaded_ = bits_;
-    growable_ = true;
+    loadRow(y, z)[x >> 6] &= ~(std::uint64_t{1} << (x & 63));
   }
   sweepAndIndex();
 }
 
 void CullingRegion::grow(std::span<const FullyFreeBlock> covered) {
   if (!growable_) return;
-  bits_ = loaded_;
-  loadBlocks(covered);
-  loaded_ = bits_;
+  loadBlocks(covered);  // into the loaded rows, the sweep's source
   // The region only grows (its voxels stay covered): the bricks keep theirs.
   sweepAndIndex(/*clear=*/false);
 }
@@ -285,6 +286,8 @@ void CullingRegion::sweepAndIndex(bool clear) {
   const unsigned ox = origin.x - min_.x, oy = origin.y - min_.y, oz = origin.z - min_.z;
   const auto sweepRow = [&](unsigned y, unsigned z, unsigned y_prev, unsigned z_prev) {
     std::uint64_t* r = row(y, z);
+    const std::uint64_t* loaded = loadRow(y, z);  // r itself when swept in place
+    if (loaded != r) std::copy(loaded, loaded + words_per_row_, r);
     if (y != y_prev) {
       const std::uint64_t* p = row(y_prev, z);
       for (unsigned w = 0; w < words_per_row_; ++w) r[w] &= p[w];

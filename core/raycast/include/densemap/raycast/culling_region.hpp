@@ -86,6 +86,13 @@ class CullingRegion {
   std::uint64_t* row(unsigned y, unsigned z) {
     return bits_.data() + (static_cast<std::size_t>(z) * ny_ + y) * words_per_row_;
   }
+  /// The row the loads write and the sweep reads: loaded_'s in a growable build (the sweep
+  /// writes bits_ from it, so grow() loads more and sweeps again without copies), else bits_'s
+  /// (swept in place).
+  std::uint64_t* loadRow(unsigned y, unsigned z) {
+    std::vector<std::uint64_t>& rows = growable_ ? loaded_ : bits_;
+    return rows.data() + (static_cast<std::size_t>(z) * ny_ + y) * words_per_row_;
+  }
   /// Sets the bits of the box's fully-free voxels (the blocks' layers along z in parallel).
   void loadFullyFree(const OccupancyMap& map);
   /// Sets the bits of these blocks' voxels inside the box (the blocks' layers along z in
@@ -96,7 +103,7 @@ class CullingRegion {
   /// Copies the swept rows into bricks_ (the query layout) over the blocks of `frame`; without
   /// `clear` (the same frame), ORs them into the bricks already there.
   void toBricks(const KeyBox& frame, bool clear);
-  /// The sweep from O over bits_, then toBricks(frame_, clear).
+  /// The sweep from O over the loaded rows into bits_, then toBricks(frame_, clear).
   void sweepAndIndex(bool clear = true);
   /// Keeps the run of set bits of `r` that contains bit `x0` (none if it is clear).
   void keepRunThrough(std::uint64_t* r, unsigned x0) const;
@@ -117,7 +124,7 @@ class CullingRegion {
   VoxelKey origin_{};
   KeyBox frame_{};
   bool growable_ = false;
-  std::vector<std::uint64_t> loaded_;  // bits_ before the sweep (growable builds)
+  std::vector<std::uint64_t> loaded_;  // the loaded voxels before the sweep (growable builds)
 };
 
 /// The box the culling region is built in for a scan: the bounding box of the sensor's voxel
