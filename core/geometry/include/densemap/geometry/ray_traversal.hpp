@@ -261,8 +261,8 @@ bool traverseRay(const VoxelGrid& grid, const Point3f& origin, const Point3f& en
     visit.begin(s.origin, s.step);
     visit.first();
     if (counted) {
-      detail::KeyedSteps<Visitor> keyed{visit, {key[0], key[1], key[2]},
-                                        {s.step[0], s.step[1], s.step[2]}};
+      detail::KeyedSteps<Visitor> keyed{
+          visit, {key[0], key[1], key[2]}, {s.step[0], s.step[1], s.step[2]}};
       countedSteps(s, total, keyed);
       return true;
     }
@@ -549,12 +549,12 @@ std::size_t traverseRayBackward(const VoxelGrid& grid, const Point3f& origin, co
   if (!ran) {
     if constexpr (kSteps) {
       visit.begin(s.end, delta);
-      detail::KeyedSteps<Visitor, bool> keyed{visit, {s.end[0], s.end[1], s.end[2]},
-                                              {delta[0], delta[1], delta[2]}};
+      detail::KeyedSteps<Visitor, bool> keyed{
+          visit, {s.end[0], s.end[1], s.end[2]}, {delta[0], delta[1], delta[2]}};
       done = detail::backwardSteps(walk, keyed, handover);
     } else {
-      detail::KeyVisits<Visitor> keyed{visit, {s.end[0], s.end[1], s.end[2]},
-                                       {delta[0], delta[1], delta[2]}};
+      detail::KeyVisits<Visitor> keyed{
+          visit, {s.end[0], s.end[1], s.end[2]}, {delta[0], delta[1], delta[2]}};
       done = detail::backwardSteps(walk, keyed, handover);
     }
   }

@@ -88,7 +88,7 @@ class DenseMarks {
   /// (a block border every 8 steps, counted down per axis), the first-touch bookkeeping once per
   /// block entered. Only for walks whose voxels are all in the box — a walk between two voxels
   /// of the box (it moves monotonically) — so there is no box test. Made by
-  /// StepMarker::cursorTo; its touched count goes back by StepMarker::resume.
+  /// StepMarker::cursorFor; its last marks and touched count go back by StepMarker::resume.
   class Cursor {
    public:
     /// The walk stepped along axis A.
@@ -223,7 +223,9 @@ class DenseMarks {
       c.index_ = static_cast<unsigned>(block::indexOf(first));
       // Per axis (written out: a loop over VoxelKey's operator[] took ~175 instructions a ray).
       constexpr int m = block::kEdge - 1;
-      const auto left = [](int d, int in_block) { return d > 0 ? block::kEdge - in_block : in_block + 1; };
+      const auto left = [](int d, int in_block) {
+        return d > 0 ? block::kEdge - in_block : in_block + 1;
+      };
       c.left_[0] = left(delta[0], first.x & m);
       c.left_[1] = left(delta[1], first.y & m);
       c.left_[2] = left(delta[2], first.z & m);

@@ -80,45 +80,75 @@ struct SharedFrameSink : DenseSink {
   }
 };
 
+/// A walk's fast loop marks through a DenseMarks::Cursor (in registers) when the walk stays in
+/// the box: the steps of markRay's forward walks (every voxel) and of markRayCulled's backward
+/// walks (until the region).
+struct CursorMarkAll {
+  DenseMarks::Cursor cursor;
+  std::uint32_t marked = 0;
+  void first() {  // the forward walk's first voxel
+    cursor.mark();
+    ++marked;
+  }
+  template <int A>
+  void step() {
+    cursor.template move<A>();
+    cursor.mark();
+    ++marked;
+  }
+};
+struct CursorMarkUnlessCulled {
+  DenseMarks::Cursor cursor;
+  std::uint32_t marked = 0;
+  template <int A>
+  bool step() {
+    cursor.template move<A>();
+    if (!cursor.markUnlessCulled()) return false;
+    ++marked;
+    return true;
+  }
+};
+
+/// What the two dense walks share: a DenseMarks::StepMarker for their steps and keys, the
+/// voxels marked, and the fast loops' Steps (fastSteps in place of begin(), endFastSteps).
+template <class Steps>
+class MarkerWalk {
+ public:
+  explicit MarkerWalk(DenseMarks::StepMarker marker) : marker_(marker) {}
+  void begin(const VoxelKey& k, const int (&delta)[3]) { marker_.begin(k, delta); }
+  [[nodiscard]] std::optional<Steps> fastSteps(const VoxelKey& first, const int (&delta)[3],
+                                               const VoxelKey& last) {
+    if (auto c = marker_.cursorFor(first, delta, last)) return Steps{*c};
+    return std::nullopt;
+  }
+  void endFastSteps(const Steps& steps) {
+    marker_.resume(steps.cursor);
+    marked_ += steps.marked;
+  }
+
+ protected:
+  DenseMarks::StepMarker marker_;
+  std::uint32_t marked_ = 0;  // not size_t: see StepMarker's count
+};
+
 /// markRayCulled's walk through a SharedFrameSink: the fast backward walk's steps go to a
-/// DenseMarks::StepMarker (the voxel's address followed step by step, its region bit and
-/// mark one word address apart); when the walk hands over to the exact one, keys go to the
-/// sink as markFreeUnlessIn takes them.
+/// DenseMarks::Cursor (CursorMarkUnlessCulled: the voxel's address followed step by step, its
+/// region bit and mark one word address apart), or to the StepMarker when the walk may leave
+/// the box; when the walk hands over to the exact one, keys go to the sink as
+/// markFreeUnlessIn takes them.
 template <class Region>
-class SharedFrameWalk {
+class SharedFrameWalk : public MarkerWalk<CursorMarkUnlessCulled> {
  public:
   SharedFrameWalk(const Region& region, SharedFrameSink& sink)
-      : marker_(sink.dense, sink.update, region.frameMasks()), region_(region), sink_(sink) {}
-  void begin(const VoxelKey& k, const int (&delta)[3]) { marker_.begin(k, delta); }
+      : MarkerWalk(DenseMarks::StepMarker(sink.dense, sink.update, region.frameMasks())),
+        region_(region),
+        sink_(sink) {}
   template <int A>
   bool step(int coord) {
     marker_.template move<A>(coord);
     if (!marker_.markUnlessCulled()) return false;
     ++marked_;
     return true;
-  }
-  /// The fast walk's steps through a cursor (in registers) when the walk stays in the box (in
-  /// place of begin()).
-  struct MarkUnlessCulled {
-    DenseMarks::Cursor cursor;
-    std::uint32_t marked = 0;
-    template <int A>
-    bool step() {
-      cursor.template move<A>();
-      if (!cursor.markUnlessCulled()) return false;
-      ++marked;
-      return true;
-    }
-  };
-  [[nodiscard]] std::optional<MarkUnlessCulled> fastSteps(const VoxelKey& first,
-                                                          const int (&delta)[3],
-                                                          const VoxelKey& last) {
-    if (auto c = marker_.cursorFor(first, delta, last)) return MarkUnlessCulled{*c};
-    return std::nullopt;
-  }
-  void endFastSteps(const MarkUnlessCulled& steps) {
-    marker_.resume(steps.cursor);
-    marked_ += steps.marked;
   }
   bool operator()(const VoxelKey& k) {
     if (stepping_) {  // the exact walk took over: the marks' own state from here on
@@ -137,19 +167,16 @@ class SharedFrameWalk {
   }
 
  private:
-  DenseMarks::StepMarker marker_;
   const Region& region_;
   SharedFrameSink& sink_;
-  std::uint32_t marked_ = 0;  // not size_t: see StepMarker's count
   bool stepping_ = true;
 };
 
-/// markRay's forward walk through a DenseSink: the walk's steps to a
-/// DenseMarks::StepMarker, every voxel marked.
-class ForwardWalk {
+/// markRay's forward walk through a DenseSink: the walk's steps to a DenseMarks::Cursor in
+/// the counted loop (CursorMarkAll), else to the StepMarker, every voxel marked.
+class ForwardWalk : public MarkerWalk<CursorMarkAll> {
  public:
-  explicit ForwardWalk(DenseMarks::StepMarker marker) : marker_(marker) {}
-  void begin(const VoxelKey& k, const int (&delta)[3]) { marker_.begin(k, delta); }
+  explicit ForwardWalk(DenseMarks::StepMarker marker) : MarkerWalk(marker) {}
   void first() {
     marker_.mark();
     ++marked_;
@@ -160,40 +187,11 @@ class ForwardWalk {
     marker_.mark();
     ++marked_;
   }
-  /// traverseRay's counted loop marks through a cursor (in registers) when the walk stays in
-  /// the box (in place of begin(); the first voxel is marked by first()).
-  struct MarkAll {
-    DenseMarks::Cursor cursor;
-    std::uint32_t marked = 0;
-    void first() {
-      cursor.mark();
-      ++marked;
-    }
-    template <int A>
-    void step() {
-      cursor.template move<A>();
-      cursor.mark();
-      ++marked;
-    }
-  };
-  [[nodiscard]] std::optional<MarkAll> fastSteps(const VoxelKey& first, const int (&delta)[3],
-                                                 const VoxelKey& last) {
-    if (auto c = marker_.cursorFor(first, delta, last)) return MarkAll{*c};
-    return std::nullopt;
-  }
-  void endFastSteps(const MarkAll& steps) {
-    marker_.resume(steps.cursor);
-    marked_ += steps.marked;
-  }
   /// Voxels marked; ends the walk.
   std::size_t finish() {
     marker_.finish();
     return marked_;
   }
-
- private:
-  DenseMarks::StepMarker marker_;
-  std::uint32_t marked_ = 0;  // not size_t: see StepMarker's count
 };
 
 /// Marks `k` free unless `region` holds it; returns whether it marked.
