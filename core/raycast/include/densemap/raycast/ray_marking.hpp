@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <optional>
 #include <type_traits>
+#include <utility>
 
 #include "densemap/geometry/ray_traversal.hpp"
 #include "densemap/map/dense_marks.hpp"
@@ -114,7 +115,9 @@ struct CursorMarkUnlessCulled {
 template <class Steps>
 class MarkerWalk {
  public:
-  explicit MarkerWalk(DenseMarks::StepMarker marker) : marker_(marker) {}
+  /// The StepMarker's constructor arguments (built in place).
+  template <class... Args>
+  explicit MarkerWalk(Args&&... args) : marker_(std::forward<Args>(args)...) {}
   void begin(const VoxelKey& k, const int (&delta)[3]) { marker_.begin(k, delta); }
   [[nodiscard]] std::optional<Steps> fastSteps(const VoxelKey& first, const int (&delta)[3],
                                                const VoxelKey& last) {
@@ -140,7 +143,7 @@ template <class Region>
 class SharedFrameWalk : public MarkerWalk<CursorMarkUnlessCulled> {
  public:
   SharedFrameWalk(const Region& region, SharedFrameSink& sink)
-      : MarkerWalk(DenseMarks::StepMarker(sink.dense, sink.update, region.frameMasks())),
+      : MarkerWalk(sink.dense, sink.update, region.frameMasks()),
         region_(region),
         sink_(sink) {}
   template <int A>
