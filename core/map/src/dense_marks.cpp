@@ -35,6 +35,7 @@ void DenseMarks::discard() {
     seen_[i] = 0;
   }
   touched_count_ = 0;
+  queue_.clear();
 }
 
 std::uint64_t DenseMarks::blockKeyAt(std::uint32_t i) const {

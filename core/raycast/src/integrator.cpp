@@ -186,6 +186,15 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
           if (local.dense_ok && region != nullptr && region->sharesFrame(local.dense)) {
             SharedFrameSink sink{{local.dense, local.update}};
             mark_all(sink);
+          } else if (local.dense_ok && region == nullptr && options_.queue_walks) {
+            // Forward walks queued and walked together at the range's end.
+            DenseSink sink{local.dense, local.update};
+            for (std::size_t j = range.begin(); j != range.end(); ++j) {
+              const std::size_t i = j * stride;
+              if (previous != 0 && i % previous == 0) continue;
+              markRayQueued(grid, origin_world, rays_[i], sink, local.counts, *origin_key);
+            }
+            local.dense.markQueued();
           } else if (local.dense_ok) {
             DenseSink sink{local.dense, local.update};
             mark_all(sink);

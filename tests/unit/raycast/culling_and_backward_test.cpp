@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <deque>
+#include <iostream>
 #include <optional>
 #include <random>
 #include <set>
@@ -147,6 +148,113 @@ TEST(DenseMarks, StepMarkerMarksAsTheHashOnWalksInsideAndLeavingItsBox) {
     std::sort(b.begin(), b.end());
     EXPECT_EQ(a, b) << "round " << round;
   }
+}
+
+// The queued walks (markRayQueued, DenseMarks::markQueued: eight lanes side by side with
+// AVX-512, or one walk at a time) mark what markRay marks into a hash, walks leaving the box
+// included (those are not queued), in batches of any size.
+TEST(DenseMarks, QueuedWalksMarkAsTheHashInLanesAndOneByOne) {
+  const VoxelGrid grid(0.2);
+  for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kScalar}) {
+    test::RandomRays random(0.2, 12.0, 17);
+    std::mt19937 rng(5);
+    std::uniform_int_distribution<int> batch_size(1, 300);
+    DenseMarks dense;
+    for (int round = 0; round < 3; ++round) {
+      const VoxelKey lo = *grid.pointToKey(Point3f(-9.0F, -8.0F, -7.0F));
+      const VoxelKey hi = *grid.pointToKey(Point3f(8.0F, 9.0F, 6.0F));
+      ASSERT_TRUE(dense.reset(lo, hi, 1U << 20));
+      ScanUpdate plain, sut;
+      DenseSink sink{dense, sut};
+      MarkCounts plain_counts, sut_counts;
+      std::size_t queued = 0;
+      int left_in_batch = batch_size(rng);
+      for (int i = 0; i < 4000; ++i) {
+        const test::Ray ray = random.next(test::kAllRayKinds[i % 8]);
+        const RayEnd end = rayEndFor(grid, ray.origin, ray.end, 11.0);
+        markRay(grid, ray.origin, end, plain, plain_counts);
+        const auto origin_key = grid.pointToKey(ray.origin);
+        if (!origin_key) continue;
+        queued += markRayQueued(grid, ray.origin, end, sink, sut_counts, *origin_key) ? 1 : 0;
+        if (--left_in_batch == 0) {
+          dense.markQueued(kernel);
+          left_in_batch = batch_size(rng);
+        }
+      }
+      dense.markQueued(kernel);
+      dense.flushInto(sut);
+      ASSERT_EQ(sut_counts.visits, plain_counts.visits);
+      EXPECT_GT(plain.freeCount(), 50000U);
+      EXPECT_GT(queued, 400U);  // and the others (short, unsure, leaving the box) marked at once
+      EXPECT_EQ(sut.freeCount(), plain.freeCount()) << "round " << round;
+      std::vector<std::pair<std::uint64_t, bool>> a, b;
+      plain.forEachCell([&](const VoxelKey& k, const CellHits& h) {
+        a.emplace_back(k.packed(), h.occupied > 0);
+      });
+      sut.forEachCell([&](const VoxelKey& k, const CellHits& h) {
+        b.emplace_back(k.packed(), h.occupied > 0);
+      });
+      std::sort(a.begin(), a.end());
+      std::sort(b.begin(), b.end());
+      EXPECT_EQ(a, b) << "round " << round;
+    }
+  }
+  if (!DenseMarks::hasWideWalks()) std::cout << "no AVX-512 here: kBest walked one by one too\n";
+}
+
+// Queued walks through exact ties of two axes' crossing times on the way (dyadic origins and
+// directions of exact ratios): the lanes break them as countedSteps does (to the higher axis).
+TEST(DenseMarks, QueuedWalksBreakExactTiesAsTheCountedLoop) {
+  const VoxelGrid grid(0.25);
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<int> lattice(-40, 40), scale(3, 40), pick(0, 5);
+  std::size_t tied = 0;
+  for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kScalar}) {
+    DenseMarks dense;
+    const VoxelKey lo = *grid.pointToKey(Point3f(-30.0F, -30.0F, -30.0F));
+    const VoxelKey hi = *grid.pointToKey(Point3f(30.0F, 30.0F, 30.0F));
+    ASSERT_TRUE(dense.reset(lo, hi, 1U << 21));
+    ScanUpdate plain, sut;
+    DenseSink sink{dense, sut};
+    MarkCounts plain_counts, sut_counts;
+    tied = 0;
+    for (int i = 0; i < 20000; ++i) {
+      const Point3f origin(static_cast<float>(lattice(rng)) / 64.0F,
+                           static_cast<float>(lattice(rng)) / 64.0F,
+                           static_cast<float>(lattice(rng)) / 64.0F);
+      const float m = static_cast<float>(scale(rng)) / 8.0F;
+      static constexpr float kRatios[6][3] = {{2, 1, 0.5F},  {1, 2, 0.25F}, {1, 0.5F, 2},
+                                              {-2, 1, 0.5F}, {4, -1, 2},    {1, -4, -0.5F}};
+      const auto& r = kRatios[pick(rng)];
+      const Point3f end = origin + m * Point3f(r[0], r[1], r[2]);
+      const RayEnd ray = rayEndFor(grid, origin, end, -1.0);
+      markRay(grid, origin, ray, plain, plain_counts);
+      const VoxelKey origin_key = *grid.pointToKey(origin);
+      if (!markRayQueued(grid, origin, ray, sink, sut_counts, origin_key)) continue;
+      // An exact tie between the two smallest times at some step of the counted loop?
+      TraversalStart s;
+      startTraversal(grid, origin, origin_key, ray.end, ray.key, s);
+      double t[3] = {s.t_max[0], s.t_max[1], s.t_max[2]};
+      bool tie = false;
+      for (int n = 1; n < countedTotal(s); ++n) {
+        const int a = (t[0] < t[1] && t[0] < t[2]) ? 0 : (!(t[0] < t[1]) && t[1] < t[2]) ? 1 : 2;
+        for (int b = 0; b < 3; ++b) tie = tie || (b != a && t[b] == t[a]);
+        t[a] += s.t_delta[a];
+      }
+      tied += tie ? 1 : 0;
+      if (i % 97 == 0) dense.markQueued(kernel);
+    }
+    dense.markQueued(kernel);
+    dense.flushInto(sut);
+    ASSERT_EQ(sut_counts.visits, plain_counts.visits);
+    std::vector<std::uint64_t> a, b;
+    plain.forEachCell([&](const VoxelKey& k, const CellHits&) { a.push_back(k.packed()); });
+    sut.forEachCell([&](const VoxelKey& k, const CellHits&) { b.push_back(k.packed()); });
+    std::sort(a.begin(), a.end());
+    std::sort(b.begin(), b.end());
+    EXPECT_EQ(a, b);
+  }
+  EXPECT_GT(tied, 100U) << "queued walks with an exact tie on the way";
 }
 
 /// Alg. 3 as written: breadth-first from the sensor's voxel over fully-free voxels whose test

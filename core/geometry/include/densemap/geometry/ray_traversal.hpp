@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstdlib>
 #include <limits>
 #include <type_traits>
 #include <vector>
@@ -157,6 +158,18 @@ inline TraversalEnd endOf(const TraversalStart& s, int (&crossings)[3],
 /// much as the end tests of a few steps).
 inline constexpr int kCountedStepsFrom = 8;
 
+/// The voxels of a ray's traversal when traverseRay's step visitors walk it counted (at least
+/// kCountedStepsFrom crossings and endOf kClean: the origin's voxel, then countedSteps' total - 1
+/// steps), else 0 (the loop with end tests). The one rule for both traverseRay and the walks
+/// queued by a caller (DenseMarks::queueWalk).
+[[nodiscard]] inline int countedTotal(const TraversalStart& s) {
+  const int total = std::abs(s.end.x - s.origin.x) + std::abs(s.end.y - s.origin.y) +
+                    std::abs(s.end.z - s.origin.z);
+  if (total < kCountedStepsFrom) return 0;
+  int crossings[3];
+  return endOf(s, crossings) == TraversalEnd::kClean ? total : 0;
+}
+
 /// The steps of a clean ray's loop (endOf: it enters the end voxel after exactly `total`
 /// crossings) before the end voxel: total - 1 of them, each crossing the border with the
 /// smallest tMax, ties to the higher axis (traverseRay's choice), told to `steps` as
@@ -241,10 +254,8 @@ bool traverseRay(const VoxelGrid& grid, const Point3f& origin, const Point3f& en
   if constexpr (kSteps) {
     // A long ray whose loop ends cleanly (endOf) takes a known number of steps: no end test
     // per step (the key's three comparisons and the length test).
-    int crossings[3];
-    const int total =
-        std::abs(last[0] - key[0]) + std::abs(last[1] - key[1]) + std::abs(last[2] - key[2]);
-    const bool counted = total >= kCountedStepsFrom && endOf(s, crossings) == TraversalEnd::kClean;
+    const int total = countedTotal(s);
+    const bool counted = total != 0;
     // A visitor with fastSteps(first voxel, steps, last voxel) may hand the counted loop a value
     // of its own steps in place of begin() (kept in registers: first(), step<AXIS>()), taken
     // back by endFastSteps(steps).

@@ -5,6 +5,7 @@
 #include <cstdlib>
 #include <memory>
 #include <optional>
+#include <vector>
 
 #include "densemap/map/block_layout.hpp"
 #include "densemap/map/scan_update.hpp"
@@ -295,6 +296,53 @@ class DenseMarks {
     bool out_ = false;
   };
 
+  /// A forward walk queued by queueWalk: countedSteps' times, and its voxel as a bit address in
+  /// the box's mask array (block * 512 + block::indexOf) with per axis the steps left to the
+  /// next block border, a step's change of the address inside a block and into the next one.
+  struct QueuedWalk {
+    double t_max[3];
+    double t_delta[3];
+    std::uint64_t addr;
+    std::int32_t steps;  // after the first voxel
+    std::int32_t left[3];
+    std::int32_t small[3];
+    std::int32_t wrap[3];
+  };
+  /// How markQueued walks: kBest 8 walks at a time with AVX-512 where the processor has it
+  /// (hasWideWalks), else one at a time as kScalar does (countedSteps).
+  enum class WalkKernel { kBest, kScalar };
+  [[nodiscard]] static bool hasWideWalks();
+
+  /// Queues traverseRay's counted walk (countedTotal(start) = `total` > 0 voxels: the first,
+  /// then countedSteps' total - 1 steps from `t_max`, `t_delta`) from voxel `first`, moving by
+  /// `delta[a]` along axis a, to the voxel before `last`: marks the first voxel now and the
+  /// others in markQueued. False (nothing marked or queued) unless `first` and `last` are both
+  /// in the box (so are the walk's voxels between them).
+  bool queueWalk(const VoxelKey& first, const int (&delta)[3], const VoxelKey& last,
+                 const double (&t_max)[3], const double (&t_delta)[3], int total) {
+    const std::uint32_t b = blockIndex(first);
+    if (b == kOutside || blockIndex(last) == kOutside) return false;
+    QueuedWalk& w = queue_.emplace_back();
+    const int index = block::indexOf(first);
+    w.addr = static_cast<std::uint64_t>(b) * block::kVoxels + static_cast<unsigned>(index);
+    w.steps = total - 1;
+    const int in_block[3] = {first.x & (block::kEdge - 1), first.y & (block::kEdge - 1),
+                             first.z & (block::kEdge - 1)};
+    const std::int32_t stride[3] = {1, static_cast<std::int32_t>(n_[0]),
+                                    static_cast<std::int32_t>(n_[0] * n_[1])};
+    for (int a = 0; a < 3; ++a) {
+      w.t_max[a] = t_max[a];
+      w.t_delta[a] = t_delta[a];
+      w.left[a] = delta[a] > 0 ? block::kEdge - in_block[a] : in_block[a] + 1;
+      w.small[a] = delta[a] << (block::kShift * a);
+      w.wrap[a] = delta[a] * stride[a] * block::kVoxels - (block::kEdge - 1) * w.small[a];
+    }
+    setAt(b, index);
+    return true;
+  }
+  /// Marks the queued walks' voxels after their first, then empties the queue.
+  void markQueued(WalkKernel kernel = WalkKernel::kBest);
+
  private:
   static constexpr std::uint32_t kOutside = ~std::uint32_t{0};
   /// The index of `k`'s block in a box of first block `min` and block counts `n`, or kOutside.
@@ -358,6 +406,9 @@ class DenseMarks {
   ZeroedArray<std::uint8_t> seen_;
   ZeroedArray<std::uint32_t> touched_;  // one spare slot for the branch-free append
   std::size_t touched_count_ = 0;
+  std::vector<QueuedWalk> queue_;
+  std::vector<std::uint32_t> entered_;          // markQueued's: blocks the walks entered
+  std::vector<std::uint64_t> pend_w_, pend_b_;  // markQueued's: marks gathered per word
 };
 
 }  // namespace densemap

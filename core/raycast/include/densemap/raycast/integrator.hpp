@@ -57,6 +57,10 @@ struct IntegratorOptions {
   /// grow_probe_every-th scan grows (to measure again).
   double grow_min_share = 0.25;
   std::size_t grow_probe_every = 8;
+  /// With dense marks and no culling region, the rays' forward walks are queued and walked
+  /// several at a time (DenseMarks::markQueued: eight side by side with AVX-512); false: one at
+  /// a time as they come (the same marks).
+  bool queue_walks = true;
 };
 
 /// What integrating one scan did; the benchmark's per-scan figures.

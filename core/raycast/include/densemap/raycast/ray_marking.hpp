@@ -247,6 +247,28 @@ void markRay(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray, Si
   markEnd(ray, update, counts);
 }
 
+/// markRay through a DenseSink, its forward walk queued when it can be (a counted walk between
+/// two voxels of the box: every ray of the integrator's box but short ones and near-ties at the
+/// end): the first voxel is marked now and the others by the sink's DenseMarks::markQueued,
+/// which the caller runs before the marks are read. Other rays are marked as markRay does.
+/// Returns whether the walk was queued.
+inline bool markRayQueued(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray,
+                          DenseSink& sink, MarkCounts& counts, const VoxelKey& origin_key) {
+  if (ray.key_valid) {
+    TraversalStart s;
+    if (startTraversal(grid, origin, origin_key, ray.end, ray.key, s) == TraversalKind::kRay) {
+      const int total = countedTotal(s);
+      if (total != 0 && sink.dense.queueWalk(s.origin, s.step, s.end, s.t_max, s.t_delta, total)) {
+        counts.visits += static_cast<std::size_t>(total);
+        markEnd(ray, sink, counts);
+        return true;
+      }
+    }
+  }
+  markRay(grid, origin, ray, sink, counts, &origin_key);
+  return false;
+}
+
 /// markRay with a culling region (dissertation Sec. 2.3.5): the ray is traversed from its end
 /// back toward the sensor and stops at the first voxel inside the region. That is exact: the
 /// region is closed toward the sensor's voxel along each axis and a traversal moves
