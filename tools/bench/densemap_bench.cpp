@@ -298,10 +298,12 @@ static int runMain(int argc, char** argv) {
   app.add_option("--superray-min-points", o.min_points,
                  "End voxels with fewer points are not grouped into super rays (k)")
       ->capture_default_str();
-  app.add_option("--grow-strides", o.grow_strides,
-                 "Culling methods mark rays in levels (indices multiple of each stride in turn), "
-                 "the culling region growing by the scan's marks after each; a method named "
-                 "METHOD@nogrow does not (comma-separated; 0: none)")
+  app.add_option(
+         "--grow-strides", o.grow_strides,
+         "Culling methods mark rays in levels (indices multiple of each stride in turn), "
+         "the culling region growing by the scan's marks after each; a method named "
+         "METHOD@nogrow does not (comma-separated; 0: none); METHOD@single walks rays one at a "
+         "time (not queued and walked eight at a time)")
       ->delimiter(',')
       ->capture_default_str();
   app.add_option("--backend", o.backends, "Comma-separated: grid, octree")

@@ -64,12 +64,16 @@ Integrate makeIntegrator(const std::string& method, const Options& o) {
     };
   }
   // `method@nogrow`: the culling region from the map only (no growth by the scan's marks);
-  // `method@grow=A:B:..`: these strides instead of --grow-strides.
+  // `method@grow=A:B:..`: these strides instead of --grow-strides; `method@single`: walks one
+  // at a time as they come (IntegratorOptions::queue_walks off).
   const std::size_t at = method.find('@');
   std::vector<std::size_t> strides = o.grow_strides;
+  bool queue_walks = true;
   if (at != std::string::npos) {
     const std::string variant = method.substr(at + 1);
-    if (variant == "nogrow") {
+    if (variant == "single") {
+      queue_walks = false;
+    } else if (variant == "nogrow") {
       strides.clear();
     } else if (variant.starts_with("grow=")) {
       strides.clear();
@@ -94,6 +98,7 @@ Integrate makeIntegrator(const std::string& method, const Options& o) {
                             .max_range_m = o.max_range,
                             .superray_min_points = o.min_points};
   options.grow_strides = strides;
+  options.queue_walks = queue_walks;
   auto integrator = std::make_shared<Integrator>(options);
   return [integrator](OccupancyMap& map, const WorldScan& s) {
     return integrator->integrate(map, s.points, s.origin);

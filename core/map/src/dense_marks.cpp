@@ -36,6 +36,7 @@ void DenseMarks::discard() {
   }
   touched_count_ = 0;
   queue_.clear();
+  back_queue_.clear();
 }
 
 std::uint64_t DenseMarks::blockKeyAt(std::uint32_t i) const {

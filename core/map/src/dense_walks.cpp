@@ -1,7 +1,9 @@
-// DenseMarks::markQueued: the queued forward walks' steps, one walk at a time or eight side by
-// side in AVX-512 lanes (same axis choice, same double additions, same marks).
+// DenseMarks::markQueued and markQueuedBack: the queued walks' steps, one walk at a time or
+// eight side by side in AVX-512 lanes (the same decisions from the same double arithmetic, the
+// same marks).
 #include <algorithm>
 #include <bit>
+#include <limits>
 
 #include "densemap/geometry/ray_traversal.hpp"
 #include "densemap/map/dense_marks.hpp"
@@ -14,83 +16,124 @@
 namespace densemap {
 namespace {
 
-/// countedSteps' steps on a queued walk's bit address (as DenseMarks::Cursor::move, with the
-/// blocks entered listed for the first-touch bookkeeping afterwards).
-struct AddressSteps {
+/// Steps on a queued walk's place (as DenseMarks::Cursor::move), marking each voxel — unless
+/// `culled` holds it, which stops the walk — with the blocks entered listed for the first-touch
+/// bookkeeping afterwards.
+struct PlaceSteps {
   std::uint64_t* words;
+  const std::uint64_t* culled;  // null: none
   std::uint32_t* entered;
-  std::size_t n_entered;
-  std::uint64_t addr;
-  std::int32_t left[3];
-  std::int32_t small[3];
-  std::int32_t wrap[3];
+  std::size_t n_entered = 0;
+  std::size_t marked = 0;
+  DenseMarks::WalkPlace at;
   template <int A>
-  [[gnu::always_inline]] void step() {
-    if (--left[A] == 0) {
-      left[A] = block::kEdge;
-      addr += static_cast<std::uint64_t>(static_cast<std::int64_t>(wrap[A]));
-      entered[n_entered++] = static_cast<std::uint32_t>(addr >> 9);
+  [[gnu::always_inline]] bool step() {
+    if (--at.left[A] == 0) {
+      at.left[A] = block::kEdge;
+      at.addr += static_cast<std::uint64_t>(static_cast<std::int64_t>(at.wrap[A]));
+      entered[n_entered++] = static_cast<std::uint32_t>(at.addr >> 9);
     } else {
-      addr += static_cast<std::uint64_t>(static_cast<std::int64_t>(small[A]));
+      at.addr += static_cast<std::uint64_t>(static_cast<std::int64_t>(at.small[A]));
     }
-    words[addr >> 6] |= std::uint64_t{1} << (addr & 63U);
+    const std::uint64_t bit = std::uint64_t{1} << (at.addr & 63U);
+    if (culled != nullptr && (culled[at.addr >> 6] & bit) != 0) return false;
+    words[at.addr >> 6] |= bit;
+    ++marked;
+    return true;
   }
 };
-
-/// One walk's steps; returns the blocks entered (at most its steps) written to `entered`.
-std::size_t walkOne(const DenseMarks::QueuedWalk& w, std::uint64_t* words,
-                    std::uint32_t* entered) {
-  TraversalStart s;
-  for (int a = 0; a < 3; ++a) {
-    s.t_max[a] = w.t_max[a];
-    s.t_delta[a] = w.t_delta[a];
-  }
-  AddressSteps steps{words, entered, 0, w.addr, {}, {}, {}};
-  for (int a = 0; a < 3; ++a) {
-    steps.left[a] = w.left[a];
-    steps.small[a] = w.small[a];
-    steps.wrap[a] = w.wrap[a];
-  }
-  countedSteps(s, w.steps + 1, steps);
-  return steps.n_entered;
-}
 
 #ifdef DENSEMAP_WIDE_WALKS
 // GCC 12's AVX-512 intrinsics start some results from _mm512_undefined_* (its bug 105593).
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#define DENSEMAP_AVX512 gnu::target("avx512f,avx512vl,avx512dq")
+
 /// Writes the lanes' words and marks, packed, at `w` and `b` (8 slots each); returns how many.
-[[gnu::target("avx512f,avx512vl,avx512dq"), gnu::always_inline]] inline std::size_t pendLanes(
-    __mmask8 lanes, __m512i words, __m512i bits, std::uint64_t* w, std::uint64_t* b) {
+[[DENSEMAP_AVX512, gnu::always_inline]] inline std::size_t pendLanes(__mmask8 lanes, __m512i words,
+                                                                     __m512i bits, std::uint64_t* w,
+                                                                     std::uint64_t* b) {
   _mm512_storeu_si512(w, _mm512_maskz_compress_epi64(lanes, words));
   _mm512_storeu_si512(b, _mm512_maskz_compress_epi64(lanes, bits));
   return static_cast<std::size_t>(std::popcount(static_cast<unsigned>(lanes)));
 }
 
-/// The walks' steps eight at a time, one walk a lane: countedSteps' choice (the smallest tMax,
-/// ties to the higher axis) as compare masks; a lane whose walk is done takes the next one, so
-/// the lanes' walks are at different distances from their (shared) origin and their marks seldom
-/// fall on one word (a word's ORs one after the other wait on each other). Returns the blocks
-/// entered written to `entered`, which must have room for (all the walks' steps) + 8.
-[[gnu::target("avx512f,avx512vl,avx512dq")]] std::size_t walkEight(
-    const DenseMarks::QueuedWalk* walks, std::size_t n, std::uint64_t* words,
-    std::uint32_t* entered, std::uint64_t* pend_w, std::uint64_t* pend_b) {
-  const __m512i one = _mm512_set1_epi64(1), edge = _mm512_set1_epi64(block::kEdge),
-                zero = _mm512_setzero_si512(), low6 = _mm512_set1_epi64(63);
+/// Eight walks' places, a lane each, moved along the axes their lanes chose.
+struct LanePlaces {
+  __m512i addr, l0, l1, l2, s0, s1, s2, r0, r1, r2;
+  /// Puts walk place `at` in lane(s) `k`.
+  [[DENSEMAP_AVX512, gnu::always_inline]] void load(__mmask8 k, const DenseMarks::WalkPlace& at) {
+    addr = _mm512_mask_set1_epi64(addr, k, static_cast<long long>(at.addr));
+    l0 = _mm512_mask_set1_epi64(l0, k, at.left[0]);
+    l1 = _mm512_mask_set1_epi64(l1, k, at.left[1]);
+    l2 = _mm512_mask_set1_epi64(l2, k, at.left[2]);
+    s0 = _mm512_mask_set1_epi64(s0, k, at.small[0]);
+    s1 = _mm512_mask_set1_epi64(s1, k, at.small[1]);
+    s2 = _mm512_mask_set1_epi64(s2, k, at.small[2]);
+    r0 = _mm512_mask_set1_epi64(r0, k, at.wrap[0]);
+    r1 = _mm512_mask_set1_epi64(r1, k, at.wrap[1]);
+    r2 = _mm512_mask_set1_epi64(r2, k, at.wrap[2]);
+  }
+  /// The lanes in m0 / m1 / m2 step along axis 0 / 1 / 2; the blocks entered are written packed
+  /// at `entered` (8 slots); returns how many.
+  [[DENSEMAP_AVX512, gnu::always_inline]] std::size_t move(__mmask8 m0, __mmask8 m1, __mmask8 m2,
+                                                           std::uint32_t* entered) {
+    const __m512i one = _mm512_set1_epi64(1), zero = _mm512_setzero_si512();
+    l0 = _mm512_mask_sub_epi64(l0, m0, l0, one);
+    l1 = _mm512_mask_sub_epi64(l1, m1, l1, one);
+    l2 = _mm512_mask_sub_epi64(l2, m2, l2, one);
+    const __mmask8 w0 = _mm512_mask_cmpeq_epi64_mask(m0, l0, zero);
+    const __mmask8 w1 = _mm512_mask_cmpeq_epi64_mask(m1, l1, zero);
+    const __mmask8 w2 = _mm512_mask_cmpeq_epi64_mask(m2, l2, zero);
+    __m512i inc = _mm512_maskz_mov_epi64(m0, s0);
+    inc = _mm512_mask_mov_epi64(inc, m1, s1);
+    inc = _mm512_mask_mov_epi64(inc, m2, s2);
+    inc = _mm512_mask_mov_epi64(inc, w0, r0);
+    inc = _mm512_mask_mov_epi64(inc, w1, r1);
+    inc = _mm512_mask_mov_epi64(inc, w2, r2);
+    addr = _mm512_add_epi64(addr, inc);
+    const __m512i edge = _mm512_set1_epi64(block::kEdge);
+    l0 = _mm512_mask_mov_epi64(l0, w0, edge);
+    l1 = _mm512_mask_mov_epi64(l1, w1, edge);
+    l2 = _mm512_mask_mov_epi64(l2, w2, edge);
+    const auto wrapped = static_cast<__mmask8>(w0 | w1 | w2);
+    const __m256i blocks = _mm512_cvtepi64_epi32(_mm512_srli_epi64(addr, 9));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(entered),
+                        _mm256_maskz_compress_epi32(wrapped, blocks));
+    return static_cast<std::size_t>(std::popcount(static_cast<unsigned>(wrapped)));
+  }
+};
+
+/// Buffers of a wide walk: blocks entered, and marks gathered per lane and word, pended when the
+/// lane moves to another word (the word's ORs one after the other would wait on each other).
+struct WideOut {
+  std::uint32_t* entered;
+  std::uint64_t* pend_w;
+  std::uint64_t* pend_b;
+  std::size_t n_entered = 0;
+  std::size_t n_pend = 0;
+};
+
+/// The forward walks' steps eight at a time, one walk a lane: countedSteps' choice (the smallest
+/// tMax, ties to the higher axis) as compare masks; a lane whose walk is done takes the next one,
+/// so the lanes' walks are at different distances from their (shared) origin and their marks
+/// seldom fall on one word. `out` must have room for (all the walks' steps + 1) + 16.
+[[DENSEMAP_AVX512]] void walkEight(const DenseMarks::QueuedWalk* walks, std::size_t n,
+                                   WideOut& out) {
+  const __m512i one = _mm512_set1_epi64(1), zero = _mm512_setzero_si512(),
+                low6 = _mm512_set1_epi64(63);
   __m512d t0 = _mm512_setzero_pd(), t1 = t0, t2 = t0, d0 = t0, d1 = t0, d2 = t0;
-  __m512i l0 = zero, l1 = zero, l2 = zero, s0 = zero, s1 = zero, s2 = zero, r0 = zero, r1 = zero,
-          r2 = zero, addr = zero, left = zero;  // left: the lane's steps to go
-  __m512i cur_w = zero, cur_b = zero;  // per lane: the word being marked, its marks so far
-  std::size_t next = 0, n_entered = 0, n_pend = 0;
-  __mmask8 live = 0;  // lanes with a walk (its last word's marks not pended yet)
+  LanePlaces p{zero, zero, zero, zero, zero, zero, zero, zero, zero, zero};
+  __m512i left = zero;                 // the lane's steps to go
+  __m512i cur_w = zero, cur_b = zero;  // the word being marked, its marks so far
+  __mmask8 live = 0;                   // lanes with a walk whose last marks are not pended
+  std::size_t next = 0;
   while (true) {
     __mmask8 active = _mm512_cmpgt_epi64_mask(left, zero);
     if (active != 0xff) {
-      // Walks just done: their last word's marks.
       const auto done = static_cast<__mmask8>(live & ~active);
-      n_pend += pendLanes(done, cur_w, cur_b, pend_w + n_pend, pend_b + n_pend);
+      out.n_pend += pendLanes(done, cur_w, cur_b, out.pend_w + out.n_pend, out.pend_b + out.n_pend);
       cur_b = _mm512_maskz_mov_epi64(active, cur_b);
-      live = active;
       // Idle lanes take the next walks.
       auto idle = static_cast<unsigned>(static_cast<__mmask8>(~active));
       for (; idle != 0 && next < n; idle &= idle - 1, ++next) {
@@ -102,18 +145,9 @@ std::size_t walkOne(const DenseMarks::QueuedWalk& w, std::uint64_t* words,
         d0 = _mm512_mask_broadcastsd_pd(d0, k, _mm_set_sd(w.t_delta[0]));
         d1 = _mm512_mask_broadcastsd_pd(d1, k, _mm_set_sd(w.t_delta[1]));
         d2 = _mm512_mask_broadcastsd_pd(d2, k, _mm_set_sd(w.t_delta[2]));
-        l0 = _mm512_mask_set1_epi64(l0, k, w.left[0]);
-        l1 = _mm512_mask_set1_epi64(l1, k, w.left[1]);
-        l2 = _mm512_mask_set1_epi64(l2, k, w.left[2]);
-        s0 = _mm512_mask_set1_epi64(s0, k, w.small[0]);
-        s1 = _mm512_mask_set1_epi64(s1, k, w.small[1]);
-        s2 = _mm512_mask_set1_epi64(s2, k, w.small[2]);
-        r0 = _mm512_mask_set1_epi64(r0, k, w.wrap[0]);
-        r1 = _mm512_mask_set1_epi64(r1, k, w.wrap[1]);
-        r2 = _mm512_mask_set1_epi64(r2, k, w.wrap[2]);
-        addr = _mm512_mask_set1_epi64(addr, k, static_cast<long long>(w.addr));
+        p.load(k, w.at);
         left = _mm512_mask_set1_epi64(left, k, w.steps);
-        cur_w = _mm512_mask_set1_epi64(cur_w, k, static_cast<long long>(w.addr >> 6));
+        cur_w = _mm512_mask_set1_epi64(cur_w, k, static_cast<long long>(w.at.addr >> 6));
       }
       active = _mm512_cmpgt_epi64_mask(left, zero);
       live = active;
@@ -129,42 +163,144 @@ std::size_t walkOne(const DenseMarks::QueuedWalk& w, std::uint64_t* words,
     t0 = _mm512_mask_add_pd(t0, m0, t0, d0);
     t1 = _mm512_mask_add_pd(t1, m1, t1, d1);
     t2 = _mm512_mask_add_pd(t2, m2, t2, d2);
-    l0 = _mm512_mask_sub_epi64(l0, m0, l0, one);
-    l1 = _mm512_mask_sub_epi64(l1, m1, l1, one);
-    l2 = _mm512_mask_sub_epi64(l2, m2, l2, one);
-    const __mmask8 w0 = _mm512_mask_cmpeq_epi64_mask(m0, l0, zero);
-    const __mmask8 w1 = _mm512_mask_cmpeq_epi64_mask(m1, l1, zero);
-    const __mmask8 w2 = _mm512_mask_cmpeq_epi64_mask(m2, l2, zero);
-    __m512i inc = _mm512_maskz_mov_epi64(m0, s0);
-    inc = _mm512_mask_mov_epi64(inc, m1, s1);
-    inc = _mm512_mask_mov_epi64(inc, m2, s2);
-    inc = _mm512_mask_mov_epi64(inc, w0, r0);
-    inc = _mm512_mask_mov_epi64(inc, w1, r1);
-    inc = _mm512_mask_mov_epi64(inc, w2, r2);
-    addr = _mm512_add_epi64(addr, inc);
-    l0 = _mm512_mask_mov_epi64(l0, w0, edge);
-    l1 = _mm512_mask_mov_epi64(l1, w1, edge);
-    l2 = _mm512_mask_mov_epi64(l2, w2, edge);
-    // The blocks entered, packed (the store writes 8 slots; the count moves by those entered).
-    const auto wrapped = static_cast<__mmask8>(w0 | w1 | w2);
-    const __m256i blocks = _mm512_cvtepi64_epi32(_mm512_srli_epi64(addr, 9));
-    _mm256_storeu_si256(reinterpret_cast<__m256i*>(entered + n_entered),
-                        _mm256_maskz_compress_epi32(wrapped, blocks));
-    n_entered += static_cast<std::size_t>(std::popcount(static_cast<unsigned>(wrapped)));
-    // The marks: gathered per lane while it stays in one word, pended when it moves on.
-    const __m512i word = _mm512_srli_epi64(addr, 6);
+    out.n_entered += p.move(m0, m1, m2, out.entered + out.n_entered);
+    const __m512i word = _mm512_srli_epi64(p.addr, 6);
     const __mmask8 moved = _mm512_mask_cmpneq_epi64_mask(active, word, cur_w);
-    n_pend += pendLanes(moved, cur_w, cur_b, pend_w + n_pend, pend_b + n_pend);
+    out.n_pend += pendLanes(moved, cur_w, cur_b, out.pend_w + out.n_pend, out.pend_b + out.n_pend);
     cur_w = _mm512_mask_mov_epi64(cur_w, moved, word);
     cur_b = _mm512_mask_mov_epi64(cur_b, moved, zero);
     cur_b = _mm512_mask_or_epi64(cur_b, active, cur_b,
-                                 _mm512_sllv_epi64(one, _mm512_and_si512(addr, low6)));
+                                 _mm512_sllv_epi64(one, _mm512_and_si512(p.addr, low6)));
   }
-  for (std::size_t i = 0; i < n_pend; ++i) words[pend_w[i]] |= pend_b[i];
-  return n_entered;
 }
+
+/// The backward walks' steps eight at a time, one walk a lane: backwardSteps' decision (the
+/// latest head, ties to the lower axis, winning by more than the bound, else the walk is handed
+/// over) as compare masks; a lane stops at a voxel `culled` holds (its words read once per word,
+/// gathered). Returns the counts of the walks not handed over; their ids go to `handed_over`.
+[[DENSEMAP_AVX512]] DenseMarks::BackWalkCounts walkEightBack(
+    const DenseMarks::QueuedBackWalk* walks, std::size_t n, const std::uint64_t* culled,
+    WideOut& out, std::vector<std::uint32_t>& handed_over) {
+  const __m512i one = _mm512_set1_epi64(1), zero = _mm512_setzero_si512(),
+                low6 = _mm512_set1_epi64(63);
+  const __m512d none = _mm512_set1_pd(-std::numeric_limits<double>::infinity());
+  __m512d h0 = _mm512_setzero_pd(), h1 = h0, h2 = h0, d0 = h0, d1 = h0, d2 = h0, bound = h0;
+  __m512i n0 = zero, n1 = zero, n2 = zero;  // crossings left per axis (next, as BackwardWalk)
+  LanePlaces p{zero, zero, zero, zero, zero, zero, zero, zero, zero, zero};
+  __m512i left = zero, marked = zero;
+  __m512i cur_w = zero, cur_b = zero, cur_r = zero;  // cur_r: the region's bits of cur_w
+  __mmask8 live = 0, handing = 0;
+  std::size_t lane_walk[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+  std::size_t next = 0;
+  DenseMarks::BackWalkCounts counts;
+  alignas(64) std::int64_t marked_at[8];
+  while (true) {
+    __mmask8 active = _mm512_cmpgt_epi64_mask(left, zero);
+    if (active != 0xff) {
+      const auto done = static_cast<__mmask8>(live & ~active);
+      out.n_pend += pendLanes(done, cur_w, cur_b, out.pend_w + out.n_pend, out.pend_b + out.n_pend);
+      if (done != 0) {
+        _mm512_store_si512(marked_at, marked);
+        for (unsigned d = done; d != 0; d &= d - 1) {
+          const int k = std::countr_zero(d);
+          const DenseMarks::QueuedBackWalk& w = walks[lane_walk[k]];
+          if (((handing >> k) & 1U) != 0) {
+            handed_over.push_back(w.id);
+          } else {
+            counts.visits += static_cast<std::size_t>(marked_at[k]);
+            counts.culled += static_cast<std::size_t>(w.total - marked_at[k]);
+          }
+        }
+        handing = static_cast<__mmask8>(handing & ~done);
+      }
+      cur_b = _mm512_maskz_mov_epi64(active, cur_b);
+      marked = _mm512_maskz_mov_epi64(active, marked);
+      auto idle = static_cast<unsigned>(static_cast<__mmask8>(~active));
+      for (; idle != 0 && next < n; idle &= idle - 1, ++next) {
+        const DenseMarks::QueuedBackWalk& w = walks[next];
+        const auto k = static_cast<__mmask8>(idle & (0U - idle));
+        lane_walk[std::countr_zero(idle)] = next;
+        h0 = _mm512_mask_broadcastsd_pd(h0, k, _mm_set_sd(w.head[0]));
+        h1 = _mm512_mask_broadcastsd_pd(h1, k, _mm_set_sd(w.head[1]));
+        h2 = _mm512_mask_broadcastsd_pd(h2, k, _mm_set_sd(w.head[2]));
+        d0 = _mm512_mask_broadcastsd_pd(d0, k, _mm_set_sd(w.t_delta[0]));
+        d1 = _mm512_mask_broadcastsd_pd(d1, k, _mm_set_sd(w.t_delta[1]));
+        d2 = _mm512_mask_broadcastsd_pd(d2, k, _mm_set_sd(w.t_delta[2]));
+        bound = _mm512_mask_broadcastsd_pd(bound, k, _mm_set_sd(w.bound));
+        n0 = _mm512_mask_set1_epi64(n0, k, w.next[0]);
+        n1 = _mm512_mask_set1_epi64(n1, k, w.next[1]);
+        n2 = _mm512_mask_set1_epi64(n2, k, w.next[2]);
+        p.load(k, w.at);
+        left = _mm512_mask_set1_epi64(left, k, w.total);
+        const std::uint64_t word = w.at.addr >> 6;
+        cur_w = _mm512_mask_set1_epi64(cur_w, k, static_cast<long long>(word));
+        cur_r = _mm512_mask_set1_epi64(cur_r, k, static_cast<long long>(culled[word]));
+      }
+      active = _mm512_cmpgt_epi64_mask(left, zero);
+      live = active;
+      if (active == 0) break;
+    }
+    // The latest crossing (ties to the lower axis) and the runner-up.
+    const __m512d high01 = _mm512_max_pd(h0, h1);
+    const __mmask8 m2 = _mm512_mask_cmp_pd_mask(active, h2, high01, _CMP_GT_OQ);
+    const __mmask8 ge01 = _mm512_cmp_pd_mask(h0, h1, _CMP_GE_OQ);
+    __mmask8 m0 = static_cast<__mmask8>(active & ~m2 & ge01);
+    __mmask8 m1 = static_cast<__mmask8>(active & ~m2 & ~ge01);
+    __m512d chosen = _mm512_mask_mov_pd(h1, m0, h0);
+    chosen = _mm512_mask_mov_pd(chosen, m2, h2);
+    __m512d runner = _mm512_max_pd(h0, h2);  // axis 1's
+    runner = _mm512_mask_mov_pd(runner, m0, _mm512_max_pd(h1, h2));
+    runner = _mm512_mask_mov_pd(runner, m2, high01);
+    const __mmask8 wins =
+        _mm512_mask_cmp_pd_mask(active, _mm512_sub_pd(chosen, runner), bound, _CMP_GT_OQ);
+    const auto hand = static_cast<__mmask8>(active & ~wins);
+    handing = static_cast<__mmask8>(handing | hand);
+    left = _mm512_mask_mov_epi64(left, hand, zero);
+    m0 = static_cast<__mmask8>(m0 & wins);
+    m1 = static_cast<__mmask8>(m1 & wins);
+    const auto m2w = static_cast<__mmask8>(m2 & wins);
+    const auto steps = static_cast<__mmask8>(m0 | m1 | m2w);
+    // head = --next >= 0 ? head - delta : -inf
+    n0 = _mm512_mask_sub_epi64(n0, m0, n0, one);
+    n1 = _mm512_mask_sub_epi64(n1, m1, n1, one);
+    n2 = _mm512_mask_sub_epi64(n2, m2w, n2, one);
+    h0 = _mm512_mask_sub_pd(h0, m0, h0, d0);
+    h1 = _mm512_mask_sub_pd(h1, m1, h1, d1);
+    h2 = _mm512_mask_sub_pd(h2, m2w, h2, d2);
+    h0 = _mm512_mask_mov_pd(h0, _mm512_mask_cmplt_epi64_mask(m0, n0, zero), none);
+    h1 = _mm512_mask_mov_pd(h1, _mm512_mask_cmplt_epi64_mask(m1, n1, zero), none);
+    h2 = _mm512_mask_mov_pd(h2, _mm512_mask_cmplt_epi64_mask(m2w, n2, zero), none);
+    out.n_entered += p.move(m0, m1, m2w, out.entered + out.n_entered);
+    left = _mm512_mask_sub_epi64(left, steps, left, one);
+    const __m512i word = _mm512_srli_epi64(p.addr, 6);
+    const __mmask8 moved = _mm512_mask_cmpneq_epi64_mask(steps, word, cur_w);
+    out.n_pend += pendLanes(moved, cur_w, cur_b, out.pend_w + out.n_pend, out.pend_b + out.n_pend);
+    cur_w = _mm512_mask_mov_epi64(cur_w, moved, word);
+    cur_b = _mm512_mask_mov_epi64(cur_b, moved, zero);
+    cur_r = _mm512_mask_i64gather_epi64(cur_r, moved, word, culled, 8);
+    const __m512i bit = _mm512_sllv_epi64(one, _mm512_and_si512(p.addr, low6));
+    const __mmask8 stop = _mm512_mask_test_epi64_mask(steps, cur_r, bit);
+    left = _mm512_mask_mov_epi64(left, stop, zero);
+    const auto mark = static_cast<__mmask8>(steps & ~stop);
+    cur_b = _mm512_mask_or_epi64(cur_b, mark, cur_b, bit);
+    marked = _mm512_mask_add_epi64(marked, mark, marked, one);
+  }
+  return counts;
+}
+#undef DENSEMAP_AVX512
 #pragma GCC diagnostic pop
 #endif
+
+/// Room for the blocks entered and the marks pended of walks of `steps` steps in all.
+void makeRoom(std::size_t steps, std::vector<std::uint32_t>& entered,
+              std::vector<std::uint64_t>& pend_w, std::vector<std::uint64_t>& pend_b) {
+  const std::size_t room = steps + 16;
+  if (entered.size() < room) entered.resize(std::max(room, 2 * entered.size()));
+  if (pend_w.size() < room) {
+    pend_w.resize(std::max(room, 2 * pend_w.size()));
+    pend_b.resize(pend_w.size());
+  }
+}
 
 }  // namespace
 
@@ -185,30 +321,80 @@ void DenseMarks::markQueued(WalkKernel kernel) {
   const std::size_t n = queue_.size();
   if (n == 0) return;
   std::uint64_t* words = masks_[0].data();
+  std::size_t steps = 0;
+  for (const QueuedWalk& w : queue_) steps += static_cast<std::size_t>(w.steps) + 1;
+  makeRoom(steps, entered_, pend_w_, pend_b_);
+  std::size_t n_entered = 0;
 #ifdef DENSEMAP_WIDE_WALKS
   if (kernel == WalkKernel::kBest && hasWideWalks()) {
-    std::size_t room = 16;
-    for (const QueuedWalk& w : queue_) room += static_cast<std::size_t>(w.steps) + 1;
-    if (entered_.size() < room) entered_.resize(std::max(room, 2 * entered_.size()));
-    if (pend_w_.size() < room) {
-      pend_w_.resize(std::max(room, 2 * pend_w_.size()));
-      pend_b_.resize(pend_w_.size());
-    }
-    const std::size_t e =
-        walkEight(queue_.data(), n, words, entered_.data(), pend_w_.data(), pend_b_.data());
-    for (std::size_t i = 0; i < e; ++i) touch(entered_[i]);
+    WideOut out{entered_.data(), pend_w_.data(), pend_b_.data()};
+    walkEight(queue_.data(), n, out);
+    for (std::size_t i = 0; i < out.n_pend; ++i) words[pend_w_[i]] |= pend_b_[i];
+    n_entered = out.n_entered;
+    kernel = WalkKernel::kScalar;
     queue_.clear();
-    return;
   }
 #endif
   (void)kernel;
   for (const QueuedWalk& w : queue_) {
-    const auto room = static_cast<std::size_t>(w.steps) + 1;
-    if (entered_.size() < room) entered_.resize(std::max(room, 2 * entered_.size()));
-    const std::size_t e = walkOne(w, words, entered_.data());
-    for (std::size_t i = 0; i < e; ++i) touch(entered_[i]);
+    TraversalStart s;
+    for (int a = 0; a < 3; ++a) {
+      s.t_max[a] = w.t_max[a];
+      s.t_delta[a] = w.t_delta[a];
+    }
+    PlaceSteps place{words, nullptr, entered_.data() + n_entered, 0, 0, w.at};
+    countedSteps(s, w.steps + 1, place);
+    n_entered += place.n_entered;
   }
+  for (std::size_t i = 0; i < n_entered; ++i) touch(entered_[i]);
   queue_.clear();
+}
+
+DenseMarks::BackWalkCounts DenseMarks::markQueuedBack(const block::BlockMask* culled,
+                                                      std::vector<std::uint32_t>& handed_over,
+                                                      WalkKernel kernel) {
+  BackWalkCounts counts;
+  const std::size_t n = back_queue_.size();
+  if (n == 0) return counts;
+  std::uint64_t* words = masks_[0].data();
+  const std::uint64_t* culled_words = culled[0].data();
+  std::size_t steps = 0;
+  for (const QueuedBackWalk& w : back_queue_) steps += static_cast<std::size_t>(w.total) + 1;
+  makeRoom(steps, entered_, pend_w_, pend_b_);
+  std::size_t n_entered = 0;
+#ifdef DENSEMAP_WIDE_WALKS
+  if (kernel == WalkKernel::kBest && hasWideWalks()) {
+    WideOut out{entered_.data(), pend_w_.data(), pend_b_.data()};
+    counts = walkEightBack(back_queue_.data(), n, culled_words, out, handed_over);
+    for (std::size_t i = 0; i < out.n_pend; ++i) words[pend_w_[i]] |= pend_b_[i];
+    n_entered = out.n_entered;
+    back_queue_.clear();
+  }
+#endif
+  (void)kernel;
+  for (const QueuedBackWalk& w : back_queue_) {
+    BackwardWalk walk;
+    for (int a = 0; a < 3; ++a) {
+      walk.s.t_delta[a] = w.t_delta[a];
+      walk.head[a] = w.head[a];
+      walk.next[a] = w.next[a];
+    }
+    walk.bound = w.bound;
+    walk.total = static_cast<std::size_t>(w.total);
+    PlaceSteps place{words, culled_words, entered_.data() + n_entered, 0, 0, w.at};
+    bool handover = false;
+    detail::backwardSteps(walk, place, handover);
+    n_entered += place.n_entered;
+    if (handover) {
+      handed_over.push_back(w.id);
+    } else {
+      counts.visits += place.marked;
+      counts.culled += walk.total - place.marked;
+    }
+  }
+  for (std::size_t i = 0; i < n_entered; ++i) touch(entered_[i]);
+  back_queue_.clear();
+  return counts;
 }
 
 }  // namespace densemap

@@ -183,7 +183,27 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
               mark_one(i, sink, local);
             }
           };
-          if (local.dense_ok && region != nullptr && region->sharesFrame(local.dense)) {
+          if (local.dense_ok && region != nullptr && region->sharesFrame(local.dense) &&
+              options_.queue_walks) {
+            // Backward walks queued and walked together at the range's end; those handed over
+            // (near-ties) walked again one by one, exactly.
+            SharedFrameSink sink{{local.dense, local.update}};
+            for (std::size_t j = range.begin(); j != range.end(); ++j) {
+              const std::size_t i = j * stride;
+              if (previous != 0 && i % previous == 0) continue;
+              markRayCulledQueued(grid, origin_world, rays_[i], *region, local.scratch, sink,
+                                  local.counts, *origin_key, static_cast<std::uint32_t>(i));
+            }
+            local.handed.clear();
+            const DenseMarks::BackWalkCounts walked =
+                local.dense.markQueuedBack(region->frameMasks(), local.handed);
+            local.counts.visits += walked.visits;
+            local.counts.culled += walked.culled;
+            for (const std::uint32_t i : local.handed) {
+              markCrossedCulled(grid, origin_world, rays_[i], *region, local.scratch, sink,
+                                local.counts, &*origin_key);
+            }
+          } else if (local.dense_ok && region != nullptr && region->sharesFrame(local.dense)) {
             SharedFrameSink sink{{local.dense, local.update}};
             mark_all(sink);
           } else if (local.dense_ok && region == nullptr && options_.queue_walks) {

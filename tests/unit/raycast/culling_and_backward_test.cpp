@@ -455,6 +455,112 @@ TEST(CullingRegion, GrowsByTheScansMarksAsBreadthFirstOverFullyFreeOrMarkedVoxel
   }
 }
 
+// The queued backward walks (markRayCulledQueued, DenseMarks::markQueuedBack in lanes or one by
+// one, handed-over walks walked again by markCrossedCulled) mark and count what markRayCulled does
+// with a culling region sharing the dense box's frame, on rays from the sensor's voxel and from
+// around it (adversarial kinds: near-ties hand over).
+TEST(DenseMarks, QueuedBackwardWalksMarkAndCountAsMarkRayCulled) {
+  std::mt19937 rng(9);
+  std::size_t queued = 0, handed = 0;
+  for (int trial = 0; trial < 6; ++trial) {
+    const double resolution = 0.25;  // dyadic: exact ties on the way (below) hand over
+    GridMap map(resolution, SensorModel{});
+    const VoxelGrid& grid = map.grid();
+    const Point3f origin(0.03F, -0.04F, 0.02F);
+    const VoxelKey o = *grid.pointToKey(origin);
+    std::bernoulli_distribution blocked(trial % 2 == 0 ? 0.0005 : 0.003);
+    for (int dz = -25; dz <= 25; ++dz) {
+      for (int dy = -25; dy <= 25; ++dy) {
+        for (int dx = -25; dx <= 25; ++dx) {
+          const VoxelKey k{static_cast<std::uint16_t>(o.x + dx),
+                           static_cast<std::uint16_t>(o.y + dy),
+                           static_cast<std::uint16_t>(o.z + dz)};
+          const bool block = blocked(rng) && k != o;
+          map.setLogOdds(k, block ? 0.5F : map.sensorModel().clampMin());
+        }
+      }
+    }
+    test::RandomRays random(resolution, 2.5, 40 + trial);
+    std::vector<RayEnd> rays;
+    std::vector<Point3f> origins;
+    std::uniform_int_distribution<int> lattice(-40, 40), scale(3, 40), pick(0, 2);
+    for (int i = 0; i < 3000; ++i) {
+      // A quarter of the rays from the sensor's point, a quarter with exact ratios of their
+      // direction's coordinates from dyadic points (exact ties between axes on the way), the
+      // others from anywhere.
+      test::Ray ray = random.next(test::kAllRayKinds[i % 8]);
+      if (i % 4 == 0) ray.origin = origin;
+      if (i % 4 == 1) {
+        static constexpr float kRatios[3][3] = {{2, 1, 0.5F}, {-1, 2, 0.25F}, {1, -0.5F, -2}};
+        const auto& r = kRatios[pick(rng)];
+        ray.origin = Point3f(static_cast<float>(lattice(rng)) / 64.0F,
+                             static_cast<float>(lattice(rng)) / 64.0F,
+                             static_cast<float>(lattice(rng)) / 64.0F);
+        ray.end = ray.origin + static_cast<float>(scale(rng)) / 32.0F * Point3f(r[0], r[1], r[2]);
+      }
+      rays.push_back(rayEndFor(grid, ray.origin, ray.end, 3.0));
+      origins.push_back(ray.origin);
+    }
+    const VoxelKey lo = *grid.pointToKey(Point3f(-4.0F, -4.0F, -4.0F));
+    const VoxelKey hi = *grid.pointToKey(Point3f(4.0F, 4.0F, 4.0F));
+    const KeyBox frame{lo, hi};
+    CullingRegion region;
+    // (The rays' ends not excluded: the region need not be exact for the walks, only shared.)
+    region.build(map, o, KeyBox{lo, hi}, {}, &frame);
+    ASSERT_GT(region.size(), 1000U);
+    for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kScalar}) {
+      DenseMarks plain_marks, sut_marks;
+      ASSERT_TRUE(plain_marks.reset(lo, hi, 1U << 20));
+      ASSERT_TRUE(sut_marks.reset(lo, hi, 1U << 20));
+      ASSERT_TRUE(region.sharesFrame(sut_marks));
+      ScanUpdate plain, sut;
+      SharedFrameSink plain_sink{{plain_marks, plain}}, sut_sink{{sut_marks, sut}};
+      MarkCounts plain_counts, sut_counts;
+      BackwardScratch scratch;
+      std::vector<std::uint32_t> handed_over;
+      const auto walk_queue = [&] {
+        handed_over.clear();
+        const auto walked = sut_marks.markQueuedBack(region.frameMasks(), handed_over, kernel);
+        sut_counts.visits += walked.visits;
+        sut_counts.culled += walked.culled;
+        for (const std::uint32_t i : handed_over) {
+          const VoxelKey ok = *grid.pointToKey(origins[i]);
+          markCrossedCulled(grid, origins[i], rays[i], region, scratch, sut_sink, sut_counts, &ok);
+        }
+        handed += handed_over.size();
+      };
+      for (std::uint32_t i = 0; i < rays.size(); ++i) {
+        const auto ok = grid.pointToKey(origins[i]);
+        if (!ok) continue;
+        markRayCulled(grid, origins[i], rays[i], region, scratch, plain_sink, plain_counts, &*ok);
+        queued += markRayCulledQueued(grid, origins[i], rays[i], region, scratch, sut_sink,
+                                      sut_counts, *ok, i)
+                      ? 1
+                      : 0;
+        if (i % 211 == 0) walk_queue();
+      }
+      walk_queue();
+      plain_marks.flushInto(plain);
+      sut_marks.flushInto(sut);
+      EXPECT_EQ(sut_counts.visits, plain_counts.visits) << "trial " << trial;
+      EXPECT_EQ(sut_counts.culled, plain_counts.culled) << "trial " << trial;
+      EXPECT_GT(plain_counts.culled, 1000U);
+      std::vector<std::pair<std::uint64_t, bool>> a, b;
+      plain.forEachCell([&](const VoxelKey& k, const CellHits& h) {
+        a.emplace_back(k.packed(), h.occupied > 0);
+      });
+      sut.forEachCell([&](const VoxelKey& k, const CellHits& h) {
+        b.emplace_back(k.packed(), h.occupied > 0);
+      });
+      std::sort(a.begin(), a.end());
+      std::sort(b.begin(), b.end());
+      EXPECT_EQ(a, b) << "trial " << trial;
+    }
+  }
+  EXPECT_GT(queued, 10000U);
+  EXPECT_GT(handed, 10U) << "walks handed over to the exact walk";
+}
+
 TEST(CullingRegion, IsEmptyWhenTheSensorsVoxelIsNotFullyFreeAndBoxesFitTheBudget) {
   GridMap map(0.1, SensorModel{});
   const VoxelKey o{32768, 32768, 32768};

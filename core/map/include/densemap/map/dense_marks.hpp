@@ -296,20 +296,35 @@ class DenseMarks {
     bool out_ = false;
   };
 
-  /// A forward walk queued by queueWalk: countedSteps' times, and its voxel as a bit address in
-  /// the box's mask array (block * 512 + block::indexOf) with per axis the steps left to the
-  /// next block border, a step's change of the address inside a block and into the next one.
-  struct QueuedWalk {
-    double t_max[3];
-    double t_delta[3];
+  /// A queued walk's voxel: its bit address in the box's mask array (block * 512 +
+  /// block::indexOf), and per axis the steps left to the next block border, a step's change of
+  /// the address inside a block and into the next one (as DenseMarks::Cursor follows it).
+  struct WalkPlace {
     std::uint64_t addr;
-    std::int32_t steps;  // after the first voxel
     std::int32_t left[3];
     std::int32_t small[3];
     std::int32_t wrap[3];
   };
+  /// A forward walk queued by queueWalk: countedSteps' times from its first voxel.
+  struct QueuedWalk {
+    double t_max[3];
+    double t_delta[3];
+    WalkPlace at;
+    std::int32_t steps;  // after the first voxel
+  };
+  /// A backward walk queued by queueBackWalk: traverseRayBackward's fast loop (BackwardWalk's
+  /// heads, crossings left, deltas and bound) from the end voxel.
+  struct QueuedBackWalk {
+    double head[3];
+    double t_delta[3];
+    double bound;
+    WalkPlace at;
+    std::int32_t next[3];
+    std::int32_t total;  // the forward traversal's voxels: the most steps back
+    std::uint32_t id;    // the caller's
+  };
   /// How markQueued walks: kBest 8 walks at a time with AVX-512 where the processor has it
-  /// (hasWideWalks), else one at a time as kScalar does (countedSteps).
+  /// (hasWideWalks), else one at a time as kScalar does (countedSteps, backwardSteps).
   enum class WalkKernel { kBest, kScalar };
   [[nodiscard]] static bool hasWideWalks();
 
@@ -320,26 +335,55 @@ class DenseMarks {
   /// in the box (so are the walk's voxels between them).
   bool queueWalk(const VoxelKey& first, const int (&delta)[3], const VoxelKey& last,
                  const double (&t_max)[3], const double (&t_delta)[3], int total) {
-    const std::uint32_t b = blockIndex(first);
-    if (b == kOutside || blockIndex(last) == kOutside) return false;
+    WalkPlace at;
+    if (!place(first, delta, last, at)) return false;
     QueuedWalk& w = queue_.emplace_back();
-    const int index = block::indexOf(first);
-    w.addr = static_cast<std::uint64_t>(b) * block::kVoxels + static_cast<unsigned>(index);
+    w.at = at;
     w.steps = total - 1;
-    const int in_block[3] = {first.x & (block::kEdge - 1), first.y & (block::kEdge - 1),
-                             first.z & (block::kEdge - 1)};
-    const std::int32_t stride[3] = {1, static_cast<std::int32_t>(n_[0]),
-                                    static_cast<std::int32_t>(n_[0] * n_[1])};
     for (int a = 0; a < 3; ++a) {
       w.t_max[a] = t_max[a];
       w.t_delta[a] = t_delta[a];
-      w.left[a] = delta[a] > 0 ? block::kEdge - in_block[a] : in_block[a] + 1;
-      w.small[a] = delta[a] << (block::kShift * a);
-      w.wrap[a] = delta[a] * stride[a] * block::kVoxels - (block::kEdge - 1) * w.small[a];
     }
-    setAt(b, index);
+    const auto b = static_cast<std::uint32_t>(at.addr >> 9);
+    setAt(b, static_cast<int>(at.addr & (block::kVoxels - 1)));
     return true;
   }
+  /// Queues traverseRayBackward's fast walk (prepareBackward's kFast: `head`, `next`, `t_delta`,
+  /// `bound`, `total` as in BackwardWalk) from the end voxel `first` (not marked), moving by
+  /// `delta[a]` along axis a, to the origin's voxel `last`: markQueuedBack walks it. False
+  /// (nothing queued) unless both are in the box.
+  bool queueBackWalk(const VoxelKey& first, const int (&delta)[3], const VoxelKey& last,
+                     const double (&head)[3], const double (&t_delta)[3], const int (&next)[3],
+                     double bound, std::size_t total, std::uint32_t id) {
+    WalkPlace at;
+    if (!place(first, delta, last, at)) return false;
+    QueuedBackWalk& w = back_queue_.emplace_back();
+    w.at = at;
+    w.bound = bound;
+    w.total = static_cast<std::int32_t>(total);
+    w.id = id;
+    for (int a = 0; a < 3; ++a) {
+      w.head[a] = head[a];
+      w.t_delta[a] = t_delta[a];
+      w.next[a] = next[a];
+    }
+    touch(static_cast<std::uint32_t>(at.addr >> 9));  // entered (as cursorFor)
+    return true;
+  }
+  /// Voxels markQueuedBack marked and skipped (markRayCulled's counts).
+  struct BackWalkCounts {
+    std::size_t visits = 0;
+    std::size_t culled = 0;
+  };
+  /// Walks the queued backward walks, then empties the queue: each step moves (the latest
+  /// crossing undone) and stops at a voxel `culled` holds (a culling region's bits in this box's
+  /// block layout, block b's at [b]: CullingRegion::frameMasks), else marks it. A walk whose
+  /// decision does not win by its bound is the caller's to walk exactly: its id is appended to
+  /// `handed_over` and its counts are not added (what it marked is part of what the exact walk
+  /// marks). A walk's counts are visits = voxels marked, culled = total - visits.
+  BackWalkCounts markQueuedBack(const block::BlockMask* culled,
+                                std::vector<std::uint32_t>& handed_over,
+                                WalkKernel kernel = WalkKernel::kBest);
   /// Marks the queued walks' voxels after their first, then empties the queue.
   void markQueued(WalkKernel kernel = WalkKernel::kBest);
 
@@ -359,6 +403,24 @@ class DenseMarks {
   /// The index of `k`'s block in the box, or kOutside.
   [[nodiscard]] std::uint32_t blockIndex(const VoxelKey& k) const {
     return blockIndexIn(k, min_, n_);
+  }
+  /// A walk's place from voxel `first` toward `last` (moving by `delta`), when both are in the
+  /// box (else false).
+  bool place(const VoxelKey& first, const int (&delta)[3], const VoxelKey& last, WalkPlace& at) {
+    const std::uint32_t b = blockIndex(first);
+    if (b == kOutside || blockIndex(last) == kOutside) return false;
+    at.addr = static_cast<std::uint64_t>(b) * block::kVoxels +
+              static_cast<unsigned>(block::indexOf(first));
+    const int in_block[3] = {first.x & (block::kEdge - 1), first.y & (block::kEdge - 1),
+                             first.z & (block::kEdge - 1)};
+    const std::int32_t stride[3] = {1, static_cast<std::int32_t>(n_[0]),
+                                    static_cast<std::int32_t>(n_[0] * n_[1])};
+    for (int a = 0; a < 3; ++a) {
+      at.left[a] = delta[a] > 0 ? block::kEdge - in_block[a] : in_block[a] + 1;
+      at.small[a] = delta[a] * (1 << (block::kShift * a));
+      at.wrap[a] = delta[a] * stride[a] * block::kVoxels - (block::kEdge - 1) * at.small[a];
+    }
+    return true;
   }
   /// Sets voxel `index` of block `i`, with branch-free first-touch bookkeeping: the touched
   /// slot is overwritten until the count moves.
@@ -407,6 +469,7 @@ class DenseMarks {
   ZeroedArray<std::uint32_t> touched_;  // one spare slot for the branch-free append
   std::size_t touched_count_ = 0;
   std::vector<QueuedWalk> queue_;
+  std::vector<QueuedBackWalk> back_queue_;
   std::vector<std::uint32_t> entered_;          // markQueued's: blocks the walks entered
   std::vector<std::uint64_t> pend_w_, pend_b_;  // markQueued's: marks gathered per word
 };

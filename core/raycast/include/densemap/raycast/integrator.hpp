@@ -57,9 +57,10 @@ struct IntegratorOptions {
   /// grow_probe_every-th scan grows (to measure again).
   double grow_min_share = 0.25;
   std::size_t grow_probe_every = 8;
-  /// With dense marks and no culling region, the rays' forward walks are queued and walked
-  /// several at a time (DenseMarks::markQueued: eight side by side with AVX-512); false: one at
-  /// a time as they come (the same marks).
+  /// With dense marks, the rays' walks (forward ones, or backward ones with a culling region
+  /// sharing their box's frame) are queued and walked several at a time (DenseMarks::markQueued
+  /// and markQueuedBack: eight side by side with AVX-512); false: one at a time as they come
+  /// (the same marks).
   bool queue_walks = true;
 };
 
@@ -88,9 +89,8 @@ struct ScanStats {
 class Integrator {
  public:
   explicit Integrator(const IntegratorOptions& options = {})
-      : options_(options), locals_([rule = options.rule] {
-          return Local{ScanUpdate(rule), {}, {}, {}, false};
-        }) {}
+      : options_(options),
+        locals_([rule = options.rule] { return Local{ScanUpdate(rule), {}, {}, {}, false, {}}; }) {}
 
   [[nodiscard]] const IntegratorOptions& options() const { return options_; }
 
@@ -109,6 +109,7 @@ class Integrator {
     BackwardScratch scratch;
     DenseMarks dense;
     bool dense_ok = false;  // `dense` covers this scan's box
+    std::vector<std::uint32_t> handed;  // rays whose queued walks were handed over
   };
   IntegratorOptions options_;
   std::vector<RayEnd> rays_;

@@ -269,17 +269,11 @@ inline bool markRayQueued(const VoxelGrid& grid, const Point3f& origin, const Ra
   return false;
 }
 
-/// markRay with a culling region (dissertation Sec. 2.3.5): the ray is traversed from its end
-/// back toward the sensor and stops at the first voxel inside the region. That is exact: the
-/// region is closed toward the sensor's voxel along each axis and a traversal moves
-/// monotonically away from that voxel, so every voxel before it on the ray is inside too — and
-/// inside, free updates cannot change the map (fully free, not ended in by this scan's rays).
-/// `Region` needs `bool contains(const VoxelKey&) const`. `origin_key`, when given, is the
-/// origin's key (the walk then takes the ends' keys from it and the ray, not from their points).
+/// markRayCulled's free marks (the crossed voxels outside the region), not the end voxel's.
 template <class Region, class Sink>
-void markRayCulled(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray,
-                   const Region& region, BackwardScratch& scratch, Sink& update, MarkCounts& counts,
-                   const VoxelKey* origin_key = nullptr) {
+void markCrossedCulled(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray,
+                       const Region& region, BackwardScratch& scratch, Sink& update,
+                       MarkCounts& counts, const VoxelKey* origin_key) {
   // The ends' keys when the caller has the origin's (the end's is the ray's).
   RayKeys keys;
   const RayKeys* known = nullptr;
@@ -305,7 +299,48 @@ void markRayCulled(const VoxelGrid& grid, const Point3f& origin, const RayEnd& r
   }
   counts.visits += marked;
   counts.culled += total - marked;
+}
+
+/// markRay with a culling region (dissertation Sec. 2.3.5): the ray is traversed from its end
+/// back toward the sensor and stops at the first voxel inside the region. That is exact: the
+/// region is closed toward the sensor's voxel along each axis and a traversal moves
+/// monotonically away from that voxel, so every voxel before it on the ray is inside too — and
+/// inside, free updates cannot change the map (fully free, not ended in by this scan's rays).
+/// `Region` needs `bool contains(const VoxelKey&) const`. `origin_key`, when given, is the
+/// origin's key (the walk then takes the ends' keys from it and the ray, not from their points).
+template <class Region, class Sink>
+void markRayCulled(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray,
+                   const Region& region, BackwardScratch& scratch, Sink& update, MarkCounts& counts,
+                   const VoxelKey* origin_key = nullptr) {
+  markCrossedCulled(grid, origin, ray, region, scratch, update, counts, origin_key);
   markEnd(ray, update, counts);
+}
+
+/// markRayCulled through a SharedFrameSink, its backward walk queued when it can be (the fast
+/// walk, prepareBackward's kFast, between two voxels of the box): the end voxel is marked now,
+/// the walk by the sink's DenseMarks::markQueuedBack (with `region`'s frame masks), which the
+/// caller runs before the marks are read — and a walk it hands over (a near-tie on the way) the
+/// caller walks again by markCrossedCulled (`id` names the ray; its end is marked). Other rays
+/// are marked as markRayCulled does. Returns whether the walk was queued.
+template <class Region>
+bool markRayCulledQueued(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray,
+                         const Region& region, BackwardScratch& scratch, SharedFrameSink& sink,
+                         MarkCounts& counts, const VoxelKey& origin_key, std::uint32_t id) {
+  if (ray.key_valid) {
+    BackwardWalk walk;
+    const RayKeys keys{origin_key, ray.key};
+    if (prepareBackward(grid, origin, ray.end, walk, &keys) == BackwardMode::kFast) {
+      const TraversalStart& s = walk.s;
+      const int delta[3] = {-s.step[0], -s.step[1], -s.step[2]};
+      if (sink.dense.queueBackWalk(s.end, delta, s.origin, walk.head, s.t_delta, walk.next,
+                                   walk.bound, walk.total, id)) {
+        markEnd(ray, sink, counts);
+        return true;
+      }
+    }
+  }
+  markRayCulled(grid, origin, ray, region, scratch, sink, counts, &origin_key);
+  return false;
 }
 
 }  // namespace densemap
