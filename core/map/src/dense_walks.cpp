@@ -47,6 +47,7 @@ struct PlaceSteps {
 // GCC 12's AVX-512 intrinsics start some results from _mm512_undefined_* (its bug 105593).
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
 #define DENSEMAP_AVX512 gnu::target("avx512f,avx512vl,avx512dq")
 
 /// Writes the lanes' words and marks, packed, at `w` and `b` (8 slots each); returns how many.
@@ -176,8 +177,12 @@ struct WideOut {
 
 /// The backward walks' steps eight at a time, one walk a lane: backwardSteps' decision (the
 /// latest head, ties to the lower axis, winning by more than the bound, else the walk is handed
-/// over) as compare masks; a lane stops at a voxel `culled` holds (its words read once per word,
-/// gathered). Returns the counts of the walks not handed over; their ids go to `handed_over`.
+/// over) as compare masks; a lane stops at a voxel `culled` holds. The region's word of a
+/// lane's voxel is gathered when the lane moves to another word, and the voxel is tested (and
+/// marked) one iteration later, after the next step's decision: the gather's wait overlaps that
+/// work instead of holding up every step (a lane that stops has moved one voxel on, unmarked,
+/// and is dropped). Returns the counts of the walks not handed over; their ids go to
+/// `handed_over`.
 [[DENSEMAP_AVX512]] DenseMarks::BackWalkCounts walkEightBack(
     const DenseMarks::QueuedBackWalk* walks, std::size_t n, const std::uint64_t* culled,
     WideOut& out, std::vector<std::uint32_t>& handed_over) {
@@ -189,6 +194,7 @@ struct WideOut {
   LanePlaces p{zero, zero, zero, zero, zero, zero, zero, zero, zero, zero};
   __m512i left = zero, marked = zero;
   __m512i cur_w = zero, cur_b = zero, cur_r = zero;  // cur_r: the region's bits of cur_w
+  __m512i pending = zero;  // the bit of the voxel moved to and not yet tested (0: none)
   __mmask8 live = 0, handing = 0;
   std::size_t lane_walk[8] = {0, 0, 0, 0, 0, 0, 0, 0};
   std::size_t next = 0;
@@ -196,8 +202,9 @@ struct WideOut {
   alignas(64) std::int64_t marked_at[8];
   while (true) {
     __mmask8 active = _mm512_cmpgt_epi64_mask(left, zero);
-    if (active != 0xff) {
-      const auto done = static_cast<__mmask8>(live & ~active);
+    __mmask8 tested = _mm512_test_epi64_mask(pending, pending);
+    if (static_cast<__mmask8>(active | tested) != 0xff) {
+      const auto done = static_cast<__mmask8>(live & ~(active | tested));
       out.n_pend += pendLanes(done, cur_w, cur_b, out.pend_w + out.n_pend, out.pend_b + out.n_pend);
       if (done != 0) {
         _mm512_store_si512(marked_at, marked);
@@ -213,9 +220,10 @@ struct WideOut {
         }
         handing = static_cast<__mmask8>(handing & ~done);
       }
-      cur_b = _mm512_maskz_mov_epi64(active, cur_b);
-      marked = _mm512_maskz_mov_epi64(active, marked);
-      auto idle = static_cast<unsigned>(static_cast<__mmask8>(~active));
+      const auto busy = static_cast<__mmask8>(active | tested);
+      cur_b = _mm512_maskz_mov_epi64(busy, cur_b);
+      marked = _mm512_maskz_mov_epi64(busy, marked);
+      auto idle = static_cast<unsigned>(static_cast<__mmask8>(~busy));
       for (; idle != 0 && next < n; idle &= idle - 1, ++next) {
         const DenseMarks::QueuedBackWalk& w = walks[next];
         const auto k = static_cast<__mmask8>(idle & (0U - idle));
@@ -237,10 +245,10 @@ struct WideOut {
         cur_r = _mm512_mask_set1_epi64(cur_r, k, static_cast<long long>(culled[word]));
       }
       active = _mm512_cmpgt_epi64_mask(left, zero);
-      live = active;
-      if (active == 0) break;
+      live = static_cast<__mmask8>(active | tested);
+      if (live == 0) break;
     }
-    // The latest crossing (ties to the lower axis) and the runner-up.
+    // The next step's decision: the latest crossing (ties to the lower axis), the runner-up.
     const __m512d high01 = _mm512_max_pd(h0, h1);
     const __mmask8 m2 = _mm512_mask_cmp_pd_mask(active, h2, high01, _CMP_GT_OQ);
     const __mmask8 ge01 = _mm512_cmp_pd_mask(h0, h1, _CMP_GE_OQ);
@@ -253,13 +261,19 @@ struct WideOut {
     runner = _mm512_mask_mov_pd(runner, m2, high01);
     const __mmask8 wins =
         _mm512_mask_cmp_pd_mask(active, _mm512_sub_pd(chosen, runner), bound, _CMP_GT_OQ);
-    const auto hand = static_cast<__mmask8>(active & ~wins);
-    handing = static_cast<__mmask8>(handing | hand);
-    left = _mm512_mask_mov_epi64(left, hand, zero);
-    m0 = static_cast<__mmask8>(m0 & wins);
-    m1 = static_cast<__mmask8>(m1 & wins);
-    const auto m2w = static_cast<__mmask8>(m2 & wins);
+    // The voxel moved to last time: in the region (the walk ends there), else marked.
+    const __mmask8 stop = _mm512_mask_test_epi64_mask(tested, cur_r, pending);
+    const auto mark = static_cast<__mmask8>(tested & ~stop);
+    cur_b = _mm512_mask_or_epi64(cur_b, mark, cur_b, pending);
+    marked = _mm512_mask_add_epi64(marked, mark, marked, one);
+    const auto go = static_cast<__mmask8>(active & ~stop);
+    handing = static_cast<__mmask8>(handing | (go & ~wins));
+    m0 = static_cast<__mmask8>(m0 & wins & ~stop);
+    m1 = static_cast<__mmask8>(m1 & wins & ~stop);
+    const auto m2w = static_cast<__mmask8>(m2 & wins & ~stop);
     const auto steps = static_cast<__mmask8>(m0 | m1 | m2w);
+    // Lanes that stopped or hand over take no more steps.
+    left = _mm512_maskz_mov_epi64(steps, left);
     // head = --next >= 0 ? head - delta : -inf
     n0 = _mm512_mask_sub_epi64(n0, m0, n0, one);
     n1 = _mm512_mask_sub_epi64(n1, m1, n1, one);
@@ -278,12 +292,7 @@ struct WideOut {
     cur_w = _mm512_mask_mov_epi64(cur_w, moved, word);
     cur_b = _mm512_mask_mov_epi64(cur_b, moved, zero);
     cur_r = _mm512_mask_i64gather_epi64(cur_r, moved, word, culled, 8);
-    const __m512i bit = _mm512_sllv_epi64(one, _mm512_and_si512(p.addr, low6));
-    const __mmask8 stop = _mm512_mask_test_epi64_mask(steps, cur_r, bit);
-    left = _mm512_mask_mov_epi64(left, stop, zero);
-    const auto mark = static_cast<__mmask8>(steps & ~stop);
-    cur_b = _mm512_mask_or_epi64(cur_b, mark, cur_b, bit);
-    marked = _mm512_mask_add_epi64(marked, mark, marked, one);
+    pending = _mm512_maskz_sllv_epi64(steps, one, _mm512_and_si512(p.addr, low6));
   }
   return counts;
 }

@@ -176,6 +176,17 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
             local.dense_ok =
                 dense && local.dense.reset(box.min, box.max, options_.dense_marks_max_blocks);
           }
+          // The range's rays of this level, by index (the queued walks take them so).
+          const auto idsOf = [&](const tbb::blocked_range<std::size_t>& r,
+                                 std::vector<std::uint32_t>& ids) {
+            ids.clear();
+            for (std::size_t j = r.begin(); j != r.end(); ++j) {
+              const std::size_t i = j * stride;
+              if (previous != 0 && i % previous == 0) continue;
+              ids.push_back(static_cast<std::uint32_t>(i));
+            }
+            return std::span<const std::uint32_t>(ids);
+          };
           const auto mark_all = [&](auto& sink) {
             for (std::size_t j = range.begin(); j != range.end(); ++j) {
               const std::size_t i = j * stride;
@@ -188,12 +199,8 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
             // Backward walks queued and walked together at the range's end; those handed over
             // (near-ties) walked again one by one, exactly.
             SharedFrameSink sink{{local.dense, local.update}};
-            for (std::size_t j = range.begin(); j != range.end(); ++j) {
-              const std::size_t i = j * stride;
-              if (previous != 0 && i % previous == 0) continue;
-              markRayCulledQueued(grid, origin_world, rays_[i], *region, local.scratch, sink,
-                                  local.counts, *origin_key, static_cast<std::uint32_t>(i));
-            }
+            markRaysCulledQueued(grid, origin_world, rays_.data(), idsOf(range, local.ids), *region,
+                                 local.scratch, sink, local.counts, *origin_key);
             local.handed.clear();
             const DenseMarks::BackWalkCounts walked =
                 local.dense.markQueuedBack(region->frameMasks(), local.handed);
@@ -209,11 +216,8 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
           } else if (local.dense_ok && region == nullptr && options_.queue_walks) {
             // Forward walks queued and walked together at the range's end.
             DenseSink sink{local.dense, local.update};
-            for (std::size_t j = range.begin(); j != range.end(); ++j) {
-              const std::size_t i = j * stride;
-              if (previous != 0 && i % previous == 0) continue;
-              markRayQueued(grid, origin_world, rays_[i], sink, local.counts, *origin_key);
-            }
+            markRaysQueued(grid, origin_world, rays_.data(), idsOf(range, local.ids), sink,
+                           local.counts, *origin_key);
             local.dense.markQueued();
           } else if (local.dense_ok) {
             DenseSink sink{local.dense, local.update};

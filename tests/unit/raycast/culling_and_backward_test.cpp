@@ -150,7 +150,64 @@ TEST(DenseMarks, StepMarkerMarksAsTheHashOnWalksInsideAndLeavingItsBox) {
   }
 }
 
-// The queued walks (markRayQueued, DenseMarks::markQueued: eight lanes side by side with
+// startTraversals (eight rays side by side where the processor has AVX-512) gives what
+// startTraversal and endOf give, bit for bit, on adversarial rays from one origin per batch.
+TEST(TraverseRay, WideStartsAreTheScalarStartsBitForBit) {
+  std::size_t rays = 0, clean = 0;
+  for (const double resolution : {0.05, 0.1, 0.2, 0.25, 1.0 / 3.0}) {
+    const VoxelGrid grid(resolution);
+    test::RandomRays random(resolution, 30.0, 23);
+    for (int batch = 0; batch < 3000; ++batch) {
+      const test::Ray first = random.next(test::kAllRayKinds[batch % 8]);
+      const auto key_origin = grid.pointToKey(first.origin);
+      if (!key_origin) continue;
+      Point3f ends[8];
+      VoxelKey keys[8];
+      int n = 0;
+      for (int i = 0; i < 8; ++i) {
+        const test::Ray r = i == 0 ? first : random.next(test::kAllRayKinds[(batch + i) % 8]);
+        const auto k = grid.pointToKey(r.end);
+        if (!k) continue;
+        ends[n] = r.end;
+        keys[n++] = *k;
+      }
+      TraversalStarts wide, one;
+      startTraversals(grid, first.origin, *key_origin, ends, keys, n, wide, true);
+      startTraversals(grid, first.origin, *key_origin, ends, keys, n, one, false);
+      for (int i = 0; i < n; ++i) {
+        ++rays;
+        TraversalStart s;
+        const TraversalKind kind =
+            startTraversal(grid, first.origin, *key_origin, ends[i], keys[i], s);
+        ASSERT_EQ(one.kind[i], kind);
+        ASSERT_EQ(wide.kind[i], kind) << "batch " << batch << " ray " << i;
+        if (kind != TraversalKind::kRay) continue;
+        int crossings[3];
+        TraversalEndTimes times{};
+        const TraversalEnd end = endOf(s, crossings, &times);
+        ASSERT_EQ(wide.end[i], end) << "batch " << batch << " ray " << i;
+        ASSERT_EQ(wide.start[i].length, s.length);
+        for (int a = 0; a < 3; ++a) {
+          ASSERT_EQ(wide.start[i].step[a], s.step[a]);
+          ASSERT_EQ(wide.start[i].t_max[a], s.t_max[a]) << "batch " << batch << " axis " << a;
+          ASSERT_EQ(wide.start[i].t_delta[a], s.t_delta[a]);
+          if (end != TraversalEnd::kIrregular) {
+            ASSERT_EQ(wide.crossings[i][a], crossings[a]);
+          }
+        }
+        if (end != TraversalEnd::kClean) continue;
+        ++clean;
+        ASSERT_EQ(wide.times[i].scale, times.scale);
+        for (int a = 0; a < 3; ++a) ASSERT_EQ(wide.times[i].last[a], times.last[a]);
+      }
+    }
+  }
+  EXPECT_GT(rays, 80000U);
+  EXPECT_GT(clean, 20000U);
+  if (!hasWideTraversalStarts()) std::cout << "no AVX-512 here: both were the scalar starts\n";
+}
+
+// The queued walks (markRaysQueued, DenseMarks::markQueued: eight lanes side by side with
 // AVX-512, or one walk at a time) mark what markRay marks into a hash, walks leaving the box
 // included (those are not queued), in batches of any size.
 TEST(DenseMarks, QueuedWalksMarkAsTheHashInLanesAndOneByOne) {
@@ -175,7 +232,9 @@ TEST(DenseMarks, QueuedWalksMarkAsTheHashInLanesAndOneByOne) {
         markRay(grid, ray.origin, end, plain, plain_counts);
         const auto origin_key = grid.pointToKey(ray.origin);
         if (!origin_key) continue;
-        queued += markRayQueued(grid, ray.origin, end, sink, sut_counts, *origin_key) ? 1 : 0;
+        const std::uint32_t first = 0;  // one ray (a batch shares its origin)
+        queued +=
+            markRaysQueued(grid, ray.origin, &end, {&first, 1}, sink, sut_counts, *origin_key);
         if (--left_in_batch == 0) {
           dense.markQueued(kernel);
           left_in_batch = batch_size(rng);
@@ -230,7 +289,10 @@ TEST(DenseMarks, QueuedWalksBreakExactTiesAsTheCountedLoop) {
       const RayEnd ray = rayEndFor(grid, origin, end, -1.0);
       markRay(grid, origin, ray, plain, plain_counts);
       const VoxelKey origin_key = *grid.pointToKey(origin);
-      if (!markRayQueued(grid, origin, ray, sink, sut_counts, origin_key)) continue;
+      const std::uint32_t first = 0;
+      if (markRaysQueued(grid, origin, &ray, {&first, 1}, sink, sut_counts, origin_key) == 0) {
+        continue;
+      }
       // An exact tie between the two smallest times at some step of the counted loop?
       TraversalStart s;
       startTraversal(grid, origin, origin_key, ray.end, ray.key, s);
@@ -455,7 +517,7 @@ TEST(CullingRegion, GrowsByTheScansMarksAsBreadthFirstOverFullyFreeOrMarkedVoxel
   }
 }
 
-// The queued backward walks (markRayCulledQueued, DenseMarks::markQueuedBack in lanes or one by
+// The queued backward walks (markRaysCulledQueued, DenseMarks::markQueuedBack in lanes or one by
 // one, handed-over walks walked again by markCrossedCulled) mark and count what markRayCulled does
 // with a culling region sharing the dense box's frame, on rays from the sensor's voxel and from
 // around it (adversarial kinds: near-ties hand over).
@@ -533,10 +595,8 @@ TEST(DenseMarks, QueuedBackwardWalksMarkAndCountAsMarkRayCulled) {
         const auto ok = grid.pointToKey(origins[i]);
         if (!ok) continue;
         markRayCulled(grid, origins[i], rays[i], region, scratch, plain_sink, plain_counts, &*ok);
-        queued += markRayCulledQueued(grid, origins[i], rays[i], region, scratch, sut_sink,
-                                      sut_counts, *ok, i)
-                      ? 1
-                      : 0;
+        queued += markRaysCulledQueued(grid, origins[i], rays.data(), {&i, 1}, region, scratch,
+                                       sut_sink, sut_counts, *ok);
         if (i % 211 == 0) walk_queue();
       }
       walk_queue();

@@ -158,6 +158,23 @@ inline TraversalEnd endOf(const TraversalStart& s, int (&crossings)[3],
 /// much as the end tests of a few steps).
 inline constexpr int kCountedStepsFrom = 8;
 
+/// startTraversal and endOf (with its times) of up to eight rays from one origin.
+struct TraversalStarts {
+  TraversalKind kind[8];
+  TraversalStart start[8];     // kind kRay
+  TraversalEnd end[8];         // kind kRay: endOf's
+  int crossings[8][3];         // kind kRay: endOf's
+  TraversalEndTimes times[8];  // end kClean
+};
+/// Fills `out` for rays 0..n-1 (n <= 8) from `origin` (key `key_origin`) to `ends[i]` (key
+/// `key_ends[i]`; both in range): bit for bit what startTraversal and endOf give, eight rays
+/// side by side in AVX-512 lanes when `wide` and the processor has them
+/// (hasWideTraversalStarts), else one by one with those functions.
+void startTraversals(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_origin,
+                     const Point3f* ends, const VoxelKey* key_ends, int n, TraversalStarts& out,
+                     bool wide = true);
+[[nodiscard]] bool hasWideTraversalStarts();
+
 /// The voxels of a ray's traversal when traverseRay's step visitors walk it counted (at least
 /// kCountedStepsFrom crossings and endOf kClean: the origin's voxel, then countedSteps' total - 1
 /// steps), else 0 (the loop with end tests). The one rule for both traverseRay and the walks
@@ -168,6 +185,13 @@ inline constexpr int kCountedStepsFrom = 8;
   if (total < kCountedStepsFrom) return 0;
   int crossings[3];
   return endOf(s, crossings) == TraversalEnd::kClean ? total : 0;
+}
+/// countedTotal from endOf's answer (`end`, `crossings`) when the caller has it: for a kClean
+/// end the crossings are the keys' distances.
+[[nodiscard]] inline int countedTotal(TraversalEnd end, const int (&crossings)[3]) {
+  if (end != TraversalEnd::kClean) return 0;
+  const int total = crossings[0] + crossings[1] + crossings[2];
+  return total >= kCountedStepsFrom ? total : 0;
 }
 
 /// The steps of a clean ray's loop (endOf: it enters the end voxel after exactly `total`
@@ -430,6 +454,22 @@ enum class BackwardMode {
   kFast,            // `walk` is ready for fast steps
 };
 
+/// The fast backward walk's heads, counts and bound from a kClean endOf (its crossings and
+/// times); walk.s must be the ray's start already.
+inline void fastBackwardFrom(const int (&crossings)[3], const TraversalEndTimes& times,
+                             BackwardWalk& walk) {
+  // One bound for the whole walk: heads are computed t0 + k * delta (the last crossings' times,
+  // -inf for an axis with none), then decremented.
+  constexpr double kRel = 0x1p-50;
+  walk.total = static_cast<std::size_t>(crossings[0] + crossings[1] + crossings[2]);
+  walk.bound = 2 * (static_cast<double>(walk.total) + 16) * kRel * times.scale;
+  for (int a = 0; a < 3; ++a) {
+    walk.crossings[a] = crossings[a];
+    walk.next[a] = crossings[a] - 1;
+    walk.head[a] = times.last[a];
+  }
+}
+
 /// Sets up the backward walk of ray (origin, end); decides with margins whether the fast path
 /// may start (see traverseRayBackward).
 /// (`keys`, when given: the ends' keys, as startTraversal takes them.)
@@ -452,15 +492,7 @@ inline BackwardMode prepareBackward(const VoxelGrid& grid, const Point3f& origin
     case TraversalEnd::kClean:
       break;
   }
-  // One bound for the whole walk: heads are computed t0 + k * delta (the last crossings' times,
-  // -inf for an axis with none), then decremented.
-  constexpr double kRel = 0x1p-50;
-  walk.total = static_cast<std::size_t>(crossings[0] + crossings[1] + crossings[2]);
-  walk.bound = 2 * (static_cast<double>(walk.total) + 16) * kRel * times.scale;
-  for (int a = 0; a < 3; ++a) {
-    walk.next[a] = crossings[a] - 1;
-    walk.head[a] = times.last[a];
-  }
+  fastBackwardFrom(crossings, times, walk);
   return BackwardMode::kFast;
 }
 

@@ -89,8 +89,9 @@ struct ScanStats {
 class Integrator {
  public:
   explicit Integrator(const IntegratorOptions& options = {})
-      : options_(options),
-        locals_([rule = options.rule] { return Local{ScanUpdate(rule), {}, {}, {}, false, {}}; }) {}
+      : options_(options), locals_([rule = options.rule] {
+          return Local{ScanUpdate(rule), {}, {}, {}, false, {}, {}};
+        }) {}
 
   [[nodiscard]] const IntegratorOptions& options() const { return options_; }
 
@@ -110,6 +111,7 @@ class Integrator {
     DenseMarks dense;
     bool dense_ok = false;  // `dense` covers this scan's box
     std::vector<std::uint32_t> handed;  // rays whose queued walks were handed over
+    std::vector<std::uint32_t> ids;     // a range's rays, for the queued walks
   };
   IntegratorOptions options_;
   std::vector<RayEnd> rays_;

@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <optional>
+#include <span>
 #include <type_traits>
 #include <utility>
 
@@ -247,26 +248,64 @@ void markRay(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray, Si
   markEnd(ray, update, counts);
 }
 
-/// markRay through a DenseSink, its forward walk queued when it can be (a counted walk between
-/// two voxels of the box: every ray of the integrator's box but short ones and near-ties at the
-/// end): the first voxel is marked now and the others by the sink's DenseMarks::markQueued,
-/// which the caller runs before the marks are read. Other rays are marked as markRay does.
-/// Returns whether the walk was queued.
-inline bool markRayQueued(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray,
-                          DenseSink& sink, MarkCounts& counts, const VoxelKey& origin_key) {
-  if (ray.key_valid) {
-    TraversalStart s;
-    if (startTraversal(grid, origin, origin_key, ray.end, ray.key, s) == TraversalKind::kRay) {
-      const int total = countedTotal(s);
-      if (total != 0 && sink.dense.queueWalk(s.origin, s.step, s.end, s.t_max, s.t_delta, total)) {
-        counts.visits += static_cast<std::size_t>(total);
-        markEnd(ray, sink, counts);
-        return true;
-      }
+/// Rays rays[id] for `ids`, their traversals started eight at a time (startTraversals):
+/// `each(id, starts, lane)` in order for those whose end key is valid, `other(id)` for the rest.
+template <class Each, class Other>
+void startRaysByEight(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& origin_key,
+                      const RayEnd* rays, std::span<const std::uint32_t> ids, Each&& each,
+                      Other&& other) {
+  TraversalStarts starts;
+  Point3f ends[8];
+  VoxelKey keys[8];
+  std::uint32_t lane_ray[8];
+  int n = 0;
+  const auto start = [&] {
+    startTraversals(grid, origin, origin_key, ends, keys, n, starts);
+    for (int l = 0; l < n; ++l) each(lane_ray[l], starts, l);
+    n = 0;
+  };
+  for (const std::uint32_t id : ids) {
+    const RayEnd& ray = rays[id];
+    if (!ray.key_valid) {
+      other(id);
+      continue;
     }
+    ends[n] = ray.end;
+    keys[n] = ray.key;
+    lane_ray[n++] = id;
+    if (n == 8) start();
   }
-  markRay(grid, origin, ray, sink, counts, &origin_key);
-  return false;
+  if (n != 0) start();
+}
+
+/// markRay for rays[id], `ids`, through a DenseSink, each forward walk queued when it can be (a
+/// counted walk between two voxels of the box: every ray of the integrator's box but short ones
+/// and near-ties at the end): its first voxel is marked now and the others by the sink's
+/// DenseMarks::markQueued, which the caller runs before the marks are read. Other rays are
+/// marked as markRay does. Returns how many walks were queued.
+inline std::size_t markRaysQueued(const VoxelGrid& grid, const Point3f& origin, const RayEnd* rays,
+                                  std::span<const std::uint32_t> ids, DenseSink& sink,
+                                  MarkCounts& counts, const VoxelKey& origin_key) {
+  std::size_t queued = 0;
+  startRaysByEight(
+      grid, origin, origin_key, rays, ids,
+      [&](std::uint32_t id, const TraversalStarts& st, int l) {
+        const RayEnd& ray = rays[id];
+        if (st.kind[l] == TraversalKind::kRay) {
+          const TraversalStart& s = st.start[l];
+          const int total = countedTotal(st.end[l], st.crossings[l]);
+          if (total == 0 ||
+              !sink.dense.queueWalk(s.origin, s.step, s.end, s.t_max, s.t_delta, total)) {
+            markRay(grid, origin, ray, sink, counts, &origin_key);
+            return;
+          }
+          counts.visits += static_cast<std::size_t>(total);
+          ++queued;
+        }
+        markEnd(ray, sink, counts);  // (one voxel: nothing crossed)
+      },
+      [&](std::uint32_t id) { markRay(grid, origin, rays[id], sink, counts, &origin_key); });
+  return queued;
 }
 
 /// markRayCulled's free marks (the crossed voxels outside the region), not the end voxel's.
@@ -316,31 +355,46 @@ void markRayCulled(const VoxelGrid& grid, const Point3f& origin, const RayEnd& r
   markEnd(ray, update, counts);
 }
 
-/// markRayCulled through a SharedFrameSink, its backward walk queued when it can be (the fast
-/// walk, prepareBackward's kFast, between two voxels of the box): the end voxel is marked now,
-/// the walk by the sink's DenseMarks::markQueuedBack (with `region`'s frame masks), which the
-/// caller runs before the marks are read — and a walk it hands over (a near-tie on the way) the
-/// caller walks again by markCrossedCulled (`id` names the ray; its end is marked). Other rays
-/// are marked as markRayCulled does. Returns whether the walk was queued.
+/// markRayCulled for rays[id], `ids`, through a SharedFrameSink, each backward walk queued
+/// when it can be (the fast walk, prepareBackward's kFast, between two voxels of the box): the
+/// end voxel is marked now, the walk by the sink's DenseMarks::markQueuedBack (with `region`'s
+/// frame masks), which the caller runs before the marks are read — and a walk it hands over (a
+/// near-tie on the way) the caller walks again by markCrossedCulled (the walk's id is its ray's
+/// index; its end is marked). Other rays are marked as markRayCulled does. Returns how many walks
+/// were queued.
 template <class Region>
-bool markRayCulledQueued(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray,
-                         const Region& region, BackwardScratch& scratch, SharedFrameSink& sink,
-                         MarkCounts& counts, const VoxelKey& origin_key, std::uint32_t id) {
-  if (ray.key_valid) {
-    BackwardWalk walk;
-    const RayKeys keys{origin_key, ray.key};
-    if (prepareBackward(grid, origin, ray.end, walk, &keys) == BackwardMode::kFast) {
-      const TraversalStart& s = walk.s;
-      const int delta[3] = {-s.step[0], -s.step[1], -s.step[2]};
-      if (sink.dense.queueBackWalk(s.end, delta, s.origin, walk.head, s.t_delta, walk.next,
-                                   walk.bound, walk.total, id)) {
-        markEnd(ray, sink, counts);
-        return true;
-      }
-    }
-  }
-  markRayCulled(grid, origin, ray, region, scratch, sink, counts, &origin_key);
-  return false;
+std::size_t markRaysCulledQueued(const VoxelGrid& grid, const Point3f& origin, const RayEnd* rays,
+                                 std::span<const std::uint32_t> ids, const Region& region,
+                                 BackwardScratch& scratch, SharedFrameSink& sink,
+                                 MarkCounts& counts, const VoxelKey& origin_key) {
+  std::size_t queued = 0;
+  startRaysByEight(
+      grid, origin, origin_key, rays, ids,
+      [&](std::uint32_t id, const TraversalStarts& st, int l) {
+        const RayEnd& ray = rays[id];
+        if (st.kind[l] == TraversalKind::kRay) {
+          if (st.end[l] != TraversalEnd::kClean) {
+            markRayCulled(grid, origin, ray, region, scratch, sink, counts, &origin_key);
+            return;
+          }
+          BackwardWalk walk;
+          walk.s = st.start[l];
+          fastBackwardFrom(st.crossings[l], st.times[l], walk);
+          const TraversalStart& s = walk.s;
+          const int delta[3] = {-s.step[0], -s.step[1], -s.step[2]};
+          if (!sink.dense.queueBackWalk(s.end, delta, s.origin, walk.head, s.t_delta, walk.next,
+                                        walk.bound, walk.total, id)) {
+            markRayCulled(grid, origin, ray, region, scratch, sink, counts, &origin_key);
+            return;
+          }
+          ++queued;
+        }
+        markEnd(ray, sink, counts);  // (one voxel: nothing crossed)
+      },
+      [&](std::uint32_t id) {
+        markRayCulled(grid, origin, rays[id], region, scratch, sink, counts, &origin_key);
+      });
+  return queued;
 }
 
 }  // namespace densemap

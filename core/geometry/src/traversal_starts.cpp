@@ -1,0 +1,211 @@
+// startTraversals: startTraversal and endOf for eight rays at a time in AVX-512 lanes — the same
+// IEEE operations in the same order (this file is built with -ffp-contract=off: no fused
+// multiply-adds), so every time and decision is the scalar functions' bit for bit.
+#include <cstring>
+#include <limits>
+
+#include "densemap/geometry/ray_traversal.hpp"
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#define DENSEMAP_WIDE_STARTS 1
+#endif
+
+namespace densemap {
+namespace {
+
+void startOne(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_origin,
+              const Point3f& end, const VoxelKey& key_end, TraversalStarts& out, int lane) {
+  out.kind[lane] = startTraversal(grid, origin, key_origin, end, key_end, out.start[lane]);
+  if (out.kind[lane] == TraversalKind::kRay) {
+    out.end[lane] = endOf(out.start[lane], out.crossings[lane], &out.times[lane]);
+  }
+}
+
+#ifdef DENSEMAP_WIDE_STARTS
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"  // GCC 12's intrinsics (its bug 105593)
+
+/// endOf's near(x, y): |x - y| <= bound (NaN, from inf - inf: not near).
+[[gnu::target("avx512f,avx512vl,avx512dq"), gnu::always_inline]] inline __mmask8 near(
+    __m512d x, __m512d y, __m512d bound) {
+  return _mm512_cmp_pd_mask(_mm512_andnot_pd(_mm512_set1_pd(-0.0), _mm512_sub_pd(x, y)), bound,
+                            _CMP_LE_OQ);
+}
+
+[[gnu::target("avx512f,avx512vl,avx512dq")]] void startEight(const VoxelGrid& grid,
+                                                              const Point3f& origin,
+                                                              const VoxelKey& key_origin,
+                                                              const Point3f* ends,
+                                                              const VoxelKey* key_ends, int n,
+                                                              TraversalStarts& out) {
+  constexpr double kMax = std::numeric_limits<double>::max();
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  alignas(32) float e[3][8];
+  alignas(64) std::int64_t k[3][8];
+  for (int i = 0; i < 8; ++i) {
+    const int j = i < n ? i : 0;  // spare lanes: a copy of the first ray
+    for (int a = 0; a < 3; ++a) {
+      e[a][i] = ends[j][a];
+      k[a][i] = key_ends[j][a];
+    }
+  }
+  const int ko[3] = {key_origin.x, key_origin.y, key_origin.z};
+  const double resolution = grid.resolution();
+  // Vector3 arithmetic of OctoMap, one float operation at a time (as startTraversal).
+  __m256 dir[3];
+  for (int a = 0; a < 3; ++a) {
+    dir[a] = _mm256_sub_ps(_mm256_load_ps(e[a]), _mm256_set1_ps(origin[a]));
+  }
+  const __m256 norm_sq = _mm256_add_ps(
+      _mm256_add_ps(_mm256_mul_ps(dir[0], dir[0]), _mm256_mul_ps(dir[1], dir[1])),
+      _mm256_mul_ps(dir[2], dir[2]));
+  const __m256 length = _mm512_cvtpd_ps(_mm512_sqrt_pd(_mm512_cvtps_pd(norm_sq)));
+  const __mmask8 has_length = _mm256_cmp_ps_mask(length, _mm256_setzero_ps(), _CMP_GT_OQ);
+  __mmask8 same = 0xff;  // both ends in one voxel
+  __m512d t_max[3], t_delta[3];
+  __m512i step[3], key_end[3];
+  for (int a = 0; a < 3; ++a) {
+    key_end[a] = _mm512_load_si512(k[a]);
+    same &= _mm512_cmpeq_epi64_mask(key_end[a], _mm512_set1_epi64(ko[a]));
+    const __m256 d = _mm256_div_ps(dir[a], length);
+    const __mmask8 up = _mm256_cmp_ps_mask(d, _mm256_setzero_ps(), _CMP_GT_OQ);
+    const __mmask8 down = _mm256_cmp_ps_mask(d, _mm256_setzero_ps(), _CMP_LT_OQ);
+    step[a] = _mm512_mask_mov_epi64(
+        _mm512_maskz_mov_epi64(up, _mm512_set1_epi64(1)), down, _mm512_set1_epi64(-1));
+    // The voxel's border toward the step: the key's centre plus the (float) half step.
+    const double centre = VoxelGrid::keyToCoord(ko[a], resolution);
+    const double border_up = centre + static_cast<float>(1 * resolution * 0.5);
+    const double border_down = centre + static_cast<float>(-1 * resolution * 0.5);
+    const __m512d border =
+        _mm512_mask_mov_pd(_mm512_set1_pd(border_up), down, _mm512_set1_pd(border_down));
+    const __m512d dd = _mm512_cvtps_pd(d);
+    const __m512d fabs_d = _mm512_cvtps_pd(_mm256_andnot_ps(_mm256_set1_ps(-0.0F), d));
+    const auto moves = static_cast<__mmask8>(up | down);
+    t_max[a] = _mm512_mask_div_pd(
+        _mm512_set1_pd(kMax), moves,
+        _mm512_sub_pd(border, _mm512_set1_pd(static_cast<double>(origin[a]))), dd);
+    t_delta[a] =
+        _mm512_mask_div_pd(_mm512_set1_pd(kMax), moves, _mm512_set1_pd(resolution), fabs_d);
+  }
+  // endOf, lane by lane in masks.
+  __mmask8 irregular = 0;
+  __m512d last[3], beyond[3];
+  __m512d scale = _mm512_setzero_pd();
+  __m512i total = _mm512_setzero_si512();
+  __m512i crossings[3];
+  for (int a = 0; a < 3; ++a) {
+    const __m512i c =
+        _mm512_mullo_epi64(_mm512_sub_epi64(key_end[a], _mm512_set1_epi64(ko[a])), step[a]);
+    crossings[a] = c;
+    const __mmask8 still = _mm512_cmpeq_epi64_mask(step[a], _mm512_setzero_si512());
+    irregular |= _mm512_mask_cmpneq_epi64_mask(still, key_end[a], _mm512_set1_epi64(ko[a]));
+    irregular |= _mm512_mask_cmplt_epi64_mask(static_cast<__mmask8>(~still), c,
+                                              _mm512_setzero_si512());
+    const auto moving = static_cast<__mmask8>(~still);
+    total = _mm512_mask_add_epi64(total, moving, total, c);
+    const __m512d cd = _mm512_cvtepi64_pd(c);
+    beyond[a] = _mm512_mask_add_pd(_mm512_set1_pd(kInf), moving, t_max[a],
+                                   _mm512_mul_pd(cd, t_delta[a]));
+    const __mmask8 some = _mm512_mask_cmpgt_epi64_mask(moving, c, _mm512_setzero_si512());
+    last[a] = _mm512_mask_add_pd(
+        _mm512_set1_pd(-kInf), some, t_max[a],
+        _mm512_mul_pd(_mm512_cvtepi64_pd(_mm512_sub_epi64(c, _mm512_set1_epi64(1))), t_delta[a]));
+    const __m512d reach = _mm512_add_pd(
+        _mm512_andnot_pd(_mm512_set1_pd(-0.0), t_max[a]),
+        _mm512_mul_pd(_mm512_cvtepi64_pd(_mm512_add_epi64(c, _mm512_set1_epi64(1))), t_delta[a]));
+    scale = _mm512_mask_max_pd(scale, moving, scale, reach);
+  }
+  // bound = 4 * (total + 8) * 2^-50 * scale (the int product first).
+  const __m512d bound = _mm512_mul_pd(
+      _mm512_mul_pd(_mm512_cvtepi64_pd(_mm512_mullo_epi64(
+                        _mm512_add_epi64(total, _mm512_set1_epi64(8)), _mm512_set1_epi64(4))),
+                    _mm512_set1_pd(0x1p-50)),
+      scale);
+  __mmask8 unsure = static_cast<__mmask8>(
+      near(last[0], last[1], bound) | near(last[0], last[2], bound) |
+      near(last[1], last[2], bound) | near(beyond[0], beyond[1], bound) |
+      near(beyond[0], beyond[2], bound) | near(beyond[1], beyond[2], bound));
+  const __m512d last_max = _mm512_max_pd(_mm512_max_pd(last[0], last[1]), last[2]);
+  const __m512d beyond_min = _mm512_min_pd(_mm512_min_pd(beyond[0], beyond[1]), beyond[2]);
+  const __mmask8 some_last = _mm512_cmp_pd_mask(last_max, _mm512_set1_pd(-kInf), _CMP_GT_OQ);
+  const __mmask8 gap =
+      _mm512_cmp_pd_mask(_mm512_sub_pd(beyond_min, last_max), bound, _CMP_GT_OQ);
+  const __mmask8 within = _mm512_cmp_pd_mask(
+      _mm512_sub_pd(_mm512_cvtps_pd(length), last_max), bound, _CMP_GT_OQ);
+  unsure |= static_cast<__mmask8>(~(some_last & gap & within));
+  // Out, lane by lane.
+  alignas(64) double tm[3][8], td[3][8], la[3][8], sc[8];
+  alignas(64) std::int64_t st[3][8], cr[3][8];
+  alignas(32) float len[8];
+  for (int a = 0; a < 3; ++a) {
+    _mm512_store_pd(tm[a], t_max[a]);
+    _mm512_store_pd(td[a], t_delta[a]);
+    _mm512_store_pd(la[a], last[a]);
+    _mm512_store_si512(st[a], step[a]);
+    _mm512_store_si512(cr[a], crossings[a]);
+  }
+  _mm512_store_pd(sc, scale);
+  _mm256_store_ps(len, length);
+  for (int i = 0; i < n; ++i) {
+    const unsigned bit = 1U << i;
+    if ((same & bit) != 0 || (has_length & bit) == 0) {
+      out.kind[i] = TraversalKind::kSameVoxel;
+      continue;
+    }
+    out.kind[i] = TraversalKind::kRay;
+    TraversalStart& s = out.start[i];
+    s.origin = key_origin;
+    s.end = key_ends[i];
+    s.length = len[i];
+    for (int a = 0; a < 3; ++a) {
+      s.step[a] = static_cast<int>(st[a][i]);
+      s.t_max[a] = tm[a][i];
+      s.t_delta[a] = td[a][i];
+      out.crossings[i][a] = static_cast<int>(cr[a][i]);
+    }
+    if ((irregular & bit) != 0) {
+      out.end[i] = TraversalEnd::kIrregular;
+    } else if ((unsure & bit) != 0) {
+      out.end[i] = TraversalEnd::kUnsure;
+    } else {
+      out.end[i] = TraversalEnd::kClean;
+      for (int a = 0; a < 3; ++a) out.times[i].last[a] = la[a][i];
+      out.times[i].scale = sc[i];
+    }
+  }
+}
+#pragma GCC diagnostic pop
+#endif
+
+}  // namespace
+
+bool hasWideTraversalStarts() {
+#ifdef DENSEMAP_WIDE_STARTS
+  static const bool has = [] {
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx512f") != 0 && __builtin_cpu_supports("avx512vl") != 0 &&
+           __builtin_cpu_supports("avx512dq") != 0;
+  }();
+  return has;
+#else
+  return false;
+#endif
+}
+
+void startTraversals(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_origin,
+                     const Point3f* ends, const VoxelKey* key_ends, int n, TraversalStarts& out,
+                     bool wide) {
+  if (n <= 0) return;
+#ifdef DENSEMAP_WIDE_STARTS
+  if (wide && hasWideTraversalStarts()) {
+    startEight(grid, origin, key_origin, ends, key_ends, n, out);
+    return;
+  }
+#endif
+  (void)wide;
+  for (int i = 0; i < n; ++i) startOne(grid, origin, key_origin, ends[i], key_ends[i], out, i);
+}
+
+}  // namespace densemap
