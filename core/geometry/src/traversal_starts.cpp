@@ -181,7 +181,7 @@ void startOne(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_
 
 }  // namespace
 
-bool hasWideTraversalStarts() {
+bool hasWideLanes() {
 #ifdef DENSEMAP_WIDE_STARTS
   static const bool has = [] {
     __builtin_cpu_init();
@@ -199,7 +199,7 @@ void startTraversals(const VoxelGrid& grid, const Point3f& origin, const VoxelKe
                      bool wide) {
   if (n <= 0) return;
 #ifdef DENSEMAP_WIDE_STARTS
-  if (wide && hasWideTraversalStarts()) {
+  if (wide && hasWideLanes()) {
     startEight(grid, origin, key_origin, ends, key_ends, n, out);
     return;
   }

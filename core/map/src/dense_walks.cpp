@@ -315,12 +315,7 @@ void makeRoom(std::size_t steps, std::vector<std::uint32_t>& entered,
 
 bool DenseMarks::hasWideWalks() {
 #ifdef DENSEMAP_WIDE_WALKS
-  static const bool has = [] {
-    __builtin_cpu_init();
-    return __builtin_cpu_supports("avx512f") != 0 && __builtin_cpu_supports("avx512vl") != 0 &&
-           __builtin_cpu_supports("avx512dq") != 0;
-  }();
-  return has;
+  return hasWideLanes();
 #else
   return false;
 #endif

@@ -21,6 +21,16 @@
 namespace densemap {
 namespace {
 
+/// An update set's cells (packed key, occupied), sorted: two sets mark the same cells iff equal.
+std::vector<std::pair<std::uint64_t, bool>> markedCells(const ScanUpdate& update) {
+  std::vector<std::pair<std::uint64_t, bool>> cells;
+  update.forEachCell([&](const VoxelKey& k, const CellHits& h) {
+    cells.emplace_back(k.packed(), h.occupied > 0);
+  });
+  std::sort(cells.begin(), cells.end());
+  return cells;
+}
+
 TEST(TraverseRayBackward, IsTheForwardTraversalReversedOnAdversarialRays) {
   BackwardScratch scratch;
   std::size_t rays = 0, nonempty = 0;
@@ -139,14 +149,7 @@ TEST(DenseMarks, StepMarkerMarksAsTheHashOnWalksInsideAndLeavingItsBox) {
     ASSERT_EQ(sut_counts.visits, plain_counts.visits);
     EXPECT_GT(plain.freeCount(), 10000U);
     EXPECT_EQ(sut.freeCount(), plain.freeCount()) << "round " << round;
-    std::vector<std::pair<std::uint64_t, bool>> a, b;
-    plain.forEachCell(
-        [&](const VoxelKey& k, const CellHits& h) { a.emplace_back(k.packed(), h.occupied > 0); });
-    sut.forEachCell(
-        [&](const VoxelKey& k, const CellHits& h) { b.emplace_back(k.packed(), h.occupied > 0); });
-    std::sort(a.begin(), a.end());
-    std::sort(b.begin(), b.end());
-    EXPECT_EQ(a, b) << "round " << round;
+    EXPECT_EQ(markedCells(plain), markedCells(sut)) << "round " << round;
   }
 }
 
@@ -204,7 +207,7 @@ TEST(TraverseRay, WideStartsAreTheScalarStartsBitForBit) {
   }
   EXPECT_GT(rays, 80000U);
   EXPECT_GT(clean, 20000U);
-  if (!hasWideTraversalStarts()) std::cout << "no AVX-512 here: both were the scalar starts\n";
+  if (!hasWideLanes()) std::cout << "no AVX-512 here: both were the scalar starts\n";
 }
 
 // The queued walks (markRaysQueued, DenseMarks::markQueued: eight lanes side by side with
@@ -246,16 +249,7 @@ TEST(DenseMarks, QueuedWalksMarkAsTheHashInLanesAndOneByOne) {
       EXPECT_GT(plain.freeCount(), 50000U);
       EXPECT_GT(queued, 400U);  // and the others (short, unsure, leaving the box) marked at once
       EXPECT_EQ(sut.freeCount(), plain.freeCount()) << "round " << round;
-      std::vector<std::pair<std::uint64_t, bool>> a, b;
-      plain.forEachCell([&](const VoxelKey& k, const CellHits& h) {
-        a.emplace_back(k.packed(), h.occupied > 0);
-      });
-      sut.forEachCell([&](const VoxelKey& k, const CellHits& h) {
-        b.emplace_back(k.packed(), h.occupied > 0);
-      });
-      std::sort(a.begin(), a.end());
-      std::sort(b.begin(), b.end());
-      EXPECT_EQ(a, b) << "round " << round;
+      EXPECT_EQ(markedCells(plain), markedCells(sut)) << "round " << round;
     }
   }
   if (!DenseMarks::hasWideWalks()) std::cout << "no AVX-512 here: kBest walked one by one too\n";
@@ -605,16 +599,7 @@ TEST(DenseMarks, QueuedBackwardWalksMarkAndCountAsMarkRayCulled) {
       EXPECT_EQ(sut_counts.visits, plain_counts.visits) << "trial " << trial;
       EXPECT_EQ(sut_counts.culled, plain_counts.culled) << "trial " << trial;
       EXPECT_GT(plain_counts.culled, 1000U);
-      std::vector<std::pair<std::uint64_t, bool>> a, b;
-      plain.forEachCell([&](const VoxelKey& k, const CellHits& h) {
-        a.emplace_back(k.packed(), h.occupied > 0);
-      });
-      sut.forEachCell([&](const VoxelKey& k, const CellHits& h) {
-        b.emplace_back(k.packed(), h.occupied > 0);
-      });
-      std::sort(a.begin(), a.end());
-      std::sort(b.begin(), b.end());
-      EXPECT_EQ(a, b) << "trial " << trial;
+      EXPECT_EQ(markedCells(plain), markedCells(sut)) << "trial " << trial;
     }
   }
   EXPECT_GT(queued, 10000U);

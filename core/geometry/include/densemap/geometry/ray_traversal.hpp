@@ -168,12 +168,14 @@ struct TraversalStarts {
 };
 /// Fills `out` for rays 0..n-1 (n <= 8) from `origin` (key `key_origin`) to `ends[i]` (key
 /// `key_ends[i]`; both in range): bit for bit what startTraversal and endOf give, eight rays
-/// side by side in AVX-512 lanes when `wide` and the processor has them
-/// (hasWideTraversalStarts), else one by one with those functions.
+/// side by side in AVX-512 lanes when `wide` and the processor has them (hasWideLanes), else
+/// one by one with those functions.
 void startTraversals(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_origin,
                      const Point3f* ends, const VoxelKey* key_ends, int n, TraversalStarts& out,
                      bool wide = true);
-[[nodiscard]] bool hasWideTraversalStarts();
+/// Whether the processor (and the system) has the AVX-512 lanes the wide walks and starts use
+/// (AVX-512 F, VL and DQ; checked once).
+[[nodiscard]] bool hasWideLanes();
 
 /// The voxels of a ray's traversal when traverseRay's step visitors walk it counted (at least
 /// kCountedStepsFrom crossings and endOf kClean: the origin's voxel, then countedSteps' total - 1
