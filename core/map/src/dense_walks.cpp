@@ -313,12 +313,12 @@ void makeRoom(std::size_t steps, std::vector<std::uint32_t>& entered,
 
 }  // namespace
 
-bool DenseMarks::hasWideWalks() {
-#ifdef DENSEMAP_WIDE_WALKS
-  return hasWideLanes();
-#else
-  return false;
-#endif
+bool DenseMarks::hasWideWalks() { return hasWideLanes(); }
+
+void DenseMarks::finishQueued(std::size_t n_pend, std::size_t n_entered) {
+  std::uint64_t* words = masks_[0].data();
+  for (std::size_t i = 0; i < n_pend; ++i) words[pend_w_[i]] |= pend_b_[i];
+  for (std::size_t i = 0; i < n_entered; ++i) touch(entered_[i]);
 }
 
 void DenseMarks::markQueued(WalkKernel kernel) {
@@ -333,10 +333,9 @@ void DenseMarks::markQueued(WalkKernel kernel) {
   if (kernel == WalkKernel::kBest && hasWideWalks()) {
     WideOut out{entered_.data(), pend_w_.data(), pend_b_.data()};
     walkEight(queue_.data(), n, out);
-    for (std::size_t i = 0; i < out.n_pend; ++i) words[pend_w_[i]] |= pend_b_[i];
-    n_entered = out.n_entered;
-    kernel = WalkKernel::kScalar;
+    finishQueued(out.n_pend, out.n_entered);
     queue_.clear();
+    return;
   }
 #endif
   (void)kernel;
@@ -350,7 +349,7 @@ void DenseMarks::markQueued(WalkKernel kernel) {
     countedSteps(s, w.steps + 1, place);
     n_entered += place.n_entered;
   }
-  for (std::size_t i = 0; i < n_entered; ++i) touch(entered_[i]);
+  finishQueued(0, n_entered);
   queue_.clear();
 }
 
@@ -370,9 +369,9 @@ DenseMarks::BackWalkCounts DenseMarks::markQueuedBack(const block::BlockMask* cu
   if (kernel == WalkKernel::kBest && hasWideWalks()) {
     WideOut out{entered_.data(), pend_w_.data(), pend_b_.data()};
     counts = walkEightBack(back_queue_.data(), n, culled_words, out, handed_over);
-    for (std::size_t i = 0; i < out.n_pend; ++i) words[pend_w_[i]] |= pend_b_[i];
-    n_entered = out.n_entered;
+    finishQueued(out.n_pend, out.n_entered);
     back_queue_.clear();
+    return counts;
   }
 #endif
   (void)kernel;
@@ -396,7 +395,7 @@ DenseMarks::BackWalkCounts DenseMarks::markQueuedBack(const block::BlockMask* cu
       counts.culled += walk.total - place.marked;
     }
   }
-  for (std::size_t i = 0; i < n_entered; ++i) touch(entered_[i]);
+  finishQueued(0, n_entered);
   back_queue_.clear();
   return counts;
 }

@@ -176,7 +176,7 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
             local.dense_ok =
                 dense && local.dense.reset(box.min, box.max, options_.dense_marks_max_blocks);
           }
-          // The range's rays of this level, by index (the queued walks take them so).
+          // The range's rays of this level, by index.
           const auto idsOf = [&](const tbb::blocked_range<std::size_t>& r,
                                  std::vector<std::uint32_t>& ids) {
             ids.clear();
@@ -188,11 +188,7 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
             return std::span<const std::uint32_t>(ids);
           };
           const auto mark_all = [&](auto& sink) {
-            for (std::size_t j = range.begin(); j != range.end(); ++j) {
-              const std::size_t i = j * stride;
-              if (previous != 0 && i % previous == 0) continue;
-              mark_one(i, sink, local);
-            }
+            for (const std::uint32_t i : idsOf(range, local.ids)) mark_one(i, sink, local);
           };
           if (local.dense_ok && region != nullptr && region->sharesFrame(local.dense) &&
               options_.queue_walks) {

@@ -404,6 +404,9 @@ class DenseMarks {
   [[nodiscard]] std::uint32_t blockIndex(const VoxelKey& k) const {
     return blockIndexIn(k, min_, n_);
   }
+  /// After the queued walks: their pended marks (`n_pend` of pend_w_ / pend_b_) ORed in, the
+  /// blocks they entered (`n_entered` of entered_) through the first-touch bookkeeping.
+  void finishQueued(std::size_t n_pend, std::size_t n_entered);
   /// A walk's place from voxel `first` toward `last` (moving by `delta`), when both are in the
   /// box (else false).
   bool place(const VoxelKey& first, const int (&delta)[3], const VoxelKey& last, WalkPlace& at) {
