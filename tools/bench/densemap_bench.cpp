@@ -78,7 +78,8 @@ int checkOptions(const Options& o, std::vector<Backend>& backends) {
                  kernel::applySettings(probe, o.kernel_settings).error().message.c_str());
     return 2;
   }
-  for (const auto& m : o.methods) {
+  for (const auto& name : o.methods) {
+    const std::string m = laneMethod(name, o.threads).method;
     if (makeIntegrator(m, o)) continue;
     const auto dense = kernelOptions(m, o);
     if (!dense && m.find("@set=") != std::string::npos) {  // a known kind, a bad setting
@@ -90,7 +91,7 @@ int checkOptions(const Options& o, std::vector<Backend>& backends) {
                    "densemap-bench: unknown method '%s' or rule '%s' (methods: octomap, raycast, "
                    "superray, culling, superray+culling, and the dense kinds akimap_rays, "
                    "akimap_rays@plain, akimap, bgk, bgkl; rules: set, per_ray)\n",
-                   m.c_str(), o.rule.c_str());
+                   name.c_str(), o.rule.c_str());
       return 2;
     }
   }
@@ -122,7 +123,8 @@ std::vector<std::unique_ptr<Lane>> makeLanes(const Options& o,
   std::stable_partition(order.begin(), order.end(), [](const auto& m) { return m == "octomap"; });
   std::vector<std::unique_ptr<Lane>> lanes;
   for (const auto& method : order) {
-    if (method == "octomap" || kernelOptions(method, o)) {  // OctoMap's octree, a kernel map: once
+    // OctoMap's octree, a kernel map: once
+    if (method == "octomap" || kernelOptions(laneMethod(method, o.threads).method, o)) {
       lanes.push_back(std::make_unique<Lane>(method, Backend::kOctree, o));
       continue;
     }
@@ -303,7 +305,8 @@ static int runMain(int argc, char** argv) {
          "Culling methods mark rays in levels (indices multiple of each stride in turn), "
          "the culling region growing by the scan's marks after each; a method named "
          "METHOD@nogrow does not (comma-separated; 0: none); METHOD@single walks rays one at a "
-         "time (not queued and walked eight at a time)")
+         "time (not queued and walked eight at a time); any method name may end in @tN: that "
+         "lane runs on N threads (e.g. raycast@t1,raycast@t2 for a scaling ratio in one run)")
       ->delimiter(',')
       ->capture_default_str();
   app.add_option("--backend", o.backends, "Comma-separated: grid, octree")

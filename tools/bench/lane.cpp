@@ -56,6 +56,16 @@ Expected<kernel::KernelOptions> kernelOptions(const std::string& method, const O
   return k;
 }
 
+LaneMethod laneMethod(const std::string& name, int threads) {
+  const std::size_t at = name.rfind("@t");
+  if (at == std::string::npos || at + 2 == name.size()) return {name, threads};
+  int n = 0;
+  const char* end = name.data() + name.size();
+  const auto [ptr, ec] = std::from_chars(name.data() + at + 2, end, n);
+  if (ec != std::errc() || ptr != end || n < 1 || n > 256) return {name, threads};
+  return {name.substr(0, at), n};
+}
+
 Integrate makeIntegrator(const std::string& method, const Options& o) {
   if (method == "octomap") {
     return [range = o.max_range](OccupancyMap& map, const WorldScan& s) {

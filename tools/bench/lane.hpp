@@ -53,6 +53,15 @@ struct Options {
 [[nodiscard]] Expected<kernel::KernelOptions> kernelOptions(const std::string& method,
                                                             const Options& o);
 
+/// A method name and the worker threads of its lane: `METHOD@tN` is METHOD on N threads (1 ..
+/// 256; a thread-scaling ratio in one run, the lanes taking turns), any other name `threads`.
+/// An `@tN` that is not a number in range is left in the name (an unknown method then).
+struct LaneMethod {
+  std::string method;
+  int threads = 1;
+};
+[[nodiscard]] LaneMethod laneMethod(const std::string& name, int threads);
+
 using Integrate = std::function<ScanStats(OccupancyMap&, const WorldScan&)>;
 /// The integrator of a log-odds method (octomap, raycast, superray, culling,
 /// superray+culling) under o.rule; empty for anything else.
@@ -66,18 +75,20 @@ using Integrate = std::function<ScanStats(OccupancyMap&, const WorldScan&)>;
 class Lane {
  public:
   Lane(const std::string& method, Backend backend, const Options& o)
+      : Lane(method, laneMethod(method, method == "octomap" ? 1 : o.threads), backend, o) {}
+  Lane(const std::string& method, const LaneMethod& base, Backend backend, const Options& o)
       : map_(std::move(*makeMap(backend, o.resolution))),
-        integrate_(makeIntegrator(method, o)),
-        arena_(method == "octomap" ? 1 : o.threads) {
-    map_->setRunner(tbbRunner());  // in the lane's arena of o.threads
+        integrate_(makeIntegrator(base.method, o)),
+        arena_(base.threads) {
+    map_->setRunner(tbbRunner());  // in the lane's arena
     r_.method = method;
     r_.backend = std::string(backendName(backend));
-    r_.threads = method == "octomap" ? 1 : o.threads;
+    r_.threads = base.threads;
     r_.rule = method == "octomap" ? "set" : o.rule;
     r_.resolution = o.resolution;
     r_.max_range = o.max_range;
     r_.has_counts = method != "octomap";
-    if (auto k = kernelOptions(method, o); k) {
+    if (auto k = kernelOptions(base.method, o); k) {
       r_.dense = true;
       r_.backend = "kernel";
       kernel_ = std::make_shared<kernel::KernelMap>(o.resolution, *k);

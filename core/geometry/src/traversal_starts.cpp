@@ -194,6 +194,18 @@ bool hasWideLanes() {
 #endif
 }
 
+bool hasFourLanes() {
+#ifdef DENSEMAP_WIDE_STARTS
+  static const bool has = [] {
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx2") != 0;
+  }();
+  return has;
+#else
+  return false;
+#endif
+}
+
 void startTraversals(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_origin,
                      const Point3f* ends, const VoxelKey* key_ends, int n, TraversalStarts& out,
                      bool wide) {

@@ -1,6 +1,6 @@
-// DenseMarks::markQueued and markQueuedBack: the queued walks' steps, one walk at a time or
-// eight side by side in AVX-512 lanes (the same decisions from the same double arithmetic, the
-// same marks).
+// DenseMarks::markQueued and markQueuedBack: the queued walks' steps, one walk at a time, or
+// eight side by side in AVX-512 lanes, or (forward walks) four in AVX2 lanes (the same decisions
+// from the same double arithmetic, the same marks).
 #include <algorithm>
 #include <bit>
 #include <limits>
@@ -297,6 +297,157 @@ struct WideOut {
   return counts;
 }
 #undef DENSEMAP_AVX512
+
+#define DENSEMAP_AVX2 gnu::target("avx2")
+
+/// AVX2 has no mask registers and no compress: a lane mask is a vector of all-ones lanes, and
+/// the lanes a 4-bit mask names are packed to the front by a permute from these tables.
+struct FourLaneTables {
+  alignas(32) std::int32_t pack64[16][8];  // the 64-bit lanes set in the mask, in order
+  alignas(32) std::int32_t pack_low[16][8];  // their low 32 bits, in order
+  alignas(32) std::int64_t lane[4][4];       // all-ones in lane k only
+};
+constexpr FourLaneTables makeFourLaneTables() {
+  FourLaneTables t{};
+  for (int m = 0; m < 16; ++m) {
+    int n = 0;
+    for (int i = 0; i < 4; ++i) {
+      if ((m >> i & 1) == 0) continue;
+      t.pack64[m][2 * n] = 2 * i;
+      t.pack64[m][2 * n + 1] = 2 * i + 1;
+      t.pack_low[m][n] = 2 * i;
+      ++n;
+    }
+  }
+  for (int k = 0; k < 4; ++k) t.lane[k][k] = -1;
+  return t;
+}
+constexpr FourLaneTables kFour = makeFourLaneTables();
+
+/// Writes the 64-bit lanes `bits` names of `v`, packed, at `out` (4 slots); returns how many.
+[[DENSEMAP_AVX2, gnu::always_inline]] inline std::size_t packFour(int bits, __m256i v,
+                                                                  std::uint64_t* out) {
+  const __m256i idx = _mm256_load_si256(reinterpret_cast<const __m256i*>(kFour.pack64[bits]));
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(out), _mm256_permutevar8x32_epi32(v, idx));
+  return static_cast<std::size_t>(std::popcount(static_cast<unsigned>(bits)));
+}
+
+/// The lanes a vector mask holds, as bits.
+[[DENSEMAP_AVX2, gnu::always_inline]] inline int bitsOf(__m256i m) {
+  return _mm256_movemask_pd(_mm256_castsi256_pd(m));
+}
+/// `x` into the lanes `k` holds.
+[[DENSEMAP_AVX2, gnu::always_inline]] inline void putLanes(__m256i& v, long long x, __m256i k) {
+  v = _mm256_blendv_epi8(v, _mm256_set1_epi64x(x), k);
+}
+
+/// The forward walks' steps four at a time in AVX2 lanes, as walkEight: the same choice (the
+/// smallest tMax, ties to the higher axis) from the same double additions, a lane taking the
+/// next walk when its own is done, marks gathered per lane and word and pended when the lane
+/// moves on. `out` must have room for (all the walks' steps + 1) + 16.
+[[DENSEMAP_AVX2]] void walkFour(const DenseMarks::QueuedWalk* walks, std::size_t n,
+                                WideOut& out) {
+  const __m256i one = _mm256_set1_epi64x(1), zero = _mm256_setzero_si256(),
+                low6 = _mm256_set1_epi64x(63), edge = _mm256_set1_epi64x(block::kEdge);
+  __m256d t0 = _mm256_setzero_pd(), t1 = t0, t2 = t0, d0 = t0, d1 = t0, d2 = t0;
+  __m256i addr = zero, l0 = zero, l1 = zero, l2 = zero, s0 = zero, s1 = zero, s2 = zero,
+          r0 = zero, r1 = zero, r2 = zero;
+  __m256i left = zero;                 // the lane's steps to go
+  __m256i cur_w = zero, cur_b = zero;  // the word being marked, its marks so far
+  int live = 0;                        // lanes with a walk whose last marks are not pended
+  std::size_t next = 0;
+  // The outputs' ends in locals: stores through the uint64_t pointers could alias `out`'s
+  // counters, which would keep them in memory (a store-to-load round trip every step).
+  std::uint32_t* entered = out.entered + out.n_entered;
+  std::uint64_t* pend_w = out.pend_w + out.n_pend;
+  std::uint64_t* pend_b = out.pend_b + out.n_pend;
+  while (true) {
+    __m256i active = _mm256_cmpgt_epi64(left, zero);
+    int act = bitsOf(active);
+    if (act != 0xf) {
+      const int done = live & ~act;
+      packFour(done, cur_w, pend_w);
+      const std::size_t pended = packFour(done, cur_b, pend_b);
+      pend_w += pended;
+      pend_b += pended;
+      cur_b = _mm256_and_si256(cur_b, active);
+      // Idle lanes take the next walks.
+      for (unsigned idle = ~static_cast<unsigned>(act) & 0xfU; idle != 0 && next < n;
+           idle &= idle - 1, ++next) {
+        const DenseMarks::QueuedWalk& w = walks[next];
+        const __m256i k =
+            _mm256_load_si256(reinterpret_cast<const __m256i*>(kFour.lane[std::countr_zero(idle)]));
+        const __m256d kd = _mm256_castsi256_pd(k);
+        t0 = _mm256_blendv_pd(t0, _mm256_set1_pd(w.t_max[0]), kd);
+        t1 = _mm256_blendv_pd(t1, _mm256_set1_pd(w.t_max[1]), kd);
+        t2 = _mm256_blendv_pd(t2, _mm256_set1_pd(w.t_max[2]), kd);
+        d0 = _mm256_blendv_pd(d0, _mm256_set1_pd(w.t_delta[0]), kd);
+        d1 = _mm256_blendv_pd(d1, _mm256_set1_pd(w.t_delta[1]), kd);
+        d2 = _mm256_blendv_pd(d2, _mm256_set1_pd(w.t_delta[2]), kd);
+        putLanes(addr, static_cast<long long>(w.at.addr), k);
+        putLanes(l0, w.at.left[0], k);
+        putLanes(l1, w.at.left[1], k);
+        putLanes(l2, w.at.left[2], k);
+        putLanes(s0, w.at.small[0], k);
+        putLanes(s1, w.at.small[1], k);
+        putLanes(s2, w.at.small[2], k);
+        putLanes(r0, w.at.wrap[0], k);
+        putLanes(r1, w.at.wrap[1], k);
+        putLanes(r2, w.at.wrap[2], k);
+        putLanes(left, w.steps, k);
+        putLanes(cur_w, static_cast<long long>(w.at.addr >> 6), k);
+      }
+      active = _mm256_cmpgt_epi64(left, zero);
+      act = bitsOf(active);
+      live = act;
+      if (act == 0) break;
+    }
+    left = _mm256_add_epi64(left, active);  // active lanes are -1
+    const __m256i lt01 = _mm256_castpd_si256(_mm256_cmp_pd(t0, t1, _CMP_LT_OQ));
+    const __m256i lt02 = _mm256_castpd_si256(_mm256_cmp_pd(t0, t2, _CMP_LT_OQ));
+    const __m256i lt12 = _mm256_castpd_si256(_mm256_cmp_pd(t1, t2, _CMP_LT_OQ));
+    const __m256i m0 = _mm256_and_si256(active, _mm256_and_si256(lt01, lt02));
+    const __m256i m1 = _mm256_and_si256(active, _mm256_andnot_si256(lt01, lt12));
+    const __m256i m2 = _mm256_andnot_si256(_mm256_or_si256(m0, m1), active);
+    t0 = _mm256_blendv_pd(t0, _mm256_add_pd(t0, d0), _mm256_castsi256_pd(m0));
+    t1 = _mm256_blendv_pd(t1, _mm256_add_pd(t1, d1), _mm256_castsi256_pd(m1));
+    t2 = _mm256_blendv_pd(t2, _mm256_add_pd(t2, d2), _mm256_castsi256_pd(m2));
+    l0 = _mm256_add_epi64(l0, m0);
+    l1 = _mm256_add_epi64(l1, m1);
+    l2 = _mm256_add_epi64(l2, m2);
+    const __m256i w0 = _mm256_and_si256(m0, _mm256_cmpeq_epi64(l0, zero));
+    const __m256i w1 = _mm256_and_si256(m1, _mm256_cmpeq_epi64(l1, zero));
+    const __m256i w2 = _mm256_and_si256(m2, _mm256_cmpeq_epi64(l2, zero));
+    __m256i inc = _mm256_and_si256(m0, _mm256_blendv_epi8(s0, r0, w0));
+    inc = _mm256_or_si256(inc, _mm256_and_si256(m1, _mm256_blendv_epi8(s1, r1, w1)));
+    inc = _mm256_or_si256(inc, _mm256_and_si256(m2, _mm256_blendv_epi8(s2, r2, w2)));
+    addr = _mm256_add_epi64(addr, inc);
+    l0 = _mm256_blendv_epi8(l0, edge, w0);
+    l1 = _mm256_blendv_epi8(l1, edge, w1);
+    l2 = _mm256_blendv_epi8(l2, edge, w2);
+    const int wrapped = bitsOf(_mm256_or_si256(w0, _mm256_or_si256(w1, w2)));
+    const __m256i blocks = _mm256_permutevar8x32_epi32(
+        _mm256_srli_epi64(addr, 9),
+        _mm256_load_si256(reinterpret_cast<const __m256i*>(kFour.pack_low[wrapped])));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(entered), _mm256_castsi256_si128(blocks));
+    entered += std::popcount(static_cast<unsigned>(wrapped));
+    const __m256i word = _mm256_srli_epi64(addr, 6);
+    const __m256i moved = _mm256_andnot_si256(_mm256_cmpeq_epi64(word, cur_w), active);
+    const int mv = bitsOf(moved);
+    packFour(mv, cur_w, pend_w);
+    const std::size_t pended = packFour(mv, cur_b, pend_b);
+    pend_w += pended;
+    pend_b += pended;
+    cur_w = _mm256_blendv_epi8(cur_w, word, moved);
+    cur_b = _mm256_andnot_si256(moved, cur_b);
+    cur_b = _mm256_or_si256(
+        cur_b, _mm256_and_si256(active, _mm256_sllv_epi64(one, _mm256_and_si256(addr, low6))));
+  }
+  out.n_entered = static_cast<std::size_t>(entered - out.entered);
+  out.n_pend = static_cast<std::size_t>(pend_w - out.pend_w);
+}
+
+#undef DENSEMAP_AVX2
 #pragma GCC diagnostic pop
 #endif
 
@@ -314,6 +465,7 @@ void makeRoom(std::size_t steps, std::vector<std::uint32_t>& entered,
 }  // namespace
 
 bool DenseMarks::hasWideWalks() { return hasWideLanes(); }
+bool DenseMarks::hasFourWalks() { return hasFourLanes(); }
 
 void DenseMarks::finishQueued(std::size_t n_pend, std::size_t n_entered) {
   std::uint64_t* words = masks_[0].data();
@@ -333,6 +485,13 @@ void DenseMarks::markQueued(WalkKernel kernel) {
   if (kernel == WalkKernel::kBest && hasWideWalks()) {
     WideOut out{entered_.data(), pend_w_.data(), pend_b_.data()};
     walkEight(queue_.data(), n, out);
+    finishQueued(out.n_pend, out.n_entered);
+    queue_.clear();
+    return;
+  }
+  if ((kernel == WalkKernel::kBest || kernel == WalkKernel::kFour) && hasFourWalks()) {
+    WideOut out{entered_.data(), pend_w_.data(), pend_b_.data()};
+    walkFour(queue_.data(), n, out);
     finishQueued(out.n_pend, out.n_entered);
     queue_.clear();
     return;

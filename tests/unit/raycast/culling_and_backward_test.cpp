@@ -211,11 +211,12 @@ TEST(TraverseRay, WideStartsAreTheScalarStartsBitForBit) {
 }
 
 // The queued walks (markRaysQueued, DenseMarks::markQueued: eight lanes side by side with
-// AVX-512, or one walk at a time) mark what markRay marks into a hash, walks leaving the box
-// included (those are not queued), in batches of any size.
+// AVX-512, four with AVX2, or one walk at a time) mark what markRay marks into a hash, walks
+// leaving the box included (those are not queued), in batches of any size.
 TEST(DenseMarks, QueuedWalksMarkAsTheHashInLanesAndOneByOne) {
   const VoxelGrid grid(0.2);
-  for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kScalar}) {
+  for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kFour,
+                            DenseMarks::WalkKernel::kScalar}) {
     test::RandomRays random(0.2, 12.0, 17);
     std::mt19937 rng(5);
     std::uniform_int_distribution<int> batch_size(1, 300);
@@ -252,7 +253,8 @@ TEST(DenseMarks, QueuedWalksMarkAsTheHashInLanesAndOneByOne) {
       EXPECT_EQ(markedCells(plain), markedCells(sut)) << "round " << round;
     }
   }
-  if (!DenseMarks::hasWideWalks()) std::cout << "no AVX-512 here: kBest walked one by one too\n";
+  if (!DenseMarks::hasWideWalks()) std::cout << "no AVX-512 here: kBest was not eight lanes\n";
+  if (!DenseMarks::hasFourWalks()) std::cout << "no AVX2 here: kFour walked one by one\n";
 }
 
 // Queued walks through exact ties of two axes' crossing times on the way (dyadic origins and
@@ -262,7 +264,8 @@ TEST(DenseMarks, QueuedWalksBreakExactTiesAsTheCountedLoop) {
   std::mt19937 rng(11);
   std::uniform_int_distribution<int> lattice(-40, 40), scale(3, 40), pick(0, 5);
   std::size_t tied = 0;
-  for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kScalar}) {
+  for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kFour,
+                            DenseMarks::WalkKernel::kScalar}) {
     DenseMarks dense;
     const VoxelKey lo = *grid.pointToKey(Point3f(-30.0F, -30.0F, -30.0F));
     const VoxelKey hi = *grid.pointToKey(Point3f(30.0F, 30.0F, 30.0F));

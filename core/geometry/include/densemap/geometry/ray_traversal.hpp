@@ -176,6 +176,8 @@ void startTraversals(const VoxelGrid& grid, const Point3f& origin, const VoxelKe
 /// Whether the processor (and the system) has the AVX-512 lanes the wide walks and starts use
 /// (AVX-512 F, VL and DQ; checked once).
 [[nodiscard]] bool hasWideLanes();
+/// Whether the processor has AVX2 (the four-lane kernels'), checked once.
+[[nodiscard]] bool hasFourLanes();
 
 /// The voxels of a ray's traversal when traverseRay's step visitors walk it counted (at least
 /// kCountedStepsFrom crossings and endOf kClean: the origin's voxel, then countedSteps' total - 1

@@ -324,9 +324,13 @@ class DenseMarks {
     std::uint32_t id;    // the caller's
   };
   /// How markQueued walks: kBest 8 walks at a time with AVX-512 where the processor has it
-  /// (hasWideWalks), else one at a time as kScalar does (countedSteps, backwardSteps).
-  enum class WalkKernel { kBest, kScalar };
+  /// (hasWideWalks), else (forward walks) 4 at a time with AVX2 where it has that
+  /// (hasFourWalks), else one at a time as kScalar does (countedSteps, backwardSteps); kFour
+  /// forward walks 4 at a time where the processor has AVX2 (else as kScalar), backward ones
+  /// as kScalar.
+  enum class WalkKernel { kBest, kFour, kScalar };
   [[nodiscard]] static bool hasWideWalks();
+  [[nodiscard]] static bool hasFourWalks();
 
   /// Queues traverseRay's counted walk (countedTotal(start) = `total` > 0 voxels: the first,
   /// then countedSteps' total - 1 steps from `t_max`, `t_delta`) from voxel `first`, moving by

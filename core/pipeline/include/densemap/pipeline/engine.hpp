@@ -36,7 +36,8 @@ struct PipelineOptions {
   int threads = 2;  // size of the task arena the ingest runs the engine in
   /// Scans waiting per sensor id (latest wins per sensor: a full sensor's oldest is dropped);
   /// all sensors together kQueueSensorShare times as many, one scan per sensor always fitting.
-  std::size_t queue_depth = 2;
+  /// 4: a 10-Hz sensor's burst after a ~0.4-s stall is absorbed, not dropped.
+  std::size_t queue_depth = 4;
   /// Bytes (rawScanBytes) the waiting scans may hold in all: beyond it the sensor with the most
   /// waiting gives up its oldest, else the oldest scan goes (one scan larger than all of it
   /// still waits alone). 0: no byte budget.
