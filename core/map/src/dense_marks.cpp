@@ -1,5 +1,7 @@
 #include "densemap/map/dense_marks.hpp"
 
+#include <algorithm>
+
 namespace densemap {
 
 bool DenseMarks::reset(const VoxelKey& min, const VoxelKey& max, std::size_t max_blocks) {
@@ -49,20 +51,93 @@ std::uint64_t DenseMarks::blockKeyAt(std::uint32_t i) const {
   return block::blockOf(first);
 }
 
-bool DenseMarks::absorb(DenseMarks& other) {
-  for (int a = 0; a < 3; ++a) {
-    if (other.min_[a] != min_[a] || other.n_[a] != n_[a]) return false;
-  }
-  for (std::size_t t = 0; t < other.touched_count_; ++t) {
-    const std::uint32_t i = other.touched_[t];
-    touch(i);
-    for (int w = 0; w < block::kMaskWords; ++w) {
-      masks_[i][w] |= other.masks_[i][w];
-      occupied_[i][w] |= other.occupied_[i][w];
+void DenseMarks::flushAllInto(std::span<DenseMarks* const> others, ScanUpdate& update,
+                              const ChunkRunner& runner) {
+  // The others' blocks join this one's list (no marks moved yet): each block once, in order.
+  std::vector<DenseMarks*> same, apart;
+  for (DenseMarks* other : others) {
+    bool shared = true;
+    for (int a = 0; a < 3; ++a) {
+      shared = shared && other->min_[a] == min_[a] && other->n_[a] == n_[a];
     }
+    if (!shared) {
+      apart.push_back(other);  // flushed after these (by hash probe: its blocks may be ours)
+      continue;
+    }
+    for (std::size_t t = 0; t < other->touched_count_; ++t) touch(other->touched_[t]);
+    same.push_back(other);
   }
-  other.discard();
-  return true;
+  // Chunks of the list: the others' marks ORed in (and cleared there), the blocks holding marks
+  // counted (a walk may enter a block and stop before marking), then written out in order at
+  // their chunk's offset. Chunks own distinct blocks, so they may run at once.
+  constexpr std::size_t kChunk = 512, kAhead = 8;
+  const std::size_t n = touched_count_;
+  const std::size_t chunks = (n + kChunk - 1) / kChunk;
+  chunk_held_.assign(chunks + 1, 0);
+  runner.run(chunks, 1, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t c = begin; c != end; ++c) {
+      std::size_t held = 0;
+      const std::size_t to = std::min(n, (c + 1) * kChunk);
+      for (std::size_t t = c * kChunk; t < to; ++t) {
+        // The blocks are all over the box (cache misses): a few ahead are fetched meanwhile.
+        if (t + kAhead < to) {
+          const std::uint32_t ahead = touched_[t + kAhead];
+          __builtin_prefetch(&masks_[ahead]);
+          __builtin_prefetch(&occupied_[ahead]);
+          for (const DenseMarks* other : same) {
+            __builtin_prefetch(&other->masks_[ahead]);
+            __builtin_prefetch(&other->occupied_[ahead]);
+          }
+        }
+        const std::uint32_t i = touched_[t];
+        for (DenseMarks* other : same) {
+          if (other->seen_[i] == 0) continue;
+          for (int w = 0; w < block::kMaskWords; ++w) {
+            masks_[i][w] |= other->masks_[i][w];
+            occupied_[i][w] |= other->occupied_[i][w];
+          }
+          other->masks_[i] = {};
+          other->occupied_[i] = {};
+          other->seen_[i] = 0;
+        }
+        held += (block::anyBit(masks_[i]) || block::anyBit(occupied_[i])) ? 1 : 0;
+      }
+      chunk_held_[c + 1] = held;
+    }
+  });
+  for (std::size_t c = 0; c < chunks; ++c) chunk_held_[c + 1] += chunk_held_[c];
+  const std::size_t first = update.appendBlocks(chunk_held_[chunks]);
+  runner.run(chunks, 1, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t c = begin; c != end; ++c) {
+      std::size_t at = first + chunk_held_[c];
+      const std::size_t to = std::min(n, (c + 1) * kChunk);
+      for (std::size_t t = c * kChunk; t < to; ++t) {
+        if (t + kAhead < to) {
+          __builtin_prefetch(&masks_[touched_[t + kAhead]]);
+          __builtin_prefetch(&occupied_[touched_[t + kAhead]]);
+        }
+        const std::uint32_t i = touched_[t];
+        if (block::anyBit(masks_[i]) || block::anyBit(occupied_[i])) {
+          auto& [key, b] = update.blockAt(at++);
+          key = blockKeyAt(i);
+          b.free = masks_[i];
+          b.occupied = occupied_[i];
+        }
+        masks_[i] = {};
+        occupied_[i] = {};
+        seen_[i] = 0;
+      }
+    }
+  });
+  touched_count_ = 0;
+  queue_.clear();
+  back_queue_.clear();
+  for (DenseMarks* other : same) {  // every block of their lists is cleared already
+    other->touched_count_ = 0;
+    other->queue_.clear();
+    other->back_queue_.clear();
+  }
+  for (DenseMarks* other : apart) other->flushInto(update);
 }
 
 void DenseMarks::flushInto(ScanUpdate& update) {

@@ -29,7 +29,18 @@ std::size_t slotOf(std::uint64_t key, std::size_t mask) {
 }  // namespace
 
 std::uint32_t ScanUpdate::indexFor(std::uint64_t block_key) {
-  if ((blocks_.size() + 1) * 2 > slot_keys_.size()) grow();
+  if ((blocks_.size() + 1) * 2 > slot_keys_.size()) {
+    grow(blocks_.size() + 1);  // indexes every block, appended ones too
+  } else if (indexed_ < blocks_.size()) {
+    const std::size_t mask = slot_keys_.size() - 1;  // appended blocks not yet in the slots
+    for (std::size_t i = indexed_; i < blocks_.size(); ++i) {
+      std::size_t slot = slotOf(blocks_[i].first, mask);
+      while (slot_keys_[slot] != kEmpty) slot = (slot + 1) & mask;
+      slot_keys_[slot] = blocks_[i].first;
+      slot_blocks_[slot] = static_cast<std::uint32_t>(i);
+    }
+  }
+  indexed_ = blocks_.size();
   const std::size_t mask = slot_keys_.size() - 1;
   for (std::size_t slot = slotOf(block_key, mask);; slot = (slot + 1) & mask) {
     if (slot_keys_[slot] == block_key) return slot_blocks_[slot];
@@ -37,14 +48,23 @@ std::uint32_t ScanUpdate::indexFor(std::uint64_t block_key) {
       slot_keys_[slot] = block_key;
       slot_blocks_[slot] = static_cast<std::uint32_t>(blocks_.size());
       Block& b = blocks_.emplace_back(block_key, Block{}).second;
+      indexed_ = blocks_.size();
       if (rule_ == UpdateRule::kPerRay) b.counts = std::make_unique<Counts>();
       return slot_blocks_[slot];
     }
   }
 }
 
-void ScanUpdate::grow() {
-  const std::size_t size = std::max<std::size_t>(1024, slot_keys_.size() * 2);
+std::size_t ScanUpdate::appendBlocks(std::size_t n) {
+  cached_key_ = kEmpty;
+  const std::size_t first = blocks_.size();
+  blocks_.resize(first + n);
+  return first;
+}
+
+void ScanUpdate::grow(std::size_t blocks) {
+  std::size_t size = std::max<std::size_t>(1024, slot_keys_.size() * 2);
+  while (size < blocks * 2) size *= 2;
   slot_keys_.assign(size, kEmpty);
   slot_blocks_.assign(size, 0);
   const std::size_t mask = size - 1;
@@ -58,7 +78,8 @@ void ScanUpdate::grow() {
 
 void ScanUpdate::clear() {
   blocks_.clear();
-  std::fill(slot_keys_.begin(), slot_keys_.end(), kEmpty);
+  if (indexed_ > 0) std::fill(slot_keys_.begin(), slot_keys_.end(), kEmpty);
+  indexed_ = 0;
   cached_key_ = kEmpty;
 }
 

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "densemap/geometry/stopwatch.hpp"
+#include "densemap/parallel/tbb_runner.hpp"
 
 namespace densemap {
 
@@ -251,15 +252,16 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
   // The workers' dense marks (all over the same box) ORed into one by block index, then one
   // flush into the update; each worker's own update holds only its marks outside the box.
   DenseMarks* dense_marks = nullptr;
+  others_.clear();
   for (Local& local : locals_) {
     if (!local.dense_ok) continue;
     if (dense_marks == nullptr) {
       dense_marks = &local.dense;
-    } else if (!dense_marks->absorb(local.dense)) {
-      local.dense.flushInto(update);  // another box (not so today: every worker resets to it)
+    } else {
+      others_.push_back(&local.dense);
     }
   }
-  if (dense_marks != nullptr) dense_marks->flushInto(update);
+  if (dense_marks != nullptr) dense_marks->flushAllInto(others_, update, tbbRunner());
   for (Local& local : locals_) {
     update.merge(local.update);
     stats.visits += local.counts.visits;

@@ -4,8 +4,12 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <map>
 #include <random>
+#include <set>
+
+#include "densemap/parallel/tbb_runner.hpp"
 
 namespace densemap {
 namespace {
@@ -149,36 +153,87 @@ TEST(DenseMarks, AResetDropsMarksAScanLeftUnflushed) {
   EXPECT_TRUE(outside.empty());
 }
 
-TEST(DenseMarks, AbsorbingAnotherWorkersMarksGivesTheUpdateOfBoth) {
-  std::mt19937 rng(8);
-  std::uniform_int_distribution<int> coord(32700, 32800);
-  const VoxelKey lo{32720, 32730, 32740}, hi{32790, 32780, 32770};
-  DenseMarks a, b, other_box;
-  ASSERT_TRUE(a.reset(lo, hi, 1000));
-  ASSERT_TRUE(b.reset(lo, hi, 1000));
-  ASSERT_TRUE(other_box.reset(lo, {32800, 32780, 32770}, 1000));  // one block wider
-  ScanUpdate plain, outside;
-  for (int i = 0; i < 6000; ++i) {
-    const VoxelKey k{static_cast<std::uint16_t>(coord(rng)), static_cast<std::uint16_t>(coord(rng)),
-                     static_cast<std::uint16_t>(coord(rng))};
-    DenseMarks& into = i % 2 == 0 ? a : b;
-    if (i % 5 == 0) {
-      plain.markOccupied(k);
-      into.markOccupied(k, outside);
-    } else {
-      plain.markFree(k);
-      into.markFree(k, outside);
-    }
+// Runs the chunks last to first, one at a time: an order no serial flush takes.
+class BackwardRunner final : public ChunkRunner {
+ public:
+  void run(std::size_t n, std::size_t, const Body& body) const override {
+    for (std::size_t c = n; c-- > 0;) body(c, c + 1);
   }
-  EXPECT_FALSE(a.absorb(other_box));  // another box: refused
-  ASSERT_TRUE(a.absorb(b));
-  ScanUpdate sut;
-  a.flushInto(sut);
-  sut.merge(outside);
-  EXPECT_EQ(cellsOf(sut), cellsOf(plain));
-  ScanUpdate left;
-  b.flushInto(left);  // absorbed: nothing left
-  EXPECT_TRUE(left.empty());
+};
+
+// Several workers' marks flushed together (flushAllInto: the same box ORed in by block index in
+// chunks, another box flushed after) give the update of all the marks, the blocks in the order
+// one worker's flush would give after the others' marks were added, whichever order the
+// chunks run in; every worker's marks are cleared.
+TEST(DenseMarks, FlushingAllWorkersMarksGivesTheUpdateOfAll) {
+  const BackwardRunner backward;
+  for (const ChunkRunner* runner : {&serialRunner(), &tbbRunner(),
+                                    static_cast<const ChunkRunner*>(&backward)}) {
+    std::mt19937 rng(8);
+    std::uniform_int_distribution<int> coord(32600, 32800);
+    const VoxelKey lo{32600, 32610, 32620}, hi{32790, 32780, 32770};
+    DenseMarks a, b, c, other_box;
+    ASSERT_TRUE(a.reset(lo, hi, 100000));
+    ASSERT_TRUE(b.reset(lo, hi, 100000));
+    ASSERT_TRUE(c.reset(lo, hi, 100000));
+    ASSERT_TRUE(other_box.reset(lo, {32800, 32780, 32770}, 100000));  // one block wider
+    ScanUpdate plain, outside;
+    // The serial order: a's blocks as first marked, then each other's new ones (as a's list
+    // gains them), then the other box's.
+    std::vector<std::uint64_t> order;
+    std::set<std::uint64_t> listed;
+    std::vector<std::uint64_t> order_b, order_c, order_other;
+    DenseMarks* workers[4] = {&a, &b, &c, &other_box};
+    std::vector<std::uint64_t>* orders[4] = {&order, &order_b, &order_c, &order_other};
+    std::set<std::uint64_t> seen[4];
+    for (int i = 0; i < 60000; ++i) {
+      const VoxelKey k{static_cast<std::uint16_t>(coord(rng)),
+                       static_cast<std::uint16_t>(coord(rng)),
+                       static_cast<std::uint16_t>(coord(rng))};
+      const int w = i % 7 == 0 ? 3 : i % 3;
+      DenseMarks& into = *workers[w];
+      if (i % 5 == 0) {
+        plain.markOccupied(k);
+        into.markOccupied(k, outside);
+      } else {
+        plain.markFree(k);
+        into.markFree(k, outside);
+      }
+      const VoxelKey& top = w == 3 ? VoxelKey{32800, 32780, 32770} : hi;
+      bool inside = true;  // the box is whole blocks
+      for (int axis = 0; axis < 3; ++axis) {
+        inside = inside && (k[axis] >> 3) >= (lo[axis] >> 3) && (k[axis] >> 3) <= (top[axis] >> 3);
+      }
+      if (inside && seen[w].insert(block::blockOf(k)).second) {
+        orders[w]->push_back(block::blockOf(k));
+      }
+    }
+    for (const auto* extra : {&order_b, &order_c, &order_other}) {
+      for (const std::uint64_t key : *extra) order.push_back(key);
+    }
+    std::vector<std::uint64_t> expected_order;
+    for (const std::uint64_t key : order) {
+      if (listed.insert(key).second) expected_order.push_back(key);
+    }
+    ScanUpdate sut;
+    DenseMarks* others[3] = {&other_box, &b, &c};
+    a.flushAllInto(others, sut, *runner);
+    std::vector<std::uint64_t> got_order;
+    for (const auto& [key, block] : sut.blocks()) got_order.push_back(key);
+    EXPECT_EQ(got_order, expected_order);
+    EXPECT_GT(got_order.size(), 2000U);  // many chunks
+    sut.merge(outside);
+    EXPECT_EQ(cellsOf(sut), cellsOf(plain));
+    for (DenseMarks* w : workers) {  // flushed: nothing left
+      ScanUpdate left;
+      w->flushInto(left);
+      EXPECT_TRUE(left.empty());
+    }
+    // The update's index finds the appended blocks: marking one again adds no block.
+    const std::size_t blocks = sut.blocks().size();
+    sut.markFree(block::keyOf(got_order[got_order.size() / 2], 0));
+    EXPECT_EQ(sut.blocks().size(), blocks);
+  }
 }
 
 TEST(DenseMarks, RefusesABoxOverItsBlockLimit) {

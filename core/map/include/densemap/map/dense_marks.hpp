@@ -5,7 +5,10 @@
 #include <cstdlib>
 #include <memory>
 #include <optional>
+#include <span>
 #include <vector>
+
+#include "densemap/geometry/chunk_runner.hpp"
 
 #include "densemap/map/block_layout.hpp"
 #include "densemap/map/scan_update.hpp"
@@ -69,10 +72,13 @@ class DenseMarks {
 
   /// ORs the marks into `update` and clears them.
   void flushInto(ScanUpdate& update);
-  /// ORs `other`'s marks into these and clears them there, when `other` covers the same blocks
-  /// (else false, nothing done). Cheaper than flushing both: a block index, not a hash probe,
-  /// per block.
-  [[nodiscard]] bool absorb(DenseMarks& other);
+  /// The marks of these and of `others` (other workers') ORed into `update` — which must hold
+  /// none of this box's blocks (a fresh one) — and cleared in all: as flushing each, the blocks
+  /// in the same order as this one's flushInto after the others' marks were added to it.
+  /// Others over the same blocks are ORed in by block index, not by hash probe, the blocks split
+  /// into chunks that `runner` may run at once; others over another box are flushed one by one.
+  void flushAllInto(std::span<DenseMarks* const> others, ScanUpdate& update,
+                    const ChunkRunner& runner);
 
   /// Calls f(block key, free mask) for each block with free marks so far (the marks stay).
   template <class F>
@@ -479,6 +485,7 @@ class DenseMarks {
   std::vector<QueuedBackWalk> back_queue_;
   std::vector<std::uint32_t> entered_;          // markQueued's: blocks the walks entered
   std::vector<std::uint64_t> pend_w_, pend_b_;  // markQueued's: marks gathered per word
+  std::vector<std::size_t> chunk_held_;          // flushAllInto's: blocks with marks per chunk
 };
 
 }  // namespace densemap

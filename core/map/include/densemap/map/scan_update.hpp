@@ -62,6 +62,13 @@ class ScanUpdate {
     }
   }
 
+  /// Appends `n` empty blocks (kSet) that a caller fills — in parallel if it likes: key and
+  /// marks, the keys distinct and none already in the update — before the update is used
+  /// again (the key index takes them in at the next mark or merge, if one comes). Returns the
+  /// position of the first new block.
+  std::size_t appendBlocks(std::size_t n);
+  [[nodiscard]] std::pair<std::uint64_t, Block>& blockAt(std::size_t j) { return blocks_[j]; }
+
   /// Adds another update (same rule) into this one.
   void merge(const ScanUpdate& other);
   void clear();
@@ -114,12 +121,15 @@ class ScanUpdate {
   }
   /// Open addressing with linear probing on the block key; creates the block when missing.
   std::uint32_t indexFor(std::uint64_t block_key);
-  void grow();
+  /// A slot table for at least `blocks` blocks (twice as many slots, a power of two, at least
+  /// double the present), every block indexed again.
+  void grow(std::size_t blocks);
 
   UpdateRule rule_;
   std::vector<std::pair<std::uint64_t, Block>> blocks_;
   std::vector<std::uint64_t> slot_keys_;    // kEmpty or a block key; size a power of two
   std::vector<std::uint32_t> slot_blocks_;  // index into blocks_
+  std::size_t indexed_ = 0;                 // blocks_[0, indexed_) are in the slots
   std::uint64_t cached_key_ = kEmpty;
   std::uint32_t cached_index_ = 0;
 };

@@ -117,6 +117,7 @@ class Integrator {
   std::vector<RayEnd> rays_;
   std::vector<VoxelKey> hit_;
   std::vector<FullyFreeBlock> covered_;
+  std::vector<DenseMarks*> others_;  // the workers' dense marks after the first, to flush
   SuperRayBuilder super_rays_;
   CullingRegion region_;
   tbb::enumerable_thread_specific<Local> locals_;
