@@ -67,6 +67,10 @@ void DenseMarks::flushAllInto(std::span<DenseMarks* const> others, ScanUpdate& u
     for (std::size_t t = 0; t < other->touched_count_; ++t) touch(other->touched_[t]);
     same.push_back(other);
   }
+  // In the box's block order (x fastest, then y, then z): the map's apply reads neighbouring
+  // blocks one after the other, which it does faster than in the walks' order (BALM 0.1 m, one
+  // thread: 8.3 ms a scan against 15.1-15.9 for the lanes' interleaved order).
+  std::sort(touched_.data(), touched_.data() + touched_count_);
   // Chunks of the list: the others' marks ORed in (and cleared there), the blocks holding marks
   // counted (a walk may enter a block and stop before marking), then written out in order at
   // their chunk's offset. Chunks own distinct blocks, so they may run at once.

@@ -147,6 +147,10 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
     local.counts = {};
     local.dense_ok = dense && local.dense.reset(box.min, box.max, options_.dense_marks_max_blocks);
   }
+  // Queues pay where the processor walks them in lanes (IntegratorOptions::queue_walks).
+  const bool queue_forward =
+      options_.queue_walks && (DenseMarks::hasWideWalks() || DenseMarks::hasFourWalks());
+  const bool queue_backward = options_.queue_walks && DenseMarks::hasWideWalks();
   const auto mark_one = [&](std::size_t i, auto& sink, Local& local) {
     if (region != nullptr) {
       markRayCulled(grid, origin_world, rays_[i], *region, local.scratch, sink, local.counts,
@@ -192,7 +196,7 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
             for (const std::uint32_t i : idsOf(range, local.ids)) mark_one(i, sink, local);
           };
           if (local.dense_ok && region != nullptr && region->sharesFrame(local.dense) &&
-              options_.queue_walks) {
+              queue_backward) {
             // Backward walks queued and walked together at the range's end; those handed over
             // (near-ties) walked again one by one, exactly.
             SharedFrameSink sink{{local.dense, local.update}};
@@ -210,7 +214,7 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
           } else if (local.dense_ok && region != nullptr && region->sharesFrame(local.dense)) {
             SharedFrameSink sink{{local.dense, local.update}};
             mark_all(sink);
-          } else if (local.dense_ok && region == nullptr && options_.queue_walks) {
+          } else if (local.dense_ok && region == nullptr && queue_forward) {
             // Forward walks queued and walked together at the range's end.
             DenseSink sink{local.dense, local.update};
             markRaysQueued(grid, origin_world, rays_.data(), idsOf(range, local.ids), sink,

@@ -8,6 +8,7 @@
 #include <map>
 #include <random>
 #include <set>
+#include <tuple>
 
 #include "densemap/parallel/tbb_runner.hpp"
 
@@ -162,9 +163,9 @@ class BackwardRunner final : public ChunkRunner {
 };
 
 // Several workers' marks flushed together (flushAllInto: the same box ORed in by block index in
-// chunks, another box flushed after) give the update of all the marks, the blocks in the order
-// one worker's flush would give after the others' marks were added, whichever order the
-// chunks run in; every worker's marks are cleared.
+// chunks, another box flushed after) give the update of all the marks, the box's blocks in
+// block order and then the other box's, whichever order the chunks run in; every worker's
+// marks are cleared.
 TEST(DenseMarks, FlushingAllWorkersMarksGivesTheUpdateOfAll) {
   const BackwardRunner backward;
   for (const ChunkRunner* runner : {&serialRunner(), &tbbRunner(),
@@ -208,11 +209,20 @@ TEST(DenseMarks, FlushingAllWorkersMarksGivesTheUpdateOfAll) {
         orders[w]->push_back(block::blockOf(k));
       }
     }
-    for (const auto* extra : {&order_b, &order_c, &order_other}) {
+    for (const auto* extra : {&order_b, &order_c}) {
       for (const std::uint64_t key : *extra) order.push_back(key);
     }
     std::vector<std::uint64_t> expected_order;
     for (const std::uint64_t key : order) {
+      if (listed.insert(key).second) expected_order.push_back(key);
+    }
+    const auto zyx = [](std::uint64_t key) {  // the box's block order: x fastest, then y, z
+      const VoxelKey corner = block::keyOf(key, 0);
+      return std::tuple(corner.z, corner.y, corner.x);
+    };
+    std::sort(expected_order.begin(), expected_order.end(),
+              [&](std::uint64_t p, std::uint64_t q) { return zyx(p) < zyx(q); });
+    for (const std::uint64_t key : order_other) {  // the other box's, after, as first marked
       if (listed.insert(key).second) expected_order.push_back(key);
     }
     ScanUpdate sut;

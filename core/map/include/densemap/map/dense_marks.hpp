@@ -73,8 +73,9 @@ class DenseMarks {
   /// ORs the marks into `update` and clears them.
   void flushInto(ScanUpdate& update);
   /// The marks of these and of `others` (other workers') ORed into `update` — which must hold
-  /// none of this box's blocks (a fresh one) — and cleared in all: as flushing each, the blocks
-  /// in the same order as this one's flushInto after the others' marks were added to it.
+  /// none of this box's blocks (a fresh one) — and cleared in all: the marks of flushing each,
+  /// the box's blocks in block order (x fastest, then y, then z), then those of others over
+  /// another box.
   /// Others over the same blocks are ORed in by block index, not by hash probe, the blocks split
   /// into chunks that `runner` may run at once; others over another box are flushed one by one.
   void flushAllInto(std::span<DenseMarks* const> others, ScanUpdate& update,
