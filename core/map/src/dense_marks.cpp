@@ -29,16 +29,21 @@ bool DenseMarks::reset(const VoxelKey& min, const VoxelKey& max, std::size_t max
   return true;
 }
 
-void DenseMarks::discard() {
-  for (std::size_t t = 0; t < touched_count_; ++t) {
-    const std::uint32_t i = touched_[t];
-    masks_[i] = {};
-    occupied_[i] = {};
-    seen_[i] = 0;
-  }
+void DenseMarks::clearBlock(std::uint32_t i) {
+  masks_[i] = {};
+  occupied_[i] = {};
+  seen_[i] = 0;
+}
+
+void DenseMarks::forgetList() {
   touched_count_ = 0;
   queue_.clear();
   back_queue_.clear();
+}
+
+void DenseMarks::discard() {
+  for (std::size_t t = 0; t < touched_count_; ++t) clearBlock(touched_[t]);
+  forgetList();
 }
 
 std::uint64_t DenseMarks::blockKeyAt(std::uint32_t i) const {
@@ -100,9 +105,7 @@ void DenseMarks::flushAllInto(std::span<DenseMarks* const> others, ScanUpdate& u
             masks_[i][w] |= other->masks_[i][w];
             occupied_[i][w] |= other->occupied_[i][w];
           }
-          other->masks_[i] = {};
-          other->occupied_[i] = {};
-          other->seen_[i] = 0;
+          other->clearBlock(i);
         }
         held += (block::anyBit(masks_[i]) || block::anyBit(occupied_[i])) ? 1 : 0;
       }
@@ -127,20 +130,12 @@ void DenseMarks::flushAllInto(std::span<DenseMarks* const> others, ScanUpdate& u
           b.free = masks_[i];
           b.occupied = occupied_[i];
         }
-        masks_[i] = {};
-        occupied_[i] = {};
-        seen_[i] = 0;
+        clearBlock(i);
       }
     }
   });
-  touched_count_ = 0;
-  queue_.clear();
-  back_queue_.clear();
-  for (DenseMarks* other : same) {  // every block of their lists is cleared already
-    other->touched_count_ = 0;
-    other->queue_.clear();
-    other->back_queue_.clear();
-  }
+  forgetList();
+  for (DenseMarks* other : same) other->forgetList();  // their blocks are cleared already
   for (DenseMarks* other : apart) other->flushInto(update);
 }
 

@@ -303,7 +303,7 @@ struct WideOut {
 /// AVX2 has no mask registers and no compress: a lane mask is a vector of all-ones lanes, and
 /// the lanes a 4-bit mask names are packed to the front by a permute from these tables.
 struct FourLaneTables {
-  alignas(32) std::int32_t pack64[16][8];  // the 64-bit lanes set in the mask, in order
+  alignas(32) std::int32_t pack64[16][8];    // the 64-bit lanes set in the mask, in order
   alignas(32) std::int32_t pack_low[16][8];  // their low 32 bits, in order
   alignas(32) std::int64_t lane[4][4];       // all-ones in lane k only
 };
@@ -345,13 +345,12 @@ constexpr FourLaneTables kFour = makeFourLaneTables();
 /// smallest tMax, ties to the higher axis) from the same double additions, a lane taking the
 /// next walk when its own is done, marks gathered per lane and word and pended when the lane
 /// moves on. `out` must have room for (all the walks' steps + 1) + 16.
-[[DENSEMAP_AVX2]] void walkFour(const DenseMarks::QueuedWalk* walks, std::size_t n,
-                                WideOut& out) {
+[[DENSEMAP_AVX2]] void walkFour(const DenseMarks::QueuedWalk* walks, std::size_t n, WideOut& out) {
   const __m256i one = _mm256_set1_epi64x(1), zero = _mm256_setzero_si256(),
                 low6 = _mm256_set1_epi64x(63), edge = _mm256_set1_epi64x(block::kEdge);
   __m256d t0 = _mm256_setzero_pd(), t1 = t0, t2 = t0, d0 = t0, d1 = t0, d2 = t0;
-  __m256i addr = zero, l0 = zero, l1 = zero, l2 = zero, s0 = zero, s1 = zero, s2 = zero,
-          r0 = zero, r1 = zero, r2 = zero;
+  __m256i addr = zero, l0 = zero, l1 = zero, l2 = zero, s0 = zero, s1 = zero, s2 = zero, r0 = zero,
+          r1 = zero, r2 = zero;
   __m256i left = zero;                 // the lane's steps to go
   __m256i cur_w = zero, cur_b = zero;  // the word being marked, its marks so far
   int live = 0;                        // lanes with a walk whose last marks are not pended

@@ -168,8 +168,8 @@ class BackwardRunner final : public ChunkRunner {
 // marks are cleared.
 TEST(DenseMarks, FlushingAllWorkersMarksGivesTheUpdateOfAll) {
   const BackwardRunner backward;
-  for (const ChunkRunner* runner : {&serialRunner(), &tbbRunner(),
-                                    static_cast<const ChunkRunner*>(&backward)}) {
+  for (const ChunkRunner* runner :
+       {&serialRunner(), &tbbRunner(), static_cast<const ChunkRunner*>(&backward)}) {
     std::mt19937 rng(8);
     std::uniform_int_distribution<int> coord(32600, 32800);
     const VoxelKey lo{32600, 32610, 32620}, hi{32790, 32780, 32770};

@@ -452,6 +452,10 @@ class DenseMarks {
   unsigned n_[3] = {0, 0, 0};
   /// Clears the marks made since the last flush (none when every scan was flushed).
   void discard();
+  /// Block i's marks and first-touch flag cleared; the list of touched blocks and the queues
+  /// emptied (their blocks' marks are the caller's to clear).
+  void clearBlock(std::uint32_t i);
+  void forgetList();
 
   /// An array of zeroed Ts from calloc: the pages a scan never touches stay unmapped (the
   /// largest box, 2^21 blocks, is 128 MiB of masks per array), where a vector writes them all.
@@ -486,7 +490,7 @@ class DenseMarks {
   std::vector<QueuedBackWalk> back_queue_;
   std::vector<std::uint32_t> entered_;          // markQueued's: blocks the walks entered
   std::vector<std::uint64_t> pend_w_, pend_b_;  // markQueued's: marks gathered per word
-  std::vector<std::size_t> chunk_held_;          // flushAllInto's: blocks with marks per chunk
+  std::vector<std::size_t> chunk_held_;         // flushAllInto's: blocks with marks per chunk
 };
 
 }  // namespace densemap
