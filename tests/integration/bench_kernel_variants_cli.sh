@@ -30,3 +30,18 @@ for bad in "akimap_rays@set=widht=3" "akimap_rays@set=hit_stencil_steps=7" "akim
   grep -qF "${bad#*@}" "$dir/err.txt" || grep -qF "$bad" "$dir/err.txt" ||
     { echo "$bad: the error does not name it:"; cat "$dir/err.txt"; exit 1; }
 done
+# METHOD@tN: the lane runs on N threads (the table's thr column), the same map as OctoMap's;
+# OctoMap on more than one thread is refused, exit 2.
+"$bench" --data "$dir/scene" --resolution 0.1 --max-range 8 --backend grid \
+  --methods octomap,raycast@t1,raycast@t2 >"$dir/threads.txt" 2>&1
+for lane in "raycast@t1 1" "raycast@t2 2"; do
+  set -- $lane
+  awk -v m="$1" -v t="$2" '$1 == m && $2 == "grid" && $4 == t && $12 == "0" {found = 1}
+    END {exit !found}' "$dir/threads.txt" ||
+    { echo "$1: not on $2 threads with 0 cells differing:"; cat "$dir/threads.txt"; exit 1; }
+done
+code=0
+"$bench" --data "$dir/scene" --resolution 0.1 --methods octomap@t2 >/dev/null 2>"$dir/err.txt" ||
+  code=$?
+[ "$code" -eq 2 ] && grep -qF "octomap@t2" "$dir/err.txt" ||
+  { echo "octomap@t2: exit $code, expected 2 naming it"; exit 1; }

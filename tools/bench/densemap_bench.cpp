@@ -80,6 +80,11 @@ int checkOptions(const Options& o, std::vector<Backend>& backends) {
   }
   for (const auto& name : o.methods) {
     const std::string m = laneMethod(name, o.threads).method;
+    if (m == "octomap" && name != m) {  // its lane would be a grid map's, OctoMap's insert on it
+      std::fprintf(stderr, "densemap-bench: '%s': OctoMap runs on one thread (no @tN)\n",
+                   name.c_str());
+      return 2;
+    }
     if (makeIntegrator(m, o)) continue;
     const auto dense = kernelOptions(m, o);
     if (!dense && m.find("@set=") != std::string::npos) {  // a known kind, a bad setting
