@@ -344,7 +344,9 @@ constexpr FourLaneTables kFour = makeFourLaneTables();
 /// The forward walks' steps four at a time in AVX2 lanes, as walkEight: the same choice (the
 /// smallest tMax, ties to the higher axis) from the same double additions, a lane taking the
 /// next walk when its own is done, marks gathered per lane and word and pended when the lane
-/// moves on. `out` must have room for (all the walks' steps + 1) + 16.
+/// moves on. No blocks entered are listed (finishPended takes them from the pended words: per
+/// step that was 9 of some 70 instructions). `out` must have room for (all the walks' steps + 1)
+/// + 16.
 [[DENSEMAP_AVX2]] void walkFour(const DenseMarks::QueuedWalk* walks, std::size_t n, WideOut& out) {
   const __m256i one = _mm256_set1_epi64x(1), zero = _mm256_setzero_si256(),
                 low6 = _mm256_set1_epi64x(63), edge = _mm256_set1_epi64x(block::kEdge);
@@ -357,7 +359,6 @@ constexpr FourLaneTables kFour = makeFourLaneTables();
   std::size_t next = 0;
   // The outputs' ends in locals: stores through the uint64_t pointers could alias `out`'s
   // counters, which would keep them in memory (a store-to-load round trip every step).
-  std::uint32_t* entered = out.entered + out.n_entered;
   std::uint64_t* pend_w = out.pend_w + out.n_pend;
   std::uint64_t* pend_b = out.pend_b + out.n_pend;
   while (true) {
@@ -424,12 +425,6 @@ constexpr FourLaneTables kFour = makeFourLaneTables();
     l0 = _mm256_blendv_epi8(l0, edge, w0);
     l1 = _mm256_blendv_epi8(l1, edge, w1);
     l2 = _mm256_blendv_epi8(l2, edge, w2);
-    const int wrapped = bitsOf(_mm256_or_si256(w0, _mm256_or_si256(w1, w2)));
-    const __m256i blocks = _mm256_permutevar8x32_epi32(
-        _mm256_srli_epi64(addr, 9),
-        _mm256_load_si256(reinterpret_cast<const __m256i*>(kFour.pack_low[wrapped])));
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(entered), _mm256_castsi256_si128(blocks));
-    entered += std::popcount(static_cast<unsigned>(wrapped));
     const __m256i word = _mm256_srli_epi64(addr, 6);
     const __m256i moved = _mm256_andnot_si256(_mm256_cmpeq_epi64(word, cur_w), active);
     const int mv = bitsOf(moved);
@@ -442,7 +437,6 @@ constexpr FourLaneTables kFour = makeFourLaneTables();
     cur_b = _mm256_or_si256(
         cur_b, _mm256_and_si256(active, _mm256_sllv_epi64(one, _mm256_and_si256(addr, low6))));
   }
-  out.n_entered = static_cast<std::size_t>(entered - out.entered);
   out.n_pend = static_cast<std::size_t>(pend_w - out.pend_w);
 }
 
@@ -472,6 +466,14 @@ void DenseMarks::finishQueued(std::size_t n_pend, std::size_t n_entered) {
   for (std::size_t i = 0; i < n_entered; ++i) touch(entered_[i]);
 }
 
+void DenseMarks::finishPended(std::size_t n_pend) {
+  std::uint64_t* words = masks_[0].data();
+  for (std::size_t i = 0; i < n_pend; ++i) {
+    words[pend_w_[i]] |= pend_b_[i];
+    touch(static_cast<std::uint32_t>(pend_w_[i] / block::kMaskWords));
+  }
+}
+
 void DenseMarks::markQueued(WalkKernel kernel) {
   const std::size_t n = queue_.size();
   if (n == 0) return;
@@ -491,7 +493,7 @@ void DenseMarks::markQueued(WalkKernel kernel) {
   if ((kernel == WalkKernel::kBest || kernel == WalkKernel::kFour) && hasFourWalks()) {
     WideOut out{entered_.data(), pend_w_.data(), pend_b_.data()};
     walkFour(queue_.data(), n, out);
-    finishQueued(out.n_pend, out.n_entered);
+    finishPended(out.n_pend);
     queue_.clear();
     return;
   }

@@ -418,6 +418,9 @@ class DenseMarks {
   /// After the queued walks: their pended marks (`n_pend` of pend_w_ / pend_b_) ORed in, the
   /// blocks they entered (`n_entered` of entered_) through the first-touch bookkeeping.
   void finishQueued(std::size_t n_pend, std::size_t n_entered);
+  /// The same for walks that list no blocks entered (walkFour): every block a forward walk
+  /// marks holds one of its pended words, so the pended words' blocks are the blocks entered.
+  void finishPended(std::size_t n_pend);
   /// A walk's place from voxel `first` toward `last` (moving by `delta`), when both are in the
   /// box (else false).
   bool place(const VoxelKey& first, const int (&delta)[3], const VoxelKey& last, WalkPlace& at) {
