@@ -1,4 +1,5 @@
-// startTraversals: startTraversal and endOf for eight rays at a time in AVX-512 lanes — the same
+// startTraversals: startTraversal and endOf for eight rays at a time in AVX-512 lanes (or AVX2
+// lanes, the doubles in two halves of four) — the same
 // IEEE operations in the same order (this file is built with -ffp-contract=off: no fused
 // multiply-adds), so every time and decision is the scalar functions' bit for bit.
 #include <cstring>
@@ -176,6 +177,179 @@ void startOne(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_
     }
   }
 }
+
+#define DENSEMAP_AVX2 gnu::target("avx2")
+
+/// The 64-bit lanes of half `h` of a vector of eight 32-bit lane masks (or ints), sign-extended.
+[[DENSEMAP_AVX2, gnu::always_inline]] inline __m256i halfOf(__m256i v, int h) {
+  return _mm256_cvtepi32_epi64(h == 0 ? _mm256_castsi256_si128(v) : _mm256_extracti128_si256(v, 1));
+}
+[[DENSEMAP_AVX2, gnu::always_inline]] inline __m256d halfAsDoubles(__m256i v, int h) {
+  return _mm256_cvtepi32_pd(h == 0 ? _mm256_castsi256_si128(v) : _mm256_extracti128_si256(v, 1));
+}
+[[DENSEMAP_AVX2, gnu::always_inline]] inline __m128 halfOf(__m256 v, int h) {
+  return h == 0 ? _mm256_castps256_ps128(v) : _mm256_extractf128_ps(v, 1);
+}
+[[DENSEMAP_AVX2, gnu::always_inline]] inline __m256d blendMask(__m256d no, __m256d yes, __m256i k) {
+  return _mm256_blendv_pd(no, yes, _mm256_castsi256_pd(k));
+}
+[[DENSEMAP_AVX2, gnu::always_inline]] inline int bitsOf(__m256i k32) {
+  return _mm256_movemask_ps(_mm256_castsi256_ps(k32));
+}
+/// endOf's near(x, y) for four lanes, as bits.
+[[DENSEMAP_AVX2, gnu::always_inline]] inline int nearFour(__m256d x, __m256d y, __m256d bound) {
+  return _mm256_movemask_pd(_mm256_cmp_pd(
+      _mm256_andnot_pd(_mm256_set1_pd(-0.0), _mm256_sub_pd(x, y)), bound, _CMP_LE_OQ));
+}
+
+/// startEight with AVX2: the floats in eight lanes, the doubles in two halves of four, the keys,
+/// steps and crossings as 32-bit ints (exact: keys are 16-bit), the same IEEE operations in the
+/// same order.
+[[DENSEMAP_AVX2]] void startEightByFour(const VoxelGrid& grid, const Point3f& origin,
+                                        const VoxelKey& key_origin, const Point3f* ends,
+                                        const VoxelKey* key_ends, int n, TraversalStarts& out) {
+  constexpr double kMax = std::numeric_limits<double>::max();
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  alignas(32) float e[3][8];
+  alignas(32) std::int32_t k[3][8];
+  for (int i = 0; i < 8; ++i) {
+    const int j = i < n ? i : 0;  // spare lanes: a copy of the first ray
+    for (int a = 0; a < 3; ++a) {
+      e[a][i] = ends[j][a];
+      k[a][i] = key_ends[j][a];
+    }
+  }
+  const int ko[3] = {key_origin.x, key_origin.y, key_origin.z};
+  const double resolution = grid.resolution();
+  __m256 dir[3];
+  for (int a = 0; a < 3; ++a) {
+    dir[a] = _mm256_sub_ps(_mm256_load_ps(e[a]), _mm256_set1_ps(origin[a]));
+  }
+  const __m256 norm_sq = _mm256_add_ps(
+      _mm256_add_ps(_mm256_mul_ps(dir[0], dir[0]), _mm256_mul_ps(dir[1], dir[1])),
+      _mm256_mul_ps(dir[2], dir[2]));
+  const __m256 length =
+      _mm256_set_m128(_mm256_cvtpd_ps(_mm256_sqrt_pd(_mm256_cvtps_pd(halfOf(norm_sq, 1)))),
+                      _mm256_cvtpd_ps(_mm256_sqrt_pd(_mm256_cvtps_pd(halfOf(norm_sq, 0)))));
+  const int has_length =
+      _mm256_movemask_ps(_mm256_cmp_ps(length, _mm256_setzero_ps(), _CMP_GT_OQ));
+  const __m256i zero = _mm256_setzero_si256();
+  int same = 0xff, irregular = 0;
+  __m256d t_max[3][2], t_delta[3][2], last[3][2], beyond[3][2];
+  __m256d scale[2] = {_mm256_setzero_pd(), _mm256_setzero_pd()};
+  __m256i step[3], crossings[3];
+  __m256i total = zero;
+  for (int a = 0; a < 3; ++a) {
+    const __m256i key_end = _mm256_load_si256(reinterpret_cast<const __m256i*>(k[a]));
+    const __m256i key_o = _mm256_set1_epi32(ko[a]);
+    same &= bitsOf(_mm256_cmpeq_epi32(key_end, key_o));
+    const __m256 d = _mm256_div_ps(dir[a], length);
+    const __m256i up = _mm256_castps_si256(_mm256_cmp_ps(d, _mm256_setzero_ps(), _CMP_GT_OQ));
+    const __m256i down = _mm256_castps_si256(_mm256_cmp_ps(d, _mm256_setzero_ps(), _CMP_LT_OQ));
+    step[a] = _mm256_sub_epi32(down, up);  // -1 - 0 down, 0 - -1 up
+    const __m256i moves = _mm256_or_si256(up, down);
+    const double centre = VoxelGrid::keyToCoord(ko[a], resolution);
+    const double border_up = centre + static_cast<float>(1 * resolution * 0.5);
+    const double border_down = centre + static_cast<float>(-1 * resolution * 0.5);
+    // endOf's crossings: (key_end - key_origin) * step.
+    const __m256i c = _mm256_sign_epi32(_mm256_sub_epi32(key_end, key_o), step[a]);
+    crossings[a] = c;
+    irregular |= bitsOf(_mm256_andnot_si256(moves, _mm256_xor_si256(_mm256_cmpeq_epi32(key_end, key_o),
+                                                                     _mm256_set1_epi32(-1))));
+    irregular |= bitsOf(_mm256_and_si256(moves, _mm256_cmpgt_epi32(zero, c)));
+    total = _mm256_add_epi32(total, _mm256_and_si256(moves, c));
+    const __m256i some = _mm256_and_si256(moves, _mm256_cmpgt_epi32(c, zero));
+    const __m256i c_less = _mm256_sub_epi32(c, _mm256_set1_epi32(1));
+    const __m256i c_more = _mm256_add_epi32(c, _mm256_set1_epi32(1));
+    for (int h = 0; h < 2; ++h) {
+      const __m128 dh = halfOf(d, h);
+      const __m256d dd = _mm256_cvtps_pd(dh);
+      const __m256d fabs_d = _mm256_cvtps_pd(_mm_andnot_ps(_mm_set1_ps(-0.0F), dh));
+      const __m256i moves64 = halfOf(moves, h);
+      const __m256d border = blendMask(_mm256_set1_pd(border_up), _mm256_set1_pd(border_down),
+                                       halfOf(down, h));
+      const __m256d tm = blendMask(
+          _mm256_set1_pd(kMax),
+          _mm256_div_pd(_mm256_sub_pd(border, _mm256_set1_pd(static_cast<double>(origin[a]))),
+                        dd),
+          moves64);
+      const __m256d td =
+          blendMask(_mm256_set1_pd(kMax), _mm256_div_pd(_mm256_set1_pd(resolution), fabs_d),
+                    moves64);
+      t_max[a][h] = tm;
+      t_delta[a][h] = td;
+      beyond[a][h] = blendMask(_mm256_set1_pd(kInf),
+                               _mm256_add_pd(tm, _mm256_mul_pd(halfAsDoubles(c, h), td)), moves64);
+      last[a][h] =
+          blendMask(_mm256_set1_pd(-kInf),
+                    _mm256_add_pd(tm, _mm256_mul_pd(halfAsDoubles(c_less, h), td)), halfOf(some, h));
+      const __m256d reach = _mm256_add_pd(_mm256_andnot_pd(_mm256_set1_pd(-0.0), tm),
+                                          _mm256_mul_pd(halfAsDoubles(c_more, h), td));
+      scale[h] = blendMask(scale[h], _mm256_max_pd(scale[h], reach), moves64);
+    }
+  }
+  // bound = 4 * (total + 8) * 2^-50 * scale (the int product first).
+  const __m256i total_term = _mm256_slli_epi32(_mm256_add_epi32(total, _mm256_set1_epi32(8)), 2);
+  int unsure = 0;
+  alignas(32) double tm[3][8], td[3][8], la[3][8], sc[8];
+  for (int h = 0; h < 2; ++h) {
+    const __m256d bound = _mm256_mul_pd(
+        _mm256_mul_pd(halfAsDoubles(total_term, h), _mm256_set1_pd(0x1p-50)), scale[h]);
+    int u = nearFour(last[0][h], last[1][h], bound) | nearFour(last[0][h], last[2][h], bound) |
+            nearFour(last[1][h], last[2][h], bound) | nearFour(beyond[0][h], beyond[1][h], bound) |
+            nearFour(beyond[0][h], beyond[2][h], bound) | nearFour(beyond[1][h], beyond[2][h], bound);
+    const __m256d last_max = _mm256_max_pd(_mm256_max_pd(last[0][h], last[1][h]), last[2][h]);
+    const __m256d beyond_min =
+        _mm256_min_pd(_mm256_min_pd(beyond[0][h], beyond[1][h]), beyond[2][h]);
+    const __m256d some_last = _mm256_cmp_pd(last_max, _mm256_set1_pd(-kInf), _CMP_GT_OQ);
+    const __m256d gap = _mm256_cmp_pd(_mm256_sub_pd(beyond_min, last_max), bound, _CMP_GT_OQ);
+    const __m256d within = _mm256_cmp_pd(
+        _mm256_sub_pd(_mm256_cvtps_pd(halfOf(length, h)), last_max), bound, _CMP_GT_OQ);
+    u |= ~_mm256_movemask_pd(_mm256_and_pd(some_last, _mm256_and_pd(gap, within))) & 0xf;
+    unsure |= u << (4 * h);
+    for (int a = 0; a < 3; ++a) {
+      _mm256_store_pd(tm[a] + 4 * h, t_max[a][h]);
+      _mm256_store_pd(td[a] + 4 * h, t_delta[a][h]);
+      _mm256_store_pd(la[a] + 4 * h, last[a][h]);
+    }
+    _mm256_store_pd(sc + 4 * h, scale[h]);
+  }
+  alignas(32) std::int32_t st[3][8], cr[3][8];
+  alignas(32) float len[8];
+  for (int a = 0; a < 3; ++a) {
+    _mm256_store_si256(reinterpret_cast<__m256i*>(st[a]), step[a]);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(cr[a]), crossings[a]);
+  }
+  _mm256_store_ps(len, length);
+  for (int i = 0; i < n; ++i) {
+    const unsigned bit = 1U << i;
+    if ((same & bit) != 0 || (has_length & bit) == 0) {
+      out.kind[i] = TraversalKind::kSameVoxel;
+      continue;
+    }
+    out.kind[i] = TraversalKind::kRay;
+    TraversalStart& s = out.start[i];
+    s.origin = key_origin;
+    s.end = key_ends[i];
+    s.length = len[i];
+    for (int a = 0; a < 3; ++a) {
+      s.step[a] = st[a][i];
+      s.t_max[a] = tm[a][i];
+      s.t_delta[a] = td[a][i];
+      out.crossings[i][a] = cr[a][i];
+    }
+    if ((irregular & bit) != 0) {
+      out.end[i] = TraversalEnd::kIrregular;
+    } else if ((unsure & bit) != 0) {
+      out.end[i] = TraversalEnd::kUnsure;
+    } else {
+      out.end[i] = TraversalEnd::kClean;
+      for (int a = 0; a < 3; ++a) out.times[i].last[a] = la[a][i];
+      out.times[i].scale = sc[i];
+    }
+  }
+}
+#undef DENSEMAP_AVX2
 #pragma GCC diagnostic pop
 #endif
 
@@ -213,6 +387,10 @@ void startTraversals(const VoxelGrid& grid, const Point3f& origin, const VoxelKe
 #ifdef DENSEMAP_WIDE_STARTS
   if (wide && hasWideLanes()) {
     startEight(grid, origin, key_origin, ends, key_ends, n, out);
+    return;
+  }
+  if (wide && hasFourLanes()) {
+    startEightByFour(grid, origin, key_origin, ends, key_ends, n, out);
     return;
   }
 #endif

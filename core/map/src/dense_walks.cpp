@@ -460,18 +460,42 @@ void makeRoom(std::size_t steps, std::vector<std::uint32_t>& entered,
 bool DenseMarks::hasWideWalks() { return hasWideLanes(); }
 bool DenseMarks::hasFourWalks() { return hasFourLanes(); }
 
+// The first-touch bookkeeping of these loops (touch()) kept in locals: seen_'s byte stores may
+// alias any member, which would reload the count and the arrays' pointers after each store.
 void DenseMarks::finishQueued(std::size_t n_pend, std::size_t n_entered) {
-  std::uint64_t* words = masks_[0].data();
-  for (std::size_t i = 0; i < n_pend; ++i) words[pend_w_[i]] |= pend_b_[i];
-  for (std::size_t i = 0; i < n_entered; ++i) touch(entered_[i]);
+  std::uint64_t* const words = masks_[0].data();
+  const std::uint64_t* const pend_w = pend_w_.data();
+  const std::uint64_t* const pend_b = pend_b_.data();
+  for (std::size_t i = 0; i < n_pend; ++i) words[pend_w[i]] |= pend_b[i];
+  std::uint8_t* const seen = seen_.data();
+  std::uint32_t* const touched = touched_.data();
+  const std::uint32_t* const entered = entered_.data();
+  std::size_t count = touched_count_;
+  for (std::size_t i = 0; i < n_entered; ++i) {
+    const std::uint32_t b = entered[i];
+    touched[count] = b;
+    count += seen[b] ^ 1U;
+    seen[b] = 1;
+  }
+  touched_count_ = count;
 }
 
 void DenseMarks::finishPended(std::size_t n_pend) {
-  std::uint64_t* words = masks_[0].data();
+  std::uint64_t* const words = masks_[0].data();
+  const std::uint64_t* const pend_w = pend_w_.data();
+  const std::uint64_t* const pend_b = pend_b_.data();
+  std::uint8_t* const seen = seen_.data();
+  std::uint32_t* const touched = touched_.data();
+  std::size_t count = touched_count_;
   for (std::size_t i = 0; i < n_pend; ++i) {
-    words[pend_w_[i]] |= pend_b_[i];
-    touch(static_cast<std::uint32_t>(pend_w_[i] / block::kMaskWords));
+    const std::uint64_t w = pend_w[i];
+    words[w] |= pend_b[i];
+    const auto b = static_cast<std::uint32_t>(w / block::kMaskWords);
+    touched[count] = b;
+    count += seen[b] ^ 1U;
+    seen[b] = 1;
   }
+  touched_count_ = count;
 }
 
 void DenseMarks::markQueued(WalkKernel kernel) {
