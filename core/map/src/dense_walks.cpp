@@ -440,6 +440,171 @@ constexpr FourLaneTables kFour = makeFourLaneTables();
   out.n_pend = static_cast<std::size_t>(pend_w - out.pend_w);
 }
 
+
+/// The backward walks' steps four at a time in AVX2 lanes, as walkEightBack: the same decision
+/// (the latest head, ties to the lower axis, winning by more than the bound, else the walk is
+/// handed over), the region's word gathered when a lane moves to another word and the voxel
+/// tested (and marked) one iteration later. Blocks entered are not listed (finishPended takes
+/// them from the pended words). Returns the counts of the walks not handed over; their ids go to
+/// `handed_over`.
+[[DENSEMAP_AVX2]] DenseMarks::BackWalkCounts walkFourBack(const DenseMarks::QueuedBackWalk* walks,
+                                                         std::size_t n,
+                                                         const std::uint64_t* culled,
+                                                         WideOut& out,
+                                                         std::vector<std::uint32_t>& handed_over) {
+  const __m256i one = _mm256_set1_epi64x(1), zero = _mm256_setzero_si256(),
+                low6 = _mm256_set1_epi64x(63), edge = _mm256_set1_epi64x(block::kEdge);
+  const __m256d none = _mm256_set1_pd(-std::numeric_limits<double>::infinity());
+  __m256d h0 = _mm256_setzero_pd(), h1 = h0, h2 = h0, d0 = h0, d1 = h0, d2 = h0, bound = h0;
+  __m256i n0 = zero, n1 = zero, n2 = zero;  // crossings left per axis (next, as BackwardWalk)
+  __m256i addr = zero, l0 = zero, l1 = zero, l2 = zero, s0 = zero, s1 = zero, s2 = zero, r0 = zero,
+          r1 = zero, r2 = zero;
+  __m256i left = zero, marked = zero;
+  __m256i cur_w = zero, cur_b = zero, cur_r = zero;  // cur_r: the region's bits of cur_w
+  __m256i pending = zero;  // the bit of the voxel moved to and not yet tested (0: none)
+  int live = 0, handing = 0;
+  std::size_t lane_walk[4] = {0, 0, 0, 0};
+  std::size_t next = 0;
+  DenseMarks::BackWalkCounts counts;
+  alignas(32) std::int64_t marked_at[4];
+  std::uint64_t* pend_w = out.pend_w + out.n_pend;  // (locals: see walkFour)
+  std::uint64_t* pend_b = out.pend_b + out.n_pend;
+  const auto* culled_words = reinterpret_cast<const long long*>(culled);
+  while (true) {
+    __m256i active = _mm256_cmpgt_epi64(left, zero);
+    const __m256i untested = _mm256_cmpeq_epi64(pending, zero);
+    int act = bitsOf(active);
+    const int tst = ~bitsOf(untested) & 0xf;
+    if ((act | tst) != 0xf) {
+      const int done = live & ~(act | tst);
+      packFour(done, cur_w, pend_w);
+      const std::size_t pended = packFour(done, cur_b, pend_b);
+      pend_w += pended;
+      pend_b += pended;
+      if (done != 0) {
+        _mm256_store_si256(reinterpret_cast<__m256i*>(marked_at), marked);
+        for (unsigned d = static_cast<unsigned>(done); d != 0; d &= d - 1) {
+          const int k = std::countr_zero(d);
+          const DenseMarks::QueuedBackWalk& w = walks[lane_walk[k]];
+          if (((handing >> k) & 1) != 0) {
+            handed_over.push_back(w.id);
+          } else {
+            counts.visits += static_cast<std::size_t>(marked_at[k]);
+            counts.culled += static_cast<std::size_t>(w.total - marked_at[k]);
+          }
+        }
+        handing &= ~done;
+      }
+      const __m256i busy = _mm256_or_si256(active, _mm256_andnot_si256(untested, _mm256_set1_epi64x(-1)));
+      cur_b = _mm256_and_si256(cur_b, busy);
+      marked = _mm256_and_si256(marked, busy);
+      for (unsigned idle = ~static_cast<unsigned>(act | tst) & 0xfU; idle != 0 && next < n;
+           idle &= idle - 1, ++next) {
+        const DenseMarks::QueuedBackWalk& w = walks[next];
+        const int lane = std::countr_zero(idle);
+        lane_walk[lane] = next;
+        const __m256i k = _mm256_load_si256(reinterpret_cast<const __m256i*>(kFour.lane[lane]));
+        const __m256d kd = _mm256_castsi256_pd(k);
+        h0 = _mm256_blendv_pd(h0, _mm256_set1_pd(w.head[0]), kd);
+        h1 = _mm256_blendv_pd(h1, _mm256_set1_pd(w.head[1]), kd);
+        h2 = _mm256_blendv_pd(h2, _mm256_set1_pd(w.head[2]), kd);
+        d0 = _mm256_blendv_pd(d0, _mm256_set1_pd(w.t_delta[0]), kd);
+        d1 = _mm256_blendv_pd(d1, _mm256_set1_pd(w.t_delta[1]), kd);
+        d2 = _mm256_blendv_pd(d2, _mm256_set1_pd(w.t_delta[2]), kd);
+        bound = _mm256_blendv_pd(bound, _mm256_set1_pd(w.bound), kd);
+        putLanes(n0, w.next[0], k);
+        putLanes(n1, w.next[1], k);
+        putLanes(n2, w.next[2], k);
+        putLanes(addr, static_cast<long long>(w.at.addr), k);
+        putLanes(l0, w.at.left[0], k);
+        putLanes(l1, w.at.left[1], k);
+        putLanes(l2, w.at.left[2], k);
+        putLanes(s0, w.at.small[0], k);
+        putLanes(s1, w.at.small[1], k);
+        putLanes(s2, w.at.small[2], k);
+        putLanes(r0, w.at.wrap[0], k);
+        putLanes(r1, w.at.wrap[1], k);
+        putLanes(r2, w.at.wrap[2], k);
+        putLanes(left, w.total, k);
+        const std::uint64_t word = w.at.addr >> 6;
+        putLanes(cur_w, static_cast<long long>(word), k);
+        putLanes(cur_r, static_cast<long long>(culled[word]), k);
+      }
+      active = _mm256_cmpgt_epi64(left, zero);
+      act = bitsOf(active);
+      live = act | tst;
+      if (live == 0) break;
+    }
+    // The next step's decision: the latest crossing (ties to the lower axis), the runner-up.
+    const __m256d high01 = _mm256_max_pd(h0, h1);
+    const __m256i m2 = _mm256_and_si256(
+        active, _mm256_castpd_si256(_mm256_cmp_pd(h2, high01, _CMP_GT_OQ)));
+    const __m256i ge01 = _mm256_castpd_si256(_mm256_cmp_pd(h0, h1, _CMP_GE_OQ));
+    const __m256i not2 = _mm256_andnot_si256(m2, active);
+    __m256i m0 = _mm256_and_si256(not2, ge01);
+    __m256i m1 = _mm256_andnot_si256(ge01, not2);
+    __m256d chosen = _mm256_blendv_pd(h1, h0, _mm256_castsi256_pd(m0));
+    chosen = _mm256_blendv_pd(chosen, h2, _mm256_castsi256_pd(m2));
+    __m256d runner = _mm256_max_pd(h0, h2);  // axis 1's
+    runner = _mm256_blendv_pd(runner, _mm256_max_pd(h1, h2), _mm256_castsi256_pd(m0));
+    runner = _mm256_blendv_pd(runner, high01, _mm256_castsi256_pd(m2));
+    const __m256i wins = _mm256_and_si256(
+        active, _mm256_castpd_si256(_mm256_cmp_pd(_mm256_sub_pd(chosen, runner), bound, _CMP_GT_OQ)));
+    // The voxel moved to last time: in the region (the walk ends there), else marked.
+    const __m256i stop = _mm256_andnot_si256(
+        _mm256_cmpeq_epi64(_mm256_and_si256(cur_r, pending), zero), _mm256_set1_epi64x(-1));
+    const __m256i mark = _mm256_andnot_si256(stop, _mm256_andnot_si256(untested, _mm256_set1_epi64x(-1)));
+    cur_b = _mm256_or_si256(cur_b, _mm256_andnot_si256(stop, pending));
+    marked = _mm256_sub_epi64(marked, mark);
+    const __m256i go = _mm256_andnot_si256(stop, active);
+    handing |= bitsOf(_mm256_andnot_si256(wins, go));
+    const __m256i moving = _mm256_andnot_si256(stop, wins);
+    m0 = _mm256_and_si256(m0, moving);
+    m1 = _mm256_and_si256(m1, moving);
+    const __m256i m2w = _mm256_and_si256(m2, moving);
+    const __m256i steps = _mm256_or_si256(m0, _mm256_or_si256(m1, m2w));
+    // Lanes that stopped or hand over take no more steps.
+    left = _mm256_and_si256(left, steps);
+    // head = --next >= 0 ? head - delta : -inf
+    n0 = _mm256_add_epi64(n0, m0);
+    n1 = _mm256_add_epi64(n1, m1);
+    n2 = _mm256_add_epi64(n2, m2w);
+    h0 = _mm256_blendv_pd(h0, _mm256_sub_pd(h0, d0), _mm256_castsi256_pd(m0));
+    h1 = _mm256_blendv_pd(h1, _mm256_sub_pd(h1, d1), _mm256_castsi256_pd(m1));
+    h2 = _mm256_blendv_pd(h2, _mm256_sub_pd(h2, d2), _mm256_castsi256_pd(m2w));
+    h0 = _mm256_blendv_pd(h0, none, _mm256_castsi256_pd(_mm256_and_si256(m0, _mm256_cmpgt_epi64(zero, n0))));
+    h1 = _mm256_blendv_pd(h1, none, _mm256_castsi256_pd(_mm256_and_si256(m1, _mm256_cmpgt_epi64(zero, n1))));
+    h2 = _mm256_blendv_pd(h2, none, _mm256_castsi256_pd(_mm256_and_si256(m2w, _mm256_cmpgt_epi64(zero, n2))));
+    // The lanes' places moved (as walkFour).
+    l0 = _mm256_add_epi64(l0, m0);
+    l1 = _mm256_add_epi64(l1, m1);
+    l2 = _mm256_add_epi64(l2, m2w);
+    const __m256i w0 = _mm256_and_si256(m0, _mm256_cmpeq_epi64(l0, zero));
+    const __m256i w1 = _mm256_and_si256(m1, _mm256_cmpeq_epi64(l1, zero));
+    const __m256i w2 = _mm256_and_si256(m2w, _mm256_cmpeq_epi64(l2, zero));
+    __m256i inc = _mm256_and_si256(m0, _mm256_blendv_epi8(s0, r0, w0));
+    inc = _mm256_or_si256(inc, _mm256_and_si256(m1, _mm256_blendv_epi8(s1, r1, w1)));
+    inc = _mm256_or_si256(inc, _mm256_and_si256(m2w, _mm256_blendv_epi8(s2, r2, w2)));
+    addr = _mm256_add_epi64(addr, inc);
+    l0 = _mm256_blendv_epi8(l0, edge, w0);
+    l1 = _mm256_blendv_epi8(l1, edge, w1);
+    l2 = _mm256_blendv_epi8(l2, edge, w2);
+    left = _mm256_add_epi64(left, steps);  // stepping lanes are -1
+    const __m256i word = _mm256_srli_epi64(addr, 6);
+    const __m256i moved = _mm256_andnot_si256(_mm256_cmpeq_epi64(word, cur_w), steps);
+    const int mv = bitsOf(moved);
+    packFour(mv, cur_w, pend_w);
+    const std::size_t pended = packFour(mv, cur_b, pend_b);
+    pend_w += pended;
+    pend_b += pended;
+    cur_w = _mm256_blendv_epi8(cur_w, word, moved);
+    cur_b = _mm256_andnot_si256(moved, cur_b);
+    cur_r = _mm256_mask_i64gather_epi64(cur_r, culled_words, word, moved, 8);
+    pending = _mm256_and_si256(steps, _mm256_sllv_epi64(one, _mm256_and_si256(addr, low6)));
+  }
+  out.n_pend = static_cast<std::size_t>(pend_w - out.pend_w);
+  return counts;
+}
 #undef DENSEMAP_AVX2
 #pragma GCC diagnostic pop
 #endif
@@ -554,6 +719,13 @@ DenseMarks::BackWalkCounts DenseMarks::markQueuedBack(const block::BlockMask* cu
     WideOut out{entered_.data(), pend_w_.data(), pend_b_.data()};
     counts = walkEightBack(back_queue_.data(), n, culled_words, out, handed_over);
     finishQueued(out.n_pend, out.n_entered);
+    back_queue_.clear();
+    return counts;
+  }
+  if ((kernel == WalkKernel::kBest || kernel == WalkKernel::kFour) && hasFourWalks()) {
+    WideOut out{entered_.data(), pend_w_.data(), pend_b_.data()};
+    counts = walkFourBack(back_queue_.data(), n, culled_words, out, handed_over);
+    finishPended(out.n_pend);
     back_queue_.clear();
     return counts;
   }

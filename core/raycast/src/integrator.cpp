@@ -150,7 +150,7 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
   // Queues pay where the processor walks them in lanes (IntegratorOptions::queue_walks).
   const bool queue_forward =
       options_.queue_walks && (DenseMarks::hasWideWalks() || DenseMarks::hasFourWalks());
-  const bool queue_backward = options_.queue_walks && DenseMarks::hasWideWalks();
+  const bool queue_backward = queue_forward;
   const auto mark_one = [&](std::size_t i, auto& sink, Local& local) {
     if (region != nullptr) {
       markRayCulled(grid, origin_world, rays_[i], *region, local.scratch, sink, local.counts,

@@ -567,7 +567,8 @@ TEST(DenseMarks, QueuedBackwardWalksMarkAndCountAsMarkRayCulled) {
     // (The rays' ends not excluded: the region need not be exact for the walks, only shared.)
     region.build(map, o, KeyBox{lo, hi}, {}, &frame);
     ASSERT_GT(region.size(), 1000U);
-    for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kScalar}) {
+    for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kFour,
+                              DenseMarks::WalkKernel::kScalar}) {
       DenseMarks plain_marks, sut_marks;
       ASSERT_TRUE(plain_marks.reset(lo, hi, 1U << 20));
       ASSERT_TRUE(sut_marks.reset(lo, hi, 1U << 20));

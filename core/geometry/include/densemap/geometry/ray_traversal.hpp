@@ -168,8 +168,9 @@ struct TraversalStarts {
 };
 /// Fills `out` for rays 0..n-1 (n <= 8) from `origin` (key `key_origin`) to `ends[i]` (key
 /// `key_ends[i]`; both in range): bit for bit what startTraversal and endOf give, eight rays
-/// side by side in AVX-512 lanes when `wide` and the processor has them (hasWideLanes), else
-/// one by one with those functions.
+/// side by side in AVX-512 lanes when `wide` and the processor has them (hasWideLanes), else in
+/// AVX2 lanes (the doubles four at a time) when it has those (hasFourLanes), else one by one
+/// with those functions.
 void startTraversals(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_origin,
                      const Point3f* ends, const VoxelKey* key_ends, int n, TraversalStarts& out,
                      bool wide = true);

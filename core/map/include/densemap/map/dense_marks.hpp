@@ -330,11 +330,10 @@ class DenseMarks {
     std::int32_t total;  // the forward traversal's voxels: the most steps back
     std::uint32_t id;    // the caller's
   };
-  /// How markQueued walks: kBest 8 walks at a time with AVX-512 where the processor has it
-  /// (hasWideWalks), else (forward walks) 4 at a time with AVX2 where it has that
-  /// (hasFourWalks), else one at a time as kScalar does (countedSteps, backwardSteps); kFour
-  /// forward walks 4 at a time where the processor has AVX2 (else as kScalar), backward ones
-  /// as kScalar.
+  /// How markQueued and markQueuedBack walk: kBest 8 walks at a time with AVX-512 where the
+  /// processor has it (hasWideWalks), else 4 at a time with AVX2 where it has that
+  /// (hasFourWalks), else one at a time as kScalar does (countedSteps, backwardSteps); kFour 4
+  /// at a time where the processor has AVX2 (else as kScalar).
   enum class WalkKernel { kBest, kFour, kScalar };
   [[nodiscard]] static bool hasWideWalks();
   [[nodiscard]] static bool hasFourWalks();

@@ -59,8 +59,8 @@ struct IntegratorOptions {
   std::size_t grow_probe_every = 8;
   /// With dense marks, the rays' walks (forward ones, or backward ones with a culling region
   /// sharing their box's frame) are queued and walked several at a time where the processor
-  /// has the lanes (DenseMarks::markQueued: eight side by side with AVX-512, four with AVX2;
-  /// markQueuedBack: eight with AVX-512), else one at a time as they come, as with false (a
+  /// has the lanes (DenseMarks::markQueued and markQueuedBack: eight side by side with AVX-512,
+  /// four with AVX2), else one at a time as they come, as with false (a
   /// queue walked one walk at a time costs more than walking as they come: measured); the
   /// same marks either way.
   bool queue_walks = true;
