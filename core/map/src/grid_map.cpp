@@ -64,6 +64,10 @@ struct GridMap::BlockWriter {
       applySetWide(block_key, b, model);
       return;
     }
+    if (hasFourLanes()) {
+      applySetEight(block_key, b, model);
+      return;
+    }
 #endif
     const float clamp_max = model.clampMax();
     // The cells updated counted by the processor's popcount where it has one (countBits: the
@@ -140,6 +144,71 @@ struct GridMap::BlockWriter {
         _mm512_mask_storeu_ps(write->voxels.log_odds.data() + first, changed, v);
         const auto free =
             static_cast<__mmask16>(_mm512_cmp_ps_mask(v, clamp_min, _CMP_LE_OQ) & changed);
+        const std::uint64_t lanes = static_cast<std::uint64_t>(changed) << shift;
+        write->fully_free[wd] =
+            (write->fully_free[wd] & ~lanes) | (static_cast<std::uint64_t>(free) << shift);
+      }
+    }
+  }
+
+  /// The lanes whose bits `m` (8 bits) holds, as all-ones lanes.
+  [[gnu::target("avx2"), gnu::always_inline]] static __m256i lanesOf(unsigned m) {
+    const __m256i lane_bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+    return _mm256_cmpeq_epi32(
+        _mm256_and_si256(_mm256_set1_epi32(static_cast<int>(m)), lane_bit), lane_bit);
+  }
+  /// applySetWide with AVX2: eight cells at a time (no mask registers: lane masks from the
+  /// mask bits, masked loads and stores), the same arithmetic, cells and order.
+  [[gnu::target("avx2,popcnt,bmi")]] void applySetEight(std::uint64_t block_key,
+                                                        const ScanUpdate::Block& b,
+                                                        const SensorModel& model) {
+    const __m256 hit = _mm256_set1_ps(model.hit()), miss = _mm256_set1_ps(model.miss());
+    const __m256 clamp_min = _mm256_set1_ps(model.clampMin());
+    const __m256 clamp_max = _mm256_set1_ps(model.clampMax());
+    alignas(32) float values[8];
+    for (int wd = 0; wd < block::kMaskWords; ++wd) {
+      const std::uint64_t occupied = b.occupied[wd];
+      std::uint64_t todo = b.free[wd] | occupied;
+      counts.updated += static_cast<std::size_t>(__builtin_popcountll(todo));
+      todo &= ~(read->fully_free[wd] & ~occupied);
+      if (todo == 0) continue;
+      const std::uint64_t known = read->voxels.known[wd];
+      for (int q = 0; q < 8; ++q) {
+        const int shift = 8 * q;
+        unsigned cells = (todo >> shift) & 0xffU;
+        if (cells == 0) continue;
+        const unsigned kn = (known >> shift) & 0xffU;
+        const unsigned hits = (occupied >> shift) & 0xffU;
+        const int first = wd * 64 + shift;
+        const __m256 old = _mm256_maskload_ps(read->voxels.log_odds.data() + first, lanesOf(kn));
+        // A known hit cell at or above the upper bound keeps its value (updateNode's return).
+        cells &= ~(kn & hits &
+                   static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(old, clamp_max, _CMP_GE_OQ))));
+        __m256 v = _mm256_add_ps(old, _mm256_blendv_ps(miss, hit, _mm256_castsi256_ps(lanesOf(hits))));
+        v = _mm256_blendv_ps(v, clamp_min, _mm256_cmp_ps(v, clamp_min, _CMP_LT_OQ));
+        v = _mm256_blendv_ps(v, clamp_max, _mm256_cmp_ps(v, clamp_max, _CMP_GT_OQ));
+        const unsigned changed =
+            cells & ~(kn & static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(old, v, _CMP_EQ_OQ))));
+        if (changed == 0) continue;
+        if (write == nullptr) {
+          write = &map.store_->writable(entry);
+          read = write;
+        }
+        const unsigned newly = changed & ~kn;
+        write->voxels.known[wd] |= static_cast<std::uint64_t>(newly) << shift;
+        counts.newly_known += static_cast<std::size_t>(__builtin_popcount(newly));
+        counts.changed += static_cast<std::size_t>(__builtin_popcount(changed));
+        if (out != nullptr) {
+          _mm256_store_ps(values, v);
+          for (unsigned c = changed; c != 0; c &= c - 1) {
+            const int k = __builtin_ctz(c);
+            out->push_back({block::keyOf(block_key, first + k), values[k], true});
+          }
+        }
+        _mm256_maskstore_ps(write->voxels.log_odds.data() + first, lanesOf(changed), v);
+        const unsigned free =
+            static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(v, clamp_min, _CMP_LE_OQ))) &
+            changed;
         const std::uint64_t lanes = static_cast<std::uint64_t>(changed) << shift;
         write->fully_free[wd] =
             (write->fully_free[wd] & ~lanes) | (static_cast<std::uint64_t>(free) << shift);
