@@ -28,6 +28,60 @@ void startOne(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #pragma GCC diagnostic ignored "-Wuninitialized"  // GCC 12's intrinsics (its bug 105593)
 
+/// The rays' ends and end keys in eight lanes (spare lanes: a copy of the first ray).
+template <class Key>
+void loadLanes(const Point3f* ends, const VoxelKey* key_ends, int n, float (&e)[3][8],
+               Key (&k)[3][8]) {
+  for (int i = 0; i < 8; ++i) {
+    const int j = i < n ? i : 0;
+    for (int a = 0; a < 3; ++a) {
+      e[a][i] = ends[j][a];
+      k[a][i] = key_ends[j][a];
+    }
+  }
+}
+
+/// Eight lanes' starts and ends, stored from the vectors; written out as startTraversal and endOf
+/// give them.
+template <class Int>
+struct LaneResults {
+  alignas(64) double tm[3][8], td[3][8], la[3][8], sc[8];
+  alignas(64) Int st[3][8], cr[3][8];
+  alignas(32) float len[8];
+  unsigned same = 0, has_length = 0, irregular = 0, unsure = 0;  // lane bits
+
+  void writeOut(const VoxelKey& key_origin, const VoxelKey* key_ends, int n,
+                TraversalStarts& out) const {
+    for (int i = 0; i < n; ++i) {
+      const unsigned bit = 1U << i;
+      if ((same & bit) != 0 || (has_length & bit) == 0) {
+        out.kind[i] = TraversalKind::kSameVoxel;
+        continue;
+      }
+      out.kind[i] = TraversalKind::kRay;
+      TraversalStart& s = out.start[i];
+      s.origin = key_origin;
+      s.end = key_ends[i];
+      s.length = len[i];
+      for (int a = 0; a < 3; ++a) {
+        s.step[a] = static_cast<int>(st[a][i]);
+        s.t_max[a] = tm[a][i];
+        s.t_delta[a] = td[a][i];
+        out.crossings[i][a] = static_cast<int>(cr[a][i]);
+      }
+      if ((irregular & bit) != 0) {
+        out.end[i] = TraversalEnd::kIrregular;
+      } else if ((unsure & bit) != 0) {
+        out.end[i] = TraversalEnd::kUnsure;
+      } else {
+        out.end[i] = TraversalEnd::kClean;
+        for (int a = 0; a < 3; ++a) out.times[i].last[a] = la[a][i];
+        out.times[i].scale = sc[i];
+      }
+    }
+  }
+};
+
 /// endOf's near(x, y): |x - y| <= bound (NaN, from inf - inf: not near).
 [[gnu::target("avx512f,avx512vl,avx512dq"), gnu::always_inline]] inline __mmask8 near(
     __m512d x, __m512d y, __m512d bound) {
@@ -45,13 +99,7 @@ void startOne(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_
   constexpr double kInf = std::numeric_limits<double>::infinity();
   alignas(32) float e[3][8];
   alignas(64) std::int64_t k[3][8];
-  for (int i = 0; i < 8; ++i) {
-    const int j = i < n ? i : 0;  // spare lanes: a copy of the first ray
-    for (int a = 0; a < 3; ++a) {
-      e[a][i] = ends[j][a];
-      k[a][i] = key_ends[j][a];
-    }
-  }
+  loadLanes(ends, key_ends, n, e, k);
   const int ko[3] = {key_origin.x, key_origin.y, key_origin.z};
   const double resolution = grid.resolution();
   // Vector3 arithmetic of OctoMap, one float operation at a time (as startTraversal).
@@ -137,45 +185,21 @@ void startOne(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_
       _mm512_sub_pd(_mm512_cvtps_pd(length), last_max), bound, _CMP_GT_OQ);
   unsure |= static_cast<__mmask8>(~(some_last & gap & within));
   // Out, lane by lane.
-  alignas(64) double tm[3][8], td[3][8], la[3][8], sc[8];
-  alignas(64) std::int64_t st[3][8], cr[3][8];
-  alignas(32) float len[8];
+  LaneResults<std::int64_t> r;
   for (int a = 0; a < 3; ++a) {
-    _mm512_store_pd(tm[a], t_max[a]);
-    _mm512_store_pd(td[a], t_delta[a]);
-    _mm512_store_pd(la[a], last[a]);
-    _mm512_store_si512(st[a], step[a]);
-    _mm512_store_si512(cr[a], crossings[a]);
+    _mm512_store_pd(r.tm[a], t_max[a]);
+    _mm512_store_pd(r.td[a], t_delta[a]);
+    _mm512_store_pd(r.la[a], last[a]);
+    _mm512_store_si512(r.st[a], step[a]);
+    _mm512_store_si512(r.cr[a], crossings[a]);
   }
-  _mm512_store_pd(sc, scale);
-  _mm256_store_ps(len, length);
-  for (int i = 0; i < n; ++i) {
-    const unsigned bit = 1U << i;
-    if ((same & bit) != 0 || (has_length & bit) == 0) {
-      out.kind[i] = TraversalKind::kSameVoxel;
-      continue;
-    }
-    out.kind[i] = TraversalKind::kRay;
-    TraversalStart& s = out.start[i];
-    s.origin = key_origin;
-    s.end = key_ends[i];
-    s.length = len[i];
-    for (int a = 0; a < 3; ++a) {
-      s.step[a] = static_cast<int>(st[a][i]);
-      s.t_max[a] = tm[a][i];
-      s.t_delta[a] = td[a][i];
-      out.crossings[i][a] = static_cast<int>(cr[a][i]);
-    }
-    if ((irregular & bit) != 0) {
-      out.end[i] = TraversalEnd::kIrregular;
-    } else if ((unsure & bit) != 0) {
-      out.end[i] = TraversalEnd::kUnsure;
-    } else {
-      out.end[i] = TraversalEnd::kClean;
-      for (int a = 0; a < 3; ++a) out.times[i].last[a] = la[a][i];
-      out.times[i].scale = sc[i];
-    }
-  }
+  _mm512_store_pd(r.sc, scale);
+  _mm256_store_ps(r.len, length);
+  r.same = same;
+  r.has_length = has_length;
+  r.irregular = irregular;
+  r.unsure = unsure;
+  r.writeOut(key_origin, key_ends, n, out);
 }
 
 #define DENSEMAP_AVX2 gnu::target("avx2")
@@ -212,27 +236,20 @@ void startOne(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_
   constexpr double kInf = std::numeric_limits<double>::infinity();
   alignas(32) float e[3][8];
   alignas(32) std::int32_t k[3][8];
-  for (int i = 0; i < 8; ++i) {
-    const int j = i < n ? i : 0;  // spare lanes: a copy of the first ray
-    for (int a = 0; a < 3; ++a) {
-      e[a][i] = ends[j][a];
-      k[a][i] = key_ends[j][a];
-    }
-  }
+  loadLanes(ends, key_ends, n, e, k);
   const int ko[3] = {key_origin.x, key_origin.y, key_origin.z};
   const double resolution = grid.resolution();
   __m256 dir[3];
   for (int a = 0; a < 3; ++a) {
     dir[a] = _mm256_sub_ps(_mm256_load_ps(e[a]), _mm256_set1_ps(origin[a]));
   }
-  const __m256 norm_sq = _mm256_add_ps(
-      _mm256_add_ps(_mm256_mul_ps(dir[0], dir[0]), _mm256_mul_ps(dir[1], dir[1])),
-      _mm256_mul_ps(dir[2], dir[2]));
+  const __m256 norm_sq =
+      _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dir[0], dir[0]), _mm256_mul_ps(dir[1], dir[1])),
+                    _mm256_mul_ps(dir[2], dir[2]));
   const __m256 length =
       _mm256_set_m128(_mm256_cvtpd_ps(_mm256_sqrt_pd(_mm256_cvtps_pd(halfOf(norm_sq, 1)))),
                       _mm256_cvtpd_ps(_mm256_sqrt_pd(_mm256_cvtps_pd(halfOf(norm_sq, 0)))));
-  const int has_length =
-      _mm256_movemask_ps(_mm256_cmp_ps(length, _mm256_setzero_ps(), _CMP_GT_OQ));
+  const int has_length = _mm256_movemask_ps(_mm256_cmp_ps(length, _mm256_setzero_ps(), _CMP_GT_OQ));
   const __m256i zero = _mm256_setzero_si256();
   int same = 0xff, irregular = 0;
   __m256d t_max[3][2], t_delta[3][2], last[3][2], beyond[3][2];
@@ -254,8 +271,8 @@ void startOne(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_
     // endOf's crossings: (key_end - key_origin) * step.
     const __m256i c = _mm256_sign_epi32(_mm256_sub_epi32(key_end, key_o), step[a]);
     crossings[a] = c;
-    irregular |= bitsOf(_mm256_andnot_si256(moves, _mm256_xor_si256(_mm256_cmpeq_epi32(key_end, key_o),
-                                                                     _mm256_set1_epi32(-1))));
+    irregular |= bitsOf(_mm256_andnot_si256(
+        moves, _mm256_xor_si256(_mm256_cmpeq_epi32(key_end, key_o), _mm256_set1_epi32(-1))));
     irregular |= bitsOf(_mm256_and_si256(moves, _mm256_cmpgt_epi32(zero, c)));
     total = _mm256_add_epi32(total, _mm256_and_si256(moves, c));
     const __m256i some = _mm256_and_si256(moves, _mm256_cmpgt_epi32(c, zero));
@@ -266,23 +283,21 @@ void startOne(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_
       const __m256d dd = _mm256_cvtps_pd(dh);
       const __m256d fabs_d = _mm256_cvtps_pd(_mm_andnot_ps(_mm_set1_ps(-0.0F), dh));
       const __m256i moves64 = halfOf(moves, h);
-      const __m256d border = blendMask(_mm256_set1_pd(border_up), _mm256_set1_pd(border_down),
-                                       halfOf(down, h));
+      const __m256d border =
+          blendMask(_mm256_set1_pd(border_up), _mm256_set1_pd(border_down), halfOf(down, h));
       const __m256d tm = blendMask(
           _mm256_set1_pd(kMax),
-          _mm256_div_pd(_mm256_sub_pd(border, _mm256_set1_pd(static_cast<double>(origin[a]))),
-                        dd),
+          _mm256_div_pd(_mm256_sub_pd(border, _mm256_set1_pd(static_cast<double>(origin[a]))), dd),
           moves64);
-      const __m256d td =
-          blendMask(_mm256_set1_pd(kMax), _mm256_div_pd(_mm256_set1_pd(resolution), fabs_d),
-                    moves64);
+      const __m256d td = blendMask(_mm256_set1_pd(kMax),
+                                   _mm256_div_pd(_mm256_set1_pd(resolution), fabs_d), moves64);
       t_max[a][h] = tm;
       t_delta[a][h] = td;
       beyond[a][h] = blendMask(_mm256_set1_pd(kInf),
                                _mm256_add_pd(tm, _mm256_mul_pd(halfAsDoubles(c, h), td)), moves64);
-      last[a][h] =
-          blendMask(_mm256_set1_pd(-kInf),
-                    _mm256_add_pd(tm, _mm256_mul_pd(halfAsDoubles(c_less, h), td)), halfOf(some, h));
+      last[a][h] = blendMask(_mm256_set1_pd(-kInf),
+                             _mm256_add_pd(tm, _mm256_mul_pd(halfAsDoubles(c_less, h), td)),
+                             halfOf(some, h));
       const __m256d reach = _mm256_add_pd(_mm256_andnot_pd(_mm256_set1_pd(-0.0), tm),
                                           _mm256_mul_pd(halfAsDoubles(c_more, h), td));
       scale[h] = blendMask(scale[h], _mm256_max_pd(scale[h], reach), moves64);
@@ -290,14 +305,14 @@ void startOne(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_
   }
   // bound = 4 * (total + 8) * 2^-50 * scale (the int product first).
   const __m256i total_term = _mm256_slli_epi32(_mm256_add_epi32(total, _mm256_set1_epi32(8)), 2);
-  int unsure = 0;
-  alignas(32) double tm[3][8], td[3][8], la[3][8], sc[8];
+  LaneResults<std::int32_t> r;
   for (int h = 0; h < 2; ++h) {
     const __m256d bound = _mm256_mul_pd(
         _mm256_mul_pd(halfAsDoubles(total_term, h), _mm256_set1_pd(0x1p-50)), scale[h]);
     int u = nearFour(last[0][h], last[1][h], bound) | nearFour(last[0][h], last[2][h], bound) |
             nearFour(last[1][h], last[2][h], bound) | nearFour(beyond[0][h], beyond[1][h], bound) |
-            nearFour(beyond[0][h], beyond[2][h], bound) | nearFour(beyond[1][h], beyond[2][h], bound);
+            nearFour(beyond[0][h], beyond[2][h], bound) |
+            nearFour(beyond[1][h], beyond[2][h], bound);
     const __m256d last_max = _mm256_max_pd(_mm256_max_pd(last[0][h], last[1][h]), last[2][h]);
     const __m256d beyond_min =
         _mm256_min_pd(_mm256_min_pd(beyond[0][h], beyond[1][h]), beyond[2][h]);
@@ -306,48 +321,23 @@ void startOne(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_
     const __m256d within = _mm256_cmp_pd(
         _mm256_sub_pd(_mm256_cvtps_pd(halfOf(length, h)), last_max), bound, _CMP_GT_OQ);
     u |= ~_mm256_movemask_pd(_mm256_and_pd(some_last, _mm256_and_pd(gap, within))) & 0xf;
-    unsure |= u << (4 * h);
+    r.unsure |= static_cast<unsigned>(u) << (4 * h);
     for (int a = 0; a < 3; ++a) {
-      _mm256_store_pd(tm[a] + 4 * h, t_max[a][h]);
-      _mm256_store_pd(td[a] + 4 * h, t_delta[a][h]);
-      _mm256_store_pd(la[a] + 4 * h, last[a][h]);
+      _mm256_store_pd(r.tm[a] + 4 * h, t_max[a][h]);
+      _mm256_store_pd(r.td[a] + 4 * h, t_delta[a][h]);
+      _mm256_store_pd(r.la[a] + 4 * h, last[a][h]);
     }
-    _mm256_store_pd(sc + 4 * h, scale[h]);
+    _mm256_store_pd(r.sc + 4 * h, scale[h]);
   }
-  alignas(32) std::int32_t st[3][8], cr[3][8];
-  alignas(32) float len[8];
   for (int a = 0; a < 3; ++a) {
-    _mm256_store_si256(reinterpret_cast<__m256i*>(st[a]), step[a]);
-    _mm256_store_si256(reinterpret_cast<__m256i*>(cr[a]), crossings[a]);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(r.st[a]), step[a]);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(r.cr[a]), crossings[a]);
   }
-  _mm256_store_ps(len, length);
-  for (int i = 0; i < n; ++i) {
-    const unsigned bit = 1U << i;
-    if ((same & bit) != 0 || (has_length & bit) == 0) {
-      out.kind[i] = TraversalKind::kSameVoxel;
-      continue;
-    }
-    out.kind[i] = TraversalKind::kRay;
-    TraversalStart& s = out.start[i];
-    s.origin = key_origin;
-    s.end = key_ends[i];
-    s.length = len[i];
-    for (int a = 0; a < 3; ++a) {
-      s.step[a] = st[a][i];
-      s.t_max[a] = tm[a][i];
-      s.t_delta[a] = td[a][i];
-      out.crossings[i][a] = cr[a][i];
-    }
-    if ((irregular & bit) != 0) {
-      out.end[i] = TraversalEnd::kIrregular;
-    } else if ((unsure & bit) != 0) {
-      out.end[i] = TraversalEnd::kUnsure;
-    } else {
-      out.end[i] = TraversalEnd::kClean;
-      for (int a = 0; a < 3; ++a) out.times[i].last[a] = la[a][i];
-      out.times[i].scale = sc[i];
-    }
-  }
+  _mm256_store_ps(r.len, length);
+  r.same = static_cast<unsigned>(same);
+  r.has_length = static_cast<unsigned>(has_length);
+  r.irregular = static_cast<unsigned>(irregular);
+  r.writeOut(key_origin, key_ends, n, out);
 }
 #undef DENSEMAP_AVX2
 #pragma GCC diagnostic pop

@@ -340,6 +340,50 @@ constexpr FourLaneTables kFour = makeFourLaneTables();
 [[DENSEMAP_AVX2, gnu::always_inline]] inline void putLanes(__m256i& v, long long x, __m256i k) {
   v = _mm256_blendv_epi8(v, _mm256_set1_epi64x(x), k);
 }
+/// Pends the words and marks of the lanes `bits` names (packed at the pointers, which move on).
+[[DENSEMAP_AVX2, gnu::always_inline]] inline void pendFour(int bits, __m256i words, __m256i marks,
+                                                           std::uint64_t*& pend_w,
+                                                           std::uint64_t*& pend_b) {
+  packFour(bits, words, pend_w);
+  const std::size_t pended = packFour(bits, marks, pend_b);
+  pend_w += pended;
+  pend_b += pended;
+}
+
+/// Four walks' places, a lane each (LanePlaces in AVX2 lanes): lane masks are all-ones lanes.
+struct FourPlaces {
+  __m256i addr, l0, l1, l2, s0, s1, s2, r0, r1, r2;
+  /// Puts walk place `at` in the lane(s) `k` holds.
+  [[DENSEMAP_AVX2, gnu::always_inline]] void load(__m256i k, const DenseMarks::WalkPlace& at) {
+    putLanes(addr, static_cast<long long>(at.addr), k);
+    putLanes(l0, at.left[0], k);
+    putLanes(l1, at.left[1], k);
+    putLanes(l2, at.left[2], k);
+    putLanes(s0, at.small[0], k);
+    putLanes(s1, at.small[1], k);
+    putLanes(s2, at.small[2], k);
+    putLanes(r0, at.wrap[0], k);
+    putLanes(r1, at.wrap[1], k);
+    putLanes(r2, at.wrap[2], k);
+  }
+  /// The lanes in m0 / m1 / m2 step along axis 0 / 1 / 2.
+  [[DENSEMAP_AVX2, gnu::always_inline]] void move(__m256i m0, __m256i m1, __m256i m2) {
+    const __m256i zero = _mm256_setzero_si256(), edge = _mm256_set1_epi64x(block::kEdge);
+    l0 = _mm256_add_epi64(l0, m0);  // stepping lanes are -1
+    l1 = _mm256_add_epi64(l1, m1);
+    l2 = _mm256_add_epi64(l2, m2);
+    const __m256i w0 = _mm256_and_si256(m0, _mm256_cmpeq_epi64(l0, zero));
+    const __m256i w1 = _mm256_and_si256(m1, _mm256_cmpeq_epi64(l1, zero));
+    const __m256i w2 = _mm256_and_si256(m2, _mm256_cmpeq_epi64(l2, zero));
+    __m256i inc = _mm256_and_si256(m0, _mm256_blendv_epi8(s0, r0, w0));
+    inc = _mm256_or_si256(inc, _mm256_and_si256(m1, _mm256_blendv_epi8(s1, r1, w1)));
+    inc = _mm256_or_si256(inc, _mm256_and_si256(m2, _mm256_blendv_epi8(s2, r2, w2)));
+    addr = _mm256_add_epi64(addr, inc);
+    l0 = _mm256_blendv_epi8(l0, edge, w0);
+    l1 = _mm256_blendv_epi8(l1, edge, w1);
+    l2 = _mm256_blendv_epi8(l2, edge, w2);
+  }
+};
 
 /// The forward walks' steps four at a time in AVX2 lanes, as walkEight: the same choice (the
 /// smallest tMax, ties to the higher axis) from the same double additions, a lane taking the
@@ -349,10 +393,9 @@ constexpr FourLaneTables kFour = makeFourLaneTables();
 /// + 16.
 [[DENSEMAP_AVX2]] void walkFour(const DenseMarks::QueuedWalk* walks, std::size_t n, WideOut& out) {
   const __m256i one = _mm256_set1_epi64x(1), zero = _mm256_setzero_si256(),
-                low6 = _mm256_set1_epi64x(63), edge = _mm256_set1_epi64x(block::kEdge);
+                low6 = _mm256_set1_epi64x(63);
   __m256d t0 = _mm256_setzero_pd(), t1 = t0, t2 = t0, d0 = t0, d1 = t0, d2 = t0;
-  __m256i addr = zero, l0 = zero, l1 = zero, l2 = zero, s0 = zero, s1 = zero, s2 = zero, r0 = zero,
-          r1 = zero, r2 = zero;
+  FourPlaces p{zero, zero, zero, zero, zero, zero, zero, zero, zero, zero};
   __m256i left = zero;                 // the lane's steps to go
   __m256i cur_w = zero, cur_b = zero;  // the word being marked, its marks so far
   int live = 0;                        // lanes with a walk whose last marks are not pended
@@ -366,10 +409,7 @@ constexpr FourLaneTables kFour = makeFourLaneTables();
     int act = bitsOf(active);
     if (act != 0xf) {
       const int done = live & ~act;
-      packFour(done, cur_w, pend_w);
-      const std::size_t pended = packFour(done, cur_b, pend_b);
-      pend_w += pended;
-      pend_b += pended;
+      pendFour(done, cur_w, cur_b, pend_w, pend_b);
       cur_b = _mm256_and_si256(cur_b, active);
       // Idle lanes take the next walks.
       for (unsigned idle = ~static_cast<unsigned>(act) & 0xfU; idle != 0 && next < n;
@@ -384,16 +424,7 @@ constexpr FourLaneTables kFour = makeFourLaneTables();
         d0 = _mm256_blendv_pd(d0, _mm256_set1_pd(w.t_delta[0]), kd);
         d1 = _mm256_blendv_pd(d1, _mm256_set1_pd(w.t_delta[1]), kd);
         d2 = _mm256_blendv_pd(d2, _mm256_set1_pd(w.t_delta[2]), kd);
-        putLanes(addr, static_cast<long long>(w.at.addr), k);
-        putLanes(l0, w.at.left[0], k);
-        putLanes(l1, w.at.left[1], k);
-        putLanes(l2, w.at.left[2], k);
-        putLanes(s0, w.at.small[0], k);
-        putLanes(s1, w.at.small[1], k);
-        putLanes(s2, w.at.small[2], k);
-        putLanes(r0, w.at.wrap[0], k);
-        putLanes(r1, w.at.wrap[1], k);
-        putLanes(r2, w.at.wrap[2], k);
+        p.load(k, w.at);
         putLanes(left, w.steps, k);
         putLanes(cur_w, static_cast<long long>(w.at.addr >> 6), k);
       }
@@ -412,34 +443,17 @@ constexpr FourLaneTables kFour = makeFourLaneTables();
     t0 = _mm256_blendv_pd(t0, _mm256_add_pd(t0, d0), _mm256_castsi256_pd(m0));
     t1 = _mm256_blendv_pd(t1, _mm256_add_pd(t1, d1), _mm256_castsi256_pd(m1));
     t2 = _mm256_blendv_pd(t2, _mm256_add_pd(t2, d2), _mm256_castsi256_pd(m2));
-    l0 = _mm256_add_epi64(l0, m0);
-    l1 = _mm256_add_epi64(l1, m1);
-    l2 = _mm256_add_epi64(l2, m2);
-    const __m256i w0 = _mm256_and_si256(m0, _mm256_cmpeq_epi64(l0, zero));
-    const __m256i w1 = _mm256_and_si256(m1, _mm256_cmpeq_epi64(l1, zero));
-    const __m256i w2 = _mm256_and_si256(m2, _mm256_cmpeq_epi64(l2, zero));
-    __m256i inc = _mm256_and_si256(m0, _mm256_blendv_epi8(s0, r0, w0));
-    inc = _mm256_or_si256(inc, _mm256_and_si256(m1, _mm256_blendv_epi8(s1, r1, w1)));
-    inc = _mm256_or_si256(inc, _mm256_and_si256(m2, _mm256_blendv_epi8(s2, r2, w2)));
-    addr = _mm256_add_epi64(addr, inc);
-    l0 = _mm256_blendv_epi8(l0, edge, w0);
-    l1 = _mm256_blendv_epi8(l1, edge, w1);
-    l2 = _mm256_blendv_epi8(l2, edge, w2);
-    const __m256i word = _mm256_srli_epi64(addr, 6);
+    p.move(m0, m1, m2);
+    const __m256i word = _mm256_srli_epi64(p.addr, 6);
     const __m256i moved = _mm256_andnot_si256(_mm256_cmpeq_epi64(word, cur_w), active);
-    const int mv = bitsOf(moved);
-    packFour(mv, cur_w, pend_w);
-    const std::size_t pended = packFour(mv, cur_b, pend_b);
-    pend_w += pended;
-    pend_b += pended;
+    pendFour(bitsOf(moved), cur_w, cur_b, pend_w, pend_b);
     cur_w = _mm256_blendv_epi8(cur_w, word, moved);
     cur_b = _mm256_andnot_si256(moved, cur_b);
     cur_b = _mm256_or_si256(
-        cur_b, _mm256_and_si256(active, _mm256_sllv_epi64(one, _mm256_and_si256(addr, low6))));
+        cur_b, _mm256_and_si256(active, _mm256_sllv_epi64(one, _mm256_and_si256(p.addr, low6))));
   }
   out.n_pend = static_cast<std::size_t>(pend_w - out.pend_w);
 }
-
 
 /// The backward walks' steps four at a time in AVX2 lanes, as walkEightBack: the same decision
 /// (the latest head, ties to the lower axis, winning by more than the bound, else the walk is
@@ -448,17 +462,15 @@ constexpr FourLaneTables kFour = makeFourLaneTables();
 /// them from the pended words). Returns the counts of the walks not handed over; their ids go to
 /// `handed_over`.
 [[DENSEMAP_AVX2]] DenseMarks::BackWalkCounts walkFourBack(const DenseMarks::QueuedBackWalk* walks,
-                                                         std::size_t n,
-                                                         const std::uint64_t* culled,
-                                                         WideOut& out,
-                                                         std::vector<std::uint32_t>& handed_over) {
+                                                          std::size_t n,
+                                                          const std::uint64_t* culled, WideOut& out,
+                                                          std::vector<std::uint32_t>& handed_over) {
   const __m256i one = _mm256_set1_epi64x(1), zero = _mm256_setzero_si256(),
-                low6 = _mm256_set1_epi64x(63), edge = _mm256_set1_epi64x(block::kEdge);
+                low6 = _mm256_set1_epi64x(63);
   const __m256d none = _mm256_set1_pd(-std::numeric_limits<double>::infinity());
   __m256d h0 = _mm256_setzero_pd(), h1 = h0, h2 = h0, d0 = h0, d1 = h0, d2 = h0, bound = h0;
   __m256i n0 = zero, n1 = zero, n2 = zero;  // crossings left per axis (next, as BackwardWalk)
-  __m256i addr = zero, l0 = zero, l1 = zero, l2 = zero, s0 = zero, s1 = zero, s2 = zero, r0 = zero,
-          r1 = zero, r2 = zero;
+  FourPlaces p{zero, zero, zero, zero, zero, zero, zero, zero, zero, zero};
   __m256i left = zero, marked = zero;
   __m256i cur_w = zero, cur_b = zero, cur_r = zero;  // cur_r: the region's bits of cur_w
   __m256i pending = zero;  // the bit of the voxel moved to and not yet tested (0: none)
@@ -477,10 +489,7 @@ constexpr FourLaneTables kFour = makeFourLaneTables();
     const int tst = ~bitsOf(untested) & 0xf;
     if ((act | tst) != 0xf) {
       const int done = live & ~(act | tst);
-      packFour(done, cur_w, pend_w);
-      const std::size_t pended = packFour(done, cur_b, pend_b);
-      pend_w += pended;
-      pend_b += pended;
+      pendFour(done, cur_w, cur_b, pend_w, pend_b);
       if (done != 0) {
         _mm256_store_si256(reinterpret_cast<__m256i*>(marked_at), marked);
         for (unsigned d = static_cast<unsigned>(done); d != 0; d &= d - 1) {
@@ -495,7 +504,8 @@ constexpr FourLaneTables kFour = makeFourLaneTables();
         }
         handing &= ~done;
       }
-      const __m256i busy = _mm256_or_si256(active, _mm256_andnot_si256(untested, _mm256_set1_epi64x(-1)));
+      const __m256i busy =
+          _mm256_or_si256(active, _mm256_andnot_si256(untested, _mm256_set1_epi64x(-1)));
       cur_b = _mm256_and_si256(cur_b, busy);
       marked = _mm256_and_si256(marked, busy);
       for (unsigned idle = ~static_cast<unsigned>(act | tst) & 0xfU; idle != 0 && next < n;
@@ -515,16 +525,7 @@ constexpr FourLaneTables kFour = makeFourLaneTables();
         putLanes(n0, w.next[0], k);
         putLanes(n1, w.next[1], k);
         putLanes(n2, w.next[2], k);
-        putLanes(addr, static_cast<long long>(w.at.addr), k);
-        putLanes(l0, w.at.left[0], k);
-        putLanes(l1, w.at.left[1], k);
-        putLanes(l2, w.at.left[2], k);
-        putLanes(s0, w.at.small[0], k);
-        putLanes(s1, w.at.small[1], k);
-        putLanes(s2, w.at.small[2], k);
-        putLanes(r0, w.at.wrap[0], k);
-        putLanes(r1, w.at.wrap[1], k);
-        putLanes(r2, w.at.wrap[2], k);
+        p.load(k, w.at);
         putLanes(left, w.total, k);
         const std::uint64_t word = w.at.addr >> 6;
         putLanes(cur_w, static_cast<long long>(word), k);
@@ -537,8 +538,8 @@ constexpr FourLaneTables kFour = makeFourLaneTables();
     }
     // The next step's decision: the latest crossing (ties to the lower axis), the runner-up.
     const __m256d high01 = _mm256_max_pd(h0, h1);
-    const __m256i m2 = _mm256_and_si256(
-        active, _mm256_castpd_si256(_mm256_cmp_pd(h2, high01, _CMP_GT_OQ)));
+    const __m256i m2 =
+        _mm256_and_si256(active, _mm256_castpd_si256(_mm256_cmp_pd(h2, high01, _CMP_GT_OQ)));
     const __m256i ge01 = _mm256_castpd_si256(_mm256_cmp_pd(h0, h1, _CMP_GE_OQ));
     const __m256i not2 = _mm256_andnot_si256(m2, active);
     __m256i m0 = _mm256_and_si256(not2, ge01);
@@ -549,11 +550,13 @@ constexpr FourLaneTables kFour = makeFourLaneTables();
     runner = _mm256_blendv_pd(runner, _mm256_max_pd(h1, h2), _mm256_castsi256_pd(m0));
     runner = _mm256_blendv_pd(runner, high01, _mm256_castsi256_pd(m2));
     const __m256i wins = _mm256_and_si256(
-        active, _mm256_castpd_si256(_mm256_cmp_pd(_mm256_sub_pd(chosen, runner), bound, _CMP_GT_OQ)));
+        active,
+        _mm256_castpd_si256(_mm256_cmp_pd(_mm256_sub_pd(chosen, runner), bound, _CMP_GT_OQ)));
     // The voxel moved to last time: in the region (the walk ends there), else marked.
     const __m256i stop = _mm256_andnot_si256(
         _mm256_cmpeq_epi64(_mm256_and_si256(cur_r, pending), zero), _mm256_set1_epi64x(-1));
-    const __m256i mark = _mm256_andnot_si256(stop, _mm256_andnot_si256(untested, _mm256_set1_epi64x(-1)));
+    const __m256i mark =
+        _mm256_andnot_si256(stop, _mm256_andnot_si256(untested, _mm256_set1_epi64x(-1)));
     cur_b = _mm256_or_si256(cur_b, _mm256_andnot_si256(stop, pending));
     marked = _mm256_sub_epi64(marked, mark);
     const __m256i go = _mm256_andnot_si256(stop, active);
@@ -572,35 +575,21 @@ constexpr FourLaneTables kFour = makeFourLaneTables();
     h0 = _mm256_blendv_pd(h0, _mm256_sub_pd(h0, d0), _mm256_castsi256_pd(m0));
     h1 = _mm256_blendv_pd(h1, _mm256_sub_pd(h1, d1), _mm256_castsi256_pd(m1));
     h2 = _mm256_blendv_pd(h2, _mm256_sub_pd(h2, d2), _mm256_castsi256_pd(m2w));
-    h0 = _mm256_blendv_pd(h0, none, _mm256_castsi256_pd(_mm256_and_si256(m0, _mm256_cmpgt_epi64(zero, n0))));
-    h1 = _mm256_blendv_pd(h1, none, _mm256_castsi256_pd(_mm256_and_si256(m1, _mm256_cmpgt_epi64(zero, n1))));
-    h2 = _mm256_blendv_pd(h2, none, _mm256_castsi256_pd(_mm256_and_si256(m2w, _mm256_cmpgt_epi64(zero, n2))));
-    // The lanes' places moved (as walkFour).
-    l0 = _mm256_add_epi64(l0, m0);
-    l1 = _mm256_add_epi64(l1, m1);
-    l2 = _mm256_add_epi64(l2, m2w);
-    const __m256i w0 = _mm256_and_si256(m0, _mm256_cmpeq_epi64(l0, zero));
-    const __m256i w1 = _mm256_and_si256(m1, _mm256_cmpeq_epi64(l1, zero));
-    const __m256i w2 = _mm256_and_si256(m2w, _mm256_cmpeq_epi64(l2, zero));
-    __m256i inc = _mm256_and_si256(m0, _mm256_blendv_epi8(s0, r0, w0));
-    inc = _mm256_or_si256(inc, _mm256_and_si256(m1, _mm256_blendv_epi8(s1, r1, w1)));
-    inc = _mm256_or_si256(inc, _mm256_and_si256(m2w, _mm256_blendv_epi8(s2, r2, w2)));
-    addr = _mm256_add_epi64(addr, inc);
-    l0 = _mm256_blendv_epi8(l0, edge, w0);
-    l1 = _mm256_blendv_epi8(l1, edge, w1);
-    l2 = _mm256_blendv_epi8(l2, edge, w2);
+    h0 = _mm256_blendv_pd(h0, none,
+                          _mm256_castsi256_pd(_mm256_and_si256(m0, _mm256_cmpgt_epi64(zero, n0))));
+    h1 = _mm256_blendv_pd(h1, none,
+                          _mm256_castsi256_pd(_mm256_and_si256(m1, _mm256_cmpgt_epi64(zero, n1))));
+    h2 = _mm256_blendv_pd(h2, none,
+                          _mm256_castsi256_pd(_mm256_and_si256(m2w, _mm256_cmpgt_epi64(zero, n2))));
+    p.move(m0, m1, m2w);
     left = _mm256_add_epi64(left, steps);  // stepping lanes are -1
-    const __m256i word = _mm256_srli_epi64(addr, 6);
+    const __m256i word = _mm256_srli_epi64(p.addr, 6);
     const __m256i moved = _mm256_andnot_si256(_mm256_cmpeq_epi64(word, cur_w), steps);
-    const int mv = bitsOf(moved);
-    packFour(mv, cur_w, pend_w);
-    const std::size_t pended = packFour(mv, cur_b, pend_b);
-    pend_w += pended;
-    pend_b += pended;
+    pendFour(bitsOf(moved), cur_w, cur_b, pend_w, pend_b);
     cur_w = _mm256_blendv_epi8(cur_w, word, moved);
     cur_b = _mm256_andnot_si256(moved, cur_b);
     cur_r = _mm256_mask_i64gather_epi64(cur_r, culled_words, word, moved, 8);
-    pending = _mm256_and_si256(steps, _mm256_sllv_epi64(one, _mm256_and_si256(addr, low6)));
+    pending = _mm256_and_si256(steps, _mm256_sllv_epi64(one, _mm256_and_si256(p.addr, low6)));
   }
   out.n_pend = static_cast<std::size_t>(pend_w - out.pend_w);
   return counts;

@@ -154,8 +154,8 @@ struct GridMap::BlockWriter {
   /// The lanes whose bits `m` (8 bits) holds, as all-ones lanes.
   [[gnu::target("avx2"), gnu::always_inline]] static __m256i lanesOf(unsigned m) {
     const __m256i lane_bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-    return _mm256_cmpeq_epi32(
-        _mm256_and_si256(_mm256_set1_epi32(static_cast<int>(m)), lane_bit), lane_bit);
+    return _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(static_cast<int>(m)), lane_bit),
+                              lane_bit);
   }
   /// applySetWide with AVX2: eight cells at a time (no mask registers: lane masks from the
   /// mask bits, masked loads and stores), the same arithmetic, cells and order.
@@ -182,13 +182,16 @@ struct GridMap::BlockWriter {
         const int first = wd * 64 + shift;
         const __m256 old = _mm256_maskload_ps(read->voxels.log_odds.data() + first, lanesOf(kn));
         // A known hit cell at or above the upper bound keeps its value (updateNode's return).
-        cells &= ~(kn & hits &
-                   static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(old, clamp_max, _CMP_GE_OQ))));
-        __m256 v = _mm256_add_ps(old, _mm256_blendv_ps(miss, hit, _mm256_castsi256_ps(lanesOf(hits))));
+        cells &=
+            ~(kn & hits &
+              static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(old, clamp_max, _CMP_GE_OQ))));
+        __m256 v =
+            _mm256_add_ps(old, _mm256_blendv_ps(miss, hit, _mm256_castsi256_ps(lanesOf(hits))));
         v = _mm256_blendv_ps(v, clamp_min, _mm256_cmp_ps(v, clamp_min, _CMP_LT_OQ));
         v = _mm256_blendv_ps(v, clamp_max, _mm256_cmp_ps(v, clamp_max, _CMP_GT_OQ));
         const unsigned changed =
-            cells & ~(kn & static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(old, v, _CMP_EQ_OQ))));
+            cells &
+            ~(kn & static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(old, v, _CMP_EQ_OQ))));
         if (changed == 0) continue;
         if (write == nullptr) {
           write = &map.store_->writable(entry);

@@ -207,7 +207,8 @@ TEST(TraverseRay, WideStartsAreTheScalarStartsBitForBit) {
   }
   EXPECT_GT(rays, 80000U);
   EXPECT_GT(clean, 20000U);
-  if (!hasWideLanes() && !hasFourLanes()) std::cout << "no AVX2 here: both were the scalar starts\n";
+  if (!hasWideLanes() && !hasFourLanes())
+    std::cout << "no AVX2 here: both were the scalar starts\n";
 }
 
 // The queued walks (markRaysQueued, DenseMarks::markQueued: eight lanes side by side with
