@@ -303,9 +303,8 @@ struct WideOut {
 /// AVX2 has no mask registers and no compress: a lane mask is a vector of all-ones lanes, and
 /// the lanes a 4-bit mask names are packed to the front by a permute from these tables.
 struct FourLaneTables {
-  alignas(32) std::int32_t pack64[16][8];    // the 64-bit lanes set in the mask, in order
-  alignas(32) std::int32_t pack_low[16][8];  // their low 32 bits, in order
-  alignas(32) std::int64_t lane[4][4];       // all-ones in lane k only
+  alignas(32) std::int32_t pack64[16][8];  // the 64-bit lanes set in the mask, in order
+  alignas(32) std::int64_t lane[4][4];     // all-ones in lane k only
 };
 constexpr FourLaneTables makeFourLaneTables() {
   FourLaneTables t{};
@@ -315,7 +314,6 @@ constexpr FourLaneTables makeFourLaneTables() {
       if ((m >> i & 1) == 0) continue;
       t.pack64[m][2 * n] = 2 * i;
       t.pack64[m][2 * n + 1] = 2 * i + 1;
-      t.pack_low[m][n] = 2 * i;
       ++n;
     }
   }
