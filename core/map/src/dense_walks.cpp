@@ -612,7 +612,7 @@ void makeRoom(std::size_t steps, std::vector<std::uint32_t>& entered,
 bool DenseMarks::hasWideWalks() { return hasWideLanes(); }
 bool DenseMarks::hasFourWalks() { return hasFourLanes(); }
 
-// The first-touch bookkeeping of these loops (touch()) kept in locals: seen_'s byte stores may
+// The first-touch bookkeeping of these loops (touchIn) kept in locals: seen_'s byte stores may
 // alias any member, which would reload the count and the arrays' pointers after each store.
 void DenseMarks::finishQueued(std::size_t n_pend, std::size_t n_entered) {
   std::uint64_t* const words = masks_[0].data();
@@ -623,12 +623,7 @@ void DenseMarks::finishQueued(std::size_t n_pend, std::size_t n_entered) {
   std::uint32_t* const touched = touched_.data();
   const std::uint32_t* const entered = entered_.data();
   std::size_t count = touched_count_;
-  for (std::size_t i = 0; i < n_entered; ++i) {
-    const std::uint32_t b = entered[i];
-    touched[count] = b;
-    count += seen[b] ^ 1U;
-    seen[b] = 1;
-  }
+  for (std::size_t i = 0; i < n_entered; ++i) touchIn(entered[i], seen, touched, count);
   touched_count_ = count;
 }
 
@@ -642,10 +637,7 @@ void DenseMarks::finishPended(std::size_t n_pend) {
   for (std::size_t i = 0; i < n_pend; ++i) {
     const std::uint64_t w = pend_w[i];
     words[w] |= pend_b[i];
-    const auto b = static_cast<std::uint32_t>(w / block::kMaskWords);
-    touched[count] = b;
-    count += seen[b] ^ 1U;
-    seen[b] = 1;
+    touchIn(static_cast<std::uint32_t>(w / block::kMaskWords), seen, touched, count);
   }
   touched_count_ = count;
 }

@@ -90,6 +90,17 @@ class DenseMarks {
     }
   }
 
+  /// The first-touch bookkeeping, branch free: block `i` appended at touched[count] (the slot is
+  /// overwritten until the count moves) and counted once, the first time seen[i] is set. The one
+  /// definition, for the members (touch) and for loops that keep the three in locals or
+  /// registers (Cursor, the queued walks' finish: seen's byte stores may alias any member).
+  template <class Count>  // std::size_t, or 32 bits where a uint64_t store must not alias it
+  static void touchIn(std::uint32_t i, std::uint8_t* seen, std::uint32_t* touched, Count& count) {
+    touched[count] = i;
+    count += seen[i] ^ 1U;
+    seen[i] = 1;
+  }
+
   /// A walk's voxel in the box as a value, for a walk's loop to keep in registers (a
   /// StepMarker lives in memory, and its loop reloaded and stored its state at every step): the
   /// voxel's block and its index in the block followed step by step as StepMarker::move does
@@ -107,9 +118,7 @@ class DenseMarks {
         left_[A] = block::kEdge;
         index_ = static_cast<unsigned>(static_cast<int>(index_) - block::kEdge * index_step_[A]);
         block_ = static_cast<std::uint32_t>(static_cast<std::int32_t>(block_) + block_step_[A]);
-        touched_[count_] = block_;
-        count_ += seen_[block_] ^ 1U;
-        seen_[block_] = 1;
+        touchIn(block_, seen_, touched_, count_);
         load();
       } else if constexpr (A == 2) {
         load();  // a z step changes the mask word (a word holds one layer of the block)
@@ -243,9 +252,7 @@ class DenseMarks {
       c.block_step_[0] = delta[0];
       c.block_step_[1] = delta[1] * static_cast<std::int32_t>(n_[0]);
       c.block_step_[2] = delta[2] * static_cast<std::int32_t>(n_[0] * n_[1]);
-      touched_[count_] = block;  // entered: the first-touch bookkeeping, as enter()
-      count_ += seen_[block] ^ 1U;
-      seen_[block] = 1;
+      touchIn(block, seen_, touched_, count_);  // entered, as enter()
       c.count_ = count_;
       const unsigned w = c.index_ >> 6;
       c.word_ = &masks_[block][w];
@@ -279,9 +286,7 @@ class DenseMarks {
 
    private:
     void enter() {  // the walk entered block_: first touch of the scan?
-      touched_[count_] = block_;
-      count_ += seen_[block_] ^ 1U;
-      seen_[block_] = 1;
+      touchIn(block_, seen_, touched_, count_);
     }
     DenseMarks& marks_;
     ScanUpdate& outside_;
@@ -444,11 +449,7 @@ class DenseMarks {
     touch(i);
     block::setBit(masks_[i], index);
   }
-  void touch(std::uint32_t i) {
-    touched_[touched_count_] = i;
-    touched_count_ += seen_[i] ^ 1U;
-    seen_[i] = 1;
-  }
+  void touch(std::uint32_t i) { touchIn(i, seen_.data(), touched_.data(), touched_count_); }
 
   unsigned min_[3] = {0, 0, 0};
   unsigned n_[3] = {0, 0, 0};
