@@ -348,38 +348,49 @@ constexpr FourLaneTables kFour = makeFourLaneTables();
   pend_b += pended;
 }
 
-/// Four walks' places, a lane each (LanePlaces in AVX2 lanes): lane masks are all-ones lanes.
+/// Four walks' places, a lane each, in mirrored block addresses (5 vectors where LanePlaces'
+/// layout takes 10: AVX2 has 16 registers, and the walks' other state takes 9 more). Along an
+/// axis a walk moves down, the voxel's coordinate in its block is kept as 7 - c (the axis' 3
+/// bits XORed with 7: `flip`), so inside a block every walk moves up by the axis' unit (1, 8,
+/// 64) and leaves the block where that mirrored coordinate is 7, adding the lane's crossing
+/// increment for the axis instead (its block stride, signed, less 7 units). An axis no walk
+/// moves along (delta 0) is never chosen (its crossing time is the largest double).
 struct FourPlaces {
-  __m256i addr, l0, l1, l2, s0, s1, s2, r0, r1, r2;
+  __m256i addr, flip, c0, c1, c2;  // addr ^ flip: the voxel's address; cA: crossing less a unit
   /// Puts walk place `at` in the lane(s) `k` holds.
   [[DENSEMAP_AVX2, gnu::always_inline]] void load(__m256i k, const DenseMarks::WalkPlace& at) {
-    putLanes(addr, static_cast<long long>(at.addr), k);
-    putLanes(l0, at.left[0], k);
-    putLanes(l1, at.left[1], k);
-    putLanes(l2, at.left[2], k);
-    putLanes(s0, at.small[0], k);
-    putLanes(s1, at.small[1], k);
-    putLanes(s2, at.small[2], k);
-    putLanes(r0, at.wrap[0], k);
-    putLanes(r1, at.wrap[1], k);
-    putLanes(r2, at.wrap[2], k);
+    long long f = 0;
+    long long c[3];
+    for (int a = 0; a < 3; ++a) {
+      const long long unit = 1LL << (block::kShift * a);
+      if (at.small[a] < 0) f |= (block::kEdge - 1) * unit;
+      // wrap + (kEdge - 1) small: the block stride signed (see DenseMarks::place).
+      c[a] = at.wrap[a] + (block::kEdge - 1) * static_cast<long long>(at.small[a]) -
+             block::kEdge * unit;
+    }
+    putLanes(addr, static_cast<long long>(at.addr) ^ f, k);
+    putLanes(flip, f, k);
+    putLanes(c0, c[0], k);
+    putLanes(c1, c[1], k);
+    putLanes(c2, c[2], k);
   }
   /// The lanes in m0 / m1 / m2 step along axis 0 / 1 / 2.
   [[DENSEMAP_AVX2, gnu::always_inline]] void move(__m256i m0, __m256i m1, __m256i m2) {
-    const __m256i zero = _mm256_setzero_si256(), edge = _mm256_set1_epi64x(block::kEdge);
-    l0 = _mm256_add_epi64(l0, m0);  // stepping lanes are -1
-    l1 = _mm256_add_epi64(l1, m1);
-    l2 = _mm256_add_epi64(l2, m2);
-    const __m256i w0 = _mm256_and_si256(m0, _mm256_cmpeq_epi64(l0, zero));
-    const __m256i w1 = _mm256_and_si256(m1, _mm256_cmpeq_epi64(l1, zero));
-    const __m256i w2 = _mm256_and_si256(m2, _mm256_cmpeq_epi64(l2, zero));
-    __m256i inc = _mm256_and_si256(m0, _mm256_blendv_epi8(s0, r0, w0));
-    inc = _mm256_or_si256(inc, _mm256_and_si256(m1, _mm256_blendv_epi8(s1, r1, w1)));
-    inc = _mm256_or_si256(inc, _mm256_and_si256(m2, _mm256_blendv_epi8(s2, r2, w2)));
-    addr = _mm256_add_epi64(addr, inc);
-    l0 = _mm256_blendv_epi8(l0, edge, w0);
-    l1 = _mm256_blendv_epi8(l1, edge, w1);
-    l2 = _mm256_blendv_epi8(l2, edge, w2);
+    __m256i inc = _mm256_and_si256(m0, _mm256_set1_epi64x(1));
+    inc = _mm256_or_si256(inc, _mm256_and_si256(m1, _mm256_set1_epi64x(block::kEdge)));
+    inc =
+        _mm256_or_si256(inc, _mm256_and_si256(m2, _mm256_set1_epi64x(block::kEdge * block::kEdge)));
+    // The moving axis' 3 bits (7 units), all set at the block's border.
+    const __m256i field = _mm256_sub_epi64(_mm256_slli_epi64(inc, block::kShift), inc);
+    __m256i cross = _mm256_and_si256(m0, c0);
+    cross = _mm256_or_si256(cross, _mm256_and_si256(m1, c1));
+    cross = _mm256_or_si256(cross, _mm256_and_si256(m2, c2));
+    const __m256i border = _mm256_cmpeq_epi64(_mm256_and_si256(addr, field), field);
+    addr = _mm256_add_epi64(addr, _mm256_add_epi64(inc, _mm256_and_si256(border, cross)));
+  }
+  /// The lanes' voxel addresses (block * kVoxels + block::indexOf).
+  [[DENSEMAP_AVX2, gnu::always_inline]] __m256i voxel() const {
+    return _mm256_xor_si256(addr, flip);
   }
 };
 
@@ -393,7 +404,7 @@ struct FourPlaces {
   const __m256i one = _mm256_set1_epi64x(1), zero = _mm256_setzero_si256(),
                 low6 = _mm256_set1_epi64x(63);
   __m256d t0 = _mm256_setzero_pd(), t1 = t0, t2 = t0, d0 = t0, d1 = t0, d2 = t0;
-  FourPlaces p{zero, zero, zero, zero, zero, zero, zero, zero, zero, zero};
+  FourPlaces p{zero, zero, zero, zero, zero};
   __m256i left = zero;                 // the lane's steps to go
   __m256i cur_w = zero, cur_b = zero;  // the word being marked, its marks so far
   int live = 0;                        // lanes with a walk whose last marks are not pended
@@ -442,13 +453,14 @@ struct FourPlaces {
     t1 = _mm256_blendv_pd(t1, _mm256_add_pd(t1, d1), _mm256_castsi256_pd(m1));
     t2 = _mm256_blendv_pd(t2, _mm256_add_pd(t2, d2), _mm256_castsi256_pd(m2));
     p.move(m0, m1, m2);
-    const __m256i word = _mm256_srli_epi64(p.addr, 6);
+    const __m256i voxel = p.voxel();
+    const __m256i word = _mm256_srli_epi64(voxel, 6);
     const __m256i moved = _mm256_andnot_si256(_mm256_cmpeq_epi64(word, cur_w), active);
     pendFour(bitsOf(moved), cur_w, cur_b, pend_w, pend_b);
     cur_w = _mm256_blendv_epi8(cur_w, word, moved);
     cur_b = _mm256_andnot_si256(moved, cur_b);
     cur_b = _mm256_or_si256(
-        cur_b, _mm256_and_si256(active, _mm256_sllv_epi64(one, _mm256_and_si256(p.addr, low6))));
+        cur_b, _mm256_and_si256(active, _mm256_sllv_epi64(one, _mm256_and_si256(voxel, low6))));
   }
   out.n_pend = static_cast<std::size_t>(pend_w - out.pend_w);
 }
@@ -468,9 +480,11 @@ struct FourPlaces {
   const __m256d none = _mm256_set1_pd(-std::numeric_limits<double>::infinity());
   __m256d h0 = _mm256_setzero_pd(), h1 = h0, h2 = h0, d0 = h0, d1 = h0, d2 = h0, bound = h0;
   __m256i n0 = zero, n1 = zero, n2 = zero;  // crossings left per axis (next, as BackwardWalk)
-  FourPlaces p{zero, zero, zero, zero, zero, zero, zero, zero, zero, zero};
+  FourPlaces p{zero, zero, zero, zero, zero};
   __m256i left = zero, marked = zero;
-  __m256i cur_w = zero, cur_b = zero, cur_r = zero;  // cur_r: the region's bits of cur_w
+  // cur_b: the marks so far in the word of the lane's voxel (p.voxel() >> 6); cur_r: the
+  // region's bits of that word.
+  __m256i cur_b = zero, cur_r = zero;
   __m256i pending = zero;  // the bit of the voxel moved to and not yet tested (0: none)
   int live = 0, handing = 0;
   std::size_t lane_walk[4] = {0, 0, 0, 0};
@@ -487,7 +501,7 @@ struct FourPlaces {
     const int tst = ~bitsOf(untested) & 0xf;
     if ((act | tst) != 0xf) {
       const int done = live & ~(act | tst);
-      pendFour(done, cur_w, cur_b, pend_w, pend_b);
+      pendFour(done, _mm256_srli_epi64(p.voxel(), 6), cur_b, pend_w, pend_b);
       if (done != 0) {
         _mm256_store_si256(reinterpret_cast<__m256i*>(marked_at), marked);
         for (unsigned d = static_cast<unsigned>(done); d != 0; d &= d - 1) {
@@ -526,7 +540,6 @@ struct FourPlaces {
         p.load(k, w.at);
         putLanes(left, w.total, k);
         const std::uint64_t word = w.at.addr >> 6;
-        putLanes(cur_w, static_cast<long long>(word), k);
         putLanes(cur_r, static_cast<long long>(culled[word]), k);
       }
       active = _mm256_cmpgt_epi64(left, zero);
@@ -579,15 +592,17 @@ struct FourPlaces {
                           _mm256_castsi256_pd(_mm256_and_si256(m1, _mm256_cmpgt_epi64(zero, n1))));
     h2 = _mm256_blendv_pd(h2, none,
                           _mm256_castsi256_pd(_mm256_and_si256(m2w, _mm256_cmpgt_epi64(zero, n2))));
+    const __m256i before = p.voxel();  // the word moved from (as walkFour)
     p.move(m0, m1, m2w);
     left = _mm256_add_epi64(left, steps);  // stepping lanes are -1
-    const __m256i word = _mm256_srli_epi64(p.addr, 6);
-    const __m256i moved = _mm256_andnot_si256(_mm256_cmpeq_epi64(word, cur_w), steps);
-    pendFour(bitsOf(moved), cur_w, cur_b, pend_w, pend_b);
-    cur_w = _mm256_blendv_epi8(cur_w, word, moved);
+    const __m256i voxel = p.voxel();
+    const __m256i word = _mm256_srli_epi64(voxel, 6);
+    const __m256i moved = _mm256_andnot_si256(
+        _mm256_cmpeq_epi64(_mm256_srli_epi64(_mm256_xor_si256(before, voxel), 6), zero), steps);
+    pendFour(bitsOf(moved), _mm256_srli_epi64(before, 6), cur_b, pend_w, pend_b);
     cur_b = _mm256_andnot_si256(moved, cur_b);
     cur_r = _mm256_mask_i64gather_epi64(cur_r, culled_words, word, moved, 8);
-    pending = _mm256_and_si256(steps, _mm256_sllv_epi64(one, _mm256_and_si256(p.addr, low6)));
+    pending = _mm256_and_si256(steps, _mm256_sllv_epi64(one, _mm256_and_si256(voxel, low6)));
   }
   out.n_pend = static_cast<std::size_t>(pend_w - out.pend_w);
   return counts;
