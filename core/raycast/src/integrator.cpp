@@ -6,12 +6,26 @@
 
 #include <algorithm>
 #include <chrono>
+#include <mutex>
 #include <string>
 
 #include "densemap/geometry/stopwatch.hpp"
 #include "densemap/parallel/tbb_runner.hpp"
 
 namespace densemap {
+namespace {
+
+/// Grows `box` to hold `k`.
+void growBox(KeyBox& box, const VoxelKey& k) {
+  box.min.x = std::min(box.min.x, k.x);
+  box.min.y = std::min(box.min.y, k.y);
+  box.min.z = std::min(box.min.z, k.z);
+  box.max.x = std::max(box.max.x, k.x);
+  box.max.y = std::max(box.max.y, k.y);
+  box.max.z = std::max(box.max.z, k.z);
+}
+
+}  // namespace
 
 std::string_view methodName(IntegrationMethod method) {
   switch (method) {
@@ -47,13 +61,30 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
   stats.points = points_world.size();
   auto t0 = std::chrono::steady_clock::now();
 
+  // The rays' ends, and the box of their end voxels (each range's, joined under a lock).
   rays_.resize(points_world.size());
+  KeyBox ends{};
+  bool any_end = false;
+  std::mutex ends_mutex;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points_world.size(), 4096),
                     [&](const tbb::blocked_range<std::size_t>& range) {
+                      KeyBox local{};
+                      bool any = false;
                       for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                        rays_[i] =
+                        const RayEnd r =
                             rayEndFor(grid, origin_world, points_world[i], options_.max_range_m);
+                        rays_[i] = r;
+                        if (!r.key_valid) continue;
+                        if (!any) local = {r.key, r.key};
+                        any = true;
+                        growBox(local, r.key);
                       }
+                      if (!any) return;
+                      const std::lock_guard lock(ends_mutex);
+                      if (!any_end) ends = local;
+                      any_end = true;
+                      growBox(ends, local.min);
+                      growBox(ends, local.max);
                     });
   stats.rays = rays_.size();
 
@@ -64,13 +95,14 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
   hit_.clear();
   if (origin_key) {
     box = {*origin_key, *origin_key};
-    for (const RayEnd& r : rays_) {
-      if (!r.key_valid) continue;
-      for (int a = 0; a < 3; ++a) {
-        box.min[a] = std::min(box.min[a], r.key[a]);
-        box.max[a] = std::max(box.max[a], r.key[a]);
+    if (any_end) {
+      growBox(box, ends.min);
+      growBox(box, ends.max);
+    }
+    if (culling) {
+      for (const RayEnd& r : rays_) {
+        if (r.key_valid && r.occupied) hit_.push_back(r.key);
       }
-      if (culling && r.occupied) hit_.push_back(r.key);
     }
   }
   // Super rays and the culling region are independent: built side by side (the region build

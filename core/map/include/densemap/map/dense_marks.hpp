@@ -458,6 +458,9 @@ class DenseMarks {
   /// Block i's marks and first-touch flag cleared; the list of touched blocks and the queues
   /// emptied (their blocks' marks are the caller's to clear).
   void clearBlock(std::uint32_t i);
+  /// Puts the touched blocks' list in block index order (its blocks' seen flags set: each
+  /// once), by a sort or by reading the box's seen flags in chunks with `runner`.
+  void orderTouched(const ChunkRunner& runner);
   void forgetList();
 
   /// An array of zeroed Ts from calloc: the pages a scan never touches stay unmapped (the
