@@ -8,6 +8,7 @@ namespace densemap {
 
 bool DenseMarks::reset(const VoxelKey& min, const VoxelKey& max, std::size_t max_blocks) {
   discard();  // marks a scan left unflushed (it threw) are not the next scan's
+  memo_valid_ = false;
   std::size_t blocks = 1;
   for (int a = 0; a < 3; ++a) {
     const unsigned lo = static_cast<unsigned>(min[a] >> block::kShift);

@@ -16,7 +16,7 @@ namespace densemap {
 namespace {
 
 /// Grows `box` to hold `k`.
-void growBox(KeyBox& box, const VoxelKey& k) {
+[[gnu::always_inline]] inline void growBox(KeyBox& box, const VoxelKey& k) {
   box.min.x = std::min(box.min.x, k.x);
   box.min.y = std::min(box.min.y, k.y);
   box.min.z = std::min(box.min.z, k.z);

@@ -350,8 +350,10 @@ class DenseMarks {
   /// in the box (so are the walk's voxels between them).
   bool queueWalk(const VoxelKey& first, const int (&delta)[3], const VoxelKey& last,
                  const double (&t_max)[3], const double (&t_delta)[3], int total) {
-    WalkPlace at;
-    if (!place(first, delta, last, at)) return false;
+    // Forward walks start in the sensor's voxel: their places come from placeFrom's memo.
+    const WalkPlace* from = placeFrom(first, delta);
+    if (from == nullptr || blockIndex(last) == kOutside) return false;
+    const WalkPlace at = *from;
     QueuedWalk& w = queue_.emplace_back();
     w.at = at;
     w.steps = total - 1;
@@ -425,6 +427,24 @@ class DenseMarks {
   /// The same for walks that list no blocks entered (walkFour): every block a forward walk
   /// marks holds one of its pended words, so the pended words' blocks are the blocks entered.
   void finishPended(std::size_t n_pend);
+  /// place's walk place from voxel `first` moving by `delta` (each -1, 0 or 1), or null when
+  /// `first` is outside the box: memoized for the last `first` (the 27 deltas' places), since
+  /// a scan's forward walks all start in the sensor's voxel.
+  const WalkPlace* placeFrom(const VoxelKey& first, const int (&delta)[3]) {
+    if (!memo_valid_ || !(first == memo_first_)) {
+      memo_first_ = first;
+      memo_valid_ = true;
+      memo_filled_ = 0;
+      memo_inside_ = blockIndex(first) != kOutside;
+    }
+    if (!memo_inside_) return nullptr;
+    const int slot = (delta[0] + 1) + 3 * (delta[1] + 1) + 9 * (delta[2] + 1);
+    if ((memo_filled_ >> slot & 1U) == 0) {
+      (void)place(first, delta, first, memo_places_[slot]);
+      memo_filled_ |= 1U << slot;
+    }
+    return &memo_places_[slot];
+  }
   /// A walk's place from voxel `first` toward `last` (moving by `delta`), when both are in the
   /// box (else false).
   bool place(const VoxelKey& first, const int (&delta)[3], const VoxelKey& last, WalkPlace& at) {
@@ -453,6 +473,12 @@ class DenseMarks {
 
   unsigned min_[3] = {0, 0, 0};
   unsigned n_[3] = {0, 0, 0};
+  // placeFrom's memo (invalid after reset: the box's indexing may change).
+  VoxelKey memo_first_{};
+  bool memo_valid_ = false;
+  bool memo_inside_ = false;
+  std::uint32_t memo_filled_ = 0;  // the slots computed
+  WalkPlace memo_places_[27]{};
   /// Clears the marks made since the last flush (none when every scan was flushed).
   void discard();
   /// Block i's marks and first-touch flag cleared; the list of touched blocks and the queues
