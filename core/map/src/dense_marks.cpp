@@ -40,11 +40,22 @@ void DenseMarks::clearBlock(std::uint32_t i) {
 
 void DenseMarks::forgetList() {
   touched_count_ = 0;
+  unlisted_ = false;
   queue_.clear();
   back_queue_.clear();
 }
 
+void DenseMarks::relist() {
+  if (!unlisted_) return;
+  std::uint32_t* const touched = touched_.data();
+  std::size_t count = 0;
+  forEachSeen([&](std::uint32_t i) { touched[count++] = i; });
+  touched_count_ = count;
+  unlisted_ = false;
+}
+
 void DenseMarks::discard() {
+  relist();
   for (std::size_t t = 0; t < touched_count_; ++t) clearBlock(touched_[t]);
   forgetList();
 }
@@ -61,14 +72,15 @@ std::uint64_t DenseMarks::blockKeyAt(std::uint32_t i) const {
 
 void DenseMarks::orderTouched(const ChunkRunner& runner) {
   const std::size_t n = touched_count_;
-  const std::size_t box = static_cast<std::size_t>(n_[0]) * n_[1] * n_[2];
+  const std::size_t box = boxBlocks();
   // Sorting is serial; the seen flags of the box, read in chunks side by side, list the same
   // blocks in the same order (a byte a block: cheaper than the sort's n log n steps unless the
   // box is far larger than the list).
-  if (box > 64 * n) {
+  if (!unlisted_ && box > 64 * n) {
     std::sort(touched_.data(), touched_.data() + n);
     return;
   }
+  unlisted_ = false;                                   // listed below from the seen flags
   constexpr std::size_t kScan = std::size_t{1} << 15;  // blocks a chunk (a multiple of 8)
   const std::size_t chunks = (box + kScan - 1) / kScan;
   const std::uint8_t* const seen = seen_.data();
@@ -83,21 +95,12 @@ void DenseMarks::orderTouched(const ChunkRunner& runner) {
     }
   });
   for (std::size_t c = 0; c < chunks; ++c) chunk_held_[c + 1] += chunk_held_[c];
+  touched_count_ = chunk_held_[chunks];
   runner.run(chunks, 1, [&](std::size_t begin, std::size_t end) {
     for (std::size_t c = begin; c != end; ++c) {
       std::uint32_t* out = touched_.data() + chunk_held_[c];
-      const std::size_t from = c * kScan, to = std::min(box, (c + 1) * kScan);
-      std::size_t i = from;
-      for (; i + 8 <= to; i += 8) {  // eight flags at a time: most words are all clear
-        std::uint64_t flags;
-        std::memcpy(&flags, seen + i, sizeof flags);
-        for (; flags != 0; flags &= flags - 1) {
-          *out++ = static_cast<std::uint32_t>(i + (std::countr_zero(flags) >> 3));
-        }
-      }
-      for (; i < to; ++i) {
-        if (seen[i] != 0) *out++ = static_cast<std::uint32_t>(i);
-      }
+      forEachSeenIn(c * kScan, std::min(box, (c + 1) * kScan),
+                    [&](std::uint32_t i) { *out++ = i; });
     }
   });
 }
@@ -115,6 +118,7 @@ void DenseMarks::flushAllInto(std::span<DenseMarks* const> others, ScanUpdate& u
       apart.push_back(other);  // flushed after these (by hash probe: its blocks may be ours)
       continue;
     }
+    other->relist();
     for (std::size_t t = 0; t < other->touched_count_; ++t) touch(other->touched_[t]);
     same.push_back(other);
   }
@@ -186,6 +190,7 @@ void DenseMarks::flushAllInto(std::span<DenseMarks* const> others, ScanUpdate& u
 }
 
 void DenseMarks::flushInto(ScanUpdate& update) {
+  relist();
   for (std::size_t t = 0; t < touched_count_; ++t) {
     const std::uint32_t i = touched_[t];
     // A StepMarker enters blocks before marking: a walk may stop in one without a mark.

@@ -627,7 +627,7 @@ void makeRoom(std::size_t steps, std::vector<std::uint32_t>& entered,
 bool DenseMarks::hasWideWalks() { return hasWideLanes(); }
 bool DenseMarks::hasFourWalks() { return hasFourLanes(); }
 
-// The first-touch bookkeeping of these loops (touchIn) kept in locals: seen_'s byte stores may
+// The first-touch bookkeeping of this loop (touchIn) kept in locals: seen_'s byte stores may
 // alias any member, which would reload the count and the arrays' pointers after each store.
 void DenseMarks::finishQueued(std::size_t n_pend, std::size_t n_entered) {
   std::uint64_t* const words = masks_[0].data();
@@ -647,14 +647,12 @@ void DenseMarks::finishPended(std::size_t n_pend) {
   const std::uint64_t* const pend_w = pend_w_.data();
   const std::uint64_t* const pend_b = pend_b_.data();
   std::uint8_t* const seen = seen_.data();
-  std::uint32_t* const touched = touched_.data();
-  std::size_t count = touched_count_;
   for (std::size_t i = 0; i < n_pend; ++i) {
     const std::uint64_t w = pend_w[i];
     words[w] |= pend_b[i];
-    touchIn(static_cast<std::uint32_t>(w / block::kMaskWords), seen, touched, count);
+    seen[w / block::kMaskWords] = 1;  // listed later (unlisted_)
   }
-  touched_count_ = count;
+  if (n_pend != 0) unlisted_ = true;
 }
 
 void DenseMarks::markQueued(WalkKernel kernel) {

@@ -1,8 +1,10 @@
 #pragma once
 
+#include <bit>
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <memory>
 #include <optional>
 #include <span>
@@ -84,10 +86,14 @@ class DenseMarks {
   /// Calls f(block key, free mask) for each block with free marks so far (the marks stay).
   template <class F>
   void forEachMarkedFree(F&& f) const {
-    for (std::size_t t = 0; t < touched_count_; ++t) {
-      const std::uint32_t i = touched_[t];
+    const auto each = [&](std::uint32_t i) {
       if (block::anyBit(masks_[i])) f(blockKeyAt(i), masks_[i]);
+    };
+    if (unlisted_) {
+      forEachSeen(each);  // the list lacks blocks only seen (see finishPended)
+      return;
     }
+    for (std::size_t t = 0; t < touched_count_; ++t) each(touched_[t]);
   }
 
   /// The first-touch bookkeeping, branch free: block `i` appended at touched[count] (the slot is
@@ -426,7 +432,35 @@ class DenseMarks {
   void finishQueued(std::size_t n_pend, std::size_t n_entered);
   /// The same for walks that list no blocks entered (walkFour): every block a forward walk
   /// marks holds one of its pended words, so the pended words' blocks are the blocks entered.
+  /// Their seen flags are set, not the list (a store a pend, where the list took five
+  /// instructions more): the list is `unlisted_` until relist() or the flush rebuilds it.
   void finishPended(std::size_t n_pend);
+  /// Calls f(i) for each block i in [from, to) whose seen flag is set, in index order.
+  template <class F>
+  void forEachSeenIn(std::size_t from, std::size_t to, F&& f) const {
+    const std::uint8_t* const seen = seen_.data();
+    std::size_t i = from;
+    for (; i + 8 <= to; i += 8) {  // eight flags (0 or 1) at a time: most words are all clear
+      std::uint64_t flags;
+      std::memcpy(&flags, seen + i, sizeof flags);
+      for (; flags != 0; flags &= flags - 1) {
+        f(static_cast<std::uint32_t>(i + (static_cast<unsigned>(std::countr_zero(flags)) >> 3)));
+      }
+    }
+    for (; i < to; ++i) {
+      if (seen[i] != 0) f(static_cast<std::uint32_t>(i));
+    }
+  }
+  /// forEachSeenIn over the whole box.
+  template <class F>
+  void forEachSeen(F&& f) const {
+    forEachSeenIn(0, boxBlocks(), f);
+  }
+  [[nodiscard]] std::size_t boxBlocks() const {
+    return static_cast<std::size_t>(n_[0]) * n_[1] * n_[2];
+  }
+  /// The list of touched blocks rebuilt from the seen flags when it is unlisted_ (serially).
+  void relist();
   /// place's walk place from voxel `first` moving by `delta` (each -1, 0 or 1), or null when
   /// `first` is outside the box: memoized for the last `first` (the 27 deltas' places), since
   /// a scan's forward walks all start in the sensor's voxel.
@@ -502,6 +536,7 @@ class DenseMarks {
     }
     [[nodiscard]] std::size_t size() const { return size_; }
     [[nodiscard]] T* data() { return data_.get(); }
+    [[nodiscard]] const T* data() const { return data_.get(); }
     T& operator[](std::size_t i) { return data_[i]; }
     const T& operator[](std::size_t i) const { return data_[i]; }
 
@@ -518,6 +553,7 @@ class DenseMarks {
   ZeroedArray<std::uint8_t> seen_;
   ZeroedArray<std::uint32_t> touched_;  // one spare slot for the branch-free append
   std::size_t touched_count_ = 0;
+  bool unlisted_ = false;  // blocks seen (seen_) that touched_ does not list: finishPended's
   std::vector<QueuedWalk> queue_;
   std::vector<QueuedBackWalk> back_queue_;
   std::vector<std::uint32_t> entered_;          // markQueued's: blocks the walks entered
