@@ -592,7 +592,7 @@ struct FourPlaces {
                           _mm256_castsi256_pd(_mm256_and_si256(m1, _mm256_cmpgt_epi64(zero, n1))));
     h2 = _mm256_blendv_pd(h2, none,
                           _mm256_castsi256_pd(_mm256_and_si256(m2w, _mm256_cmpgt_epi64(zero, n2))));
-    const __m256i before = p.voxel();  // the word moved from (as walkFour)
+    const __m256i before = p.voxel();  // its word is the one moved from (no word register)
     p.move(m0, m1, m2w);
     left = _mm256_add_epi64(left, steps);  // stepping lanes are -1
     const __m256i voxel = p.voxel();
