@@ -58,6 +58,11 @@ struct GridMap::BlockWriter {
   /// A cell already at the clamping bound its update moves toward keeps its value, as
   /// OctoMap's updateNode returns early for it ("no change: node already at threshold"; so does
   /// OctreeMap::apply): crossed-only cells that are fully free are dropped a mask word at a time.
+  /// The cells of mask word `wd` an update writes: those it reaches, less the fully-free ones
+  /// it only crosses (the rule above; the one definition for applySet's three forms).
+  [[nodiscard]] std::uint64_t toWrite(std::uint64_t reached, std::uint64_t occupied, int wd) const {
+    return reached & ~(read->fully_free[wd] & ~occupied);
+  }
   void applySet(std::uint64_t block_key, const ScanUpdate::Block& b, const SensorModel& model) {
 #ifdef DENSEMAP_WIDE_APPLY
     if (hasWideLanes()) {
@@ -77,7 +82,7 @@ struct GridMap::BlockWriter {
     counts.updated += block::countBits(reached);
     for (int wd = 0; wd < block::kMaskWords; ++wd) {
       const std::uint64_t occupied = b.occupied[wd];
-      std::uint64_t todo = reached[wd] & ~(read->fully_free[wd] & ~occupied);
+      std::uint64_t todo = toWrite(reached[wd], occupied, wd);
       while (todo != 0) {
         const int bit = std::countr_zero(todo);
         todo &= todo - 1;
@@ -106,7 +111,7 @@ struct GridMap::BlockWriter {
       const std::uint64_t occupied = b.occupied[wd];
       std::uint64_t todo = b.free[wd] | occupied;
       counts.updated += static_cast<std::size_t>(std::popcount(todo));
-      todo &= ~(read->fully_free[wd] & ~occupied);
+      todo = toWrite(todo, occupied, wd);
       if (todo == 0) continue;
       const std::uint64_t known = read->voxels.known[wd];
       for (int q = 0; q < 4; ++q) {
@@ -170,7 +175,7 @@ struct GridMap::BlockWriter {
       const std::uint64_t occupied = b.occupied[wd];
       std::uint64_t todo = b.free[wd] | occupied;
       counts.updated += static_cast<std::size_t>(__builtin_popcountll(todo));
-      todo &= ~(read->fully_free[wd] & ~occupied);
+      todo = toWrite(todo, occupied, wd);
       if (todo == 0) continue;
       const std::uint64_t known = read->voxels.known[wd];
       for (int q = 0; q < 8; ++q) {
