@@ -3,6 +3,8 @@
 // from the same double arithmetic, the same marks).
 #include <algorithm>
 #include <bit>
+#include <cstddef>
+#include <cstring>
 #include <limits>
 
 #include "densemap/geometry/ray_traversal.hpp"
@@ -465,6 +467,218 @@ struct FourPlaces {
   out.n_pend = static_cast<std::size_t>(pend_w - out.pend_w);
 }
 
+/// The 32-bit lanes a mask names, packed to the front (a permute's indices), per 8-bit mask.
+struct EightLaneTable {
+  alignas(32) std::int32_t pack32[256][8];
+};
+constexpr EightLaneTable makeEightLaneTable() {
+  EightLaneTable t{};
+  for (int m = 0; m < 256; ++m) {
+    int n = 0;
+    for (int i = 0; i < 8; ++i) {
+      if ((m >> i & 1) != 0) t.pack32[m][n++] = i;
+    }
+  }
+  return t;
+}
+constexpr EightLaneTable kEight = makeEightLaneTable();
+
+/// Pends the 32-bit words and marks of the lanes `bits` names (packed at the pointers, which
+/// move on; 8 slots written).
+[[DENSEMAP_AVX2, gnu::always_inline]] inline void pendEight(unsigned bits, __m256i words,
+                                                            __m256i marks, std::uint32_t*& pend_w,
+                                                            std::uint32_t*& pend_b) {
+  const __m256i idx = _mm256_load_si256(reinterpret_cast<const __m256i*>(kEight.pack32[bits]));
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(pend_w), _mm256_permutevar8x32_epi32(words, idx));
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(pend_b), _mm256_permutevar8x32_epi32(marks, idx));
+  const auto pended = static_cast<std::size_t>(std::popcount(bits));
+  pend_w += pended;
+  pend_b += pended;
+}
+/// All-ones in the 32-bit lanes `bits` names.
+[[DENSEMAP_AVX2, gnu::always_inline]] inline __m256i lanesOf(unsigned bits) {
+  const __m256i each = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+  return _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(static_cast<int>(bits)), each),
+                            each);
+}
+/// `x` into the 32-bit lanes `k` holds.
+[[DENSEMAP_AVX2, gnu::always_inline]] inline void putLanes32(__m256i& v, __m256i k,
+                                                             std::int32_t x) {
+  v = _mm256_blendv_epi8(v, _mm256_set1_epi32(x), k);
+}
+/// The 32-bit lanes a vector mask holds, as bits.
+[[DENSEMAP_AVX2, gnu::always_inline]] inline unsigned bitsOf32(__m256i m) {
+  return static_cast<unsigned>(_mm256_movemask_ps(_mm256_castsi256_ps(m)));
+}
+
+/// The forward walks' steps eight at a time in AVX2 lanes of 32-bit fixed-point times
+/// (DenseMarks::FixedWalk): walkFour's walks, a lane taking the next walk when its own is done,
+/// with countedSteps' choice (the smallest time) made from integers that are each within
+/// (k + 1) / 2 + 2^-10 units of the double time after k additions (the rounding of the start
+/// and of each delta, 1/2 unit each, and the doubles' own error): a step is taken only when
+/// the smallest time is below the others by more than the walk's slack (steps / 2 + 3, above
+/// two such errors), so the doubles' decision, ties included, is the same one. A lane whose
+/// decision is closer than that stops, unstepped, and its walk's queue index is appended at
+/// `handed_over` + `n_handed` (room for n; what it marked is part of the walk's marks). Marks are
+/// gathered per 32-bit word and pended when the lane moves on. `pend_w` / `pend_b` need room for
+/// (all the walks' steps + 1) + 16.
+[[DENSEMAP_AVX2]] std::size_t walkEightFixed(const DenseMarks::FixedWalk* walks, std::size_t n,
+                                             std::uint32_t* pend_w, std::uint32_t* pend_b,
+                                             std::uint32_t* handed_over, std::size_t& n_handed) {
+  // The lanes' state that no step changes, and the constants, in memory, read where used: the
+  // empty asm at each step (a memory clobber) keeps GCC from holding them in registers (or
+  // building the constants from immediates, three instructions each), which spilled the state
+  // a step changes instead (16 registers: that state, 7 vectors, and the step's temporaries).
+  enum : int { kD0, kD1, kD2, kSlack, kFlip, kC0, kC1, kC2, kOne, kEdge, kEdge2, kLow5, kMinus2 };
+  alignas(32) __m256i ro[13];  // (the assembly below reads them at 32 * index)
+  static_assert(kD1 == 1 && kD2 == 2 && kSlack == 3 && kFlip == 4 && kC0 == 5 && kC1 == 6 &&
+                kC2 == 7 && kOne == 8 && kEdge == 9 && kEdge2 == 10 && kLow5 == 11 &&
+                kMinus2 == 12 && sizeof(__m256i) == 32);
+  const __m256i zero = _mm256_setzero_si256();
+  // A lane without a walk has the slack kNoWalk: every time is above its threshold (no step, no
+  // hand-over).
+  const __m256i no_walk = _mm256_set1_epi32(-(1 << 30));
+  for (__m256i& v : ro) v = zero;
+  ro[kSlack] = no_walk;
+  ro[kOne] = _mm256_set1_epi32(1);
+  ro[kEdge] = _mm256_set1_epi32(block::kEdge);
+  ro[kEdge2] = _mm256_set1_epi32(block::kEdge * block::kEdge);
+  ro[kLow5] = _mm256_set1_epi32(31);
+  ro[kMinus2] = _mm256_set1_epi32(-2);
+  __m256i t0 = zero, t1 = zero, t2 = zero, addr = zero;
+  __m256i left = zero;                 // the lane's steps to go
+  __m256i cur_w = zero, cur_b = zero;  // the 32-bit word of the lane's voxel, its marks so far
+  unsigned live = 0;                   // lanes with a walk whose last marks are not pended
+  std::uint32_t lane_walk[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+  std::uint32_t* const pend_start = pend_w;
+  std::size_t next = 0;
+  while (true) {
+    const __m256i active = _mm256_cmpgt_epi32(left, zero);
+    unsigned act = bitsOf32(active);
+    if (act != 0xffU) {
+      pendEight(live & ~act, cur_w, cur_b, pend_w, pend_b);
+      cur_b = _mm256_and_si256(cur_b, active);
+      ro[kSlack] = _mm256_blendv_epi8(_mm256_set1_epi32(-(1 << 30)), ro[kSlack], active);
+      // Idle lanes take the next walks.
+      for (unsigned idle = ~act & 0xffU; idle != 0 && next < n; idle &= idle - 1, ++next) {
+        const DenseMarks::FixedWalk& w = walks[next];
+        const int lane = std::countr_zero(idle);
+        lane_walk[lane] = w.index;
+        const __m256i k = lanesOf(1U << lane);
+        putLanes32(t0, k, w.t[0]);
+        putLanes32(t1, k, w.t[1]);
+        putLanes32(t2, k, w.t[2]);
+        putLanes32(ro[kD0], k, w.d[0]);
+        putLanes32(ro[kD1], k, w.d[1]);
+        putLanes32(ro[kD2], k, w.d[2]);
+        putLanes32(ro[kSlack], k, w.slack);
+        putLanes32(left, k, w.steps);
+        putLanes32(addr, k, w.addr);
+        putLanes32(ro[kFlip], k, w.flip);
+        putLanes32(ro[kC0], k, w.cross[0]);
+        putLanes32(ro[kC1], k, w.cross[1]);
+        putLanes32(ro[kC2], k, w.cross[2]);
+        putLanes32(cur_w, k, (w.addr ^ w.flip) >> 5);
+        act |= 1U << lane;
+      }
+      live = act;
+      if (act == 0) break;
+    }
+    // The smallest time; the axes above it by more than the slack (n_a) do not step. Exactly
+    // one axis within the slack: n0 + n1 + n2 == -2; with more, the decision is too close to
+    // call: the lane stops (its slack kNoWalk: no axis within) and its walk is handed over.
+    // (In assembly, this and the step below: GCC's registers for the intrinsics spilled the
+    // state a step changes, some 80 instructions a step where these take 55.)
+    __m256i n0, n1, n2;
+    while (true) {
+      __m256i thr;
+      std::uint64_t unsure;
+      asm("vpminsd %t[t1], %t[t0], %t[thr]\n\t"
+          "vpminsd %t[t2], %t[thr], %t[thr]\n\t"
+          "vpaddd 96(%[ro]), %t[thr], %t[thr]\n\t"
+          "vpcmpgtd %t[thr], %t[t0], %t[n0]\n\t"
+          "vpcmpgtd %t[thr], %t[t1], %t[n1]\n\t"
+          "vpcmpgtd %t[thr], %t[t2], %t[n2]\n\t"
+          "vpaddd %t[n1], %t[n0], %t[thr]\n\t"
+          "vpaddd %t[n2], %t[thr], %t[thr]\n\t"
+          "vpcmpgtd 384(%[ro]), %t[thr], %t[thr]\n\t"
+          "vmovmskps %t[thr], %k[unsure]"
+          : [n0] "=&x"(n0), [n1] "=&x"(n1), [n2] "=&x"(n2), [thr] "=&x"(thr), [unsure] "=r"(unsure)
+          : [t0] "x"(t0), [t1] "x"(t1), [t2] "x"(t2), [ro] "r"(ro),
+            "m"(*reinterpret_cast<const __m256i(*)[13]>(ro)));
+      if (unsure == 0) [[likely]]
+        break;
+      // (No call here: it would make GCC keep the lanes' state in memory on the common path.)
+      for (unsigned u = unsure; u != 0; u &= u - 1) {
+        handed_over[n_handed++] = lane_walk[std::countr_zero(u)];
+      }
+      const __m256i stop = lanesOf(unsure);
+      ro[kSlack] = _mm256_blendv_epi8(ro[kSlack], _mm256_set1_epi32(-(1 << 30)), stop);
+      left = _mm256_andnot_si256(stop, left);  // done after this (unstepped) step
+    }
+    // The step: the times of the axes stepped on, the places (FourPlaces::move in 32 bits, the
+    // masks negated), the voxel's word and mark (lanes that did not step stay on their word),
+    // the marks of the lanes that moved to another word pended (pendEight), a step less to go.
+    __m256i x1, x2, x3, x4;
+    std::uint64_t moved, pended;
+    asm("vpandn 0(%[ro]), %t[n0], %t[x1]\n\t"
+        "vpaddd %t[x1], %t[t0], %t[t0]\n\t"
+        "vpandn 32(%[ro]), %t[n1], %t[x1]\n\t"
+        "vpaddd %t[x1], %t[t1], %t[t1]\n\t"
+        "vpandn 64(%[ro]), %t[n2], %t[x1]\n\t"
+        "vpaddd %t[x1], %t[t2], %t[t2]\n\t"
+        // x1: the unit moved by (inc); x2: the block crossing's increment less the unit
+        "vpandn 256(%[ro]), %t[n0], %t[x1]\n\t"
+        "vpandn 288(%[ro]), %t[n1], %t[x3]\n\t"
+        "vpor %t[x3], %t[x1], %t[x1]\n\t"
+        "vpandn 320(%[ro]), %t[n2], %t[x3]\n\t"
+        "vpor %t[x3], %t[x1], %t[x1]\n\t"
+        "vpandn 160(%[ro]), %t[n0], %t[x2]\n\t"
+        "vpandn 192(%[ro]), %t[n1], %t[x3]\n\t"
+        "vpor %t[x3], %t[x2], %t[x2]\n\t"
+        "vpandn 224(%[ro]), %t[n2], %t[x3]\n\t"
+        "vpor %t[x3], %t[x2], %t[x2]\n\t"
+        // x3: the moving axis' field (7 units); x4: at the block's border
+        "vpslld $3, %t[x1], %t[x3]\n\t"
+        "vpsubd %t[x1], %t[x3], %t[x3]\n\t"
+        "vpand %t[x3], %t[addr], %t[x4]\n\t"
+        "vpcmpeqd %t[x3], %t[x4], %t[x4]\n\t"
+        "vpand %t[x4], %t[x2], %t[x2]\n\t"
+        "vpaddd %t[x1], %t[addr], %t[addr]\n\t"
+        "vpaddd %t[x2], %t[addr], %t[addr]\n\t"
+        // x1: the voxel; x2: its word; x3: on the same word as before
+        "vpxor 128(%[ro]), %t[addr], %t[x1]\n\t"
+        "vpsrld $5, %t[x1], %t[x2]\n\t"
+        "vpcmpeqd %t[cur_w], %t[x2], %t[x3]\n\t"
+        "vmovmskps %t[x3], %k[moved]\n\t"
+        "xorl $0xff, %k[moved]\n\t"
+        "movq %[moved], %[pended]\n\t"
+        "shlq $5, %[pended]\n\t"
+        "vmovdqa (%[pack], %[pended]), %t[x4]\n\t"
+        "popcntq %[moved], %[pended]\n\t"
+        "vpermd %t[cur_w], %t[x4], %t[cur_w]\n\t"
+        "vmovdqu %t[cur_w], (%[pw])\n\t"
+        "vpermd %t[cur_b], %t[x4], %t[x4]\n\t"
+        "vmovdqu %t[x4], (%[pb])\n\t"
+        "leaq (%[pw], %[pended], 4), %[pw]\n\t"
+        "leaq (%[pb], %[pended], 4), %[pb]\n\t"
+        "vmovdqa %t[x2], %t[cur_w]\n\t"
+        "vpand %t[x3], %t[cur_b], %t[cur_b]\n\t"
+        "vpand 352(%[ro]), %t[x1], %t[x1]\n\t"
+        "vmovdqa 256(%[ro]), %t[x4]\n\t"
+        "vpsllvd %t[x1], %t[x4], %t[x4]\n\t"
+        "vpor %t[x4], %t[cur_b], %t[cur_b]\n\t"
+        "vpsubd 256(%[ro]), %t[left], %t[left]"
+        : [left] "+x"(left), [t0] "+x"(t0), [t1] "+x"(t1), [t2] "+x"(t2), [addr] "+x"(addr),
+          [cur_w] "+x"(cur_w), [cur_b] "+x"(cur_b), [pw] "+r"(pend_w), [pb] "+r"(pend_b),
+          [x1] "=&x"(x1), [x2] "=&x"(x2), [x3] "=&x"(x3), [x4] "=&x"(x4), [moved] "=&r"(moved),
+          [pended] "=&r"(pended)
+        : [n0] "x"(n0), [n1] "x"(n1), [n2] "x"(n2), [ro] "r"(ro), [pack] "r"(kEight.pack32)
+        : "memory");
+  }
+  return static_cast<std::size_t>(pend_w - pend_start);
+}
+
 /// The backward walks' steps four at a time in AVX2 lanes, as walkEightBack: the same decision
 /// (the latest head, ties to the lower axis, winning by more than the bound, else the walk is
 /// handed over), the region's word gathered when a lane moves to another word and the voxel
@@ -655,6 +869,116 @@ void DenseMarks::finishPended(std::size_t n_pend) {
   if (n_pend != 0) unlisted_ = true;
 }
 
+void DenseMarks::finishPended32(std::size_t n_pend) {
+  // The masks' 64-bit words read as pairs of 32-bit ones (little-endian: the low half first).
+  using Word32 [[gnu::may_alias]] = std::uint32_t;
+  auto* const words = reinterpret_cast<Word32*>(masks_[0].data());
+  const std::uint32_t* const pend_w = pend32_w_.data();
+  const std::uint32_t* const pend_b = pend32_b_.data();
+  std::uint8_t* const seen = seen_.data();
+  constexpr unsigned kWords32 = block::kVoxels / 32;
+  for (std::size_t i = 0; i < n_pend; ++i) {
+    const std::uint32_t w = pend_w[i];
+    words[w] |= pend_b[i];
+    seen[w / kWords32] = 1;  // listed later (unlisted_)
+  }
+  if (n_pend != 0) unlisted_ = true;
+}
+
+#ifdef DENSEMAP_WIDE_WALKS
+namespace {
+
+/// `w` (queue index `index`) in kFixedEight's terms; false when its times are out of range.
+[[gnu::target("avx2")]] bool toFixed(const DenseMarks::QueuedWalk& w, std::uint32_t index,
+                                     DenseMarks::FixedWalk& f) {
+  const double last = w.t_last;
+  if (!(last > 0x1p-500 && last < 0x1p500) || w.steps <= 0 || w.steps > (1 << 20)) return false;
+  // Units of 2^(e - 28) for a last time in [2^e, 2^(e+1)): it is 2^28 to 2^29 units, and the
+  // scaling is exact (a power of two).
+  std::uint64_t bits;
+  std::memcpy(&bits, &last, sizeof bits);
+  const int e = static_cast<int>((bits >> 52) & 0x7ffU) - 1023;
+  const std::uint64_t scale_bits = static_cast<std::uint64_t>(1023 + 28 - e) << 52;
+  double scale;
+  std::memcpy(&scale, &scale_bits, sizeof scale);
+  // The times and deltas four at a time (t_max and t_delta are adjacent): t0 t1 t2 d0, then
+  // t2 d0 d1 d2. Clamped at 2^30 (above any decision's threshold: never chosen); to nearest.
+  static_assert(offsetof(DenseMarks::QueuedWalk, t_delta) ==
+                offsetof(DenseMarks::QueuedWalk, t_max) + 3 * sizeof(double));
+  static_assert(offsetof(DenseMarks::FixedWalk, d) ==
+                offsetof(DenseMarks::FixedWalk, t) + 3 * sizeof(std::int32_t));
+  const __m256d sc = _mm256_set1_pd(scale);
+  const __m256d x = _mm256_mul_pd(_mm256_loadu_pd(w.t_max), sc);
+  const __m256d y = _mm256_mul_pd(_mm256_loadu_pd(w.t_max + 2), sc);
+  const __m256d low = _mm256_set1_pd(-0x1p29), cap = _mm256_set1_pd(0x1p30);
+  // In range (not NaN), the deltas not negative.
+  if ((_mm256_movemask_pd(_mm256_cmp_pd(x, low, _CMP_GE_OQ)) &
+       _mm256_movemask_pd(_mm256_cmp_pd(y, low, _CMP_GE_OQ)) &
+       (_mm256_movemask_pd(_mm256_cmp_pd(y, _mm256_setzero_pd(), _CMP_GE_OQ)) | 1)) != 0xf) {
+    return false;
+  }
+  _mm_storeu_si128(reinterpret_cast<__m128i*>(f.t), _mm256_cvtpd_epi32(_mm256_min_pd(x, cap)));
+  _mm_storeu_si128(reinterpret_cast<__m128i*>(f.t + 2), _mm256_cvtpd_epi32(_mm256_min_pd(y, cap)));
+  // FourPlaces::load's mirrored place.
+  std::int32_t flip = 0;
+#pragma GCC unroll 3
+  for (int a = 0; a < 3; ++a) {
+    const std::int32_t unit = std::int32_t{1} << (block::kShift * a);
+    if (w.at.small[a] < 0) flip |= (block::kEdge - 1) * unit;
+    f.cross[a] = w.at.wrap[a] + (block::kEdge - 1) * w.at.small[a] - block::kEdge * unit;
+  }
+  f.slack = (w.steps >> 1) + 3;
+  f.steps = w.steps;
+  f.flip = flip;
+  f.addr = static_cast<std::int32_t>(w.at.addr) ^ flip;  // below 2^30: the box's bits
+  f.index = index;
+  return true;
+}
+
+}  // namespace
+
+void DenseMarks::markQueuedFixed() {
+  const std::size_t n = queue_.size();
+  if (fixed_.size() < n) fixed_.resize(n);
+  handed_ids_.clear();
+  std::size_t m = 0, steps = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (toFixed(queue_[i], static_cast<std::uint32_t>(i), fixed_[m])) {
+      steps += static_cast<std::size_t>(fixed_[m].steps) + 1;
+      ++m;
+    } else {
+      handed_ids_.push_back(static_cast<std::uint32_t>(i));
+    }
+  }
+  const std::size_t room = steps + 16;
+  if (pend32_w_.size() < room) {
+    pend32_w_.resize(std::max(room, 2 * pend32_w_.size()));
+    pend32_b_.resize(pend32_w_.size());
+  }
+  std::size_t n_handed = handed_ids_.size();
+  handed_ids_.resize(n_handed + m);
+  finishPended32(walkEightFixed(fixed_.data(), m, pend32_w_.data(), pend32_b_.data(),
+                                handed_ids_.data(), n_handed));
+  handed_ids_.resize(n_handed);
+  fixed_handed_ += n_handed;
+  if (!handed_ids_.empty()) {
+    handed_.clear();
+    std::size_t handed_steps = 0;
+    for (const std::uint32_t i : handed_ids_) {
+      handed_.push_back(queue_[i]);
+      handed_steps += static_cast<std::size_t>(queue_[i].steps) + 1;
+    }
+    makeRoom(handed_steps, entered_, pend_w_, pend_b_);
+    WideOut out{entered_.data(), pend_w_.data(), pend_b_.data()};
+    walkFour(handed_.data(), handed_.size(), out);
+    finishPended(out.n_pend);
+  }
+  queue_.clear();
+}
+#else
+void DenseMarks::markQueuedFixed() { markQueued(WalkKernel::kScalar); }
+#endif
+
 void DenseMarks::markQueued(WalkKernel kernel) {
   const std::size_t n = queue_.size();
   if (n == 0) return;
@@ -671,7 +995,11 @@ void DenseMarks::markQueued(WalkKernel kernel) {
     queue_.clear();
     return;
   }
-  if ((kernel == WalkKernel::kBest || kernel == WalkKernel::kFour) && hasFourWalks()) {
+  if ((kernel == WalkKernel::kBest || kernel == WalkKernel::kFixedEight) && hasFourWalks()) {
+    markQueuedFixed();
+    return;
+  }
+  if (kernel == WalkKernel::kFour && hasFourWalks()) {
     WideOut out{entered_.data(), pend_w_.data(), pend_b_.data()};
     walkFour(queue_.data(), n, out);
     finishPended(out.n_pend);
@@ -714,7 +1042,7 @@ DenseMarks::BackWalkCounts DenseMarks::markQueuedBack(const block::BlockMask* cu
     back_queue_.clear();
     return counts;
   }
-  if ((kernel == WalkKernel::kBest || kernel == WalkKernel::kFour) && hasFourWalks()) {
+  if (kernel != WalkKernel::kScalar && hasFourWalks()) {
     WideOut out{entered_.data(), pend_w_.data(), pend_b_.data()};
     counts = walkFourBack(back_queue_.data(), n, culled_words, out, handed_over);
     finishPended(out.n_pend);

@@ -327,6 +327,7 @@ class DenseMarks {
   struct QueuedWalk {
     double t_max[3];
     double t_delta[3];
+    double t_last;  // the last crossing's time (endOf's TraversalEndTimes): no step's is later
     WalkPlace at;
     std::int32_t steps;  // after the first voxel
   };
@@ -342,10 +343,13 @@ class DenseMarks {
     std::uint32_t id;    // the caller's
   };
   /// How markQueued and markQueuedBack walk: kBest 8 walks at a time with AVX-512 where the
-  /// processor has it (hasWideWalks), else 4 at a time with AVX2 where it has that
-  /// (hasFourWalks), else one at a time as kScalar does (countedSteps, backwardSteps); kFour 4
-  /// at a time where the processor has AVX2 (else as kScalar).
-  enum class WalkKernel { kBest, kFour, kScalar };
+  /// processor has it (hasWideWalks), else as kFixedEight (forward) or kFour (backward) where it
+  /// has AVX2 (hasFourWalks), else one at a time as kScalar does (countedSteps, backwardSteps);
+  /// kFour 4 at a time in AVX2 lanes of doubles; kFixedEight (forward walks; backward ones as
+  /// kFour) 8 at a time in AVX2 lanes of 32-bit fixed-point times, each decision checked to win
+  /// by more than the rounding's bound, a walk whose decision does not handed over to kFour
+  /// from its start (fixedHandedOver counts them). Without AVX2, all as kScalar.
+  enum class WalkKernel { kBest, kFour, kFixedEight, kScalar };
   [[nodiscard]] static bool hasWideWalks();
   [[nodiscard]] static bool hasFourWalks();
 
@@ -354,8 +358,9 @@ class DenseMarks {
   /// `delta[a]` along axis a, to the voxel before `last`: marks the first voxel now and the
   /// others in markQueued. False (nothing marked or queued) unless `first` and `last` are both
   /// in the box (so are the walk's voxels between them).
+  /// `t_last`: the time of its last crossing (endOf's TraversalEndTimes, the largest of `last`).
   bool queueWalk(const VoxelKey& first, const int (&delta)[3], const VoxelKey& last,
-                 const double (&t_max)[3], const double (&t_delta)[3], int total) {
+                 const double (&t_max)[3], const double (&t_delta)[3], int total, double t_last) {
     // Forward walks start in the sensor's voxel: their places come from placeFrom's memo.
     const WalkPlace* from = placeFrom(first, delta);
     if (from == nullptr || blockIndex(last) == kOutside) return false;
@@ -363,6 +368,7 @@ class DenseMarks {
     QueuedWalk& w = queue_.emplace_back();
     w.at = at;
     w.steps = total - 1;
+    w.t_last = t_last;
     for (int a = 0; a < 3; ++a) {
       w.t_max[a] = t_max[a];
       w.t_delta[a] = t_delta[a];
@@ -409,6 +415,23 @@ class DenseMarks {
                                 WalkKernel kernel = WalkKernel::kBest);
   /// Marks the queued walks' voxels after their first, then empties the queue.
   void markQueued(WalkKernel kernel = WalkKernel::kBest);
+  /// The forward walks kFixedEight handed over to kFour since construction (decisions too close
+  /// to call in fixed point, or times out of its range).
+  [[nodiscard]] std::size_t fixedHandedOver() const { return fixed_handed_; }
+
+  /// A forward walk in kFixedEight's terms: per axis the crossing time and its step in units of
+  /// 2^-k of the walk's last crossing time (2^28 to 2^29 units, clamped at 2^30), the slack a
+  /// decision must win by, the steps, and the place mirrored as the AVX2 walks keep it.
+  struct FixedWalk {
+    std::int32_t t[3];
+    std::int32_t d[3];
+    std::int32_t slack;
+    std::int32_t steps;
+    std::int32_t addr;  // mirrored: addr ^ flip is the voxel's address
+    std::int32_t flip;
+    std::int32_t cross[3];  // per axis: the block crossing's increment, less the axis' unit
+    std::uint32_t index;    // in the queue
+  };
 
  private:
   static constexpr std::uint32_t kOutside = ~std::uint32_t{0};
@@ -435,6 +458,11 @@ class DenseMarks {
   /// Their seen flags are set, not the list (a store a pend, where the list took five
   /// instructions more): the list is `unlisted_` until relist() or the flush rebuilds it.
   void finishPended(std::size_t n_pend);
+  /// finishPended for the 32-bit words kFixedEight pends (pend32_w_ / pend32_b_).
+  void finishPended32(std::size_t n_pend);
+  /// markQueued's kFixedEight: the queue in fixed point, walked; the walks it hands over, and
+  /// those out of its range, walked by kFour.
+  void markQueuedFixed();
   /// Calls f(i) for each block i in [from, to) whose seen flag is set, in index order.
   template <class F>
   void forEachSeenIn(std::size_t from, std::size_t to, F&& f) const {
@@ -558,6 +586,11 @@ class DenseMarks {
   std::vector<QueuedBackWalk> back_queue_;
   std::vector<std::uint32_t> entered_;          // markQueued's: blocks the walks entered
   std::vector<std::uint64_t> pend_w_, pend_b_;  // markQueued's: marks gathered per word
+  std::vector<std::uint32_t> pend32_w_, pend32_b_;  // kFixedEight's: per 32-bit word
+  std::vector<FixedWalk> fixed_;                    // kFixedEight's queue
+  std::vector<QueuedWalk> handed_;                  // kFixedEight's hand-overs
+  std::vector<std::uint32_t> handed_ids_;
+  std::size_t fixed_handed_ = 0;
   std::vector<std::size_t> chunk_held_;         // flushAllInto's: blocks with marks per chunk
 };
 

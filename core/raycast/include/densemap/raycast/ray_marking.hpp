@@ -295,7 +295,9 @@ inline std::size_t markRaysQueued(const VoxelGrid& grid, const Point3f& origin, 
           const TraversalStart& s = st.start[l];
           const int total = countedTotal(st.end[l], st.crossings[l]);
           if (total == 0 ||
-              !sink.dense.queueWalk(s.origin, s.step, s.end, s.t_max, s.t_delta, total)) {
+              !sink.dense.queueWalk(s.origin, s.step, s.end, s.t_max, s.t_delta, total,
+                                    std::max(std::max(st.times[l].last[0], st.times[l].last[1]),
+                                             st.times[l].last[2]))) {
             markRay(grid, origin, ray, sink, counts, &origin_key);
             return;
           }
