@@ -310,7 +310,9 @@ static int runMain(int argc, char** argv) {
          "Culling methods mark rays in levels (indices multiple of each stride in turn), "
          "the culling region growing by the scan's marks after each; a method named "
          "METHOD@nogrow does not (comma-separated; 0: none); METHOD@single walks rays one at a "
-         "time (not queued and walked eight at a time); any method name may end in @tN: that "
+         "time (not queued and walked eight at a time); METHOD@four walks the queued walks four "
+         "at a time in lanes of doubles (the AVX2 kernel before the fixed-point one), "
+         "METHOD@scalar one at a time; any method name may end in @tN: that "
          "lane runs on N threads (e.g. raycast@t1,raycast@t2 for a scaling ratio in one run)")
       ->delimiter(',')
       ->capture_default_str();

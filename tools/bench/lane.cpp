@@ -75,14 +75,21 @@ Integrate makeIntegrator(const std::string& method, const Options& o) {
   }
   // `method@nogrow`: the culling region from the map only (no growth by the scan's marks);
   // `method@grow=A:B:..`: these strides instead of --grow-strides; `method@single`: walks one
-  // at a time as they come (IntegratorOptions::queue_walks off).
+  // at a time as they come (IntegratorOptions::queue_walks off); `method@four` / `@scalar`: the
+  // queued walks four at a time in lanes of doubles / one at a time (WalkKernel kFour / kScalar;
+  // the default, kBest, is kFixedEight's eight lanes of fixed point where AVX2 is the widest).
   const std::size_t at = method.find('@');
   std::vector<std::size_t> strides = o.grow_strides;
   bool queue_walks = true;
+  DenseMarks::WalkKernel kernel = DenseMarks::WalkKernel::kBest;
   if (at != std::string::npos) {
     const std::string variant = method.substr(at + 1);
     if (variant == "single") {
       queue_walks = false;
+    } else if (variant == "four") {
+      kernel = DenseMarks::WalkKernel::kFour;
+    } else if (variant == "scalar") {
+      kernel = DenseMarks::WalkKernel::kScalar;
     } else if (variant == "nogrow") {
       strides.clear();
     } else if (variant.starts_with("grow=")) {
@@ -109,6 +116,7 @@ Integrate makeIntegrator(const std::string& method, const Options& o) {
                             .superray_min_points = o.min_points};
   options.grow_strides = strides;
   options.queue_walks = queue_walks;
+  options.walk_kernel = kernel;
   auto integrator = std::make_shared<Integrator>(options);
   return [integrator](OccupancyMap& map, const WorldScan& s) {
     return integrator->integrate(map, s.points, s.origin);

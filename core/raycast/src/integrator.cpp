@@ -236,7 +236,8 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
                                  local.scratch, sink, local.counts, *origin_key);
             local.handed.clear();
             const DenseMarks::BackWalkCounts walked =
-                local.dense.markQueuedBack(region->frameMasks(), local.handed);
+                local.dense.markQueuedBack(region->frameMasks(), local.handed,
+                                           options_.walk_kernel);
             local.counts.visits += walked.visits;
             local.counts.culled += walked.culled;
             for (const std::uint32_t i : local.handed) {
@@ -251,7 +252,7 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
             DenseSink sink{local.dense, local.update};
             markRaysQueued(grid, origin_world, rays_.data(), idsOf(range, local.ids), sink,
                            local.counts, *origin_key);
-            local.dense.markQueued();
+            local.dense.markQueued(options_.walk_kernel);
           } else if (local.dense_ok) {
             DenseSink sink{local.dense, local.update};
             mark_all(sink);

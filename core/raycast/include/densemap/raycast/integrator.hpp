@@ -64,6 +64,8 @@ struct IntegratorOptions {
   /// queue walked one walk at a time costs more than walking as they come: measured); the
   /// same marks either way.
   bool queue_walks = true;
+  /// How queued walks are walked (DenseMarks::WalkKernel; the same marks with each).
+  DenseMarks::WalkKernel walk_kernel = DenseMarks::WalkKernel::kBest;
 };
 
 /// What integrating one scan did; the benchmark's per-scan figures.
