@@ -71,9 +71,8 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
                       KeyBox local{};
                       bool any = false;
                       for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                        const RayEnd r =
-                            rayEndFor(grid, origin_world, points_world[i], options_.max_range_m);
-                        rays_[i] = r;
+                        RayEnd& r = rays_[i];
+                        rayEndInto(grid, origin_world, points_world[i], options_.max_range_m, r);
                         if (!r.key_valid) continue;
                         if (!any) local = {r.key, r.key};
                         any = true;

@@ -25,16 +25,22 @@ struct RayEnd {
   bool occupied = true;
 };
 
-/// The ray OctoMap 1.9.7's `OccupancyOcTreeBase::computeUpdate` casts for one point (no
-/// bounding box): to the point itself, occupied; or, when longer than `max_range_m`
-/// (< 0: unlimited), cut at that range with OctoMap's float arithmetic and not occupied.
-[[nodiscard]] inline RayEnd rayEndFor(const VoxelGrid& grid, const Point3f& origin,
-                                      const Point3f& point, double max_range_m) {
-  RayEnd ray;
+/// rayEndFor written into `ray` in place (the integrator's loop: a RayEnd returned and copied
+/// was read back, 8 bytes at a time, from its key's 2-byte stores: a store-forwarding stall a
+/// ray). Every member is set.
+inline void rayEndInto(const VoxelGrid& grid, const Point3f& origin, const Point3f& point,
+                       double max_range_m, RayEnd& ray) {
+  ray.weight = 1;
+  ray.occupied = true;
   const float dx = point.x() - origin.x();
   const float dy = point.y() - origin.y();
   const float dz = point.z() - origin.z();
-  const double norm = std::sqrt(static_cast<double>(dx * dx + dy * dy + dz * dz));
+  const double squared = static_cast<double>(dx * dx + dy * dy + dz * dz);
+  // Clearly within range without the square root (its latency held up the loop): below
+  // (1 - 2^-40) max^2, the rounded root is below max; the root decides the rest.
+  const double norm = max_range_m < 0.0 || squared < max_range_m * max_range_m * (1 - 0x1p-40)
+                          ? 0.0
+                          : std::sqrt(squared);
   if (max_range_m < 0.0 || norm <= max_range_m) {
     ray.end = point;
   } else {
@@ -49,10 +55,23 @@ struct RayEnd {
                       origin.z() + direction.z() * range);
     ray.occupied = false;
   }
-  if (const auto key = grid.pointToKey(ray.end)) {
-    ray.key = *key;
-    ray.key_valid = true;
-  }
+  // The key's members one by one (an optional<VoxelKey> copied whole stalled the same way).
+  const auto x = grid.coordToKey(ray.end.x());
+  const auto y = grid.coordToKey(ray.end.y());
+  const auto z = grid.coordToKey(ray.end.z());
+  ray.key_valid = x && y && z;
+  ray.key.x = x.value_or(0);
+  ray.key.y = y.value_or(0);
+  ray.key.z = z.value_or(0);
+}
+
+/// The ray OctoMap 1.9.7's `OccupancyOcTreeBase::computeUpdate` casts for one point (no
+/// bounding box): to the point itself, occupied; or, when longer than `max_range_m`
+/// (< 0: unlimited), cut at that range with OctoMap's float arithmetic and not occupied.
+[[nodiscard]] inline RayEnd rayEndFor(const VoxelGrid& grid, const Point3f& origin,
+                                      const Point3f& point, double max_range_m) {
+  RayEnd ray;
+  rayEndInto(grid, origin, point, max_range_m, ray);
   return ray;
 }
 
