@@ -525,17 +525,17 @@ constexpr EightLaneTable kEight = makeEightLaneTable();
 [[DENSEMAP_AVX2]] std::size_t walkEightFixed(const DenseMarks::FixedWalk* walks, std::size_t n,
                                              std::uint32_t* pend_w, std::uint32_t* pend_b,
                                              std::uint32_t* handed_over, std::size_t& n_handed) {
-  // The lanes' state that no step changes, and the constants, in memory, read where used: the
-  // empty asm at each step (a memory clobber) keeps GCC from holding them in registers (or
-  // building the constants from immediates, three instructions each), which spilled the state
-  // a step changes instead (16 registers: that state, 7 vectors, and the step's temporaries).
+  // The lanes' state that no step changes, and the constants, in memory: the step's assembly
+  // reads them as memory operands, which leaves the 16 registers to the state a step changes
+  // (7 vectors) and its temporaries. (GCC, given the intrinsics, held these in registers, built
+  // the constants from immediates, three instructions each, and spilled the changing state.)
   enum : int { kD0, kD1, kD2, kSlack, kFlip, kC0, kC1, kC2, kOne, kEdge, kEdge2, kLow5, kMinus2 };
   alignas(32) __m256i ro[13];  // (the assembly below reads them at 32 * index)
   static_assert(kD1 == 1 && kD2 == 2 && kSlack == 3 && kFlip == 4 && kC0 == 5 && kC1 == 6 &&
                 kC2 == 7 && kOne == 8 && kEdge == 9 && kEdge2 == 10 && kLow5 == 11 &&
                 kMinus2 == 12 && sizeof(__m256i) == 32);
   const __m256i zero = _mm256_setzero_si256();
-  // A lane without a walk has the slack kNoWalk: every time is above its threshold (no step, no
+  // A lane without a walk has this slack: every time is above its threshold (no step, no
   // hand-over).
   const __m256i no_walk = _mm256_set1_epi32(-(1 << 30));
   for (__m256i& v : ro) v = zero;
@@ -558,7 +558,7 @@ constexpr EightLaneTable kEight = makeEightLaneTable();
     if (act != 0xffU) {
       pendEight(live & ~act, cur_w, cur_b, pend_w, pend_b);
       cur_b = _mm256_and_si256(cur_b, active);
-      ro[kSlack] = _mm256_blendv_epi8(_mm256_set1_epi32(-(1 << 30)), ro[kSlack], active);
+      ro[kSlack] = _mm256_blendv_epi8(no_walk, ro[kSlack], active);
       // Idle lanes take the next walks.
       for (unsigned idle = ~act & 0xffU; idle != 0 && next < n; idle &= idle - 1, ++next) {
         const DenseMarks::FixedWalk& w = walks[next];
@@ -586,9 +586,9 @@ constexpr EightLaneTable kEight = makeEightLaneTable();
     }
     // The smallest time; the axes above it by more than the slack (n_a) do not step. Exactly
     // one axis within the slack: n0 + n1 + n2 == -2; with more, the decision is too close to
-    // call: the lane stops (its slack kNoWalk: no axis within) and its walk is handed over.
-    // (In assembly, this and the step below: GCC's registers for the intrinsics spilled the
-    // state a step changes, some 80 instructions a step where these take 55.)
+    // call: the lane stops (its slack no_walk's: no axis within) and its walk is handed over.
+    // (In assembly, this and the step below: with the intrinsics, GCC's registers spilled the
+    // state a step changes, some 82 instructions a step where the loop now takes 65.)
     __m256i n0, n1, n2;
     while (true) {
       __m256i thr;
@@ -613,7 +613,7 @@ constexpr EightLaneTable kEight = makeEightLaneTable();
         handed_over[n_handed++] = lane_walk[std::countr_zero(u)];
       }
       const __m256i stop = lanesOf(unsure);
-      ro[kSlack] = _mm256_blendv_epi8(ro[kSlack], _mm256_set1_epi32(-(1 << 30)), stop);
+      ro[kSlack] = _mm256_blendv_epi8(ro[kSlack], no_walk, stop);
       left = _mm256_andnot_si256(stop, left);  // done after this (unstepped) step
     }
     // The step: the times of the axes stepped on, the places (FourPlaces::move in 32 bits, the

@@ -234,9 +234,8 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
             markRaysCulledQueued(grid, origin_world, rays_.data(), idsOf(range, local.ids), *region,
                                  local.scratch, sink, local.counts, *origin_key);
             local.handed.clear();
-            const DenseMarks::BackWalkCounts walked =
-                local.dense.markQueuedBack(region->frameMasks(), local.handed,
-                                           options_.walk_kernel);
+            const DenseMarks::BackWalkCounts walked = local.dense.markQueuedBack(
+                region->frameMasks(), local.handed, options_.walk_kernel);
             local.counts.visits += walked.visits;
             local.counts.culled += walked.culled;
             for (const std::uint32_t i : local.handed) {

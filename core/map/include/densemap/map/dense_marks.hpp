@@ -391,7 +391,8 @@ class DenseMarks {
                                          at,
                                          {next[0], next[1], next[2]},
                                          static_cast<std::int32_t>(total),
-                                         id});  // (see queueWalk)
+                                         id});
+    // (Built whole: see queueWalk.)
     touch(static_cast<std::uint32_t>(at.addr >> 9));  // entered (as cursorFor)
     return true;
   }
