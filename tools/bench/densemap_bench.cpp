@@ -139,8 +139,10 @@ std::vector<std::unique_ptr<Lane>> makeLanes(const Options& o,
   return lanes;
 }
 
-/// Lanes take turns, `turn` scans at a time (0: all of them), and the lane that starts a
-/// turn rotates: none always follows OctoMap's long serial run (caches evicted, idle workers).
+/// Lanes take turns, `turn` scans at a time (0: all of them). The first lane (OctoMap's, or the
+/// reference) opens every turn and the others rotate after it, so that none always follows
+/// OctoMap's long serial run (caches evicted, idle workers). (Rotating all the lanes kept the
+/// same lane after OctoMap's in every turn: `raycast`, whose apply stage paid for it.)
 /// Returns each lane's CPU steal over its turns (by lane index).
 std::vector<StealMeter> runLanes(std::vector<std::unique_ptr<Lane>>& lanes,
                                  const std::vector<WorldScan>& scans, std::size_t turn) {
@@ -151,7 +153,7 @@ std::vector<StealMeter> runLanes(std::vector<std::unique_ptr<Lane>>& lanes,
   for (std::size_t first = 0, t = 0; first < scans.size(); first += turn, ++t) {
     const std::size_t last = std::min(scans.size(), first + turn);
     for (std::size_t k = 0; k < lanes.size(); ++k) {
-      const std::size_t index = (t + k) % lanes.size();
+      const std::size_t index = k == 0 ? 0 : 1 + (t + k - 1) % (lanes.size() - 1);
       auto& lane = lanes[index];
       const std::optional<CpuTimes> before = readCpuTimes();
       for (std::size_t i = first; i < last; ++i) {
