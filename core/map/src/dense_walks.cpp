@@ -821,6 +821,143 @@ constexpr EightLaneTable kEight = makeEightLaneTable();
   out.n_pend = static_cast<std::size_t>(pend_w - out.pend_w);
   return counts;
 }
+
+/// The backward walks' steps eight at a time in AVX2 lanes of 32-bit fixed-point heads
+/// (DenseMarks::FixedWalk, `t` the heads): walkFourBack's walks with backwardSteps' decision
+/// (the latest head) made from integers, each within (k + 1) / 2 + 2^-10 units of the double
+/// head after k subtractions: a step is taken only when the latest head is above the others by
+/// more than the walk's slack (steps / 2 + 3 units, plus the doubles' own bound in units), so
+/// the doubles' walk takes the same step and does not hand over. A lane whose decision is
+/// closer than that stops, unstepped, and its walk's queue index is appended at `handed_over` +
+/// `n_handed` (what it marked is part of the walk's marks; its counts are not added). An axis
+/// whose crossings are all undone is not set apart: its head goes below the first crossing's
+/// time (below 0 by up to a delta), so it never wins by the slack over a head left (at or above
+/// 0) — at worst a near decision hands the walk over. The region's 32-bit word of a lane's
+/// voxel is gathered when the lane moves to another word, and the voxel is tested (and marked)
+/// one iteration later, as walkFourBack does. Marks are pended per 32-bit word; `pend_w` /
+/// `pend_b` need room for (all the walks' steps + 1) + 16. Returns the counts of the walks not
+/// handed over; `n_pend` is set to the marks pended.
+[[DENSEMAP_AVX2]] DenseMarks::BackWalkCounts walkEightFixedBack(
+    const DenseMarks::FixedWalk* walks, std::size_t n, const std::uint32_t* culled,
+    std::uint32_t* pend_w, std::uint32_t* pend_b, std::uint32_t* handed_over, std::size_t& n_handed,
+    std::size_t& n_pend) {
+  const __m256i zero = _mm256_setzero_si256(), ones = _mm256_set1_epi32(-1),
+                one = _mm256_set1_epi32(1), low5 = _mm256_set1_epi32(31),
+                minus2 = _mm256_set1_epi32(-2), edge = _mm256_set1_epi32(block::kEdge),
+                edge2 = _mm256_set1_epi32(block::kEdge * block::kEdge);
+  __m256i h0 = zero, h1 = zero, h2 = zero, d0 = zero, d1 = zero, d2 = zero, slack = zero;
+  __m256i addr = zero, flip = zero, c0 = zero, c1 = zero, c2 = zero;
+  __m256i left = zero, marked = zero;  // steps to go; voxels marked
+  // cur_w: the 32-bit word of the lane's voxel; cur_b: the marks so far in it; cur_r: the
+  // region's bits of it; pending: the bit of the voxel moved to and not yet tested (0: none).
+  __m256i cur_w = zero, cur_b = zero, cur_r = zero, pending = zero;
+  unsigned live = 0, handing = 0;
+  std::uint32_t lane_walk[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+  alignas(32) std::int32_t marked_at[8];
+  std::uint32_t* const pend_start = pend_w;
+  const auto* culled_words = reinterpret_cast<const int*>(culled);
+  DenseMarks::BackWalkCounts counts;
+  std::size_t next = 0;
+  while (true) {
+    __m256i active = _mm256_cmpgt_epi32(left, zero);
+    __m256i tested = _mm256_andnot_si256(_mm256_cmpeq_epi32(pending, zero), ones);
+    const unsigned busy = bitsOf32(_mm256_or_si256(active, tested));
+    if (busy != 0xffU) {
+      const unsigned done = live & ~busy;
+      if (done != 0) {
+        pendEight(done, cur_w, cur_b, pend_w, pend_b);
+        _mm256_store_si256(reinterpret_cast<__m256i*>(marked_at), marked);
+        for (unsigned d = done; d != 0; d &= d - 1) {
+          const int k = std::countr_zero(d);
+          const DenseMarks::FixedWalk& w = walks[lane_walk[k]];
+          if (((handing >> k) & 1U) != 0) {
+            handed_over[n_handed++] = w.index;
+          } else {
+            counts.visits += static_cast<std::size_t>(marked_at[k]);
+            counts.culled += static_cast<std::size_t>(w.steps - marked_at[k]);
+          }
+        }
+        handing &= ~done;
+      }
+      const __m256i keep = lanesOf(busy);
+      cur_b = _mm256_and_si256(cur_b, keep);
+      marked = _mm256_and_si256(marked, keep);
+      unsigned now = busy;
+      for (unsigned idle = ~busy & 0xffU; idle != 0 && next < n; idle &= idle - 1, ++next) {
+        const DenseMarks::FixedWalk& w = walks[next];
+        const int lane = std::countr_zero(idle);
+        lane_walk[lane] = static_cast<std::uint32_t>(next);
+        const __m256i k = lanesOf(1U << lane);
+        putLanes32(h0, k, w.t[0]);
+        putLanes32(h1, k, w.t[1]);
+        putLanes32(h2, k, w.t[2]);
+        putLanes32(d0, k, w.d[0]);
+        putLanes32(d1, k, w.d[1]);
+        putLanes32(d2, k, w.d[2]);
+        putLanes32(slack, k, w.slack);
+        putLanes32(left, k, w.steps);
+        putLanes32(addr, k, w.addr);
+        putLanes32(flip, k, w.flip);
+        putLanes32(c0, k, w.cross[0]);
+        putLanes32(c1, k, w.cross[1]);
+        putLanes32(c2, k, w.cross[2]);
+        const std::int32_t word = (w.addr ^ w.flip) >> 5;
+        putLanes32(cur_w, k, word);
+        putLanes32(cur_r, k, culled_words[word]);
+        now |= 1U << lane;
+      }
+      live = now;
+      if (now == 0) break;
+      active = _mm256_cmpgt_epi32(left, zero);
+    }
+    // The latest head; the axes below it by more than the slack (n_a) do not step. Exactly one
+    // axis within the slack: n0 + n1 + n2 == -2; with more, the decision is too close to call.
+    const __m256i thr = _mm256_sub_epi32(_mm256_max_epi32(_mm256_max_epi32(h0, h1), h2), slack);
+    const __m256i n0 = _mm256_cmpgt_epi32(thr, h0);
+    const __m256i n1 = _mm256_cmpgt_epi32(thr, h1);
+    const __m256i n2 = _mm256_cmpgt_epi32(thr, h2);
+    const __m256i sure = _mm256_cmpeq_epi32(_mm256_add_epi32(_mm256_add_epi32(n0, n1), n2), minus2);
+    // The voxel moved to last time: in the region (the walk ends there), else marked.
+    const __m256i stop =
+        _mm256_andnot_si256(_mm256_cmpeq_epi32(_mm256_and_si256(cur_r, pending), zero), ones);
+    cur_b = _mm256_or_si256(cur_b, _mm256_andnot_si256(stop, pending));
+    marked = _mm256_sub_epi32(marked, _mm256_andnot_si256(stop, tested));
+    const __m256i go = _mm256_andnot_si256(stop, active);
+    handing |= bitsOf32(_mm256_andnot_si256(sure, go));
+    const __m256i steps = _mm256_and_si256(go, sure);
+    // Lanes that stopped or hand over take no more steps.
+    left = _mm256_and_si256(_mm256_sub_epi32(left, one), steps);
+    const __m256i m0 = _mm256_andnot_si256(n0, steps);
+    const __m256i m1 = _mm256_andnot_si256(n1, steps);
+    const __m256i m2 = _mm256_andnot_si256(n2, steps);
+    h0 = _mm256_sub_epi32(h0, _mm256_and_si256(m0, d0));
+    h1 = _mm256_sub_epi32(h1, _mm256_and_si256(m1, d1));
+    h2 = _mm256_sub_epi32(h2, _mm256_and_si256(m2, d2));
+    // The place (FourPlaces::move in 32 bits).
+    const __m256i inc =
+        _mm256_or_si256(_mm256_and_si256(m0, one),
+                        _mm256_or_si256(_mm256_and_si256(m1, edge), _mm256_and_si256(m2, edge2)));
+    const __m256i cross =
+        _mm256_or_si256(_mm256_and_si256(m0, c0),
+                        _mm256_or_si256(_mm256_and_si256(m1, c1), _mm256_and_si256(m2, c2)));
+    const __m256i field = _mm256_sub_epi32(_mm256_slli_epi32(inc, block::kShift), inc);
+    const __m256i border = _mm256_cmpeq_epi32(_mm256_and_si256(addr, field), field);
+    addr = _mm256_add_epi32(addr, _mm256_add_epi32(inc, _mm256_and_si256(border, cross)));
+    const __m256i voxel = _mm256_xor_si256(addr, flip);
+    const __m256i word = _mm256_srli_epi32(voxel, 5);
+    const __m256i moved = _mm256_andnot_si256(_mm256_cmpeq_epi32(word, cur_w), steps);
+    const unsigned moved_bits = bitsOf32(moved);
+    if (moved_bits != 0) {
+      pendEight(moved_bits, cur_w, cur_b, pend_w, pend_b);
+      cur_w = _mm256_blendv_epi8(cur_w, word, moved);
+      cur_b = _mm256_andnot_si256(moved, cur_b);
+      cur_r = _mm256_mask_i32gather_epi32(cur_r, culled_words, word, moved, 4);
+    }
+    pending = _mm256_and_si256(steps, _mm256_sllv_epi32(one, _mm256_and_si256(voxel, low5)));
+  }
+  n_pend = static_cast<std::size_t>(pend_w - pend_start);
+  return counts;
+}
 #undef DENSEMAP_AVX2
 #pragma GCC diagnostic pop
 #endif
@@ -888,19 +1025,38 @@ void DenseMarks::finishPended32(std::size_t n_pend) {
 #ifdef DENSEMAP_WIDE_WALKS
 namespace {
 
-/// `w` (queue index `index`) in kFixedEight's terms; false when its times are out of range.
-[[gnu::target("avx2")]] bool toFixed(const DenseMarks::QueuedWalk& w, std::uint32_t index,
-                                     DenseMarks::FixedWalk& f) {
-  const double last = w.t_last;
-  if (!(last > 0x1p-500 && last < 0x1p500) || w.steps <= 0 || w.steps > (1 << 20)) return false;
-  // Units of 2^(e - 28) for a last time in [2^e, 2^(e+1)): it is 2^28 to 2^29 units, and the
-  // scaling is exact (a power of two).
+/// The power of two that puts `last` (in (2^-500, 2^500)) at 2^28 to 2^29 units: 2^(28 - e)
+/// for `last` in [2^e, 2^(e+1)) (scaling by it is exact).
+double unitsFor(double last) {
   std::uint64_t bits;
   std::memcpy(&bits, &last, sizeof bits);
   const int e = static_cast<int>((bits >> 52) & 0x7ffU) - 1023;
   const std::uint64_t scale_bits = static_cast<std::uint64_t>(1023 + 28 - e) << 52;
   double scale;
   std::memcpy(&scale, &scale_bits, sizeof scale);
+  return scale;
+}
+
+/// Place `at` in `f`'s terms: FourPlaces::load's mirrored place in 32 bits.
+void fixedPlace(const DenseMarks::WalkPlace& at, DenseMarks::FixedWalk& f) {
+  std::int32_t flip = 0;
+#pragma GCC unroll 3
+  for (int a = 0; a < 3; ++a) {
+    const std::int32_t unit = std::int32_t{1} << (block::kShift * a);
+    if (at.small[a] < 0) flip |= (block::kEdge - 1) * unit;
+    f.cross[a] = at.wrap[a] + (block::kEdge - 1) * at.small[a] - block::kEdge * unit;
+  }
+  f.flip = flip;
+  f.addr = static_cast<std::int32_t>(at.addr) ^ flip;  // below 2^30: the box's bits
+}
+
+/// `w` (queue index `index`) in kFixedEight's terms; false when its times are out of range.
+[[gnu::target("avx2")]] bool toFixed(const DenseMarks::QueuedWalk& w, std::uint32_t index,
+                                     DenseMarks::FixedWalk& f) {
+  const double last = w.t_last;
+  if (!(last > 0x1p-500 && last < 0x1p500) || w.steps <= 0 || w.steps > (1 << 20)) return false;
+  // Units of 2^(e - 28) for a last time in [2^e, 2^(e+1)): it is 2^28 to 2^29 units.
+  const double scale = unitsFor(last);
   // The times and deltas four at a time (t_max and t_delta are adjacent): t0 t1 t2 d0, then
   // t2 d0 d1 d2. Clamped at 2^30 (above any decision's threshold: never chosen); to nearest.
   static_assert(offsetof(DenseMarks::QueuedWalk, t_delta) ==
@@ -919,18 +1075,51 @@ namespace {
   }
   _mm_storeu_si128(reinterpret_cast<__m128i*>(f.t), _mm256_cvtpd_epi32(_mm256_min_pd(x, cap)));
   _mm_storeu_si128(reinterpret_cast<__m128i*>(f.t + 2), _mm256_cvtpd_epi32(_mm256_min_pd(y, cap)));
-  // FourPlaces::load's mirrored place.
-  std::int32_t flip = 0;
-#pragma GCC unroll 3
-  for (int a = 0; a < 3; ++a) {
-    const std::int32_t unit = std::int32_t{1} << (block::kShift * a);
-    if (w.at.small[a] < 0) flip |= (block::kEdge - 1) * unit;
-    f.cross[a] = w.at.wrap[a] + (block::kEdge - 1) * w.at.small[a] - block::kEdge * unit;
-  }
+  fixedPlace(w.at, f);
   f.slack = (w.steps >> 1) + 3;
   f.steps = w.steps;
-  f.flip = flip;
-  f.addr = static_cast<std::int32_t>(w.at.addr) ^ flip;  // below 2^30: the box's bits
+  f.index = index;
+  return true;
+}
+
+/// Backward walk `w` (queue index `index`) in kFixedEight's terms (`t`: the heads, `steps`: the
+/// total): units as toFixed's, of its latest head; an axis without crossings left at -2^30
+/// (never the latest); the slack with the doubles' bound added. False when out of range.
+[[gnu::target("avx2")]] bool toFixedBack(const DenseMarks::QueuedBackWalk& w, std::uint32_t index,
+                                         DenseMarks::FixedWalk& f) {
+  const double last = std::max(w.head[0], std::max(w.head[1], w.head[2]));
+  if (!(last > 0x1p-500 && last < 0x1p500) || w.total <= 0 || w.total > (1 << 20) ||
+      !(w.bound >= 0 && w.bound < 0x1p-20 * last)) {
+    return false;
+  }
+  const double scale = unitsFor(last);
+  // Heads and deltas four at a time (h0 h1 h2 d0, then h2 d0 d1 d2, as toFixed's): the heads at
+  // most 2^29 units (the latest), -inf (an axis without crossings) to -2^30; the deltas clamped
+  // at 2^30 (a head that goes below 0 has no crossings left: they are at or above 0).
+  static_assert(offsetof(DenseMarks::QueuedBackWalk, t_delta) ==
+                offsetof(DenseMarks::QueuedBackWalk, head) + 3 * sizeof(double));
+  const __m256d sc = _mm256_set1_pd(scale);
+  const __m256d x = _mm256_mul_pd(_mm256_loadu_pd(w.head), sc);
+  const __m256d y = _mm256_mul_pd(_mm256_loadu_pd(w.head + 2), sc);
+  const __m256d zero = _mm256_setzero_pd(), none = _mm256_set1_pd(-0x1p30),
+                cap = _mm256_set1_pd(0x1p30);
+  // The heads at or above 0 or -inf, the deltas not negative (none of them NaN).
+  const int heads_ok = _mm256_movemask_pd(_mm256_or_pd(
+      _mm256_cmp_pd(x, zero, _CMP_GE_OQ),
+      _mm256_cmp_pd(x, _mm256_set1_pd(-std::numeric_limits<double>::infinity()), _CMP_EQ_OQ)));
+  if ((heads_ok & 7) != 7 ||
+      (_mm256_movemask_pd(_mm256_cmp_pd(y, zero, _CMP_GE_OQ)) & 0xe) != 0xe) {
+    return false;
+  }
+  _mm_storeu_si128(reinterpret_cast<__m128i*>(f.t), _mm256_cvtpd_epi32(_mm256_max_pd(x, none)));
+  _mm_storeu_si128(reinterpret_cast<__m128i*>(f.t + 2), _mm256_cvtpd_epi32(_mm256_min_pd(y, cap)));
+  for (int a = 0; a < 3; ++a) {
+    if (w.next[a] < 0) f.t[a] = -(1 << 30);  // no crossing left: never the latest
+  }
+  fixedPlace(w.at, f);
+  // The doubles' bound in units, rounded up: below 2^9 (under 2^-20 of the latest head).
+  f.slack = (w.total >> 1) + 4 + static_cast<std::int32_t>(w.bound * scale);
+  f.steps = w.total;
   f.index = index;
   return true;
 }
@@ -956,11 +1145,12 @@ void DenseMarks::markQueuedFixed() {
     pend32_b_.resize(pend32_w_.size());
   }
   std::size_t n_handed = handed_ids_.size();
+  const std::size_t out_of_range = n_handed;
   handed_ids_.resize(n_handed + m);
   finishPended32(walkEightFixed(fixed_.data(), m, pend32_w_.data(), pend32_b_.data(),
                                 handed_ids_.data(), n_handed));
   handed_ids_.resize(n_handed);
-  fixed_handed_ += n_handed;
+  fixed_handed_ += n_handed - out_of_range;
   if (!handed_ids_.empty()) {
     handed_.clear();
     std::size_t handed_steps = 0;
@@ -975,8 +1165,60 @@ void DenseMarks::markQueuedFixed() {
   }
   queue_.clear();
 }
+DenseMarks::BackWalkCounts DenseMarks::markQueuedBackFixed(
+    const block::BlockMask* culled, std::vector<std::uint32_t>& handed_over) {
+  const std::size_t n = back_queue_.size();
+  if (fixed_.size() < n) fixed_.resize(n);
+  handed_ids_.clear();
+  std::size_t m = 0, steps = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (toFixedBack(back_queue_[i], static_cast<std::uint32_t>(i), fixed_[m])) {
+      steps += static_cast<std::size_t>(fixed_[m].steps) + 1;
+      ++m;
+    } else {
+      handed_ids_.push_back(static_cast<std::uint32_t>(i));
+    }
+  }
+  const std::size_t room = steps + 16;
+  if (pend32_w_.size() < room) {
+    pend32_w_.resize(std::max(room, 2 * pend32_w_.size()));
+    pend32_b_.resize(pend32_w_.size());
+  }
+  std::size_t n_handed = handed_ids_.size();
+  const std::size_t out_of_range = n_handed;
+  handed_ids_.resize(n_handed + m);
+  // The region's 64-bit words read as pairs of 32-bit ones (as finishPended32's masks).
+  using Word32 [[gnu::may_alias]] = std::uint32_t;
+  std::size_t n_pend = 0;
+  BackWalkCounts counts =
+      walkEightFixedBack(fixed_.data(), m, reinterpret_cast<const Word32*>(culled[0].data()),
+                         pend32_w_.data(), pend32_b_.data(), handed_ids_.data(), n_handed, n_pend);
+  finishPended32(n_pend);
+  handed_ids_.resize(n_handed);
+  fixed_handed_ += n_handed - out_of_range;
+  if (!handed_ids_.empty()) {
+    back_handed_.clear();
+    std::size_t handed_steps = 0;
+    for (const std::uint32_t i : handed_ids_) {
+      back_handed_.push_back(back_queue_[i]);
+      handed_steps += static_cast<std::size_t>(back_queue_[i].total) + 1;
+    }
+    makeRoom(handed_steps, entered_, pend_w_, pend_b_);
+    WideOut out{entered_.data(), pend_w_.data(), pend_b_.data()};
+    const BackWalkCounts more =
+        walkFourBack(back_handed_.data(), back_handed_.size(), culled[0].data(), out, handed_over);
+    finishPended(out.n_pend);
+    counts.visits += more.visits;
+    counts.culled += more.culled;
+  }
+  return counts;
+}
 #else
 void DenseMarks::markQueuedFixed() { markQueued(WalkKernel::kScalar); }
+DenseMarks::BackWalkCounts DenseMarks::markQueuedBackFixed(
+    const block::BlockMask* culled, std::vector<std::uint32_t>& handed_over) {
+  return markQueuedBack(culled, handed_over, WalkKernel::kScalar);
+}
 #endif
 
 void DenseMarks::markQueued(WalkKernel kernel) {
@@ -1042,7 +1284,12 @@ DenseMarks::BackWalkCounts DenseMarks::markQueuedBack(const block::BlockMask* cu
     back_queue_.clear();
     return counts;
   }
-  if (kernel != WalkKernel::kScalar && hasFourWalks()) {
+  if ((kernel == WalkKernel::kBest || kernel == WalkKernel::kFixedEight) && hasFourWalks()) {
+    counts = markQueuedBackFixed(culled, handed_over);
+    back_queue_.clear();
+    return counts;
+  }
+  if (kernel == WalkKernel::kFour && hasFourWalks()) {
     WideOut out{entered_.data(), pend_w_.data(), pend_b_.data()};
     counts = walkFourBack(back_queue_.data(), n, culled_words, out, handed_over);
     finishPended(out.n_pend);

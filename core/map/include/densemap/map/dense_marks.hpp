@@ -343,12 +343,12 @@ class DenseMarks {
     std::uint32_t id;    // the caller's
   };
   /// How markQueued and markQueuedBack walk: kBest 8 walks at a time with AVX-512 where the
-  /// processor has it (hasWideWalks), else as kFixedEight (forward) or kFour (backward) where it
-  /// has AVX2 (hasFourWalks), else one at a time as kScalar does (countedSteps, backwardSteps);
-  /// kFour 4 at a time in AVX2 lanes of doubles; kFixedEight (forward walks; backward ones as
-  /// kFour) 8 at a time in AVX2 lanes of 32-bit fixed-point times, each decision checked to win
-  /// by more than the rounding's bound, a walk whose decision does not handed over to kFour
-  /// from its start (fixedHandedOver counts them). Without AVX2, all as kScalar.
+  /// processor has it (hasWideWalks), else as kFixedEight where it has AVX2 (hasFourWalks), else
+  /// one at a time as kScalar does (countedSteps, backwardSteps); kFour 4 at a time in AVX2
+  /// lanes of doubles; kFixedEight 8 at a time in AVX2 lanes of 32-bit fixed-point times, each
+  /// decision checked to win by more than the rounding's bound, a walk whose decision does not
+  /// handed over to kFour from its start (fixedHandedOver counts them). Without AVX2, all as
+  /// kScalar.
   enum class WalkKernel { kBest, kFour, kFixedEight, kScalar };
   [[nodiscard]] static bool hasWideWalks();
   [[nodiscard]] static bool hasFourWalks();
@@ -412,8 +412,8 @@ class DenseMarks {
                                 WalkKernel kernel = WalkKernel::kBest);
   /// Marks the queued walks' voxels after their first, then empties the queue.
   void markQueued(WalkKernel kernel = WalkKernel::kBest);
-  /// The forward walks kFixedEight handed over to kFour since construction (decisions too close
-  /// to call in fixed point, or times out of its range).
+  /// The walks (forward and backward) kFixedEight handed over to kFour since construction
+  /// (decisions too close to call in fixed point; not those out of its range).
   [[nodiscard]] std::size_t fixedHandedOver() const { return fixed_handed_; }
 
   /// A forward walk in kFixedEight's terms: per axis the crossing time and its step in units of
@@ -460,6 +460,11 @@ class DenseMarks {
   /// markQueued's kFixedEight: the queue in fixed point, walked; the walks it hands over, and
   /// those out of its range, walked by kFour.
   void markQueuedFixed();
+  /// markQueuedBack's kFixedEight (the queue not emptied): the walks in fixed point, walked
+  /// against `culled`; those it hands over, and those out of its range, walked by kFour (whose
+  /// own hand-overs go to `handed_over`).
+  BackWalkCounts markQueuedBackFixed(const block::BlockMask* culled,
+                                     std::vector<std::uint32_t>& handed_over);
   /// Calls f(i) for each block i in [from, to) whose seen flag is set, in index order.
   template <class F>
   void forEachSeenIn(std::size_t from, std::size_t to, F&& f) const {
@@ -586,6 +591,7 @@ class DenseMarks {
   std::vector<std::uint32_t> pend32_w_, pend32_b_;  // kFixedEight's: per 32-bit word
   std::vector<FixedWalk> fixed_;                    // kFixedEight's queue
   std::vector<QueuedWalk> handed_;                  // kFixedEight's hand-overs
+  std::vector<QueuedBackWalk> back_handed_;         // (backward)
   std::vector<std::uint32_t> handed_ids_;
   std::size_t fixed_handed_ = 0;
   std::vector<std::size_t> chunk_held_;         // flushAllInto's: blocks with marks per chunk
