@@ -317,38 +317,45 @@ SuperRayStats SuperRayBuilder::build(const VoxelGrid& grid, const Point3f& origi
   const auto indexOf = [](std::uint64_t x) {
     return static_cast<std::uint32_t>(x & ((std::uint64_t{1} << kIndexBits) - 1));
   };
+  // The runs of end voxels with enough rays to group (at least min_points, and 2), and their
+  // rays flagged; the others' rays stay where they are (gathering them in the sorted order, a
+  // random read a ray, was most of this function's time while most rays pass through).
+  const std::size_t min_run = std::max<std::size_t>(min_points, 2);
   runs_.clear();
+  grouped_.assign(n, 0);
   for (std::size_t i = 0; i < n;) {
     std::size_t j = i;
     while (j < n && cellOf(order_[j]) == cellOf(order_[i])) ++j;
-    runs_.emplace_back(static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(j));
+    if (j - i >= min_run && cellOf(order_[i]) != kNoCell) {
+      runs_.emplace_back(static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(j));
+      for (std::size_t k = i; k < j; ++k) grouped_[indexOf(order_[k])] = 1;
+    }
     i = j;
   }
 
-  // Each run writes at most its own length, at its own offset; compacted afterwards.
+  // Each run writes at most its own length, at its own offset; appended afterwards.
   out_.resize(n);
   written_.assign(runs_.size(), 0);
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, runs_.size(), 64),
-      [&](const tbb::blocked_range<std::size_t>& range) {
-        Scratch& scratch = scratch_.local();
-        for (std::size_t r = range.begin(); r != range.end(); ++r) {
-          const auto [first, last] = runs_[r];
-          const std::size_t size = last - first;
-          RayEnd* out = out_.data() + first;
-          if (size < std::max<std::size_t>(min_points, 2) || cellOf(order_[first]) == kNoCell) {
-            for (std::size_t j = 0; j < size; ++j) out[j] = rays[indexOf(order_[first + j])];
-            written_[r] = static_cast<std::uint32_t>(size);
-            continue;
-          }
-          scratch.cell.resize(size);
-          for (std::size_t j = 0; j < size; ++j) scratch.cell[j] = rays[indexOf(order_[first + j])];
-          written_[r] =
-              static_cast<std::uint32_t>(groupCell(grid, origin, scratch.cell, out, scratch));
-        }
-      });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, runs_.size(), 16),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      Scratch& scratch = scratch_.local();
+                      for (std::size_t r = range.begin(); r != range.end(); ++r) {
+                        const auto [first, last] = runs_[r];
+                        const std::size_t size = last - first;
+                        scratch.cell.resize(size);
+                        for (std::size_t j = 0; j < size; ++j)
+                          scratch.cell[j] = rays[indexOf(order_[first + j])];
+                        written_[r] = static_cast<std::uint32_t>(
+                            groupCell(grid, origin, scratch.cell, out_.data() + first, scratch));
+                      }
+                    });
 
-  rays.clear();
+  // The rays not grouped, in their order, then the groups' rays.
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (grouped_[i] == 0) rays[kept++] = rays[i];
+  }
+  rays.resize(kept);
   for (std::size_t r = 0; r < runs_.size(); ++r) {
     const RayEnd* out = out_.data() + runs_[r].first;
     for (std::uint32_t j = 0; j < written_[r]; ++j) {

@@ -73,7 +73,8 @@ class SuperRayBuilder {
   std::vector<std::uint64_t> order_;  // (cell code, ray index), sorted
   std::vector<std::uint64_t> sort_tmp_;
   std::vector<std::uint32_t> radix_count_;
-  std::vector<std::pair<std::uint32_t, std::uint32_t>> runs_;
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> runs_;  // the end voxels grouped
+  std::vector<std::uint8_t> grouped_;                          // per ray: in one of runs_
   std::vector<std::uint32_t> written_;
   std::vector<RayEnd> out_;
   tbb::enumerable_thread_specific<Scratch> scratch_;
