@@ -1124,26 +1124,38 @@ void fixedPlace(const DenseMarks::WalkPlace& at, DenseMarks::FixedWalk& f) {
   return true;
 }
 
-}  // namespace
-
-void DenseMarks::markQueuedFixed() {
-  const std::size_t n = queue_.size();
-  if (fixed_.size() < n) fixed_.resize(n);
-  handed_ids_.clear();
+/// The queued walks in kFixedEight's terms (`convert`: toFixed or toFixedBack) at the front of
+/// `fixed`, the queue indices of those out of its range in `out_of_range`, and room in the
+/// pend buffers for the converted walks' marks. Returns how many were converted.
+template <class Walk, class Convert>
+std::size_t fixQueue(const std::vector<Walk>& queue, Convert convert,
+                     std::vector<DenseMarks::FixedWalk>& fixed,
+                     std::vector<std::uint32_t>& out_of_range, std::vector<std::uint32_t>& pend_w,
+                     std::vector<std::uint32_t>& pend_b) {
+  const std::size_t n = queue.size();
+  if (fixed.size() < n) fixed.resize(n);
+  out_of_range.clear();
   std::size_t m = 0, steps = 0;
   for (std::size_t i = 0; i < n; ++i) {
-    if (toFixed(queue_[i], static_cast<std::uint32_t>(i), fixed_[m])) {
-      steps += static_cast<std::size_t>(fixed_[m].steps) + 1;
+    if (convert(queue[i], static_cast<std::uint32_t>(i), fixed[m])) {
+      steps += static_cast<std::size_t>(fixed[m].steps) + 1;
       ++m;
     } else {
-      handed_ids_.push_back(static_cast<std::uint32_t>(i));
+      out_of_range.push_back(static_cast<std::uint32_t>(i));
     }
   }
   const std::size_t room = steps + 16;
-  if (pend32_w_.size() < room) {
-    pend32_w_.resize(std::max(room, 2 * pend32_w_.size()));
-    pend32_b_.resize(pend32_w_.size());
+  if (pend_w.size() < room) {
+    pend_w.resize(std::max(room, 2 * pend_w.size()));
+    pend_b.resize(pend_w.size());
   }
+  return m;
+}
+
+}  // namespace
+
+void DenseMarks::markQueuedFixed() {
+  const std::size_t m = fixQueue(queue_, toFixed, fixed_, handed_ids_, pend32_w_, pend32_b_);
   std::size_t n_handed = handed_ids_.size();
   const std::size_t out_of_range = n_handed;
   handed_ids_.resize(n_handed + m);
@@ -1167,23 +1179,8 @@ void DenseMarks::markQueuedFixed() {
 }
 DenseMarks::BackWalkCounts DenseMarks::markQueuedBackFixed(
     const block::BlockMask* culled, std::vector<std::uint32_t>& handed_over) {
-  const std::size_t n = back_queue_.size();
-  if (fixed_.size() < n) fixed_.resize(n);
-  handed_ids_.clear();
-  std::size_t m = 0, steps = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (toFixedBack(back_queue_[i], static_cast<std::uint32_t>(i), fixed_[m])) {
-      steps += static_cast<std::size_t>(fixed_[m].steps) + 1;
-      ++m;
-    } else {
-      handed_ids_.push_back(static_cast<std::uint32_t>(i));
-    }
-  }
-  const std::size_t room = steps + 16;
-  if (pend32_w_.size() < room) {
-    pend32_w_.resize(std::max(room, 2 * pend32_w_.size()));
-    pend32_b_.resize(pend32_w_.size());
-  }
+  const std::size_t m =
+      fixQueue(back_queue_, toFixedBack, fixed_, handed_ids_, pend32_w_, pend32_b_);
   std::size_t n_handed = handed_ids_.size();
   const std::size_t out_of_range = n_handed;
   handed_ids_.resize(n_handed + m);
