@@ -826,8 +826,8 @@ constexpr EightLaneTable kEight = makeEightLaneTable();
 /// (DenseMarks::FixedWalk, `t` the heads): walkFourBack's walks with backwardSteps' decision
 /// (the latest head) made from integers, each within (k + 1) / 2 + 2^-10 units of the double
 /// head after k subtractions: a step is taken only when the latest head is above the others by
-/// more than the walk's slack (steps / 2 + 3 units, plus the doubles' own bound in units), so
-/// the doubles' walk takes the same step and does not hand over. A lane whose decision is
+/// more than the walk's slack (steps / 2 + 4 units plus the doubles' own bound in units, rounded
+/// down: toFixedBack), so the doubles' walk takes the same step and does not hand over. A lane whose decision is
 /// closer than that stops, unstepped, and its walk's queue index is appended at `handed_over` +
 /// `n_handed` (what it marked is part of the walk's marks; its counts are not added). An axis
 /// whose crossings are all undone is not set apart: its head goes below the first crossing's

@@ -346,9 +346,9 @@ class DenseMarks {
   /// processor has it (hasWideWalks), else as kFixedEight where it has AVX2 (hasFourWalks), else
   /// one at a time as kScalar does (countedSteps, backwardSteps); kFour 4 at a time in AVX2
   /// lanes of doubles; kFixedEight 8 at a time in AVX2 lanes of 32-bit fixed-point times, each
-  /// decision checked to win by more than the rounding's bound, a walk whose decision does not
-  /// handed over to kFour from its start (fixedHandedOver counts them). Without AVX2, all as
-  /// kScalar.
+  /// decision checked to win by more than the rounding's bound, a walk with a decision that
+  /// does not handed over to kFour from its start (fixedHandedOver counts them). Without AVX2,
+  /// all as kScalar.
   enum class WalkKernel { kBest, kFour, kFixedEight, kScalar };
   [[nodiscard]] static bool hasWideWalks();
   [[nodiscard]] static bool hasFourWalks();
