@@ -43,6 +43,9 @@ void DenseMarks::forgetList() {
   unlisted_ = false;
   queue_.clear();
   back_queue_.clear();
+  n_fixed_ = 0;
+  fixed_steps_ = 0;
+  fixed_first_ = kNoVoxel;
 }
 
 void DenseMarks::relist() {

@@ -962,15 +962,21 @@ constexpr EightLaneTable kEight = makeEightLaneTable();
 #pragma GCC diagnostic pop
 #endif
 
-/// Room for the blocks entered and the marks pended of walks of `steps` steps in all.
-void makeRoom(std::size_t steps, std::vector<std::uint32_t>& entered,
-              std::vector<std::uint64_t>& pend_w, std::vector<std::uint64_t>& pend_b) {
+/// Room for the marks pended (words and marks) of walks of `steps` steps in all.
+template <class Word>
+void pendRoom(std::size_t steps, std::vector<Word>& pend_w, std::vector<Word>& pend_b) {
   const std::size_t room = steps + 16;
-  if (entered.size() < room) entered.resize(std::max(room, 2 * entered.size()));
   if (pend_w.size() < room) {
     pend_w.resize(std::max(room, 2 * pend_w.size()));
     pend_b.resize(pend_w.size());
   }
+}
+/// pendRoom, and room for the blocks entered.
+void makeRoom(std::size_t steps, std::vector<std::uint32_t>& entered,
+              std::vector<std::uint64_t>& pend_w, std::vector<std::uint64_t>& pend_b) {
+  const std::size_t room = steps + 16;
+  if (entered.size() < room) entered.resize(std::max(room, 2 * entered.size()));
+  pendRoom(steps, pend_w, pend_b);
 }
 
 }  // namespace
@@ -1050,22 +1056,21 @@ void fixedPlace(const DenseMarks::WalkPlace& at, DenseMarks::FixedWalk& f) {
   f.addr = static_cast<std::int32_t>(at.addr) ^ flip;  // below 2^30: the box's bits
 }
 
-/// `w` (queue index `index`) in kFixedEight's terms; false when its times are out of range.
-[[gnu::target("avx2")]] bool toFixed(const DenseMarks::QueuedWalk& w, std::uint32_t index,
-                                     DenseMarks::FixedWalk& f) {
-  const double last = w.t_last;
-  if (!(last > 0x1p-500 && last < 0x1p500) || w.steps <= 0 || w.steps > (1 << 20)) return false;
+/// A forward walk's times (`times`: t_max[3] then t_delta[3], adjacent), its last crossing's
+/// time `last` and its steps in kFixedEight's terms (f's t, d, slack and steps); false when they
+/// are out of its range.
+[[gnu::target("avx2")]] bool fixedTimes(const double* times, double last, std::int32_t steps,
+                                        DenseMarks::FixedWalk& f) {
+  if (!(last > 0x1p-500 && last < 0x1p500) || steps <= 0 || steps > (1 << 20)) return false;
   // Units of 2^(e - 28) for a last time in [2^e, 2^(e+1)): it is 2^28 to 2^29 units.
   const double scale = unitsFor(last);
-  // The times and deltas four at a time (t_max and t_delta are adjacent): t0 t1 t2 d0, then
-  // t2 d0 d1 d2. Clamped at 2^30 (above any decision's threshold: never chosen); to nearest.
-  static_assert(offsetof(DenseMarks::QueuedWalk, t_delta) ==
-                offsetof(DenseMarks::QueuedWalk, t_max) + 3 * sizeof(double));
+  // The times and deltas four at a time: t0 t1 t2 d0, then t2 d0 d1 d2. Clamped at 2^30 (above
+  // any decision's threshold: never chosen); to nearest.
   static_assert(offsetof(DenseMarks::FixedWalk, d) ==
                 offsetof(DenseMarks::FixedWalk, t) + 3 * sizeof(std::int32_t));
   const __m256d sc = _mm256_set1_pd(scale);
-  const __m256d x = _mm256_mul_pd(_mm256_loadu_pd(w.t_max), sc);
-  const __m256d y = _mm256_mul_pd(_mm256_loadu_pd(w.t_max + 2), sc);
+  const __m256d x = _mm256_mul_pd(_mm256_loadu_pd(times), sc);
+  const __m256d y = _mm256_mul_pd(_mm256_loadu_pd(times + 2), sc);
   const __m256d low = _mm256_set1_pd(-0x1p29), cap = _mm256_set1_pd(0x1p30);
   // In range (not NaN), the deltas not negative.
   if ((_mm256_movemask_pd(_mm256_cmp_pd(x, low, _CMP_GE_OQ)) &
@@ -1075,9 +1080,18 @@ void fixedPlace(const DenseMarks::WalkPlace& at, DenseMarks::FixedWalk& f) {
   }
   _mm_storeu_si128(reinterpret_cast<__m128i*>(f.t), _mm256_cvtpd_epi32(_mm256_min_pd(x, cap)));
   _mm_storeu_si128(reinterpret_cast<__m128i*>(f.t + 2), _mm256_cvtpd_epi32(_mm256_min_pd(y, cap)));
+  f.slack = (steps >> 1) + 3;
+  f.steps = steps;
+  return true;
+}
+
+/// `w` (queue index `index`) in kFixedEight's terms; false when its times are out of range.
+[[gnu::target("avx2")]] bool toFixed(const DenseMarks::QueuedWalk& w, std::uint32_t index,
+                                     DenseMarks::FixedWalk& f) {
+  static_assert(offsetof(DenseMarks::QueuedWalk, t_delta) ==
+                offsetof(DenseMarks::QueuedWalk, t_max) + 3 * sizeof(double));
+  if (!fixedTimes(w.t_max, w.t_last, w.steps, f)) return false;
   fixedPlace(w.at, f);
-  f.slack = (w.steps >> 1) + 3;
-  f.steps = w.steps;
   f.index = index;
   return true;
 }
@@ -1144,15 +1158,80 @@ std::size_t fixQueue(const std::vector<Walk>& queue, Convert convert,
       out_of_range.push_back(static_cast<std::uint32_t>(i));
     }
   }
-  const std::size_t room = steps + 16;
-  if (pend_w.size() < room) {
-    pend_w.resize(std::max(room, 2 * pend_w.size()));
-    pend_b.resize(pend_w.size());
-  }
+  pendRoom(steps, pend_w, pend_b);
   return m;
 }
 
 }  // namespace
+
+unsigned DenseMarks::queueFixedWalks(const TraversalStarts& starts, const FixedLanes& lanes) {
+  if (lanes.lanes == 0) return 0;
+  // The memo of the walks' first voxel (their origin, the same for the eight).
+  const VoxelKey first = starts.start[std::countr_zero(lanes.lanes)].origin;
+  constexpr int kStill[3] = {0, 0, 0};
+  const WalkPlace* const at_first = placeFrom(first, kStill);
+  if (at_first == nullptr) return 0;
+  if (fixed_queue_.size() < n_fixed_ + 8) {
+    fixed_queue_.resize(std::max<std::size_t>(256, 2 * (n_fixed_ + 8)));
+  }
+  FixedWalk* const out = fixed_queue_.data() + n_fixed_;
+  // The box's keys: an end is in it when each coordinate less the lowest is below the span.
+  const unsigned lo[3] = {min_[0] << block::kShift, min_[1] << block::kShift,
+                          min_[2] << block::kShift};
+  const unsigned span[3] = {n_[0] << block::kShift, n_[1] << block::kShift, n_[2] << block::kShift};
+  static_assert(offsetof(TraversalStart, t_delta) ==
+                offsetof(TraversalStart, t_max) + 3 * sizeof(double));
+  std::size_t n = 0, steps = 0;
+  unsigned queued = 0;
+  for (unsigned m = lanes.lanes; m != 0; m &= m - 1) {
+    const int l = std::countr_zero(m);
+    const TraversalStart& s = starts.start[l];
+    if (s.end.x - lo[0] >= span[0] || s.end.y - lo[1] >= span[1] || s.end.z - lo[2] >= span[2]) {
+      continue;
+    }
+    FixedWalk& f = out[n];
+    if (!fixedTimes(s.t_max, lanes.t_last[l], lanes.total[l] - 1, f)) continue;
+    const int slot = (s.step[0] + 1) + 3 * (s.step[1] + 1) + 9 * (s.step[2] + 1);
+    if ((memo_fixed_filled_ >> slot & 1U) == 0) {
+      fixedPlace(*placeFrom(first, s.step), memo_fixed_[slot]);
+      memo_fixed_filled_ |= 1U << slot;
+    }
+    const FixedWalk& at = memo_fixed_[slot];
+    f.addr = at.addr;
+    f.flip = at.flip;
+    f.cross[0] = at.cross[0];
+    f.cross[1] = at.cross[1];
+    f.cross[2] = at.cross[2];
+    f.index = lanes.id[l];
+    ++n;
+    steps += static_cast<std::size_t>(lanes.total[l]);
+    queued |= 1U << l;
+  }
+  n_fixed_ += n;
+  fixed_steps_ += steps;
+  if (n != 0 && at_first->addr != fixed_first_) {  // their first voxel (the sensor's), once
+    setAt(static_cast<std::uint32_t>(at_first->addr >> 9),
+          static_cast<int>(at_first->addr & (block::kVoxels - 1)));
+    fixed_first_ = at_first->addr;
+  }
+  return queued;
+}
+
+void DenseMarks::markFixedQueued(std::vector<std::uint32_t>& handed_over) {
+  const std::size_t m = n_fixed_;
+  if (m == 0) return;
+  pendRoom(fixed_steps_, pend32_w_, pend32_b_);
+  std::size_t n_handed = handed_over.size();
+  const std::size_t before = n_handed;
+  handed_over.resize(n_handed + m);
+  finishPended32(walkEightFixed(fixed_queue_.data(), m, pend32_w_.data(), pend32_b_.data(),
+                                handed_over.data(), n_handed));
+  handed_over.resize(n_handed);
+  fixed_handed_ += n_handed - before;
+  n_fixed_ = 0;
+  fixed_steps_ = 0;
+  fixed_first_ = kNoVoxel;
+}
 
 void DenseMarks::markQueuedFixed() {
   const std::size_t m = fixQueue(queue_, toFixed, fixed_, handed_ids_, pend32_w_, pend32_b_);
@@ -1210,7 +1289,14 @@ DenseMarks::BackWalkCounts DenseMarks::markQueuedBackFixed(
   }
   return counts;
 }
+bool DenseMarks::queuesFixed(WalkKernel kernel) {
+  return (kernel == WalkKernel::kFixedEight || (kernel == WalkKernel::kBest && !hasWideWalks())) &&
+         hasFourWalks();
+}
 #else
+bool DenseMarks::queuesFixed(WalkKernel) { return false; }
+unsigned DenseMarks::queueFixedWalks(const TraversalStarts&, const FixedLanes&) { return 0; }
+void DenseMarks::markFixedQueued(std::vector<std::uint32_t>&) {}
 void DenseMarks::markQueuedFixed() { markQueued(WalkKernel::kScalar); }
 DenseMarks::BackWalkCounts DenseMarks::markQueuedBackFixed(
     const block::BlockMask* culled, std::vector<std::uint32_t>& handed_over) {

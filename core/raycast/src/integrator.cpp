@@ -249,8 +249,10 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
             // Forward walks queued and walked together at the range's end.
             DenseSink sink{local.dense, local.update};
             markRaysQueued(grid, origin_world, rays_.data(), idsOf(range, local.ids), sink,
-                           local.counts, *origin_key);
-            local.dense.markQueued(options_.walk_kernel);
+                           local.counts, *origin_key,
+                           DenseMarks::queuesFixed(options_.walk_kernel));
+            walkRaysQueued(grid, origin_world, rays_.data(), sink, *origin_key,
+                           options_.walk_kernel, local.handed);
           } else if (local.dense_ok) {
             DenseSink sink{local.dense, local.update};
             mark_all(sink);

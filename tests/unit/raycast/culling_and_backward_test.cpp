@@ -331,6 +331,72 @@ TEST(DenseMarks, QueuedWalksBreakExactTiesAsTheCountedLoop) {
   EXPECT_GT(tied, 100U) << "queued walks with an exact tie on the way";
 }
 
+// The forward walks queued straight into fixed point by their rays' indices (markRaysQueued's
+// `fixed`, DenseMarks::queueFixedWalks, walkRaysQueued: eight lanes of 32-bit times, the walks
+// with a decision too close to call walked again by markRay) mark what markRay marks into a
+// hash and count the same visits: random rays, rays through exact ties (dyadic origins and
+// directions of exact ratios: handed over), rays leaving the box, batches of any size (each
+// flushed and compared: a batch of a few long rays has its origin's voxel marked by the queue
+// alone).
+TEST(DenseMarks, FixedQueueByRayIndexMarksAsTheHash) {
+  const VoxelGrid grid(0.25);
+  std::mt19937 rng(29);
+  std::uniform_int_distribution<int> lattice(-40, 40), scale(3, 60), pick(0, 6), batch(1, 300),
+      few(1, 4);
+  std::uniform_real_distribution<float> coord(-14.0F, 14.0F);
+  ASSERT_EQ(DenseMarks::queuesFixed(DenseMarks::WalkKernel::kFixedEight),
+            DenseMarks::hasFourWalks());
+  DenseMarks dense;
+  const VoxelKey lo = *grid.pointToKey(Point3f(-10.0F, -10.0F, -10.0F));
+  const VoxelKey hi = *grid.pointToKey(Point3f(10.0F, 10.0F, 10.0F));
+  ASSERT_TRUE(dense.reset(lo, hi, 1U << 21));
+  MarkCounts plain_counts, sut_counts;
+  std::vector<RayEnd> rays;
+  std::vector<std::uint32_t> ids, handed;
+  std::size_t queued = 0, free_cells = 0;
+  for (int b = 0; b < 150; ++b) {
+    ScanUpdate plain, sut;
+    DenseSink sink{dense, sut};
+    const Point3f origin(static_cast<float>(lattice(rng)) / 64.0F,
+                         static_cast<float>(lattice(rng)) / 64.0F,
+                         static_cast<float>(lattice(rng)) / 64.0F);
+    const VoxelKey origin_key = *grid.pointToKey(origin);
+    rays.clear();
+    ids.clear();
+    for (int i = b % 3 == 0 ? few(rng) : batch(rng); i > 0; --i) {
+      static constexpr float kRatios[6][3] = {{2, 1, 0.5F},  {1, 2, 0.25F}, {1, 0.5F, 2},
+                                              {-2, 1, 0.5F}, {4, -1, 2},    {1, -4, -0.5F}};
+      const int k = pick(rng);
+      const float m = static_cast<float>(scale(rng)) / 8.0F;
+      const Point3f end = k == 6
+                              ? Point3f(coord(rng), coord(rng), coord(rng))
+                              : origin + m * Point3f(kRatios[k][0], kRatios[k][1], kRatios[k][2]);
+      ids.push_back(static_cast<std::uint32_t>(rays.size()));
+      rays.push_back(rayEndFor(grid, origin, end, -1.0));
+      markRay(grid, origin, rays.back(), plain, plain_counts);
+    }
+    queued += markRaysQueued(grid, origin, rays.data(), ids, sink, sut_counts, origin_key,
+                             DenseMarks::queuesFixed(DenseMarks::WalkKernel::kFixedEight));
+    walkRaysQueued(grid, origin, rays.data(), sink, origin_key, DenseMarks::WalkKernel::kFixedEight,
+                   handed);
+    dense.flushInto(sut);
+    ASSERT_EQ(sut_counts.visits, plain_counts.visits) << "batch " << b;
+    ASSERT_EQ(markedCells(plain), markedCells(sut)) << "batch " << b << " of " << rays.size();
+    free_cells += plain.freeCount();
+  }
+  EXPECT_GT(free_cells, 50000U);
+  EXPECT_GT(queued, 5000U);
+  if (DenseMarks::hasFourWalks()) {
+    // The exact ties (a few per cent of these rays) are handed over and walked again.
+    std::cout << "fixed point by ray index: " << dense.fixedHandedOver() << " of " << queued
+              << " walks handed over\n";
+    EXPECT_GT(dense.fixedHandedOver(), 50U);
+    EXPECT_LT(dense.fixedHandedOver(), queued / 4);
+  } else {
+    std::cout << "no AVX2 here: the walks were queued for markQueued\n";
+  }
+}
+
 /// Alg. 3 as written: breadth-first from the sensor's voxel over fully-free voxels whose test
 /// cells are all in the region.
 /// With `marked`, grown by the voxels the scan marked free too (CullingRegion::grow).

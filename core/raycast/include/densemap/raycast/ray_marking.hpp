@@ -268,11 +268,12 @@ void markRay(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray, Si
 }
 
 /// Rays rays[id] for `ids`, their traversals started eight at a time (startTraversals):
-/// `each(id, starts, lane)` in order for those whose end key is valid, `other(id)` for the rest.
-template <class Each, class Other>
+/// `each(id, starts, lane)` in order for those whose end key is valid, then `after(starts)` for
+/// the eight (or the last few), `other(id)` for the rest.
+template <class Each, class Other, class After>
 void startRaysByEight(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& origin_key,
                       const RayEnd* rays, std::span<const std::uint32_t> ids, Each&& each,
-                      Other&& other) {
+                      Other&& other, After&& after) {
   TraversalStarts starts;
   Point3f ends[8];
   VoxelKey keys[8];
@@ -281,6 +282,7 @@ void startRaysByEight(const VoxelGrid& grid, const Point3f& origin, const VoxelK
   const auto start = [&] {
     startTraversals(grid, origin, origin_key, ends, keys, n, starts);
     for (int l = 0; l < n; ++l) each(lane_ray[l], starts, l);
+    after(starts);
     n = 0;
   };
   for (const std::uint32_t id : ids) {
@@ -296,37 +298,85 @@ void startRaysByEight(const VoxelGrid& grid, const Point3f& origin, const VoxelK
   }
   if (n != 0) start();
 }
+template <class Each, class Other>
+void startRaysByEight(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& origin_key,
+                      const RayEnd* rays, std::span<const std::uint32_t> ids, Each&& each,
+                      Other&& other) {
+  startRaysByEight(grid, origin, origin_key, rays, ids, each, other, [](const TraversalStarts&) {});
+}
 
 /// markRay for rays[id], `ids`, through a DenseSink, each forward walk queued when it can be (a
 /// counted walk between two voxels of the box: every ray of the integrator's box but short ones
 /// and near-ties at the end): its first voxel is marked now and the others by the sink's
-/// DenseMarks::markQueued, which the caller runs before the marks are read. Other rays are
-/// marked as markRay does. Returns how many walks were queued.
+/// DenseMarks::markQueued, which the caller runs before the marks are read — or, when `fixed`
+/// (DenseMarks::queuesFixed), queued eight at a time by the rays' indices
+/// (DenseMarks::queueFixedWalks) for walkRaysQueued. Other rays are marked as markRay does.
+/// Returns how many walks were queued.
 inline std::size_t markRaysQueued(const VoxelGrid& grid, const Point3f& origin, const RayEnd* rays,
                                   std::span<const std::uint32_t> ids, DenseSink& sink,
-                                  MarkCounts& counts, const VoxelKey& origin_key) {
+                                  MarkCounts& counts, const VoxelKey& origin_key,
+                                  bool fixed = false) {
   std::size_t queued = 0;
+  DenseMarks::FixedLanes lanes;  // `fixed`: the eight's walks to queue
+  const auto queued_one = [&](const RayEnd& ray, int total) {
+    counts.visits += static_cast<std::size_t>(total);
+    ++queued;
+    markEnd(ray, sink, counts);
+  };
   startRaysByEight(
       grid, origin, origin_key, rays, ids,
       [&](std::uint32_t id, const TraversalStarts& st, int l) {
         const RayEnd& ray = rays[id];
-        if (st.kind[l] == TraversalKind::kRay) {
-          const TraversalStart& s = st.start[l];
-          const int total = countedTotal(st.end[l], st.crossings[l]);
-          if (total == 0 ||
-              !sink.dense.queueWalk(s.origin, s.step, s.end, s.t_max, s.t_delta, total,
-                                    std::max(std::max(st.times[l].last[0], st.times[l].last[1]),
-                                             st.times[l].last[2]))) {
-            markRay(grid, origin, ray, sink, counts, &origin_key);
-            return;
-          }
-          counts.visits += static_cast<std::size_t>(total);
-          ++queued;
+        if (st.kind[l] != TraversalKind::kRay) {
+          markEnd(ray, sink, counts);  // (one voxel: nothing crossed)
+          return;
         }
-        markEnd(ray, sink, counts);  // (one voxel: nothing crossed)
+        const TraversalStart& s = st.start[l];
+        const int total = countedTotal(st.end[l], st.crossings[l]);
+        const double t_last =
+            std::max(std::max(st.times[l].last[0], st.times[l].last[1]), st.times[l].last[2]);
+        if (total != 0 && fixed) {
+          lanes.add(l, total, t_last, id);
+        } else if (total != 0 && sink.dense.queueWalk(s.origin, s.step, s.end, s.t_max, s.t_delta,
+                                                      total, t_last)) {
+          queued_one(ray, total);
+        } else {
+          markRay(grid, origin, ray, sink, counts, &origin_key);
+        }
       },
-      [&](std::uint32_t id) { markRay(grid, origin, rays[id], sink, counts, &origin_key); });
+      [&](std::uint32_t id) { markRay(grid, origin, rays[id], sink, counts, &origin_key); },
+      [&](const TraversalStarts& st) {
+        if (lanes.lanes == 0) return;
+        const unsigned done = sink.dense.queueFixedWalks(st, lanes);
+        for (unsigned m = lanes.lanes; m != 0; m &= m - 1) {
+          const int l = std::countr_zero(m);
+          const RayEnd& ray = rays[lanes.id[l]];
+          if ((done >> l & 1U) != 0) {
+            queued_one(ray, lanes.total[l]);
+          } else {
+            markRay(grid, origin, ray, sink, counts, &origin_key);
+          }
+        }
+        lanes.lanes = 0;
+      });
   return queued;
+}
+
+/// Walks what markRaysQueued queued into `sink` from `rays` (its `fixed` is
+/// DenseMarks::queuesFixed(kernel)): DenseMarks::markQueued(kernel), or markFixedQueued and
+/// the walks it hands over walked again by markRay (their counts were added when queued;
+/// `handed`: scratch).
+inline void walkRaysQueued(const VoxelGrid& grid, const Point3f& origin, const RayEnd* rays,
+                           DenseSink& sink, const VoxelKey& origin_key,
+                           DenseMarks::WalkKernel kernel, std::vector<std::uint32_t>& handed) {
+  if (!DenseMarks::queuesFixed(kernel)) {
+    sink.dense.markQueued(kernel);
+    return;
+  }
+  handed.clear();
+  sink.dense.markFixedQueued(handed);
+  MarkCounts counted;  // (already)
+  for (const std::uint32_t id : handed) markRay(grid, origin, rays[id], sink, counted, &origin_key);
 }
 
 /// markRayCulled's free marks (the crossed voxels outside the region), not the end voxel's.
