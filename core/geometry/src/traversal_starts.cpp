@@ -41,46 +41,39 @@ void loadLanes(const Point3f* ends, const VoxelKey* key_ends, int n, float (&e)[
   }
 }
 
-/// Eight lanes' starts and ends, stored from the vectors; written out as startTraversal and endOf
-/// give them.
+/// Eight lanes' starts and ends (`r`, stored from the vectors) written out as startTraversal
+/// and endOf give them.
 template <class Int>
-struct LaneResults {
-  alignas(64) double tm[3][8], td[3][8], la[3][8], sc[8];
-  alignas(64) Int st[3][8], cr[3][8];
-  alignas(32) float len[8];
-  unsigned same = 0, has_length = 0, irregular = 0, unsure = 0;  // lane bits
-
-  void writeOut(const VoxelKey& key_origin, const VoxelKey* key_ends, int n,
-                TraversalStarts& out) const {
-    for (int i = 0; i < n; ++i) {
-      const unsigned bit = 1U << i;
-      if ((same & bit) != 0 || (has_length & bit) == 0) {
-        out.kind[i] = TraversalKind::kSameVoxel;
-        continue;
-      }
-      out.kind[i] = TraversalKind::kRay;
-      TraversalStart& s = out.start[i];
-      s.origin = key_origin;
-      s.end = key_ends[i];
-      s.length = len[i];
-      for (int a = 0; a < 3; ++a) {
-        s.step[a] = static_cast<int>(st[a][i]);
-        s.t_max[a] = tm[a][i];
-        s.t_delta[a] = td[a][i];
-        out.crossings[i][a] = static_cast<int>(cr[a][i]);
-      }
-      if ((irregular & bit) != 0) {
-        out.end[i] = TraversalEnd::kIrregular;
-      } else if ((unsure & bit) != 0) {
-        out.end[i] = TraversalEnd::kUnsure;
-      } else {
-        out.end[i] = TraversalEnd::kClean;
-        for (int a = 0; a < 3; ++a) out.times[i].last[a] = la[a][i];
-        out.times[i].scale = sc[i];
-      }
+void writeOut(const TraversalLaneValues<Int>& r, const VoxelKey& key_origin,
+              const VoxelKey* key_ends, int n, TraversalStarts& out) {
+  for (int i = 0; i < n; ++i) {
+    const unsigned bit = 1U << i;
+    if ((r.same & bit) != 0 || (r.has_length & bit) == 0) {
+      out.kind[i] = TraversalKind::kSameVoxel;
+      continue;
+    }
+    out.kind[i] = TraversalKind::kRay;
+    TraversalStart& s = out.start[i];
+    s.origin = key_origin;
+    s.end = key_ends[i];
+    s.length = r.len[i];
+    for (int a = 0; a < 3; ++a) {
+      s.step[a] = static_cast<int>(r.st[a][i]);
+      s.t_max[a] = r.tm[a][i];
+      s.t_delta[a] = r.td[a][i];
+      out.crossings[i][a] = static_cast<int>(r.cr[a][i]);
+    }
+    if ((r.irregular & bit) != 0) {
+      out.end[i] = TraversalEnd::kIrregular;
+    } else if ((r.unsure & bit) != 0) {
+      out.end[i] = TraversalEnd::kUnsure;
+    } else {
+      out.end[i] = TraversalEnd::kClean;
+      for (int a = 0; a < 3; ++a) out.times[i].last[a] = r.la[a][i];
+      out.times[i].scale = r.sc[i];
     }
   }
-};
+}
 
 /// endOf's near(x, y): |x - y| <= bound (NaN, from inf - inf: not near).
 [[gnu::target("avx512f,avx512vl,avx512dq"), gnu::always_inline]] inline __mmask8 near(
@@ -185,7 +178,7 @@ struct LaneResults {
       _mm512_sub_pd(_mm512_cvtps_pd(length), last_max), bound, _CMP_GT_OQ);
   unsure |= static_cast<__mmask8>(~(some_last & gap & within));
   // Out, lane by lane.
-  LaneResults<std::int64_t> r;
+  TraversalLaneValues<std::int64_t> r;
   for (int a = 0; a < 3; ++a) {
     _mm512_store_pd(r.tm[a], t_max[a]);
     _mm512_store_pd(r.td[a], t_delta[a]);
@@ -199,7 +192,7 @@ struct LaneResults {
   r.has_length = has_length;
   r.irregular = irregular;
   r.unsure = unsure;
-  r.writeOut(key_origin, key_ends, n, out);
+  writeOut(r, key_origin, key_ends, n, out);
 }
 
 #define DENSEMAP_AVX2 gnu::target("avx2")
@@ -226,16 +219,16 @@ struct LaneResults {
       _mm256_andnot_pd(_mm256_set1_pd(-0.0), _mm256_sub_pd(x, y)), bound, _CMP_LE_OQ));
 }
 
-/// startEight with AVX2: the floats in eight lanes, the doubles in two halves of four, the keys,
-/// steps and crossings as 32-bit ints (exact: keys are 16-bit), the same IEEE operations in the
-/// same order.
-[[DENSEMAP_AVX2]] void startEightByFour(const VoxelGrid& grid, const Point3f& origin,
+/// startEight with AVX2 into lanes: the floats in eight lanes, the doubles in two halves of
+/// four, the keys, steps and crossings as 32-bit ints (exact: keys are 16-bit), the same IEEE
+/// operations in the same order.
+[[DENSEMAP_AVX2]] void lanesEightByFour(const VoxelGrid& grid, const Point3f& origin,
                                         const VoxelKey& key_origin, const Point3f* ends,
-                                        const VoxelKey* key_ends, int n, TraversalStarts& out) {
+                                        const VoxelKey* key_ends, int n, TraversalLanes& r) {
   constexpr double kMax = std::numeric_limits<double>::max();
   constexpr double kInf = std::numeric_limits<double>::infinity();
   alignas(32) float e[3][8];
-  alignas(32) std::int32_t k[3][8];
+  std::int32_t(&k)[3][8] = r.key_end;
   loadLanes(ends, key_ends, n, e, k);
   const int ko[3] = {key_origin.x, key_origin.y, key_origin.z};
   const double resolution = grid.resolution();
@@ -305,7 +298,7 @@ struct LaneResults {
   }
   // bound = 4 * (total + 8) * 2^-50 * scale (the int product first).
   const __m256i total_term = _mm256_slli_epi32(_mm256_add_epi32(total, _mm256_set1_epi32(8)), 2);
-  LaneResults<std::int32_t> r;
+  r.unsure = 0;
   for (int h = 0; h < 2; ++h) {
     const __m256d bound = _mm256_mul_pd(
         _mm256_mul_pd(halfAsDoubles(total_term, h), _mm256_set1_pd(0x1p-50)), scale[h]);
@@ -337,7 +330,15 @@ struct LaneResults {
   r.same = static_cast<unsigned>(same);
   r.has_length = static_cast<unsigned>(has_length);
   r.irregular = static_cast<unsigned>(irregular);
-  r.writeOut(key_origin, key_ends, n, out);
+}
+
+/// startEight with AVX2 (lanesEightByFour's lanes written out).
+[[DENSEMAP_AVX2]] void startEightByFour(const VoxelGrid& grid, const Point3f& origin,
+                                        const VoxelKey& key_origin, const Point3f* ends,
+                                        const VoxelKey* key_ends, int n, TraversalStarts& out) {
+  TraversalLanes r;
+  lanesEightByFour(grid, origin, key_origin, ends, key_ends, n, r);
+  writeOut(r, key_origin, key_ends, n, out);
 }
 #undef DENSEMAP_AVX2
 #pragma GCC diagnostic pop
@@ -368,6 +369,22 @@ bool hasFourLanes() {
 #else
   return false;
 #endif
+}
+
+void startTraversalLanes(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_origin,
+                         const Point3f* ends, const VoxelKey* key_ends, int n,
+                         TraversalLanes& out) {
+  if (n <= 0) return;
+#ifdef DENSEMAP_WIDE_STARTS
+  if (hasFourLanes()) {
+    lanesEightByFour(grid, origin, key_origin, ends, key_ends, n, out);
+    return;
+  }
+#endif
+  (void)grid, (void)origin, (void)key_origin, (void)ends, (void)key_ends;
+  out.same = 0;
+  out.has_length = 0xffU;
+  out.irregular = 0xffU;
 }
 
 void startTraversals(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_origin,

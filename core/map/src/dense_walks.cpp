@@ -1096,6 +1096,85 @@ void fixedPlace(const DenseMarks::WalkPlace& at, DenseMarks::FixedWalk& f) {
   return true;
 }
 
+/// The lanes of `r` (startTraversalLanes') that `lanes` names in kFixedEight's terms, eight at a
+/// time: fixedTimes (the times and deltas, the slack and the steps: the first eight fields of a
+/// FixedWalk) of each, the same operations side by side, in `rows` (row l: lane l's). Returns
+/// the lanes in its range with a counted walk (kClean, countedTotal from kCountedStepsFrom) whose
+/// end key is in the box of keys [lo, lo + span) per axis.
+[[gnu::target("avx2"), gnu::always_inline]] inline __m256i load8(const std::int32_t* p) {
+  return _mm256_load_si256(reinterpret_cast<const __m256i*>(p));
+}
+[[gnu::target("avx2"), gnu::always_inline]] inline __m256i whole(const __m128i (&v)[2]) {
+  return _mm256_set_m128i(v[1], v[0]);
+}
+[[gnu::target("avx2")]] unsigned fixedLanes(const TraversalLanes& r, unsigned lanes,
+                                            const unsigned (&lo)[3], const unsigned (&span)[3],
+                                            std::int32_t (&rows)[8][8]) {
+  const auto load = load8;
+  const __m256i total =
+      _mm256_add_epi32(_mm256_add_epi32(load(r.cr[0]), load(r.cr[1])), load(r.cr[2]));
+  const __m256i steps = _mm256_sub_epi32(total, _mm256_set1_epi32(1));
+  // Counted (total >= kCountedStepsFrom, so steps > 0) and at most 2^20 steps.
+  __m256i ok = _mm256_andnot_si256(_mm256_cmpgt_epi32(_mm256_set1_epi32(kCountedStepsFrom), total),
+                                   _mm256_cmpgt_epi32(_mm256_set1_epi32((1 << 20) + 1), steps));
+  for (int a = 0; a < 3; ++a) {  // (key - lo) <= span - 1, unsigned
+    const __m256i d =
+        _mm256_sub_epi32(load(r.key_end[a]), _mm256_set1_epi32(static_cast<int>(lo[a])));
+    const __m256i top = _mm256_set1_epi32(static_cast<int>(span[a] - 1));
+    ok = _mm256_and_si256(ok, _mm256_cmpeq_epi32(_mm256_max_epu32(d, top), top));
+  }
+  unsigned in_range = static_cast<unsigned>(_mm256_movemask_ps(_mm256_castsi256_ps(ok)));
+  __m128i t[3][2], d[3][2];
+  for (int h = 0; h < 2; ++h) {
+    // fixedTimes: the last crossing's time in (2^-500, 2^500), units of 2^(e - 28) for it in
+    // [2^e, 2^(e+1)) (unitsFor: 2^(1023 + 28 - e) as bits), the times at least -2^29 and the
+    // deltas not negative (none NaN), both clamped at 2^30 and rounded to nearest.
+    const __m256d last = _mm256_max_pd(
+        _mm256_max_pd(_mm256_load_pd(r.la[0] + 4 * h), _mm256_load_pd(r.la[1] + 4 * h)),
+        _mm256_load_pd(r.la[2] + 4 * h));
+    __m256d fine = _mm256_and_pd(_mm256_cmp_pd(last, _mm256_set1_pd(0x1p-500), _CMP_GT_OQ),
+                                 _mm256_cmp_pd(last, _mm256_set1_pd(0x1p500), _CMP_LT_OQ));
+    const __m256i biased = _mm256_srli_epi64(_mm256_castpd_si256(last), 52);
+    const __m256d scale = _mm256_castsi256_pd(
+        _mm256_slli_epi64(_mm256_sub_epi64(_mm256_set1_epi64x(1023 + 1023 + 28), biased), 52));
+    const __m256d low = _mm256_set1_pd(-0x1p29), cap = _mm256_set1_pd(0x1p30),
+                  zero = _mm256_setzero_pd();
+    for (int a = 0; a < 3; ++a) {
+      const __m256d x = _mm256_mul_pd(_mm256_load_pd(r.tm[a] + 4 * h), scale);
+      const __m256d y = _mm256_mul_pd(_mm256_load_pd(r.td[a] + 4 * h), scale);
+      fine = _mm256_and_pd(fine, _mm256_and_pd(_mm256_cmp_pd(x, low, _CMP_GE_OQ),
+                                               _mm256_cmp_pd(y, zero, _CMP_GE_OQ)));
+      t[a][h] = _mm256_cvtpd_epi32(_mm256_min_pd(x, cap));
+      d[a][h] = _mm256_cvtpd_epi32(_mm256_min_pd(y, cap));
+    }
+    in_range &= ~(static_cast<unsigned>(_mm256_movemask_pd(fine) ^ 0xf) << (4 * h));
+  }
+  // The eight fields (t, d, slack, steps) as rows of lanes, transposed to a row per lane.
+  const __m256i f[8] = {whole(t[0]),
+                        whole(t[1]),
+                        whole(t[2]),
+                        whole(d[0]),
+                        whole(d[1]),
+                        whole(d[2]),
+                        _mm256_add_epi32(_mm256_srai_epi32(steps, 1), _mm256_set1_epi32(3)),
+                        steps};
+  const __m256i u0 = _mm256_unpacklo_epi32(f[0], f[1]), u1 = _mm256_unpackhi_epi32(f[0], f[1]);
+  const __m256i u2 = _mm256_unpacklo_epi32(f[2], f[3]), u3 = _mm256_unpackhi_epi32(f[2], f[3]);
+  const __m256i u4 = _mm256_unpacklo_epi32(f[4], f[5]), u5 = _mm256_unpackhi_epi32(f[4], f[5]);
+  const __m256i u6 = _mm256_unpacklo_epi32(f[6], f[7]), u7 = _mm256_unpackhi_epi32(f[6], f[7]);
+  const __m256i v[8] = {_mm256_unpacklo_epi64(u0, u2), _mm256_unpackhi_epi64(u0, u2),
+                        _mm256_unpacklo_epi64(u1, u3), _mm256_unpackhi_epi64(u1, u3),
+                        _mm256_unpacklo_epi64(u4, u6), _mm256_unpackhi_epi64(u4, u6),
+                        _mm256_unpacklo_epi64(u5, u7), _mm256_unpackhi_epi64(u5, u7)};
+  for (int l = 0; l < 4; ++l) {  // v[l]: lanes l and l + 4, fields 0-3; v[l + 4]: fields 4-7
+    _mm256_store_si256(reinterpret_cast<__m256i*>(rows[l]),
+                       _mm256_permute2x128_si256(v[l], v[l + 4], 0x20));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(rows[l + 4]),
+                       _mm256_permute2x128_si256(v[l], v[l + 4], 0x31));
+  }
+  return lanes & in_range;
+}
+
 /// Backward walk `w` (queue index `index`) in kFixedEight's terms (`t`: the heads, `steps`: the
 /// total): units as toFixed's, of its latest head; an axis without crossings left at -2^30
 /// (never the latest); the slack with the doubles' bound added. False when out of range.
@@ -1164,52 +1243,50 @@ std::size_t fixQueue(const std::vector<Walk>& queue, Convert convert,
 
 }  // namespace
 
-unsigned DenseMarks::queueFixedWalks(const TraversalStarts& starts, const FixedLanes& lanes) {
-  if (lanes.lanes == 0) return 0;
-  // The memo of the walks' first voxel (their origin, the same for the eight).
-  const VoxelKey first = starts.start[std::countr_zero(lanes.lanes)].origin;
+unsigned DenseMarks::queueFixedLanes(const TraversalLanes& lanes, int n, const VoxelKey& first,
+                                     const std::uint32_t* ids) {
+  // The rays with a clean end (then fixedLanes picks the counted walks).
+  const unsigned rays = (n >= 8 ? 0xffU : (1U << n) - 1U) & ~lanes.same & lanes.has_length &
+                        ~lanes.irregular & ~lanes.unsure;
+  if (rays == 0) return 0;
   constexpr int kStill[3] = {0, 0, 0};
-  const WalkPlace* const at_first = placeFrom(first, kStill);
+  const WalkPlace* const at_first = placeFrom(first, kStill);  // (the memo of `first`)
   if (at_first == nullptr) return 0;
-  if (fixed_queue_.size() < n_fixed_ + 8) {
-    fixed_queue_.resize(std::max<std::size_t>(256, 2 * (n_fixed_ + 8)));
-  }
-  FixedWalk* const out = fixed_queue_.data() + n_fixed_;
-  // The box's keys: an end is in it when each coordinate less the lowest is below the span.
+  // The box's keys: [lo, lo + span) per axis.
   const unsigned lo[3] = {min_[0] << block::kShift, min_[1] << block::kShift,
                           min_[2] << block::kShift};
   const unsigned span[3] = {n_[0] << block::kShift, n_[1] << block::kShift, n_[2] << block::kShift};
-  static_assert(offsetof(TraversalStart, t_delta) ==
-                offsetof(TraversalStart, t_max) + 3 * sizeof(double));
-  std::size_t n = 0, steps = 0;
-  unsigned queued = 0;
-  for (unsigned m = lanes.lanes; m != 0; m &= m - 1) {
+  alignas(32) std::int32_t rows[8][8];
+  const unsigned queued = fixedLanes(lanes, rays, lo, span, rows);
+  if (queued == 0) return 0;
+  if (fixed_queue_.size() < n_fixed_ + 8) {
+    fixed_queue_.resize(std::max<std::size_t>(256, 2 * (n_fixed_ + 8)));
+  }
+  FixedWalk* out = fixed_queue_.data() + n_fixed_;
+  static_assert(offsetof(FixedWalk, addr) == 8 * sizeof(std::int32_t));
+  std::size_t steps = 0;
+  for (unsigned m = queued; m != 0; m &= m - 1) {
     const int l = std::countr_zero(m);
-    const TraversalStart& s = starts.start[l];
-    if (s.end.x - lo[0] >= span[0] || s.end.y - lo[1] >= span[1] || s.end.z - lo[2] >= span[2]) {
-      continue;
-    }
-    FixedWalk& f = out[n];
-    if (!fixedTimes(s.t_max, lanes.t_last[l], lanes.total[l] - 1, f)) continue;
-    const int slot = (s.step[0] + 1) + 3 * (s.step[1] + 1) + 9 * (s.step[2] + 1);
+    const int delta[3] = {lanes.st[0][l], lanes.st[1][l], lanes.st[2][l]};
+    const int slot = (delta[0] + 1) + 3 * (delta[1] + 1) + 9 * (delta[2] + 1);
     if ((memo_fixed_filled_ >> slot & 1U) == 0) {
-      fixedPlace(*placeFrom(first, s.step), memo_fixed_[slot]);
+      fixedPlace(*placeFrom(first, delta), memo_fixed_[slot]);
       memo_fixed_filled_ |= 1U << slot;
     }
+    std::memcpy(out, rows[l], sizeof rows[l]);  // t, d, slack, steps
     const FixedWalk& at = memo_fixed_[slot];
-    f.addr = at.addr;
-    f.flip = at.flip;
-    f.cross[0] = at.cross[0];
-    f.cross[1] = at.cross[1];
-    f.cross[2] = at.cross[2];
-    f.index = lanes.id[l];
-    ++n;
-    steps += static_cast<std::size_t>(lanes.total[l]);
-    queued |= 1U << l;
+    out->addr = at.addr;
+    out->flip = at.flip;
+    out->cross[0] = at.cross[0];
+    out->cross[1] = at.cross[1];
+    out->cross[2] = at.cross[2];
+    out->index = ids[l];
+    steps += static_cast<std::size_t>(rows[l][7]) + 1;
+    ++out;
   }
-  n_fixed_ += n;
+  n_fixed_ = static_cast<std::size_t>(out - fixed_queue_.data());
   fixed_steps_ += steps;
-  if (n != 0 && at_first->addr != fixed_first_) {  // their first voxel (the sensor's), once
+  if (at_first->addr != fixed_first_) {  // their first voxel (the sensor's), once
     setAt(static_cast<std::uint32_t>(at_first->addr >> 9),
           static_cast<int>(at_first->addr & (block::kVoxels - 1)));
     fixed_first_ = at_first->addr;
@@ -1295,7 +1372,10 @@ bool DenseMarks::queuesFixed(WalkKernel kernel) {
 }
 #else
 bool DenseMarks::queuesFixed(WalkKernel) { return false; }
-unsigned DenseMarks::queueFixedWalks(const TraversalStarts&, const FixedLanes&) { return 0; }
+unsigned DenseMarks::queueFixedLanes(const TraversalLanes&, int, const VoxelKey&,
+                                     const std::uint32_t*) {
+  return 0;
+}
 void DenseMarks::markFixedQueued(std::vector<std::uint32_t>&) {}
 void DenseMarks::markQueuedFixed() { markQueued(WalkKernel::kScalar); }
 DenseMarks::BackWalkCounts DenseMarks::markQueuedBackFixed(

@@ -166,6 +166,28 @@ struct TraversalStarts {
   int crossings[8][3];         // kind kRay: endOf's
   TraversalEndTimes times[8];  // end kClean
 };
+/// startTraversals' values for eight rays as its lanes hold them, side by side (lane i: ray i;
+/// lanes from n on copy ray 0): startTraversal's times, steps and length, endOf's crossings
+/// and last crossing times, and per lane bits. Lane i's kind is kSameVoxel when `same` or not
+/// `has_length` names it, else kRay; then its end is kIrregular when `irregular` names it, else
+/// kUnsure when `unsure` does, else kClean, and `last` and `scale` are endOf's
+/// TraversalEndTimes (`crossings`, endOf's, are exact unless kIrregular).
+template <class Int>
+struct TraversalLaneValues {
+  alignas(64) double tm[3][8], td[3][8], la[3][8], sc[8];  // t_max, t_delta, last, scale
+  alignas(64) Int st[3][8], cr[3][8];                      // step, crossings
+  alignas(32) float len[8];
+  unsigned same = 0, has_length = 0, irregular = 0, unsure = 0;
+};
+/// TraversalLaneValues in 32-bit ints (the AVX2 lanes'), with the rays' end keys.
+struct TraversalLanes : TraversalLaneValues<std::int32_t> {
+  alignas(32) std::int32_t key_end[3][8];
+};
+/// startTraversals into lanes (`out`), for a caller that reads them side by side: the same
+/// values bit for bit, with AVX2 where the processor has it (hasFourLanes); without it, every
+/// lane is told kRay with a kIrregular end (the caller walks them by traverseRay).
+void startTraversalLanes(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_origin,
+                         const Point3f* ends, const VoxelKey* key_ends, int n, TraversalLanes& out);
 /// Fills `out` for rays 0..n-1 (n <= 8) from `origin` (key `key_origin`) to `ends[i]` (key
 /// `key_ends[i]`; both in range): bit for bit what startTraversal and endOf give, eight rays
 /// side by side in AVX-512 lanes when `wide` and the processor has them (hasWideLanes), else in

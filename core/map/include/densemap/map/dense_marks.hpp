@@ -17,7 +17,7 @@
 
 namespace densemap {
 
-struct TraversalStarts;
+struct TraversalLanes;
 
 /// The marks of one scan under UpdateRule::kSet, free and occupied, in dense arrays of 8^3
 /// blocks over a box of block coordinates: marking a voxel is an index computation and a bit
@@ -398,31 +398,17 @@ class DenseMarks {
     touch(static_cast<std::uint32_t>(at.addr >> 9));  // entered (as cursorFor)
     return true;
   }
-  /// Whether queueFixedWalks and markFixedQueued walk the forward walks with `kernel`: kFixedEight
+  /// Whether queueFixedLanes and markFixedQueued walk the forward walks with `kernel`: kFixedEight
   /// (or kBest on a processor with AVX2 but not AVX-512), where the processor has AVX2.
   [[nodiscard]] static bool queuesFixed(WalkKernel kernel);
-  /// Lanes of startTraversals' eight for queueFixedWalks: per lane l named in `lanes`, its
-  /// countedTotal (> 0), its last crossing's time (endOf's TraversalEndTimes, the largest) and
-  /// the caller's id of its ray.
-  struct FixedLanes {
-    unsigned lanes = 0;
-    int total[8];
-    double t_last[8];
-    std::uint32_t id[8];
-    void add(int l, int t, double last, std::uint32_t ray) {
-      lanes |= 1U << l;
-      total[l] = t;
-      t_last[l] = last;
-      id[l] = ray;
-    }
-  };
-  /// queueWalk straight into kFixedEight's terms (queuesFixed) for the walks of `starts` (from
-  /// one origin: startTraversals') that `lanes` names, for a caller that can walk any of them
-  /// again by its id: traverseRay's counted walk marked from its first voxel, which is marked
-  /// now. Returns the lanes queued: those with both ends in the box and times in the fixed
-  /// point's range (toFixed's); the caller walks the others.
-  unsigned queueFixedWalks(const TraversalStarts& starts, const FixedLanes& lanes);
-  /// Walks the walks queueFixedWalks queued, then empties that queue. The ids of those it hands
+  /// queueWalk straight into kFixedEight's terms (queuesFixed) for a caller that can walk any
+  /// of them again by its id: the counted walks of rays 0..n-1 of `lanes` (startTraversalLanes'
+  /// from voxel `first`; ray l's id ids[l]), each marked from its first voxel, which is marked
+  /// now. Returns the lanes queued: counted walks (kClean, countedTotal > 0) with both ends in
+  /// the box and times in the fixed point's range (toFixed's); the caller walks the others.
+  unsigned queueFixedLanes(const TraversalLanes& lanes, int n, const VoxelKey& first,
+                           const std::uint32_t* ids);
+  /// Walks the walks queueFixedLanes queued, then empties that queue. The ids of those it hands
   /// over (a decision too close to call in fixed point) are appended to `handed_over`: the
   /// caller walks them exactly (what they marked is part of their marks).
   void markFixedQueued(std::vector<std::uint32_t>& handed_over);
@@ -457,7 +443,7 @@ class DenseMarks {
     std::int32_t addr;  // mirrored: addr ^ flip is the voxel's address
     std::int32_t flip;
     std::int32_t cross[3];  // per axis: the block crossing's increment, less the axis' unit
-    std::uint32_t index;    // in the queue (queueFixedWalks': the caller's id)
+    std::uint32_t index;    // in the queue (queueFixedLanes': the caller's id)
   };
 
  private:
@@ -576,7 +562,7 @@ class DenseMarks {
   bool memo_inside_ = false;
   std::uint32_t memo_filled_ = 0;  // the slots computed
   WalkPlace memo_places_[27]{};
-  // queueFixedWalks': the memo's places in FixedWalk's terms (addr, flip, cross), the slots
+  // queueFixedLanes': the memo's places in FixedWalk's terms (addr, flip, cross), the slots
   // computed, and the address of the first voxel it marked since the queue was last walked.
   static constexpr std::uint64_t kNoVoxel = ~std::uint64_t{0};
   std::uint32_t memo_fixed_filled_ = 0;
@@ -629,7 +615,7 @@ class DenseMarks {
   std::vector<std::uint64_t> pend_w_, pend_b_;  // markQueued's: marks gathered per word
   std::vector<std::uint32_t> pend32_w_, pend32_b_;  // kFixedEight's: per 32-bit word
   std::vector<FixedWalk> fixed_;                    // kFixedEight's queue
-  std::vector<FixedWalk> fixed_queue_;              // queueFixedWalks' (n_fixed_ of them)
+  std::vector<FixedWalk> fixed_queue_;              // queueFixedLanes' (n_fixed_ of them)
   std::size_t n_fixed_ = 0, fixed_steps_ = 0;       // (fixed_steps_: their totals)
   std::vector<QueuedWalk> handed_;                  // kFixedEight's hand-overs
   std::vector<QueuedBackWalk> back_handed_;         // (backward)

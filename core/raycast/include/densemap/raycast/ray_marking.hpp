@@ -267,24 +267,15 @@ void markRay(const VoxelGrid& grid, const Point3f& origin, const RayEnd& ray, Si
   markEnd(ray, update, counts);
 }
 
-/// Rays rays[id] for `ids`, their traversals started eight at a time (startTraversals):
-/// `each(id, starts, lane)` in order for those whose end key is valid, then `after(starts)` for
-/// the eight (or the last few), `other(id)` for the rest.
-template <class Each, class Other, class After>
-void startRaysByEight(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& origin_key,
-                      const RayEnd* rays, std::span<const std::uint32_t> ids, Each&& each,
-                      Other&& other, After&& after) {
-  TraversalStarts starts;
+/// Rays rays[id] for `ids` with a valid end key, eight at a time: `eight(ends, keys, ids, n)`
+/// (n <= 8 of each); `other(id)` for the rest, in order.
+template <class Eight, class Other>
+void forRaysByEight(const RayEnd* rays, std::span<const std::uint32_t> ids, Eight&& eight,
+                    Other&& other) {
   Point3f ends[8];
   VoxelKey keys[8];
   std::uint32_t lane_ray[8];
   int n = 0;
-  const auto start = [&] {
-    startTraversals(grid, origin, origin_key, ends, keys, n, starts);
-    for (int l = 0; l < n; ++l) each(lane_ray[l], starts, l);
-    after(starts);
-    n = 0;
-  };
   for (const std::uint32_t id : ids) {
     const RayEnd& ray = rays[id];
     if (!ray.key_valid) {
@@ -294,71 +285,89 @@ void startRaysByEight(const VoxelGrid& grid, const Point3f& origin, const VoxelK
     ends[n] = ray.end;
     keys[n] = ray.key;
     lane_ray[n++] = id;
-    if (n == 8) start();
+    if (n == 8) {
+      eight(ends, keys, lane_ray, n);
+      n = 0;
+    }
   }
-  if (n != 0) start();
+  if (n != 0) eight(ends, keys, lane_ray, n);
 }
+
+/// Rays rays[id] for `ids`, their traversals started eight at a time (startTraversals):
+/// `each(id, starts, lane)` in order for those whose end key is valid, `other(id)` for the rest.
 template <class Each, class Other>
 void startRaysByEight(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& origin_key,
                       const RayEnd* rays, std::span<const std::uint32_t> ids, Each&& each,
                       Other&& other) {
-  startRaysByEight(grid, origin, origin_key, rays, ids, each, other, [](const TraversalStarts&) {});
+  TraversalStarts starts;
+  forRaysByEight(
+      rays, ids,
+      [&](const Point3f* ends, const VoxelKey* keys, const std::uint32_t* lane_ray, int n) {
+        startTraversals(grid, origin, origin_key, ends, keys, n, starts);
+        for (int l = 0; l < n; ++l) each(lane_ray[l], starts, l);
+      },
+      other);
 }
 
 /// markRay for rays[id], `ids`, through a DenseSink, each forward walk queued when it can be (a
 /// counted walk between two voxels of the box: every ray of the integrator's box but short ones
 /// and near-ties at the end): its first voxel is marked now and the others by the sink's
 /// DenseMarks::markQueued, which the caller runs before the marks are read — or, when `fixed`
-/// (DenseMarks::queuesFixed), queued eight at a time by the rays' indices
-/// (DenseMarks::queueFixedWalks) for walkRaysQueued. Other rays are marked as markRay does.
-/// Returns how many walks were queued.
+/// (DenseMarks::queuesFixed), started side by side (startTraversalLanes) and queued eight at a
+/// time by the rays' indices (DenseMarks::queueFixedLanes) for walkRaysQueued. Other rays are
+/// marked as markRay does. Returns how many walks were queued.
 inline std::size_t markRaysQueued(const VoxelGrid& grid, const Point3f& origin, const RayEnd* rays,
                                   std::span<const std::uint32_t> ids, DenseSink& sink,
                                   MarkCounts& counts, const VoxelKey& origin_key,
                                   bool fixed = false) {
   std::size_t queued = 0;
-  DenseMarks::FixedLanes lanes;  // `fixed`: the eight's walks to queue
-  const auto queued_one = [&](const RayEnd& ray, int total) {
-    counts.visits += static_cast<std::size_t>(total);
-    ++queued;
-    markEnd(ray, sink, counts);
+  const auto marked = [&](std::uint32_t id) {
+    markRay(grid, origin, rays[id], sink, counts, &origin_key);
   };
+  if (fixed) {
+    TraversalLanes lanes;
+    forRaysByEight(
+        rays, ids,
+        [&](const Point3f* ends, const VoxelKey* keys, const std::uint32_t* lane_ray, int n) {
+          startTraversalLanes(grid, origin, origin_key, ends, keys, n, lanes);
+          const unsigned done = sink.dense.queueFixedLanes(lanes, n, origin_key, lane_ray);
+          for (int l = 0; l < n; ++l) {
+            const RayEnd& ray = rays[lane_ray[l]];
+            if ((done >> l & 1U) != 0) {
+              counts.visits += static_cast<std::size_t>(lanes.cr[0][l] + lanes.cr[1][l] +
+                                                        lanes.cr[2][l]);  // (countedTotal)
+              ++queued;
+              markEnd(ray, sink, counts);
+            } else if ((lanes.same >> l & 1U) != 0 || (lanes.has_length >> l & 1U) == 0) {
+              markEnd(ray, sink, counts);  // (kSameVoxel: one voxel, nothing crossed)
+            } else {
+              marked(lane_ray[l]);
+            }
+          }
+        },
+        marked);
+    return queued;
+  }
   startRaysByEight(
       grid, origin, origin_key, rays, ids,
       [&](std::uint32_t id, const TraversalStarts& st, int l) {
         const RayEnd& ray = rays[id];
-        if (st.kind[l] != TraversalKind::kRay) {
-          markEnd(ray, sink, counts);  // (one voxel: nothing crossed)
-          return;
-        }
-        const TraversalStart& s = st.start[l];
-        const int total = countedTotal(st.end[l], st.crossings[l]);
-        const double t_last =
-            std::max(std::max(st.times[l].last[0], st.times[l].last[1]), st.times[l].last[2]);
-        if (total != 0 && fixed) {
-          lanes.add(l, total, t_last, id);
-        } else if (total != 0 && sink.dense.queueWalk(s.origin, s.step, s.end, s.t_max, s.t_delta,
-                                                      total, t_last)) {
-          queued_one(ray, total);
-        } else {
-          markRay(grid, origin, ray, sink, counts, &origin_key);
-        }
-      },
-      [&](std::uint32_t id) { markRay(grid, origin, rays[id], sink, counts, &origin_key); },
-      [&](const TraversalStarts& st) {
-        if (lanes.lanes == 0) return;
-        const unsigned done = sink.dense.queueFixedWalks(st, lanes);
-        for (unsigned m = lanes.lanes; m != 0; m &= m - 1) {
-          const int l = std::countr_zero(m);
-          const RayEnd& ray = rays[lanes.id[l]];
-          if ((done >> l & 1U) != 0) {
-            queued_one(ray, lanes.total[l]);
-          } else {
-            markRay(grid, origin, ray, sink, counts, &origin_key);
+        if (st.kind[l] == TraversalKind::kRay) {
+          const TraversalStart& s = st.start[l];
+          const int total = countedTotal(st.end[l], st.crossings[l]);
+          if (total == 0 ||
+              !sink.dense.queueWalk(s.origin, s.step, s.end, s.t_max, s.t_delta, total,
+                                    std::max(std::max(st.times[l].last[0], st.times[l].last[1]),
+                                             st.times[l].last[2]))) {
+            marked(id);
+            return;
           }
+          counts.visits += static_cast<std::size_t>(total);
+          ++queued;
         }
-        lanes.lanes = 0;
-      });
+        markEnd(ray, sink, counts);  // (one voxel: nothing crossed)
+      },
+      marked);
   return queued;
 }
 
