@@ -31,7 +31,7 @@ TEST(ServerConfig, TheShippedConfigIsValidAndEqualsTheDefaults) {
   EXPECT_EQ(options->max_range_m, defaults->max_range_m);
   EXPECT_EQ(options->queue_depth, defaults->queue_depth);
   EXPECT_EQ(options->method, defaults->method);
-  EXPECT_EQ(defaults->method, IntegrationMethod::kSuperRayCulling);
+  EXPECT_EQ(defaults->method, IntegrationMethod::kRaycast);
   EXPECT_EQ(options->rule, UpdateRule::kSet);
   EXPECT_FALSE(options->kernel) << "log-odds is the default map kind";
   EXPECT_FALSE(options->upsample) << "no upsampling unless enabled";

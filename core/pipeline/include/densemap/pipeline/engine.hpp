@@ -23,7 +23,7 @@ struct PipelineOptions {
   double resolution_m = 0.2;
   SensorProbabilities sensor;
   double max_range_m = -1.0;  // < 0: unlimited
-  IntegrationMethod method = IntegrationMethod::kSuperRayCulling;
+  IntegrationMethod method = IntegrationMethod::kRaycast;
   UpdateRule rule = UpdateRule::kSet;
   /// The map kind: std::nullopt for the log-odds map (OctoMap's semantics, `method`, `rule`),
   /// or a dense kernel map (AKIMap, BGKOctoMap, BGKOctoMap-L; their published settings). A
