@@ -1241,6 +1241,20 @@ std::size_t fixQueue(const std::vector<Walk>& queue, Convert convert,
   return m;
 }
 
+/// walkEightFixed over `walks`, the indices of those it hands over appended to `handed` (and
+/// added to `counted`). Returns how many marks it pended.
+std::size_t walkFixedHanding(const DenseMarks::FixedWalk* walks, std::size_t m,
+                             std::uint32_t* pend_w, std::uint32_t* pend_b,
+                             std::vector<std::uint32_t>& handed, std::size_t& counted) {
+  std::size_t n_handed = handed.size();
+  const std::size_t before = n_handed;
+  handed.resize(n_handed + m);
+  const std::size_t n_pend = walkEightFixed(walks, m, pend_w, pend_b, handed.data(), n_handed);
+  handed.resize(n_handed);
+  counted += n_handed - before;
+  return n_pend;
+}
+
 }  // namespace
 
 unsigned DenseMarks::queueFixedLanes(const TraversalLanes& lanes, int n, const VoxelKey& first,
@@ -1298,13 +1312,8 @@ void DenseMarks::markFixedQueued(std::vector<std::uint32_t>& handed_over) {
   const std::size_t m = n_fixed_;
   if (m == 0) return;
   pendRoom(fixed_steps_, pend32_w_, pend32_b_);
-  std::size_t n_handed = handed_over.size();
-  const std::size_t before = n_handed;
-  handed_over.resize(n_handed + m);
-  finishPended32(walkEightFixed(fixed_queue_.data(), m, pend32_w_.data(), pend32_b_.data(),
-                                handed_over.data(), n_handed));
-  handed_over.resize(n_handed);
-  fixed_handed_ += n_handed - before;
+  finishPended32(walkFixedHanding(fixed_queue_.data(), m, pend32_w_.data(), pend32_b_.data(),
+                                  handed_over, fixed_handed_));
   n_fixed_ = 0;
   fixed_steps_ = 0;
   fixed_first_ = kNoVoxel;
@@ -1312,13 +1321,9 @@ void DenseMarks::markFixedQueued(std::vector<std::uint32_t>& handed_over) {
 
 void DenseMarks::markQueuedFixed() {
   const std::size_t m = fixQueue(queue_, toFixed, fixed_, handed_ids_, pend32_w_, pend32_b_);
-  std::size_t n_handed = handed_ids_.size();
-  const std::size_t out_of_range = n_handed;
-  handed_ids_.resize(n_handed + m);
-  finishPended32(walkEightFixed(fixed_.data(), m, pend32_w_.data(), pend32_b_.data(),
-                                handed_ids_.data(), n_handed));
-  handed_ids_.resize(n_handed);
-  fixed_handed_ += n_handed - out_of_range;
+  // (handed_ids_ starts with the walks out of range: not counted as handed over.)
+  finishPended32(walkFixedHanding(fixed_.data(), m, pend32_w_.data(), pend32_b_.data(), handed_ids_,
+                                  fixed_handed_));
   if (!handed_ids_.empty()) {
     handed_.clear();
     std::size_t handed_steps = 0;
