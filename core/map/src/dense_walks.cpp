@@ -1096,30 +1096,30 @@ void fixedPlace(const DenseMarks::WalkPlace& at, DenseMarks::FixedWalk& f) {
   return true;
 }
 
-/// The lanes of `r` (startTraversalLanes') that `lanes` names in kFixedEight's terms, eight at a
-/// time: fixedTimes (the times and deltas, the slack and the steps: the first eight fields of a
-/// FixedWalk) of each, the same operations side by side, in `rows` (row l: lane l's). Returns
-/// the lanes in its range with a counted walk (kClean, countedTotal from kCountedStepsFrom) whose
-/// end key is in the box of keys [lo, lo + span) per axis.
+/// Eight 32-bit lanes from memory; two halves of four as one vector.
 [[gnu::target("avx2"), gnu::always_inline]] inline __m256i load8(const std::int32_t* p) {
   return _mm256_load_si256(reinterpret_cast<const __m256i*>(p));
 }
 [[gnu::target("avx2"), gnu::always_inline]] inline __m256i whole(const __m128i (&v)[2]) {
   return _mm256_set_m128i(v[1], v[0]);
 }
+/// The lanes of `r` (startTraversalLanes') that `lanes` names in kFixedEight's terms, eight at a
+/// time: fixedTimes (the times and deltas, the slack and the steps: the first eight fields of a
+/// FixedWalk) of each, the same operations side by side, in `rows` (row l: lane l's). Returns
+/// the lanes in its range with a counted walk (kClean, countedTotal from kCountedStepsFrom) whose
+/// end key is in the box of keys [lo, lo + span) per axis.
 [[gnu::target("avx2")]] unsigned fixedLanes(const TraversalLanes& r, unsigned lanes,
                                             const unsigned (&lo)[3], const unsigned (&span)[3],
                                             std::int32_t (&rows)[8][8]) {
-  const auto load = load8;
   const __m256i total =
-      _mm256_add_epi32(_mm256_add_epi32(load(r.cr[0]), load(r.cr[1])), load(r.cr[2]));
+      _mm256_add_epi32(_mm256_add_epi32(load8(r.cr[0]), load8(r.cr[1])), load8(r.cr[2]));
   const __m256i steps = _mm256_sub_epi32(total, _mm256_set1_epi32(1));
   // Counted (total >= kCountedStepsFrom, so steps > 0) and at most 2^20 steps.
   __m256i ok = _mm256_andnot_si256(_mm256_cmpgt_epi32(_mm256_set1_epi32(kCountedStepsFrom), total),
                                    _mm256_cmpgt_epi32(_mm256_set1_epi32((1 << 20) + 1), steps));
   for (int a = 0; a < 3; ++a) {  // (key - lo) <= span - 1, unsigned
     const __m256i d =
-        _mm256_sub_epi32(load(r.key_end[a]), _mm256_set1_epi32(static_cast<int>(lo[a])));
+        _mm256_sub_epi32(load8(r.key_end[a]), _mm256_set1_epi32(static_cast<int>(lo[a])));
     const __m256i top = _mm256_set1_epi32(static_cast<int>(span[a] - 1));
     ok = _mm256_and_si256(ok, _mm256_cmpeq_epi32(_mm256_max_epu32(d, top), top));
   }
