@@ -468,8 +468,10 @@ struct FourPlaces {
 }
 
 /// The 32-bit lanes a mask names, packed to the front (a permute's indices), per 8-bit mask.
+/// And per lane, all-ones in the 32-bit lanes but that one.
 struct EightLaneTable {
   alignas(32) std::int32_t pack32[256][8];
+  alignas(32) std::int32_t others[8][8];
 };
 constexpr EightLaneTable makeEightLaneTable() {
   EightLaneTable t{};
@@ -478,6 +480,9 @@ constexpr EightLaneTable makeEightLaneTable() {
     for (int i = 0; i < 8; ++i) {
       if ((m >> i & 1) != 0) t.pack32[m][n++] = i;
     }
+  }
+  for (int lane = 0; lane < 8; ++lane) {
+    for (int i = 0; i < 8; ++i) t.others[lane][i] = i == lane ? 0 : -1;
   }
   return t;
 }
@@ -534,6 +539,10 @@ constexpr EightLaneTable kEight = makeEightLaneTable();
   static_assert(kD1 == 1 && kD2 == 2 && kSlack == 3 && kFlip == 4 && kC0 == 5 && kC1 == 6 &&
                 kC2 == 7 && kOne == 8 && kEdge == 9 && kEdge2 == 10 && kLow5 == 11 &&
                 kMinus2 == 12 && sizeof(__m256i) == 32);
+  using Walk = DenseMarks::FixedWalk;  // (the refill's assembly reads its fields at these)
+  static_assert(offsetof(Walk, t) == 0 && offsetof(Walk, d) == 12 && offsetof(Walk, slack) == 24 &&
+                offsetof(Walk, steps) == 28 && offsetof(Walk, addr) == 32 &&
+                offsetof(Walk, flip) == 36 && offsetof(Walk, cross) == 40);
   const __m256i zero = _mm256_setzero_si256();
   // A lane without a walk has this slack: every time is above its threshold (no step, no
   // hand-over).
@@ -560,25 +569,60 @@ constexpr EightLaneTable kEight = makeEightLaneTable();
       cur_b = _mm256_and_si256(cur_b, active);
       ro[kSlack] = _mm256_blendv_epi8(no_walk, ro[kSlack], active);
       // Idle lanes take the next walks.
+      // (In assembly: written with the intrinsics, GCC moved the read-only vectors out of
+      // `ro` into other stack slots and registers around this loop and back after it, some 150
+      // instructions a walk; this is 45.)
       for (unsigned idle = ~act & 0xffU; idle != 0 && next < n; idle &= idle - 1, ++next) {
         const DenseMarks::FixedWalk& w = walks[next];
         const int lane = std::countr_zero(idle);
         lane_walk[lane] = w.index;
-        const __m256i k = lanesOf(1U << lane);
-        putLanes32(t0, k, w.t[0]);
-        putLanes32(t1, k, w.t[1]);
-        putLanes32(t2, k, w.t[2]);
-        putLanes32(ro[kD0], k, w.d[0]);
-        putLanes32(ro[kD1], k, w.d[1]);
-        putLanes32(ro[kD2], k, w.d[2]);
-        putLanes32(ro[kSlack], k, w.slack);
-        putLanes32(left, k, w.steps);
-        putLanes32(addr, k, w.addr);
-        putLanes32(ro[kFlip], k, w.flip);
-        putLanes32(ro[kC0], k, w.cross[0]);
-        putLanes32(ro[kC1], k, w.cross[1]);
-        putLanes32(ro[kC2], k, w.cross[2]);
-        putLanes32(cur_w, k, (w.addr ^ w.flip) >> 5);
+        const std::int32_t word = (w.addr ^ w.flip) >> 5;
+        __m256i x, k;
+        // Each field broadcast, and taken in `lane` (the others keep theirs: `others`' lanes).
+        asm("vmovdqa (%[others]), %t[k]\n\t"
+            "vpbroadcastd 0(%[w]), %t[x]\n\t"
+            "vpblendvb %t[k], %t[t0], %t[x], %t[t0]\n\t"
+            "vpbroadcastd 4(%[w]), %t[x]\n\t"
+            "vpblendvb %t[k], %t[t1], %t[x], %t[t1]\n\t"
+            "vpbroadcastd 8(%[w]), %t[x]\n\t"
+            "vpblendvb %t[k], %t[t2], %t[x], %t[t2]\n\t"
+            "vpbroadcastd 28(%[w]), %t[x]\n\t"
+            "vpblendvb %t[k], %t[left], %t[x], %t[left]\n\t"
+            "vpbroadcastd 32(%[w]), %t[x]\n\t"
+            "vpblendvb %t[k], %t[addr], %t[x], %t[addr]\n\t"
+            "vmovd %[word], %x[x]\n\t"
+            "vpbroadcastd %x[x], %t[x]\n\t"
+            "vpblendvb %t[k], %t[cur_w], %t[x], %t[cur_w]\n\t"
+            // d0, d1, d2 (ro 0-2), slack (3), flip (4), the crossings (5-7)
+            "vpbroadcastd 12(%[w]), %t[x]\n\t"
+            "vpblendvb %t[k], 0(%[ro]), %t[x], %t[x]\n\t"
+            "vmovdqa %t[x], 0(%[ro])\n\t"
+            "vpbroadcastd 16(%[w]), %t[x]\n\t"
+            "vpblendvb %t[k], 32(%[ro]), %t[x], %t[x]\n\t"
+            "vmovdqa %t[x], 32(%[ro])\n\t"
+            "vpbroadcastd 20(%[w]), %t[x]\n\t"
+            "vpblendvb %t[k], 64(%[ro]), %t[x], %t[x]\n\t"
+            "vmovdqa %t[x], 64(%[ro])\n\t"
+            "vpbroadcastd 24(%[w]), %t[x]\n\t"
+            "vpblendvb %t[k], 96(%[ro]), %t[x], %t[x]\n\t"
+            "vmovdqa %t[x], 96(%[ro])\n\t"
+            "vpbroadcastd 36(%[w]), %t[x]\n\t"
+            "vpblendvb %t[k], 128(%[ro]), %t[x], %t[x]\n\t"
+            "vmovdqa %t[x], 128(%[ro])\n\t"
+            "vpbroadcastd 40(%[w]), %t[x]\n\t"
+            "vpblendvb %t[k], 160(%[ro]), %t[x], %t[x]\n\t"
+            "vmovdqa %t[x], 160(%[ro])\n\t"
+            "vpbroadcastd 44(%[w]), %t[x]\n\t"
+            "vpblendvb %t[k], 192(%[ro]), %t[x], %t[x]\n\t"
+            "vmovdqa %t[x], 192(%[ro])\n\t"
+            "vpbroadcastd 48(%[w]), %t[x]\n\t"
+            "vpblendvb %t[k], 224(%[ro]), %t[x], %t[x]\n\t"
+            "vmovdqa %t[x], 224(%[ro])"
+            : [t0] "+x"(t0), [t1] "+x"(t1), [t2] "+x"(t2), [left] "+x"(left), [addr] "+x"(addr),
+              [cur_w] "+x"(cur_w), [x] "=&x"(x), [k] "=&x"(k),
+              "+m"(*reinterpret_cast<__m256i(*)[13]>(ro))
+            : [w] "r"(&w), [ro] "r"(ro), [others] "r"(kEight.others[lane]), [word] "r"(word),
+              "m"(w), "m"(kEight.others[lane]));
         act |= 1U << lane;
       }
       live = act;
