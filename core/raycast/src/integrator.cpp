@@ -11,6 +11,7 @@
 
 #include "densemap/geometry/stopwatch.hpp"
 #include "densemap/parallel/tbb_runner.hpp"
+#include "densemap/raycast/ray_ends.hpp"
 
 namespace densemap {
 namespace {
@@ -70,9 +71,10 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
                     [&](const tbb::blocked_range<std::size_t>& range) {
                       KeyBox local{};
                       bool any = false;
+                      rayEndsInto(grid, origin_world, points_world.data() + range.begin(),
+                                  range.size(), options_.max_range_m, rays_.data() + range.begin());
                       for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                        RayEnd& r = rays_[i];
-                        rayEndInto(grid, origin_world, points_world[i], options_.max_range_m, r);
+                        const RayEnd& r = rays_[i];
                         if (!r.key_valid) continue;
                         if (!any) local = {r.key, r.key};
                         any = true;
