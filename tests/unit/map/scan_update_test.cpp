@@ -138,6 +138,48 @@ TEST(DenseMarks, GivesTheSameUpdateAsTheHashInsideAndOutsideItsBox) {
   }
 }
 
+// markOccupiedLanes marks the lanes' keys in the box as markOccupied does and names the others.
+TEST(DenseMarks, OccupiedLanesAreMarkOccupiedKeyByKey) {
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<int> coord(32700, 32800);
+  std::uniform_int_distribution<unsigned> lanes(0, 255);
+  DenseMarks dense, one;
+  for (int round = 0; round < 3; ++round) {
+    ASSERT_TRUE(dense.reset({32720, 32730, 32740}, {32790, 32780, 32770}, 1000));
+    ASSERT_TRUE(one.reset({32720, 32730, 32740}, {32790, 32780, 32770}, 1000));
+    ScanUpdate plain, sut;
+    std::size_t outside = 0, inside = 0;
+    for (int i = 0; i < 2000; ++i) {
+      VoxelKey keys[8];
+      for (VoxelKey& k : keys) {
+        k = {static_cast<std::uint16_t>(coord(rng)), static_cast<std::uint16_t>(coord(rng)),
+             static_cast<std::uint16_t>(coord(rng))};
+      }
+      const unsigned which = lanes(rng);
+      const unsigned out = dense.markOccupiedLanes(keys, which);
+      for (int l = 0; l < 8; ++l) {
+        if ((which >> l & 1U) == 0) continue;
+        one.markOccupied(keys[l], plain);
+        ScanUpdate alone;
+        one.markOccupied(keys[l], alone);
+        EXPECT_EQ((out >> l & 1U) != 0, !alone.empty()) << "lane " << l;  // outside the box
+        if ((out >> l & 1U) != 0) {
+          sut.markOccupied(keys[l]);
+          ++outside;
+        } else {
+          ++inside;
+        }
+      }
+      EXPECT_EQ(out & ~which, 0U);
+    }
+    dense.flushInto(sut);
+    one.flushInto(plain);
+    EXPECT_EQ(cellsOf(sut), cellsOf(plain)) << "round " << round;
+    EXPECT_GT(outside, 500U);
+    EXPECT_GT(inside, 500U);
+  }
+}
+
 TEST(DenseMarks, AResetDropsMarksAScanLeftUnflushed) {
   DenseMarks dense;
   ASSERT_TRUE(dense.reset({32720, 32730, 32740}, {32790, 32780, 32770}, 1000));

@@ -73,6 +73,26 @@ class DenseMarks {
     touch(i);
     block::setBit(occupied_[i], block::indexOf(k));
   }
+  /// markOccupied for keys[l], the lanes l of `lanes` (up to 8), the first-touch bookkeeping
+  /// in locals; returns the lanes whose key is outside the box (the caller's to mark).
+  unsigned markOccupiedLanes(const VoxelKey* keys, unsigned lanes) {
+    std::uint8_t* const seen = seen_.data();
+    std::uint32_t* const touched = touched_.data();
+    std::size_t count = touched_count_;
+    unsigned outside = 0;
+    for (unsigned m = lanes; m != 0; m &= m - 1) {
+      const int l = std::countr_zero(m);
+      const std::uint32_t i = blockIndexIn(keys[l], min_, n_);
+      if (i == kOutside) {
+        outside |= 1U << l;
+        continue;
+      }
+      touchIn(i, seen, touched, count);
+      block::setBit(occupied_[i], block::indexOf(keys[l]));
+    }
+    touched_count_ = count;
+    return outside;
+  }
 
   /// ORs the marks into `update` and clears them.
   void flushInto(ScanUpdate& update);

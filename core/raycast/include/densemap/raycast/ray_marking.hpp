@@ -1,5 +1,6 @@
 #pragma once
 
+#include <bit>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -331,18 +332,26 @@ inline std::size_t markRaysQueued(const VoxelGrid& grid, const Point3f& origin, 
         [&](const Point3f* ends, const VoxelKey* keys, const std::uint32_t* lane_ray, int n) {
           startTraversalLanes(grid, origin, origin_key, ends, keys, n, lanes);
           const unsigned done = sink.dense.queueFixedLanes(lanes, n, origin_key, lane_ray);
+          unsigned occupied = 0;  // the lanes whose end voxel markEnd would mark (keys[l])
           for (int l = 0; l < n; ++l) {
             const RayEnd& ray = rays[lane_ray[l]];
             if ((done >> l & 1U) != 0) {
               counts.visits += static_cast<std::size_t>(lanes.cr[0][l] + lanes.cr[1][l] +
                                                         lanes.cr[2][l]);  // (countedTotal)
               ++queued;
-              markEnd(ray, sink, counts);
+              occupied |= (ray.occupied ? 1U : 0U) << l;
             } else if ((lanes.same >> l & 1U) != 0 || (lanes.has_length >> l & 1U) == 0) {
-              markEnd(ray, sink, counts);  // (kSameVoxel: one voxel, nothing crossed)
+              // (kSameVoxel: one voxel, nothing crossed)
+              occupied |= (ray.occupied ? 1U : 0U) << l;
             } else {
               marked(lane_ray[l]);
             }
+          }
+          // markEnd's marks (every key here is valid) and counts, the lanes' together.
+          counts.visits += static_cast<std::size_t>(std::popcount(occupied));
+          for (unsigned out = sink.dense.markOccupiedLanes(keys, occupied); out != 0;
+               out &= out - 1) {
+            sink.update.markOccupied(keys[std::countr_zero(out)]);
           }
         },
         marked);
