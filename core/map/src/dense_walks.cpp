@@ -571,7 +571,7 @@ constexpr EightLaneTable kEight = makeEightLaneTable();
       // Idle lanes take the next walks.
       // (In assembly: written with the intrinsics, GCC moved the read-only vectors out of
       // `ro` into other stack slots and registers around this loop and back after it, some 150
-      // instructions a walk; this is 45.)
+      // instructions a walk; this is some 60.)
       for (unsigned idle = ~act & 0xffU; idle != 0 && next < n; idle &= idle - 1, ++next) {
         const DenseMarks::FixedWalk& w = walks[next];
         const int lane = std::countr_zero(idle);

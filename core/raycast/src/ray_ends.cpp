@@ -25,11 +25,11 @@ namespace {
 /// [-kMaxKey, kMaxKey), floored, plus kMaxKey; 0 where outside): the keys as 32-bit lanes and
 /// the lanes inside as all-ones.
 [[gnu::target("avx2"), gnu::always_inline]] inline __m128i keysOfFour(__m128 coords, __m256d factor,
-                                                                     __m128i& inside) {
+                                                                      __m128i& inside) {
   const __m256d scaled = _mm256_mul_pd(factor, _mm256_cvtps_pd(coords));
-  const __m256d in = _mm256_and_pd(
-      _mm256_cmp_pd(scaled, _mm256_set1_pd(-VoxelGrid::kMaxKey), _CMP_GE_OQ),
-      _mm256_cmp_pd(scaled, _mm256_set1_pd(VoxelGrid::kMaxKey), _CMP_LT_OQ));
+  const __m256d in =
+      _mm256_and_pd(_mm256_cmp_pd(scaled, _mm256_set1_pd(-VoxelGrid::kMaxKey), _CMP_GE_OQ),
+                    _mm256_cmp_pd(scaled, _mm256_set1_pd(VoxelGrid::kMaxKey), _CMP_LT_OQ));
   // floorToInt: the truncation, less one where it is above the value.
   const __m128i t = _mm256_cvttpd_epi32(scaled);
   const __m256d above = _mm256_cmp_pd(_mm256_cvtepi32_pd(t), scaled, _CMP_GT_OQ);
@@ -41,9 +41,9 @@ namespace {
 
 /// The eight points from `points`: their ray ends written where they are clearly within range;
 /// returns the lanes left to rayEndInto.
-[[gnu::target("avx2"), gnu::always_inline]] inline unsigned endsOfEight(const Point3f* points, __m256 ox, __m256 oy, __m256 oz,
-                                             __m256d factor, double near_squared, bool unlimited,
-                                             RayEnd* rays) {
+[[gnu::target("avx2"), gnu::always_inline]] inline unsigned endsOfEight(
+    const Point3f* points, __m256 ox, __m256 oy, __m256 oz, __m256d factor, double near_squared,
+    bool unlimited, RayEnd* rays) {
   static_assert(sizeof(Point3f) == 3 * sizeof(float));
   const __m256i at = _mm256_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21);
   const auto* base = reinterpret_cast<const float*>(points);
@@ -52,8 +52,8 @@ namespace {
   const __m256 z = _mm256_i32gather_ps(base + 2, at, 4);
   const __m256 dx = _mm256_sub_ps(x, ox), dy = _mm256_sub_ps(y, oy), dz = _mm256_sub_ps(z, oz);
   // (dx dx + dy dy) + dz dz in floats, as rayEndInto (no fused multiply-add in this target).
-  const __m256 squared = _mm256_add_ps(
-      _mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)), _mm256_mul_ps(dz, dz));
+  const __m256 squared = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
+                                       _mm256_mul_ps(dz, dz));
   const __m256d limit = _mm256_set1_pd(near_squared);
   const unsigned near_lo = static_cast<unsigned>(_mm256_movemask_pd(
       _mm256_cmp_pd(_mm256_cvtps_pd(_mm256_castps256_ps128(squared)), limit, _CMP_LT_OQ)));
@@ -104,16 +104,16 @@ namespace {
   const double near_squared = max_range_m * max_range_m * (1 - 0x1p-40);
   const bool unlimited = max_range_m < 0.0;
   for (std::size_t g = 0; g < n / 8; ++g) {
-    rest[g] = static_cast<std::uint8_t>(endsOfEight(points + 8 * g, ox, oy, oz, factor,
-                                                    near_squared, unlimited, rays + 8 * g));
+    rest[g] = static_cast<std::uint8_t>(
+        endsOfEight(points + 8 * g, ox, oy, oz, factor, near_squared, unlimited, rays + 8 * g));
   }
 }
 #endif
 
 }  // namespace
 
-void rayEndsInto(const VoxelGrid& grid, const Point3f& origin, const Point3f* points,
-                 std::size_t n, double max_range_m, RayEnd* rays) {
+void rayEndsInto(const VoxelGrid& grid, const Point3f& origin, const Point3f* points, std::size_t n,
+                 double max_range_m, RayEnd* rays) {
   std::size_t i = 0;
 #ifdef DENSEMAP_WIDE_ENDS
   if (hasFourLanes()) {

@@ -41,8 +41,8 @@ std::vector<Point3f> hardPoints(const VoxelGrid& grid, const Point3f& origin, do
         p = Point3f(std::round(p.x() / res) * res, std::round(p.y() / res) * res, p.z());
         break;
       case 3:  // at or past a face of the addressable cube
-        p[static_cast<int>(i % 3)] = (unit(rng) < 0 ? -1.0F : 1.0F) *
-                                     std::nextafter(edge, kind(rng) < 6 ? 0.0F : 1e9F);
+        p[static_cast<int>(i % 3)] =
+            (unit(rng) < 0 ? -1.0F : 1.0F) * std::nextafter(edge, kind(rng) < 6 ? 0.0F : 1e9F);
         break;
       case 4:
         p[static_cast<int>(i % 3)] = std::numeric_limits<float>::quiet_NaN();

@@ -12,7 +12,7 @@ namespace densemap {
 /// length in the same float operations, the range test, and the keys of the points clearly within
 /// range in double lanes (coordToKey's product, bounds and floor); the points that are not (near
 /// or beyond the range, not finite) are left to rayEndInto.
-void rayEndsInto(const VoxelGrid& grid, const Point3f& origin, const Point3f* points,
-                 std::size_t n, double max_range_m, RayEnd* rays);
+void rayEndsInto(const VoxelGrid& grid, const Point3f& origin, const Point3f* points, std::size_t n,
+                 double max_range_m, RayEnd* rays);
 
 }  // namespace densemap
