@@ -4,7 +4,13 @@
 #include <bit>
 #include <cstring>
 
+#include "huge_pages.hpp"
+
 namespace densemap {
+
+void* DenseMarks::zeroedPages(std::size_t bytes) { return mapHugePages(bytes); }
+
+void DenseMarks::freePages(void* p, std::size_t bytes) { unmapHugePages(p, bytes); }
 
 bool DenseMarks::reset(const VoxelKey& min, const VoxelKey& max, std::size_t max_blocks) {
   discard();  // marks a scan left unflushed (it threw) are not the next scan's
