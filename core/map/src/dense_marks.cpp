@@ -135,16 +135,19 @@ void DenseMarks::flushAllInto(std::span<DenseMarks* const> others, ScanUpdate& u
   // blocks one after the other, which it does faster than in the walks' order (BALM 0.1 m, one
   // thread: 8.3 ms a scan against 15.1-15.9 for the lanes' interleaved order).
   orderTouched(runner);
-  // Chunks of the list: the others' marks ORed in (and cleared there), the blocks holding marks
-  // counted (a walk may enter a block and stop before marking), then written out in order at
-  // their chunk's offset. Chunks own distinct blocks, so they may run at once.
+  // Chunks of the list in one pass: the others' marks ORed in (and cleared there), then the
+  // blocks holding marks written out (a walk may enter a block and stop before marking) from
+  // the start of their chunk's room, and cleared. Chunks own distinct blocks and rooms, so
+  // they may run at once. (Two passes, a count of the blocks holding marks and then the
+  // write-out at their exact places, read every block's marks twice.)
   constexpr std::size_t kChunk = 512, kAhead = 8;
   const std::size_t n = touched_count_;
   const std::size_t chunks = (n + kChunk - 1) / kChunk;
   chunk_held_.assign(chunks + 1, 0);
+  const std::size_t first = update.appendBlocks(n);  // room for every listed block
   runner.run(chunks, 1, [&](std::size_t begin, std::size_t end) {
     for (std::size_t c = begin; c != end; ++c) {
-      std::size_t held = 0;
+      std::size_t at = first + c * kChunk;
       const std::size_t to = std::min(n, (c + 1) * kChunk);
       for (std::size_t t = c * kChunk; t < to; ++t) {
         // The blocks are all over the box (cache misses): a few ahead are fetched meanwhile.
@@ -166,23 +169,6 @@ void DenseMarks::flushAllInto(std::span<DenseMarks* const> others, ScanUpdate& u
           }
           other->clearBlock(i);
         }
-        held += (block::anyBit(masks_[i]) || block::anyBit(occupied_[i])) ? 1 : 0;
-      }
-      chunk_held_[c + 1] = held;
-    }
-  });
-  for (std::size_t c = 0; c < chunks; ++c) chunk_held_[c + 1] += chunk_held_[c];
-  const std::size_t first = update.appendBlocks(chunk_held_[chunks]);
-  runner.run(chunks, 1, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t c = begin; c != end; ++c) {
-      std::size_t at = first + chunk_held_[c];
-      const std::size_t to = std::min(n, (c + 1) * kChunk);
-      for (std::size_t t = c * kChunk; t < to; ++t) {
-        if (t + kAhead < to) {
-          __builtin_prefetch(&masks_[touched_[t + kAhead]]);
-          __builtin_prefetch(&occupied_[touched_[t + kAhead]]);
-        }
-        const std::uint32_t i = touched_[t];
         if (block::anyBit(masks_[i]) || block::anyBit(occupied_[i])) {
           auto& [key, b] = update.blockAt(at++);
           key = blockKeyAt(i);
@@ -191,8 +177,22 @@ void DenseMarks::flushAllInto(std::span<DenseMarks* const> others, ScanUpdate& u
         }
         clearBlock(i);
       }
+      chunk_held_[c + 1] = at - (first + c * kChunk);
     }
   });
+  // A chunk that wrote fewer blocks than it listed left a gap: the later chunks' blocks move
+  // down over it, in order.
+  std::size_t end = first;
+  for (std::size_t c = 0; c < chunks; ++c) {
+    const std::size_t from = first + c * kChunk, held = chunk_held_[c + 1];
+    if (end != from) {
+      for (std::size_t k = 0; k < held; ++k) {
+        update.blockAt(end + k) = std::move(update.blockAt(from + k));
+      }
+    }
+    end += held;
+  }
+  update.truncateBlocks(end);
   forgetList();
   for (DenseMarks* other : same) other->forgetList();  // their blocks are cleared already
   for (DenseMarks* other : apart) other->flushInto(update);

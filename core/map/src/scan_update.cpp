@@ -62,6 +62,16 @@ std::size_t ScanUpdate::appendBlocks(std::size_t n) {
   return first;
 }
 
+void ScanUpdate::truncateBlocks(std::size_t n) {
+  if (n >= blocks_.size()) return;
+  blocks_.resize(n);
+  cached_key_ = kEmpty;
+  if (indexed_ > n) {
+    grow(n);  // the slots indexed blocks that are gone: the rest indexed again
+    indexed_ = n;
+  }
+}
+
 void ScanUpdate::grow(std::size_t blocks) {
   std::size_t size = std::max<std::size_t>(1024, slot_keys_.size() * 2);
   while (size < blocks * 2) size *= 2;

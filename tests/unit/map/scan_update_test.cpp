@@ -288,6 +288,79 @@ TEST(DenseMarks, FlushingAllWorkersMarksGivesTheUpdateOfAll) {
   }
 }
 
+// Blocks a walk entered and left without a mark (a culled walk may stop there) are listed but
+// hold nothing: the flush leaves them out, the blocks after them in the box's order moved down
+// over the gaps (flushAllInto writes each chunk of the list from its own room's start).
+TEST(DenseMarks, FlushingLeavesOutBlocksEnteredWithoutMarks) {
+  const BackwardRunner backward;
+  for (const ChunkRunner* runner :
+       {&serialRunner(), &tbbRunner(), static_cast<const ChunkRunner*>(&backward)}) {
+    std::mt19937 rng(11);
+    std::uniform_int_distribution<int> coord(32600, 32800);
+    const VoxelKey lo{32600, 32610, 32620}, hi{32790, 32780, 32770};
+    DenseMarks a, b;
+    ASSERT_TRUE(a.reset(lo, hi, 100000));
+    ASSERT_TRUE(b.reset(lo, hi, 100000));
+    ScanUpdate plain, outside;
+    std::set<std::uint64_t> marked, entered_only;
+    for (int i = 0; i < 40000; ++i) {
+      const VoxelKey k{static_cast<std::uint16_t>(coord(rng)),
+                       static_cast<std::uint16_t>(coord(rng)),
+                       static_cast<std::uint16_t>(coord(rng))};
+      DenseMarks& into = i % 2 == 0 ? a : b;
+      bool inside = true;  // the box is whole blocks
+      for (int axis = 0; axis < 3; ++axis) {
+        inside = inside && (k[axis] >> 3) >= (lo[axis] >> 3) && (k[axis] >> 3) <= (hi[axis] >> 3);
+      }
+      if (i % 3 == 0 && inside) {  // entered, not marked
+        DenseMarks::StepMarker walk(into, outside);
+        const int delta[3] = {1, 0, 0};
+        walk.begin(k, delta);
+        walk.finish();
+        entered_only.insert(block::blockOf(k));
+        continue;
+      }
+      if (i % 5 == 0) {
+        plain.markOccupied(k);
+        into.markOccupied(k, outside);
+      } else {
+        plain.markFree(k);
+        into.markFree(k, outside);
+      }
+      if (inside) marked.insert(block::blockOf(k));
+    }
+    std::size_t empty = 0;
+    for (const std::uint64_t key : entered_only) empty += marked.count(key) == 0 ? 1 : 0;
+    EXPECT_GT(empty, 1000U);  // gaps in most chunks
+    const auto zyx = [](std::uint64_t key) {
+      const VoxelKey corner = block::keyOf(key, 0);
+      return std::tuple(corner.z, corner.y, corner.x);
+    };
+    std::vector<std::uint64_t> expected_order(marked.begin(), marked.end());
+    std::sort(expected_order.begin(), expected_order.end(),
+              [&](std::uint64_t p, std::uint64_t q) { return zyx(p) < zyx(q); });
+    ScanUpdate sut;
+    DenseMarks* others[1] = {&b};
+    a.flushAllInto(others, sut, *runner);
+    std::vector<std::uint64_t> got_order;
+    for (const auto& [key, block] : sut.blocks()) {
+      got_order.push_back(key);
+      EXPECT_TRUE(block::anyBit(block.free) || block::anyBit(block.occupied));
+    }
+    EXPECT_EQ(got_order, expected_order);
+    sut.merge(outside);
+    EXPECT_EQ(cellsOf(sut), cellsOf(plain));
+    for (DenseMarks* w : {&a, &b}) {  // flushed: nothing left
+      ScanUpdate left;
+      w->flushInto(left);
+      EXPECT_TRUE(left.empty());
+    }
+    const std::size_t blocks = sut.blocks().size();
+    sut.markFree(block::keyOf(got_order[got_order.size() / 2], 0));
+    EXPECT_EQ(sut.blocks().size(), blocks);
+  }
+}
+
 TEST(DenseMarks, RefusesABoxOverItsBlockLimit) {
   DenseMarks dense;
   EXPECT_FALSE(dense.reset({0, 0, 0}, {799, 799, 799}, 100 * 100 * 99));

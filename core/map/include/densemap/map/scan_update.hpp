@@ -68,6 +68,8 @@ class ScanUpdate {
   /// position of the first new block.
   std::size_t appendBlocks(std::size_t n);
   [[nodiscard]] std::pair<std::uint64_t, Block>& blockAt(std::size_t j) { return blocks_[j]; }
+  /// Drops the blocks from position `n` on (appended room a caller did not fill).
+  void truncateBlocks(std::size_t n);
 
   /// Adds another update (same rule) into this one.
   void merge(const ScanUpdate& other);
