@@ -4,13 +4,7 @@
 #include <bit>
 #include <cstring>
 
-#include "huge_pages.hpp"
-
 namespace densemap {
-
-void* DenseMarks::zeroedPages(std::size_t bytes) { return mapHugePages(bytes); }
-
-void DenseMarks::freePages(void* p, std::size_t bytes) { unmapHugePages(p, bytes); }
 
 bool DenseMarks::reset(const VoxelKey& min, const VoxelKey& max, std::size_t max_blocks) {
   discard();  // marks a scan left unflushed (it threw) are not the next scan's
@@ -28,8 +22,11 @@ bool DenseMarks::reset(const VoxelKey& min, const VoxelKey& max, std::size_t max
     return false;
   }
   if (masks_.size() < blocks) {
-    if (!masks_.assign(blocks) || !occupied_.assign(blocks) || !seen_.assign(blocks) ||
-        !touched_.assign(blocks + 1)) {
+    // Twice the box, up to the limit: a box a little larger than the last one does not map the
+    // arrays again (each time, every page a scan touches is faulted in anew).
+    const std::size_t room = std::max(blocks, std::min(max_blocks, 2 * blocks));
+    if (!masks_.assign(room) || !occupied_.assign(room) || !seen_.assign(room) ||
+        !touched_.assign(room + 1)) {
       masks_.assign(0);
       n_[0] = n_[1] = n_[2] = 0;
       return false;

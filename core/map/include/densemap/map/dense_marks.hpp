@@ -598,41 +598,28 @@ class DenseMarks {
   void orderTouched(const ChunkRunner& runner);
   void forgetList();
 
-  /// Zeroed memory for `bytes` on huge pages where the kernel gives them (mapHugePages: the
-  /// walks' marks land all over the box, and with 4 KiB pages most missed the TLB; pages never
-  /// touched stay unmapped); null when out of memory or when `bytes` is 0.
-  static void* zeroedPages(std::size_t bytes);
-  static void freePages(void* p, std::size_t bytes);
-  /// An array of zeroed Ts on zeroedPages (the largest box, 2^21 blocks, is 128 MiB of masks
-  /// per array, of which a scan touches a part; a vector would write them all).
+  /// An array of zeroed Ts from calloc: the pages a scan never touches stay unmapped (the
+  /// largest box, 2^21 blocks, is 128 MiB of masks per array), where a vector writes them all.
   template <class T>
   class ZeroedArray {
    public:
-    ZeroedArray() = default;
-    ZeroedArray(const ZeroedArray&) = delete;
-    ZeroedArray& operator=(const ZeroedArray&) = delete;
-    ~ZeroedArray() { release(); }
     /// Replaces the contents by n zeroed elements; false when out of memory (then empty).
     bool assign(std::size_t n) {
-      release();
-      if (n == 0 || n > SIZE_MAX / 2 / sizeof(T)) return n == 0;
-      data_ = static_cast<T*>(zeroedPages(n * sizeof(T)));
+      data_.reset(static_cast<T*>(std::calloc(n, sizeof(T))));
       size_ = data_ != nullptr ? n : 0;
       return data_ != nullptr;
     }
     [[nodiscard]] std::size_t size() const { return size_; }
-    [[nodiscard]] T* data() { return data_; }
-    [[nodiscard]] const T* data() const { return data_; }
+    [[nodiscard]] T* data() { return data_.get(); }
+    [[nodiscard]] const T* data() const { return data_.get(); }
     T& operator[](std::size_t i) { return data_[i]; }
     const T& operator[](std::size_t i) const { return data_[i]; }
 
    private:
-    void release() {
-      if (data_ != nullptr) freePages(data_, size_ * sizeof(T));
-      data_ = nullptr;
-      size_ = 0;
-    }
-    T* data_ = nullptr;
+    struct Free {
+      void operator()(T* p) const { std::free(p); }
+    };
+    std::unique_ptr<T[], Free> data_;
     std::size_t size_ = 0;
   };
 
