@@ -8,6 +8,7 @@
 #include <map>
 #include <random>
 #include <set>
+#include <span>
 #include <tuple>
 
 #include "densemap/parallel/tbb_runner.hpp"
@@ -105,9 +106,8 @@ namespace {
 /// Cells of an update as (packed key -> occupied?), for comparing two updates.
 std::map<std::uint64_t, bool> cellsOf(const ScanUpdate& u) {
   std::map<std::uint64_t, bool> cells;
-  u.forEachCell([&](const VoxelKey& k, const CellHits& h) {
-    cells.emplace(k.packed(), h.occupied > 0);
-  });
+  u.forEachCell(
+      [&](const VoxelKey& k, const CellHits& h) { cells.emplace(k.packed(), h.occupied > 0); });
   return cells;
 }
 
@@ -204,14 +204,64 @@ class BackwardRunner final : public ChunkRunner {
   }
 };
 
+/// The runners a flush is checked under: in order, in parallel, and in reverse order.
+std::vector<const ChunkRunner*> flushRunners() {
+  static const BackwardRunner backward;
+  return {&serialRunner(), &tbbRunner(), &backward};
+}
+
+/// Whether `k` is in the dense box from `lo` to `hi` (the box is whole blocks).
+bool inBlockBox(const VoxelKey& k, const VoxelKey& lo, const VoxelKey& hi) {
+  bool inside = true;
+  for (int axis = 0; axis < 3; ++axis) {
+    inside = inside && (k[axis] >> 3) >= (lo[axis] >> 3) && (k[axis] >> 3) <= (hi[axis] >> 3);
+  }
+  return inside;
+}
+
+/// Sorts block keys in the box's block order: x fastest, then y, then z.
+void sortInBoxOrder(std::vector<std::uint64_t>::iterator first,
+                    std::vector<std::uint64_t>::iterator last) {
+  const auto zyx = [](std::uint64_t key) {
+    const VoxelKey corner = block::keyOf(key, 0);
+    return std::tuple(corner.z, corner.y, corner.x);
+  };
+  std::sort(first, last, [&](std::uint64_t p, std::uint64_t q) { return zyx(p) < zyx(q); });
+}
+
+/// Marks `k` (occupied or free) in the plain update and in a worker's dense marks alike.
+void markBoth(const VoxelKey& k, bool occupied, ScanUpdate& plain, DenseMarks& into,
+              ScanUpdate& outside) {
+  if (occupied) {
+    plain.markOccupied(k);
+    into.markOccupied(k, outside);
+  } else {
+    plain.markFree(k);
+    into.markFree(k, outside);
+  }
+}
+
+/// After a flush: every worker's marks are cleared, and the update's index finds the blocks
+/// the flush appended (marking one again adds no block).
+void expectFlushedAndIndexed(std::span<DenseMarks* const> workers, ScanUpdate& sut,
+                             const std::vector<std::uint64_t>& got_order) {
+  for (DenseMarks* w : workers) {
+    ScanUpdate left;
+    w->flushInto(left);
+    EXPECT_TRUE(left.empty());
+  }
+  ASSERT_FALSE(got_order.empty());
+  const std::size_t blocks = sut.blocks().size();
+  sut.markFree(block::keyOf(got_order[got_order.size() / 2], 0));
+  EXPECT_EQ(sut.blocks().size(), blocks);
+}
+
 // Several workers' marks flushed together (flushAllInto: the same box ORed in by block index in
 // chunks, another box flushed after) give the update of all the marks, the box's blocks in
 // block order and then the other box's, whichever order the chunks run in; every worker's
 // marks are cleared.
 TEST(DenseMarks, FlushingAllWorkersMarksGivesTheUpdateOfAll) {
-  const BackwardRunner backward;
-  for (const ChunkRunner* runner :
-       {&serialRunner(), &tbbRunner(), static_cast<const ChunkRunner*>(&backward)}) {
+  for (const ChunkRunner* runner : flushRunners()) {
     std::mt19937 rng(8);
     std::uniform_int_distribution<int> coord(32600, 32800);
     const VoxelKey lo{32600, 32610, 32620}, hi{32790, 32780, 32770};
@@ -235,19 +285,9 @@ TEST(DenseMarks, FlushingAllWorkersMarksGivesTheUpdateOfAll) {
                        static_cast<std::uint16_t>(coord(rng))};
       const int w = i % 7 == 0 ? 3 : i % 3;
       DenseMarks& into = *workers[w];
-      if (i % 5 == 0) {
-        plain.markOccupied(k);
-        into.markOccupied(k, outside);
-      } else {
-        plain.markFree(k);
-        into.markFree(k, outside);
-      }
+      markBoth(k, i % 5 == 0, plain, into, outside);
       const VoxelKey& top = w == 3 ? VoxelKey{32800, 32780, 32770} : hi;
-      bool inside = true;  // the box is whole blocks
-      for (int axis = 0; axis < 3; ++axis) {
-        inside = inside && (k[axis] >> 3) >= (lo[axis] >> 3) && (k[axis] >> 3) <= (top[axis] >> 3);
-      }
-      if (inside && seen[w].insert(block::blockOf(k)).second) {
+      if (inBlockBox(k, lo, top) && seen[w].insert(block::blockOf(k)).second) {
         orders[w]->push_back(block::blockOf(k));
       }
     }
@@ -258,12 +298,7 @@ TEST(DenseMarks, FlushingAllWorkersMarksGivesTheUpdateOfAll) {
     for (const std::uint64_t key : order) {
       if (listed.insert(key).second) expected_order.push_back(key);
     }
-    const auto zyx = [](std::uint64_t key) {  // the box's block order: x fastest, then y, z
-      const VoxelKey corner = block::keyOf(key, 0);
-      return std::tuple(corner.z, corner.y, corner.x);
-    };
-    std::sort(expected_order.begin(), expected_order.end(),
-              [&](std::uint64_t p, std::uint64_t q) { return zyx(p) < zyx(q); });
+    sortInBoxOrder(expected_order.begin(), expected_order.end());
     for (const std::uint64_t key : order_other) {  // the other box's, after, as first marked
       if (listed.insert(key).second) expected_order.push_back(key);
     }
@@ -276,15 +311,7 @@ TEST(DenseMarks, FlushingAllWorkersMarksGivesTheUpdateOfAll) {
     EXPECT_GT(got_order.size(), 2000U);  // many chunks
     sut.merge(outside);
     EXPECT_EQ(cellsOf(sut), cellsOf(plain));
-    for (DenseMarks* w : workers) {  // flushed: nothing left
-      ScanUpdate left;
-      w->flushInto(left);
-      EXPECT_TRUE(left.empty());
-    }
-    // The update's index finds the appended blocks: marking one again adds no block.
-    const std::size_t blocks = sut.blocks().size();
-    sut.markFree(block::keyOf(got_order[got_order.size() / 2], 0));
-    EXPECT_EQ(sut.blocks().size(), blocks);
+    expectFlushedAndIndexed(workers, sut, got_order);
   }
 }
 
@@ -292,9 +319,7 @@ TEST(DenseMarks, FlushingAllWorkersMarksGivesTheUpdateOfAll) {
 // hold nothing: the flush leaves them out, the blocks after them in the box's order moved down
 // over the gaps (flushAllInto writes each chunk of the list from its own room's start).
 TEST(DenseMarks, FlushingLeavesOutBlocksEnteredWithoutMarks) {
-  const BackwardRunner backward;
-  for (const ChunkRunner* runner :
-       {&serialRunner(), &tbbRunner(), static_cast<const ChunkRunner*>(&backward)}) {
+  for (const ChunkRunner* runner : flushRunners()) {
     std::mt19937 rng(11);
     std::uniform_int_distribution<int> coord(32600, 32800);
     const VoxelKey lo{32600, 32610, 32620}, hi{32790, 32780, 32770};
@@ -308,10 +333,7 @@ TEST(DenseMarks, FlushingLeavesOutBlocksEnteredWithoutMarks) {
                        static_cast<std::uint16_t>(coord(rng)),
                        static_cast<std::uint16_t>(coord(rng))};
       DenseMarks& into = i % 2 == 0 ? a : b;
-      bool inside = true;  // the box is whole blocks
-      for (int axis = 0; axis < 3; ++axis) {
-        inside = inside && (k[axis] >> 3) >= (lo[axis] >> 3) && (k[axis] >> 3) <= (hi[axis] >> 3);
-      }
+      const bool inside = inBlockBox(k, lo, hi);
       if (i % 3 == 0 && inside) {  // entered, not marked
         DenseMarks::StepMarker walk(into, outside);
         const int delta[3] = {1, 0, 0};
@@ -320,25 +342,14 @@ TEST(DenseMarks, FlushingLeavesOutBlocksEnteredWithoutMarks) {
         entered_only.insert(block::blockOf(k));
         continue;
       }
-      if (i % 5 == 0) {
-        plain.markOccupied(k);
-        into.markOccupied(k, outside);
-      } else {
-        plain.markFree(k);
-        into.markFree(k, outside);
-      }
+      markBoth(k, i % 5 == 0, plain, into, outside);
       if (inside) marked.insert(block::blockOf(k));
     }
     std::size_t empty = 0;
     for (const std::uint64_t key : entered_only) empty += marked.count(key) == 0 ? 1 : 0;
     EXPECT_GT(empty, 1000U);  // gaps in most chunks
-    const auto zyx = [](std::uint64_t key) {
-      const VoxelKey corner = block::keyOf(key, 0);
-      return std::tuple(corner.z, corner.y, corner.x);
-    };
     std::vector<std::uint64_t> expected_order(marked.begin(), marked.end());
-    std::sort(expected_order.begin(), expected_order.end(),
-              [&](std::uint64_t p, std::uint64_t q) { return zyx(p) < zyx(q); });
+    sortInBoxOrder(expected_order.begin(), expected_order.end());
     ScanUpdate sut;
     DenseMarks* others[1] = {&b};
     a.flushAllInto(others, sut, *runner);
@@ -350,14 +361,8 @@ TEST(DenseMarks, FlushingLeavesOutBlocksEnteredWithoutMarks) {
     EXPECT_EQ(got_order, expected_order);
     sut.merge(outside);
     EXPECT_EQ(cellsOf(sut), cellsOf(plain));
-    for (DenseMarks* w : {&a, &b}) {  // flushed: nothing left
-      ScanUpdate left;
-      w->flushInto(left);
-      EXPECT_TRUE(left.empty());
-    }
-    const std::size_t blocks = sut.blocks().size();
-    sut.markFree(block::keyOf(got_order[got_order.size() / 2], 0));
-    EXPECT_EQ(sut.blocks().size(), blocks);
+    DenseMarks* const workers[2] = {&a, &b};
+    expectFlushedAndIndexed(workers, sut, got_order);
   }
 }
 
