@@ -366,6 +366,24 @@ TEST(DenseMarks, FlushingLeavesOutBlocksEnteredWithoutMarks) {
   }
 }
 
+// Truncating below the blocks the key index holds: a dropped block marked again is a new
+// block, and the kept ones are still found (no block added for them).
+TEST(ScanUpdate, TruncatingDropsBlocksFromTheIndexToo) {
+  ScanUpdate sut;
+  std::vector<VoxelKey> keys;
+  for (std::uint16_t i = 0; i < 40; ++i) keys.push_back({static_cast<std::uint16_t>(8 * i), 0, 0});
+  for (const VoxelKey& k : keys) sut.markFree(k);  // one block each, all indexed
+  ASSERT_EQ(sut.blocks().size(), keys.size());
+  sut.truncateBlocks(10);
+  ASSERT_EQ(sut.blocks().size(), 10U);
+  for (std::size_t i = 0; i < 10; ++i) sut.markOccupied(keys[i]);
+  EXPECT_EQ(sut.blocks().size(), 10U);
+  sut.markFree(keys[25]);
+  ASSERT_EQ(sut.blocks().size(), 11U);
+  EXPECT_EQ(sut.blocks().back().first, block::blockOf(keys[25]));
+  EXPECT_EQ(sut.occupiedCount(), 10U);
+}
+
 TEST(DenseMarks, RefusesABoxOverItsBlockLimit) {
   DenseMarks dense;
   EXPECT_FALSE(dense.reset({0, 0, 0}, {799, 799, 799}, 100 * 100 * 99));
