@@ -21,7 +21,7 @@ constexpr std::size_t kSlabNodes = kHugePage / sizeof(BlockNode);
 
 /// Entries and tables replaced by a compaction, kept for readers that may still probe them.
 struct BlockStore::Garbage {
-  std::deque<BlockEntry> entries;
+  StableVector<BlockEntry> entries;
   std::vector<std::unique_ptr<Table>> tables;
 };
 
@@ -271,7 +271,6 @@ void BlockStore::compactIfWorthIt() {
   auto garbage = std::make_shared<Garbage>();
   garbage->entries = std::move(entries_);
   garbage->tables = std::move(tables_);
-  entries_ = std::deque<BlockEntry>();
   regions_.clear();
   int bits = kInitialTableBits;
   while ((std::size_t{1} << bits) < alive * 2 + 2) ++bits;
@@ -416,8 +415,8 @@ std::size_t BlockStore::memoryBytes() const {
   for (const auto& t : tables_) table_bytes += (t->mask + 1) * sizeof(void*);
   std::lock_guard lock(pool_mutex_);
   return slabs_.size() * kSlabNodes * sizeof(BlockNode) + table_bytes +
-         entries_.size() * sizeof(BlockEntry) + indexBytes() + free_.capacity() * sizeof(void*) +
-         tombs_.size() * sizeof(ChainLink) +
+         entryBytes() + indexBytes() + free_.capacity() * sizeof(void*) +
+         tombs_.capacityBytes() +
          evidence_blocks_.load(std::memory_order_relaxed) * (sizeof(BlockEvidence) + 16);
 }
 

@@ -298,11 +298,8 @@ ApplyStats GridMap::writeBlocks(std::span<BlockEntry* const> entries, CellChange
 }
 
 ApplyStats GridMap::apply(const ScanUpdate& update, CellChanges* changes) {
-  const auto& update_blocks = update.blocks();
-  std::vector<BlockEntry*> entries(update_blocks.size());
-  std::vector<std::pair<std::uint64_t, const ScanUpdate::Block*>> blocks;
-  blocks.reserve(update_blocks.size());
-  for (const auto& [block_key, cells] : update_blocks) blocks.emplace_back(block_key, &cells);
+  const auto& blocks = update.blocks();
+  std::vector<BlockEntry*>& entries = writeEntries(blocks.size());
   // The blocks' entries looked up side by side (reads only: cache misses), then the missing
   // ones created one after the other, in the update's order.
   runner().run(blocks.size(), 256, [&](std::size_t begin, std::size_t end) {
@@ -316,7 +313,7 @@ ApplyStats GridMap::apply(const ScanUpdate& update, CellChanges* changes) {
   const auto cells_of = [&](std::size_t j) {
     block::BlockMask cells;
     for (std::size_t w = 0; w < cells.size(); ++w) {
-      cells[w] = blocks[j].second->free[w] | blocks[j].second->occupied[w];
+      cells[w] = blocks[j].second.free[w] | blocks[j].second.occupied[w];
     }
     return cells;
   };
@@ -324,7 +321,7 @@ ApplyStats GridMap::apply(const ScanUpdate& update, CellChanges* changes) {
     return writeBlocks(
         entries, changes,
         [&](std::size_t j, BlockWriter& w) {
-          w.applySet(blocks[j].first, *blocks[j].second, model);
+          w.applySet(blocks[j].first, blocks[j].second, model);
         },
         cells_of);
   }
@@ -332,7 +329,7 @@ ApplyStats GridMap::apply(const ScanUpdate& update, CellChanges* changes) {
       entries, changes,
       [&](std::size_t j, BlockWriter& w) {
         ScanUpdate::forEachCellInBlock(
-            blocks[j].first, *blocks[j].second, [&](const VoxelKey& key, const CellHits& hits) {
+            blocks[j].first, blocks[j].second, [&](const VoxelKey& key, const CellHits& hits) {
               const int i = block::indexOf(key);
               w.set(key, i, updatedLogOdds(model, rule, w.known(i) ? w.value(i) : 0.0F, hits));
             });
@@ -427,16 +424,16 @@ EvictStats GridMap::evictBlocks(const std::function<bool(const Point3f&)>& keep,
     }
     return true;
   };
-  store_->forEachRegionWriter([&](const block::BlockBox& box, std::vector<BlockEntry*>& region) {
+  store_->forEachRegionWriter([&](const block::BlockBox& box, auto&& for_each_entry) {
     if (keepsAll(box)) return;
-    for (BlockEntry* e : region) {
-      if (BlockStore::latest(*e) == nullptr) continue;
-      if (keep(block::centreOf(grid(), e->key))) continue;
+    for_each_entry([&](BlockEntry* e) {
+      if (BlockStore::latest(*e) == nullptr) return;
+      if (keep(block::centreOf(grid(), e->key))) return;
       const std::size_t cells = dropBlock(*e, changes);
       known_cells_ -= cells;
       stats.cells += cells;
       ++stats.blocks;
-    }
+    });
   });
   return stats;
 }
@@ -501,7 +498,7 @@ void GridMap::applyChanges(const CellChanges& changes) {
 
 ApplyStats GridMap::assignBlocks(std::span<const BlockCells> blocks, const BlockValues& values_of,
                                  CellChanges* changes) {
-  std::vector<BlockEntry*> entries(blocks.size());
+  std::vector<BlockEntry*>& entries = writeEntries(blocks.size());
   for (std::size_t j = 0; j < blocks.size(); ++j) entries[j] = &store_->entry(blocks[j].key);
   return writeBlocks(entries, changes, [&](std::size_t j, BlockWriter& w) {
     std::array<float, block::kVoxels> values;  // only the mask's cells are read

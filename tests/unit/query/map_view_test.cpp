@@ -121,7 +121,7 @@ TEST(MapView, ReservedBlocksServeTheFirstVersionsWithoutGrowingThePool) {
     (void)MapView::publish(sut);
   }
   EXPECT_GT(sut.store()->liveNodes(), 0U);
-  EXPECT_EQ(sut.memoryBytes() - sut.store()->entryCount() * sizeof(BlockEntry) -
+  EXPECT_EQ(sut.memoryBytes() - sut.store()->entryBytes() -
                 sut.store()->indexBytes(),
             reserved);  // the same slabs (only entries, their index and table were added)
 }

@@ -1,14 +1,16 @@
 #pragma once
 
+#include <algorithm>
 #include <atomic>
 #include <cstdint>
-#include <deque>
 #include <memory>
 #include <mutex>
 #include <unordered_map>
 #include <vector>
 
 #include "densemap/map/block_layout.hpp"
+#include "densemap/map/region_index.hpp"
+#include "densemap/map/stable_vector.hpp"
 #include "densemap/map/voxel_block.hpp"
 
 namespace densemap {
@@ -135,41 +137,14 @@ class BlockStore {
   /// cost follows the entries in and near the box (and the box's regions), not the whole map.
   template <typename F>
   void forEachEntryIn(const block::BlockBox& box, F&& f) const {
-    const auto visit = [&](const std::vector<BlockEntry*>& region) {
-      for (const BlockEntry* e : region) {
-        if (box.contains(e->key)) f(*e);
-      }
-    };
-    std::size_t box_regions = 1;
-    for (int a = 0; a < 3; ++a) {
-      box_regions *= std::size_t{(box.max[a] >> kRegionShift) - (box.min[a] >> kRegionShift) + 1};
-    }
-    if (box_regions > regions_.size()) {  // fewer regions in the map than in the box
-      for (const auto& [key, region] : regions_) visit(region);
-      return;
-    }
-    for (std::uint32_t z = box.min[2] >> kRegionShift; z <= box.max[2] >> kRegionShift; ++z) {
-      for (std::uint32_t y = box.min[1] >> kRegionShift; y <= box.max[1] >> kRegionShift; ++y) {
-        for (std::uint32_t x = box.min[0] >> kRegionShift; x <= box.max[0] >> kRegionShift; ++x) {
-          const auto it = regions_.find(regionKey(x, y, z));
-          if (it != regions_.end()) visit(it->second);
-        }
-      }
-    }
+    regions_.forEachIn(box, f);
   }
-  /// Calls f(box, entries) for every region of 8^3 blocks that holds entries (writer): the
-  /// region's box of blocks and its entries, so a caller can pass over a whole region at once.
+  /// Calls f(box, for_each) for every region of 8^3 blocks that holds entries (writer): the
+  /// region's box of blocks, and a function that calls its argument with each of the region's
+  /// entries (BlockEntry*), so a caller can pass over a whole region at once.
   template <typename F>
   void forEachRegionWriter(F&& f) {
-    for (auto& [key, region] : regions_) {
-      block::BlockBox box;
-      for (int a = 0; a < 3; ++a) {
-        const auto c = static_cast<std::uint32_t>((key >> (10 * a)) & 0x3ff);
-        box.min[a] = c << kRegionShift;
-        box.max[a] = std::min<std::uint32_t>(((c + 1) << kRegionShift) - 1, 0x1fff);
-      }
-      f(box, region);
-    }
+    regions_.forEachRegion(f);
   }
   /// Whether a version was ever published (writes then copy blocks readers may hold).
   [[nodiscard]] bool versioned() const { return versioned_; }
@@ -199,10 +174,12 @@ class BlockStore {
   /// Compactions of the entry table so far (for tests).
   [[nodiscard]] std::size_t compactions() const { return compactions_; }
   [[nodiscard]] std::size_t memoryBytes() const;
-  /// Bytes of forEachEntryIn's region index (a pointer per entry, a hash node per region).
+  /// Bytes of forEachEntryIn's region index (pages of entry pointers, a hash node per region).
   [[nodiscard]] std::size_t indexBytes() const {
-    return entries_.size() * sizeof(void*) + regions_.size() * 64;
+    return regions_.bytes();
   }
+  /// Bytes of the entries' storage (its chunks, filled or not).
+  [[nodiscard]] std::size_t entryBytes() const { return entries_.capacityBytes(); }
 
  private:
   struct Table {
@@ -234,28 +211,19 @@ class BlockStore {
   void retireTombstones();  // writer, in publish()
   void compactIfWorthIt();  // writer, in publish()
 
-  /// Regions of 8^3 blocks (64^3 voxels) and their entries: forEachEntryIn's index (writer).
-  static constexpr int kRegionShift = 3;
-  [[nodiscard]] static std::uint64_t regionKey(std::uint32_t x, std::uint32_t y, std::uint32_t z) {
-    return std::uint64_t{x} | (std::uint64_t{y} << 10) | (std::uint64_t{z} << 20);
-  }
-  [[nodiscard]] static std::uint64_t regionOf(std::uint64_t block_key) {
-    const auto c = block::coordsOf(block_key);
-    return regionKey(c[0] >> kRegionShift, c[1] >> kRegionShift, c[2] >> kRegionShift);
-  }
-  void index(BlockEntry& e) { regions_[regionOf(e.key)].push_back(&e); }
+  void index(BlockEntry& e) { regions_.add(&e); }
 
   std::uint64_t writing_ = 0;
   bool versioned_ = false;
-  std::deque<BlockEntry> entries_;
-  std::unordered_map<std::uint64_t, std::vector<BlockEntry*>> regions_;
+  StableVector<BlockEntry> entries_;
+  RegionIndex<BlockEntry> regions_;  // forEachEntryIn's index (writer)
   std::atomic<Table*> table_;
   std::vector<std::unique_ptr<Table>> tables_;  // the current one last
 
   mutable std::mutex pool_mutex_;
   std::vector<std::unique_ptr<Slab>> slabs_;
   std::vector<BlockNode*> free_;
-  std::deque<ChainLink> tombs_;  // tombstone storage
+  StableVector<ChainLink> tombs_;  // tombstone storage
   std::vector<ChainLink*> free_tombs_;
   std::atomic<std::size_t> live_nodes_{0};
   std::atomic<std::size_t> evidence_blocks_{0};

@@ -92,8 +92,18 @@ class GridMap final : public OccupancyMap {
   /// Drops a block (BlockStore::drop); returns its known cells. known_cells_ is the caller's.
   std::size_t dropBlock(BlockEntry& entry, CellChanges* changes);
 
+  /// The entries of an update's blocks, in its order (apply, assignBlocks): kept from scan to
+  /// scan, so that a scan allocates nothing for them (a scan's allocations each walk the
+  /// allocator's free chunks after another part of the process freed many: OctoMap's run in
+  /// the same process made the apply 3x slower, ~5 ms of ~2.5 at 0.1 m).
+  std::vector<BlockEntry*>& writeEntries(std::size_t n) {
+    write_entries_.resize(n);
+    return write_entries_;
+  }
+
   std::shared_ptr<BlockStore> store_;
   std::size_t known_cells_ = 0;
+  std::vector<BlockEntry*> write_entries_;
 };
 
 }  // namespace densemap
