@@ -75,9 +75,10 @@ Integrate makeIntegrator(const std::string& method, const Options& o) {
   }
   // `method@nogrow`: the culling region from the map only (no growth by the scan's marks);
   // `method@grow=A:B:..`: these strides instead of --grow-strides; `method@single`: walks one
-  // at a time as they come (IntegratorOptions::queue_walks off); `method@four` / `@scalar`: the
-  // queued walks four at a time in lanes of doubles / one at a time (WalkKernel kFour / kScalar;
-  // the default, kBest, is kFixedEight's eight lanes of fixed point where AVX2 is the widest).
+  // at a time as they come (IntegratorOptions::queue_walks off); `method@wide` / `@four` /
+  // `@fixed` / `@scalar`: the queued walks eight at a time in AVX-512 lanes of doubles / four in
+  // AVX2 lanes of doubles / eight in AVX2 lanes of fixed point / one at a time (WalkKernel
+  // kWideEight / kFour / kFixedEight / kScalar; the default, kBest, is kFixedEight's).
   const std::size_t at = method.find('@');
   std::vector<std::size_t> strides = o.grow_strides;
   bool queue_walks = true;
@@ -88,6 +89,10 @@ Integrate makeIntegrator(const std::string& method, const Options& o) {
       queue_walks = false;
     } else if (variant == "four") {
       kernel = DenseMarks::WalkKernel::kFour;
+    } else if (variant == "wide") {
+      kernel = DenseMarks::WalkKernel::kWideEight;
+    } else if (variant == "fixed") {
+      kernel = DenseMarks::WalkKernel::kFixedEight;
     } else if (variant == "scalar") {
       kernel = DenseMarks::WalkKernel::kScalar;
     } else if (variant == "nogrow") {

@@ -1416,8 +1416,7 @@ DenseMarks::BackWalkCounts DenseMarks::markQueuedBackFixed(
   return counts;
 }
 bool DenseMarks::queuesFixed(WalkKernel kernel) {
-  return (kernel == WalkKernel::kFixedEight || (kernel == WalkKernel::kBest && !hasWideWalks())) &&
-         hasFourWalks();
+  return (kernel == WalkKernel::kFixedEight || kernel == WalkKernel::kBest) && hasFourWalks();
 }
 #else
 bool DenseMarks::queuesFixed(WalkKernel) { return false; }
@@ -1442,7 +1441,7 @@ void DenseMarks::markQueued(WalkKernel kernel) {
   makeRoom(steps, entered_, pend_w_, pend_b_);
   std::size_t n_entered = 0;
 #ifdef DENSEMAP_WIDE_WALKS
-  if (kernel == WalkKernel::kBest && hasWideWalks()) {
+  if (kernel == WalkKernel::kWideEight && hasWideWalks()) {
     WideOut out{entered_.data(), pend_w_.data(), pend_b_.data()};
     walkEight(queue_.data(), n, out);
     finishQueued(out.n_pend, out.n_entered);
@@ -1489,7 +1488,7 @@ DenseMarks::BackWalkCounts DenseMarks::markQueuedBack(const block::BlockMask* cu
   makeRoom(steps, entered_, pend_w_, pend_b_);
   std::size_t n_entered = 0;
 #ifdef DENSEMAP_WIDE_WALKS
-  if (kernel == WalkKernel::kBest && hasWideWalks()) {
+  if (kernel == WalkKernel::kWideEight && hasWideWalks()) {
     WideOut out{entered_.data(), pend_w_.data(), pend_b_.data()};
     counts = walkEightBack(back_queue_.data(), n, culled_words, out, handed_over);
     finishQueued(out.n_pend, out.n_entered);

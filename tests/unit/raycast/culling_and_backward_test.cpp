@@ -245,8 +245,9 @@ TEST(TraverseRay, WideStartsAreTheScalarStartsBitForBit) {
 // leaving the box included (those are not queued), in batches of any size.
 TEST(DenseMarks, QueuedWalksMarkAsTheHashInLanesAndOneByOne) {
   const VoxelGrid grid(0.2);
-  for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kFour,
-                            DenseMarks::WalkKernel::kFixedEight, DenseMarks::WalkKernel::kScalar}) {
+  for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kWideEight,
+                            DenseMarks::WalkKernel::kFour, DenseMarks::WalkKernel::kFixedEight,
+                            DenseMarks::WalkKernel::kScalar}) {
     test::RandomRays random(0.2, 12.0, 17);
     std::mt19937 rng(5);
     std::uniform_int_distribution<int> batch_size(1, 300);
@@ -303,8 +304,9 @@ TEST(DenseMarks, QueuedWalksBreakExactTiesAsTheCountedLoop) {
   std::mt19937 rng(11);
   std::uniform_int_distribution<int> lattice(-40, 40), scale(3, 40), pick(0, 5);
   std::size_t tied = 0;
-  for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kFour,
-                            DenseMarks::WalkKernel::kFixedEight, DenseMarks::WalkKernel::kScalar}) {
+  for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kWideEight,
+                            DenseMarks::WalkKernel::kFour, DenseMarks::WalkKernel::kFixedEight,
+                            DenseMarks::WalkKernel::kScalar}) {
     DenseMarks dense;
     const VoxelKey lo = *grid.pointToKey(Point3f(-30.0F, -30.0F, -30.0F));
     const VoxelKey hi = *grid.pointToKey(Point3f(30.0F, 30.0F, 30.0F));
@@ -677,9 +679,9 @@ TEST(DenseMarks, QueuedBackwardWalksMarkAndCountAsMarkRayCulled) {
     // (The rays' ends not excluded: the region need not be exact for the walks, only shared.)
     region.build(map, o, KeyBox{lo, hi}, {}, &frame);
     ASSERT_GT(region.size(), 1000U);
-    for (const auto kernel :
-         {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kFour,
-          DenseMarks::WalkKernel::kFixedEight, DenseMarks::WalkKernel::kScalar}) {
+    for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kWideEight,
+                              DenseMarks::WalkKernel::kFour, DenseMarks::WalkKernel::kFixedEight,
+                              DenseMarks::WalkKernel::kScalar}) {
       DenseMarks plain_marks, sut_marks;
       ASSERT_TRUE(plain_marks.reset(lo, hi, 1U << 20));
       ASSERT_TRUE(sut_marks.reset(lo, hi, 1U << 20));

@@ -364,14 +364,15 @@ class DenseMarks {
     std::int32_t total;  // the forward traversal's voxels: the most steps back
     std::uint32_t id;    // the caller's
   };
-  /// How markQueued and markQueuedBack walk: kBest 8 walks at a time with AVX-512 where the
-  /// processor has it (hasWideWalks), else as kFixedEight where it has AVX2 (hasFourWalks), else
-  /// one at a time as kScalar does (countedSteps, backwardSteps); kFour 4 at a time in AVX2
-  /// lanes of doubles; kFixedEight 8 at a time in AVX2 lanes of 32-bit fixed-point times, each
-  /// decision checked to win by more than the rounding's bound, a walk with a decision that
-  /// does not handed over to kFour from its start (fixedHandedOver counts them). Without AVX2,
-  /// all as kScalar.
-  enum class WalkKernel { kBest, kFour, kFixedEight, kScalar };
+  /// How markQueued and markQueuedBack walk: kBest as kFixedEight where the processor has AVX2
+  /// (hasFourWalks), else one at a time as kScalar does (countedSteps, backwardSteps);
+  /// kWideEight 8 at a time in AVX-512 lanes of doubles where the processor has it
+  /// (hasWideWalks; it was kBest there until a Zen 4 walked BALM 0.2 m's forward walks 25%
+  /// faster with kFixedEight, 0.1 m's 22%); kFour 4 at a time in AVX2 lanes of doubles;
+  /// kFixedEight 8 at a time in AVX2 lanes of 32-bit fixed-point times, each decision checked
+  /// to win by more than the rounding's bound, a walk with a decision that does not handed over
+  /// to kFour from its start (fixedHandedOver counts them). Without AVX2, all as kScalar.
+  enum class WalkKernel { kBest, kWideEight, kFour, kFixedEight, kScalar };
   [[nodiscard]] static bool hasWideWalks();
   [[nodiscard]] static bool hasFourWalks();
 
@@ -419,7 +420,7 @@ class DenseMarks {
     return true;
   }
   /// Whether queueFixedLanes and markFixedQueued walk the forward walks with `kernel`: kFixedEight
-  /// (or kBest on a processor with AVX2 but not AVX-512), where the processor has AVX2.
+  /// or kBest, where the processor has AVX2.
   [[nodiscard]] static bool queuesFixed(WalkKernel kernel);
   /// queueWalk straight into kFixedEight's terms (queuesFixed) for a caller that can walk any
   /// of them again by its id: the counted walks of rays 0..n-1 of `lanes` (startTraversalLanes'
@@ -631,8 +632,8 @@ class DenseMarks {
   bool unlisted_ = false;  // blocks seen (seen_) that touched_ does not list: finishPended's
   std::vector<QueuedWalk> queue_;
   std::vector<QueuedBackWalk> back_queue_;
-  std::vector<std::uint32_t> entered_;          // markQueued's: blocks the walks entered
-  std::vector<std::uint64_t> pend_w_, pend_b_;  // markQueued's: marks gathered per word
+  std::vector<std::uint32_t> entered_;              // markQueued's: blocks the walks entered
+  std::vector<std::uint64_t> pend_w_, pend_b_;      // markQueued's: marks gathered per word
   std::vector<std::uint32_t> pend32_w_, pend32_b_;  // kFixedEight's: per 32-bit word
   std::vector<FixedWalk> fixed_;                    // kFixedEight's queue
   std::vector<FixedWalk> fixed_queue_;              // queueFixedLanes' (n_fixed_ of them)
@@ -641,7 +642,7 @@ class DenseMarks {
   std::vector<QueuedBackWalk> back_handed_;         // (backward)
   std::vector<std::uint32_t> handed_ids_;
   std::size_t fixed_handed_ = 0;
-  std::vector<std::size_t> chunk_held_;         // flushAllInto's: blocks with marks per chunk
+  std::vector<std::size_t> chunk_held_;  // flushAllInto's: blocks with marks per chunk
 };
 
 }  // namespace densemap
