@@ -632,8 +632,8 @@ class DenseMarks {
   bool unlisted_ = false;  // blocks seen (seen_) that touched_ does not list: finishPended's
   std::vector<QueuedWalk> queue_;
   std::vector<QueuedBackWalk> back_queue_;
-  std::vector<std::uint32_t> entered_;              // markQueued's: blocks the walks entered
-  std::vector<std::uint64_t> pend_w_, pend_b_;      // markQueued's: marks gathered per word
+  std::vector<std::uint32_t> entered_;          // markQueued's: blocks the walks entered
+  std::vector<std::uint64_t> pend_w_, pend_b_;  // markQueued's: marks gathered per word
   std::vector<std::uint32_t> pend32_w_, pend32_b_;  // kFixedEight's: per 32-bit word
   std::vector<FixedWalk> fixed_;                    // kFixedEight's queue
   std::vector<FixedWalk> fixed_queue_;              // queueFixedLanes' (n_fixed_ of them)
@@ -642,7 +642,7 @@ class DenseMarks {
   std::vector<QueuedBackWalk> back_handed_;         // (backward)
   std::vector<std::uint32_t> handed_ids_;
   std::size_t fixed_handed_ = 0;
-  std::vector<std::size_t> chunk_held_;  // flushAllInto's: blocks with marks per chunk
+  std::vector<std::size_t> chunk_held_;         // flushAllInto's: blocks with marks per chunk
 };
 
 }  // namespace densemap

@@ -11,7 +11,7 @@ namespace densemap {
 
 /// The block store's entries by region of 8^3 blocks (64^3 voxels): what forEachEntryIn and
 /// forEachRegionWriter walk, so that a box costs the entries in and near it, not the whole map
-/// (writer only). A region's entries sit in a chain of pages of 63 taken from one pool that
+/// (writer only). A region's entries sit in a chain of pages of 62 taken from one pool that
 /// grows a chunk at a time: a new block allocates nothing, and a new region only its hash
 /// node. (A vector per region allocated ~30 times a scan at 0.1 m as regions filled, and with
 /// the allocator's free chunks just swollen by another part of the process each allocation
@@ -19,7 +19,7 @@ namespace densemap {
 template <class Entry>
 class RegionIndex {
   struct Page {
-    std::array<Entry*, 63> entries;
+    std::array<Entry*, 62> entries;  // with the count and link: 512 bytes
     std::uint32_t count = 0;
     Page* next = nullptr;
   };
