@@ -13,8 +13,9 @@ namespace densemap {
 /// Append-only storage whose elements never move (the block store's entries: its hash table
 /// and region index point at them), in chunks that double from kFirstChunk up to kMaxChunk
 /// elements, so that appending allocates once per chunk. (std::deque, which it replaces,
-/// allocates every 512 bytes: ~60 allocations a scan at 0.1 m, each a walk of the allocator's
-/// unsorted free chunks when another part of the process has just freed many small ones.)
+/// allocates every 512 bytes: up to ~60 allocations a scan at 0.1 m while the map grows, each a
+/// walk of the allocator's unsorted free chunks when another part of the process has just freed
+/// many small ones.)
 template <class T, std::size_t kFirstChunk = 64, std::size_t kMaxChunk = 16384>
 class StableVector {
   struct Chunk {
