@@ -314,8 +314,11 @@ static int runMain(int argc, char** argv) {
          "METHOD@nogrow does not (comma-separated; 0: none); METHOD@single walks rays one at a "
          "time (not queued and walked eight at a time); METHOD@four walks the queued walks four "
          "at a time in lanes of doubles (the AVX2 kernel before the fixed-point one), "
-         "METHOD@fixed eight at a time in AVX2 lanes of fixed point (the default), METHOD@wide "
-         "eight at a time in AVX-512 lanes of doubles, METHOD@scalar one at a time; any method "
+         "METHOD@fixed eight at a time in AVX2 lanes of fixed point (the default without AVX-512), "
+         "METHOD@sixteen sixteen at a time in AVX-512 lanes of fixed point (the default with it; "
+         "backward walks as @fixed), "
+         "METHOD@wide eight at a time in AVX-512 lanes of doubles, METHOD@scalar one at a time; "
+         "any method "
          "name may end in @tN: that "
          "lane runs on N threads (e.g. raycast@t1,raycast@t2 for a scaling ratio in one run)")
       ->delimiter(',')

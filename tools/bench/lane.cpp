@@ -76,9 +76,11 @@ Integrate makeIntegrator(const std::string& method, const Options& o) {
   // `method@nogrow`: the culling region from the map only (no growth by the scan's marks);
   // `method@grow=A:B:..`: these strides instead of --grow-strides; `method@single`: walks one
   // at a time as they come (IntegratorOptions::queue_walks off); `method@wide` / `@four` /
-  // `@fixed` / `@scalar`: the queued walks eight at a time in AVX-512 lanes of doubles / four in
-  // AVX2 lanes of doubles / eight in AVX2 lanes of fixed point / one at a time (WalkKernel
-  // kWideEight / kFour / kFixedEight / kScalar; the default, kBest, is kFixedEight's).
+  // `@fixed` / `@sixteen` / `@scalar`: the queued walks eight at a time in AVX-512 lanes of
+  // doubles / four in AVX2 lanes of doubles / eight in AVX2 lanes of fixed point / sixteen in
+  // AVX-512 lanes of fixed point / one at a time (WalkKernel kWideEight / kFour / kFixedEight /
+  // kFixedSixteen / kScalar; the default, kBest, is kFixedSixteen's with AVX-512, else
+  // kFixedEight's).
   const std::size_t at = method.find('@');
   std::vector<std::size_t> strides = o.grow_strides;
   bool queue_walks = true;
@@ -93,6 +95,8 @@ Integrate makeIntegrator(const std::string& method, const Options& o) {
       kernel = DenseMarks::WalkKernel::kWideEight;
     } else if (variant == "fixed") {
       kernel = DenseMarks::WalkKernel::kFixedEight;
+    } else if (variant == "sixteen") {
+      kernel = DenseMarks::WalkKernel::kFixedSixteen;
     } else if (variant == "scalar") {
       kernel = DenseMarks::WalkKernel::kScalar;
     } else if (variant == "nogrow") {

@@ -247,6 +247,7 @@ TEST(DenseMarks, QueuedWalksMarkAsTheHashInLanesAndOneByOne) {
   const VoxelGrid grid(0.2);
   for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kWideEight,
                             DenseMarks::WalkKernel::kFour, DenseMarks::WalkKernel::kFixedEight,
+                            DenseMarks::WalkKernel::kFixedSixteen,
                             DenseMarks::WalkKernel::kScalar}) {
     test::RandomRays random(0.2, 12.0, 17);
     std::mt19937 rng(5);
@@ -285,7 +286,9 @@ TEST(DenseMarks, QueuedWalksMarkAsTheHashInLanesAndOneByOne) {
       EXPECT_EQ(sut.freeCount(), plain.freeCount()) << "round " << round;
       EXPECT_EQ(markedCells(plain), markedCells(sut)) << "round " << round;
     }
-    if (kernel == DenseMarks::WalkKernel::kFixedEight && DenseMarks::hasFourWalks()) {
+    if ((kernel == DenseMarks::WalkKernel::kFixedEight ||
+         kernel == DenseMarks::WalkKernel::kFixedSixteen) &&
+        DenseMarks::hasFourWalks()) {
       // Decisions too close to call in fixed point are few, even among these rays (on grid
       // planes, edges and corners, along the axes: many exact ties).
       std::cout << "fixed point: " << dense.fixedHandedOver() << " of " << queued_all
@@ -306,6 +309,7 @@ TEST(DenseMarks, QueuedWalksBreakExactTiesAsTheCountedLoop) {
   std::size_t tied = 0;
   for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kWideEight,
                             DenseMarks::WalkKernel::kFour, DenseMarks::WalkKernel::kFixedEight,
+                            DenseMarks::WalkKernel::kFixedSixteen,
                             DenseMarks::WalkKernel::kScalar}) {
     DenseMarks dense;
     const VoxelKey lo = *grid.pointToKey(Point3f(-30.0F, -30.0F, -30.0F));
@@ -353,7 +357,9 @@ TEST(DenseMarks, QueuedWalksBreakExactTiesAsTheCountedLoop) {
     std::sort(a.begin(), a.end());
     std::sort(b.begin(), b.end());
     EXPECT_EQ(a, b);
-    if (kernel == DenseMarks::WalkKernel::kFixedEight && DenseMarks::hasFourWalks()) {
+    if ((kernel == DenseMarks::WalkKernel::kFixedEight ||
+         kernel == DenseMarks::WalkKernel::kFixedSixteen) &&
+        DenseMarks::hasFourWalks()) {
       // An exact tie of the doubles is within the fixed point's slack: each such walk is
       // handed over (and walked exactly by the doubles).
       EXPECT_GE(dense.fixedHandedOver(), tied);
@@ -369,14 +375,16 @@ TEST(DenseMarks, QueuedWalksBreakExactTiesAsTheCountedLoop) {
 // directions of exact ratios: handed over), rays leaving the box, batches of any size (each
 // flushed and compared: a batch of a few long rays has its origin's voxel marked by the queue
 // alone).
-TEST(DenseMarks, FixedQueueByRayIndexMarksAsTheHash) {
+// Both fixed-point kernels: eight AVX2 lanes and (where AVX-512 is) sixteen.
+class FixedQueueByRayIndex : public ::testing::TestWithParam<DenseMarks::WalkKernel> {};
+TEST_P(FixedQueueByRayIndex, MarksAsTheHash) {
+  const DenseMarks::WalkKernel kernel = GetParam();
   const VoxelGrid grid(0.25);
   std::mt19937 rng(29);
   std::uniform_int_distribution<int> lattice(-40, 40), scale(3, 60), pick(0, 6), batch(1, 300),
       few(1, 4);
   std::uniform_real_distribution<float> coord(-14.0F, 14.0F);
-  ASSERT_EQ(DenseMarks::queuesFixed(DenseMarks::WalkKernel::kFixedEight),
-            DenseMarks::hasFourWalks());
+  ASSERT_EQ(DenseMarks::queuesFixed(kernel), DenseMarks::hasFourWalks());
   DenseMarks dense;
   const VoxelKey lo = *grid.pointToKey(Point3f(-10.0F, -10.0F, -10.0F));
   const VoxelKey hi = *grid.pointToKey(Point3f(10.0F, 10.0F, 10.0F));
@@ -407,9 +415,8 @@ TEST(DenseMarks, FixedQueueByRayIndexMarksAsTheHash) {
       markRay(grid, origin, rays.back(), plain, plain_counts);
     }
     queued += markRaysQueued(grid, origin, rays.data(), ids, sink, sut_counts, origin_key,
-                             DenseMarks::queuesFixed(DenseMarks::WalkKernel::kFixedEight));
-    walkRaysQueued(grid, origin, rays.data(), sink, origin_key, DenseMarks::WalkKernel::kFixedEight,
-                   handed);
+                             DenseMarks::queuesFixed(kernel));
+    walkRaysQueued(grid, origin, rays.data(), sink, origin_key, kernel, handed);
     dense.flushInto(sut);
     ASSERT_EQ(sut_counts.visits, plain_counts.visits) << "batch " << b;
     ASSERT_EQ(markedCells(plain), markedCells(sut)) << "batch " << b << " of " << rays.size();
@@ -427,6 +434,9 @@ TEST(DenseMarks, FixedQueueByRayIndexMarksAsTheHash) {
     std::cout << "no AVX2 here: the walks were queued for markQueued\n";
   }
 }
+INSTANTIATE_TEST_SUITE_P(DenseMarks, FixedQueueByRayIndex,
+                         ::testing::Values(DenseMarks::WalkKernel::kFixedEight,
+                                           DenseMarks::WalkKernel::kFixedSixteen));
 
 /// Alg. 3 as written: breadth-first from the sensor's voxel over fully-free voxels whose test
 /// cells are all in the region.
@@ -681,6 +691,7 @@ TEST(DenseMarks, QueuedBackwardWalksMarkAndCountAsMarkRayCulled) {
     ASSERT_GT(region.size(), 1000U);
     for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kWideEight,
                               DenseMarks::WalkKernel::kFour, DenseMarks::WalkKernel::kFixedEight,
+                              DenseMarks::WalkKernel::kFixedSixteen,
                               DenseMarks::WalkKernel::kScalar}) {
       DenseMarks plain_marks, sut_marks;
       ASSERT_TRUE(plain_marks.reset(lo, hi, 1U << 20));

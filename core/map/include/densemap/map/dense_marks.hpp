@@ -364,15 +364,18 @@ class DenseMarks {
     std::int32_t total;  // the forward traversal's voxels: the most steps back
     std::uint32_t id;    // the caller's
   };
-  /// How markQueued and markQueuedBack walk: kBest as kFixedEight where the processor has AVX2
-  /// (hasFourWalks), else one at a time as kScalar does (countedSteps, backwardSteps);
-  /// kWideEight 8 at a time in AVX-512 lanes of doubles where the processor has it
-  /// (hasWideWalks; it was kBest there until a Zen 4 walked BALM 0.2 m's forward walks 25%
-  /// faster with kFixedEight, 0.1 m's 22%); kFour 4 at a time in AVX2 lanes of doubles;
+  /// How markQueued and markQueuedBack walk: kBest as kFixedSixteen where the processor has
+  /// AVX-512 (hasWideWalks), as kFixedEight where it has AVX2 (hasFourWalks), else one at a
+  /// time as kScalar does (countedSteps, backwardSteps); kWideEight 8 at a time in AVX-512 lanes
+  /// of doubles where the processor has it (it was kBest there until an AMD Zen 5 walked BALM
+  /// 0.2 m's forward walks 25% faster with kFixedEight, 0.1 m's 22%; kFixedSixteen another 17%
+  /// and 12%); kFour 4 at a time in AVX2 lanes of doubles;
   /// kFixedEight 8 at a time in AVX2 lanes of 32-bit fixed-point times, each decision checked
   /// to win by more than the rounding's bound, a walk with a decision that does not handed over
-  /// to kFour from its start (fixedHandedOver counts them). Without AVX2, all as kScalar.
-  enum class WalkKernel { kBest, kWideEight, kFour, kFixedEight, kScalar };
+  /// to kFour from its start (fixedHandedOver counts them); kFixedSixteen the forward walks as
+  /// kFixedEight's, sixteen at a time in AVX-512 lanes where the processor has it (hasWideWalks;
+  /// else as kFixedEight), the backward walks as kFixedEight. Without AVX2, all as kScalar.
+  enum class WalkKernel { kBest, kWideEight, kFour, kFixedEight, kScalar, kFixedSixteen };
   [[nodiscard]] static bool hasWideWalks();
   [[nodiscard]] static bool hasFourWalks();
 
@@ -419,9 +422,12 @@ class DenseMarks {
     touch(static_cast<std::uint32_t>(at.addr >> 9));  // entered (as cursorFor)
     return true;
   }
-  /// Whether queueFixedLanes and markFixedQueued walk the forward walks with `kernel`: kFixedEight
-  /// or kBest, where the processor has AVX2.
+  /// Whether queueFixedLanes and markFixedQueued walk the forward walks with `kernel`: kFixedEight,
+  /// kFixedSixteen or kBest, where the processor has AVX2.
   [[nodiscard]] static bool queuesFixed(WalkKernel kernel);
+  /// Whether `kernel`'s fixed-point forward walks go sixteen at a time (kFixedSixteen, where the
+  /// processor has AVX-512).
+  [[nodiscard]] static bool walksSixteen(WalkKernel kernel);
   /// queueWalk straight into kFixedEight's terms (queuesFixed) for a caller that can walk any
   /// of them again by its id: the counted walks of rays 0..n-1 of `lanes` (startTraversalLanes'
   /// from voxel `first`; ray l's id ids[l]), each marked from its first voxel, which is marked
@@ -431,8 +437,10 @@ class DenseMarks {
                            const std::uint32_t* ids);
   /// Walks the walks queueFixedLanes queued, then empties that queue. The ids of those it hands
   /// over (a decision too close to call in fixed point) are appended to `handed_over`: the
-  /// caller walks them exactly (what they marked is part of their marks).
-  void markFixedQueued(std::vector<std::uint32_t>& handed_over);
+  /// caller walks them exactly (what they marked is part of their marks). `kernel`: one that
+  /// queuesFixed (walksSixteen picks the lanes).
+  void markFixedQueued(std::vector<std::uint32_t>& handed_over,
+                       WalkKernel kernel = WalkKernel::kBest);
   /// Voxels markQueuedBack marked and skipped (markRayCulled's counts).
   struct BackWalkCounts {
     std::size_t visits = 0;
@@ -494,9 +502,9 @@ class DenseMarks {
   void finishPended(std::size_t n_pend);
   /// finishPended for the 32-bit words kFixedEight pends (pend32_w_ / pend32_b_).
   void finishPended32(std::size_t n_pend);
-  /// markQueued's kFixedEight: the queue in fixed point, walked; the walks it hands over, and
-  /// those out of its range, walked by kFour.
-  void markQueuedFixed();
+  /// markQueued's kFixedEight (kFixedSixteen): the queue in fixed point, walked; the walks it
+  /// hands over, and those out of its range, walked by kFour.
+  void markQueuedFixed(WalkKernel kernel);
   /// markQueuedBack's kFixedEight (the queue not emptied): the walks in fixed point, walked
   /// against `culled`; those it hands over, and those out of its range, walked by kFour (whose
   /// own hand-overs go to `handed_over`).
@@ -635,6 +643,7 @@ class DenseMarks {
   std::vector<std::uint32_t> entered_;          // markQueued's: blocks the walks entered
   std::vector<std::uint64_t> pend_w_, pend_b_;  // markQueued's: marks gathered per word
   std::vector<std::uint32_t> pend32_w_, pend32_b_;  // kFixedEight's: per 32-bit word
+  std::vector<std::int32_t> sixteen_rows_;          // kFixedSixteen's walks, field by field
   std::vector<FixedWalk> fixed_;                    // kFixedEight's queue
   std::vector<FixedWalk> fixed_queue_;              // queueFixedLanes' (n_fixed_ of them)
   std::size_t n_fixed_ = 0, fixed_steps_ = 0;       // (fixed_steps_: their totals)

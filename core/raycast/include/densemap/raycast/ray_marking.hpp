@@ -392,7 +392,7 @@ inline void walkRaysQueued(const VoxelGrid& grid, const Point3f& origin, const R
     return;
   }
   handed.clear();
-  sink.dense.markFixedQueued(handed);
+  sink.dense.markFixedQueued(handed, kernel);
   MarkCounts counted;  // (already)
   for (const std::uint32_t id : handed) markRay(grid, origin, rays[id], sink, counted, &origin_key);
 }
