@@ -82,17 +82,20 @@ void writeOut(const TraversalLaneValues<Int>& r, const VoxelKey& key_origin,
                             _CMP_LE_OQ);
 }
 
-[[gnu::target("avx512f,avx512vl,avx512dq")]] void startEight(const VoxelGrid& grid,
+/// Eight rays' starts and ends into lanes (`r`) with AVX-512: the doubles eight at a time, the
+/// keys, steps and crossings as 64-bit ints in the vectors (exact: keys are 16-bit), stored as
+/// TraversalLanes' 32-bit ones; the same IEEE operations in the same order as startTraversal
+/// and endOf.
+[[gnu::target("avx512f,avx512vl,avx512dq")]] void lanesEight(const VoxelGrid& grid,
                                                               const Point3f& origin,
                                                               const VoxelKey& key_origin,
                                                               const Point3f* ends,
                                                               const VoxelKey* key_ends, int n,
-                                                              TraversalStarts& out) {
+                                                              TraversalLanes& r) {
   constexpr double kMax = std::numeric_limits<double>::max();
   constexpr double kInf = std::numeric_limits<double>::infinity();
   alignas(32) float e[3][8];
-  alignas(64) std::int64_t k[3][8];
-  loadLanes(ends, key_ends, n, e, k);
+  loadLanes(ends, key_ends, n, e, r.key_end);
   const int ko[3] = {key_origin.x, key_origin.y, key_origin.z};
   const double resolution = grid.resolution();
   // Vector3 arithmetic of OctoMap, one float operation at a time (as startTraversal).
@@ -109,7 +112,8 @@ void writeOut(const TraversalLaneValues<Int>& r, const VoxelKey& key_origin,
   __m512d t_max[3], t_delta[3];
   __m512i step[3], key_end[3];
   for (int a = 0; a < 3; ++a) {
-    key_end[a] = _mm512_load_si512(k[a]);
+    key_end[a] = _mm512_cvtepi32_epi64(
+        _mm256_load_si256(reinterpret_cast<const __m256i*>(r.key_end[a])));
     same &= _mm512_cmpeq_epi64_mask(key_end[a], _mm512_set1_epi64(ko[a]));
     const __m256 d = _mm256_div_ps(dir[a], length);
     const __mmask8 up = _mm256_cmp_ps_mask(d, _mm256_setzero_ps(), _CMP_GT_OQ);
@@ -177,14 +181,12 @@ void writeOut(const TraversalLaneValues<Int>& r, const VoxelKey& key_origin,
   const __mmask8 within = _mm512_cmp_pd_mask(
       _mm512_sub_pd(_mm512_cvtps_pd(length), last_max), bound, _CMP_GT_OQ);
   unsure |= static_cast<__mmask8>(~(some_last & gap & within));
-  // Out, lane by lane.
-  TraversalLaneValues<std::int64_t> r;
   for (int a = 0; a < 3; ++a) {
     _mm512_store_pd(r.tm[a], t_max[a]);
     _mm512_store_pd(r.td[a], t_delta[a]);
     _mm512_store_pd(r.la[a], last[a]);
-    _mm512_store_si512(r.st[a], step[a]);
-    _mm512_store_si512(r.cr[a], crossings[a]);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(r.st[a]), _mm512_cvtepi64_epi32(step[a]));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(r.cr[a]), _mm512_cvtepi64_epi32(crossings[a]));
   }
   _mm512_store_pd(r.sc, scale);
   _mm256_store_ps(r.len, length);
@@ -192,6 +194,17 @@ void writeOut(const TraversalLaneValues<Int>& r, const VoxelKey& key_origin,
   r.has_length = has_length;
   r.irregular = irregular;
   r.unsure = unsure;
+}
+
+/// startTraversals' eight rays with AVX-512 (lanesEight's lanes written out).
+[[gnu::target("avx512f,avx512vl,avx512dq")]] void startEight(const VoxelGrid& grid,
+                                                              const Point3f& origin,
+                                                              const VoxelKey& key_origin,
+                                                              const Point3f* ends,
+                                                              const VoxelKey* key_ends, int n,
+                                                              TraversalStarts& out) {
+  TraversalLanes r;
+  lanesEight(grid, origin, key_origin, ends, key_ends, n, r);
   writeOut(r, key_origin, key_ends, n, out);
 }
 
@@ -373,15 +386,19 @@ bool hasFourLanes() {
 
 void startTraversalLanes(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_origin,
                          const Point3f* ends, const VoxelKey* key_ends, int n,
-                         TraversalLanes& out) {
+                         TraversalLanes& out, bool wide) {
   if (n <= 0) return;
 #ifdef DENSEMAP_WIDE_STARTS
+  if (wide && hasWideLanes()) {
+    lanesEight(grid, origin, key_origin, ends, key_ends, n, out);
+    return;
+  }
   if (hasFourLanes()) {
     lanesEightByFour(grid, origin, key_origin, ends, key_ends, n, out);
     return;
   }
 #endif
-  (void)grid, (void)origin, (void)key_origin, (void)ends, (void)key_ends;
+  (void)grid, (void)origin, (void)key_origin, (void)ends, (void)key_ends, (void)wide;
   out.same = 0;
   out.has_length = 0xffU;
   out.irregular = 0xffU;

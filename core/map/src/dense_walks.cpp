@@ -754,6 +754,17 @@ void fixedColumns(const DenseMarks::FixedWalk* walks, std::size_t n, std::size_t
   }
 }
 
+/// `walks` (n of them) as fixedColumns' rows in `rows` (grown when short); returns the stride.
+std::size_t fixedColumnsInto(const DenseMarks::FixedWalk* walks, std::size_t n,
+                             std::vector<std::int32_t>& rows) {
+  const std::size_t stride = n + 16;
+  if (rows.size() < kFixedFields * stride) {
+    rows.resize(std::max<std::size_t>(kFixedFields * stride, 2 * rows.size()));
+  }
+  fixedColumns(walks, n, stride, rows.data());
+  return stride;
+}
+
 /// walkSixteenFixed refills its lanes once this many are idle: fewer refills, each of several
 /// lanes (a refill's branch mispredicts). On a Zen 5, BALM 0.2 m `raycast`: 2 -> 6.0 ms a scan,
 /// 4 -> 5.8, 6 -> 5.9, 8 -> 6.0; refilling each lane as it was done (a loop over the idle
@@ -867,6 +878,128 @@ constexpr unsigned kSixteenRefillAt = 4;
     left = _mm512_sub_epi32(left, one);
   }
   return static_cast<std::size_t>(pend_w - pend_start);
+}
+
+/// walkEightFixedBack's walks sixteen at a time in AVX-512 lanes: the same integers and
+/// decisions (the latest head winning by more than the slack, else the walk is handed over), the
+/// region's word gathered when a lane moves to another word and the voxel tested (and marked)
+/// one iteration later, the marks pended per 32-bit word; lanes refilled as walkSixteenFixed's,
+/// from the walks field by field (`rows`, `stride`). Same contract as walkEightFixedBack.
+[[DENSEMAP_AVX512_FIXED]] DenseMarks::BackWalkCounts walkSixteenFixedBack(
+    const std::int32_t* rows, std::size_t stride, std::size_t n, unsigned refill_at,
+    const std::uint32_t* culled, std::uint32_t* pend_w, std::uint32_t* pend_b,
+    std::uint32_t* handed_over, std::size_t& n_handed, std::size_t& n_pend) {
+  const __m512i zero = _mm512_setzero_si512(), one = _mm512_set1_epi32(1),
+                edge = _mm512_set1_epi32(block::kEdge),
+                edge2 = _mm512_set1_epi32(block::kEdge * block::kEdge),
+                low5 = _mm512_set1_epi32(31);
+  __m512i h0 = zero, h1 = zero, h2 = zero, d0 = zero, d1 = zero, d2 = zero, slack = zero;
+  __m512i addr = zero, flip = zero, c0 = zero, c1 = zero, c2 = zero, ids = zero;
+  __m512i left = zero, total = zero, marked = zero;  // steps to go, in all; voxels marked
+  // cur_w: the 32-bit word of the lane's voxel; cur_b: the marks so far in it; cur_r: the
+  // region's bits of it; pending: the bit of the voxel moved to and not yet tested (0: none).
+  __m512i cur_w = zero, cur_b = zero, cur_r = zero, pending = zero;
+  __mmask16 live = 0, handing = 0;
+  std::uint32_t* const pend_start = pend_w;
+  DenseMarks::BackWalkCounts counts;
+  std::size_t next = 0;
+  refill_at = std::clamp(refill_at, 1U, 16U);
+  while (true) {
+    __mmask16 active = _mm512_cmpgt_epi32_mask(left, zero);
+    const __mmask16 tested = _mm512_test_epi32_mask(pending, pending);
+    const auto busy = static_cast<__mmask16>(active | tested);
+    const unsigned idle = ~static_cast<unsigned>(busy) & 0xffffU;
+    if (static_cast<unsigned>(std::popcount(idle)) >= refill_at) [[unlikely]] {
+      // The walks done: their marks pended, their counts added (or handed over).
+      const auto done = static_cast<__mmask16>(live & idle);
+      pendSixteen(done, cur_w, cur_b, pend_w, pend_b);
+      const auto counted = static_cast<__mmask16>(done & ~handing);
+      counts.visits += static_cast<std::uint32_t>(_mm512_mask_reduce_add_epi32(counted, marked));
+      counts.culled += static_cast<std::uint32_t>(
+          _mm512_mask_reduce_add_epi32(counted, _mm512_sub_epi32(total, marked)));
+      if (const auto handed = static_cast<unsigned>(done & handing); handed != 0) {
+        alignas(64) std::uint32_t lane_walk[16];
+        _mm512_store_si512(lane_walk, ids);
+        for (unsigned u = handed; u != 0; u &= u - 1) {
+          handed_over[n_handed++] = lane_walk[std::countr_zero(u)];
+        }
+      }
+      handing = static_cast<__mmask16>(handing & ~done);
+      cur_b = _mm512_maskz_mov_epi32(busy, cur_b);
+      marked = _mm512_maskz_mov_epi32(busy, marked);
+      const auto take = static_cast<unsigned>(
+          std::min<std::size_t>(static_cast<std::size_t>(std::popcount(idle)), n - next));
+      const auto fill = static_cast<__mmask16>(_pdep_u32((1U << take) - 1U, idle));
+      const std::int32_t* at = rows + next;
+#define DENSEMAP_EXPAND(v, field) \
+  v = _mm512_mask_expand_epi32(v, fill, _mm512_loadu_si512(at + (field) * stride))
+      DENSEMAP_EXPAND(h0, 0);
+      DENSEMAP_EXPAND(h1, 1);
+      DENSEMAP_EXPAND(h2, 2);
+      DENSEMAP_EXPAND(d0, 3);
+      DENSEMAP_EXPAND(d1, 4);
+      DENSEMAP_EXPAND(d2, 5);
+      DENSEMAP_EXPAND(slack, 6);
+      DENSEMAP_EXPAND(left, 7);
+      DENSEMAP_EXPAND(addr, 8);
+      DENSEMAP_EXPAND(flip, 9);
+      DENSEMAP_EXPAND(c0, 10);
+      DENSEMAP_EXPAND(c1, 11);
+      DENSEMAP_EXPAND(c2, 12);
+      DENSEMAP_EXPAND(ids, 13);
+#undef DENSEMAP_EXPAND
+      total = _mm512_mask_mov_epi32(total, fill, left);
+      cur_w = _mm512_mask_srli_epi32(cur_w, fill, _mm512_xor_si512(addr, flip), 5);
+      cur_r = _mm512_mask_i32gather_epi32(cur_r, fill, cur_w, culled, 4);
+      next += take;
+      live = static_cast<__mmask16>(busy | fill);
+      if (next == n) refill_at = 1;  // (then every lane counted as soon as it is done)
+      if (live == 0) break;
+      active = _mm512_cmpgt_epi32_mask(left, zero);
+    }
+    // The latest head; the axes within the slack of it (w_a) step; exactly one must be.
+    const __m512i thr = _mm512_sub_epi32(_mm512_max_epi32(_mm512_max_epi32(h0, h1), h2), slack);
+    const __mmask16 w0 = _mm512_cmpge_epi32_mask(h0, thr);
+    const __mmask16 w1 = _mm512_cmpge_epi32_mask(h1, thr);
+    const __mmask16 w2 = _mm512_cmpge_epi32_mask(h2, thr);
+    const auto sure = static_cast<__mmask16>((w0 ^ w1 ^ w2) & ~(w0 & w1 & w2));
+    // The voxel moved to last time: in the region (the walk ends there), else marked.
+    const __mmask16 stop = _mm512_test_epi32_mask(cur_r, pending);
+    cur_b = _mm512_mask_or_epi32(cur_b, static_cast<__mmask16>(~stop), cur_b, pending);
+    marked = _mm512_mask_add_epi32(marked, static_cast<__mmask16>(tested & ~stop), marked, one);
+    const auto go = static_cast<__mmask16>(active & ~stop);
+    handing = static_cast<__mmask16>(handing | (go & ~sure));
+    const auto steps = static_cast<__mmask16>(go & sure);
+    // Lanes that stopped or hand over take no more steps.
+    left = _mm512_maskz_sub_epi32(steps, left, one);
+    const auto m0 = static_cast<__mmask16>(steps & w0);
+    const auto m1 = static_cast<__mmask16>(steps & w1);
+    const auto m2 = static_cast<__mmask16>(steps & w2);
+    h0 = _mm512_mask_sub_epi32(h0, m0, h0, d0);
+    h1 = _mm512_mask_sub_epi32(h1, m1, h1, d1);
+    h2 = _mm512_mask_sub_epi32(h2, m2, h2, d2);
+    // The place (FourPlaces::move in 32 bits).
+    __m512i inc = _mm512_maskz_mov_epi32(m0, one);
+    inc = _mm512_mask_mov_epi32(inc, m1, edge);
+    inc = _mm512_mask_mov_epi32(inc, m2, edge2);
+    __m512i cross = _mm512_maskz_mov_epi32(m0, c0);
+    cross = _mm512_mask_mov_epi32(cross, m1, c1);
+    cross = _mm512_mask_mov_epi32(cross, m2, c2);
+    const __m512i field = _mm512_sub_epi32(_mm512_slli_epi32(inc, block::kShift), inc);
+    const __mmask16 border = _mm512_cmpeq_epi32_mask(_mm512_and_si512(addr, field), field);
+    addr = _mm512_add_epi32(addr, inc);
+    addr = _mm512_mask_add_epi32(addr, border, addr, cross);
+    const __m512i voxel = _mm512_xor_si512(addr, flip);
+    const __m512i word = _mm512_srli_epi32(voxel, 5);
+    const __mmask16 moved = _mm512_mask_cmpneq_epi32_mask(steps, word, cur_w);
+    pendSixteen(moved, cur_w, cur_b, pend_w, pend_b);
+    cur_w = _mm512_mask_mov_epi32(cur_w, moved, word);
+    cur_b = _mm512_maskz_mov_epi32(static_cast<__mmask16>(~moved), cur_b);
+    cur_r = _mm512_mask_i32gather_epi32(cur_r, moved, word, culled, 4);
+    pending = _mm512_maskz_sllv_epi32(steps, one, _mm512_and_si512(voxel, low5));
+  }
+  n_pend = static_cast<std::size_t>(pend_w - pend_start);
+  return counts;
 }
 
 /// The backward walks' steps four at a time in AVX2 lanes, as walkEightBack: the same decision
@@ -1442,11 +1575,7 @@ std::size_t walkFixedHanding(const DenseMarks::FixedWalk* walks, std::size_t m,
   handed.resize(n_handed + m);
   std::size_t n_pend = 0;
   if (sixteen_rows != nullptr) {
-    const std::size_t stride = m + 16;
-    if (sixteen_rows->size() < kFixedFields * stride) {
-      sixteen_rows->resize(std::max<std::size_t>(kFixedFields * stride, 2 * sixteen_rows->size()));
-    }
-    fixedColumns(walks, m, stride, sixteen_rows->data());
+    const std::size_t stride = fixedColumnsInto(walks, m, *sixteen_rows);
     n_pend = walkSixteenFixed(sixteen_rows->data(), stride, m, kSixteenRefillAt, pend_w, pend_b,
                               handed.data(), n_handed);
   } else {
@@ -1543,7 +1672,7 @@ void DenseMarks::markQueuedFixed(WalkKernel kernel) {
   queue_.clear();
 }
 DenseMarks::BackWalkCounts DenseMarks::markQueuedBackFixed(
-    const block::BlockMask* culled, std::vector<std::uint32_t>& handed_over) {
+    const block::BlockMask* culled, std::vector<std::uint32_t>& handed_over, WalkKernel kernel) {
   const std::size_t m =
       fixQueue(back_queue_, toFixedBack, fixed_, handed_ids_, pend32_w_, pend32_b_);
   std::size_t n_handed = handed_ids_.size();
@@ -1552,9 +1681,17 @@ DenseMarks::BackWalkCounts DenseMarks::markQueuedBackFixed(
   // The region's 64-bit words read as pairs of 32-bit ones (as finishPended32's masks).
   using Word32 [[gnu::may_alias]] = std::uint32_t;
   std::size_t n_pend = 0;
-  BackWalkCounts counts =
-      walkEightFixedBack(fixed_.data(), m, reinterpret_cast<const Word32*>(culled[0].data()),
-                         pend32_w_.data(), pend32_b_.data(), handed_ids_.data(), n_handed, n_pend);
+  const auto* culled32 = reinterpret_cast<const Word32*>(culled[0].data());
+  BackWalkCounts counts;
+  if (walksSixteen(kernel)) {
+    const std::size_t stride = fixedColumnsInto(fixed_.data(), m, sixteen_rows_);
+    counts = walkSixteenFixedBack(sixteen_rows_.data(), stride, m, kSixteenRefillAt, culled32,
+                                  pend32_w_.data(), pend32_b_.data(), handed_ids_.data(), n_handed,
+                                  n_pend);
+  } else {
+    counts = walkEightFixedBack(fixed_.data(), m, culled32, pend32_w_.data(), pend32_b_.data(),
+                                handed_ids_.data(), n_handed, n_pend);
+  }
   finishPended32(n_pend);
   handed_ids_.resize(n_handed);
   fixed_handed_ += n_handed - out_of_range;
@@ -1592,7 +1729,7 @@ unsigned DenseMarks::queueFixedLanes(const TraversalLanes&, int, const VoxelKey&
 void DenseMarks::markFixedQueued(std::vector<std::uint32_t>&) {}
 void DenseMarks::markQueuedFixed(WalkKernel kernel) { markQueued(WalkKernel::kScalar); }
 DenseMarks::BackWalkCounts DenseMarks::markQueuedBackFixed(
-    const block::BlockMask* culled, std::vector<std::uint32_t>& handed_over) {
+    const block::BlockMask* culled, std::vector<std::uint32_t>& handed_over, WalkKernel kernel) {
   return markQueuedBack(culled, handed_over, WalkKernel::kScalar);
 }
 #endif
@@ -1660,8 +1797,8 @@ DenseMarks::BackWalkCounts DenseMarks::markQueuedBack(const block::BlockMask* cu
     back_queue_.clear();
     return counts;
   }
-  if (queuesFixed(kernel)) {  // (kFixedSixteen's backward walks as kFixedEight's)
-    counts = markQueuedBackFixed(culled, handed_over);
+  if (queuesFixed(kernel)) {
+    counts = markQueuedBackFixed(culled, handed_over, kernel);
     back_queue_.clear();
     return counts;
   }

@@ -154,8 +154,8 @@ TEST(DenseMarks, StepMarkerMarksAsTheHashOnWalksInsideAndLeavingItsBox) {
 }
 
 // startTraversals (eight rays side by side where the processor has AVX-512 or AVX2) and
-// startTraversalLanes (AVX2) give what startTraversal and endOf give, bit for bit, on
-// adversarial rays from one origin per batch.
+// startTraversalLanes (AVX-512 or AVX2 lanes) give what startTraversal and endOf give, bit for
+// bit, on adversarial rays from one origin per batch.
 TEST(TraverseRay, WideStartsAreTheScalarStartsBitForBit) {
   std::size_t rays = 0, clean = 0;
   for (const double resolution : {0.05, 0.1, 0.2, 0.25, 1.0 / 3.0}) {
@@ -178,8 +178,9 @@ TEST(TraverseRay, WideStartsAreTheScalarStartsBitForBit) {
       TraversalStarts wide, one;
       startTraversals(grid, first.origin, *key_origin, ends, keys, n, wide, true);
       startTraversals(grid, first.origin, *key_origin, ends, keys, n, one, false);
-      TraversalLanes lanes;  // (the AVX2 lanes, read side by side)
-      startTraversalLanes(grid, first.origin, *key_origin, ends, keys, n, lanes);
+      TraversalLanes both[2];  // (AVX-512 lanes where the processor has them, AVX2 lanes)
+      startTraversalLanes(grid, first.origin, *key_origin, ends, keys, n, both[0], true);
+      startTraversalLanes(grid, first.origin, *key_origin, ends, keys, n, both[1], false);
       for (int i = 0; i < n; ++i) {
         ++rays;
         TraversalStart s;
@@ -188,35 +189,39 @@ TEST(TraverseRay, WideStartsAreTheScalarStartsBitForBit) {
         ASSERT_EQ(one.kind[i], kind);
         ASSERT_EQ(wide.kind[i], kind) << "batch " << batch << " ray " << i;
         const unsigned bit = 1U << i;
-        const bool lane_ray = (lanes.same & bit) == 0 && (lanes.has_length & bit) != 0;
-        ASSERT_EQ(lane_ray, kind == TraversalKind::kRay) << "batch " << batch << " ray " << i;
+        for (const TraversalLanes& lanes : both) {
+          const bool lane_ray = (lanes.same & bit) == 0 && (lanes.has_length & bit) != 0;
+          ASSERT_EQ(lane_ray, kind == TraversalKind::kRay) << "batch " << batch << " ray " << i;
+        }
         if (kind != TraversalKind::kRay) continue;
         int crossings[3];
         TraversalEndTimes times{};
         const TraversalEnd end = endOf(s, crossings, &times);
         ASSERT_EQ(wide.end[i], end) << "batch " << batch << " ray " << i;
-        if (hasFourLanes()) {
-          const TraversalEnd lane_end = (lanes.irregular & bit) != 0 ? TraversalEnd::kIrregular
-                                        : (lanes.unsure & bit) != 0  ? TraversalEnd::kUnsure
-                                                                     : TraversalEnd::kClean;
-          ASSERT_EQ(lane_end, end) << "batch " << batch << " ray " << i;
-          for (int a = 0; a < 3; ++a) {
-            ASSERT_EQ(lanes.key_end[a][i], keys[i][a]);
-            ASSERT_EQ(lanes.st[a][i], s.step[a]);
-            ASSERT_EQ(lanes.tm[a][i], s.t_max[a]);
-            ASSERT_EQ(lanes.td[a][i], s.t_delta[a]);
-            if (end != TraversalEnd::kIrregular) {
-              ASSERT_EQ(lanes.cr[a][i], crossings[a]);
+        for (const TraversalLanes& lanes : both) {
+          if (hasFourLanes()) {
+            const TraversalEnd lane_end = (lanes.irregular & bit) != 0 ? TraversalEnd::kIrregular
+                                          : (lanes.unsure & bit) != 0  ? TraversalEnd::kUnsure
+                                                                       : TraversalEnd::kClean;
+            ASSERT_EQ(lane_end, end) << "batch " << batch << " ray " << i;
+            for (int a = 0; a < 3; ++a) {
+              ASSERT_EQ(lanes.key_end[a][i], keys[i][a]);
+              ASSERT_EQ(lanes.st[a][i], s.step[a]);
+              ASSERT_EQ(lanes.tm[a][i], s.t_max[a]);
+              ASSERT_EQ(lanes.td[a][i], s.t_delta[a]);
+              if (end != TraversalEnd::kIrregular) {
+                ASSERT_EQ(lanes.cr[a][i], crossings[a]);
+              }
+              if (end == TraversalEnd::kClean) {
+                ASSERT_EQ(lanes.la[a][i], times.last[a]);
+              }
             }
             if (end == TraversalEnd::kClean) {
-              ASSERT_EQ(lanes.la[a][i], times.last[a]);
+              ASSERT_EQ(lanes.sc[i], times.scale);
             }
+          } else {
+            ASSERT_NE(lanes.irregular & bit, 0U);  // (walked by traverseRay)
           }
-          if (end == TraversalEnd::kClean) {
-            ASSERT_EQ(lanes.sc[i], times.scale);
-          }
-        } else {
-          ASSERT_NE(lanes.irregular & bit, 0U);  // (walked by traverseRay)
         }
         ASSERT_EQ(wide.start[i].length, s.length);
         for (int a = 0; a < 3; ++a) {

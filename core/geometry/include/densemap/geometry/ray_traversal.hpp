@@ -184,10 +184,12 @@ struct TraversalLanes : TraversalLaneValues<std::int32_t> {
   alignas(32) std::int32_t key_end[3][8];
 };
 /// startTraversals into lanes (`out`), for a caller that reads them side by side: the same
-/// values bit for bit, with AVX2 where the processor has it (hasFourLanes); without it, every
-/// lane is told kRay with a kIrregular end (the caller walks them by traverseRay).
+/// values bit for bit, with AVX-512 when `wide` and the processor has it (hasWideLanes), else
+/// with AVX2 where it has that (hasFourLanes); without either, every lane is told kRay with a
+/// kIrregular end (the caller walks them by traverseRay).
 void startTraversalLanes(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_origin,
-                         const Point3f* ends, const VoxelKey* key_ends, int n, TraversalLanes& out);
+                         const Point3f* ends, const VoxelKey* key_ends, int n, TraversalLanes& out,
+                         bool wide = true);
 /// Fills `out` for rays 0..n-1 (n <= 8) from `origin` (key `key_origin`) to `ends[i]` (key
 /// `key_ends[i]`; both in range): bit for bit what startTraversal and endOf give, eight rays
 /// side by side in AVX-512 lanes when `wide` and the processor has them (hasWideLanes), else in

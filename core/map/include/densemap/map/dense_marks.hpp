@@ -368,13 +368,14 @@ class DenseMarks {
   /// AVX-512 (hasWideWalks), as kFixedEight where it has AVX2 (hasFourWalks), else one at a
   /// time as kScalar does (countedSteps, backwardSteps); kWideEight 8 at a time in AVX-512 lanes
   /// of doubles where the processor has it (it was kBest there until an AMD Zen 5 walked BALM
-  /// 0.2 m's forward walks 25% faster with kFixedEight, 0.1 m's 22%; kFixedSixteen another 17%
-  /// and 12%); kFour 4 at a time in AVX2 lanes of doubles;
+  /// 0.2 m's forward walks 25% faster with kFixedEight, 0.1 m's 22%; kFixedSixteen took
+  /// another 17% and 12% off the whole `raycast` scan); kFour 4 at a time in AVX2 lanes of
+  /// doubles;
   /// kFixedEight 8 at a time in AVX2 lanes of 32-bit fixed-point times, each decision checked
   /// to win by more than the rounding's bound, a walk with a decision that does not handed over
-  /// to kFour from its start (fixedHandedOver counts them); kFixedSixteen the forward walks as
-  /// kFixedEight's, sixteen at a time in AVX-512 lanes where the processor has it (hasWideWalks;
-  /// else as kFixedEight), the backward walks as kFixedEight. Without AVX2, all as kScalar.
+  /// to kFour from its start (fixedHandedOver counts them); kFixedSixteen kFixedEight's walks
+  /// sixteen at a time in AVX-512 lanes where the processor has it (hasWideWalks; else as
+  /// kFixedEight). Without AVX2, all as kScalar.
   enum class WalkKernel { kBest, kWideEight, kFour, kFixedEight, kScalar, kFixedSixteen };
   [[nodiscard]] static bool hasWideWalks();
   [[nodiscard]] static bool hasFourWalks();
@@ -505,11 +506,11 @@ class DenseMarks {
   /// markQueued's kFixedEight (kFixedSixteen): the queue in fixed point, walked; the walks it
   /// hands over, and those out of its range, walked by kFour.
   void markQueuedFixed(WalkKernel kernel);
-  /// markQueuedBack's kFixedEight (the queue not emptied): the walks in fixed point, walked
-  /// against `culled`; those it hands over, and those out of its range, walked by kFour (whose
-  /// own hand-overs go to `handed_over`).
+  /// markQueuedBack's kFixedEight (kFixedSixteen; the queue not emptied): the walks in fixed
+  /// point, walked against `culled`; those it hands over, and those out of its range, walked by
+  /// kFour (whose own hand-overs go to `handed_over`).
   BackWalkCounts markQueuedBackFixed(const block::BlockMask* culled,
-                                     std::vector<std::uint32_t>& handed_over);
+                                     std::vector<std::uint32_t>& handed_over, WalkKernel kernel);
   /// Calls f(i) for each block i in [from, to) whose seen flag is set, in index order.
   template <class F>
   void forEachSeenIn(std::size_t from, std::size_t to, F&& f) const {
