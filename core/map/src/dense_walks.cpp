@@ -1401,12 +1401,12 @@ void fixedPlace(const DenseMarks::WalkPlace& at, DenseMarks::FixedWalk& f) {
 }
 /// The lanes of `r` (startTraversalLanes') that `lanes` names in kFixedEight's terms, eight at a
 /// time: fixedTimes (the times and deltas, the slack and the steps: the first eight fields of a
-/// FixedWalk) of each, the same operations side by side, in `rows` (row l: lane l's). Returns
+/// FixedWalk) of each, the same operations side by side, a vector per field in `f`. Returns
 /// the lanes in its range with a counted walk (kClean, countedTotal from kCountedStepsFrom) whose
 /// end key is in the box of keys [lo, lo + span) per axis.
-[[gnu::target("avx2")]] unsigned fixedLanes(const TraversalLanes& r, unsigned lanes,
-                                            const unsigned (&lo)[3], const unsigned (&span)[3],
-                                            std::int32_t (&rows)[8][8]) {
+[[gnu::target("avx2"), gnu::always_inline]] inline unsigned fixedFields(
+    const TraversalLanes& r, unsigned lanes, const unsigned (&lo)[3], const unsigned (&span)[3],
+    __m256i (&f)[8]) {
   const __m256i total =
       _mm256_add_epi32(_mm256_add_epi32(load8(r.cr[0]), load8(r.cr[1])), load8(r.cr[2]));
   const __m256i steps = _mm256_sub_epi32(total, _mm256_set1_epi32(1));
@@ -1445,15 +1445,25 @@ void fixedPlace(const DenseMarks::WalkPlace& at, DenseMarks::FixedWalk& f) {
     }
     in_range &= ~(static_cast<unsigned>(_mm256_movemask_pd(fine) ^ 0xf) << (4 * h));
   }
-  // The eight fields (t, d, slack, steps) as rows of lanes, transposed to a row per lane.
-  const __m256i f[8] = {whole(t[0]),
-                        whole(t[1]),
-                        whole(t[2]),
-                        whole(d[0]),
-                        whole(d[1]),
-                        whole(d[2]),
-                        _mm256_add_epi32(_mm256_srai_epi32(steps, 1), _mm256_set1_epi32(3)),
-                        steps};
+  // The eight fields (t, d, slack, steps), a vector of lanes each.
+  f[0] = whole(t[0]);
+  f[1] = whole(t[1]);
+  f[2] = whole(t[2]);
+  f[3] = whole(d[0]);
+  f[4] = whole(d[1]);
+  f[5] = whole(d[2]);
+  f[6] = _mm256_add_epi32(_mm256_srai_epi32(steps, 1), _mm256_set1_epi32(3));
+  f[7] = steps;
+  return lanes & in_range;
+}
+
+/// fixedFields' fields of the lanes in a row per lane (`rows`, row l: lane l's, as a FixedWalk's
+/// first eight fields). Returns fixedFields' lanes.
+[[gnu::target("avx2")]] unsigned fixedLanes(const TraversalLanes& r, unsigned lanes,
+                                            const unsigned (&lo)[3], const unsigned (&span)[3],
+                                            std::int32_t (&rows)[8][8]) {
+  __m256i f[8];
+  const unsigned queued = fixedFields(r, lanes, lo, span, f);
   const __m256i u0 = _mm256_unpacklo_epi32(f[0], f[1]), u1 = _mm256_unpackhi_epi32(f[0], f[1]);
   const __m256i u2 = _mm256_unpacklo_epi32(f[2], f[3]), u3 = _mm256_unpackhi_epi32(f[2], f[3]);
   const __m256i u4 = _mm256_unpacklo_epi32(f[4], f[5]), u5 = _mm256_unpackhi_epi32(f[4], f[5]);
@@ -1468,7 +1478,23 @@ void fixedPlace(const DenseMarks::WalkPlace& at, DenseMarks::FixedWalk& f) {
     _mm256_store_si256(reinterpret_cast<__m256i*>(rows[l + 4]),
                        _mm256_permute2x128_si256(v[l], v[l + 4], 0x31));
   }
-  return lanes & in_range;
+  return queued;
+}
+
+/// fixedFields' fields of the lanes it returns, packed in lane order, at `at` of the first eight
+/// of fixedColumns' rows (`cols`, `stride` apart; 8 slots written in each). Returns those lanes.
+[[gnu::target("avx2")]] unsigned fixedLaneColumns(const TraversalLanes& r, unsigned lanes,
+                                                  const unsigned (&lo)[3],
+                                                  const unsigned (&span)[3], std::int32_t* cols,
+                                                  std::size_t stride, std::size_t at) {
+  __m256i f[8];
+  const unsigned queued = fixedFields(r, lanes, lo, span, f);
+  const __m256i idx = _mm256_load_si256(reinterpret_cast<const __m256i*>(kEight.pack32[queued]));
+  for (int k = 0; k < 8; ++k) {
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(cols + k * stride + at),
+                        _mm256_permutevar8x32_epi32(f[k], idx));
+  }
+  return queued;
 }
 
 /// Backward walk `w` (queue index `index`) in kFixedEight's terms (`t`: the heads, `steps`: the
@@ -1537,23 +1563,21 @@ std::size_t fixQueue(const std::vector<Walk>& queue, Convert convert,
   return m;
 }
 
-/// walkEightFixed (or, `sixteen`, walkSixteenFixed) over `walks`, the indices of those it hands
-/// over appended to `handed` (and added to `counted`). Returns how many marks it pended.
-std::size_t walkFixedHanding(const DenseMarks::FixedWalk* walks, std::size_t m,
-                             std::uint32_t* pend_w, std::uint32_t* pend_b,
-                             std::vector<std::uint32_t>& handed, std::size_t& counted,
-                             std::vector<std::int32_t>* sixteen_rows) {
+/// walkEightFixed over `walks` or, given `cols` (fixedColumns' rows, `stride` apart),
+/// walkSixteenFixed over those; the indices of those it hands over appended to `handed` (and
+/// added to `counted`). Returns how many marks it pended.
+std::size_t walkFixedHanding(const DenseMarks::FixedWalk* walks, const std::int32_t* cols,
+                             std::size_t stride, std::size_t m, std::uint32_t* pend_w,
+                             std::uint32_t* pend_b, std::vector<std::uint32_t>& handed,
+                             std::size_t& counted) {
   std::size_t n_handed = handed.size();
   const std::size_t before = n_handed;
   handed.resize(n_handed + m);
-  std::size_t n_pend = 0;
-  if (sixteen_rows != nullptr) {
-    const std::size_t stride = fixedColumnsInto(walks, m, *sixteen_rows);
-    n_pend = walkSixteenFixed(sixteen_rows->data(), stride, m, kSixteenRefillAt, pend_w, pend_b,
-                              handed.data(), n_handed);
-  } else {
-    n_pend = walkEightFixed(walks, m, pend_w, pend_b, handed.data(), n_handed);
-  }
+  const std::size_t n_pend =
+      cols != nullptr
+          ? walkSixteenFixed(cols, stride, m, kSixteenRefillAt, pend_w, pend_b, handed.data(),
+                             n_handed)
+          : walkEightFixed(walks, m, pend_w, pend_b, handed.data(), n_handed);
   handed.resize(n_handed);
   counted += n_handed - before;
   return n_pend;
@@ -1562,7 +1586,7 @@ std::size_t walkFixedHanding(const DenseMarks::FixedWalk* walks, std::size_t m,
 }  // namespace
 
 unsigned DenseMarks::queueFixedLanes(const TraversalLanes& lanes, int n, const VoxelKey& first,
-                                     const std::uint32_t* ids) {
+                                     const std::uint32_t* ids, WalkKernel kernel) {
   // The rays with a clean end (then fixedLanes picks the counted walks).
   const unsigned rays = (n >= 8 ? 0xffU : (1U << n) - 1U) & ~lanes.same & lanes.has_length &
                         ~lanes.irregular & ~lanes.unsure;
@@ -1574,35 +1598,62 @@ unsigned DenseMarks::queueFixedLanes(const TraversalLanes& lanes, int n, const V
   const unsigned lo[3] = {min_[0] << block::kShift, min_[1] << block::kShift,
                           min_[2] << block::kShift};
   const unsigned span[3] = {n_[0] << block::kShift, n_[1] << block::kShift, n_[2] << block::kShift};
-  alignas(32) std::int32_t rows[8][8];
-  const unsigned queued = fixedLanes(lanes, rays, lo, span, rows);
-  if (queued == 0) return 0;
-  if (fixed_queue_.size() < n_fixed_ + 8) {
-    fixed_queue_.resize(std::max<std::size_t>(256, 2 * (n_fixed_ + 8)));
-  }
-  FixedWalk* out = fixed_queue_.data() + n_fixed_;
-  static_assert(offsetof(FixedWalk, addr) == 8 * sizeof(std::int32_t));
-  std::size_t steps = 0;
-  for (unsigned m = queued; m != 0; m &= m - 1) {
-    const int l = std::countr_zero(m);
+  // The place of lane l's walk in FixedWalk's terms (from the memo of its direction).
+  const auto place_of = [&](int l) -> const FixedWalk& {
     const int delta[3] = {lanes.st[0][l], lanes.st[1][l], lanes.st[2][l]};
     const int slot = (delta[0] + 1) + 3 * (delta[1] + 1) + 9 * (delta[2] + 1);
     if ((memo_fixed_filled_ >> slot & 1U) == 0) {
       fixedPlace(*placeFrom(first, delta), memo_fixed_[slot]);
       memo_fixed_filled_ |= 1U << slot;
     }
-    std::memcpy(out, rows[l], sizeof rows[l]);  // t, d, slack, steps
-    const FixedWalk& at = memo_fixed_[slot];
-    out->addr = at.addr;
-    out->flip = at.flip;
-    out->cross[0] = at.cross[0];
-    out->cross[1] = at.cross[1];
-    out->cross[2] = at.cross[2];
-    out->index = ids[l];
-    steps += static_cast<std::size_t>(rows[l][7]) + 1;
-    ++out;
+    return memo_fixed_[slot];
+  };
+  if (n_fixed_ == 0) fixed_columns_ = walksSixteen(kernel);  // (a queue keeps its layout)
+  unsigned queued = 0;
+  std::size_t steps = 0;
+  if (fixed_columns_) {
+    if (fixed_cols_cap_ < n_fixed_ + 8) growFixedColumns();
+    const std::size_t stride = fixed_cols_cap_ + 16;
+    std::int32_t* const cols = fixed_cols_.data();
+    queued = fixedLaneColumns(lanes, rays, lo, span, cols, stride, n_fixed_);
+    std::size_t at = n_fixed_;
+    for (unsigned m = queued; m != 0; m &= m - 1, ++at) {
+      const int l = std::countr_zero(m);
+      const FixedWalk& place = place_of(l);
+      cols[8 * stride + at] = place.addr;
+      cols[9 * stride + at] = place.flip;
+      cols[10 * stride + at] = place.cross[0];
+      cols[11 * stride + at] = place.cross[1];
+      cols[12 * stride + at] = place.cross[2];
+      cols[13 * stride + at] = static_cast<std::int32_t>(ids[l]);
+      steps += static_cast<std::size_t>(cols[7 * stride + at]) + 1;
+    }
+    n_fixed_ = at;
+  } else {
+    alignas(32) std::int32_t rows[8][8];
+    queued = fixedLanes(lanes, rays, lo, span, rows);
+    if (queued == 0) return 0;
+    if (fixed_queue_.size() < n_fixed_ + 8) {
+      fixed_queue_.resize(std::max<std::size_t>(256, 2 * (n_fixed_ + 8)));
+    }
+    FixedWalk* out = fixed_queue_.data() + n_fixed_;
+    static_assert(offsetof(FixedWalk, addr) == 8 * sizeof(std::int32_t));
+    for (unsigned m = queued; m != 0; m &= m - 1) {
+      const int l = std::countr_zero(m);
+      const FixedWalk& place = place_of(l);
+      std::memcpy(out, rows[l], sizeof rows[l]);  // t, d, slack, steps
+      out->addr = place.addr;
+      out->flip = place.flip;
+      out->cross[0] = place.cross[0];
+      out->cross[1] = place.cross[1];
+      out->cross[2] = place.cross[2];
+      out->index = ids[l];
+      steps += static_cast<std::size_t>(rows[l][7]) + 1;
+      ++out;
+    }
+    n_fixed_ = static_cast<std::size_t>(out - fixed_queue_.data());
   }
-  n_fixed_ = static_cast<std::size_t>(out - fixed_queue_.data());
+  if (queued == 0) return 0;
   fixed_steps_ += steps;
   if (at_first->addr != fixed_first_) {  // their first voxel (the sensor's), once
     setAt(static_cast<std::uint32_t>(at_first->addr >> 9),
@@ -1612,13 +1663,25 @@ unsigned DenseMarks::queueFixedLanes(const TraversalLanes& lanes, int n, const V
   return queued;
 }
 
-void DenseMarks::markFixedQueued(std::vector<std::uint32_t>& handed_over, WalkKernel kernel) {
+void DenseMarks::growFixedColumns() {
+  const std::size_t cap = std::max<std::size_t>(256, 2 * (n_fixed_ + 8));
+  const std::size_t stride = cap + 16, old_stride = fixed_cols_cap_ + 16;
+  std::vector<std::int32_t> cols(kFixedFields * stride);
+  for (int k = 0; k < kFixedFields; ++k) {
+    std::copy_n(fixed_cols_.data() + k * old_stride, n_fixed_, cols.data() + k * stride);
+  }
+  fixed_cols_ = std::move(cols);
+  fixed_cols_cap_ = cap;
+}
+
+void DenseMarks::markFixedQueued(std::vector<std::uint32_t>& handed_over) {
   const std::size_t m = n_fixed_;
   if (m == 0) return;
   pendRoom(fixed_steps_, pend32_w_, pend32_b_);
-  finishPended32(walkFixedHanding(fixed_queue_.data(), m, pend32_w_.data(), pend32_b_.data(),
-                                  handed_over, fixed_handed_,
-                                  walksSixteen(kernel) ? &sixteen_rows_ : nullptr));
+  finishPended32(walkFixedHanding(fixed_queue_.data(),
+                                  fixed_columns_ ? fixed_cols_.data() : nullptr,
+                                  fixed_cols_cap_ + 16, m, pend32_w_.data(), pend32_b_.data(),
+                                  handed_over, fixed_handed_));
   n_fixed_ = 0;
   fixed_steps_ = 0;
   fixed_first_ = kNoVoxel;
@@ -1627,9 +1690,14 @@ void DenseMarks::markFixedQueued(std::vector<std::uint32_t>& handed_over, WalkKe
 void DenseMarks::markQueuedFixed(WalkKernel kernel) {
   const std::size_t m = fixQueue(queue_, toFixed, fixed_, handed_ids_, pend32_w_, pend32_b_);
   // (handed_ids_ starts with the walks out of range: not counted as handed over.)
-  finishPended32(walkFixedHanding(fixed_.data(), m, pend32_w_.data(), pend32_b_.data(), handed_ids_,
-                                  fixed_handed_,
-                                  walksSixteen(kernel) ? &sixteen_rows_ : nullptr));
+  const std::int32_t* cols = nullptr;
+  std::size_t stride = 0;
+  if (walksSixteen(kernel)) {
+    stride = fixedColumnsInto(fixed_.data(), m, sixteen_rows_);
+    cols = sixteen_rows_.data();
+  }
+  finishPended32(walkFixedHanding(fixed_.data(), cols, stride, m, pend32_w_.data(),
+                                  pend32_b_.data(), handed_ids_, fixed_handed_));
   if (!handed_ids_.empty()) {
     handed_.clear();
     std::size_t handed_steps = 0;
@@ -1695,14 +1763,16 @@ bool DenseMarks::walksSixteen(WalkKernel kernel) {
 }
 #else
 bool DenseMarks::queuesFixed(WalkKernel) { return false; }
+bool DenseMarks::walksSixteen(WalkKernel) { return false; }
 unsigned DenseMarks::queueFixedLanes(const TraversalLanes&, int, const VoxelKey&,
-                                     const std::uint32_t*) {
+                                     const std::uint32_t*, WalkKernel) {
   return 0;
 }
+void DenseMarks::growFixedColumns() {}
 void DenseMarks::markFixedQueued(std::vector<std::uint32_t>&) {}
-void DenseMarks::markQueuedFixed(WalkKernel kernel) { markQueued(WalkKernel::kScalar); }
+void DenseMarks::markQueuedFixed(WalkKernel) { markQueued(WalkKernel::kScalar); }
 DenseMarks::BackWalkCounts DenseMarks::markQueuedBackFixed(
-    const block::BlockMask* culled, std::vector<std::uint32_t>& handed_over, WalkKernel kernel) {
+    const block::BlockMask* culled, std::vector<std::uint32_t>& handed_over, WalkKernel) {
   return markQueuedBack(culled, handed_over, WalkKernel::kScalar);
 }
 #endif

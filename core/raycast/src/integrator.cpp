@@ -252,7 +252,7 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
             DenseSink sink{local.dense, local.update};
             markRaysQueued(grid, origin_world, rays_.data(), idsOf(range, local.ids), sink,
                            local.counts, *origin_key,
-                           DenseMarks::queuesFixed(options_.walk_kernel));
+                           DenseMarks::queuesFixed(options_.walk_kernel), options_.walk_kernel);
             walkRaysQueued(grid, origin_world, rays_.data(), sink, *origin_key,
                            options_.walk_kernel, local.handed);
           } else if (local.dense_ok) {

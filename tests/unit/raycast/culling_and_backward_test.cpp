@@ -387,7 +387,7 @@ TEST_P(FixedQueueByRayIndex, MarksAsTheHash) {
   const VoxelGrid grid(0.25);
   std::mt19937 rng(29);
   std::uniform_int_distribution<int> lattice(-40, 40), scale(3, 60), pick(0, 6), batch(1, 300),
-      few(1, 4);
+      few(1, 4), many(800, 1500);
   std::uniform_real_distribution<float> coord(-14.0F, 14.0F);
   ASSERT_EQ(DenseMarks::queuesFixed(kernel), DenseMarks::hasFourWalks());
   DenseMarks dense;
@@ -407,7 +407,8 @@ TEST_P(FixedQueueByRayIndex, MarksAsTheHash) {
     const VoxelKey origin_key = *grid.pointToKey(origin);
     rays.clear();
     ids.clear();
-    for (int i = b % 3 == 0 ? few(rng) : batch(rng); i > 0; --i) {
+    // (Batches of many rays: the queue grows while it holds walks.)
+    for (int i = b % 3 == 0 ? few(rng) : b % 10 == 1 ? many(rng) : batch(rng); i > 0; --i) {
       static constexpr float kRatios[6][3] = {{2, 1, 0.5F},  {1, 2, 0.25F}, {1, 0.5F, 2},
                                               {-2, 1, 0.5F}, {4, -1, 2},    {1, -4, -0.5F}};
       const int k = pick(rng);
@@ -420,7 +421,7 @@ TEST_P(FixedQueueByRayIndex, MarksAsTheHash) {
       markRay(grid, origin, rays.back(), plain, plain_counts);
     }
     queued += markRaysQueued(grid, origin, rays.data(), ids, sink, sut_counts, origin_key,
-                             DenseMarks::queuesFixed(kernel));
+                             DenseMarks::queuesFixed(kernel), kernel);
     walkRaysQueued(grid, origin, rays.data(), sink, origin_key, kernel, handed);
     dense.flushInto(sut);
     ASSERT_EQ(sut_counts.visits, plain_counts.visits) << "batch " << b;

@@ -434,14 +434,15 @@ class DenseMarks {
   /// from voxel `first`; ray l's id ids[l]), each marked from its first voxel, which is marked
   /// now. Returns the lanes queued: counted walks (kClean, countedTotal > 0) with both ends in
   /// the box and times in the fixed point's range (toFixed's); the caller walks the others.
+  /// `kernel` (one that queuesFixed): an empty queue takes walksSixteen(kernel)'s layout, field
+  /// by field for kFixedSixteen (no transposition before its walk), else a FixedWalk a walk.
   unsigned queueFixedLanes(const TraversalLanes& lanes, int n, const VoxelKey& first,
-                           const std::uint32_t* ids);
-  /// Walks the walks queueFixedLanes queued, then empties that queue. The ids of those it hands
-  /// over (a decision too close to call in fixed point) are appended to `handed_over`: the
-  /// caller walks them exactly (what they marked is part of their marks). `kernel`: one that
-  /// queuesFixed (walksSixteen picks the lanes).
-  void markFixedQueued(std::vector<std::uint32_t>& handed_over,
-                       WalkKernel kernel = WalkKernel::kBest);
+                           const std::uint32_t* ids, WalkKernel kernel = WalkKernel::kBest);
+  /// Walks the walks queueFixedLanes queued (with the kernel they were queued for), then
+  /// empties that queue. The ids of those it hands over (a decision too close to call in fixed
+  /// point) are appended to `handed_over`: the caller walks them exactly (what they marked is
+  /// part of their marks).
+  void markFixedQueued(std::vector<std::uint32_t>& handed_over);
   /// Voxels markQueuedBack marked and skipped (markRayCulled's counts).
   struct BackWalkCounts {
     std::size_t visits = 0;
@@ -647,6 +648,12 @@ class DenseMarks {
   std::vector<std::int32_t> sixteen_rows_;          // kFixedSixteen's walks, field by field
   std::vector<FixedWalk> fixed_;                    // kFixedEight's queue
   std::vector<FixedWalk> fixed_queue_;              // queueFixedLanes' (n_fixed_ of them)
+  // queueFixedLanes' for kFixedSixteen (fixed_columns_): 14 rows of fixed_cols_cap_ + 16.
+  std::vector<std::int32_t> fixed_cols_;
+  std::size_t fixed_cols_cap_ = 0;
+  bool fixed_columns_ = false;
+  /// fixed_cols_ with room for twice the walks queued (those kept).
+  void growFixedColumns();
   std::size_t n_fixed_ = 0, fixed_steps_ = 0;       // (fixed_steps_: their totals)
   std::vector<QueuedWalk> handed_;                  // kFixedEight's hand-overs
   std::vector<QueuedBackWalk> back_handed_;         // (backward)

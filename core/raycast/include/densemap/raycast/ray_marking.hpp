@@ -314,13 +314,14 @@ void startRaysByEight(const VoxelGrid& grid, const Point3f& origin, const VoxelK
 /// counted walk between two voxels of the box: every ray of the integrator's box but short ones
 /// and near-ties at the end): its first voxel is marked now and the others by the sink's
 /// DenseMarks::markQueued, which the caller runs before the marks are read — or, when `fixed`
-/// (DenseMarks::queuesFixed), started side by side (startTraversalLanes) and queued eight at a
-/// time by the rays' indices (DenseMarks::queueFixedLanes) for walkRaysQueued. Other rays are
-/// marked as markRay does. Returns how many walks were queued.
-inline std::size_t markRaysQueued(const VoxelGrid& grid, const Point3f& origin, const RayEnd* rays,
-                                  std::span<const std::uint32_t> ids, DenseSink& sink,
-                                  MarkCounts& counts, const VoxelKey& origin_key,
-                                  bool fixed = false) {
+/// (DenseMarks::queuesFixed(kernel)), started side by side (startTraversalLanes) and queued
+/// eight at a time by the rays' indices (DenseMarks::queueFixedLanes, for `kernel`) for
+/// walkRaysQueued. Other rays are marked as markRay does. Returns how many walks were queued.
+inline std::size_t markRaysQueued(
+    const VoxelGrid& grid, const Point3f& origin, const RayEnd* rays,
+    std::span<const std::uint32_t> ids, DenseSink& sink, MarkCounts& counts,
+    const VoxelKey& origin_key, bool fixed = false,
+    DenseMarks::WalkKernel kernel = DenseMarks::WalkKernel::kBest) {
   std::size_t queued = 0;
   const auto marked = [&](std::uint32_t id) {
     markRay(grid, origin, rays[id], sink, counts, &origin_key);
@@ -331,7 +332,8 @@ inline std::size_t markRaysQueued(const VoxelGrid& grid, const Point3f& origin, 
         rays, ids,
         [&](const Point3f* ends, const VoxelKey* keys, const std::uint32_t* lane_ray, int n) {
           startTraversalLanes(grid, origin, origin_key, ends, keys, n, lanes);
-          const unsigned done = sink.dense.queueFixedLanes(lanes, n, origin_key, lane_ray);
+          const unsigned done =
+              sink.dense.queueFixedLanes(lanes, n, origin_key, lane_ray, kernel);
           unsigned occupied = 0;  // the lanes whose end voxel markEnd would mark (keys[l])
           for (int l = 0; l < n; ++l) {
             const RayEnd& ray = rays[lane_ray[l]];
@@ -381,9 +383,9 @@ inline std::size_t markRaysQueued(const VoxelGrid& grid, const Point3f& origin, 
 }
 
 /// Walks what markRaysQueued queued into `sink` from `rays` (its `fixed` is
-/// DenseMarks::queuesFixed(kernel)): DenseMarks::markQueued(kernel), or markFixedQueued and
-/// the walks it hands over walked again by markRay (their counts were added when queued;
-/// `handed`: scratch).
+/// DenseMarks::queuesFixed(kernel), its `kernel` this one): DenseMarks::markQueued(kernel), or
+/// markFixedQueued and the walks it hands over walked again by markRay (their counts were added
+/// when queued; `handed`: scratch).
 inline void walkRaysQueued(const VoxelGrid& grid, const Point3f& origin, const RayEnd* rays,
                            DenseSink& sink, const VoxelKey& origin_key,
                            DenseMarks::WalkKernel kernel, std::vector<std::uint32_t>& handed) {
@@ -392,7 +394,7 @@ inline void walkRaysQueued(const VoxelGrid& grid, const Point3f& origin, const R
     return;
   }
   handed.clear();
-  sink.dense.markFixedQueued(handed, kernel);
+  sink.dense.markFixedQueued(handed);
   MarkCounts counted;  // (already)
   for (const std::uint32_t id : handed) markRay(grid, origin, rays[id], sink, counted, &origin_key);
 }
