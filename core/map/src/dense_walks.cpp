@@ -810,14 +810,14 @@ struct SixteenWalks {
 /// same integers, the same decisions (a step only when the smallest time is below the others by
 /// more than the slack, else the walk is handed over), the same marks pended per 32-bit word.
 /// The decision's axes are mask registers, and with 32 vector registers all the lanes' state
-/// stays in registers. A lane whose walk is done waits, masked off, until `refill_at` lanes
-/// are (or the queue is out): then they take the next walks at once, each field expanded into
+/// stays in registers. A lane whose walk is done waits, masked off, until kSixteenRefillAt
+/// lanes are (or the queue is out): then they take the next walks at once, each field expanded into
 /// them from `rows` (fixedColumns' of these walks, `stride` apart; no loop over the lanes, whose
 /// count would mispredict). Same contract as walkEightFixed; `pend_w` / `pend_b` need room for
 /// (all the walks' steps + 1) + 16.
 [[DENSEMAP_AVX512_FIXED]] std::size_t walkSixteenFixed(const std::int32_t* rows, std::size_t stride,
-                                                       std::size_t n, unsigned refill_at,
-                                                       std::uint32_t* pend_w, std::uint32_t* pend_b,
+                                                       std::size_t n, std::uint32_t* pend_w,
+                                                       std::uint32_t* pend_b,
                                                        std::uint32_t* handed_over,
                                                        std::size_t& n_handed) {
   const __m512i zero = _mm512_setzero_si512(), one = _mm512_set1_epi32(1),
@@ -828,7 +828,7 @@ struct SixteenWalks {
   __mmask16 live = 0;                  // lanes with a walk whose last marks are not pended
   std::uint32_t* const pend_start = pend_w;
   std::size_t next = 0;
-  refill_at = std::clamp(refill_at, 1U, 16U);
+  unsigned refill_at = kSixteenRefillAt;
   while (true) {
     __mmask16 act = _mm512_cmpgt_epi32_mask(w.left, zero);
     const unsigned idle = ~static_cast<unsigned>(act) & 0xffffU;
@@ -889,8 +889,7 @@ struct SixteenWalks {
 /// one iteration later, the marks pended per 32-bit word; lanes refilled as walkSixteenFixed's,
 /// from the walks field by field (`rows`, `stride`). Same contract as walkEightFixedBack.
 [[DENSEMAP_AVX512_FIXED]] DenseMarks::BackWalkCounts walkSixteenFixedBack(
-    const std::int32_t* rows, std::size_t stride, std::size_t n, unsigned refill_at,
-    const std::uint32_t* culled, std::uint32_t* pend_w, std::uint32_t* pend_b,
+    const std::int32_t* rows, std::size_t stride, std::size_t n, const std::uint32_t* culled, std::uint32_t* pend_w, std::uint32_t* pend_b,
     std::uint32_t* handed_over, std::size_t& n_handed, std::size_t& n_pend) {
   const __m512i zero = _mm512_setzero_si512(), one = _mm512_set1_epi32(1),
                 low5 = _mm512_set1_epi32(31);
@@ -904,7 +903,7 @@ struct SixteenWalks {
   std::uint32_t* const pend_start = pend_w;
   DenseMarks::BackWalkCounts counts;
   std::size_t next = 0;
-  refill_at = std::clamp(refill_at, 1U, 16U);
+  unsigned refill_at = kSixteenRefillAt;
   while (true) {
     __mmask16 active = _mm512_cmpgt_epi32_mask(w.left, zero);
     const __mmask16 tested = _mm512_test_epi32_mask(pending, pending);
@@ -1576,8 +1575,7 @@ std::size_t walkFixedHanding(const DenseMarks::FixedWalk* walks, const std::int3
   handed.resize(n_handed + m);
   const std::size_t n_pend =
       cols != nullptr
-          ? walkSixteenFixed(cols, stride, m, kSixteenRefillAt, pend_w, pend_b, handed.data(),
-                             n_handed)
+          ? walkSixteenFixed(cols, stride, m, pend_w, pend_b, handed.data(), n_handed)
           : walkEightFixed(walks, m, pend_w, pend_b, handed.data(), n_handed);
   handed.resize(n_handed);
   counted += n_handed - before;
@@ -1727,9 +1725,8 @@ DenseMarks::BackWalkCounts DenseMarks::markQueuedBackFixed(
   BackWalkCounts counts;
   if (walksSixteen(kernel)) {
     const std::size_t stride = fixedColumnsInto(fixed_.data(), m, sixteen_rows_);
-    counts = walkSixteenFixedBack(sixteen_rows_.data(), stride, m, kSixteenRefillAt, culled32,
-                                  pend32_w_.data(), pend32_b_.data(), handed_ids_.data(), n_handed,
-                                  n_pend);
+    counts = walkSixteenFixedBack(sixteen_rows_.data(), stride, m, culled32, pend32_w_.data(),
+                                  pend32_b_.data(), handed_ids_.data(), n_handed, n_pend);
   } else {
     counts = walkEightFixedBack(fixed_.data(), m, culled32, pend32_w_.data(), pend32_b_.data(),
                                 handed_ids_.data(), n_handed, n_pend);

@@ -507,6 +507,8 @@ class DenseMarks {
   /// markQueued's kFixedEight (kFixedSixteen): the queue in fixed point, walked; the walks it
   /// hands over, and those out of its range, walked by kFour.
   void markQueuedFixed(WalkKernel kernel);
+  /// fixed_cols_ with room for twice the walks queued (those kept).
+  void growFixedColumns();
   /// markQueuedBack's kFixedEight (kFixedSixteen; the queue not emptied): the walks in fixed
   /// point, walked against `culled`; those it hands over, and those out of its range, walked by
   /// kFour (whose own hand-overs go to `handed_over`).
@@ -652,8 +654,6 @@ class DenseMarks {
   std::vector<std::int32_t> fixed_cols_;
   std::size_t fixed_cols_cap_ = 0;
   bool fixed_columns_ = false;
-  /// fixed_cols_ with room for twice the walks queued (those kept).
-  void growFixedColumns();
   std::size_t n_fixed_ = 0, fixed_steps_ = 0;       // (fixed_steps_: their totals)
   std::vector<QueuedWalk> handed_;                  // kFixedEight's hand-overs
   std::vector<QueuedBackWalk> back_handed_;         // (backward)
