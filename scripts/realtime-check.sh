@@ -2,7 +2,7 @@
 # Server against core, same scans, same session (issue 15's check): runs densemap-server on
 # loopback at RES / RANGE, replays DATA at RATE Hz (optionally with point queries), stops it,
 # then runs densemap-bench on the same scans with the same method (METHOD, default raycast, the
-# server's default; grid, 2 threads). Prints the server's latency p50/p99, drops, RSS, and the bench's p50/p99.
+# server's default; grid, THREADS threads). Prints the server's latency p50/p99, drops, RSS, and the bench's p50/p99.
 # Writes $OUT/scans.csv (densemap replay --csv: per-scan latency and map size) and rss.txt.
 # Usage: scripts/realtime-check.sh DATA RES RANGE [RATE=10] [FIRST=0] [LIMIT=0] [QUERY_POINTS=0]
 # Environment: DENSEMAP_BIN (default build/bin), DENSEMAP_DOMAIN (default 77), BENCH=0 skips the
@@ -11,16 +11,18 @@
 # $OUT/perf.data, WARM_UP=true turns the pipeline's warm-up on, LEGACY=1 drives a densemap
 # built before replay's --csv and --query-bbox-edge (before/after runs), KIND=K the server's
 # map.kind (default log_odds; a dense kind such as akimap_rays is benched as that kind),
-# METHOD=M the server's pipeline.integration (raycast, culling, superray, superray+culling).
+# METHOD=M the server's pipeline.integration (raycast, culling, superray, superray+culling),
+# THREADS=N the server's pipeline.threads and the bench's --threads (default 2).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DATA=$1 RES=$2 RANGE=$3 RATE=${4:-10} FIRST=${5:-0} LIMIT=${6:-0} QUERY=${7:-0}
+THREADS=${THREADS:-2}
 BIN=${DENSEMAP_BIN:-build/bin}
 DOMAIN=${DENSEMAP_DOMAIN:-77}
 OUT=$(mktemp -d /tmp/densemap-rt.XXXXXX)
 cat > "$OUT/server.textproto" <<CFG
 map { backend: "grid" kind: "${KIND:-log_odds}" resolution_m: $RES max_range_m: $RANGE }
-pipeline { threads: 2 queue_depth: 2 integration: "${METHOD:-raycast}" max_abs_position_m: 10000
+pipeline { threads: $THREADS queue_depth: 2 integration: "${METHOD:-raycast}" max_abs_position_m: 10000
            ${WARM_UP:+warm_up: $WARM_UP} }
 snapshot { path: "" autosave_period_s: 0 }
 dds { domain_id: $DOMAIN network_interface: "lo" }
@@ -68,7 +70,7 @@ if [ "${BENCH:-1}" = 1 ]; then
   method=${METHOD:-raycast}
   [ "${KIND:-log_odds}" != log_odds ] && method=$KIND
   "$BIN/densemap-bench" --data "$DATA" --resolution "$RES" --max-range "$RANGE" \
-    --methods "$method" --backend grid --threads 2 --first "$FIRST" --limit "$LIMIT" \
+    --methods "$method" --backend grid --threads "$THREADS" --first "$FIRST" --limit "$LIMIT" \
     2> "$OUT/bench.log" | tee "$OUT/bench.txt" | head -3
 fi
 echo "outputs in $OUT"
