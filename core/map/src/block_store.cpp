@@ -174,12 +174,17 @@ void BlockStore::recycle(ChainLink* link) {
   }
 }
 
-BlockNode& BlockStore::writable(BlockEntry& e) {
-  ChainLink* head = e.head.load(std::memory_order_relaxed);
+BlockNode* BlockStore::ownHead(ChainLink* head) const {
   const BlockNode* current = contents(head);
   if (current != nullptr && (!versioned_ || head->version == writing_)) {
-    return *static_cast<BlockNode*>(head);
+    return static_cast<BlockNode*>(head);
   }
+  return nullptr;
+}
+
+BlockNode& BlockStore::writable(BlockEntry& e) {
+  ChainLink* head = e.head.load(std::memory_order_relaxed);
+  if (BlockNode* own = ownHead(head)) return *own;
   BlockNode* node = nullptr;
   {
     std::lock_guard lock(pool_mutex_);
@@ -189,6 +194,37 @@ BlockNode& BlockStore::writable(BlockEntry& e) {
       if (head != nullptr) superseded_.emplace_back(head, node);
     }
   }
+  return becomeHead(e, head, node);
+}
+
+BlockNode& BlockStore::WriteBatch::writable(BlockEntry& e) {
+  ChainLink* head = e.head.load(std::memory_order_relaxed);
+  if (BlockNode* own = store_.ownHead(head)) return *own;
+  if (next_ == nodes_.size()) {
+    nodes_.clear();
+    next_ = 0;
+    std::lock_guard lock(store_.pool_mutex_);
+    for (std::size_t k = 0; k < kBatchNodes; ++k) nodes_.push_back(store_.allocate());
+  }
+  BlockNode* node = nodes_[next_++];  // in the pool's order: the most recently freed first
+  if (store_.versioned_) {
+    written_.push_back(e.key);
+    if (head != nullptr) superseded_.emplace_back(head, node);
+  }
+  return store_.becomeHead(e, head, node);
+}
+
+BlockStore::WriteBatch::~WriteBatch() {
+  if (next_ == nodes_.size() && written_.empty() && superseded_.empty()) return;
+  std::lock_guard lock(store_.pool_mutex_);
+  // The unused nodes back in the order they came out (the next one on top).
+  for (std::size_t k = nodes_.size(); k > next_; --k) store_.recycle(nodes_[k - 1]);
+  store_.written_.insert(store_.written_.end(), written_.begin(), written_.end());
+  store_.superseded_.insert(store_.superseded_.end(), superseded_.begin(), superseded_.end());
+}
+
+BlockNode& BlockStore::becomeHead(BlockEntry& e, ChainLink* head, BlockNode* node) {
+  const BlockNode* current = contents(head);
   if (current != nullptr) {
     node->voxels = current->voxels;
     node->fully_free = current->fully_free;

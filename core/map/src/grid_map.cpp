@@ -34,11 +34,13 @@ struct GridMap::BlockWriter {
   BlockEntry& entry;
   Counts& counts;
   CellChanges* out;
+  BlockStore::WriteBatch& batch;  // the task's: where the writable node comes from
   const BlockNode* read;
   BlockNode* write = nullptr;
 
-  BlockWriter(GridMap& m, BlockEntry& e, Counts& c, CellChanges* changes)
-      : map(m), entry(e), counts(c), out(changes), read(BlockStore::latest(e)) {
+  BlockWriter(GridMap& m, BlockEntry& e, Counts& c, CellChanges* changes,
+              BlockStore::WriteBatch& b)
+      : map(m), entry(e), counts(c), out(changes), batch(b), read(BlockStore::latest(e)) {
     static const BlockNode kEmpty{};
     if (read == nullptr) read = &kEmpty;
   }
@@ -132,7 +134,7 @@ struct GridMap::BlockWriter {
             static_cast<__mmask16>(cells & ~_mm512_mask_cmp_ps_mask(kn, old, v, _CMP_EQ_OQ));
         if (changed == 0) continue;
         if (write == nullptr) {
-          write = &map.store_->writable(entry);
+          write = &batch.writable(entry);
           read = write;
         }
         const auto newly = static_cast<__mmask16>(changed & ~kn);
@@ -199,7 +201,7 @@ struct GridMap::BlockWriter {
             ~(kn & static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(old, v, _CMP_EQ_OQ))));
         if (changed == 0) continue;
         if (write == nullptr) {
-          write = &map.store_->writable(entry);
+          write = &batch.writable(entry);
           read = write;
         }
         const unsigned newly = changed & ~kn;
@@ -230,7 +232,7 @@ struct GridMap::BlockWriter {
   template <class KeyOf>
   void change(int i, float v, bool was_known, KeyOf&& key_of) {
     if (write == nullptr) {
-      write = &map.store_->writable(entry);
+      write = &batch.writable(entry);
       read = write;
     }
     if (!was_known) {
@@ -253,6 +255,7 @@ ApplyStats GridMap::writeBlocks(std::span<BlockEntry* const> entries, CellChange
   std::atomic<std::size_t> updated{0}, changed{0}, newly_known{0};
   runner().run(entries.size(), 16, [&](std::size_t begin, std::size_t end) {
     Counts c;
+    BlockStore::WriteBatch batch(*store_);
     // Blocks come from all over the map (cache misses): the entry four blocks ahead and the
     // newest node's first lines two ahead are fetched while this one is written.
     const auto prefetchNode = [&](std::size_t k) {
@@ -281,7 +284,8 @@ ApplyStats GridMap::writeBlocks(std::span<BlockEntry* const> entries, CellChange
     for (std::size_t j = begin; j != end; ++j) {
       if (j + 4 < end) __builtin_prefetch(entries[j + 4]);
       prefetchNode(j + 2);
-      BlockWriter w(*this, *entries[j], c, changes != nullptr ? &block_changes[j] : nullptr);
+      BlockWriter w(*this, *entries[j], c, changes != nullptr ? &block_changes[j] : nullptr,
+                    batch);
       write_block(j, w);
     }
     updated += c.updated;

@@ -247,6 +247,57 @@ TEST(BlockStore, EvidenceGoesWithDropsAndSurvivesCompaction) {
   EXPECT_EQ(store.findEntry(200000), nullptr);
 }
 
+// Writes through WriteBatch (nodes taken from the pool a few at a time, the version's
+// bookkeeping kept until the batch ends) leave the same versions as writable(): the new
+// version's contents copied from the last and changed, the old version's unchanged while held,
+// every written block listed once, and every node back in the pool once nobody reads it (the
+// batches' unused nodes included).
+TEST(BlockStore, WritesThroughBatchesKeepTheVersionsBookkeeping) {
+  BlockStore store;
+  (void)store.publish();  // versioned from here
+  for (std::uint64_t k = 0; k < 1000; ++k) {
+    store.writable(store.entry(k)).voxels.markKnown(1);
+  }
+  BlockStore::Published held = store.publish();
+  std::vector<BlockEntry*> entries;
+  for (std::uint64_t k = 0; k < 1100; ++k) entries.push_back(&store.entry(k));  // 100 new
+  // Two tasks, each with its own batch, over distinct blocks (odd and even).
+  std::vector<std::thread> tasks;
+  for (std::size_t part = 0; part < 2; ++part) {
+    tasks.emplace_back([&, part] {
+      BlockStore::WriteBatch batch(store);
+      for (std::size_t j = part; j < entries.size(); j += 2) {
+        batch.writable(*entries[j]).voxels.markKnown(2);
+        batch.writable(*entries[j]).voxels.markKnown(3);  // the same node again
+      }
+    });
+  }
+  for (std::thread& t : tasks) t.join();
+  const BlockStore::Published next = store.publish();
+  std::vector<std::uint64_t> written = next.written_blocks;
+  std::sort(written.begin(), written.end());
+  ASSERT_EQ(written.size(), 1100U);
+  for (std::uint64_t k = 0; k < 1100; ++k) EXPECT_EQ(written[k], k);
+  EXPECT_EQ(store.liveNodes(), 1000U + 1100U);  // the held version's, and the new ones
+  for (std::uint64_t k = 0; k < 1100; ++k) {
+    const BlockNode* now = store.find(k, next.version);
+    ASSERT_NE(now, nullptr);
+    EXPECT_EQ(now->voxels.isKnown(1), k < 1000);  // copied from the last version
+    EXPECT_TRUE(now->voxels.isKnown(2) && now->voxels.isKnown(3));
+    const BlockNode* then = store.find(k, held.version);
+    if (k < 1000) {
+      ASSERT_NE(then, nullptr);
+      EXPECT_TRUE(then->voxels.isKnown(1));
+      EXPECT_FALSE(then->voxels.isKnown(2));
+    } else {
+      EXPECT_EQ(then, nullptr);
+    }
+  }
+  held = {};
+  (void)store.publish();
+  EXPECT_EQ(store.liveNodes(), store.entryCount());
+}
+
 TEST(MapView, AWindowedDriveKeepsMemoryFlat) {
   GridMap sut(0.1, SensorModel{});
   sut.reserveBlocks(2048);

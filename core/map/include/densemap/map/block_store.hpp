@@ -107,6 +107,29 @@ class BlockStore {
   /// already wrote it (or the store is unversioned), else a copy of the head (or an empty node)
   /// that becomes the new head. Safe from parallel tasks for distinct entries.
   BlockNode& writable(BlockEntry& entry);
+  /// writable() for one task's run of blocks: its nodes come from the pool kBatchNodes at a
+  /// time and the version's bookkeeping waits in the batch, so the pool's lock is taken once
+  /// per refill and once at the end, not once per block (two tasks of a scan's apply took it
+  /// ~9,000 times a scan, and the server's 2-thread apply took 6.4-8.2 ms against 4.8-5.0 this
+  /// way). The destructor hands the bookkeeping to the version and the unused nodes back to the
+  /// pool (out of memory there ends the process, as a bad_alloc from the writer does now).
+  /// Writer side, like writable(); one batch per task.
+  class WriteBatch {
+   public:
+    explicit WriteBatch(BlockStore& store) : store_(store) {}
+    ~WriteBatch();
+    WriteBatch(const WriteBatch&) = delete;
+    WriteBatch& operator=(const WriteBatch&) = delete;
+    BlockNode& writable(BlockEntry& entry);
+
+   private:
+    static constexpr std::size_t kBatchNodes = 16;
+    BlockStore& store_;
+    std::vector<BlockNode*> nodes_;  // taken from the pool; those from next_ on not used yet
+    std::size_t next_ = 0;
+    std::vector<std::uint64_t> written_;
+    std::vector<std::pair<ChainLink*, ChainLink*>> superseded_;
+  };
   /// Ends the version being written and starts the next one. Returns the pin of the version
   /// just ended (readers hold it) and the blocks that version wrote, in no particular order.
   struct Published {
@@ -207,6 +230,12 @@ class BlockStore {
   ChainLink* allocateTomb();      // pool_mutex_ held
   void recycle(ChainLink* link);  // pool_mutex_ held
   void addSlab();                 // pool_mutex_ held
+  /// writable()'s node for `e` from `node` (taken from the pool): the head's contents copied
+  /// (or an empty node), the version set, made the head.
+  BlockNode& becomeHead(BlockEntry& e, ChainLink* head, BlockNode* node);
+  /// `head` as a node this version may write in place (it wrote it already, or the store is
+  /// unversioned), else null.
+  [[nodiscard]] BlockNode* ownHead(ChainLink* head) const;
   void release(const std::vector<std::pair<ChainLink*, ChainLink*>>& superseded);
   void retireTombstones();  // writer, in publish()
   void compactIfWorthIt();  // writer, in publish()
