@@ -811,10 +811,10 @@ struct SixteenWalks {
 /// more than the slack, else the walk is handed over), the same marks pended per 32-bit word.
 /// The decision's axes are mask registers, and with 32 vector registers all the lanes' state
 /// stays in registers. A lane whose walk is done waits, masked off, until kSixteenRefillAt
-/// lanes are (or the queue is out): then they take the next walks at once, each field expanded into
-/// them from `rows` (fixedColumns' of these walks, `stride` apart; no loop over the lanes, whose
-/// count would mispredict). Same contract as walkEightFixed; `pend_w` / `pend_b` need room for
-/// (all the walks' steps + 1) + 16.
+/// lanes are (or the queue is out): then they take the next walks at once, each field expanded
+/// into them from `rows` (fixedColumns' of these walks, `stride` apart; no loop over the
+/// lanes, whose count would mispredict). Same contract as walkEightFixed; `pend_w` / `pend_b`
+/// need room for (all the walks' steps + 1) + 16.
 [[DENSEMAP_AVX512_FIXED]] std::size_t walkSixteenFixed(const std::int32_t* rows, std::size_t stride,
                                                        std::size_t n, std::uint32_t* pend_w,
                                                        std::uint32_t* pend_b,
@@ -889,8 +889,9 @@ struct SixteenWalks {
 /// one iteration later, the marks pended per 32-bit word; lanes refilled as walkSixteenFixed's,
 /// from the walks field by field (`rows`, `stride`). Same contract as walkEightFixedBack.
 [[DENSEMAP_AVX512_FIXED]] DenseMarks::BackWalkCounts walkSixteenFixedBack(
-    const std::int32_t* rows, std::size_t stride, std::size_t n, const std::uint32_t* culled, std::uint32_t* pend_w, std::uint32_t* pend_b,
-    std::uint32_t* handed_over, std::size_t& n_handed, std::size_t& n_pend) {
+    const std::int32_t* rows, std::size_t stride, std::size_t n, const std::uint32_t* culled,
+    std::uint32_t* pend_w, std::uint32_t* pend_b, std::uint32_t* handed_over,
+    std::size_t& n_handed, std::size_t& n_pend) {
   const __m512i zero = _mm512_setzero_si512(), one = _mm512_set1_epi32(1),
                 low5 = _mm512_set1_epi32(31);
   SixteenWalks w{zero, zero, zero, zero, zero, zero, zero,  // (w.t: the heads)
