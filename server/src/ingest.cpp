@@ -4,6 +4,7 @@
 #include <chrono>
 
 #include "densemap/geometry/percentile.hpp"
+#include "guarded.hpp"
 
 namespace densemap {
 
@@ -92,15 +93,31 @@ Expected<void> Ingest::restoreKernelEvidence(const kernel::KernelEvidence& evide
 
 void Ingest::run() {
   while (running_.load()) {
-    runCommands();
-    auto raw = queue_.pop(std::chrono::milliseconds(20));
-    if (raw) process(*raw);
+    // process() and runCommands() turn the engine's failures into rejections and errors;
+    // guarded() takes the rest (a counter's allocation, a reject handler).
+    guarded("ingest", [&] {
+      runCommands();
+      auto raw = queue_.pop(std::chrono::milliseconds(20));
+      if (raw) process(*raw);
+    });
   }
 }
 
-void Ingest::process(const RawScan& raw) {
+std::expected<IntegrationResult, Rejection> Ingest::integrate(const RawScan& raw) {
   std::expected<IntegrationResult, Rejection> outcome;
-  arena_.execute([&] { outcome = engine_->integrate(raw); });
+  try {
+    arena_.execute([&] { outcome = engine_->integrate(raw); });
+  } catch (...) {
+    // Nothing is published: readers keep the last version. The map is not rolled back, so a
+    // scan that failed part-way may leave part of its update, published with the next scan.
+    return std::unexpected(
+        Rejection{RejectReason::kInternal, "integration failed: " + currentFailure()});
+  }
+  return outcome;
+}
+
+void Ingest::process(const RawScan& raw) {
+  std::expected<IntegrationResult, Rejection> outcome = integrate(raw);
   if (outcome) {
     outcome->latency_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - raw.received)
@@ -127,8 +144,12 @@ void Ingest::runCommands() {
   for (auto& [command, promise] : pending) {
     IntegrationResult result;
     Expected<std::string> outcome;
-    arena_.execute([&] { outcome = engine_->command(command, result); });
-    if (!result.changes.empty()) published(result);
+    try {
+      arena_.execute([&] { outcome = engine_->command(command, result); });
+      if (!result.changes.empty()) published(result);
+    } catch (...) {
+      outcome = makeError("command failed: " + currentFailure());
+    }
     promise.set_value(std::move(outcome));
   }
 }
@@ -147,7 +168,9 @@ void Ingest::published(IntegrationResult& result) {
       latency_next_ = (latency_next_ + 1) % latencies_.size();
     }
   }
-  if (publisher_) publisher_(result, engine_->view());
+  // A publisher that throws loses the announcement; the version is published (readers see it).
+  if (publisher_)
+    guarded("ingest: announcing a version", [&] { publisher_(result, engine_->view()); });
 }
 
 PipelineCounters Ingest::counters() const {

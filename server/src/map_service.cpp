@@ -8,9 +8,10 @@
 #include <vector>
 
 #include "command_room.hpp"
-#include "densemap/wire/topics.hpp"
 #include "densemap/server/export_path.hpp"
+#include "densemap/wire/topics.hpp"
 #include "densemap_msgs.h"
+#include "guarded.hpp"
 #include "publisher.hpp"
 #include "query_room.hpp"
 #include "replies.hpp"
@@ -108,7 +109,7 @@ Expected<std::unique_ptr<MapService>> MapService::create(Ingest& ingest,
   }
   service->makeRooms();
   ingest.setPublisher([p = service->publisher_.get()](const IntegrationResult& r,
-                                                        const std::shared_ptr<const MapView>& v) {
+                                                      const std::shared_ptr<const MapView>& v) {
     p->onIntegrated(r, v);
   });
   return service;
@@ -118,14 +119,13 @@ void MapService::makeRooms() {
   Dds& d = *dds_;
   replies_ = std::make_unique<ReplyWriters>(d.participant, d.topics);
   queries_ = std::make_unique<QueryRoom>(
-      ingest_, QueryRoom::Readers{d.point_reader, d.bbox_reader, d.ray_reader}, *replies_,
-      *tasks_, *stats_, options_.max_query_cells);
+      ingest_, QueryRoom::Readers{d.point_reader, d.bbox_reader, d.ray_reader}, *replies_, *tasks_,
+      *stats_, options_.max_query_cells);
   commands_ = std::make_unique<CommandRoom>(
       ingest_, CommandRoom::Endpoints{d.cmd_reader, d.map_reader, d.tile_writer}, *replies_,
       *tasks_, *stats_, *saver_, exportDirectory(options_.export_dir, options_.snapshot_path));
   publisher_ = std::make_unique<Publisher>(
-      ingest_, Publisher::Writers{d.event_writer, d.delta_writer, d.manifest_writer},
-      ros2_.get());
+      ingest_, Publisher::Writers{d.event_writer, d.delta_writer, d.manifest_writer}, ros2_.get());
   status_ = std::make_unique<StatusRoom>(ingest_, d.status_writer, d.participant, d.status_probe,
                                          options_.domain_id,
                                          StatusRoom::Sources{*stats_, *saver_, ros2_.get()});
@@ -151,8 +151,8 @@ MapService::MapService(Ingest& ingest, const ServiceOptions& options)
       dds_(std::make_unique<Dds>()),
       stats_(std::make_unique<RequestStats>()),
       tasks_(std::make_unique<RequestTasks>(options.query_threads, options.request_budget_bytes)),
-      saver_(std::make_unique<SnapshotSaver>(ingest, options.snapshot_path,
-                                             options.snapshot_keep)) {}
+      saver_(
+          std::make_unique<SnapshotSaver>(ingest, options.snapshot_path, options.snapshot_keep)) {}
 
 MapService::~MapService() { stop(); }
 
@@ -184,16 +184,18 @@ void MapService::ingestLoop() {
   // Only takes and enqueues: validation and integration happen in the pipeline.
   while (running_.load()) {
     dds_->ingest_waitset->wait(std::chrono::milliseconds(200));
-    dds::takeAll<densemap_msgs_Scan>(dds_->scan_reader, [&](const densemap_msgs_Scan& msg) {
-      RawScan raw;
-      raw.sensor_id = dds::text(msg.sensor_id);
-      raw.seq = msg.seq;
-      raw.stamp_ns = msg.stamp_ns;
-      for (int i = 0; i < 3; ++i) raw.t_world_sensor[i] = msg.T_world_sensor.t[i];
-      for (int i = 0; i < 4; ++i) raw.q_world_sensor[i] = msg.T_world_sensor.q[i];
-      raw.xyz.assign(msg.points._buffer, msg.points._buffer + msg.points._length);
-      raw.intensity.assign(msg.intensity._buffer, msg.intensity._buffer + msg.intensity._length);
-      ingest_.submit(std::move(raw));
+    guarded("scan intake", [&] {
+      dds::takeAll<densemap_msgs_Scan>(dds_->scan_reader, [&](const densemap_msgs_Scan& msg) {
+        RawScan raw;
+        raw.sensor_id = dds::text(msg.sensor_id);
+        raw.seq = msg.seq;
+        raw.stamp_ns = msg.stamp_ns;
+        for (int i = 0; i < 3; ++i) raw.t_world_sensor[i] = msg.T_world_sensor.t[i];
+        for (int i = 0; i < 4; ++i) raw.q_world_sensor[i] = msg.T_world_sensor.q[i];
+        raw.xyz.assign(msg.points._buffer, msg.points._buffer + msg.points._length);
+        raw.intensity.assign(msg.intensity._buffer, msg.intensity._buffer + msg.intensity._length);
+        ingest_.submit(std::move(raw));
+      });
     });
   }
 }
@@ -201,8 +203,10 @@ void MapService::ingestLoop() {
 void MapService::serviceLoop() {
   while (running_.load()) {
     dds_->service_waitset->wait(std::chrono::milliseconds(100));
-    queries_->take();
-    commands_->answer();
+    guarded("requests", [&] {
+      queries_->take();
+      commands_->answer();
+    });
   }
 }
 
@@ -214,38 +218,44 @@ void MapService::publishLoop() {
   const bool autosave = options_.autosave_period_s > 0 && !options_.snapshot_path.empty();
   std::uint64_t saved_version = ingest_.view()->version();  // what the file already holds
   while (running_.load()) {
-    publisher_->publishWaiting(autosave ? std::min(next_status, next_save) : next_status, running_);
-    const auto now = std::chrono::steady_clock::now();
-    heartbeat_ = now.time_since_epoch().count();
-    if (now >= next_status) {
-      status_->publish();
-      publisher_->publishManifest();
-      next_status = now + std::chrono::seconds(1);
-      // Requests served and none in flight: the heap goes back to the OS (RSS stayed ~850 MB
-      // after a flood until a save trimmed it).
-      tasks_->trimIfIdle();
-    }
-    // Autosave only a changed map: a daemon idle for months does not rewrite the same file.
-    if (autosave && now >= next_save) {
-      const std::uint64_t version = ingest_.view()->version();
-      auto pause = autosave_period;
-      if (version != saved_version) {
-        const auto began = std::chrono::steady_clock::now();
-        if (auto ok = saver_->save(); !ok) {
-          spdlog::warn("autosave failed: {}", ok.error().message);  // counted by the saver
-        } else {
-          saved_version = version;
-        }
-        // A short period on a large map would mean back-to-back full rewrites: saving takes
-        // at most a fifth of the time.
-        pause = std::max(pause, 4 * (std::chrono::steady_clock::now() - began));
+    guarded("publishing", [&] {
+      publisher_->publishWaiting(autosave ? std::min(next_status, next_save) : next_status,
+                                 running_);
+      const auto now = std::chrono::steady_clock::now();
+      heartbeat_ = now.time_since_epoch().count();
+      if (now >= next_status) {
+        next_status = now + std::chrono::seconds(1);  // first: a turn that throws waits too
+        status_->publish();
+        publisher_->publishManifest();
+        // Requests served and none in flight: the heap goes back to the OS (RSS stayed ~850 MB
+        // after a flood until a save trimmed it).
+        tasks_->trimIfIdle();
       }
-      next_save = std::chrono::steady_clock::now() + pause;
-    }
+      // Autosave only a changed map: a daemon idle for months does not rewrite the same file.
+      if (autosave && now >= next_save) {
+        next_save = now + autosave_period;  // first: a save that throws waits a period too
+        const std::uint64_t version = ingest_.view()->version();
+        auto pause = autosave_period;
+        if (version != saved_version) {
+          const auto began = std::chrono::steady_clock::now();
+          if (auto ok = saver_->save(); !ok) {
+            spdlog::warn("autosave failed: {}", ok.error().message);  // counted by the saver
+          } else {
+            saved_version = version;
+          }
+          // A short period on a large map would mean back-to-back full rewrites: saving takes
+          // at most a fifth of the time.
+          pause = std::max(pause, 4 * (std::chrono::steady_clock::now() - began));
+        }
+        next_save = std::chrono::steady_clock::now() + pause;
+      }
+    });
   }
-  publisher_->publishWaiting(std::chrono::steady_clock::now(), running_);  // what is left
-  status_->publish();
-  publisher_->publishManifest();
+  guarded("publishing", [&] {
+    publisher_->publishWaiting(std::chrono::steady_clock::now(), running_);  // what is left
+    status_->publish();
+    publisher_->publishManifest();
+  });
 }
 
 }  // namespace densemap::server

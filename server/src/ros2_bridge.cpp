@@ -11,6 +11,7 @@
 #include "densemap/ros2/names.hpp"
 #include "densemap/ros2/tf_buffer.hpp"
 #include "densemap/wire/topics.hpp"
+#include "guarded.hpp"
 #include "nav_msgs.h"
 #include "octomap_msgs.h"
 #include "ros2_bridge_state.hpp"
@@ -213,17 +214,20 @@ void Ros2Bridge::loop() {
   while (running_.load()) {
     const auto fired = dds_->waitset->wait(std::chrono::milliseconds(20));
     if (!running_.load()) break;
-    takeTransforms();  // first: clouds taken below may need them
-    for (dds_attach_t tag : fired) {
-      if (tag >= kCloudTag0) takeClouds(static_cast<std::size_t>(tag - kCloudTag0));
-    }
-    const auto now = Clock::now();
-    resolveWaiting(now);
-    if (options_.publish_period_s > 0 && now >= state_->next_publish) {
-      publishMaps();
-      state_->next_publish = now + std::chrono::duration_cast<Clock::duration>(
-                                       std::chrono::duration<double>(options_.publish_period_s));
-    }
+    guarded("ros2 bridge", [&] {
+      takeTransforms();  // first: clouds taken below may need them
+      for (dds_attach_t tag : fired) {
+        if (tag >= kCloudTag0) takeClouds(static_cast<std::size_t>(tag - kCloudTag0));
+      }
+      const auto now = Clock::now();
+      resolveWaiting(now);
+      if (options_.publish_period_s > 0 && now >= state_->next_publish) {
+        // First: a publication that throws waits a period too.
+        state_->next_publish = now + std::chrono::duration_cast<Clock::duration>(
+                                         std::chrono::duration<double>(options_.publish_period_s));
+        publishMaps();
+      }
+    });
   }
 }
 

@@ -21,6 +21,8 @@ std::string_view rejectReasonName(RejectReason reason) {
       return "bad_quaternion";
     case RejectReason::kPoseOutOfBounds:
       return "pose_out_of_bounds";
+    case RejectReason::kInternal:
+      return "internal";
     case RejectReason::kCount:
       break;
   }

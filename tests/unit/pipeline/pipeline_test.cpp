@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
 #include <map>
 #include <mutex>
 #include <thread>
@@ -11,6 +12,7 @@
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_diff.hpp"
 #include "densemap/test_support/random_rays.hpp"
+#include "failing_allocations.hpp"
 
 namespace densemap {
 namespace {
@@ -255,6 +257,62 @@ TEST(Pipeline, BadScansAreRejectedWithTheirReasonAndLeaveTheMapUnchanged) {
   EXPECT_EQ(c.rejected_by_reason[static_cast<int>(RejectReason::kEmpty)], 1U);
   EXPECT_FALSE(c.last_reject_reason.empty());
   EXPECT_EQ((*sut)->view(), before);  // nothing was published
+}
+
+TEST(Pipeline, AnEngineThatThrowsRejectsTheScanAndTheWorkerGoesOn) {
+  auto sut = Ingest::create({.resolution_m = 0.2, .threads = 2, .queue_depth = 16});
+  ASSERT_TRUE(sut);
+  std::atomic<int> announced{0};
+  std::atomic<bool> throw_from_publisher{false};
+  (*sut)->setPublisher([&](const IntegrationResult&, const std::shared_ptr<const MapView>&) {
+    ++announced;
+    if (throw_from_publisher) throw std::runtime_error("publisher failed");
+  });
+  (*sut)->start();
+  (*sut)->submit(rawScan(1));
+  ASSERT_TRUE(waitFor([&] { return (*sut)->counters().integrated == 1; }));
+  const auto before = (*sut)->view();
+
+  // Out of memory inside the engine: the scan's first large allocation (its points) throws
+  // on the worker. The scan is rejected as internal and nothing is published.
+  RawScan big = rawScan(2, 20000);
+  {
+    test::FailingAllocations failing(64 << 10, 1);
+    (*sut)->submit(std::move(big));
+    ASSERT_TRUE(waitFor([&] { return (*sut)->counters().rejected == 1; }));
+    EXPECT_EQ(failing.failed(), 1U);
+  }
+  EXPECT_EQ((*sut)->view(), before);
+  auto c = (*sut)->counters();
+  EXPECT_EQ(c.rejected_by_reason[static_cast<int>(RejectReason::kInternal)], 1U);
+  EXPECT_NE(c.last_reject_reason.find("integration failed"), std::string::npos)
+      << c.last_reject_reason;
+
+  // A command that throws answers with an error; the next one runs.
+  auto failed = (*sut)->command([](OccupancyMap&, CellChanges&) -> Expected<std::string> {
+    throw std::runtime_error("boom");
+  });
+  ASSERT_EQ(failed.wait_for(5s), std::future_status::ready);
+  const auto failed_reply = failed.get();
+  ASSERT_FALSE(failed_reply);
+  EXPECT_NE(failed_reply.error().message.find("boom"), std::string::npos);
+  auto fine = (*sut)->command(
+      [](OccupancyMap&, CellChanges&) -> Expected<std::string> { return std::string("ok"); });
+  ASSERT_EQ(fine.wait_for(5s), std::future_status::ready);
+  EXPECT_EQ(fine.get().value_or(""), "ok");
+
+  // A publisher that throws loses its announcement, not the scan.
+  throw_from_publisher = true;
+  (*sut)->submit(rawScan(3));
+  ASSERT_TRUE(waitFor([&] { return (*sut)->counters().integrated == 2; }));
+  throw_from_publisher = false;
+  (*sut)->submit(rawScan(4));
+  ASSERT_TRUE(waitFor([&] { return (*sut)->counters().integrated == 3; }));
+  (*sut)->stop();
+  c = (*sut)->counters();
+  EXPECT_EQ(c.rejected, 1U);
+  EXPECT_EQ(announced.load(), 3);
+  EXPECT_EQ((*sut)->view()->version(), 3U);
 }
 
 TEST(Pipeline, CommandsRunBetweenScansAndPublishTheirChanges) {

@@ -96,6 +96,8 @@ class Ingest {
   void run();
   void runCommands();
   void process(const RawScan& raw);
+  /// The engine's integration in the arena; anything it throws becomes a kInternal rejection.
+  std::expected<IntegrationResult, Rejection> integrate(const RawScan& raw);
   /// Counts an integrated scan (its latency, evictions) and hands the result on.
   void published(IntegrationResult& result);
 

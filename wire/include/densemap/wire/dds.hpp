@@ -13,8 +13,8 @@
 #include <utility>
 #include <vector>
 
-#include "densemap/wire/security.hpp"
 #include "densemap/geometry/error.hpp"
+#include "densemap/wire/security.hpp"
 
 namespace densemap::dds {
 
@@ -89,6 +89,22 @@ struct QosSpec {
 [[nodiscard]] Expected<Entity> createWriter(const Entity& participant, const Entity& topic,
                                             const QosSpec& qos);
 
+/// Samples a reader lent out (dds_take / dds_read), returned when this goes: a callback that
+/// throws does not leak them.
+class Loan {
+ public:
+  Loan(const Entity& reader, void** samples, dds_return_t n)
+      : reader_(reader), samples_(samples), n_(n) {}
+  ~Loan() { dds_return_loan(reader_.get(), samples_, n_); }
+  Loan(const Loan&) = delete;
+  Loan& operator=(const Loan&) = delete;
+
+ private:
+  const Entity& reader_;
+  void** samples_;
+  dds_return_t n_;
+};
+
 /// Calls `f` on every available valid sample of type T in `reader` (loaned, returned right
 /// after `f` runs); `take` removes them from the reader, otherwise they stay (read).
 /// Returns how many there were.
@@ -105,13 +121,15 @@ std::size_t forEachSample(const Entity& reader, bool take, const std::function<v
     const dds_return_t n = take ? dds_take(reader.get(), samples.data(), infos.data(), max, max)
                                 : dds_read(reader.get(), samples.data(), infos.data(), max, max);
     if (n <= 0) break;
-    for (dds_return_t i = 0; i < n; ++i) {
-      if (infos[i].valid_data) {
-        f(*static_cast<const T*>(samples[i]));
-        ++taken;
+    {
+      const Loan loan(reader, samples.data(), n);
+      for (dds_return_t i = 0; i < n; ++i) {
+        if (infos[i].valid_data) {
+          f(*static_cast<const T*>(samples[i]));
+          ++taken;
+        }
       }
     }
-    dds_return_loan(reader.get(), samples.data(), n);
     if (static_cast<std::size_t>(n) < batch || !take) break;
   }
   return taken;
@@ -129,8 +147,8 @@ bool takeOne(const Entity& reader, F&& f) {
   void* sample = nullptr;
   dds_sample_info_t info;
   if (dds_take(reader.get(), &sample, &info, 1, 1) <= 0) return false;
+  const Loan loan(reader, &sample, 1);
   if (info.valid_data) f(*static_cast<const T*>(sample));
-  dds_return_loan(reader.get(), &sample, 1);
   return true;
 }
 
@@ -140,8 +158,8 @@ bool takeOneWithInfo(const Entity& reader, F&& f) {
   void* sample = nullptr;
   dds_sample_info_t info;
   if (dds_take(reader.get(), &sample, &info, 1, 1) <= 0) return false;
+  const Loan loan(reader, &sample, 1);
   if (info.valid_data) f(*static_cast<const T*>(sample), info);
-  dds_return_loan(reader.get(), &sample, 1);
   return true;
 }
 

@@ -19,6 +19,9 @@ enum class RejectReason {
   kNonFinitePoint,
   kBadQuaternion,
   kPoseOutOfBounds,
+  /// The engine failed on a valid scan (out of memory, say): the scan is not integrated, the
+  /// server goes on (Ingest).
+  kInternal,
   kCount
 };
 inline constexpr std::size_t kRejectReasonCount = static_cast<std::size_t>(RejectReason::kCount);
