@@ -188,6 +188,7 @@ BlockNode& BlockStore::writable(BlockEntry& e) {
   BlockNode* node = nullptr;
   {
     std::lock_guard lock(pool_mutex_);
+    if (versioned_) keepBatchRoom(1);  // first: it may throw before the node is taken
     node = allocate();
     if (versioned_) {
       written_.push_back(e.key);
@@ -204,23 +205,49 @@ BlockNode& BlockStore::WriteBatch::writable(BlockEntry& e) {
     nodes_.clear();
     next_ = 0;
     std::lock_guard lock(store_.pool_mutex_);
+    if (store_.versioned_) {
+      store_.keepBatchRoom(kBatchNodes);  // first: it may throw before any node is taken
+      store_.batch_room_ += kBatchNodes;
+      room_ += kBatchNodes;
+    }
+    // nodes_ holds kBatchNodes (reserved): a throw from allocate() leaves the nodes taken so
+    // far in nodes_, returned by the destructor.
     for (std::size_t k = 0; k < kBatchNodes; ++k) nodes_.push_back(store_.allocate());
   }
-  BlockNode* node = nodes_[next_++];  // in the pool's order: the most recently freed first
+  BlockNode* node = nodes_[next_];  // in the pool's order: the most recently freed first
   if (store_.versioned_) {
+    // Before the node counts as used: a throw here leaves it to go back to the pool.
     written_.push_back(e.key);
     if (head != nullptr) superseded_.emplace_back(head, node);
   }
+  ++next_;
   return store_.becomeHead(e, head, node);
 }
 
 BlockStore::WriteBatch::~WriteBatch() {
-  if (next_ == nodes_.size() && written_.empty() && superseded_.empty()) return;
+  if (next_ == nodes_.size() && written_.empty() && superseded_.empty() && room_ == 0) return;
   std::lock_guard lock(store_.pool_mutex_);
-  // The unused nodes back in the order they came out (the next one on top).
+  // The unused nodes back in the order they came out (the next one on top); free_ held them
+  // before, so it has the room.
   for (std::size_t k = nodes_.size(); k > next_; --k) store_.recycle(nodes_[k - 1]);
+  // The entries fit the room the refills kept (a node is used only once its entries are in,
+  // and a push comes only while a taken node is unused): these inserts do not allocate,
+  // whatever the task threw.
+  store_.batch_room_ -= room_;
   store_.written_.insert(store_.written_.end(), written_.begin(), written_.end());
   store_.superseded_.insert(store_.superseded_.end(), superseded_.begin(), superseded_.end());
+}
+
+void BlockStore::keepBatchRoom(std::size_t more) {
+  const std::size_t room = batch_room_ + more;
+  // Doubling, not to the entry: a reserve per refill must not copy the lists each time.
+  const auto keep = [room](auto& list) {
+    if (list.capacity() - list.size() < room) {
+      list.reserve(std::max(list.size() + room, 2 * list.capacity()));
+    }
+  };
+  keep(written_);
+  keep(superseded_);
 }
 
 BlockNode& BlockStore::becomeHead(BlockEntry& e, ChainLink* head, BlockNode* node) {
@@ -264,6 +291,7 @@ bool BlockStore::drop(BlockEntry& e) {
     recycle(head);
     return true;
   }
+  keepBatchRoom(1);  // the live batches' room stays whole
   // Readers of older versions walk past the tombstone to the contents they saw.
   ChainLink* tomb = allocateTomb();
   tomb->version = writing_;

@@ -11,8 +11,8 @@
 
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_diff.hpp"
+#include "densemap/test_support/failing_allocations.hpp"
 #include "densemap/test_support/random_rays.hpp"
-#include "failing_allocations.hpp"
 
 namespace densemap {
 namespace {

@@ -11,11 +11,14 @@
 #include <functional>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <random>
+#include <stdexcept>
 #include <thread>
 #include <unordered_map>
 
 #include "densemap/query/version_delta.hpp"
+#include "densemap/test_support/failing_allocations.hpp"
 
 namespace densemap {
 namespace {
@@ -296,6 +299,48 @@ TEST(BlockStore, WritesThroughBatchesKeepTheVersionsBookkeeping) {
   held = {};
   (void)store.publish();
   EXPECT_EQ(store.liveNodes(), store.entryCount());
+}
+
+// A task that throws while no allocation can succeed unwinds through its batch: the batch
+// hands its bookkeeping to the version within the room its refills kept (an allocation in
+// its destructor would end the process), and the version it wrote is whole.
+TEST(BlockStore, ABatchUnwindsWithoutAllocatingWhenItsTaskThrows) {
+  BlockStore store;
+  (void)store.publish();  // versioned from here
+  for (std::uint64_t k = 0; k < 1000; ++k) store.writable(store.entry(k)).voxels.markKnown(1);
+  BlockStore::Published held = store.publish();
+  std::vector<BlockEntry*> entries;
+  for (std::uint64_t k = 0; k < 1000; ++k) entries.push_back(&store.entry(k));
+  const std::runtime_error failure("the task failed");  // made before allocations fail
+  std::optional<test::FailingAllocations> failing;     // outlives the batch
+  std::uint64_t failed_allocations = 0;
+  bool caught = false;
+  try {
+    BlockStore::WriteBatch batch(store);
+    for (BlockEntry* e : entries) batch.writable(*e).voxels.markKnown(2);
+    failing.emplace(1, ~std::uint64_t{0}, test::FailingAllocations::kEveryThread);
+    throw failure;
+  } catch (const std::runtime_error&) {
+    caught = true;
+  }
+  if (failing) failed_allocations = failing->failed();
+  failing.reset();
+  EXPECT_TRUE(caught);
+  EXPECT_EQ(failed_allocations, 0U);  // the unwinding asked for no memory
+  const BlockStore::Published next = store.publish();
+  std::vector<std::uint64_t> written = next.written_blocks;
+  std::sort(written.begin(), written.end());
+  ASSERT_EQ(written.size(), 1000U);
+  for (std::uint64_t k = 0; k < 1000; ++k) {
+    EXPECT_EQ(written[k], k);
+    const BlockNode* now = store.find(k, next.version);
+    ASSERT_NE(now, nullptr);
+    EXPECT_TRUE(now->voxels.isKnown(1) && now->voxels.isKnown(2));
+    EXPECT_FALSE(store.find(k, held.version)->voxels.isKnown(2));
+  }
+  held = {};
+  (void)store.publish();
+  EXPECT_EQ(store.liveNodes(), store.entryCount());  // superseded nodes recycled, none lost
 }
 
 TEST(MapView, AWindowedDriveKeepsMemoryFlat) {

@@ -1,4 +1,4 @@
-#include "failing_allocations.hpp"
+#include "densemap/test_support/failing_allocations.hpp"
 
 #include <atomic>
 #include <cstdlib>
@@ -11,7 +11,7 @@ namespace {
 std::atomic<std::size_t> g_min_bytes{0};  // 0: disarmed
 std::atomic<std::uint64_t> g_left{0};
 std::atomic<std::uint64_t> g_failed{0};
-std::thread::id g_exempt;
+std::thread::id g_exempt;  // default (no thread): every thread fails
 
 bool shouldFail(std::size_t size) {
   const std::size_t min_bytes = g_min_bytes.load(std::memory_order_acquire);
@@ -28,8 +28,9 @@ bool shouldFail(std::size_t size) {
 
 }  // namespace
 
-FailingAllocations::FailingAllocations(std::size_t min_bytes, std::uint64_t count) {
-  g_exempt = std::this_thread::get_id();
+FailingAllocations::FailingAllocations(std::size_t min_bytes, std::uint64_t count,
+                                       Threads threads) {
+  g_exempt = threads == kOtherThreads ? std::this_thread::get_id() : std::thread::id();
   g_failed.store(0);
   g_left.store(count);
   g_min_bytes.store(min_bytes == 0 ? 1 : min_bytes, std::memory_order_release);

@@ -6,12 +6,14 @@
 namespace densemap::test {
 
 /// While one lives, the next `count` allocations of at least `min_bytes` made through the
-/// global operator new by any thread other than the one that made it throw std::bad_alloc
-/// (failing_allocations.cpp replaces operator new in the test binary that links it). For
-/// tests of how a worker thread survives running out of memory.
+/// global operator new throw std::bad_alloc: by any thread other than the one that made it
+/// (kOtherThreads), or by every thread. failing_allocations.cpp replaces operator new in each
+/// test binary that uses this. For tests of code that must survive running out of memory.
 class FailingAllocations {
  public:
-  FailingAllocations(std::size_t min_bytes, std::uint64_t count);
+  enum Threads { kOtherThreads, kEveryThread };
+  FailingAllocations(std::size_t min_bytes, std::uint64_t count,
+                     Threads threads = kOtherThreads);
   ~FailingAllocations();
   FailingAllocations(const FailingAllocations&) = delete;
   FailingAllocations& operator=(const FailingAllocations&) = delete;
