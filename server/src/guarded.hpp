@@ -2,22 +2,11 @@
 
 #include <spdlog/spdlog.h>
 
-#include <exception>
-#include <string>
 #include <string_view>
 
-namespace densemap {
+#include "densemap/cli/guarded_main.hpp"
 
-/// What the exception being handled says of itself (call inside a catch block).
-inline std::string currentFailure() {
-  try {
-    throw;
-  } catch (const std::exception& e) {
-    return e.what();
-  } catch (...) {
-    return "an unknown exception";
-  }
-}
+namespace densemap {
 
 /// Runs one turn of a server thread's loop. Whatever the turn throws (out of memory, a bug) is
 /// logged and the thread goes on to its next turn: no exception ends the daemon through
@@ -29,7 +18,7 @@ void guarded(std::string_view thread, Turn&& turn) noexcept {
     turn();
   } catch (...) {
     try {
-      spdlog::error("{}: {} (the thread goes on)", thread, currentFailure());
+      spdlog::error("{}: {} (the thread goes on)", thread, cli::currentFailure());
     } catch (...) {
     }
   }

@@ -111,7 +111,7 @@ std::expected<IntegrationResult, Rejection> Ingest::integrate(const RawScan& raw
     // Nothing is published: readers keep the last version. The map is not rolled back, so a
     // scan that failed part-way may leave part of its update, published with the next scan.
     return std::unexpected(
-        Rejection{RejectReason::kInternal, "integration failed: " + currentFailure()});
+        Rejection{RejectReason::kInternal, "integration failed: " + cli::currentFailure()});
   }
   return outcome;
 }
@@ -148,7 +148,7 @@ void Ingest::runCommands() {
       arena_.execute([&] { outcome = engine_->command(command, result); });
       if (!result.changes.empty()) published(result);
     } catch (...) {
-      outcome = makeError("command failed: " + currentFailure());
+      outcome = makeError("command failed: " + cli::currentFailure());
     }
     promise.set_value(std::move(outcome));
   }

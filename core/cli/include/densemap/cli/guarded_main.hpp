@@ -2,8 +2,21 @@
 
 #include <cstdio>
 #include <exception>
+#include <string>
 
 namespace densemap::cli {
+
+/// What the exception being handled says of itself (call inside a catch block): its what(),
+/// or "unknown exception".
+inline std::string currentFailure() {
+  try {
+    throw;
+  } catch (const std::exception& e) {
+    return e.what();
+  } catch (...) {
+    return "unknown exception";
+  }
+}
 
 /// Runs a program's body so that no exception reaches `main` (DESIGN.md, "outside people are
 /// hostile"): whatever escapes is printed as "<program>: error: <reason>" and the exit code is
@@ -14,10 +27,12 @@ template <class Body>
 int guardedMain(const char* program, Body&& body) noexcept {
   try {
     return body();
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "%s: error: %s\n", program, e.what());
   } catch (...) {
-    std::fprintf(stderr, "%s: error: unknown exception\n", program);
+    try {
+      std::fprintf(stderr, "%s: error: %s\n", program, currentFailure().c_str());
+    } catch (...) {  // no memory even for the message
+      std::fprintf(stderr, "%s: error: out of memory\n", program);
+    }
   }
   return 2;
 }
