@@ -5,7 +5,7 @@
 namespace densemap {
 
 void ScanUpdate::merge(const ScanUpdate& other) {
-  for (const auto& [block_key, b] : other.blocks_) {
+  for (const auto& [block_key, b] : other.blocks()) {
     Block& mine = blockFor(block_key);
     for (int w = 0; w < block::kMaskWords; ++w) {
       mine.free[w] |= b.free[w];
@@ -29,27 +29,31 @@ std::size_t slotOf(std::uint64_t key, std::size_t mask) {
 }  // namespace
 
 std::uint32_t ScanUpdate::indexFor(std::uint64_t block_key) {
-  if ((blocks_.size() + 1) * 2 > slot_keys_.size()) {
-    grow(blocks_.size() + 1);  // indexes every block, appended ones too
-  } else if (indexed_ < blocks_.size()) {
+  if ((count_ + 1) * 2 > slot_keys_.size()) {
+    grow(count_ + 1);  // indexes every block, appended ones too
+  } else if (indexed_ < count_) {
     const std::size_t mask = slot_keys_.size() - 1;  // appended blocks not yet in the slots
-    for (std::size_t i = indexed_; i < blocks_.size(); ++i) {
-      std::size_t slot = slotOf(blocks_[i].first, mask);
+    for (std::size_t i = indexed_; i < count_; ++i) {
+      std::size_t slot = slotOf(room_[i].first, mask);
       while (slot_keys_[slot] != kEmpty) slot = (slot + 1) & mask;
-      slot_keys_[slot] = blocks_[i].first;
+      slot_keys_[slot] = room_[i].first;
       slot_blocks_[slot] = static_cast<std::uint32_t>(i);
     }
   }
-  indexed_ = blocks_.size();
+  indexed_ = count_;
   const std::size_t mask = slot_keys_.size() - 1;
   for (std::size_t slot = slotOf(block_key, mask);; slot = (slot + 1) & mask) {
     if (slot_keys_[slot] == block_key) return slot_blocks_[slot];
     if (slot_keys_[slot] == kEmpty) {
       slot_keys_[slot] = block_key;
-      slot_blocks_[slot] = static_cast<std::uint32_t>(blocks_.size());
-      Block& b = blocks_.emplace_back(block_key, Block{}).second;
-      indexed_ = blocks_.size();
+      slot_blocks_[slot] = static_cast<std::uint32_t>(count_);
+      if (count_ == room_.size()) room_.emplace_back();
+      auto& [key, b] = room_[count_++];
+      key = block_key;
+      b.free = {};
+      b.occupied = {};
       if (rule_ == UpdateRule::kPerRay) b.counts = std::make_unique<Counts>();
+      indexed_ = count_;
       return slot_blocks_[slot];
     }
   }
@@ -57,14 +61,16 @@ std::uint32_t ScanUpdate::indexFor(std::uint64_t block_key) {
 
 std::size_t ScanUpdate::appendBlocks(std::size_t n) {
   cached_key_ = kEmpty;
-  const std::size_t first = blocks_.size();
-  blocks_.resize(first + n);
+  const std::size_t first = count_;
+  if (room_.size() < first + n) room_.resize(first + n);
+  count_ = first + n;
   return first;
 }
 
 void ScanUpdate::truncateBlocks(std::size_t n) {
-  if (n >= blocks_.size()) return;
-  blocks_.resize(n);
+  if (n >= count_) return;
+  dropCounts(n);
+  count_ = n;
   cached_key_ = kEmpty;
   if (indexed_ > n) {
     grow(n);  // the slots indexed blocks that are gone: the rest indexed again
@@ -78,16 +84,22 @@ void ScanUpdate::grow(std::size_t blocks) {
   slot_keys_.assign(size, kEmpty);
   slot_blocks_.assign(size, 0);
   const std::size_t mask = size - 1;
-  for (std::uint32_t i = 0; i < blocks_.size(); ++i) {
-    std::size_t slot = slotOf(blocks_[i].first, mask);
+  for (std::uint32_t i = 0; i < count_; ++i) {
+    std::size_t slot = slotOf(room_[i].first, mask);
     while (slot_keys_[slot] != kEmpty) slot = (slot + 1) & mask;
-    slot_keys_[slot] = blocks_[i].first;
+    slot_keys_[slot] = room_[i].first;
     slot_blocks_[slot] = i;
   }
 }
 
+void ScanUpdate::dropCounts(std::size_t from) {
+  if (rule_ != UpdateRule::kPerRay) return;  // kSet blocks have none
+  for (std::size_t i = from; i < count_; ++i) room_[i].second.counts.reset();
+}
+
 void ScanUpdate::clear() {
-  blocks_.clear();
+  dropCounts(0);
+  count_ = 0;
   if (indexed_ > 0) std::fill(slot_keys_.begin(), slot_keys_.end(), kEmpty);
   indexed_ = 0;
   cached_key_ = kEmpty;
@@ -95,7 +107,7 @@ void ScanUpdate::clear() {
 
 std::size_t ScanUpdate::freeCount() const {
   std::size_t n = 0;
-  for (const auto& [block_key, b] : blocks_) {
+  for (const auto& [block_key, b] : blocks()) {
     for (int w = 0; w < block::kMaskWords; ++w) n += std::popcount(b.free[w] & ~b.occupied[w]);
   }
   return n;
@@ -103,7 +115,7 @@ std::size_t ScanUpdate::freeCount() const {
 
 std::size_t ScanUpdate::occupiedCount() const {
   std::size_t n = 0;
-  for (const auto& [block_key, b] : blocks_) {
+  for (const auto& [block_key, b] : blocks()) {
     n += block::countBits(b.occupied);
   }
   return n;

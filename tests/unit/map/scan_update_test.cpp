@@ -52,6 +52,52 @@ TEST(ScanUpdate, PerRayCountsEveryRayWithItsWeight) {
   EXPECT_EQ(seen.at(b.packed()), std::make_pair(2U, 3U));  // both counts kept
 }
 
+// The update keeps its blocks' room from scan to scan (clearing and appending walk nothing):
+// a block made in the room of an earlier one carries none of its marks or counts, and a
+// moved-from update is empty.
+TEST(ScanUpdate, AReusedUpdateCarriesNothingOfEarlierScans) {
+  ScanUpdate sut;
+  for (std::uint16_t i = 0; i < 50; ++i) {
+    for (std::uint16_t c = 0; c < 8; ++c) {
+      sut.markFree({static_cast<std::uint16_t>(8 * i + c), c, 0});
+      sut.markOccupied({static_cast<std::uint16_t>(8 * i + c), 7, 7});
+    }
+  }
+  ASSERT_EQ(sut.blocks().size(), 50U);
+  const VoxelKey a{4000, 8, 8}, b{4008, 8, 8}, c{4016, 9, 9};
+  using Hits = std::map<std::uint64_t, std::pair<std::uint32_t, std::uint32_t>>;
+  const auto cells = [](const ScanUpdate& u) {
+    Hits out;
+    u.forEachCell([&](const VoxelKey& k, const CellHits& h) {
+      out[k.packed()] = {h.free, h.occupied};
+    });
+    return out;
+  };
+  sut.reset(UpdateRule::kSet);
+  EXPECT_TRUE(sut.empty());
+  sut.markFree(a);
+  sut.markOccupied(b);
+  EXPECT_EQ(cells(sut), (Hits{{a.packed(), {1, 0}}, {b.packed(), {0, 1}}}));
+  EXPECT_EQ(sut.freeCount(), 1U);
+  EXPECT_EQ(sut.occupiedCount(), 1U);
+  // Counts under kPerRay start at zero in a reused block, and are gone under kSet again.
+  sut.reset(UpdateRule::kPerRay);
+  sut.markFree(a, 3);
+  sut.markFree(c, 2);
+  sut.markOccupied(c);
+  EXPECT_EQ(cells(sut), (Hits{{a.packed(), {3, 0}}, {c.packed(), {2, 1}}}));
+  sut.reset(UpdateRule::kSet);  // the same blocks in the same places, as counts would add up
+  sut.markFree(a);
+  sut.markFree(c);
+  EXPECT_EQ(cells(sut), (Hits{{a.packed(), {1, 0}}, {c.packed(), {1, 0}}}));
+  ScanUpdate moved = std::move(sut);
+  EXPECT_EQ(cells(moved), (Hits{{a.packed(), {1, 0}}, {c.packed(), {1, 0}}}));
+  EXPECT_TRUE(sut.empty());  // NOLINT(bugprone-use-after-move): moved-from is specified empty
+  EXPECT_EQ(sut.blocks().size(), 0U);
+  sut.markOccupied(b);
+  EXPECT_EQ(cells(sut), (Hits{{b.packed(), {0, 1}}}));
+}
+
 class ScanUpdateMerge : public ::testing::TestWithParam<UpdateRule> {};
 
 TEST_P(ScanUpdateMerge, IsOrderIndependent) {

@@ -4,6 +4,7 @@
 #include <bit>
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <utility>
 #include <vector>
 
@@ -30,6 +31,19 @@ class ScanUpdate {
   };
 
   explicit ScanUpdate(UpdateRule rule = UpdateRule::kSet) : rule_(rule) {}
+  // A moved-from update is empty (its count goes with its room).
+  ScanUpdate(ScanUpdate&& other) noexcept { *this = std::move(other); }
+  ScanUpdate& operator=(ScanUpdate&& other) noexcept {
+    rule_ = other.rule_;
+    room_ = std::move(other.room_);
+    count_ = std::exchange(other.count_, 0);
+    slot_keys_ = std::move(other.slot_keys_);
+    slot_blocks_ = std::move(other.slot_blocks_);
+    indexed_ = std::exchange(other.indexed_, 0);
+    cached_key_ = std::exchange(other.cached_key_, kEmpty);
+    cached_index_ = other.cached_index_;
+    return *this;
+  }
 
   [[nodiscard]] UpdateRule rule() const { return rule_; }
   /// Empties the update and sets the rule for the next scan.
@@ -62,12 +76,13 @@ class ScanUpdate {
     }
   }
 
-  /// Appends `n` empty blocks (kSet) that a caller fills — in parallel if it likes: key and
-  /// marks, the keys distinct and none already in the update — before the update is used
-  /// again (the key index takes them in at the next mark or merge, if one comes). Returns the
-  /// position of the first new block.
+  /// Appends `n` blocks (kSet) that a caller fills — in parallel if it likes: key and marks,
+  /// every one of them (the room may hold an earlier scan's blocks: nothing is cleared here, so
+  /// appending costs no serial pass over the room), the keys distinct and none already in the
+  /// update — before the update is used again (the key index takes them in at the next mark or
+  /// merge, if one comes). Returns the position of the first new block.
   std::size_t appendBlocks(std::size_t n);
-  [[nodiscard]] std::pair<std::uint64_t, Block>& blockAt(std::size_t j) { return blocks_[j]; }
+  [[nodiscard]] std::pair<std::uint64_t, Block>& blockAt(std::size_t j) { return room_[j]; }
   /// Drops the blocks from position `n` on (appended room a caller did not fill).
   void truncateBlocks(std::size_t n);
 
@@ -75,10 +90,10 @@ class ScanUpdate {
   void merge(const ScanUpdate& other);
   void clear();
 
-  [[nodiscard]] bool empty() const { return blocks_.empty(); }
+  [[nodiscard]] bool empty() const { return count_ == 0; }
   /// (block key, cells) in the order blocks were first marked.
-  [[nodiscard]] const std::vector<std::pair<std::uint64_t, Block>>& blocks() const {
-    return blocks_;
+  [[nodiscard]] std::span<const std::pair<std::uint64_t, Block>> blocks() const {
+    return {room_.data(), count_};
   }
   /// Cells to be updated as free (crossed, not ended in) and as occupied.
   [[nodiscard]] std::size_t freeCount() const;
@@ -88,7 +103,7 @@ class ScanUpdate {
   /// only (occupied wins); under kPerRay both counts are given.
   template <class F>
   void forEachCell(F&& f) const {
-    for (const auto& [block_key, b] : blocks_) forEachCellInBlock(block_key, b, f);
+    for (const auto& [block_key, b] : blocks()) forEachCellInBlock(block_key, b, f);
   }
   template <class F>
   static void forEachCellInBlock(std::uint64_t block_key, const Block& b, F&& f) {
@@ -116,22 +131,27 @@ class ScanUpdate {
 
   Block& blockFor(std::uint64_t block_key) {
     // Consecutive cells of a ray mostly share a block: remember the last one.
-    if (cached_key_ == block_key) return blocks_[cached_index_].second;
+    if (cached_key_ == block_key) return room_[cached_index_].second;
     cached_key_ = block_key;
     cached_index_ = indexFor(block_key);
-    return blocks_[cached_index_].second;
+    return room_[cached_index_].second;
   }
+  /// Drops the counts of the blocks from position `from` on (kPerRay): the room keeps none.
+  void dropCounts(std::size_t from);
   /// Open addressing with linear probing on the block key; creates the block when missing.
   std::uint32_t indexFor(std::uint64_t block_key);
   /// A slot table for at least `blocks` blocks (twice as many slots, a power of two, at least
   /// double the present), every block indexed again.
   void grow(std::size_t blocks);
 
-  UpdateRule rule_;
-  std::vector<std::pair<std::uint64_t, Block>> blocks_;
+  UpdateRule rule_ = UpdateRule::kSet;
+  // The update's blocks are room_[0, count_); the rest of the room holds blocks of earlier scans,
+  // kept constructed (kSet: no counts) so that neither clearing nor appending walks them.
+  std::vector<std::pair<std::uint64_t, Block>> room_;
+  std::size_t count_ = 0;
   std::vector<std::uint64_t> slot_keys_;    // kEmpty or a block key; size a power of two
-  std::vector<std::uint32_t> slot_blocks_;  // index into blocks_
-  std::size_t indexed_ = 0;                 // blocks_[0, indexed_) are in the slots
+  std::vector<std::uint32_t> slot_blocks_;  // index into room_
+  std::size_t indexed_ = 0;                 // room_[0, indexed_) are in the slots
   std::uint64_t cached_key_ = kEmpty;
   std::uint32_t cached_index_ = 0;
 };
