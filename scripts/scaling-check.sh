@@ -4,6 +4,9 @@
 # default in the same run as OctoMap as the issue states it, and prints each run's p50 of both
 # lanes and their ratio, then the ratios' mean, min and max. One run is not a figure: this VM's
 # ratio ranged 1.58-1.97 over five runs of the same binary (README, stop 65).
+# Also prints the ratio of the p50s over the scans within the lanes' turns (the bench's turn
+# table): the scans that open a turn wake the second thread after the other lanes ran, which
+# on this VM costs the 2-thread lane milliseconds (README, stop 66).
 # Fails when a run does not report both lanes or reports a cell differing from OctoMap.
 # Usage: scripts/scaling-check.sh [RUNS=3] [DATA=../shared/data/balm-realworld] [RES=0.1]
 #        [RANGE=30]
@@ -26,7 +29,7 @@ METHODS="$METHOD@t1,$METHOD@t2"
 [ "${OCTOMAP:-1}" = 0 ] || METHODS="octomap,$METHODS"
 echo "scaling-check: $RUNS runs of densemap-bench --data $DATA --resolution $RES" \
   "--max-range $RANGE --methods $METHODS --backend grid; tables in $OUT"
-ratios=()
+ratios=() withins=()
 for run in $(seq 1 "$RUNS"); do
   "$BIN/densemap-bench" --data "$DATA" --resolution "$RES" --max-range "$RANGE" \
     --methods "$METHODS" --backend grid > "$OUT/run$run.txt" 2> "$OUT/run$run.log"
@@ -46,8 +49,24 @@ for run in $(seq 1 "$RUNS"); do
   fi
   ratio=$(awk -v a="$t1" -v b="$t2" 'BEGIN { printf "%.3f", a / b }')
   ratios+=("$ratio")
-  echo "run $run ($(date +%H:%M)): p50 $t1 ms at 1 thread, $t2 ms at 2; ratio $ratio"
+  # The turn table's rows: method backend thr openers p50 rest p50 (the rest: the scans that do
+  # not open a lane's turn, so no wake-up of the second thread after the other lanes ran).
+  read -r w1 w2 < <(awk -v a="$METHOD@t1" -v b="$METHOD@t2" '
+    NF == 7 && $2 == "grid" && $3 ~ /^[0-9]+$/ && $1 == a { w1 = $7 }
+    NF == 7 && $2 == "grid" && $3 ~ /^[0-9]+$/ && $1 == b { w2 = $7 }
+    END { printf "%s %s\n", (w1 == "" ? "-" : w1), (w2 == "" ? "-" : w2) }' "$OUT/run$run.txt")
+  within=-
+  if [ "$w1" != - ] && [ "$w2" != - ]; then
+    within=$(awk -v a="$w1" -v b="$w2" 'BEGIN { printf "%.3f", a / b }')
+    withins+=("$within")
+  fi
+  echo "run $run ($(date +%H:%M)): p50 $t1 ms at 1 thread, $t2 ms at 2; ratio $ratio" \
+    "(within turns: $w1 / $w2 ms, $within)"
 done
-printf '%s\n' "${ratios[@]}" | awk '
-  { s += $1; if (NR == 1 || $1 < lo) lo = $1; if (NR == 1 || $1 > hi) hi = $1 }
-  END { printf "ratio over %d runs: mean %.3f, min %.3f, max %.3f\n", NR, s / NR, lo, hi }'
+summary() {
+  awk -v what="$1" '
+    { s += $1; if (NR == 1 || $1 < lo) lo = $1; if (NR == 1 || $1 > hi) hi = $1 }
+    END { if (NR) printf "%s over %d runs: mean %.3f, min %.3f, max %.3f\n", what, NR, s / NR, lo, hi }'
+}
+printf '%s\n' "${ratios[@]}" | summary ratio
+[ "${#withins[@]}" = 0 ] || printf '%s\n' "${withins[@]}" | summary "ratio within turns"

@@ -11,6 +11,30 @@ namespace densemap::bench {
 
 double RunResult::percentile(double q) const { return densemap::percentile(ms_per_scan, q); }
 
+double RunResult::withinTurnP50() const { return densemap::percentile(ms_within_turn, 0.5); }
+
+double RunResult::openingTurnP50() const { return densemap::percentile(ms_opening_turn, 0.5); }
+
+std::string formatTurnTable(const std::vector<RunResult>& runs) {
+  bool turns = false;
+  for (const RunResult& r : runs) turns = turns || r.ms_opening_turn.size() > 1;
+  if (!turns) return {};
+  std::string out =
+      "p50 of the scans that open a lane's turn (the other lanes ran before them) and of the "
+      "rest\n";
+  char line[160];
+  std::snprintf(line, sizeof(line), "%-16s %-7s %3s %8s %10s %8s %10s\n", "method", "backend",
+                "thr", "openers", "p50 ms", "rest", "p50 ms");
+  out += line;
+  for (const RunResult& r : runs) {
+    std::snprintf(line, sizeof(line), "%-16s %-7s %3d %8zu %10.1f %8zu %10.1f\n", r.method.c_str(),
+                  r.backend.c_str(), r.threads, r.ms_opening_turn.size(), r.openingTurnP50(),
+                  r.ms_within_turn.size(), r.withinTurnP50());
+    out += line;
+  }
+  return out;
+}
+
 std::string formatTable(const std::vector<RunResult>& runs) {
   std::ostringstream out;
   char line[512];
@@ -96,6 +120,8 @@ std::string formatJson(const std::vector<RunResult>& runs, const std::string& da
         << ", \"max_range\": " << number(r.max_range) << ", \"scans\": " << r.scans
         << ", \"points\": " << r.points << ", \"ms_per_scan_p50\": " << number(r.percentile(0.5))
         << ", \"ms_per_scan_p99\": " << number(r.percentile(0.99))
+        << ", \"ms_opening_turn_p50\": " << number(r.openingTurnP50())
+        << ", \"ms_within_turn_p50\": " << number(r.withinTurnP50())
         << ", \"points_per_s\": " << number(r.pointsPerSecond())
         << ", \"visits_per_scan\": " << (r.has_counts ? number(r.visits_per_scan) : "null")
         << ", \"changed_cells_per_scan\": "

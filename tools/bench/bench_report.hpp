@@ -20,6 +20,9 @@ struct RunResult {
   std::size_t scans = 0;
   std::size_t points = 0;
   std::vector<double> ms_per_scan;
+  /// ms_per_scan split by the lanes' turns (--turn): the scans that opened a turn of this lane
+  /// (the other lanes ran before them: caches taken, idle worker threads to wake) and the rest.
+  std::vector<double> ms_opening_turn, ms_within_turn;
   double total_s = 0;
   bool has_counts = false;  // visits/changed are measured for densemap's own methods only
   bool dense = false;       // a kernel map (visits: kernel-cell updates + free-capsule voxels)
@@ -47,6 +50,9 @@ struct RunResult {
   double cpu_steal_share = -1;
 
   [[nodiscard]] double percentile(double q) const;
+  /// The p50 of the scans within turns (not opening one); 0 when there are none.
+  [[nodiscard]] double withinTurnP50() const;
+  [[nodiscard]] double openingTurnP50() const;
   [[nodiscard]] double pointsPerSecond() const { return total_s > 0 ? points / total_s : 0; }
   /// Wall-clock ns per visit (the mean scan's time over its visits; times `threads` for the
   /// cores' time): what each visit costs, beside how many there are.
@@ -60,6 +66,9 @@ struct RunResult {
 [[nodiscard]] std::string formatTable(const std::vector<RunResult>& runs);
 /// Rays per scan, super rays, points per ray, culled steps and region size per method.
 [[nodiscard]] std::string formatRayTable(const std::vector<RunResult>& runs);
+/// Each lane's p50 over the scans that opened its turns and over the rest (empty when no lane
+/// had more than one turn).
+[[nodiscard]] std::string formatTurnTable(const std::vector<RunResult>& runs);
 [[nodiscard]] std::string formatJson(const std::vector<RunResult>& runs, const std::string& data,
                                      const std::string& machine);
 

@@ -159,7 +159,7 @@ std::vector<StealMeter> runLanes(std::vector<std::unique_ptr<Lane>>& lanes,
       for (std::size_t i = first; i < last; ++i) {
         char detail[96];
         std::snprintf(detail, sizeof(detail), "(%s, scan %zu: %.1f ms)", lane->name().c_str(),
-                      i + 1, lane->step(scans[i]));
+                      i + 1, lane->step(scans[i], i == first));
         progress.update(++done, detail);
       }
       steal[index].add(before, readCpuTimes());
@@ -224,6 +224,7 @@ int report(const Options& o, const std::vector<RunResult>& runs,
       o.rule != "set" ? "raycast" : "octomap", machine.c_str());
   std::printf("%s\n", formatTable(runs).c_str());
   std::printf("%s", formatRayTable(runs).c_str());
+  if (lanes.size() > 1) std::printf("\n%s\n", formatTurnTable(runs).c_str());
   for (const RunResult& r : runs) {
     std::printf("%s/%s: %zu known cells, %.1f MiB (%.1f MiB per million cells)", r.method.c_str(),
                 r.backend.c_str(), r.known_cells, r.memory_bytes / 1048576.0,

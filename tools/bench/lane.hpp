@@ -110,14 +110,15 @@ class Lane {
     name_ = method + "/" + r_.backend;
   }
 
-  /// Integrates one scan; returns its wall time, ms.
-  double step(const WorldScan& scan) {
+  /// Integrates one scan (the first of this lane's turn or not); returns its wall time, ms.
+  double step(const WorldScan& scan, bool opens_turn = false) {
     ScanStats stats;
     const auto t0 = std::chrono::steady_clock::now();
     arena_.execute([&] { stats = integrate_(*map_, scan); });
     const double ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     r_.ms_per_scan.push_back(ms);
+    (opens_turn ? r_.ms_opening_turn : r_.ms_within_turn).push_back(ms);
     r_.total_s += ms / 1000.0;
     r_.points += scan.points.size();
     const std::size_t counts[7] = {stats.visits,     stats.changed, stats.rays,
