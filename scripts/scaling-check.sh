@@ -7,6 +7,8 @@
 # Also prints the ratio of the p50s over the scans within the lanes' turns (the bench's turn
 # table): the scans that open a turn wake the second thread after the other lanes ran, which
 # on this VM costs the 2-thread lane milliseconds (README, stop 66).
+# Each run's cache probes (the vCPUs' share of the last-level cache before and after its lanes)
+# follow its line.
 # Fails when a run does not report both lanes or reports a cell differing from OctoMap.
 # Usage: scripts/scaling-check.sh [RUNS=3] [DATA=../shared/data/balm-realworld] [RES=0.1]
 #        [RANGE=30]
@@ -62,6 +64,7 @@ for run in $(seq 1 "$RUNS"); do
   fi
   echo "run $run ($(date +%H:%M)): p50 $t1 ms at 1 thread, $t2 ms at 2; ratio $ratio" \
     "(within turns: $w1 / $w2 ms, $within)"
+  sed -n 's/^cache probe /  cache probe /p' "$OUT/run$run.txt"  # the vCPUs' cache share
 done
 summary() {
   awk -v what="$1" '

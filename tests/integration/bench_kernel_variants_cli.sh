@@ -40,6 +40,11 @@ for lane in "raycast@t1 1" "raycast@t2 2"; do
     END {exit !found}' "$dir/threads.txt" ||
     { echo "$1: not on $2 threads with 0 cells differing:"; cat "$dir/threads.txt"; exit 1; }
 done
+# The cache probes before and after the lanes: a time for each vCPU.
+for when in before after; do
+  grep -qE "^cache probe $when the lanes \(4 MiB pointer chase, ns a step\): vCPU 0 [0-9.]+" \
+    "$dir/threads.txt" || { echo "no cache probe $when the lanes:"; cat "$dir/threads.txt"; exit 1; }
+done
 code=0
 "$bench" --data "$dir/scene" --resolution 0.1 --methods octomap@t2 >/dev/null 2>"$dir/err.txt" ||
   code=$?

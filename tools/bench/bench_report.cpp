@@ -108,10 +108,23 @@ std::string number(double v) {
 }  // namespace
 
 std::string formatJson(const std::vector<RunResult>& runs, const std::string& data,
-                       const std::string& machine) {
+                       const std::string& machine, const CacheProbes& probes) {
   std::ostringstream out;
-  out << "{\n  \"data\": " << quoted(data) << ",\n  \"machine\": " << quoted(machine)
-      << ",\n  \"runs\": [\n";
+  out << "{\n  \"data\": " << quoted(data) << ",\n  \"machine\": " << quoted(machine);
+  if (!probes.before.empty()) {
+    // ns a step per vCPU; null where a vCPU could not be probed.
+    const auto list = [](const std::vector<double>& ns) {
+      std::string s = "[";
+      for (std::size_t k = 0; k < ns.size(); ++k) {
+        s += (k ? ", " : "") + (ns[k] < 0 ? std::string("null") : number(ns[k]));
+      }
+      return s + "]";
+    };
+    out << ",\n  \"cache_probe\": {\"bytes\": " << probes.bytes
+        << ", \"ns_per_step_before\": " << list(probes.before)
+        << ", \"ns_per_step_after\": " << list(probes.after) << "}";
+  }
+  out << ",\n  \"runs\": [\n";
   for (std::size_t i = 0; i < runs.size(); ++i) {
     const RunResult& r = runs[i];
     out << "    {\"method\": " << quoted(r.method) << ", \"backend\": " << quoted(r.backend)

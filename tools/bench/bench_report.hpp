@@ -69,7 +69,13 @@ struct RunResult {
 /// Each lane's p50 over the scans that opened its turns and over the rest (empty when no lane
 /// had more than one turn).
 [[nodiscard]] std::string formatTurnTable(const std::vector<RunResult>& runs);
+/// The cache probes of a run (cache_probe.hpp): ns a step per vCPU, before and after the lanes
+/// (empty: no probe).
+struct CacheProbes {
+  std::size_t bytes = 0;
+  std::vector<double> before, after;
+};
 [[nodiscard]] std::string formatJson(const std::vector<RunResult>& runs, const std::string& data,
-                                     const std::string& machine);
+                                     const std::string& machine, const CacheProbes& probes = {});
 
 }  // namespace densemap::bench

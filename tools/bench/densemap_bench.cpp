@@ -5,6 +5,7 @@
 #include <tbb/task_arena.h>
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -15,6 +16,7 @@
 #include <thread>
 
 #include "bench_report.hpp"
+#include "cache_probe.hpp"
 #include "cpu_steal.hpp"
 #include "densemap/cli/guarded_main.hpp"
 #include "densemap/cli/progress.hpp"
@@ -215,7 +217,8 @@ std::vector<RunResult> compareLanes(std::vector<std::unique_ptr<Lane>>& lanes,
 
 /// The tables on stdout (and --json, --growth); 1 when the JSON file cannot be written.
 int report(const Options& o, const std::vector<RunResult>& runs,
-           const std::vector<std::unique_ptr<Lane>>& lanes, std::size_t scans) {
+           const std::vector<std::unique_ptr<Lane>>& lanes, std::size_t scans,
+           const CacheProbes& probes) {
   const std::string machine = machineDescription();
   std::printf(
       "densemap-bench: %s, resolution %g m, max range %g m, %zu scans, rule %s "
@@ -244,6 +247,11 @@ int report(const Options& o, const std::vector<RunResult>& runs,
           100.0 * r.cpu_steal_share, r.method.c_str(), r.backend.c_str());
     }
   }
+  if (!probes.before.empty()) {
+    std::printf("%s\n%s\n",
+                formatCacheProbe("before the lanes", probes.bytes, probes.before).c_str(),
+                formatCacheProbe("after the lanes", probes.bytes, probes.after).c_str());
+  }
   if (o.growth > 0) {
     std::printf(
         "\nper-scan time as the map grows (--growth %zu; region: the culling region's "
@@ -255,7 +263,7 @@ int report(const Options& o, const std::vector<RunResult>& runs,
   }
   if (!o.json.empty()) {
     std::ofstream out(o.json);
-    out << formatJson(runs, o.data, machine);
+    out << formatJson(runs, o.data, machine, probes);
     if (!out) {
       std::fprintf(stderr, "densemap-bench: cannot write %s\n", o.json.c_str());
       return 1;
@@ -273,9 +281,17 @@ int run(const Options& o) {
     return 1;
   }
   auto lanes = makeLanes(o, backends);
+  // The vCPUs' share of the last-level cache, before and after (one million steps a vCPU:
+  // 20-200 ms each, eight vCPUs at most).
+  constexpr std::size_t kProbeSteps = 1'000'000;
+  const unsigned cpus = std::clamp(std::thread::hardware_concurrency(), 1U, 8U);
+  CacheProbes probes;
+  probes.bytes = o.cache_probe_mib << 20;
+  if (o.cache_probe_mib > 0) probes.before = probeCaches(probes.bytes, cpus, kProbeSteps);
   const std::vector<StealMeter> steal = runLanes(lanes, *scans, o.turn);
+  if (o.cache_probe_mib > 0) probes.after = probeCaches(probes.bytes, cpus, kProbeSteps);
   const std::vector<RunResult> runs = compareLanes(lanes, steal, o.rule != "set");
-  return report(o, runs, lanes, scans->size());
+  return report(o, runs, lanes, scans->size(), probes);
 }
 
 }  // namespace
@@ -339,6 +355,12 @@ static int runMain(int argc, char** argv) {
   app.add_option("--kernel-set", o.kernel_settings,
                  "A dense method's setting NAME=VALUE (repeatable; densemap-eval --help lists "
                  "them), for every dense method of the run");
+  app.add_option("--cache-probe-mib", o.cache_probe_mib,
+                 "Before and after the lanes, time a pointer chase over this many MiB on each "
+                 "vCPU (ns a step: its share of the last-level cache, which other guests of a "
+                 "shared host take by the minute; 0: no probe)")
+      ->check(CLI::Range(0, 1024))
+      ->capture_default_str();
   app.add_option("--growth", o.growth,
                  "Also print each method's p50 / p99 in this many consecutive parts of the scans, "
                  "with the map's size after each (per-scan cost against map size; 0: no)")

@@ -42,6 +42,7 @@ struct Options {
   std::string json;
   std::vector<std::string> kernel_settings;  // --kernel-set, for every dense method
   std::size_t growth = 0;                    // --growth N: per-scan time as the map grows
+  std::size_t cache_probe_mib = 4;           // --cache-probe-mib: 0, no probe
 };
 
 /// FNV-1a over a kernel map's evidence (keys, alpha, beta, in block order): equal digests mean
