@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <numeric>
 #include <random>
+#include <system_error>
 #include <thread>
 
 namespace densemap::bench {
@@ -36,7 +37,9 @@ std::optional<double> chaseNsPerStep(std::size_t bytes, unsigned cpu, std::size_
   const std::size_t lines = bytes / kLine;
   if (lines < 2 || lines > (std::size_t{1} << 26)) return std::nullopt;  // at most 4 GiB
   std::optional<double> ns;
-  std::thread probe([&] {
+  // A throw inside the thread would end the process (std::terminate), one from starting it would
+  // end the run: a probe that cannot run is reported as such instead.
+  const auto chase = [&] {
     cpu_set_t set;
     CPU_ZERO(&set);
     if (cpu >= CPU_SETSIZE) return;
@@ -51,8 +54,19 @@ std::optional<double> chaseNsPerStep(std::size_t bytes, unsigned cpu, std::size_
     volatile std::uint32_t end = at;  // the chase's result is used: it cannot be left out
     (void)end;
     ns = s * 1e9 / static_cast<double>(std::max<std::size_t>(steps, 1));
-  });
-  probe.join();
+  };
+  try {
+    std::thread probe([&] {
+      try {
+        chase();
+      } catch (...) {
+        ns.reset();  // e.g. std::bad_alloc for the cycle
+      }
+    });
+    probe.join();
+  } catch (const std::system_error&) {
+    return std::nullopt;  // no thread to bind
+  }
   return ns;
 }
 

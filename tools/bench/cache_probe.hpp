@@ -15,7 +15,8 @@ namespace densemap::bench {
 ///
 /// The ns a step of a dependent pointer chase over `bytes` (one pointer per 64-byte line, in a
 /// random cycle) on a thread bound to `cpu`, `steps` steps after one lap to warm up; nullopt
-/// when the thread cannot be bound there or `bytes` holds fewer than two lines.
+/// when the thread cannot be started or bound there, the buffer cannot be had, or `bytes` holds
+/// fewer than two lines.
 [[nodiscard]] std::optional<double> chaseNsPerStep(std::size_t bytes, unsigned cpu,
                                                    std::size_t steps);
 

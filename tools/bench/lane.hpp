@@ -112,7 +112,7 @@ class Lane {
   }
 
   /// Integrates one scan (the first of this lane's turn or not); returns its wall time, ms.
-  double step(const WorldScan& scan, bool opens_turn = false) {
+  double step(const WorldScan& scan, bool opens_turn) {
     ScanStats stats;
     const auto t0 = std::chrono::steady_clock::now();
     arena_.execute([&] { stats = integrate_(*map_, scan); });
