@@ -80,7 +80,7 @@ install(FILES ${PROJECT_SOURCE_DIR}/models/iln.pb DESTINATION share/densemap/mod
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/config/load ${PROJECT_SOURCE_DIR}/config/sensors
         DESTINATION share/densemap/config COMPONENT server)
 install(DIRECTORY DESTINATION ${DENSEMAP_STATE_DIR} COMPONENT server)
-# The DDS Security PKI maker (README "DDS Security: who may do what").
+# The DDS Security PKI maker (docs/security.md).
 # Installed with its version filled in (--version; its man page reads it).
 set(DENSEMAP_VERSION ${PROJECT_VERSION})
 configure_file(${PROJECT_SOURCE_DIR}/scripts/make-pki.sh

@@ -5,7 +5,7 @@
 # Usage: scripts/demo.sh [--ros] [output dir, default /tmp/densemap-demo]
 #   --ros: the scans go in as a ROS 2 robot sends them (sensor_msgs/PointCloud2 on rt/points,
 #   TF on rt/tf and rt/tf_static; densemap replay --ros) and the server also publishes
-#   octomap_binary, projected_map and octomap_point_cloud_centers (README "ROS 2").
+#   octomap_binary, projected_map and octomap_point_cloud_centers (docs/ros2.md).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROS=0

@@ -6,8 +6,7 @@
 #   1b. oracle protocol at long range: the outdoor scene seen by a simulated 64-beam sensor
 #      (12 scans, full hdl64 scans to 80 m, 0.2 m), without akimap (its free samples every
 #      0.5 m of 80 m rays take minutes a scan); the only row where rays pass 15 m, so the one
-#      that judges changes to far free space (issue 29, stop 48: bundling far rays
-#      by coarser cubes cost it 0.01 AUC and 38% MSE);
+#      that judges changes to far free space;
 #   2. hold-out protocol on real data, where DATA (default ../shared/data) holds it: la3dm's
 #      two scenes (0.1 m, 8 m), the AKIMap authors' sample (0.1 m) and BALM scans 20-59
 #      (0.2 m, 15 m; slow: AKIMap takes about 75 s per scan on 2 cores, 50 min for the 40;

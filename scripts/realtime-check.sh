@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Server against core, same scans, same session (issue 15's check): runs densemap-server on
+# Server against core, same scans, same session: runs densemap-server on
 # loopback at RES / RANGE, replays DATA at RATE Hz (optionally with point queries), stops it,
 # then runs densemap-bench on the same scans with the same method (METHOD, default raycast, the
 # server's default; grid, THREADS threads). Prints the server's latency p50/p99, drops, RSS, and the bench's p50/p99.

@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
-# Issue 31's thread-scaling figure with its spread: runs densemap-bench RUNS times on DATA at
+# The thread-scaling figure with its spread: runs densemap-bench RUNS times on DATA at
 # RES / RANGE (grid backend, set rule) with a 1-thread and a 2-thread lane of METHOD, by
-# default in the same run as OctoMap as the issue states it, and prints each run's p50 of both
-# lanes and their ratio, then the ratios' mean, min and max. One run is not a figure: this VM's
-# ratio ranged 1.58-1.97 over five runs of the same binary (README, stop 65).
+# default in the same run as OctoMap, and prints each run's p50 of both lanes and their
+# ratio, then the ratios' mean, min and max. One run is not a figure: on a shared VM the ratio
+# of the same binary drifts with the host's load.
 # Also prints the ratio of the p50s over the scans within the lanes' turns (the bench's turn
 # table): the scans that open a turn wake the second thread after the other lanes ran, which
-# on this VM costs the 2-thread lane milliseconds (README, stop 66).
+# can cost the 2-thread lane milliseconds.
 # Each run's cache probes (the vCPUs' share of the last-level cache before and after its lanes)
 # follow its line.
 # Fails when a run does not report both lanes or reports a cell differing from OctoMap.
@@ -24,7 +24,7 @@ METHOD=${METHOD:-raycast}
 OUT=${OUT:-$(mktemp -d /tmp/densemap-scaling.XXXXXX)}
 mkdir -p "$OUT"
 if [ ! -e "$DATA" ]; then
-  echo "scaling-check: no data at $DATA (see ../shared/data/README.md)" >&2
+  echo "scaling-check: no data at $DATA (set DATA, or DENSEMAP_DATA_DIR)" >&2
   exit 2
 fi
 METHODS="$METHOD@t1,$METHOD@t2"

@@ -13,7 +13,7 @@ namespace densemap::cli {
 
 /// `densemap replay --ros`: publishes scans as a ROS 2 robot would (ros2/replay_frames.hpp):
 /// sensor_msgs/PointCloud2 on `topic` and tf2_msgs/TFMessage on rt/tf and rt/tf_static.
-/// Loopback only, like every densemap participant (DESIGN.md).
+/// Loopback only, like every densemap participant (docs/architecture.md).
 class RosReplayPublisher {
  public:
   /// `static_delay` > 0: /tf_static goes out that long after creation (with the first scan

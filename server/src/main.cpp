@@ -1,5 +1,6 @@
-// densemap-server: the occupancy-mapping daemon (DESIGN.md). Scans in over DDS, map versions,
-// queries, commands, status, tiles and deltas out; snapshots on command, autosave and shutdown.
+// densemap-server: the occupancy-mapping daemon (docs/architecture.md). Scans in over DDS, map
+// versions, queries, commands, status, tiles and deltas out; snapshots on command, autosave
+// and shutdown.
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
@@ -55,14 +56,11 @@ using OrExit = std::expected<T, Exit>;
 void configureAllocator() {
   mallopt(M_MMAP_THRESHOLD, 64 << 20);
   // Free memory at the top of a heap beyond 32 MiB goes back to the OS. A thread's heap arena
-  // gives its top back only past this threshold (malloc_trim does not trim it): at 256 MiB an
-  // 8-client point-query flood left 53-105 MiB of a 49 MiB server behind, at 32 MiB 52 MiB;
-  // scans at 10 Hz were not slower (64-beam at 0.1 m, log_odds: p50 80-86 against 85-88 ms).
+  // gives its top back only past this threshold (malloc_trim does not trim it), so a larger
+  // one leaves a point-query flood's memory behind; scans at 10 Hz are not slower for it.
   mallopt(M_TRIM_THRESHOLD, 32 << 20);
   // Two heap arenas for all threads (glibc makes up to 8 per core): fewer thread heaps to hold
-  // freed memory after point-query floods (6 clients x 3M points, with the 256 MiB threshold:
-  // 46 of 120 MiB stayed, 105 of 129 with the default arenas); integration rates at 10 Hz did
-  // not change (issue 28, item 9).
+  // freed memory after point-query floods; integration at 10 Hz does not need more.
   mallopt(M_ARENA_MAX, 2);
 }
 
@@ -106,7 +104,7 @@ struct Resumed {
 };
 
 /// The snapshot's sensor model is the map's: a different one in the config would apply to new
-/// scans only, and the next snapshot would record it (issue 28, item 7). Refused, as a
+/// scans only, and the next snapshot would record it. Refused, as a
 /// different resolution is.
 std::optional<Exit> refuseOtherSensor(const densemap::ResumedSnapshot& resumed,
                                       const densemap::PipelineOptions& options) {
@@ -127,7 +125,7 @@ std::optional<Exit> refuseOtherSensor(const densemap::ResumedSnapshot& resumed,
                   now.miss, now.clamp_min, now.clamp_max)};
 }
 
-/// A dense map resumes its kernel evidence (issue 29); a snapshot without it (a log-odds
+/// A dense map resumes its kernel evidence; a snapshot without it (a log-odds
 /// map's, or one saved before) leaves the probabilities standing until new scans reach their
 /// cells, which then start again from the prior. Evidence of another kind is dropped.
 void keepMatchingEvidence(densemap::ResumedSnapshot& resumed,
@@ -205,7 +203,7 @@ int waitForStop(const sigset_t& signals, const densemap::server::MapService& ser
   }
 }
 
-/// The shutdown snapshot. The map must not be lost with the process (issue 28, item 5): when
+/// The shutdown snapshot. The map must not be lost with the process: when
 /// the snapshot cannot be written, a rescue copy goes to the first place that takes it, and
 /// the log says where. Returns the exit status.
 int saveOnShutdown(densemap::server::MapService& service, const densemap::Ingest& ingest,

@@ -126,8 +126,8 @@ void QueryRoom::take() {
   };
   // Take one request at a time from each reader in turn, so no kind starves the others. Each
   // reply waits (at most kAskerWait) until its writer has matched the asker's reply reader:
-  // discovery is not symmetric, and a reply written before that match is lost (issue 28,
-  // item 4: 1-3% of one-shot queries timed out while the server had answered).
+  // discovery is not symmetric, and a reply written before that match is lost (a one-shot
+  // client would time out although the server had answered).
   const auto asker = [](const dds::Entity& reader, const dds_sample_info_t& info) {
     return dds::participantOfWriter(reader, info.publication_handle);
   };

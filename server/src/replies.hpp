@@ -25,10 +25,10 @@ inline constexpr std::int32_t kOk = 0, kInvalid = 1, kInternal = 2;
 /// The reply topics.
 enum class ReplyTopic { kPoint, kBbox, kRay, kCommand };
 
-/// Replies to one asker only (issue 28, item 9): the writer of a reply topic for one client,
+/// Replies to one asker only: the writer of a reply topic for one client,
 /// in that client's partition (dds::replyPartition), made at its first request on that topic,
 /// the most recently used kept (a task holding one keeps it alive); and the wait for the
-/// asker's reader to match before a reply goes out (issue 28, item 4). Thread-safe.
+/// asker's reader to match before a reply goes out. Thread-safe.
 class ReplyWriters {
  public:
   ReplyWriters(const dds::Entity& participant, const dds::Topics& topics)

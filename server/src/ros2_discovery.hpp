@@ -1,6 +1,6 @@
 #pragma once
 
-// The server as a ROS 2 node (issue 32, item 7): what every rmw implementation writes on
+// The server as a ROS 2 node: what every rmw implementation writes on
 // "ros_discovery_info" so that `ros2 node list` and `ros2 node info` see a node and its topics.
 #include <span>
 #include <string>

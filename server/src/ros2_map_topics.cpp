@@ -6,7 +6,7 @@
 #include "ros2_bridge_state.hpp"
 #include "sensor_msgs.h"
 
-// The bridge's map topics (README "ROS 2", Out): /octomap_binary, /projected_map and the
+// The bridge's map topics (docs/ros2.md, Out): /octomap_binary, /projected_map and the
 // occupied-cell centres, kept current from the versions' written blocks while someone listens.
 namespace densemap::server {
 namespace {

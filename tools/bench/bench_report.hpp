@@ -28,7 +28,7 @@ struct RunResult {
   bool dense = false;       // a kernel map (visits: kernel-cell updates + free-capsule voxels)
   double visits_per_scan = 0;
   double changed_cells_per_scan = 0;
-  /// Distinct cells each scan updates (issue 31's floor: an exact update needs each once; the
+  /// Distinct cells each scan updates (the floor of an exact update needs each once; the
   /// culling region's cells are skipped, not updated). Visits beyond them are repeats.
   double cells_per_scan = 0;
   // Ray statistics (the dissertation's Tables 2.2-2.3), per scan.

@@ -8,9 +8,9 @@
 namespace densemap::bench {
 
 /// How much last-level cache each vCPU gets now. On a shared VM the host's other guests take
-/// part of it, and a vCPU's share changes by the minute: a 4 MiB pointer chase that takes
-/// ~17 ns a step on one vCPU took 104-115 ns on the other for minutes at a time, and a lane
-/// bound to that vCPU ran 1.5x slower (README, stop 66). The bench probes before and after its
+/// part of it, and a vCPU's share changes by the minute: a pointer chase can take several
+/// times longer a step on one vCPU than on the other for minutes at a time, and a lane bound
+/// to that vCPU runs slower for it. The bench probes before and after its
 /// lanes so that a run's figures carry the machine's state with them, as CPU steal does.
 ///
 /// The ns a step of a dependent pointer chase over `bytes` (one pointer per 64-byte line, in a

@@ -1,4 +1,4 @@
-// densemap-sim: writes a simulated LiDAR dataset (DESIGN.md dataset layout) with ground truth.
+// densemap-sim: writes a simulated LiDAR dataset (docs/datasets.md) with ground truth.
 #include <tbb/task_arena.h>
 #include <CLI/CLI.hpp>
 

@@ -35,9 +35,9 @@ bool isNotAllowedBySecurity(const Error& error) {
 
 std::string domainConfig(const std::string& interface_name) {
   // On loopback, discovery is unicast to every participant index's port on 127.0.0.1, each
-  // second (issue 32, item 2): a node that announces itself only by multicast (Humble with
-  // ROS_LOCALHOST_ONLY=1) never reaches us, and finds us when our announcement reaches its
-  // port; at Cyclone's default period that took 7-8 s. 120 small packets a second on lo.
+  // second: a node that announces itself only by multicast (Humble with ROS_LOCALHOST_ONLY=1)
+  // never reaches us, and finds us when our announcement reaches its port; at Cyclone's
+  // default period that takes 7-8 s. 120 small packets a second on lo.
   const std::string discovery = isLoopbackInterface(interface_name)
                                     ? "<Peers><Peer Address=\"127.0.0.1\"/></Peers>"
                                       "<SPDPInterval>1 s</SPDPInterval>"
@@ -46,8 +46,8 @@ std::string domainConfig(const std::string& interface_name) {
       isLoopbackInterface(interface_name) ? "<AllowMulticast>false</AllowMulticast>" : "";
   return "<CycloneDDS><Domain Id=\"any\"><General><Interfaces><NetworkInterface name=\"" +
          interface_name + "\"/></Interfaces>" + multicast +
-         // 120 processes per domain on one host (issue 28, item 10: 41 of 80 parallel CLI
-         // queries failed at 40). Unicast discovery port 7400 + 250 d + 10 + 2 i must stay below
+         // 120 processes per domain on one host (parallel CLI queries need more than 40).
+         // Unicast discovery port 7400 + 250 d + 10 + 2 i must stay below
          // the next domain's ports (+250): i <= 119.
          "</General><Discovery><ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>"
          "119</MaxAutoParticipantIndex>" +

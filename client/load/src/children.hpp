@@ -22,7 +22,7 @@ class Children {
                        const std::filesystem::path& tracks, const std::filesystem::path& dir);
   /// Their CPU time so far, from /proc (while they run; their own final figure comes in their
   /// result files). Each child's figure never goes back: a child that has exited reads as 0 in
-  /// /proc, which made the load tool's CPU share negative (issue 28, item 10: "-115 %").
+  /// /proc, which would make the load tool's CPU share negative.
   double cpuSeconds();
   /// Waits for every child (killing those still running `grace` later) and reads results.
   void collect(std::chrono::seconds grace, std::vector<QueryResult>& results);

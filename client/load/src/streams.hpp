@@ -15,7 +15,7 @@
 #include "densemap/io/scan_source.hpp"
 #include "densemap/load/runner.hpp"
 
-/// The streams of a load run (issue 30: runner.cpp in rooms): datasets and tracks, the send
+/// The streams of a load run (runner.cpp in rooms): datasets and tracks, the send
 /// times in flight, one sensor's sender and one query client's loop.
 namespace densemap::load::detail {
 

@@ -137,8 +137,8 @@ double fitScale(const Eigen::Matrix3d& sigma, const Eigen::Vector3d& centre,
     }
   }
   // The parabola through the grid point and its two neighbours (their values are at hand),
-  // in log s: its vertex, one evaluation (a golden-section search between the neighbours took
-  // ten for s within 0.4%; the maps did not change measurably, issue 29's third stop).
+  // in log s: its vertex, one evaluation (a golden-section search between the neighbours would
+  // take ten for a scale within 0.4%, and the maps do not change measurably).
   if (i > i_min && i < i_max) {
     const double curvature = down - 2.0 * f + up;
     if (curvature > 0.0) {

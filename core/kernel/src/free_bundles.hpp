@@ -19,7 +19,7 @@ struct CapsuleShape {
   double tip_radius_m = 0.1, tip_weight = 1.0;
 };
 
-/// kAkimapRays' free extents (issue 29): each ray's free extent [origin, hit - stop.free] and
+/// kAkimapRays' free extents: each ray's free extent [origin, hit - stop.free] and
 /// tip [.., hit - stop.tip] (as makeRaySegments with one piece per ray; a ray cut at
 /// `max_range` is free to there, without a tip). With `bundle`, the rays whose hits share a
 /// voxel give one free capsule from the origin to the mean of their free ends, weighing their

@@ -21,7 +21,7 @@ struct FreeExtent {
   double weight = 1.0;    // its value on the extent (sf2)
 };
 
-/// kAkimapRays' fast free evidence (issue 29): instead of one capsule kernel per 0.3 m piece of
+/// kAkimapRays' fast free evidence: instead of one capsule kernel per 0.3 m piece of
 /// every ray (millions per 64-beam scan, each scheduled, sorted and evaluated over its bounding
 /// box), each ray's free extent (and its tip) is one capsule, rasterised slice by slice (every
 /// voxel whose centre lies within `radius_m` of the extent is visited once per ray, no sort;

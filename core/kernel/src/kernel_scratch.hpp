@@ -25,10 +25,10 @@ void release(std::vector<T>& v) {
 /// A scan's buffers. Each is released when the stage that needs it ends (releaseSamples,
 /// releaseBundles, releaseKernels, releaseFree, FreeTraversal::release), so that the allocator
 /// hands the same memory to the next stage's buffers: a scan's peak is its largest stage, not
-/// the sum of all its buffers, and between scans the map holds its evidence. Kept between
-/// scans, as they were to spare page faults, they took more memory and more faults: server
-/// peak RSS at BALM 0.2 m 150-169 -> 107-113 MiB, minor faults 36-41k -> 24-26k for its 80
-/// scans (stop 41, 16 and 18 runs), for about 3% more CPU in the server.
+/// the sum of all its buffers, and between scans the map holds its evidence. Keeping them
+/// between scans would spare a few page faults but take more memory and, in the server,
+/// more faults in all.
+///
 struct KernelMap::Scratch {
   std::vector<std::vector<Sample>> sample_parts;
   SampleIndex::Storage index;

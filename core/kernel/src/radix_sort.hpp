@@ -21,8 +21,8 @@ namespace densemap::kernel {
 /// Sorts `items` by key(item) (an unsigned integer below 2^key_bits), stably: a least
 /// significant digit radix sort, 11 bits a pass, each pass counted and placed in parallel by
 /// fixed chunks of the items, so the order never depends on the thread count. `scratch` is a
-/// buffer the caller keeps between calls. About 5x faster than a comparison sort of the
-/// few hundred thousand (key, index) pairs of a scan (issue 29).
+/// buffer the caller keeps between calls. Several times faster than a comparison sort of the
+/// few hundred thousand (key, index) pairs of a scan.
 template <class T, class KeyOf>
 void radixSort(std::vector<T>& items, std::vector<T>& scratch, int key_bits, KeyOf&& key,
                std::vector<std::uint32_t>& counts) {

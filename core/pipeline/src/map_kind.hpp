@@ -12,7 +12,7 @@
 
 namespace densemap {
 
-/// The map a pipeline integrates into, behind one interface (issue 30): the pipeline calls
+/// The map a pipeline integrates into, behind one interface: the pipeline calls
 /// these and never asks which kind it holds. Every kind keeps an OccupancyMap that commands
 /// act on and a GridMap readers see: the map itself when it is a grid, else a mirror that
 /// follows its changes cell for cell (the octree backend). The log-odds kind integrates with

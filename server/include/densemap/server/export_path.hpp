@@ -12,8 +12,8 @@ namespace densemap::server {
 [[nodiscard]] std::filesystem::path exportDirectory(const std::filesystem::path& export_dir,
                                                     const std::filesystem::path& snapshot_path);
 
-/// Where a `save` request that names `name` may write (DESIGN.md: a request may not name a path
-/// outside the directory the operator configured). `name` must be a plain file name: 1-128
+/// Where a `save` request that names `name` may write (docs/security.md: no request may name a
+/// path outside the directory the operator configured). `name` must be a plain file name: 1-128
 /// characters of [A-Za-z0-9._-], not starting with '.', ending in .dmap, .bt or .ot; no '/',
 /// so no `..`, no absolute path and no other directory. The file goes into `export_dir`, which
 /// is created (0750) if missing; a symlink or non-directory there is refused. Writes replace the

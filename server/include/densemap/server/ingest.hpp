@@ -36,7 +36,7 @@ struct PipelineCounters {
   std::vector<SensorCounters> sensors;  // the same counts per sensor id, with seq gaps
 };
 
-/// The server's ingest (DESIGN.md data flow): a bounded latest-wins queue in front of the
+/// The server's ingest (docs/architecture.md): a bounded latest-wins queue in front of the
 /// mapping engine (densemap/pipeline/engine.hpp), run one scan at a time by a worker thread
 /// inside a task arena of `threads`. Readers get the latest published MapView without waiting
 /// for integration. Commands (reset, clear, save...) run on the worker between scans, so the
@@ -85,7 +85,7 @@ class Ingest {
   /// Waits for the worker (at most one scan) unless the ingest is stopped. Not from a
   /// Command (the worker would wait for itself).
   [[nodiscard]] SavedState savedState();
-  /// Before start(): resumes a kernel map kind's evidence from a snapshot (issue 29). An error
+  /// Before start(): resumes a kernel map kind's evidence from a snapshot. An error
   /// (and nothing changed) for a log-odds kind or another kernel kind's evidence.
   [[nodiscard]] Expected<void> restoreKernelEvidence(const kernel::KernelEvidence& evidence);
   [[nodiscard]] PipelineCounters counters() const;

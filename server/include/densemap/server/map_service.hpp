@@ -37,11 +37,11 @@ struct ServiceOptions {
   int query_threads = 2;            // the query task arena: requests are answered in parallel
   std::optional<Ros2Options> ros2;  // the ROS 2 face (Ros2Bridge); none: off
   /// How long create() listens for another server's status writer before it creates the
-  /// endpoints clients match (DESIGN.md: two servers on one domain are detected).
+  /// endpoints clients match (docs/security.md: two servers on one domain are detected).
   std::chrono::milliseconds alone_discovery{1000};
 };
 
-/// densemap-server's DDS face (DESIGN.md topics): the endpoints, three threads, and rooms of
+/// densemap-server's DDS face (docs/operations.md): the endpoints, three threads, and rooms of
 /// one job each in server/src (replies, request_tasks, query_room, command_room, publisher,
 /// status_room, snapshot_saver):
 /// - ingest: only takes scans and submits them to the pipeline;
@@ -85,7 +85,7 @@ class MapService {
   void serviceLoop();
   void publishLoop();
   /// Fails when another densemap-server's status writer is discovered on the domain within
-  /// `discovery` (DESIGN.md: two servers on one domain are detected, not merged).
+  /// `discovery` (docs/security.md: two servers on one domain are detected, not merged).
   [[nodiscard]] Expected<void> checkAlone(std::chrono::milliseconds discovery) const;
 
   Ingest& ingest_;

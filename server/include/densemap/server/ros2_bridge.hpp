@@ -54,11 +54,11 @@ struct Ros2Counters {
   std::uint64_t tf_rejected = 0;        // transforms refused (bad quaternion, cycle...)
   std::uint64_t maps_published = 0;     // map-topic rounds written
   std::string last_reject;
-  /// Per cloud topic: writers matched now and refused for their QoS (issue 32, item 4).
+  /// Per cloud topic: writers matched now and refused for their QoS.
   std::vector<RosCloudTopicStatus> clouds;
 };
 
-/// The server's ROS 2 face (README "ROS 2"), one thread on the server's participant:
+/// The server's ROS 2 face (docs/ros2.md), one thread on the server's participant:
 /// - sensor_msgs/PointCloud2 on each configured cloud topic, transformed into `world_frame`
 ///   with the TF buffer (rt/tf, rt/tf_static) at the cloud's stamp and submitted to the
 ///   pipeline as sensor-frame scans (sensor id = the topic name). A cloud whose transform is

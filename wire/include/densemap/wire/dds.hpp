@@ -49,7 +49,7 @@ class Entity {
   dds_entity_t e_ = 0;
 };
 
-/// Cyclone configuration for one interface. On loopback (DESIGN.md network safety): no
+/// Cyclone configuration for one interface. On loopback (docs/security.md): no
 /// multicast, unicast discovery to localhost. On any other interface: Cyclone's default
 /// multicast discovery there. Large receive buffers for big scans either way.
 [[nodiscard]] std::string domainConfig(const std::string& interface_name);

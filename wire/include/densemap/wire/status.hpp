@@ -24,7 +24,7 @@ struct RosCloudTopicStatus {
 
 /// A server's status as densemap/status carries it (densemap_msgs.idl Status): built once by
 /// the server from its counters, written and read by the conversions below only, for the server
-/// and the client alike (issue 30: one definition on each side of the wire).
+/// and the client alike (one definition on each side of the wire).
 struct ServerStatus {
   std::uint64_t received = 0, integrated = 0, dropped = 0, rejected = 0;
   std::vector<std::uint64_t> rejected_by_reason;

@@ -7,8 +7,8 @@
 
 namespace densemap::dds {
 
-/// Every densemap topic (DESIGN.md), created once per participant; names and types live here
-/// only, for the server and the client alike. With DDS Security, a topic the participant's
+/// Every densemap topic (docs/operations.md), created once per participant; names and types live
+/// here only, for the server and the client alike. With DDS Security, a topic the participant's
 /// permissions do not name is left empty (its readers and writers fail as "not allowed").
 struct Topics {
   Entity scan;
@@ -33,11 +33,11 @@ enum class CommandKind : std::int32_t { kReset = 0, kClearBox = 1, kSave = 2, kS
 inline constexpr std::uint32_t kMaxQueryPoints = 250'000;
 
 /// The partition of one client's reply readers, and of the server's reply writers for that
-/// client: a reply reaches its asker only (issue 28, item 9: every client read every reply; 30
-/// clients' 2.7 MB bbox replies took 6.7 s against 0.28 s for one).
+/// client: a reply reaches its asker only (otherwise every client reads every reply, and many
+/// clients' large replies slow each other down).
 [[nodiscard]] std::string replyPartition(std::uint64_t client_id);
 
-/// QoS of the request/reply topics (DESIGN.md: reliable, keep-last 16-64).
+/// QoS of the request/reply topics (docs/architecture.md: reliable, keep-last 16-64).
 inline constexpr QosSpec kRequestQos{.depth = 64};
 inline constexpr QosSpec kCommandQos{.depth = 16};
 /// Map state for late joiners: reliable, transient-local, keep-last 1 per instance.
@@ -54,7 +54,7 @@ inline constexpr QosSpec kEventWriterQos{.depth = 64}, kEventReaderQos{.depth = 
 /// ROS 2's topics (ROS2.md): clouds keep the last 5 (sensor data QoS; best effort unless the
 /// user asks for reliable); /tf reliable, keep-last 100; /tf_static and the published maps
 /// latched (reliable, transient-local, keep-last 1 a writer; a /tf_static reader keeps 100,
-/// one per broadcaster). All offer XCDR1 only, as rmw_cyclonedds does (issue 32, item 5).
+/// one per broadcaster). All offer XCDR1 only, as rmw_cyclonedds does.
 inline constexpr int kRosCloudDepth = 5;
 [[nodiscard]] constexpr QosSpec rosCloudQos(bool reliable) {
   return {.reliable = reliable, .depth = kRosCloudDepth, .xcdr1_only = true};

@@ -18,7 +18,7 @@ inline std::string currentFailure() {
   }
 }
 
-/// Runs a program's body so that no exception reaches `main` (DESIGN.md, "outside people are
+/// Runs a program's body so that no exception reaches `main` (docs/security.md, "outside people are
 /// hostile"): whatever escapes is printed as "<program>: error: <reason>" and the exit code is
 /// 2, never an abort with a core dump. Expected errors should still be returned by the body;
 /// this is the last line for the ones nobody foresaw (std::bad_alloc from a huge input, a

@@ -5,7 +5,7 @@
 
 namespace densemap {
 
-/// Runs body(begin, end) over [0, n) in chunks of about `grain` indices (issue 30: the map and
+/// Runs body(begin, end) over [0, n) in chunks of about `grain` indices (the map and
 /// its read side take one instead of naming a thread library, so a client links none).
 /// serialRunner() runs the chunks in order on the caller's thread; the engine, the server and
 /// the tools give the maps tbbRunner() (densemap::parallel), whose chunks may run at once, so a

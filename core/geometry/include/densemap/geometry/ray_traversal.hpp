@@ -44,7 +44,7 @@ inline TraversalKind startTraversal(const VoxelGrid& grid, const Point3f& origin
   start.length = static_cast<float>(std::sqrt(static_cast<double>(norm_sq)));
   // Two voxels but no length: a ray shorter than ~1e-19 m across a border (its float squared
   // length underflows to 0). OctoMap then divides by zero and loops forever (steps of tDelta 0);
-  // it has no voxel to visit, as a ray inside one voxel (issue 28: one query hung a thread).
+  // it has no voxel to visit, as a ray inside one voxel.
   if (!(start.length > 0.0F)) return TraversalKind::kSameVoxel;
   for (float& d : dir) d /= start.length;
 

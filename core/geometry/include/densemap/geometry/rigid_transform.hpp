@@ -26,7 +26,7 @@ using Transform = Eigen::Isometry3d;
                                                            double qx, double qy, double qz);
 
 /// The largest sensor position a file may give (m): the map's keys cover +-32768 voxels, and
-/// nothing a robot maps lies farther (a 1e30 translation wrote an empty map, issue 28).
+/// nothing a robot maps lies farther (a 1e30 translation would write an empty map).
 inline constexpr double kMaxPoseTranslationM = 1e6;
 
 /// The one rule for a pose read from outside (files; scans have their own quaternion and

@@ -8,7 +8,7 @@
 
 namespace densemap {
 
-/// Writes the dataset directory layout (DESIGN.md): `DIR/scans/NNNNNN.bin` (float32 x y z
+/// Writes the dataset directory layout (docs/datasets.md): `DIR/scans/NNNNNN.bin` (float32 x y z
 /// intensity, sensor frame) and `DIR/poses.txt` (KITTI 3x4 rows), where line i is the pose of
 /// scan number i. Ids need not be contiguous; lines for missing ids hold the identity.
 /// Single-writer.

@@ -23,7 +23,7 @@ class ScanSource {
   [[nodiscard]] virtual std::string describe() const = 0;
 };
 
-/// Opens any dataset format densemap reads (DESIGN.md, dataset directory):
+/// Opens any dataset format densemap reads (docs/datasets.md):
 /// - a directory with `scans/NNNNNN.bin` and `poses.txt` or `poses_kitti.txt` (sensor frame);
 /// - a directory with `clouds_world/NNNNNN.bin` and `sensor_poses_kitti.txt` (world frame);
 /// - a directory of la3dm `.pcd` files with VIEWPOINT (world frame), or one `.pcd` file;

@@ -80,11 +80,10 @@ struct KernelOptions {
   double search_max = 0.5;
   double search_range = 30.0;
   /// kAkimap, kAkimapRays: covariance regulariser, a standard deviation (m; at least a voxel) added
-  /// on every axis. 0.1 m measured best of {1, 2, 3} voxels at 0.1 m and 0.05 m on the oracle
-  /// scenes and the la3dm hold-out (issue 5 note).
+  /// on every axis; 0.1 m scores best on the oracle scenes and the la3dm hold-out.
   double min_thickness = 0.1;
   /// kAkimapRays: free evidence by one capsule per ray's free extent and one per tip, rasterised
-  /// voxel by voxel (FreeTraversal, issue 29) instead of a capsule kernel per `free_step` piece
+  /// voxel by voxel (FreeTraversal) instead of a capsule kernel per `free_step` piece
   /// of every ray scheduled through the kernel pairs. Setting free_traversal=0 (or 1).
   bool free_traversal = false;
   /// kAkimapRays with free_traversal: capsules visit the voxels within this fraction of their
@@ -115,8 +114,8 @@ struct KernelOptions {
   /// isotropic point kernels from per-axis squared offsets): the same results, bit for bit.
   bool whole_boxes = false;
 
-  /// The published settings of each method (la3dm's for the baselines); for kAkimapRays the
-  /// settings chosen in issue 17 (kernel_map.cpp says how).
+  /// The published settings of each method (la3dm's for the baselines); for kAkimapRays
+  /// densemap's own (kernel_options.cpp says how they were chosen).
   [[nodiscard]] static KernelOptions defaults(KernelMethod method);
 };
 
@@ -139,7 +138,7 @@ struct KernelScanStats {
   double ms_samples = 0, ms_kernels = 0, ms_occupied = 0, ms_free = 0, ms_apply = 0;
 };
 
-/// A kernel map's evidence, for snapshots (issue 29): per known cell its alpha and beta (the
+/// A kernel map's evidence, for snapshots: per known cell its alpha and beta (the
 /// prior not included), in block order, and the scans integrated (the random free samples'
 /// counter, so that a restored map's next scan draws what the original's would).
 struct KernelEvidence {

@@ -58,8 +58,8 @@ namespace detail {
 }  // namespace detail
 
 /// The set bits of words[0, n): the POPCNT instruction where the processor has it (checked at
-/// run time), else the portable count (issue 31: libgcc's software popcount was 1% of a scan,
-/// in the culling region's sweep).
+/// run time), else the portable count (libgcc's software popcount is slow enough to show in
+/// the culling region's sweep).
 [[nodiscard]] inline std::size_t countBits(const std::uint64_t* words, std::size_t n) {
 #if defined(__x86_64__) && defined(__GNUC__)
   if (detail::hasPopcnt()) return detail::countBitsPopcnt(words, n);

@@ -38,7 +38,7 @@ struct FullyFreeBlock {
 };
 
 /// A log-odds occupancy map at one resolution: the storage behind every integration method.
-/// Each backend keeps OctoMap's per-cell semantics exactly (DESIGN.md, exactness contract).
+/// Each backend keeps OctoMap's per-cell semantics exactly (docs/architecture.md).
 ///
 /// Thread-safety: single writer. `apply` runs its blocks through the map's ChunkRunner (serial
 /// unless setRunner() gave another, such as tbbRunner() in the caller's task arena) but must

@@ -8,7 +8,7 @@
 
 namespace densemap {
 
-/// How the rays of one scan combine in a cell (DESIGN.md, exactness contract).
+/// How the rays of one scan combine in a cell (docs/architecture.md, exactness contract).
 /// - kSet: OctoMap's rule. A cell is updated at most once per scan: occupied if any ray ends in
 ///   it, otherwise free if any ray crosses it.
 /// - kPerRay: every ray counts (the dissertation's weighted super-ray model, Sec. 2.3.4): the

@@ -19,7 +19,7 @@ struct VoxelBlock {
   void markKnown(int index) { known[index >> 6] |= std::uint64_t{1} << (index & 63); }
 };
 
-/// A dense kernel map's evidence in one block (issue 29): per cell Beta(alpha, beta) beyond the
+/// A dense kernel map's evidence in one block: per cell Beta(alpha, beta) beyond the
 /// prior, float (a scan's kernels are summed in double, then added: half the memory of double,
 /// and a Beta posterior's mean does not need more digits), and a bit per cell that any kernel
 /// reached. It lives with the block's entry in the BlockStore, beside the published log-odds.

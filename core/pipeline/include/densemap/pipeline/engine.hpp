@@ -30,7 +30,7 @@ struct PipelineOptions {
   /// kernel map publishes logit(p) = log(alpha / beta) as each cell's log-odds, so queries,
   /// snapshots and updates read it like any map.
   std::optional<kernel::KernelMethod> kernel;
-  /// Densify each scan before integration (issue 6's upsample stage); std::nullopt: off.
+  /// Densify each scan before integration (the upsample stage); std::nullopt: off.
   std::optional<upsample::UpsampleOptions> upsample;
   // The next three are the server's ingest (densemap/server/ingest.hpp), not the engine's.
   int threads = 2;  // size of the task arena the ingest runs the engine in
@@ -84,7 +84,7 @@ struct IntegrationResult {
 
 class MapKind;  // the map kind the engine integrates into (src/map_kind.hpp)
 
-/// The mapping engine (DESIGN.md data flow), one scan at a time on the caller's thread (its
+/// The mapping engine (docs/architecture.md), one scan at a time on the caller's thread (its
 /// parallel stages use the caller's TBB arena): validate -> transform (pose, [upsample]) ->
 /// integrate into the map kind -> evict -> publish a MapView. It owns the map and no thread,
 /// queue or counter: the server's ingest (densemap/server/ingest.hpp) runs it behind a queue.
@@ -117,7 +117,7 @@ class Engine {
   [[nodiscard]] std::shared_ptr<const MapView> view() const { return view_.load(); }
   /// A kernel map kind's evidence of the latest version (snapshots); none for log-odds.
   [[nodiscard]] std::optional<kernel::KernelEvidence> evidence() const;
-  /// Resumes a kernel map kind's evidence from a snapshot (issue 29). An error (and nothing
+  /// Resumes a kernel map kind's evidence from a snapshot. An error (and nothing
   /// changed) for a log-odds kind or another kernel kind's evidence.
   [[nodiscard]] Expected<void> restore(const kernel::KernelEvidence& evidence);
   [[nodiscard]] const PipelineOptions& options() const { return options_; }

@@ -16,7 +16,7 @@
 
 namespace densemap {
 
-/// How a scan's rays reach the map. All methods give the same map (DESIGN.md, exactness
+/// How a scan's rays reach the map. All methods give the same map (docs/architecture.md, exactness
 /// contract), under either UpdateRule.
 /// - kRaycast: every ray traversed on its own (the default: the fastest where measured).
 /// - kSuperRay: rays grouped into super rays first (SuperRayBuilder).

@@ -11,7 +11,7 @@
 
 namespace densemap {
 
-/// The dense-oracle protocol's ground truth (issue 5): what a dense, noise-free sensor observes
+/// The dense-oracle protocol's ground truth: what a dense, noise-free sensor observes
 /// from the poses of a sparse sequence — occupied voxels where its rays end, free voxels where
 /// they only pass. Unlike a scene's full ground truth it holds only what a sensor at those poses
 /// could see, so a map is judged on filling holes between sparse beams, not on seeing through
