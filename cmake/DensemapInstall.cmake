@@ -11,7 +11,7 @@ set(DENSEMAP_CMAKE_DIR ${CMAKE_INSTALL_LIBDIR}/cmake/densemap)
 
 # The client library and everything it links, as static libraries; exported as densemap::<name>.
 # (The read side, core/query, not the engine: a client does not link raycast, upsample or the
-# pipeline, issue 30.)
+# pipeline.)
 set(DENSEMAP_SDK_TARGETS
     densemap_options densemap_geometry densemap_map densemap_query densemap_kernel densemap_io
     densemap_snapshot_proto densemap_store densemap_dds_msgs densemap_wire densemap_client)

@@ -1,4 +1,4 @@
-# A man page for every installed program (issue 32: lintian's no-manual-page), made by
+# A man page for every installed program (lintian's no-manual-page), made by
 # help2man from the program's own --help, so the page and the program never disagree.
 # help2man comes from scripts/install-deps.sh; without it the packages have no man pages (and
 # scripts/check-packages.sh fails on lintian's no-manual-page).

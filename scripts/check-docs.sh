@@ -16,7 +16,7 @@ PY=/usr/bin/python3
 "$PY" scripts/config-reference.py --check || fail=1
 history=$(grep -rnE '\b[Ss]top [0-9]+\b|\bissue [0-9]+|\bitem [0-9]+ ' \
   --include='*.cpp' --include='*.hpp' --include='*.md' --include='*.sh' --include='*.proto' \
-  --include='*.textproto' --include=CMakeLists.txt \
+  --include='*.textproto' --include=CMakeLists.txt --include='*.cmake' --include='*.py' --include='*.idl' \
   --exclude-dir=tests --exclude-dir=.git --exclude-dir='build*' . || true)
 if [ -n "$history" ]; then
   echo "check-docs: history belongs in commit messages, not here:"; echo "$history"; fail=1

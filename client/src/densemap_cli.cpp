@@ -85,6 +85,10 @@ static int runMain(int argc, char** argv) {
 
   if (render.parsed()) return render.run();
   if (replay.parsed()) return replay.run(o);
+  // A malformed request is refused now, not after the discovery timeout.
+  if (auto ok = query.parsed() ? query.check() : map_commands.check(); !ok) {
+    return cli::fail(ok.error().message);
+  }
   auto client = cli::connect(o);
   if (!client) return cli::fail(client.error().message);
   if (query.parsed()) return query.run(**client);

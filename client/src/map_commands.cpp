@@ -170,6 +170,11 @@ bool MapCommands::parsed() const {
          clear_->parsed();
 }
 
+Expected<void> MapCommands::check() const {
+  if (clear_->parsed()) return checkBox(point3(clear_min_), point3(clear_max_));
+  return {};
+}
+
 int MapCommands::run(Client& client) {
   if (snapshot_->parsed()) {
     auto fetched = client.fetchMap();

@@ -17,6 +17,8 @@ class MapCommands {
   /// Adds the subcommands and their options to `app`.
   explicit MapCommands(CLI::App& app);
   [[nodiscard]] bool parsed() const;
+  /// The request's own rules (clear-bbox's box), before a server is looked for.
+  [[nodiscard]] Expected<void> check() const;
   int run(Client& client);
 
  private:

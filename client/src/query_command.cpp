@@ -52,6 +52,19 @@ Point3f point3(const std::vector<float>& v) { return {v[0], v[1], v[2]}; }
 
 }  // namespace
 
+Expected<void> QueryCommand::check() const {
+  if (point_->parsed()) {
+    if (random_points_ > 0 && !coords_.empty()) return makeError("give xyz or --random, not both");
+    if (random_points_ == 0 && (coords_.empty() || coords_.size() % 3 != 0)) {
+      return makeError("point coordinates come in threes (or give --random N)");
+    }
+    return {};
+  }
+  if (box_->parsed()) return checkBox(point3(box_min_), point3(box_max_));
+  if (ray_->parsed()) return checkRay(point3(origin_), point3(direction_), range_);
+  return {};
+}
+
 QueryCommand::QueryCommand(CLI::App& app) {
   command_ = app.add_subcommand("query", "Query the map");
   command_->require_subcommand(1);

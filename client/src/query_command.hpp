@@ -16,6 +16,8 @@ class QueryCommand {
   /// Adds the subcommands and their options to `app`.
   explicit QueryCommand(CLI::App& app);
   [[nodiscard]] bool parsed() const { return command_->parsed(); }
+  /// The request's own rules (the server's, from core/query), before a server is looked for.
+  [[nodiscard]] Expected<void> check() const;
   int run(Client& client);
 
  private:

@@ -311,7 +311,7 @@ static int runMain(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--methods", o.methods,
                  "Comma-separated: octomap, raycast, superray, culling, superray+culling; dense "
-                 "(kernel) maps: akimap_rays, akimap_rays@plain (its earlier path), akimap, "
+                 "(kernel) maps: akimap_rays, akimap_rays@plain (its plain path), akimap, "
                  "bgk, bgkl; KIND@set=NAME=VALUE[:NAME=VALUE...]: a dense kind with these "
                  "settings on its lane only (a setting against the default in one run)")
       ->delimiter(',')

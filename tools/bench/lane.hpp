@@ -48,7 +48,7 @@ struct Options {
 /// FNV-1a over a kernel map's evidence (keys, alpha, beta, in block order): equal digests mean
 /// the same map bit for bit (a fast path against an earlier build, on the same scans).
 [[nodiscard]] std::uint64_t evidenceDigest(const kernel::KernelEvidence& e);
-/// A dense (kernel) method: `kind`, `kind@plain` (akimap_rays' earlier path: a segment kernel
+/// A dense (kernel) method: `kind`, `kind@plain` (akimap_rays' plain path: a segment kernel
 /// per piece of ray and an adaptive kernel per hit) or `kind@set=NAME=VALUE[:NAME=VALUE...]`
 /// (these settings on this lane only), with --kernel-set applied first.
 [[nodiscard]] Expected<kernel::KernelOptions> kernelOptions(const std::string& method,

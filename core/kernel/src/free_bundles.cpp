@@ -58,8 +58,7 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
   // Each group's rays' tips then its capsule, in group order, in one pass: group g's slots
   // start at group_starts[g] + g, a slot per ray then one for the capsule. A ray without a tip,
   // or a group without free extent, leaves a hole (no length, weight 0: FreeTraversal skips
-  // it). Counting them first had been a second pass over every ray (rayFreeSpace twice: 1.1%
-  // of a 64-beam scan's instructions). The order does not change the evidence (FreeTraversal's
+  // it), so no counting pass over every ray is needed. The order does not change the evidence (FreeTraversal's
   // sums are integers).
   const FreeExtent hole{Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), 0.0, 0.0};
   out.resize(n + groups);

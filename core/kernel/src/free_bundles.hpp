@@ -26,9 +26,9 @@ struct CapsuleShape {
 /// count: such rays run within a voxel of each other all the way, and a dense 64-beam scan has
 /// several per voxel (BALM at 0.2 m: about 3), each costing a whole capsule. Tips stay one per
 /// ray: they lie near the surface, where the rays of a voxel spread the most against it
-/// (bundled too, BALM's hold-out MSE rose 3.8% against 0.9%). Cubes of the capsule's radius
-/// (0.15 m) at 0.1 m maps were 17% faster there but cost the oracle scenes 1.2-1.7% MSE (the
-/// unstructured scene's lead over BGKOctoMap-L). A voxel hit by one ray gives that ray's own
+/// (bundling them costs BALM's hold-out MSE). Cubes as small as the capsule's radius would be
+/// faster at 0.1 m but cost the oracle scenes' MSE, hence `free_bundle_m` (0.2 m by default).
+/// A voxel hit by one ray gives that ray's own
 /// capsule, bit for bit; cut rays are never bundled. The extents come in a fixed order (by
 /// voxel: its rays' tips in ray order, then its capsule) whatever the thread count, with a
 /// hole (no length, weight 0) for each ray without a tip and each voxel whose rays have no

@@ -33,9 +33,8 @@ struct ThreadBlocks {
   std::deque<FreeTraversal::Block> slots;
   std::size_t used = 0;
   /// Block key -> slot: open addressing, linear probing, a power of two at most half full. A
-  /// capsule's rows leave the cache below for another block about every tenth visit; with a
-  /// std::unordered_map (a prime modulo and a node per block) the free stage took 2.5% more
-  /// instructions (callgrind, hdl64 outdoor at 0.2 m).
+  /// capsule's rows leave the cache below for another block about every tenth visit, so a
+  /// std::unordered_map's prime modulo and node per block would show in the free stage.
   std::vector<std::pair<std::uint64_t, FreeTraversal::Block*>> index;
   std::array<std::uint64_t, kCacheSize> cache_keys{};
   std::array<FreeTraversal::Block*, kCacheSize> cache_blocks{};

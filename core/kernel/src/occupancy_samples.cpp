@@ -28,7 +28,7 @@ std::vector<Sample> makeSamples(const PointCloud& points_world, const Point3f& o
 namespace {
 
 /// The first `chunks` parts, in order, into `out`: in parallel, each part copied to its offset
-/// (a serial copy of ~30 MB was a quarter of the samples' stage on a 64-beam scan).
+/// (a serial copy of tens of MB would be a large share of the samples' stage).
 void concatenate(const std::vector<std::vector<Sample>>& parts, std::size_t chunks,
                  std::vector<Sample>& out) {
   std::vector<std::size_t> offsets(chunks + 1, 0);

@@ -766,10 +766,8 @@ std::size_t fixedColumnsInto(const DenseMarks::FixedWalk* walks, std::size_t n,
 }
 
 /// walkSixteenFixed refills its lanes once this many are idle: fewer refills, each of several
-/// lanes (a refill's branch mispredicts). On a Zen 5, BALM 0.2 m `raycast` against kFixedEight's
-/// 7.0-7.1 ms in the same runs: 2 -> 6.0 ms a scan, 4 -> 5.8, 6 -> 5.9, 8 -> 6.0; refilling each
-/// lane as its walk ended (a loop over the idle lanes, as walkEightFixed) took 0.95 of
-/// kFixedEight's time.
+/// lanes (a refill's branch mispredicts). 4 is the fastest of 2, 4, 6 and 8 on a Zen 5 (BALM
+/// 0.2 m), and faster than refilling each lane as its walk ends (as walkEightFixed does).
 constexpr unsigned kSixteenRefillAt = 4;
 
 /// Sixteen walks' FixedWalk fields, a lane each (`t`: the forward walks' times or the backward

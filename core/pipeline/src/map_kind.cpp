@@ -57,9 +57,8 @@ class LogOddsKind final : public MapKind {
   void warmUp(double max_range_m) override {
     // A sparse fan (16 x 256 rays) at 90% of the max range (50 m when unlimited), +-3 deg
     // about the horizon: the rays' box (which sizes the dense free marks) is as wide as a real
-    // scan's, and the blocks the rays touch size the per-worker update tables. Measured on the
-    // 64-beam simulation at 0.1 m / 80 m: p99 about 220 -> 150 ms, for about 230 MB more RSS
-    // kept for the life of the process (a 4 x 64 fan: +60 MB, no clear gain).
+    // scan's, and the blocks the rays touch size the per-worker update tables (a smaller fan
+    // sizes them too small to spare the first scans their allocations).
     const float range = 0.9F * static_cast<float>(max_range_m > 0 ? max_range_m : 50.0);
     PointCloud points;
     points.reserve(16 * 256);

@@ -34,10 +34,24 @@ Expected<PointQueryResult> queryPoints(const MapView& view, std::span<const floa
   return r;
 }
 
-Expected<std::pair<VoxelKey, VoxelKey>> boxKeys(const VoxelGrid& grid, const Point3f& min,
-                                                const Point3f& max) {
+Expected<void> checkBox(const Point3f& min, const Point3f& max) {
   if (!min.allFinite() || !max.allFinite()) return makeError("box corner is NaN or Inf");
   if ((min.array() > max.array()).any()) return makeError("inverted box: min > max on some axis");
+  return {};
+}
+
+Expected<void> checkRay(const Point3f& origin, const Point3f& direction, float max_range) {
+  if (!origin.allFinite() || !direction.allFinite() || !std::isfinite(max_range)) {
+    return makeError("ray origin, direction or range is NaN or Inf");
+  }
+  if (direction.norm() < 1e-6F) return makeError("ray direction has zero length");
+  if (max_range <= 0.0F || max_range > 1e4F) return makeError("ray range must be in (0, 10 km]");
+  return {};
+}
+
+Expected<std::pair<VoxelKey, VoxelKey>> boxKeys(const VoxelGrid& grid, const Point3f& min,
+                                                const Point3f& max) {
+  if (auto ok = checkBox(min, max); !ok) return std::unexpected(ok.error());
   const auto lo = grid.pointToKey(min);
   const auto hi = grid.pointToKey(max);
   if (!lo || !hi) return makeError("box outside the map's addressable range");
@@ -110,12 +124,8 @@ Expected<BoxQueryResult> queryBox(const MapView& view, const Point3f& min, const
 
 Expected<RayQueryResult> castRay(const MapView& view, const Point3f& origin,
                                  const Point3f& direction, float max_range) {
-  if (!origin.allFinite() || !direction.allFinite() || !std::isfinite(max_range)) {
-    return makeError("ray origin, direction or range is NaN or Inf");
-  }
+  if (auto ok = checkRay(origin, direction, max_range); !ok) return std::unexpected(ok.error());
   const float norm = direction.norm();
-  if (norm < 1e-6F) return makeError("ray direction has zero length");
-  if (max_range <= 0.0F || max_range > 1e4F) return makeError("ray range must be in (0, 10 km]");
   const Point3f end = origin + direction / norm * max_range;
   RayQueryResult r;
   std::optional<VoxelKey> first_hit;

@@ -301,7 +301,7 @@ bool traverseRay(const VoxelGrid& grid, const Point3f& origin, const Point3f& en
   constexpr bool kSteps = requires { visit.template step<0>(0); };
   // Each step crosses the border with the smallest tMax, ties to the higher axis. The key lives
   // in three registers (updating one 16-bit field of a VoxelKey in memory and comparing the
-  // whole key measured ~13% slower on BALM).
+  // whole key is slower).
   int key[3] = {s.origin.x, s.origin.y, s.origin.z};
   const int last[3] = {s.end.x, s.end.y, s.end.z};
   if constexpr (kSteps) {
@@ -531,7 +531,7 @@ namespace detail {
 /// (false: stop). Returns the steps taken; `handover` is set when a decision did not win by the
 /// bound (the exact walk goes on from there). Inlined, so that a `steps` held in the caller's
 /// locals stays in registers; heads and counts are locals with one branch per axis, as in
-/// traverseRay (stepping through `walk` in memory, branch-free, measured 48% slower).
+/// traverseRay (stepping through `walk` in memory, branch-free, is much slower).
 template <class Steps>
 [[gnu::always_inline]] inline std::size_t backwardSteps(const BackwardWalk& walk, Steps& steps,
                                                         bool& handover) {

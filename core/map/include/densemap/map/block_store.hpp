@@ -109,9 +109,9 @@ class BlockStore {
   BlockNode& writable(BlockEntry& entry);
   /// writable() for one task's run of blocks: its nodes come from the pool kBatchNodes at a
   /// time and the version's bookkeeping waits in the batch, so the pool's lock is taken once
-  /// per refill and once at the end, not once per block (two tasks of a scan's apply took it
-  /// ~9,000 times a scan, and the server's 2-thread apply took 6.4-8.2 ms against 4.8-5.0 this
-  /// way). The destructor hands the bookkeeping to the version and the unused nodes back to the
+  /// per refill and once at the end, not once per block (thousands of times a scan, which
+  /// makes the tasks of a 2-thread apply wait on each other).
+  /// The destructor hands the bookkeeping to the version and the unused nodes back to the
   /// pool without allocating: each refill first keeps room for its nodes' entries in the
   /// version's lists, so a task that throws (out of memory) unwinds through it without ending
   /// the process. Writer side, like writable(); one batch per task.

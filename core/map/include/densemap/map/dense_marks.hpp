@@ -367,10 +367,10 @@ class DenseMarks {
   /// How markQueued and markQueuedBack walk: kBest as kFixedSixteen where the processor has
   /// AVX-512 (hasWideWalks), as kFixedEight where it has AVX2 (hasFourWalks), else one at a
   /// time as kScalar does (countedSteps, backwardSteps); kWideEight 8 at a time in AVX-512 lanes
-  /// of doubles where the processor has it (it was kBest there until an AMD Zen 5 walked BALM
-  /// 0.2 m's forward walks 25% faster with kFixedEight, 0.1 m's 22%; kFixedSixteen took
-  /// another 17% and 12% off the whole `raycast` scan); kFour 4 at a time in AVX2 lanes of
-  /// doubles;
+  /// of doubles where the processor has it (a baseline: the fixed-point lanes walk faster);
+  /// kFour 4 at a time in AVX2 lanes of doubles;
+  ///
+  ///
   /// kFixedEight 8 at a time in AVX2 lanes of 32-bit fixed-point times, each decision checked
   /// to win by more than the rounding's bound, a walk with a decision that does not handed over
   /// to kFour from its start (fixedHandedOver counts them); kFixedSixteen kFixedEight's walks

@@ -93,9 +93,9 @@ class GridMap final : public OccupancyMap {
   std::size_t dropBlock(BlockEntry& entry, CellChanges* changes);
 
   /// The entries of an update's blocks, in its order (apply, assignBlocks): kept from scan to
-  /// scan, so that a scan allocates nothing for them (a scan's allocations each walk the
-  /// allocator's free chunks after another part of the process freed many: with OctoMap run in
-  /// the same process the apply took 7 ms instead of 3 at 0.1 m).
+  /// scan, so that a scan allocates nothing for them (each allocation would walk the
+  /// allocator's free chunks whenever another part of the process has just freed many, as
+  /// OctoMap does in the benchmark's lane).
   std::vector<BlockEntry*>& writeEntries(std::size_t n) {
     write_entries_.resize(n);
     return write_entries_;

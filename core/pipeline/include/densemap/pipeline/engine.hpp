@@ -53,8 +53,8 @@ struct PipelineOptions {
   bool warm_up = false;
   /// Blocks allocated and faulted in at creation in the map's node pool (2.2 KB each; they
   /// become map blocks or copy-on-write copies as scans arrive). Page faults are slow on VMs:
-  /// on the 64-beam simulation at 0.1 m the first two scans took 60-76 ms to apply with a cold
-  /// pool and 5-10 ms with 16384 reserved, and the server's p99 fell from about 220 to 115-145 ms.
+  /// with a cold pool the first scans of a 64-beam sensor at 0.1 m spend several times longer
+  /// in the apply, and the server's p99 shows it.
   std::size_t reserve_blocks = 16384;
   /// Bounded memory for a long-running server (grid backend, log-odds maps): after each scan,
   /// blocks whose centre is farther than this from the scan's sensor origin are dropped (their

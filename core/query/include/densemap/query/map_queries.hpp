@@ -38,6 +38,15 @@ struct PointQueryResult {
                                                      std::size_t max_points = 10'000'000,
                                                      const ChunkRunner& runner = serialRunner());
 
+/// The one rule for a box from outside, without a map (the CLI checks before it sends): both
+/// corners finite, min <= max on every axis.
+[[nodiscard]] Expected<void> checkBox(const Point3f& min, const Point3f& max);
+
+/// The one rule for a ray from outside, without a map: finite, a direction of non-zero length,
+/// a range in (0, 10 km].
+[[nodiscard]] Expected<void> checkRay(const Point3f& origin, const Point3f& direction,
+                                      float max_range);
+
 /// The keys of the box [min, max] (metres): the one check of a box from the wire (bbox queries,
 /// clear-bbox commands): errors for a non-finite corner, an inverted box, or a corner outside
 /// the addressable range.
