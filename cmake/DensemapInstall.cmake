@@ -15,8 +15,19 @@ set(DENSEMAP_CMAKE_DIR ${CMAKE_INSTALL_LIBDIR}/cmake/densemap)
 set(DENSEMAP_SDK_TARGETS
     densemap_options densemap_geometry densemap_map densemap_query densemap_kernel densemap_io
     densemap_snapshot_proto densemap_store densemap_dds_msgs densemap_wire densemap_client)
-set(DENSEMAP_SDK_HEADER_DIRS
-    core/geometry core/map core/query core/kernel core/io core/store wire client)
+# The SDK's headers: the client's public API and the plain types it names, nothing more (no
+# DDS, protobuf, TBB or map internals; scripts/check-packages.sh checks it).
+set(DENSEMAP_SDK_HEADERS
+    client/include/densemap/client/client.hpp
+    client/include/densemap/client/map_snapshot.hpp
+    core/geometry/include/densemap/geometry/error.hpp
+    core/geometry/include/densemap/geometry/point_cloud.hpp
+    core/geometry/include/densemap/geometry/voxel_key.hpp
+    core/io/include/densemap/io/raw_scan.hpp
+    core/map/include/densemap/map/cell_change.hpp
+    core/query/include/densemap/query/cell_state.hpp
+    wire/include/densemap/wire/security.hpp
+    wire/include/densemap/wire/server_status.hpp)
 foreach(target IN LISTS DENSEMAP_SDK_TARGETS)
   string(REGEX REPLACE "^densemap_" "" export_name ${target})
   set_target_properties(${target} PROPERTIES EXPORT_NAME ${export_name})
@@ -24,9 +35,10 @@ endforeach()
 install(TARGETS ${DENSEMAP_SDK_TARGETS} EXPORT densemapTargets
         ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR} COMPONENT dev
         INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
-foreach(dir IN LISTS DENSEMAP_SDK_HEADER_DIRS)
-  install(DIRECTORY ${PROJECT_SOURCE_DIR}/${dir}/include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}
-          COMPONENT dev)
+foreach(header IN LISTS DENSEMAP_SDK_HEADERS)
+  string(REGEX REPLACE "^.*/include/(densemap/.*)/[^/]+$" "\\1" subdir ${header})
+  install(FILES ${PROJECT_SOURCE_DIR}/${header}
+          DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/${subdir} COMPONENT dev)
 endforeach()
 install(EXPORT densemapTargets NAMESPACE densemap:: DESTINATION ${DENSEMAP_CMAKE_DIR}
         COMPONENT dev)

@@ -85,6 +85,24 @@ cmake -S client/examples/wall_scan -B "$work/example" -DCMAKE_PREFIX_PATH="$work
 cmake --build "$work/example" >>"$work/example.log" 2>&1 || { cat "$work/example.log" >&2; die "example: build"; }
 say "example built against the SDK in a temporary prefix"
 
+# The SDK's headers name no DDS, protobuf, TBB or map internals, and every one compiles in a
+# translation unit that reaches no Cyclone DDS, TBB, protobuf or OctoMap header.
+headers=$(cd "$work/sdk/include" && find densemap -name '*.hpp' | sort)
+[ -n "$headers" ] || die "the SDK installed no headers"
+if grep -nE 'dds_|<dds/|tbb::|<tbb/|BlockStore|google::protobuf|octomap::' \
+    $(for h in $headers; do echo "$work/sdk/include/$h"; done); then
+  die "an installed SDK header names DDS, TBB, protobuf, OctoMap or the map's internals"
+fi
+for h in $headers; do echo "#include \"$h\""; done >"$work/sdk_headers.cpp"
+eigen=$(pkg-config --cflags eigen3 2>/dev/null || echo -I/usr/include/eigen3)
+# shellcheck disable=SC2086
+c++ -std=c++23 -M -I"$work/sdk/include" $eigen "$work/sdk_headers.cpp" >"$work/sdk_headers.d" ||
+  die "the SDK's headers do not compile on their own"
+if grep -E '/(dds|ddsrt|ddsi|tbb|oneapi|google/protobuf|octomap)/' "$work/sdk_headers.d"; then
+  die "an SDK header pulls in Cyclone DDS, TBB, protobuf or OctoMap"
+fi
+say "SDK headers: $(echo "$headers" | wc -l) files, none reaching DDS, TBB, protobuf or OctoMap"
+
 # Run it against a server on loopback (its own domain and snapshot file).
 run_example() {
   local server=$1 example=$2 domain=$3

@@ -9,9 +9,12 @@
 #include <unordered_map>
 
 #include "client_parts.hpp"
+#include "densemap/client/testing.hpp"
+#include "map_snapshot_parts.hpp"
 #include "densemap/query/version_delta.hpp"
 #include "densemap/wire/dds.hpp"
 #include "densemap/wire/delta_wire.hpp"
+#include "densemap/wire/status.hpp"
 #include "densemap/wire/topics.hpp"
 #include "densemap_msgs.h"
 
@@ -19,15 +22,17 @@ namespace densemap {
 
 using namespace client_detail;
 
-Client::Client(const ClientOptions& options)
+Client::Impl::Impl(const ClientOptions& options)
     : options_(options),
       dds_(std::make_unique<Dds>()),
       client_id_(std::random_device{}() * 4294967296ULL + std::random_device{}()) {}
 
+Client::Client(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+
 Client::~Client() = default;
 
 Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
-  std::unique_ptr<Client> c(new Client(options));
+  auto c = std::make_unique<Impl>(options);
   auto& d = *c->dds_;
   auto p = dds::createParticipant({options.domain_id, options.network_interface, options.security});
   if (!p) return std::unexpected(p.error());
@@ -74,10 +79,10 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
     if (auto ok = w->attachReader(*reader, 1); !ok) return std::unexpected(ok.error());
     ws->emplace(std::move(*w));
   }
-  return c;
+  return std::unique_ptr<Client>(new Client(std::move(c)));
 }
 
-Expected<void> Client::waitForServer() {
+Expected<void> Client::Impl::waitForServer() {
   const auto deadline = Clock::now() + options_.timeout;
   // The topics whose server side has not matched yet (empty: found).
   auto unmatched = [&] {
@@ -121,7 +126,7 @@ Expected<void> Client::waitForServer() {
   return {};
 }
 
-Expected<void> Client::publishScan(const RawScan& scan) {
+Expected<void> Client::Impl::publishScan(const RawScan& scan) {
   densemap_msgs_Scan msg{};
   msg.sensor_id = const_cast<char*>(scan.sensor_id.c_str());
   msg.frame = const_cast<char*>("sensor");
@@ -173,10 +178,15 @@ Expected<PointQueryAnswer> Client::queryPoints(const std::vector<Point3f>& point
   std::vector<float> xyz;
   xyz.reserve(points_world.size() * 3);
   for (const auto& p : points_world) xyz.insert(xyz.end(), {p.x(), p.y(), p.z()});
-  return queryPointsRaw(xyz);
+  return impl_->queryPointsRaw(xyz);
 }
 
-Expected<PointQueryAnswer> Client::queryPointsRaw(const std::vector<float>& xyz) {
+Expected<PointQueryAnswer> Client::queryPoints(std::span<const float> xyz_world) {
+  if (xyz_world.size() % 3 != 0) return makeError("point coordinates come in threes");
+  return impl_->queryPointsRaw(xyz_world);
+}
+
+Expected<PointQueryAnswer> Client::Impl::queryPointsRaw(std::span<const float> xyz) {
   // At most kMaxQueryPoints a request (whole points; a stray coordinate goes with the last
   // part, for the server to refuse).
   constexpr std::size_t kPart = std::size_t{dds::kMaxQueryPoints} * 3;
@@ -196,7 +206,7 @@ Expected<PointQueryAnswer> Client::queryPointsRaw(const std::vector<float>& xyz)
   return answer;
 }
 
-Expected<PointQueryAnswer> Client::queryPointsOnce(std::span<const float> xyz) {
+Expected<PointQueryAnswer> Client::Impl::queryPointsOnce(std::span<const float> xyz) {
   densemap_msgs_PointQueryRequest req{};
   req.id = {client_id_, next_request_++};
   req.points = dds::borrowSequence<dds_sequence_float>(xyz);
@@ -224,7 +234,7 @@ Expected<PointQueryAnswer> Client::queryPointsOnce(std::span<const float> xyz) {
   return answer;
 }
 
-Expected<BoxQueryAnswer> Client::queryBox(const Point3f& min, const Point3f& max,
+Expected<BoxQueryAnswer> Client::Impl::queryBox(const Point3f& min, const Point3f& max,
                                           std::uint32_t max_centers) {
   densemap_msgs_BboxQueryRequest req{};
   req.id = {client_id_, next_request_++};
@@ -257,7 +267,7 @@ Expected<BoxQueryAnswer> Client::queryBox(const Point3f& min, const Point3f& max
   return answer;
 }
 
-Expected<RayQueryAnswer> Client::castRay(const Point3f& origin, const Point3f& direction,
+Expected<RayQueryAnswer> Client::Impl::castRay(const Point3f& origin, const Point3f& direction,
                                          float max_range) {
   densemap_msgs_RayQueryRequest req{};
   req.id = {client_id_, next_request_++};
@@ -286,15 +296,17 @@ Expected<RayQueryAnswer> Client::castRay(const Point3f& origin, const Point3f& d
   return answer;
 }
 
-Expected<std::string> Client::command(CommandKind kind, const Point3f& min, const Point3f& max,
+Expected<std::string> Client::Impl::command(dds::CommandKind kind, const Point3f& min, const Point3f& max,
                                       const std::string& path) {
   auto outcome = commandReply(kind, min, max, path);
   if (!outcome) return std::unexpected(outcome.error());
   return outcome->detail;
 }
 
-Expected<Client::CommandOutcome> Client::commandReply(CommandKind kind, const Point3f& min,
-                                                      const Point3f& max, const std::string& path) {
+Expected<Client::Impl::CommandOutcome> Client::Impl::commandReply(dds::CommandKind kind,
+                                                                  const Point3f& min,
+                                                                  const Point3f& max,
+                                                                  const std::string& path) {
   densemap_msgs_CommandRequest req{};
   req.id = {client_id_, next_request_++};
   req.kind = static_cast<std::int32_t>(kind);
@@ -302,7 +314,7 @@ Expected<Client::CommandOutcome> Client::commandReply(CommandKind kind, const Po
   copy3(req.max, max);
   req.path = const_cast<char*>(path.c_str());
   // send-map has a topic of its own (DDS Security can grant it without the others).
-  const dds::Entity& writer = kind == CommandKind::kSendMap ? dds_->mq_w : dds_->cq_w;
+  const dds::Entity& writer = kind == dds::CommandKind::kSendMap ? dds_->mq_w : dds_->cq_w;
   if (auto ok = permitted(writer, "this command"); !ok) return std::unexpected(ok.error());
   if (auto ok = permitted(dds_->cr_r, "command replies"); !ok) return std::unexpected(ok.error());
   if (auto ok = dds::write(writer, &req); !ok) return std::unexpected(ok.error());
@@ -320,7 +332,7 @@ Expected<Client::CommandOutcome> Client::commandReply(CommandKind kind, const Po
   return outcome;
 }
 
-Expected<ServerStatus> Client::status() {
+Expected<ServerStatus> Client::Impl::status() {
   if (auto ok = permitted(dds_->st_r, "status"); !ok) return std::unexpected(ok.error());
   const auto deadline = Clock::now() + options_.timeout;
   std::optional<ServerStatus> latest;
@@ -346,4 +358,47 @@ Expected<ServerStatus> Client::status() {
   }
 }
 
+Expected<void> Client::waitForServer() { return impl_->waitForServer(); }
+Expected<void> Client::publishScan(const RawScan& scan) { return impl_->publishScan(scan); }
+Expected<BoxQueryAnswer> Client::queryBox(const Point3f& min, const Point3f& max,
+                                          std::uint32_t max_centers) {
+  return impl_->queryBox(min, max, max_centers);
+}
+Expected<RayQueryAnswer> Client::castRay(const Point3f& origin, const Point3f& direction,
+                                         float max_range) {
+  return impl_->castRay(origin, direction, max_range);
+}
+Expected<std::string> Client::reset() {
+  return impl_->command(dds::CommandKind::kReset, {0, 0, 0}, {0, 0, 0}, {});
+}
+Expected<std::string> Client::clearBox(const Point3f& min, const Point3f& max) {
+  return impl_->command(dds::CommandKind::kClearBox, min, max, {});
+}
+Expected<std::string> Client::save(const std::string& name) {
+  return impl_->command(dds::CommandKind::kSave, {0, 0, 0}, {0, 0, 0}, name);
+}
+Expected<ServerStatus> Client::status() { return impl_->status(); }
+std::size_t Client::pollDeltas(const std::function<void(const DeltaInfo&)>& f) {
+  return impl_->pollDeltas(f);
+}
+std::size_t Client::pollEvents(const std::function<void(const MapEventInfo&)>& f) {
+  return impl_->pollEvents(f);
+}
+Expected<MapSnapshot> Client::fetchMap(std::uint64_t min_version) {
+  return impl_->fetchMap(min_version);
+}
+
+namespace testing {
+
+Expected<PointQueryAnswer> queryPointsRaw(Client& client, const std::vector<float>& xyz) {
+  return ClientAccess::impl(client).queryPointsRaw(xyz);
+}
+
+Expected<PointQueryAnswer> queryPointsOnce(Client& client, std::span<const float> xyz) {
+  return ClientAccess::impl(client).queryPointsOnce(xyz);
+}
+
+const GridMap& gridOf(const MapSnapshot& snapshot) { return MapSnapshotAccess::grid(snapshot); }
+
+}  // namespace testing
 }  // namespace densemap

@@ -1,6 +1,7 @@
 #include <thread>
 
 #include "client_parts.hpp"
+#include "map_snapshot_parts.hpp"
 #include "densemap/query/version_delta.hpp"
 #include "densemap/wire/delta_wire.hpp"
 #include "densemap_msgs.h"
@@ -9,7 +10,7 @@ namespace densemap {
 
 using namespace client_detail;
 
-std::size_t Client::pollDeltas(const std::function<void(const DeltaInfo&)>& f) {
+std::size_t Client::Impl::pollDeltas(const std::function<void(const DeltaInfo&)>& f) {
   if (dds_->delta_r.get() <= 0) return 0;
   return dds::takeAll<densemap_msgs_MapDelta>(dds_->delta_r, [&](const densemap_msgs_MapDelta& d) {
     DeltaInfo info;
@@ -25,7 +26,7 @@ std::size_t Client::pollDeltas(const std::function<void(const DeltaInfo&)>& f) {
   });
 }
 
-std::size_t Client::pollEvents(const std::function<void(const MapEventInfo&)>& f) {
+std::size_t Client::Impl::pollEvents(const std::function<void(const MapEventInfo&)>& f) {
   return dds::takeAll<densemap_msgs_MapEvent>(dds_->event_r, [&](const densemap_msgs_MapEvent& e) {
     MapEventInfo info;
     info.base_version = e.base_version;
@@ -40,8 +41,7 @@ std::size_t Client::pollEvents(const std::function<void(const MapEventInfo&)>& f
   });
 }
 
-Expected<std::pair<std::unique_ptr<GridMap>, std::uint64_t>> Client::fetchMap(
-    std::uint64_t min_version) {
+Expected<MapSnapshot> Client::Impl::fetchMap(std::uint64_t min_version) {
   if (auto ok = permitted(dds_->man_r, "fetching the map"); !ok) return std::unexpected(ok.error());
   // 1. The manifest (1 Hz) says when the server's map has reached min_version.
   auto deadline = Clock::now() + options_.timeout;
@@ -68,7 +68,7 @@ Expected<std::pair<std::unique_ptr<GridMap>, std::uint64_t>> Client::fetchMap(
   std::this_thread::sleep_for(std::chrono::milliseconds(100));  // the server's side of the match
   // 3. send-map; the reply comes after the server wrote every tile and says how many.
   const densemap_msgs_RequestId id{client_id_, next_request_};
-  auto sent = commandReply(CommandKind::kSendMap, {0, 0, 0}, {0, 0, 0}, {});
+  auto sent = commandReply(dds::CommandKind::kSendMap, {0, 0, 0}, {0, 0, 0}, {});
   if (!sent) return std::unexpected(sent.error());
   const std::uint64_t version = sent->sent_version, tile_count = sent->sent_tiles,
                       cell_count = sent->sent_cells;
@@ -101,7 +101,7 @@ Expected<std::pair<std::unique_ptr<GridMap>, std::uint64_t>> Client::fetchMap(
     return makeError("map tiles hold " + std::to_string(cells) + " cells, the server sent " +
                      std::to_string(cell_count));
   }
-  return std::pair{std::move(map), static_cast<std::uint64_t>(version)};
+  return MapSnapshotAccess::make(std::move(map), version);
 }
 
 }  // namespace densemap

@@ -3,8 +3,11 @@
 // The client's private parts shared by its files: client.cpp (connection, scans, queries,
 // commands, status) and client_map.cpp (map versions: events, deltas, fetching the map).
 #include <chrono>
+#include <memory>
 #include <optional>
+#include <span>
 #include <string>
+#include <vector>
 
 #include "densemap/client/client.hpp"
 #include "densemap/wire/dds.hpp"
@@ -29,7 +32,8 @@ inline Expected<void> permitted(const dds::Entity& endpoint, const std::string& 
 
 }  // namespace client_detail
 
-struct Client::Dds {
+/// The client's DDS endpoints.
+struct ClientDds {
   dds::Entity participant;
   dds::Topics topics;
   // With DDS Security, an endpoint this identity may not use stays empty (0).
@@ -37,6 +41,44 @@ struct Client::Dds {
   dds::Entity pr_r, br_r, rr_r, cr_r, man_r, delta_r, event_r, st_r;
   // One per reply reader: a request waits for data on its own reader, not by polling.
   std::optional<dds::WaitSet> pr_ws, br_ws, rr_ws, cr_ws;
+};
+
+/// The client itself; Client forwards to it.
+struct Client::Impl {
+  using Dds = ClientDds;
+  explicit Impl(const ClientOptions& options);
+
+  Expected<void> waitForServer();
+  Expected<void> publishScan(const RawScan& scan);
+  Expected<PointQueryAnswer> queryPointsRaw(std::span<const float> xyz);
+  Expected<PointQueryAnswer> queryPointsOnce(std::span<const float> xyz);
+  Expected<BoxQueryAnswer> queryBox(const Point3f& min, const Point3f& max,
+                                    std::uint32_t max_centers);
+  Expected<RayQueryAnswer> castRay(const Point3f& origin, const Point3f& direction,
+                                   float max_range);
+  /// A command's reply: the detail message and send-map's counts (CommandReply's sent_*).
+  struct CommandOutcome {
+    std::string detail;
+    std::uint64_t sent_version = 0, sent_tiles = 0, sent_cells = 0;
+  };
+  Expected<CommandOutcome> commandReply(dds::CommandKind kind, const Point3f& min,
+                                        const Point3f& max, const std::string& path);
+  Expected<std::string> command(dds::CommandKind kind, const Point3f& min, const Point3f& max,
+                                const std::string& path);
+  Expected<ServerStatus> status();
+  std::size_t pollDeltas(const std::function<void(const DeltaInfo&)>& f);
+  std::size_t pollEvents(const std::function<void(const MapEventInfo&)>& f);
+  Expected<MapSnapshot> fetchMap(std::uint64_t min_version);
+
+  ClientOptions options_;
+  std::unique_ptr<Dds> dds_;
+  std::uint64_t client_id_;
+  std::uint64_t next_request_ = 1;
+};
+
+/// Test access (client/testing/densemap/client/testing.hpp).
+struct ClientAccess {
+  static Client::Impl& impl(Client& client) { return *client.impl_; }
 };
 
 }  // namespace densemap

@@ -111,7 +111,7 @@ int runRamp(const load::Scenario& scenario, const load::RunOptions& run,
         operator_client = std::move(*c);
         if (auto ok = operator_client->waitForServer(); !ok) return fail(ok.error().message);
       }
-      if (auto r = operator_client->command(CommandKind::kReset); !r) {
+      if (auto r = operator_client->reset(); !r) {
         return fail("reset before step " + std::to_string(step + 1) + ": " + r.error().message);
       }
     }

@@ -6,6 +6,7 @@
 #include <thread>
 
 #include "cli_support.hpp"
+#include "densemap/query/map_queries.hpp"
 #include "densemap/io/octomap_export.hpp"
 #include "densemap/io/png_writer.hpp"
 #include "densemap/store/snapshot.hpp"
@@ -179,19 +180,17 @@ int MapCommands::run(Client& client) {
   if (snapshot_->parsed()) {
     auto fetched = client.fetchMap();
     if (!fetched) return fail(fetched.error().message);
-    const auto view = MapView::fromMap(*fetched->first, fetched->second);
-    auto saved = saveSnapshot(*view, SensorModel{}, Backend::kGrid, snapshot_out_);
+    auto saved = fetched->save(snapshot_out_);
     if (!saved) return fail(saved.error().message);
     std::printf("wrote %s: %zu cells, map version %llu, %zu bytes\n", snapshot_out_.c_str(),
-                view->knownCells(), static_cast<unsigned long long>(fetched->second), *saved);
+                fetched->knownCells(), static_cast<unsigned long long>(fetched->version()),
+                *saved);
     return 0;
   }
   if (status_->parsed()) return statusCommand(client, watch_);
-  const auto kind = save_->parsed()    ? CommandKind::kSave
-                    : reset_->parsed() ? CommandKind::kReset
-                                       : CommandKind::kClearBox;
-  auto r = clear_->parsed() ? client.command(kind, point3(clear_min_), point3(clear_max_))
-                            : client.command(kind, {0, 0, 0}, {0, 0, 0}, save_path_);
+  auto r = save_->parsed()    ? client.save(save_path_)
+           : reset_->parsed() ? client.reset()
+                              : client.clearBox(point3(clear_min_), point3(clear_max_));
   if (!r) return fail(r.error().message);
   std::printf("%s\n", r->c_str());
   return 0;

@@ -6,6 +6,8 @@
 #include <random>
 
 #include "cli_support.hpp"
+#include "densemap/map/sensor_model.hpp"
+#include "densemap/query/map_queries.hpp"
 
 namespace densemap::cli {
 namespace {
@@ -20,7 +22,7 @@ int queryPointsCommand(Client& client, std::vector<float> coords, std::uint32_t 
     coords.resize(std::size_t{random_points} * 3);
     for (float& c : coords) c = axis(generator);
     const auto t0 = std::chrono::steady_clock::now();
-    auto answer = client.queryPointsRaw(coords);
+    auto answer = client.queryPoints(std::span<const float>(coords));
     if (!answer) return fail(answer.error().message);
     std::size_t counts[3] = {0, 0, 0};
     for (const auto state : answer->states) ++counts[std::min(2, static_cast<int>(state))];
@@ -33,7 +35,7 @@ int queryPointsCommand(Client& client, std::vector<float> coords, std::uint32_t 
   }
   if (coords.empty() || coords.size() % 3 != 0)
     return fail("point coordinates come in threes (or give --random N)");
-  auto answer = client.queryPointsRaw(coords);
+  auto answer = client.queryPoints(std::span<const float>(coords));
   if (!answer) return fail(answer.error().message);
   const char* names[] = {"unknown", "free", "occupied"};
   for (std::size_t i = 0; i < answer->states.size(); ++i) {

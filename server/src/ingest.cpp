@@ -6,28 +6,28 @@
 #include "densemap/geometry/percentile.hpp"
 #include "guarded.hpp"
 
-namespace densemap {
+namespace densemap::server {
 
-Expected<std::unique_ptr<Ingest>> Ingest::create(const PipelineOptions& options,
+Expected<std::unique_ptr<Ingest>> Ingest::create(const IngestOptions& options,
                                                  std::unique_ptr<OccupancyMap> initial,
                                                  std::uint64_t initial_version) {
   if (options.threads < 1 || options.threads > 256) return makeError("threads must be in 1..256");
   if (options.queue_depth < 1 || options.queue_depth > 1024) {
     return makeError("queue depth must be in 1..1024");
   }
-  auto engine = Engine::create(options, std::move(initial), initial_version);
+  auto engine = Engine::create(options.engine, std::move(initial), initial_version);
   if (!engine) return std::unexpected(engine.error());
   return std::unique_ptr<Ingest>(new Ingest(options, std::move(*engine)));
 }
 
-Ingest::Ingest(const PipelineOptions& options, std::unique_ptr<Engine> engine)
+Ingest::Ingest(const IngestOptions& options, std::unique_ptr<Engine> engine)
     : engine_(std::move(engine)),
       arena_(options.threads),
       queue_(
           options.queue_depth, options.queue_depth * kQueueSensorShare,
           [](const RawScan& scan) -> const std::string& { return scan.sensor_id; },
           SensorTally::kMaxSensors, rawScanBytes, options.queue_budget_bytes) {
-  if (options.warm_up) arena_.execute([this] { engine_->warmUp(); });
+  if (options.engine.warm_up) arena_.execute([this] { engine_->warmUp(); });
 }
 
 Ingest::~Ingest() { stop(); }
@@ -187,4 +187,4 @@ PipelineCounters Ingest::counters() const {
   return c;
 }
 
-}  // namespace densemap
+}  // namespace densemap::server

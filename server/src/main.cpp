@@ -206,7 +206,7 @@ int waitForStop(const sigset_t& signals, const densemap::server::MapService& ser
 /// The shutdown snapshot. The map must not be lost with the process: when
 /// the snapshot cannot be written, a rescue copy goes to the first place that takes it, and
 /// the log says where. Returns the exit status.
-int saveOnShutdown(densemap::server::MapService& service, const densemap::Ingest& ingest,
+int saveOnShutdown(densemap::server::MapService& service, const densemap::server::Ingest& ingest,
                    const densemap::server::ServiceOptions& options) {
   const std::filesystem::path& snapshot = options.snapshot_path;
   if (snapshot.empty()) return 0;
@@ -257,14 +257,14 @@ void addServerOptions(CLI::App& app, ServerArgs& args) {
 
 /// --check-config's answer for a config the server would start with.
 void printValid(const std::string& config_path, const densemap::proto::ServerConfig& config,
-                const densemap::PipelineOptions& options,
+                const densemap::server::IngestOptions& options,
                 const densemap::server::ServiceOptions& service) {
   const std::filesystem::path& snapshot = service.snapshot_path;
   std::printf(
       "densemap-server: %s is valid: %s backend, %s map at %g m, %d threads, DDS domain "
       "%u on %s%s, snapshot %s\n",
       config_path.c_str(), config.map().backend().c_str(), config.map().kind().c_str(),
-      options.resolution_m, options.threads, service.domain_id, service.network_interface.c_str(),
+      options.engine.resolution_m, options.threads, service.domain_id, service.network_interface.c_str(),
       service.security ? " with DDS Security" : "",
       snapshot.empty() ? "off" : snapshot.string().c_str());
 }
@@ -297,11 +297,11 @@ static int runMain(int argc, char** argv) {
 
   auto config = densemap::server::loadServerConfig(config_path);
   if (!config) return fail("config: " + config.error().message, 2);
-  auto options = densemap::server::pipelineOptions(*config);
+  auto options = densemap::server::ingestOptions(*config);
   if (!options) return fail("config: " + options.error().message, 2);
   auto service_options = serviceOptions(*config, args.domain_override);
   if (!service_options) return fail(service_options.error().message, service_options.error().code);
-  auto resumed = resume(*service_options, *options, check_only);
+  auto resumed = resume(*service_options, options->engine, check_only);
   if (!resumed) return fail(resumed.error().message, resumed.error().code);
   if (check_only) {
     printValid(config_path, *config, *options, *service_options);
@@ -313,7 +313,8 @@ static int runMain(int argc, char** argv) {
   tbb::global_control parallelism(
       tbb::global_control::max_allowed_parallelism,
       static_cast<std::size_t>(options->threads + service_options->query_threads));
-  auto ingest = densemap::Ingest::create(*options, std::move(resumed->map), resumed->version);
+  auto ingest =
+      densemap::server::Ingest::create(*options, std::move(resumed->map), resumed->version);
   if (!ingest) return fail(ingest.error().message);
   if (const auto& evidence = resumed->kernel_evidence) {
     if (auto restored = (*ingest)->restoreKernelEvidence(*evidence); !restored) {
@@ -337,7 +338,7 @@ static int runMain(int argc, char** argv) {
   spdlog::info("running on DDS domain {}, interface {}{}; {} backend at {} m, {} threads{}",
                service_options->domain_id, service_options->network_interface,
                service_options->security ? " with DDS Security" : "", config->map().backend(),
-               options->resolution_m, options->threads,
+               options->engine.resolution_m, options->threads,
                service_options->ros2 ? "; ROS 2 face on" : "");
 
   const int received = waitForStop(signals, **service);

@@ -1,6 +1,6 @@
 #include "densemap/server/sensor_tally.hpp"
 
-namespace densemap {
+namespace densemap::server {
 
 SensorCounters& SensorTally::at(const std::string& sensor_id) {
   auto it = by_id_.find(sensor_id);
@@ -29,4 +29,4 @@ std::vector<SensorCounters> SensorTally::sensors() const {
   return out;
 }
 
-}  // namespace densemap
+}  // namespace densemap::server

@@ -131,7 +131,7 @@ Expected<void> mapOptions(const proto::ServerConfig& config, PipelineOptions& o)
 }
 
 /// The pipeline block: threads, memory reserves and budgets, the queue, integration, limits.
-Expected<void> ingestOptions(const proto::ServerConfig& config, PipelineOptions& o) {
+Expected<void> pipelineBlock(const proto::ServerConfig& config, PipelineOptions& o) {
   const auto& p = config.pipeline();
   if (p.threads() < 1 || p.threads() > 256) return makeError("pipeline.threads must be in 1..256");
   // Faulted in at start: more than the machine can hold aborted with bad_alloc.
@@ -168,9 +168,6 @@ Expected<void> ingestOptions(const proto::ServerConfig& config, PipelineOptions&
   auto rule = parseUpdateRule(p.update_rule());
   if (!rule) return makeError("pipeline.update_rule: " + rule.error().message);
   o.rule = *rule;
-  o.threads = static_cast<int>(p.threads());
-  o.queue_depth = p.queue_depth();
-  o.queue_budget_bytes = std::size_t{p.queue_budget_mb()} << 20;
   o.warm_up = p.warm_up();
   o.reserve_blocks = p.reserve_blocks();
   o.limits.max_points = p.max_points();
@@ -226,11 +223,21 @@ Expected<void> checkSnapshotAndDds(const proto::ServerConfig& config) {
 
 Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config) {
   PipelineOptions o;
-  for (auto* part : {&mapOptions, &ingestOptions, &upsampleOptions}) {
+  for (auto* part : {&mapOptions, &pipelineBlock, &upsampleOptions}) {
     if (auto ok = part(config, o); !ok) return std::unexpected(ok.error());
   }
   if (auto ok = checkSnapshotAndDds(config); !ok) return std::unexpected(ok.error());
   return o;
+}
+
+Expected<IngestOptions> ingestOptions(const proto::ServerConfig& config) {
+  auto engine = pipelineOptions(config);
+  if (!engine) return std::unexpected(engine.error());
+  const auto& p = config.pipeline();
+  return IngestOptions{.engine = std::move(*engine),
+                       .threads = static_cast<int>(p.threads()),
+                       .queue_depth = p.queue_depth(),
+                       .queue_budget_bytes = std::size_t{p.queue_budget_mb()} << 20};
 }
 
 Expected<std::optional<dds::SecurityFiles>> securityFiles(const proto::ServerConfig& config) {

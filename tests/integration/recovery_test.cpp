@@ -10,6 +10,7 @@
 #include <thread>
 
 #include "densemap/client/client.hpp"
+#include "densemap/client/testing.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_diff.hpp"
 #include "densemap/sim/sequence.hpp"
@@ -46,8 +47,8 @@ std::string expectRestartServes(const fs::path& dir, std::uint32_t domain, std::
   auto fetched = client->fetchMap(version);
   EXPECT_TRUE(fetched) << fetched.error().message;
   if (!fetched) return server.log();
-  EXPECT_EQ(fetched->second, version);
-  EXPECT_EQ(diffMaps(*fetched->first, expected).differing(), 0U);
+  EXPECT_EQ(fetched->version(), version);
+  EXPECT_EQ(diffMaps(testing::gridOf(*fetched), expected).differing(), 0U);
   return server.log();
 }
 
@@ -153,7 +154,7 @@ TEST(Recovery, ATruncatedNewestSnapshotFallsBackToThePreviousOneWithAWarning) {
     auto client = connect(kDomain);
     ASSERT_TRUE(client);
     test::replayScans(*client, {raws[0], raws[1]});
-    ASSERT_TRUE(client->command(CommandKind::kSave));  // version 2
+    ASSERT_TRUE(client->save());  // version 2
     test::replayScans(*client, {raws[2], raws[3]});
     EXPECT_EQ(server.stop(), 0);  // version 4, the newest
   }

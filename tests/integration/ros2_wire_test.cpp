@@ -11,6 +11,8 @@
 #include <thread>
 
 #include "densemap/client/client.hpp"
+#include "densemap/client/testing.hpp"
+#include "densemap/wire/topics.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_diff.hpp"
 #include "densemap/ros2/map_topics.hpp"
@@ -102,9 +104,9 @@ std::shared_ptr<const MapView> expectedMap(const fs::path& data, std::size_t sca
   }
   auto cfg = server::loadServerConfig(config);
   EXPECT_TRUE(cfg) << cfg.error().message;
-  auto options = server::pipelineOptions(*cfg);
+  auto options = server::ingestOptions(*cfg);
   EXPECT_TRUE(options);
-  auto pipeline = Ingest::create(*options);
+  auto pipeline = server::Ingest::create(*options);
   EXPECT_TRUE(pipeline);
   (*pipeline)->start();
   for (std::size_t k = 0; k < raws.size(); ++k) {
@@ -177,7 +179,7 @@ void replayAndCompare(const fs::path& data, std::size_t scans, std::uint32_t kDo
 
   auto fetched = client->fetchMap(scans);
   ASSERT_TRUE(fetched) << fetched.error().message;
-  const GridMap& map = *fetched->first;
+  const GridMap& map = testing::gridOf(*fetched);
   const auto expected = expectedMap(data, scans, dir / "server.textproto", frames);
   ASSERT_GT(map.knownCells(), 10000U);
   GridMap expected_map(map.resolution(), map.sensorModel());

@@ -19,6 +19,7 @@
 #include <thread>
 
 #include "densemap/client/client.hpp"
+#include "densemap/client/testing.hpp"
 #include "densemap/wire/topics.hpp"
 #include "densemap/test_support/server_clients.hpp"
 #include "densemap/test_support/server_process.hpp"
@@ -206,8 +207,8 @@ TEST_F(Security, ViewerCannotResetOrClearOperatorCan) {
   ASSERT_GT(before.known_cells, 1000u);
 
   // The viewer's client has no command writer: DDS Security did not let it create one.
-  for (auto refused : {viewer->command(CommandKind::kReset),
-                       viewer->command(CommandKind::kClearBox, {-50, -50, -5}, {50, 50, 5})}) {
+  for (auto refused : {viewer->reset(),
+                       viewer->clearBox({-50, -50, -5}, {50, 50, 5})}) {
     ASSERT_FALSE(refused);
     EXPECT_NE(refused.error().message.find("not allowed"), std::string::npos)
         << refused.error().message;
@@ -266,7 +267,7 @@ TEST_F(Security, ViewerCannotResetOrClearOperatorCan) {
   EXPECT_GT(box->occupied + box->free, 1000u);
   auto fetched = viewer->fetchMap(before.map_version);
   ASSERT_TRUE(fetched) << fetched.error().message;
-  EXPECT_EQ(fetched->first->knownCells(), before.known_cells);
+  EXPECT_EQ(fetched->knownCells(), before.known_cells);
 
   // An operator may reset (but not publish scans).
   const auto [op_replay_rc, op_replay_out] =

@@ -10,6 +10,8 @@
 #include <thread>
 
 #include "densemap/client/client.hpp"
+#include "densemap/client/testing.hpp"
+#include "densemap/query/map_queries.hpp"
 #include "densemap/wire/topics.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_diff.hpp"
@@ -121,7 +123,7 @@ TEST(Server, ReplayedScansGiveTheOfflineMapExactlyForQueriesTilesAndDeltas) {
   ASSERT_TRUE(late);
   auto fetched = late->fetchMap(raws.size());
   ASSERT_TRUE(fetched) << fetched.error().message;
-  EXPECT_EQ(diffMaps(*fetched->first, *offline).differing(), 0U);
+  EXPECT_EQ(diffMaps(testing::gridOf(*fetched), *offline).differing(), 0U);
 
   // Box and ray queries agree with core on the same map.
   auto box = client->queryBox(Point3f(0, 5, 0), Point3f(10, 15, 2.5F));
@@ -154,7 +156,7 @@ TEST(Server, IlnUpsampleStageGivesTheOfflineDensifiedMap) {
   EXPECT_GT(offline->knownCells(), offlineMap(raws)->knownCells());
   auto fetched = client->fetchMap(raws.size());
   ASSERT_TRUE(fetched) << fetched.error().message;
-  EXPECT_EQ(diffMaps(*fetched->first, *offline).differing(), 0U);
+  EXPECT_EQ(diffMaps(testing::gridOf(*fetched), *offline).differing(), 0U);
   EXPECT_EQ(server.stop(), 0);
 }
 
@@ -174,12 +176,12 @@ TEST(Server, SigtermSavesASnapshotAndARestartResumesTheIdenticalMap) {
   ASSERT_TRUE(client);
   auto fetched = client->fetchMap(raws.size());
   ASSERT_TRUE(fetched) << fetched.error().message;
-  EXPECT_EQ(fetched->second, raws.size());  // the version resumes too
-  EXPECT_EQ(diffMaps(*fetched->first, *offlineMap(raws)).differing(), 0U);
-  auto cleared = client->command(CommandKind::kClearBox, Point3f(0, 0, 0), Point3f(5, 5, 2));
+  EXPECT_EQ(fetched->version(), raws.size());  // the version resumes too
+  EXPECT_EQ(diffMaps(testing::gridOf(*fetched), *offlineMap(raws)).differing(), 0U);
+  auto cleared = client->clearBox(Point3f(0, 0, 0), Point3f(5, 5, 2));
   ASSERT_TRUE(cleared) << cleared.error().message;
   EXPECT_NE(cleared->find("erased"), std::string::npos);
-  auto reset = client->command(CommandKind::kReset);
+  auto reset = client->reset();
   ASSERT_TRUE(reset);
   auto empty = client->queryBox(Point3f(0, 0, 0), Point3f(30, 20, 3));
   ASSERT_TRUE(empty);
@@ -216,9 +218,9 @@ TEST(Server, BadInputIsRejectedCountedAndLeavesTheMapUnchanged) {
   ASSERT_FALSE(inverted);
   EXPECT_NE(inverted.error().message.find("inverted"), std::string::npos);
   EXPECT_FALSE(client->queryBox(Point3f(-1000, -1000, -100), Point3f(1000, 1000, 100)));
-  EXPECT_FALSE(client->queryPointsRaw({1.0F, 2.0F}));
+  EXPECT_FALSE(testing::queryPointsRaw(*client, {1.0F, 2.0F}));
   EXPECT_FALSE(client->castRay(Point3f(0, 0, 0), Point3f(0, 0, 0), 5.0F));
-  EXPECT_FALSE(client->command(CommandKind::kClearBox, Point3f(1, 1, 1), Point3f(0, 0, 0)));
+  EXPECT_FALSE(client->clearBox(Point3f(1, 1, 1), Point3f(0, 0, 0)));
 
   std::optional<ServerStatus> status;
   for (int i = 0; i < 50; ++i) {
@@ -249,7 +251,7 @@ TEST(Server, BadInputIsRejectedCountedAndLeavesTheMapUnchanged) {
   EXPECT_EQ(status->map_version, 1U);
   auto after = client->fetchMap();
   ASSERT_TRUE(after);
-  EXPECT_EQ(diffMaps(*after->first, *before->first).differing(), 0U);
+  EXPECT_EQ(diffMaps(testing::gridOf(*after), testing::gridOf(*before)).differing(), 0U);
   EXPECT_EQ(server.stop(), 0);
 }
 
@@ -315,14 +317,14 @@ TEST(Server, SaveWritesOnlyPlainFileNamesIntoTheExportDirectory) {
            secret.string(), "../secret", "exports/../../secret", "..", ".hidden.dmap", "map.dmap.1",
            "name with spaces.dmap", "x.txt", std::string(200, 'a') + ".dmap"}) {
     SCOPED_TRACE(hostile);
-    auto saved = client->command(CommandKind::kSave, {0, 0, 0}, {0, 0, 0}, hostile);
+    auto saved = client->save(hostile);
     EXPECT_FALSE(saved);
   }
   std::ifstream in(secret);
   std::string content((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   EXPECT_EQ(content, "root only");
   // A plain name goes to exports/ beside the snapshot, and is the map.
-  auto saved = client->command(CommandKind::kSave, {0, 0, 0}, {0, 0, 0}, "copy.dmap");
+  auto saved = client->save("copy.dmap");
   ASSERT_TRUE(saved) << saved.error().message;
   const auto exported = dir.path() / "exports" / "copy.dmap";
   EXPECT_NE(saved->find(exported.string()), std::string::npos) << *saved;
@@ -330,13 +332,13 @@ TEST(Server, SaveWritesOnlyPlainFileNamesIntoTheExportDirectory) {
   ASSERT_TRUE(loaded) << loaded.error().message;
   auto fetched = client->fetchMap();
   ASSERT_TRUE(fetched);
-  EXPECT_EQ(diffMaps(*loaded->map, *fetched->first).differing(), 0U);
+  EXPECT_EQ(diffMaps(*loaded->map, testing::gridOf(*fetched)).differing(), 0U);
   // A link planted under the name is replaced, never followed.
   const auto target = dir.path() / "target";
   std::ofstream(target) << "keep";
   std::filesystem::remove(exported);
   std::filesystem::create_symlink(target, exported);
-  ASSERT_TRUE(client->command(CommandKind::kSave, {0, 0, 0}, {0, 0, 0}, "copy.dmap"));
+  ASSERT_TRUE(client->save("copy.dmap"));
   EXPECT_FALSE(std::filesystem::is_symlink(exported));
   std::ifstream kept(target);
   std::string kept_content((std::istreambuf_iterator<char>(kept)),
@@ -407,7 +409,7 @@ TEST(Server, ASnapshotDirectoryThatDisappearsLosesNoMap) {
   const auto rescue = dir / "exports" / ("densemap-rescue-" + std::to_string(pid) + ".dmap");
   auto loaded = loadSnapshot(rescue, Backend::kGrid, 0.2);
   ASSERT_TRUE(loaded) << loaded.error().message;
-  EXPECT_EQ(diffMaps(*loaded->map, *fetched->first).differing(), 0U);
+  EXPECT_EQ(diffMaps(*loaded->map, testing::gridOf(*fetched)).differing(), 0U);
 }
 
 // Hostile-input issue 28, item 8: two servers on one domain flipped clients between two maps.
@@ -481,7 +483,7 @@ TEST(Server, APointQueryFloodStaysInTheRequestBudgetAndItsMemoryReturns) {
   for (auto& client : clients) {
     floods.emplace_back([&client, &answered] {
       std::vector<float> xyz(3 * 3'000'000, 1.0F);
-      if (auto a = client->queryPointsRaw(xyz); a && a->states.size() == 3'000'000) ++answered;
+      if (auto a = testing::queryPointsRaw(*client, xyz); a && a->states.size() == 3'000'000) ++answered;
     });
   }
   for (auto& t : floods) t.join();
@@ -562,14 +564,14 @@ TEST(Server, PointBatchesOverTheRequestLimitAreSplitByTheClientAndRefusedWhole) 
     xyz[3 * i + 1] = 0.5F * static_cast<float>((i / 200) % 40) - 10.0F;
     xyz[3 * i + 2] = 0.2F;
   }
-  auto whole = client->queryPointsRaw(xyz);
+  auto whole = testing::queryPointsRaw(*client, xyz);
   ASSERT_TRUE(whole) << whole.error().message;
   ASSERT_EQ(whole->states.size(), n);
   ASSERT_EQ(whole->log_odds.size(), n);
   // Each point's answer is the one a small request for it gets (8,000 points repeat with
   // period 8,000, so compare every part against the first 8,000).
   std::vector<float> first(xyz.begin(), xyz.begin() + 3 * 8000);
-  auto small = client->queryPointsRaw(first);
+  auto small = testing::queryPointsRaw(*client, first);
   ASSERT_TRUE(small) << small.error().message;
   std::size_t occupied = 0;
   for (std::size_t i = 0; i < n; ++i) {
@@ -580,7 +582,7 @@ TEST(Server, PointBatchesOverTheRequestLimitAreSplitByTheClientAndRefusedWhole) 
   EXPECT_GT(occupied, 0U);
   // One request over the limit is refused with the reason.
   std::vector<float> over(3 * (std::size_t{dds::kMaxQueryPoints} + 1), 1.0F);
-  auto refused = client->queryPointsOnce(over);
+  auto refused = testing::queryPointsOnce(*client, over);
   ASSERT_FALSE(refused);
   EXPECT_NE(refused.error().message.find("at most " + std::to_string(dds::kMaxQueryPoints)),
             std::string::npos)

@@ -29,7 +29,8 @@ TEST(ServerConfig, TheShippedConfigIsValidAndEqualsTheDefaults) {
   ASSERT_TRUE(defaults);
   EXPECT_EQ(options->resolution_m, defaults->resolution_m);
   EXPECT_EQ(options->max_range_m, defaults->max_range_m);
-  EXPECT_EQ(options->queue_depth, defaults->queue_depth);
+  EXPECT_EQ(ingestOptions(*config)->queue_depth,
+            ingestOptions(proto::ServerConfig{})->queue_depth);
   EXPECT_EQ(options->method, defaults->method);
   EXPECT_EQ(defaults->method, IntegrationMethod::kRaycast);
   EXPECT_EQ(options->rule, UpdateRule::kSet);

@@ -179,16 +179,16 @@ class OctomapFilesOfEveryKind : public ::testing::TestWithParam<KindCase> {};
 
 /// The map a server with this kind and backend holds after two scans.
 std::shared_ptr<const MapView> serverMap(const KindCase& c, double resolution) {
-  PipelineOptions options;
-  options.backend = c.backend;
-  options.resolution_m = resolution;
-  options.max_range_m = 6.0;
+  server::IngestOptions options;
+  options.engine.backend = c.backend;
+  options.engine.resolution_m = resolution;
+  options.engine.max_range_m = 6.0;
   if (c.kind != "log_odds") {
     auto method = kernel::parseKernelMethod(c.kind);
     EXPECT_TRUE(method) << c.kind;
-    options.kernel = *method;
+    options.engine.kernel = *method;
   }
-  auto pipeline = Ingest::create(options);
+  auto pipeline = server::Ingest::create(options);
   EXPECT_TRUE(pipeline) << pipeline.error().message;
   (*pipeline)->start();
   for (int s = 0; s < 2; ++s) {
@@ -276,7 +276,7 @@ RawScan kernelScan(std::uint64_t seq) {
   return raw;
 }
 
-void integrateAll(Ingest& pipeline, const std::vector<RawScan>& raws) {
+void integrateAll(server::Ingest& pipeline, const std::vector<RawScan>& raws) {
   const std::uint64_t before = pipeline.counters().integrated;
   for (const RawScan& raw : raws) pipeline.submit(raw);
   for (int i = 0; i < 1000 && pipeline.counters().integrated < before + raws.size(); ++i) {
@@ -295,20 +295,20 @@ void expectSameEvidence(const kernel::KernelEvidence& a, const kernel::KernelEvi
 
 TEST(Snapshot, ADenseMapResumesItsKernelEvidenceAndTheNextScanUpdatesItAlike) {
   test::TempDir dir;
-  const PipelineOptions options{.resolution_m = 0.2,
-                                .max_range_m = 5.0,
-                                .kernel = kernel::KernelMethod::kAkimapRays,
-                                .threads = 2};
-  auto original = Ingest::create(options);
+  const server::IngestOptions options{.engine = {.resolution_m = 0.2,
+                                                 .max_range_m = 5.0,
+                                                 .kernel = kernel::KernelMethod::kAkimapRays},
+                                      .threads = 2};
+  auto original = server::Ingest::create(options);
   ASSERT_TRUE(original) << original.error().message;
   (*original)->start();
   integrateAll(**original, {kernelScan(1), kernelScan(2)});
-  const Ingest::SavedState saved = (*original)->savedState();
+  const server::Ingest::SavedState saved = (*original)->savedState();
   ASSERT_TRUE(saved.kernel);
   ASSERT_GT(saved.kernel->keys.size(), 1000U);
   EXPECT_EQ(saved.kernel->scans, 2U);
   const auto file = dir.path() / "dense.dmap";
-  const SensorModel model(options.sensor);
+  const SensorModel model(options.engine.sensor);
   ASSERT_TRUE(saveSnapshot(*saved.view, model, Backend::kGrid, file, &*saved.kernel));
 
   auto loaded = loadSnapshot(file, Backend::kGrid, 0.2);
@@ -320,14 +320,14 @@ TEST(Snapshot, ADenseMapResumesItsKernelEvidenceAndTheNextScanUpdatesItAlike) {
   // The same file without its evidence: the control.
   auto plain = loadSnapshot(file, Backend::kGrid, 0.2);
   ASSERT_TRUE(plain);
-  auto resumed = Ingest::create(options, std::move(loaded->map), loaded->version);
-  auto control = Ingest::create(options, std::move(plain->map), plain->version);
+  auto resumed = server::Ingest::create(options, std::move(loaded->map), loaded->version);
+  auto control = server::Ingest::create(options, std::move(plain->map), plain->version);
   ASSERT_TRUE(resumed && control);
   ASSERT_TRUE((*resumed)->restoreKernelEvidence(*loaded->kernel));
   expectSameEvidence(*(*resumed)->savedState().kernel, *saved.kernel);
   (*resumed)->start();
   (*control)->start();
-  for (Ingest* p : {original->get(), resumed->get(), control->get()}) {
+  for (server::Ingest* p : {original->get(), resumed->get(), control->get()}) {
     integrateAll(*p, {kernelScan(3)});
   }
   const auto a = (*original)->savedState(), b = (*resumed)->savedState(),
@@ -346,11 +346,11 @@ TEST(Snapshot, ADenseMapResumesItsKernelEvidenceAndTheNextScanUpdatesItAlike) {
   // Evidence of another kind, or for a log-odds map, is refused.
   auto other = *loaded->kernel;
   other.method = kernel::KernelMethod::kBgk;
-  auto fresh = Ingest::create(options);
+  auto fresh = server::Ingest::create(options);
   EXPECT_FALSE((*fresh)->restoreKernelEvidence(other));
-  auto log_odds = Ingest::create({.resolution_m = 0.2, .max_range_m = 5.0});
+  auto log_odds = server::Ingest::create({.engine = {.resolution_m = 0.2, .max_range_m = 5.0}});
   EXPECT_FALSE((*log_odds)->restoreKernelEvidence(*loaded->kernel));
-  for (Ingest* p : {original->get(), resumed->get(), control->get()}) p->stop();
+  for (server::Ingest* p : {original->get(), resumed->get(), control->get()}) p->stop();
 }
 
 TEST(Snapshot, KernelEvidenceCutOrCorruptedIsRefused) {

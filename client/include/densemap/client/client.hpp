@@ -9,14 +9,14 @@
 #include <string>
 #include <vector>
 
-#include "densemap/wire/security.hpp"
-#include "densemap/wire/status.hpp"
-#include "densemap/wire/topics.hpp"
+#include "densemap/client/map_snapshot.hpp"
 #include "densemap/geometry/error.hpp"
-#include "densemap/map/grid_map.hpp"
-#include "densemap/query/map_queries.hpp"
+#include "densemap/geometry/point_cloud.hpp"
 #include "densemap/io/raw_scan.hpp"
-#include "densemap/io/sensor_counters.hpp"
+#include "densemap/map/cell_change.hpp"
+#include "densemap/query/cell_state.hpp"
+#include "densemap/wire/security.hpp"
+#include "densemap/wire/server_status.hpp"
 
 namespace densemap {
 
@@ -69,11 +69,11 @@ struct MapEventInfo {
   double latency_ms = 0.0;  // the server's receive -> published
 };
 
-using CommandKind = dds::CommandKind;  // the wire's, shared with the server
+struct ClientAccess;
 
 /// A densemap-server client over DDS (loopback by default). Requests carry a random client id
 /// and an increasing request id; replies are matched on both. Every call has a timeout.
-/// Thread-safety: one thread at a time.
+/// Thread-safety: one thread at a time (each thread may have a Client of its own).
 class Client {
  public:
   [[nodiscard]] static Expected<std::unique_ptr<Client>> create(const ClientOptions& options);
@@ -84,22 +84,24 @@ class Client {
   /// Waits until a server's scan reader and request readers are matched.
   [[nodiscard]] Expected<void> waitForServer();
   [[nodiscard]] Expected<void> publishScan(const RawScan& scan);
-  /// A batch of more than dds::kMaxQueryPoints points goes as several requests, one after
-  /// another, each answered from one map version; map_version is then the last part's.
+  /// The cells at the points (metres, world frame). A batch of more than 250,000 points goes as
+  /// several requests, one after another, each answered from one map version; map_version is
+  /// then the last part's.
   [[nodiscard]] Expected<PointQueryAnswer> queryPoints(const std::vector<Point3f>& points_world);
-  /// Sends raw coordinates unchecked (the server validates; split as queryPoints): for tests of
-  /// bad input.
-  [[nodiscard]] Expected<PointQueryAnswer> queryPointsRaw(const std::vector<float>& xyz);
-  /// One request of raw coordinates, unsplit (tests of the server's limit).
-  [[nodiscard]] Expected<PointQueryAnswer> queryPointsOnce(std::span<const float> xyz);
+  /// The same for coordinates x y z per point (an error unless their count is a multiple of 3).
+  [[nodiscard]] Expected<PointQueryAnswer> queryPoints(std::span<const float> xyz_world);
   [[nodiscard]] Expected<BoxQueryAnswer> queryBox(const Point3f& min, const Point3f& max,
                                                   std::uint32_t max_centers = 0);
   [[nodiscard]] Expected<RayQueryAnswer> castRay(const Point3f& origin, const Point3f& direction,
                                                  float max_range);
-  /// Returns the server's detail message, or its error.
-  [[nodiscard]] Expected<std::string> command(CommandKind kind, const Point3f& min = {0, 0, 0},
-                                              const Point3f& max = {0, 0, 0},
-                                              const std::string& path = {});
+  /// Clears the whole map (a new, empty version). Returns the server's detail message.
+  [[nodiscard]] Expected<std::string> reset();
+  /// Forgets the cells of the box [min, max] (metres, world frame): they become unknown.
+  [[nodiscard]] Expected<std::string> clearBox(const Point3f& min, const Point3f& max);
+  /// Has the server save its snapshot (`name` empty: its configured snapshot, with its
+  /// generations) or write `name` (a plain file name ending .dmap, .bt or .ot, never a path)
+  /// into its export directory.
+  [[nodiscard]] Expected<std::string> save(const std::string& name = {});
   /// The latest status sample (published at 1 Hz, transient-local).
   [[nodiscard]] Expected<ServerStatus> status();
   /// Calls `f` for every map delta received since the last call; returns how many. Needs
@@ -108,25 +110,15 @@ class Client {
   /// Calls `f` for every map event received since the last call; returns how many.
   std::size_t pollEvents(const std::function<void(const MapEventInfo&)>& f);
   /// Fetches the server's map (what a late joiner does): waits until the manifest reaches
-  /// `min_version`, asks for the map (send-map) and rebuilds it from the tiles of one version,
-  /// which it returns with the map. Times out only when tiles stop arriving.
-  [[nodiscard]] Expected<std::pair<std::unique_ptr<GridMap>, std::uint64_t>> fetchMap(
-      std::uint64_t min_version = 0);
+  /// `min_version`, asks for the map (send-map) and rebuilds it from the tiles of one version.
+  /// Times out only when tiles stop arriving.
+  [[nodiscard]] Expected<MapSnapshot> fetchMap(std::uint64_t min_version = 0);
 
  private:
-  struct Dds;
-  explicit Client(const ClientOptions& options);
-  /// A command's reply: the detail message and send-map's counts (CommandReply's sent_*).
-  struct CommandOutcome {
-    std::string detail;
-    std::uint64_t sent_version = 0, sent_tiles = 0, sent_cells = 0;
-  };
-  [[nodiscard]] Expected<CommandOutcome> commandReply(CommandKind kind, const Point3f& min,
-                                                      const Point3f& max, const std::string& path);
-  ClientOptions options_;
-  std::unique_ptr<Dds> dds_;
-  std::uint64_t client_id_;
-  std::uint64_t next_request_ = 1;
+  friend struct ClientAccess;
+  struct Impl;
+  explicit Client(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
 };
 
 }  // namespace densemap

@@ -15,12 +15,26 @@
 #include "densemap/server/latest_wins_queue.hpp"
 #include "densemap/server/sensor_tally.hpp"
 
-namespace densemap {
+namespace densemap::server {
 
 /// The waiting scans of all sensors together: this many times `queue_depth`, beyond which the
 /// sensor with the most scans waiting gives up its oldest; one scan per sensor always fits, up
 /// to SensorTally::kMaxSensors sensors at once (LatestWinsQueue).
 inline constexpr std::size_t kQueueSensorShare = 8;
+
+/// The ingest's settings: the engine's, and how the server runs it.
+struct IngestOptions {
+  PipelineOptions engine;
+  int threads = 2;  // size of the task arena the engine runs in, 1 .. 256
+  /// Scans waiting per sensor id (latest wins per sensor: a full sensor's oldest is dropped);
+  /// all sensors together kQueueSensorShare times as many, one scan per sensor always fitting.
+  /// 4: a 10-Hz sensor's burst after a ~0.4-s stall is absorbed, not dropped. 1 .. 1024.
+  std::size_t queue_depth = 4;
+  /// Bytes (rawScanBytes) the waiting scans may hold in all: beyond it the sensor with the most
+  /// waiting gives up its oldest, else the oldest scan goes (one scan larger than all of it
+  /// still waits alone). 0: no byte budget.
+  std::size_t queue_budget_bytes = std::size_t{256} << 20;
+};
 
 struct PipelineCounters {
   std::uint64_t received = 0;
@@ -52,7 +66,7 @@ class Ingest {
 
   /// An ingest over `initial` (or a new empty map) starting at `initial_version`.
   [[nodiscard]] static Expected<std::unique_ptr<Ingest>> create(
-      const PipelineOptions& options, std::unique_ptr<OccupancyMap> initial = nullptr,
+      const IngestOptions& options, std::unique_ptr<OccupancyMap> initial = nullptr,
       std::uint64_t initial_version = 0);
   ~Ingest();
   Ingest(const Ingest&) = delete;
@@ -92,7 +106,7 @@ class Ingest {
   [[nodiscard]] const PipelineOptions& options() const { return engine_->options(); }
 
  private:
-  Ingest(const PipelineOptions& options, std::unique_ptr<Engine> engine);
+  Ingest(const IngestOptions& options, std::unique_ptr<Engine> engine);
   void run();
   void runCommands();
   void process(const RawScan& raw);
@@ -120,4 +134,4 @@ class Ingest {
   std::thread worker_;
 };
 
-}  // namespace densemap
+}  // namespace densemap::server

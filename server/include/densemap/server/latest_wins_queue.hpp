@@ -12,7 +12,7 @@
 #include <utility>
 #include <vector>
 
-namespace densemap {
+namespace densemap::server {
 
 /// A bounded queue where a push into a full queue drops the OLDEST item (counted): when the
 /// consumer falls behind, it always gets the freshest data and the backlog never grows.
@@ -194,4 +194,4 @@ class LatestWinsQueue {
   bool closed_ = false;
 };
 
-}  // namespace densemap
+}  // namespace densemap::server

@@ -5,9 +5,9 @@
 #include <string>
 #include <vector>
 
-#include "densemap/io/sensor_counters.hpp"
+#include "densemap/wire/server_status.hpp"
 
-namespace densemap {
+namespace densemap::server {
 
 /// Per-sensor counters of the pipeline. At most kMaxSensors ids are kept apart; scans of
 /// further ids are counted under kOtherSensors, so bogus ids cannot grow it without bound.
@@ -29,4 +29,4 @@ class SensorTally {
   std::map<std::string, SensorCounters> by_id_;
 };
 
-}  // namespace densemap
+}  // namespace densemap::server

@@ -16,8 +16,11 @@ namespace densemap::server {
 /// errors naming the file, the line and the reason.
 [[nodiscard]] Expected<proto::ServerConfig> loadServerConfig(const std::filesystem::path& file);
 
-/// Checks values and converts to the pipeline's options.
+/// Checks values and converts to the engine's options (the map, the pipeline's limits).
 [[nodiscard]] Expected<PipelineOptions> pipelineOptions(const proto::ServerConfig& config);
+
+/// Checks values and converts to the ingest's options: the engine's, the arena and the queue.
+[[nodiscard]] Expected<IngestOptions> ingestOptions(const proto::ServerConfig& config);
 
 /// The `security` block's files (each checked readable), or none when there is no block.
 [[nodiscard]] Expected<std::optional<dds::SecurityFiles>> securityFiles(

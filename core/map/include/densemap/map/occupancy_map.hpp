@@ -8,6 +8,7 @@
 
 #include "densemap/geometry/chunk_runner.hpp"
 #include "densemap/geometry/voxel_grid.hpp"
+#include "densemap/map/cell_change.hpp"
 #include "densemap/map/scan_update.hpp"
 #include "densemap/map/sensor_model.hpp"
 
@@ -17,13 +18,6 @@ enum class Backend { kGrid, kOctree };
 
 [[nodiscard]] std::string_view backendName(Backend backend);
 
-/// A cell's value after a change; `known == false` means the cell was erased.
-struct CellChange {
-  VoxelKey key;
-  float log_odds = 0.0F;
-  bool known = true;
-};
-using CellChanges = std::vector<CellChange>;
 
 /// What applying one scan's update did to the map.
 struct ApplyStats {

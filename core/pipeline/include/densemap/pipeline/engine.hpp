@@ -32,16 +32,6 @@ struct PipelineOptions {
   std::optional<kernel::KernelMethod> kernel;
   /// Densify each scan before integration (the upsample stage); std::nullopt: off.
   std::optional<upsample::UpsampleOptions> upsample;
-  // The next three are the server's ingest (densemap/server/ingest.hpp), not the engine's.
-  int threads = 2;  // size of the task arena the ingest runs the engine in
-  /// Scans waiting per sensor id (latest wins per sensor: a full sensor's oldest is dropped);
-  /// all sensors together kQueueSensorShare times as many, one scan per sensor always fitting.
-  /// 4: a 10-Hz sensor's burst after a ~0.4-s stall is absorbed, not dropped.
-  std::size_t queue_depth = 4;
-  /// Bytes (rawScanBytes) the waiting scans may hold in all: beyond it the sensor with the most
-  /// waiting gives up its oldest, else the oldest scan goes (one scan larger than all of it
-  /// still waits alone). 0: no byte budget.
-  std::size_t queue_budget_bytes = std::size_t{256} << 20;
   ScanLimits limits;
   /// Fill IntegrationResult::changes for scans (cell by cell: costs O(changed cells) per
   /// scan). Off by default: readers diff published versions by their written blocks instead.

@@ -6,11 +6,10 @@
 #include <vector>
 
 #include "densemap/geometry/error.hpp"
+#include "densemap/query/cell_state.hpp"
 #include "densemap/query/map_view.hpp"
 
 namespace densemap {
-
-enum class CellState : std::uint8_t { kUnknown = 0, kFree = 1, kOccupied = 2 };
 
 [[nodiscard]] inline CellState cellState(std::optional<float> log_odds) {
   if (!log_odds) return CellState::kUnknown;
@@ -59,12 +58,6 @@ struct PointQueryResult {
 [[nodiscard]] Expected<BoxQueryResult> queryBox(const MapView& view, const Point3f& min,
                                                 const Point3f& max, std::size_t max_cells,
                                                 std::size_t max_centers);
-
-struct RayQueryResult {
-  bool hit = false;
-  Point3f hit_center = Point3f::Zero();  // centre of the first occupied cell
-  float distance = 0.0F;                 // origin to that centre
-};
 
 /// Walks the ray (OctoMap's traversal) from `origin` along `direction` up to `max_range`; the
 /// first occupied cell is the hit. Unknown cells are passed through.

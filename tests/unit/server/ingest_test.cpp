@@ -14,7 +14,7 @@
 #include "densemap/test_support/failing_allocations.hpp"
 #include "densemap/test_support/random_rays.hpp"
 
-namespace densemap {
+namespace densemap::server {
 namespace {
 
 using namespace std::chrono_literals;
@@ -82,8 +82,9 @@ std::size_t mismatchesWithOffline(const MapView& view, const std::vector<RawScan
 }
 
 TEST(Pipeline, PublishedViewEqualsTheOfflineMapAndDeltasReproduceEachVersion) {
-  PipelineOptions options{.resolution_m = 0.2, .max_range_m = 5.0, .threads = 2, .queue_depth = 8};
-  options.collect_changes = true;
+  IngestOptions options{
+      .engine = {.resolution_m = 0.2, .max_range_m = 5.0}, .threads = 2, .queue_depth = 8};
+  options.engine.collect_changes = true;
   auto sut = Ingest::create(options);
   ASSERT_TRUE(sut);
   Published published(**sut);
@@ -129,9 +130,9 @@ TEST(Pipeline, WarmUpLeavesTheMapEmptyAndTheScansMapUnchangedOnBothBackends) {
   // The warm-up's fan goes into a scratch map (MapKind::warmUp): the served map starts empty at
   // version 0 and ends as the offline map of the scans, cell for cell.
   for (const Backend backend : {Backend::kGrid, Backend::kOctree}) {
-    PipelineOptions options{
-        .backend = backend, .resolution_m = 0.2, .max_range_m = 5.0, .threads = 2};
-    options.warm_up = true;
+    IngestOptions options{
+        .engine = {.backend = backend, .resolution_m = 0.2, .max_range_m = 5.0}, .threads = 2};
+    options.engine.warm_up = true;
     auto sut = Ingest::create(options);
     ASSERT_TRUE(sut);
     EXPECT_EQ((*sut)->view()->knownCells(), 0U);
@@ -147,9 +148,10 @@ TEST(Pipeline, WarmUpLeavesTheMapEmptyAndTheScansMapUnchangedOnBothBackends) {
 
 TEST(Pipeline, AKeepRadiusEvictsExactlyWhatTheOfflineMapLosesAndDeltasFollow) {
   // keep_radius_m 3: after each scan, blocks whose centre is more than 3 m from its origin go.
-  PipelineOptions options{.resolution_m = 0.2, .max_range_m = 5.0, .threads = 2, .queue_depth = 8};
-  options.keep_radius_m = 3.0;
-  options.collect_changes = true;
+  IngestOptions options{
+      .engine = {.resolution_m = 0.2, .max_range_m = 5.0}, .threads = 2, .queue_depth = 8};
+  options.engine.keep_radius_m = 3.0;
+  options.engine.collect_changes = true;
   auto sut = Ingest::create(options);
   ASSERT_TRUE(sut);
   Published published(**sut);
@@ -194,13 +196,13 @@ TEST(Pipeline, AKeepRadiusEvictsExactlyWhatTheOfflineMapLosesAndDeltasFollow) {
     previous = next;
   }
   // Eviction needs the grid backend and the log-odds map.
-  PipelineOptions octree = options;
-  octree.backend = Backend::kOctree;
+  IngestOptions octree = options;
+  octree.engine.backend = Backend::kOctree;
   EXPECT_FALSE(Ingest::create(octree));
 }
 
 TEST(Pipeline, FallingBehindDropsOldScansNeverQueuesThem) {
-  auto sut = Ingest::create({.resolution_m = 0.05, .threads = 1, .queue_depth = 2});
+  auto sut = Ingest::create({.engine = {.resolution_m = 0.05}, .threads = 1, .queue_depth = 2});
   ASSERT_TRUE(sut);
   (*sut)->start();
   for (std::uint64_t seq = 1; seq <= 40; ++seq) (*sut)->submit(rawScan(seq, 20000));
@@ -217,10 +219,10 @@ TEST(Pipeline, FallingBehindDropsOldScansNeverQueuesThem) {
 }
 
 TEST(Pipeline, BadScansAreRejectedWithTheirReasonAndLeaveTheMapUnchanged) {
-  auto sut = Ingest::create({.resolution_m = 0.2,
-                             .threads = 2,
-                             .queue_depth = 16,
-                             .limits = {.max_points = 5000, .max_abs_position_m = 100.0}});
+  auto sut = Ingest::create(
+      {.engine = {.resolution_m = 0.2, .limits = {.max_points = 5000, .max_abs_position_m = 100.0}},
+       .threads = 2,
+       .queue_depth = 16});
   ASSERT_TRUE(sut);
   std::vector<RejectReason> reasons;
   std::mutex m;
@@ -260,7 +262,7 @@ TEST(Pipeline, BadScansAreRejectedWithTheirReasonAndLeaveTheMapUnchanged) {
 }
 
 TEST(Pipeline, AnEngineThatThrowsRejectsTheScanAndTheWorkerGoesOn) {
-  auto sut = Ingest::create({.resolution_m = 0.2, .threads = 2, .queue_depth = 16});
+  auto sut = Ingest::create({.engine = {.resolution_m = 0.2}, .threads = 2, .queue_depth = 16});
   ASSERT_TRUE(sut);
   std::atomic<int> announced{0};
   std::atomic<bool> throw_from_publisher{false};
@@ -316,7 +318,7 @@ TEST(Pipeline, AnEngineThatThrowsRejectsTheScanAndTheWorkerGoesOn) {
 }
 
 TEST(Pipeline, CommandsRunBetweenScansAndPublishTheirChanges) {
-  auto sut = Ingest::create({.resolution_m = 0.2, .threads = 2});
+  auto sut = Ingest::create({.engine = {.resolution_m = 0.2}, .threads = 2});
   ASSERT_TRUE(sut);
   (*sut)->start();
   (*sut)->submit(rawScan(1));
@@ -348,11 +350,9 @@ TEST(Pipeline, CommandsRunBetweenScansAndPublishTheirChanges) {
 TEST(Pipeline, KernelMapEvictionEqualsTheOfflineMapMinusTheEvictedBlocks) {
   const auto method = kernel::KernelMethod::kAkimapRays;
   constexpr double kRadius = 3.0;
-  auto sut = Ingest::create({.resolution_m = 0.2,
-                             .max_range_m = 5.0,
-                             .kernel = method,
-                             .threads = 2,
-                             .keep_radius_m = kRadius});
+  auto sut = Ingest::create(
+      {.engine = {.resolution_m = 0.2, .max_range_m = 5.0, .kernel = method, .keep_radius_m = kRadius},
+       .threads = 2});
   ASSERT_TRUE(sut) << sut.error().message;
   (*sut)->start();
   std::vector<RawScan> raws = {rawScan(1, 1500), rawScan(30, 1500)};  // origins 3 m apart
@@ -404,7 +404,8 @@ TEST(Pipeline, KernelMapKindsPublishLogitOfTheOfflineKernelMapAndClearBothStores
                             kernel::KernelMethod::kBgkl, kernel::KernelMethod::kAkimapRays}) {
     const std::string name(kernel::kernelMethodName(method));
     auto sut =
-        Ingest::create({.resolution_m = 0.2, .max_range_m = 5.0, .kernel = method, .threads = 2});
+        Ingest::create({.engine = {.resolution_m = 0.2, .max_range_m = 5.0, .kernel = method},
+                        .threads = 2});
     ASSERT_TRUE(sut) << name;
     (*sut)->start();
     std::vector<RawScan> raws = {rawScan(1, 1500), rawScan(2, 1500)};
@@ -465,7 +466,8 @@ TEST(Pipeline, UpsampleStageIntegratesTheDensifiedScan) {
                                                   {.rows = 61, .cols = 512}, DENSEMAP_ILN_MODEL);
     ASSERT_TRUE(up) << up.error().message;
     auto sut =
-        Ingest::create({.resolution_m = 0.2, .max_range_m = 20.0, .upsample = *up, .threads = 2});
+        Ingest::create({.engine = {.resolution_m = 0.2, .max_range_m = 20.0, .upsample = *up},
+                        .threads = 2});
     ASSERT_TRUE(sut);
     // A 16-beam scan: a sphere of 4 m around the sensor in one sector, 6 m elsewhere.
     RawScan raw;
@@ -498,7 +500,7 @@ TEST(Pipeline, UpsampleStageIntegratesTheDensifiedScan) {
 TEST(Pipeline, RejectsAnUpsampleStageWithMismatchedFieldsOfView) {
   upsample::UpsampleOptions up;
   up.output.top_deg = 20.0;
-  EXPECT_FALSE(Ingest::create({.upsample = up}));
+  EXPECT_FALSE(Ingest::create({.engine = {.upsample = up}}));
 }
 
 TEST(LatestWinsQueue, DropsTheOldestWhenFullAndCountsIt) {
@@ -664,7 +666,7 @@ TEST(SensorTally, KeepsAtMostSixtyFourIdsApartAndCountsTheRestTogether) {
 TEST(Pipeline, OneSensorsBurstNeverPushesOutAnotherSensorsScan) {
   // The worker is busy with front's first scan while rear's scan waits and front floods the
   // queue: front's own older scans are dropped, rear's is integrated.
-  auto sut = Ingest::create({.resolution_m = 0.05, .threads = 1, .queue_depth = 2});
+  auto sut = Ingest::create({.engine = {.resolution_m = 0.05}, .threads = 1, .queue_depth = 2});
   ASSERT_TRUE(sut);
   (*sut)->start();
   auto scan = [](const char* id, std::uint64_t seq) {
@@ -691,7 +693,7 @@ TEST(Pipeline, OneSensorsBurstNeverPushesOutAnotherSensorsScan) {
 TEST(Pipeline, CountsEachSensorsScansAndTheirSeqGaps) {
   // One worker thread on a fine map falls behind: scans are dropped. Every scan of each sensor
   // ends integrated, dropped or rejected, and a skipped seq is a gap of that sensor only.
-  auto sut = Ingest::create({.resolution_m = 0.05, .threads = 1, .queue_depth = 2});
+  auto sut = Ingest::create({.engine = {.resolution_m = 0.05}, .threads = 1, .queue_depth = 2});
   ASSERT_TRUE(sut);
   (*sut)->start();
   std::uint64_t sent_a = 0, sent_b = 0;
@@ -727,4 +729,4 @@ TEST(Pipeline, CountsEachSensorsScansAndTheirSeqGaps) {
 }
 
 }  // namespace
-}  // namespace densemap
+}  // namespace densemap::server

@@ -223,8 +223,8 @@ class ScenarioRun {
       if (client) {
         auto map = (*client)->fetchMap();
         if (map) {
-          j.cells = map->first->knownCells();
-          j.version = map->second;
+          j.cells = map->knownCells();
+          j.version = map->version();
         } else {
           j.error = map.error().message;
         }
