@@ -4,6 +4,7 @@
 
 #include <cstddef>
 #include <limits>
+#include <optional>
 #include <string_view>
 #include <vector>
 
@@ -117,6 +118,25 @@ class Integrator {
     std::vector<std::uint32_t> handed;  // rays whose queued walks were handed over
     std::vector<std::uint32_t> ids;     // a range's rays, for the queued walks
   };
+  struct ScanPlan;
+  // computeUpdate's stages, in order.
+  /// The rays' ends into rays_; the box of their end voxels (none without a valid end).
+  std::optional<KeyBox> findRayEnds(const VoxelGrid& grid, const PointCloud& points_world,
+                                    const Point3f& origin_world);
+  /// The scan's box, stages and levels (and the region's seeds, hit_).
+  ScanPlan planScan(const VoxelGrid& grid, const Point3f& origin_world,
+                    const std::optional<KeyBox>& ends);
+  /// Super rays and the culling region; the region the walks may skip, or null.
+  const CullingRegion* groupAndCull(const OccupancyMap& map, const Point3f& origin_world,
+                                    const ScanPlan& plan, ScanStats& stats);
+  /// Marks one level's rays into the workers' marks.
+  void markLevel(const VoxelGrid& grid, const Point3f& origin_world, const ScanPlan& plan,
+                 std::size_t level, const CullingRegion* region);
+  /// Grows the region by the voxels the workers marked free (adding the growth's time to
+  /// `ms_grow`); the region, or null when empty.
+  const CullingRegion* growRegion(double& ms_grow);
+  /// The workers' marks into `update`; their counts into `stats`.
+  void mergeInto(ScanUpdate& update, ScanStats& stats);
   IntegratorOptions options_;
   std::vector<RayEnd> rays_;
   std::vector<VoxelKey> hit_;
