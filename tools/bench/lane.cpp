@@ -4,7 +4,7 @@
 #include <cstring>
 
 #include "densemap/map/octree_map.hpp"
-#include "densemap/map/update_rule.hpp"
+#include "densemap/traversal/update_rule.hpp"
 
 namespace densemap::bench {
 
@@ -75,12 +75,11 @@ Integrate makeIntegrator(const std::string& method, const Options& o) {
   }
   // `method@nogrow`: the culling region from the map only (no growth by the scan's marks);
   // `method@grow=A:B:..`: these strides instead of --grow-strides; `method@single`: walks one
-  // at a time as they come (IntegratorOptions::queue_walks off); `method@wide` / `@four` /
-  // `@fixed` / `@sixteen` / `@scalar`: the queued walks eight at a time in AVX-512 lanes of
-  // doubles / four in AVX2 lanes of doubles / eight in AVX2 lanes of fixed point / sixteen in
-  // AVX-512 lanes of fixed point / one at a time (WalkKernel kWideEight / kFour / kFixedEight /
-  // kFixedSixteen / kScalar; the default, kBest, is kFixedSixteen's with AVX-512, else
-  // kFixedEight's).
+  // at a time as they come (IntegratorOptions::queue_walks off); `method@four` / `@fixed` /
+  // `@sixteen` / `@scalar`: the queued walks four at a time in AVX2 lanes of doubles / eight in
+  // AVX2 lanes of fixed point / sixteen in AVX-512 lanes of fixed point / one at a time
+  // (WalkKernel kFour / kFixedEight / kFixedSixteen / kScalar; the default, kBest, is
+  // kFixedSixteen's with AVX-512, else kFixedEight's).
   const std::size_t at = method.find('@');
   std::vector<std::size_t> strides = o.grow_strides;
   bool queue_walks = true;
@@ -91,8 +90,6 @@ Integrate makeIntegrator(const std::string& method, const Options& o) {
       queue_walks = false;
     } else if (variant == "four") {
       kernel = DenseMarks::WalkKernel::kFour;
-    } else if (variant == "wide") {
-      kernel = DenseMarks::WalkKernel::kWideEight;
     } else if (variant == "fixed") {
       kernel = DenseMarks::WalkKernel::kFixedEight;
     } else if (variant == "sixteen") {

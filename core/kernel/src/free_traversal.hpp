@@ -10,7 +10,7 @@
 #include <Eigen/Core>
 
 #include "densemap/geometry/voxel_grid.hpp"
-#include "densemap/map/block_layout.hpp"
+#include "densemap/geometry/block_layout.hpp"
 
 namespace densemap::kernel {
 

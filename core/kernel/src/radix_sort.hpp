@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "densemap/geometry/voxel_grid.hpp"
-#include "densemap/map/block_layout.hpp"
+#include "densemap/geometry/block_layout.hpp"
 
 namespace densemap::kernel {
 

@@ -1,3 +1,4 @@
+#include "densemap/map/cell_update.hpp"
 #include "densemap/map/grid_map.hpp"
 
 #include <atomic>
@@ -9,7 +10,7 @@
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
 
-#include "densemap/geometry/ray_traversal.hpp"  // hasWideLanes
+#include "densemap/traversal/ray_traversal.hpp"  // hasWideLanes
 #define DENSEMAP_WIDE_APPLY 1
 #endif
 

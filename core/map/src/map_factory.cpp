@@ -14,14 +14,6 @@ Expected<Backend> parseBackend(std::string_view name) {
   return makeError("unknown map backend '" + std::string(name) + "' (expected grid or octree)");
 }
 
-std::string_view ruleName(UpdateRule rule) { return rule == UpdateRule::kSet ? "set" : "per_ray"; }
-
-Expected<UpdateRule> parseUpdateRule(std::string_view name) {
-  if (name == "set") return UpdateRule::kSet;
-  if (name == "per_ray") return UpdateRule::kPerRay;
-  return makeError("unknown update rule '" + std::string(name) + "' (expected set or per_ray)");
-}
-
 Expected<std::unique_ptr<OccupancyMap>> makeMap(Backend backend, double resolution_m,
                                                 const SensorModel& model) {
   // 1 mm .. 100 m: below, a 16-bit key covers under 66 m; above, a voxel is not a map.

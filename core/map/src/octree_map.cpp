@@ -1,3 +1,4 @@
+#include "densemap/map/cell_update.hpp"
 #include "densemap/map/octree_map.hpp"
 
 namespace densemap {

@@ -5,8 +5,8 @@
 #include <limits>
 #include <string>
 
-#include "densemap/geometry/ray_traversal.hpp"
 #include "densemap/query/block_accessor.hpp"
+#include "densemap/traversal/ray_traversal.hpp"
 
 namespace densemap {
 

@@ -55,7 +55,7 @@ Expected<IntegrationMethod> parseIntegrationMethod(std::string_view name) {
 /// One scan's plan: its box, which stages run, and the levels its rays are marked in.
 struct Integrator::ScanPlan {
   std::optional<VoxelKey> origin_key;
-  KeyBox box{};  // the sensor's voxel and the rays' end voxels: every traversal's box
+  KeyBox box{};               // the sensor's voxel and the rays' end voxels: every traversal's box
   bool grouping = false;      // super rays
   bool build_region = false;  // a culling region
   bool dense = false;         // per-worker dense marks over `box` (kSet)
@@ -65,8 +65,7 @@ struct Integrator::ScanPlan {
   std::vector<std::size_t> strides;  // level l marks the rays at multiples of strides[l]
 };
 
-std::optional<KeyBox> Integrator::findRayEnds(const VoxelGrid& grid,
-                                              const PointCloud& points_world,
+std::optional<KeyBox> Integrator::findRayEnds(const VoxelGrid& grid, const PointCloud& points_world,
                                               const Point3f& origin_world) {
   // Each range's box of end voxels, joined under a lock.
   rays_.resize(points_world.size());
@@ -155,9 +154,8 @@ Integrator::ScanPlan Integrator::planScan(const VoxelGrid& grid, const Point3f& 
   return plan;
 }
 
-const CullingRegion* Integrator::groupAndCull(const OccupancyMap& map,
-                                              const Point3f& origin_world, const ScanPlan& plan,
-                                              ScanStats& stats) {
+const CullingRegion* Integrator::groupAndCull(const OccupancyMap& map, const Point3f& origin_world,
+                                              const ScanPlan& plan, ScanStats& stats) {
   const VoxelGrid& grid = map.grid();
   double ms_region_only = 0;
   const auto group = [&] {
@@ -193,9 +191,8 @@ const CullingRegion* Integrator::groupAndCull(const OccupancyMap& map,
   return region_.size() != 0 ? &region_ : nullptr;
 }
 
-void Integrator::markLevel(const VoxelGrid& grid, const Point3f& origin_world,
-                           const ScanPlan& plan, std::size_t level,
-                           const CullingRegion* region) {
+void Integrator::markLevel(const VoxelGrid& grid, const Point3f& origin_world, const ScanPlan& plan,
+                           std::size_t level, const CullingRegion* region) {
   const std::size_t stride = plan.strides[level];
   const std::size_t previous = level == 0 ? 0 : plan.strides[level - 1];
   const auto mark_one = [&](std::size_t i, auto& sink, Local& local) {
@@ -242,8 +239,8 @@ void Integrator::markLevel(const VoxelGrid& grid, const Point3f& origin_world,
           markRaysCulledQueued(grid, origin_world, rays_.data(), idsOf(range, local.ids), *region,
                                local.scratch, sink, local.counts, *plan.origin_key);
           local.handed.clear();
-          const DenseMarks::BackWalkCounts walked = local.dense.markQueuedBack(
-              region->frameMasks(), local.handed, options_.walk_kernel);
+          const DenseMarks::BackWalkCounts walked =
+              local.dense.markQueuedBack(region->frameMasks(), local.handed, options_.walk_kernel);
           local.counts.visits += walked.visits;
           local.counts.culled += walked.culled;
           for (const std::uint32_t i : local.handed) {
@@ -328,8 +325,8 @@ ScanStats Integrator::computeUpdate(const OccupancyMap& map, const PointCloud& p
   for (Local& local : locals_) {
     local.update.reset(options_.rule);
     local.counts = {};
-    local.dense_ok = plan.dense && local.dense.reset(plan.box.min, plan.box.max,
-                                                     options_.dense_marks_max_blocks);
+    local.dense_ok = plan.dense &&
+                     local.dense.reset(plan.box.min, plan.box.max, options_.dense_marks_max_blocks);
   }
   std::size_t visits_before_later = 0, culled_before_later = 0;  // after level 0
   double ms_grow = 0;

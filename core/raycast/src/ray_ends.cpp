@@ -4,7 +4,7 @@
 #include <bit>
 #include <cstdint>
 
-#include "densemap/geometry/ray_traversal.hpp"  // hasFourLanes
+#include "densemap/traversal/ray_traversal.hpp"  // hasFourLanes
 
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>

@@ -9,7 +9,7 @@
 #include <fstream>
 #include <sstream>
 
-#include "densemap/geometry/ray_traversal.hpp"
+#include "densemap/traversal/ray_traversal.hpp"
 #include "densemap/io/file_bytes.hpp"
 #include "densemap/io/octomap_export.hpp"
 #include "densemap/map/octree_map.hpp"

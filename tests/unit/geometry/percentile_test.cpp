@@ -1,4 +1,4 @@
-// Issue 30: one percentile definition (nearest rank) for the server's status, the load tool's
+// One percentile definition (nearest rank) for the server's status, the load tool's
 // report, the benchmarks and the CLI's replay summary.
 #include "densemap/geometry/percentile.hpp"
 

@@ -1,4 +1,4 @@
-// FreeTraversal (issue 29): each capsule's voxels and their kernel values, against a plain
+// FreeTraversal: each capsule's voxels and their kernel values, against a plain
 // evaluation of every voxel of its box.
 
 #include <gtest/gtest.h>
@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "densemap/kernel/kernel_function.hpp"
-#include "densemap/map/block_layout.hpp"
+#include "densemap/geometry/block_layout.hpp"
 #include "free_traversal.hpp"
 #include "segment_voxels.hpp"
 

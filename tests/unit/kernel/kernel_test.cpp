@@ -11,7 +11,7 @@
 #include <set>
 #include <vector>
 
-#include "densemap/geometry/ray_traversal.hpp"
+#include "densemap/traversal/ray_traversal.hpp"
 #include "densemap/kernel/bandwidth.hpp"
 #include "densemap/kernel/kernel_function.hpp"
 #include "densemap/kernel/kernel_map.hpp"
@@ -217,7 +217,7 @@ TEST(FreeTraversal, ResultDoesNotDependOnTheThreadCount) {
   EXPECT_EQ(one, build(2));  // bit for bit: fixed-point sums do not depend on the order
 }
 
-// Issue 29: rays whose hits share a voxel give one free capsule (free_bundles).
+// Rays whose hits share a voxel give one free capsule (free_bundles).
 KernelMap mapOf(const PointCloud& points, bool bundles, double resolution = 0.1) {
   KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
   options.max_range = 15.0;
@@ -285,7 +285,7 @@ TEST(FreeBundles, RaysEndingInOneVoxelKeepTheirEvidenceAndTheMapsShape) {
   expectTheSameShape(cellsOf(bundled), cellsOf(each));
 }
 
-// Issue 29's fifth stop: where voxels are finer than free_bundle_m, the rays whose hits share
+// Where voxels are finer than free_bundle_m, the rays whose hits share
 // a cube of that edge give one capsule: far fewer capsule visits at 0.1 m, the same evidence per
 // metre of ray and the same map's shape; a cube no larger than a voxel is the voxel, bit for bit.
 TEST(FreeBundles, CubesBundleTheRaysOfNeighbouringVoxels) {
@@ -338,7 +338,7 @@ TEST_P(KernelMapMethods, RowStretchesAndPointKernelsGiveTheWholeBoxesMapBitForBi
   }
 }
 
-// Issue 29: akimap_rays' hit kernels read from tables (HitStencils) give the map of the same
+// akimap_rays' hit kernels read from tables (HitStencils) give the map of the same
 // kernels evaluated cell by cell at their sub-positions (the plain path), to rounding.
 TEST(HitStencils, TabledHitKernelsGiveTheEvaluatedMap) {
   for (const double steps : {1.0, 2.0, 4.0}) {
@@ -472,7 +472,7 @@ INSTANTIATE_TEST_SUITE_P(All, KernelMapMethods,
                            return std::string(kernelMethodName(param_info.param));
                          });
 
-// Issue 29: akimap_rays' free evidence by one capsule per ray. Rays cut at max range carry free
+// akimap_rays' free evidence by one capsule per ray. Rays cut at max range carry free
 // evidence only (no hit, no tip, no occupied kernel), so each voxel's beta is exactly the sum of
 // its distances' kernels: checked against a plain reference (every addressable voxel of each
 // ray's box, sparseKernel, double sums), for rays from `origin`.
@@ -604,7 +604,7 @@ TEST(FreeTraversal, AgreesWithTheSegmentKernelsOnARoom) {
   }
 }
 
-// Issue 29: a kernel map evicts whole blocks (evidence and memory); what stays is the map
+// A kernel map evicts whole blocks (evidence and memory); what stays is the map
 // without those blocks, bit for bit.
 TEST(KernelMapEviction, KeepsExactlyTheBlocksItIsToldToKeep) {
   KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
@@ -624,7 +624,7 @@ TEST(KernelMapEviction, KeepsExactlyTheBlocksItIsToldToKeep) {
   EXPECT_LT(evicted.knownCells(), whole.knownCells());
 }
 
-// Issue 29 (memory): a scan's buffers are released as its stages end, so between scans a kernel
+// A scan's buffers are released as its stages end, so between scans a kernel
 // map holds its evidence and nothing else: what a map restored from that evidence (which never
 // integrated a scan) holds.
 TEST(KernelMapMemory, BetweenScansAMapHoldsOnlyItsEvidence) {
@@ -641,7 +641,7 @@ TEST(KernelMapMemory, BetweenScansAMapHoldsOnlyItsEvidence) {
   }
 }
 
-// Issue 29: every evidence block holds a known cell. A block that a kernel's box overlapped but
+// Every evidence block holds a known cell. A block that a kernel's box overlapped but
 // none of whose cells it reached was kept, empty, where the published map (and so eviction)
 // never saw it: on a long drive they piled up (RSS +3.7 MiB per 100 scans at a flat map).
 TEST(KernelMapMemory, EveryEvidenceBlockHoldsAKnownCell) {
@@ -657,7 +657,7 @@ TEST(KernelMapMemory, EveryEvidenceBlockHoldsAKnownCell) {
   EXPECT_EQ(map.knownCells(), 0U);
 }
 
-// Issue 29 (one copy): a kernel map whose evidence lives in a GridMap's block entries holds the
+// A kernel map whose evidence lives in a GridMap's block entries holds the
 // same evidence as one with a store of its own, bit for bit, through a published version; the
 // grid's eviction and reset take the evidence with the cells (no second index to keep in step),
 // and the grid's memory counts it.

@@ -211,7 +211,7 @@ std::map<std::uint64_t, block::BlockMask> fullyFreeIn(const OccupancyMap& map,
   return out;
 }
 
-// Issue 31: countBits takes the POPCNT instruction where the processor has it; every variant
+// countBits takes the POPCNT instruction where the processor has it; every variant
 // counts what a bit-by-bit loop counts.
 TEST(BlockLayout, CountBitsEqualsABitByBitCount) {
   std::mt19937_64 rng(7);
@@ -257,7 +257,7 @@ TEST(BlockLayout, BlockAndCellOfAPackedKeyAreThoseOfItsKey) {
 }
 
 TEST(OccupancyMaps, FullyFreeBlocksInABoxAreTheWholeMapsBlocksInsideIt) {
-  // Issue 30: the culling region asks for the blocks of its box; the grid answers from its
+  // The culling region asks for the blocks of its box; the grid answers from its
   // region index, whatever the box's size against the map's.
   std::mt19937 rng(31);
   GridMap grid(0.1, SensorModel{});

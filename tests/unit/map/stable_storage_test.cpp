@@ -7,7 +7,7 @@
 #include <set>
 #include <vector>
 
-#include "densemap/map/block_layout.hpp"
+#include "densemap/geometry/block_layout.hpp"
 #include "densemap/map/region_index.hpp"
 #include "densemap/map/stable_vector.hpp"
 

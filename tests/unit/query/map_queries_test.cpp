@@ -51,7 +51,7 @@ TEST(MapQueries, BoxCountsCellsByStateAndRefusesBadBoxes) {
   EXPECT_FALSE(queryBox(*view, Point3f(0, 0, 0), Point3f(1, 1, std::nanf("")), 1000, 10));
 }
 
-// Issue 28 (found by fuzz_queries): a ray request whose tiny range crosses voxel borders at
+// A ray request whose tiny range crosses voxel borders at
 // denormal coordinates must end (it hung a query thread).
 TEST(MapQueries, ATinyRayAcrossVoxelBordersEnds) {
   const auto view = wallView();
@@ -61,7 +61,7 @@ TEST(MapQueries, ATinyRayAcrossVoxelBordersEnds) {
   EXPECT_FALSE(r->hit);
 }
 
-// Issue 30: the point query lives with the box and ray queries (the server only wraps it).
+// The point query lives with the box and ray queries (the server only wraps it).
 TEST(MapQueries, PointsGetTheirCellsAndUnknownForNonFiniteOrFarPoints) {
   const auto view = wallView();
   const float inf = std::numeric_limits<float>::infinity();

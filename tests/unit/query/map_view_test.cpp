@@ -217,7 +217,7 @@ TEST(MapView, DroppedBlocksLeaveNewVersionsAndStayInHeldOnesThroughCompaction) {
   EXPECT_LE(sut.store()->entryCount(), 2 * with_contents + 4096);
 }
 
-// Issue 29 (one copy): a dense map's evidence lives in its blocks' entries: a drop takes it, a
+// A dense map's evidence lives in its blocks' entries: a drop takes it, a
 // compaction keeps it (with contents or without) and leaves out the entries that have neither.
 TEST(BlockStore, EvidenceGoesWithDropsAndSurvivesCompaction) {
   BlockStore store;

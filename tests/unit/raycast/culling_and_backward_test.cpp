@@ -9,8 +9,9 @@
 #include <random>
 #include <set>
 
-#include "densemap/geometry/ray_traversal.hpp"
-#include "densemap/map/dense_marks.hpp"
+#include "densemap/traversal/backward_traversal.hpp"
+#include "densemap/traversal/ray_traversal.hpp"
+#include "densemap/traversal/dense_marks.hpp"
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_diff.hpp"
 #include "densemap/raycast/culling_region.hpp"
@@ -250,7 +251,7 @@ TEST(TraverseRay, WideStartsAreTheScalarStartsBitForBit) {
 // leaving the box included (those are not queued), in batches of any size.
 TEST(DenseMarks, QueuedWalksMarkAsTheHashInLanesAndOneByOne) {
   const VoxelGrid grid(0.2);
-  for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kWideEight,
+  for (const auto kernel : {DenseMarks::WalkKernel::kBest,
                             DenseMarks::WalkKernel::kFour, DenseMarks::WalkKernel::kFixedEight,
                             DenseMarks::WalkKernel::kFixedSixteen,
                             DenseMarks::WalkKernel::kScalar}) {
@@ -312,7 +313,7 @@ TEST(DenseMarks, QueuedWalksBreakExactTiesAsTheCountedLoop) {
   std::mt19937 rng(11);
   std::uniform_int_distribution<int> lattice(-40, 40), scale(3, 40), pick(0, 5);
   std::size_t tied = 0;
-  for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kWideEight,
+  for (const auto kernel : {DenseMarks::WalkKernel::kBest,
                             DenseMarks::WalkKernel::kFour, DenseMarks::WalkKernel::kFixedEight,
                             DenseMarks::WalkKernel::kFixedSixteen,
                             DenseMarks::WalkKernel::kScalar}) {
@@ -695,7 +696,7 @@ TEST(DenseMarks, QueuedBackwardWalksMarkAndCountAsMarkRayCulled) {
     // (The rays' ends not excluded: the region need not be exact for the walks, only shared.)
     region.build(map, o, KeyBox{lo, hi}, {}, &frame);
     ASSERT_GT(region.size(), 1000U);
-    for (const auto kernel : {DenseMarks::WalkKernel::kBest, DenseMarks::WalkKernel::kWideEight,
+    for (const auto kernel : {DenseMarks::WalkKernel::kBest,
                               DenseMarks::WalkKernel::kFour, DenseMarks::WalkKernel::kFixedEight,
                               DenseMarks::WalkKernel::kFixedSixteen,
                               DenseMarks::WalkKernel::kScalar}) {
@@ -768,7 +769,7 @@ TEST(CullingRegion, IsEmptyWhenTheSensorsVoxelIsNotFullyFreeAndBoxesFitTheBudget
   EXPECT_GT(voxels, 500'000U);
 }
 
-// Issue 28: a scan with a return ~1e-30 m from the sensor, across a voxel border (a sensor at a
+// A scan with a return ~1e-30 m from the sensor, across a voxel border (a sensor at a
 // grid plane), integrates with every method instead of hanging the pipeline (OctoMap itself
 // loops forever on it, so the methods are compared with each other).
 TEST(AllMethods, AReturnTooCloseForAFloatLengthDoesNotHang) {

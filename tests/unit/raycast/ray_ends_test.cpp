@@ -8,7 +8,7 @@
 #include <random>
 #include <vector>
 
-#include "densemap/geometry/ray_traversal.hpp"
+#include "densemap/traversal/ray_traversal.hpp"
 
 namespace densemap {
 namespace {

@@ -1,4 +1,4 @@
-// The paper-like benchmark scenes and the dense-oracle labels (issue 5's oracle protocol).
+// The paper-like benchmark scenes and the dense-oracle labels (the oracle protocol).
 #include <gtest/gtest.h>
 
 #include <fstream>

@@ -14,7 +14,7 @@
 #include "densemap/geometry/error.hpp"
 #include "densemap/geometry/voxel_grid.hpp"
 #include "densemap/kernel/occupancy_samples.hpp"
-#include "densemap/map/block_layout.hpp"
+#include "densemap/geometry/block_layout.hpp"
 #include "densemap/map/block_store.hpp"
 
 namespace densemap::kernel {

@@ -8,7 +8,7 @@
 #include <unordered_map>
 #include <vector>
 
-#include "densemap/map/block_layout.hpp"
+#include "densemap/geometry/block_layout.hpp"
 #include "densemap/map/region_index.hpp"
 #include "densemap/map/stable_vector.hpp"
 #include "densemap/map/voxel_block.hpp"

@@ -9,7 +9,7 @@
 #include "densemap/geometry/chunk_runner.hpp"
 #include "densemap/geometry/voxel_grid.hpp"
 #include "densemap/map/cell_change.hpp"
-#include "densemap/map/scan_update.hpp"
+#include "densemap/traversal/scan_update.hpp"
 #include "densemap/map/sensor_model.hpp"
 
 namespace densemap {

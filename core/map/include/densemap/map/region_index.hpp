@@ -4,7 +4,7 @@
 #include <cstdint>
 #include <unordered_map>
 
-#include "densemap/map/block_layout.hpp"
+#include "densemap/geometry/block_layout.hpp"
 #include "densemap/map/stable_vector.hpp"
 
 namespace densemap {

@@ -3,7 +3,7 @@
 #include <array>
 #include <cstdint>
 
-#include "densemap/map/block_layout.hpp"
+#include "densemap/geometry/block_layout.hpp"
 
 namespace densemap {
 

@@ -3,7 +3,7 @@
 #include <cstdint>
 #include <optional>
 
-#include "densemap/map/block_layout.hpp"
+#include "densemap/geometry/block_layout.hpp"
 #include "densemap/query/map_view.hpp"
 
 namespace densemap {

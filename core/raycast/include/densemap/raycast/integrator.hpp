@@ -114,7 +114,7 @@ class Integrator {
     MarkCounts counts;
     BackwardScratch scratch;
     DenseMarks dense;
-    bool dense_ok = false;  // `dense` covers this scan's box
+    bool dense_ok = false;              // `dense` covers this scan's box
     std::vector<std::uint32_t> handed;  // rays whose queued walks were handed over
     std::vector<std::uint32_t> ids;     // a range's rays, for the queued walks
   };

@@ -9,9 +9,10 @@
 #include <type_traits>
 #include <utility>
 
-#include "densemap/geometry/ray_traversal.hpp"
-#include "densemap/map/dense_marks.hpp"
-#include "densemap/map/scan_update.hpp"
+#include "densemap/traversal/backward_traversal.hpp"
+#include "densemap/traversal/ray_traversal.hpp"
+#include "densemap/traversal/dense_marks.hpp"
+#include "densemap/traversal/scan_update.hpp"
 
 namespace densemap {
 

@@ -6,7 +6,7 @@
 #include "densemap/geometry/error.hpp"
 #include "densemap/geometry/point_cloud.hpp"
 #include "densemap/geometry/voxel_grid.hpp"
-#include "densemap/map/scan_update.hpp"
+#include "densemap/traversal/scan_update.hpp"
 #include "densemap/sim/lidar_model.hpp"
 
 namespace densemap {

@@ -1,4 +1,4 @@
-#include "densemap/geometry/ray_traversal.hpp"
+#include "densemap/traversal/ray_traversal.hpp"
 
 #include <gtest/gtest.h>
 #include <octomap/OcTree.h>
@@ -67,7 +67,7 @@ TEST(RayTraversal, LongRaysMatchOctomap) {
   expectSameAsOctomap(0.2, 100.0, RayKind::kOnFaces, 20000, 98);
 }
 
-// Issue 28 (found by fuzzing the queries): a ray of ~1e-23 m across a voxel border has a float
+// A ray of ~1e-23 m across a voxel border has a float
 // length of 0; OctoMap's loop never ends on it (tDelta 0). It visits nothing, as a ray inside
 // one voxel, forward and backward.
 TEST(RayTraversal, ARayTooShortForAFloatLengthAcrossABorderVisitsNothing) {

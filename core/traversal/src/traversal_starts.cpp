@@ -5,7 +5,7 @@
 #include <cstring>
 #include <limits>
 
-#include "densemap/geometry/ray_traversal.hpp"
+#include "densemap/traversal/ray_traversal.hpp"
 
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>

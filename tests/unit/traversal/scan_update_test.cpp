@@ -1,6 +1,6 @@
-#include "densemap/map/scan_update.hpp"
+#include "densemap/traversal/scan_update.hpp"
 
-#include "densemap/map/dense_marks.hpp"
+#include "densemap/traversal/dense_marks.hpp"
 
 #include <gtest/gtest.h>
 

@@ -8,8 +8,8 @@
 #include <utility>
 #include <vector>
 
-#include "densemap/map/block_layout.hpp"
-#include "densemap/map/update_rule.hpp"
+#include "densemap/geometry/block_layout.hpp"
+#include "densemap/traversal/update_rule.hpp"
 
 namespace densemap {
 

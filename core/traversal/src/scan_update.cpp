@@ -1,4 +1,4 @@
-#include "densemap/map/scan_update.hpp"
+#include "densemap/traversal/scan_update.hpp"
 
 #include <algorithm>
 

@@ -1,4 +1,4 @@
-#include "densemap/map/dense_marks.hpp"
+#include "densemap/traversal/dense_marks.hpp"
 
 #include <algorithm>
 #include <bit>
@@ -129,8 +129,8 @@ void DenseMarks::flushAllInto(std::span<DenseMarks* const> others, ScanUpdate& u
     same.push_back(other);
   }
   // In the box's block order (x fastest, then y, then z): the map's apply reads neighbouring
-  // blocks one after the other, which it does faster than in the walks' order (BALM 0.1 m, one
-  // thread: 8.3 ms a scan against 15.1-15.9 for the lanes' interleaved order).
+  // blocks one after the other, which it does about twice as fast as in the lanes' interleaved
+  // order.
   orderTouched(runner);
   // Chunks of the list in one pass: the others' marks ORed in (and cleared there), then the
   // blocks holding marks written out (a walk may enter a block and stop before marking) from
