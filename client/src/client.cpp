@@ -10,13 +10,13 @@
 
 #include "client_parts.hpp"
 #include "densemap/client/testing.hpp"
-#include "map_snapshot_parts.hpp"
 #include "densemap/query/version_delta.hpp"
 #include "densemap/wire/dds.hpp"
 #include "densemap/wire/delta_wire.hpp"
 #include "densemap/wire/status.hpp"
 #include "densemap/wire/topics.hpp"
 #include "densemap_msgs.h"
+#include "map_snapshot_parts.hpp"
 
 namespace densemap {
 
@@ -235,7 +235,7 @@ Expected<PointQueryAnswer> Client::Impl::queryPointsOnce(std::span<const float> 
 }
 
 Expected<BoxQueryAnswer> Client::Impl::queryBox(const Point3f& min, const Point3f& max,
-                                          std::uint32_t max_centers) {
+                                                std::uint32_t max_centers) {
   densemap_msgs_BboxQueryRequest req{};
   req.id = {client_id_, next_request_++};
   copy3(req.min, min);
@@ -268,7 +268,7 @@ Expected<BoxQueryAnswer> Client::Impl::queryBox(const Point3f& min, const Point3
 }
 
 Expected<RayQueryAnswer> Client::Impl::castRay(const Point3f& origin, const Point3f& direction,
-                                         float max_range) {
+                                               float max_range) {
   densemap_msgs_RayQueryRequest req{};
   req.id = {client_id_, next_request_++};
   copy3(req.origin, origin);
@@ -296,8 +296,8 @@ Expected<RayQueryAnswer> Client::Impl::castRay(const Point3f& origin, const Poin
   return answer;
 }
 
-Expected<std::string> Client::Impl::command(dds::CommandKind kind, const Point3f& min, const Point3f& max,
-                                      const std::string& path) {
+Expected<std::string> Client::Impl::command(dds::CommandKind kind, const Point3f& min,
+                                            const Point3f& max, const std::string& path) {
   auto outcome = commandReply(kind, min, max, path);
   if (!outcome) return std::unexpected(outcome.error());
   return outcome->detail;

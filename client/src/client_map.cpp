@@ -1,10 +1,10 @@
 #include <thread>
 
 #include "client_parts.hpp"
-#include "map_snapshot_parts.hpp"
 #include "densemap/query/version_delta.hpp"
 #include "densemap/wire/delta_wire.hpp"
 #include "densemap_msgs.h"
+#include "map_snapshot_parts.hpp"
 
 namespace densemap {
 

@@ -6,9 +6,9 @@
 #include <thread>
 
 #include "cli_support.hpp"
-#include "densemap/query/map_queries.hpp"
 #include "densemap/io/octomap_export.hpp"
 #include "densemap/io/png_writer.hpp"
+#include "densemap/query/map_queries.hpp"
 #include "densemap/store/snapshot.hpp"
 
 namespace densemap::cli {
@@ -183,8 +183,7 @@ int MapCommands::run(Client& client) {
     auto saved = fetched->save(snapshot_out_);
     if (!saved) return fail(saved.error().message);
     std::printf("wrote %s: %zu cells, map version %llu, %zu bytes\n", snapshot_out_.c_str(),
-                fetched->knownCells(), static_cast<unsigned long long>(fetched->version()),
-                *saved);
+                fetched->knownCells(), static_cast<unsigned long long>(fetched->version()), *saved);
     return 0;
   }
   if (status_->parsed()) return statusCommand(client, watch_);

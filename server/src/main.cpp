@@ -264,8 +264,8 @@ void printValid(const std::string& config_path, const densemap::proto::ServerCon
       "densemap-server: %s is valid: %s backend, %s map at %g m, %d threads, DDS domain "
       "%u on %s%s, snapshot %s\n",
       config_path.c_str(), config.map().backend().c_str(), config.map().kind().c_str(),
-      options.engine.resolution_m, options.threads, service.domain_id, service.network_interface.c_str(),
-      service.security ? " with DDS Security" : "",
+      options.engine.resolution_m, options.threads, service.domain_id,
+      service.network_interface.c_str(), service.security ? " with DDS Security" : "",
       snapshot.empty() ? "off" : snapshot.string().c_str());
 }
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 32's foreign-vendor test: a Fast DDS robot (PointCloud2 + TF) and a late Fast DDS viewer
+# The foreign-vendor test: a Fast DDS robot (PointCloud2 + TF) and a late Fast DDS viewer
 # (/octomap_binary, /projected_map) against densemap-server, in each mode a ROS user may run:
 # UDP alone or with Fast DDS's shared memory beside it, clouds best effort or reliable. Each
 # mode: a fresh server (ROS face on, loopback, its own domain); every cloud integrated; the
@@ -44,7 +44,7 @@ for transport in udp udp+shm; do
     echo "$mode: $(grep '^viewer:' "$out/peer.txt"); $(grep 'differing' "$out/compare.txt")"
   done
 done
-# A robot started first (issue 32, item 1): its /tf_static is written before the server joins;
+# A robot started first: its /tf_static is written before the server joins;
 # Fast DDS answers a late reader's request for it only at its next heartbeat (3 s), and the
 # clouds wait for it (ros2.tf_wait_s, 5 s): none may be lost.
 out="$dir/robot-first"

@@ -1,5 +1,5 @@
 // A ROS 2 robot and viewer on eProsima Fast DDS (ROS 2's default middleware), against
-// densemap-server (issue 32: a foreign vendor, not our own Cyclone participants agreeing with
+// densemap-server (a foreign vendor, not our own Cyclone participants agreeing with
 // themselves). Types from idl/ros2 by fastddsgen; loopback only (UDPv4 to 127.0.0.1, optionally
 // Fast DDS's shared memory beside it), initial peers 127.0.0.1, no multicast sent.
 //   robot:  /tf_static (map -> odom, base_link -> lidar), then per scan /tf (odom -> base_link)

@@ -1,4 +1,4 @@
-// A query request as the server holds it once DDS has decoded it (issue 28: any floats, any
+// A query request as the server holds it once DDS has decoded it (any floats, any
 // lengths, any counts): point batches, boxes and rays against a small map, through the same
 // functions the server answers with (core/pipeline map_queries). Nothing may crash, hang or
 // allocate beyond the request's own size and the configured limits.

@@ -107,16 +107,13 @@ TEST(BoundedMemory, ALongDriveWithAKeepRadiusKeepsRssFlatWithoutItRssGrows) {
   EXPECT_GT(static_cast<double>(u.back()), 1.3 * static_cast<double>(u.front()));
 }
 
-// Issue 29: a dense map evicts with the grid, so a kernel map kind keeps the same promise: flat
+// A dense map evicts with the grid, so a kernel map kind keeps the same promise: flat
 // RSS.
 TEST(BoundedMemory, ADenseMapWithAKeepRadiusKeepsRssFlat) {
   test::TempDir dir;
-  // The issue's figure: RSS within 10% over the second half (1,000 scans: 93.9 .. 95.7 MiB;
-  // 300 scans: 92.0 .. 93.4). Before stop 41 the kernel map kept the blocks that a kernel's box
-  // overlapped without reaching a cell, which eviction never saw: RSS crept 3.7 MiB per 100
-  // scans (121 .. 138 MiB over the second half of 1,000; KernelMapMemory's unit test guards
-  // that), and this gate allowed 25%. Without eviction the kernel map alone grows several times
-  // over.
+  // RSS within 10% over the second half. Blocks that a kernel's box overlapped without
+  // reaching a cell, kept by the kernel map, would make RSS creep (KernelMapMemory's unit test
+  // guards that). Without eviction the kernel map alone grows several times over.
   std::string scene;
   const auto raws = streetDrive(dir.path(), 300, scene);
   const int scans = static_cast<int>(raws.size());

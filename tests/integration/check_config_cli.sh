@@ -45,7 +45,7 @@ if command -v openssl >/dev/null; then
   sed 's#/server.key#/none.key#' "$dir/secure.textproto" >"$dir/nokey.textproto"
   expect_fail "missing private key" "security.private_key" "$dir/nokey.textproto"
 fi
-# Hostile-input issue 28, items 2, 3 and 5: a directory where a file is expected, values that
+# A directory where a file is expected, values that
 # cannot work, and a snapshot directory the server could not write are refused with the reason.
 expect_fail "directory as config" "is a directory" "$dir"
 printf 'snapshot { path: "%s" }\n' "$dir" >"$dir/snapdir.textproto"

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Hostile-input issue 28, item 2: a directory named where a file is expected is a clear error
+# A directory named where a file is expected is a clear error
 # (exit 1 or 2 and the reason), never an abort (before: uncaught std::ios_failure, rc 134).
 # Starts no DDS participant: every command fails while reading its input.
 # Usage: directory_inputs_cli.sh SERVER_BIN CLI_BIN MAP_BIN SIM_BIN

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Hostile-input issue 28, item 4: one-shot `densemap query point` runs, each a new DDS
+# One-shot `densemap query point` runs, each a new DDS
 # participant, against one server. Before the fix 1-3% timed out although the server had
 # answered (its reply writer had not yet matched the new client's reply reader); every reply
 # now waits for that match. Fails on any failed run.

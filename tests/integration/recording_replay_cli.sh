@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 32, users' own recordings: a ROS 2 MCAP bag (densemap-sim --mcap, zstd chunks) replayed
+# Users' own recordings: a ROS 2 MCAP bag (densemap-sim --mcap, zstd chunks) replayed
 # into the server at its recorded rate gives the map densemap-map makes of the same scans from
 # the dataset directory, byte for byte as OctoMap's .bt; densemap-map reads the bag to the same
 # map too. One server, loopback only, its own domain.

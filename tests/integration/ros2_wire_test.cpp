@@ -12,7 +12,6 @@
 
 #include "densemap/client/client.hpp"
 #include "densemap/client/testing.hpp"
-#include "densemap/wire/topics.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_diff.hpp"
 #include "densemap/ros2/map_topics.hpp"
@@ -26,6 +25,7 @@
 #include "densemap/test_support/server_clients.hpp"
 #include "densemap/test_support/server_process.hpp"
 #include "densemap/wire/dds.hpp"
+#include "densemap/wire/topics.hpp"
 #include "nav_msgs.h"
 #include "octomap_msgs.h"
 #include "rmw_dds_common.h"
@@ -454,7 +454,7 @@ TEST(Ros2Wire, TopicAndTypeNamesFollowRmwCycloneddsConventions) {
                "nav_msgs::msg::dds_::OccupancyGrid_");
 }
 
-// Issue 32, item 5: as rmw_cyclonedds (humble serdata.cpp), the ROS types carry no type
+// As rmw_cyclonedds (humble serdata.cpp), the ROS types carry no type
 // information and the rt/ endpoints offer XCDR1 only, so peers stricter than Fast DDS 2.x
 // match the server as they match a ROS node.
 TEST(Ros2Wire, RosEndpointsOfferXcdr1OnlyAndNoTypeInformation) {
@@ -578,7 +578,7 @@ void checkRosNode(std::uint32_t domain, const std::string& ros2_extra,
   EXPECT_EQ(server.stop(), 0);
 }
 
-// Issue 32, item 7: `ros2 node list` lists what rmw implementations announce on
+// `ros2 node list` lists what rmw implementations announce on
 // ros_discovery_info; the server announces itself there in its robot's layout (Humble's gids
 // have 24 bytes, Iron's and later 16).
 TEST(Ros2Wire, TheServerIsARosNodeOnRosDiscoveryInfoInItsDistributionsLayout) {
@@ -591,7 +591,7 @@ TEST(Ros2Wire, TheServerIsARosNodeOnRosDiscoveryInfoInItsDistributionsLayout) {
 #endif
 
 #ifndef DENSEMAP_ROS2_REALDATA
-// Issue 32, item 3: as octomap_server, an empty map is not published on the map topics (no
+// As octomap_server, an empty map is not published on the map topics (no
 // 0-byte Octomap), and a viewer that leaves and returns gets the unchanged map once (from the
 // writer's transient-local history), not a second copy.
 TEST(Ros2Wire, AnEmptyMapIsNotPublishedAndAReturningViewerGetsTheMapOnce) {
@@ -641,7 +641,7 @@ TEST(Ros2Wire, AnEmptyMapIsNotPublishedAndAReturningViewerGetsTheMapOnce) {
 #endif
 
 #ifndef DENSEMAP_ROS2_REALDATA
-// Issue 32, item 4: a robot whose clouds never arrive is explained in the status: a best-effort
+// A robot whose clouds never arrive is explained in the status: a best-effort
 // publisher against reliable_clouds: true is refused for its reliability (DDS's incompatible
 // QoS status), a matching one is counted as a matched writer.
 TEST(Ros2Wire, StatusSaysWhichCloudWritersMatchAndWhichWereRefusedForTheirQos) {
@@ -701,7 +701,7 @@ TEST(Ros2Wire, StatusSaysWhichCloudWritersMatchAndWhichWereRefusedForTheirQos) {
 #endif
 
 #ifndef DENSEMAP_ROS2_REALDATA
-// Issue 32, item 1: with the default config, clouds that arrive before a late /tf_static (a
+// With the default config, clouds that arrive before a late /tf_static (a
 // Fast DDS broadcaster's sample reaches Cyclone at its next heartbeat, ~3 s) wait for it and
 // are all integrated, as octomap_server's TF filter keeps them (5 clouds, 5 s).
 TEST(Ros2Wire, CloudsBeforeALateTfStaticWaitForItWithTheDefaultConfig) {
@@ -726,7 +726,7 @@ TEST(Ros2Wire, CloudsBeforeALateTfStaticWaitForItWithTheDefaultConfig) {
 #endif
 
 #ifndef DENSEMAP_ROS2_REALDATA
-// Issue 32, item 2: a node that announces itself only by multicast (Humble with
+// A node that announces itself only by multicast (Humble with
 // ROS_LOCALHOST_ONLY=1) never reaches the server, which has multicast off on loopback: it is
 // found when the server's own unicast announcement reaches its discovery port. Such a node is
 // played by a Cyclone participant with no multicast whose one peer is a port nobody listens on

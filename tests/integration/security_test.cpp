@@ -20,9 +20,9 @@
 
 #include "densemap/client/client.hpp"
 #include "densemap/client/testing.hpp"
-#include "densemap/wire/topics.hpp"
 #include "densemap/test_support/server_clients.hpp"
 #include "densemap/test_support/server_process.hpp"
+#include "densemap/wire/topics.hpp"
 #include "densemap_msgs.h"
 
 namespace densemap {
@@ -207,8 +207,7 @@ TEST_F(Security, ViewerCannotResetOrClearOperatorCan) {
   ASSERT_GT(before.known_cells, 1000u);
 
   // The viewer's client has no command writer: DDS Security did not let it create one.
-  for (auto refused : {viewer->reset(),
-                       viewer->clearBox({-50, -50, -5}, {50, 50, 5})}) {
+  for (auto refused : {viewer->reset(), viewer->clearBox({-50, -50, -5}, {50, 50, 5})}) {
     ASSERT_FALSE(refused);
     EXPECT_NE(refused.error().message.find("not allowed"), std::string::npos)
         << refused.error().message;

@@ -11,11 +11,10 @@
 
 #include "densemap/client/client.hpp"
 #include "densemap/client/testing.hpp"
-#include "densemap/query/map_queries.hpp"
-#include "densemap/wire/topics.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_diff.hpp"
 #include "densemap/pipeline/scan_validator.hpp"
+#include "densemap/query/map_queries.hpp"
 #include "densemap/raycast/integrator.hpp"
 #include "densemap/sim/sequence.hpp"
 #include "densemap/store/snapshot.hpp"
@@ -23,6 +22,7 @@
 #include "densemap/test_support/server_clients.hpp"
 #include "densemap/test_support/server_process.hpp"
 #include "densemap/upsample/interpolation.hpp"
+#include "densemap/wire/topics.hpp"
 #include "densemap_msgs.h"
 
 extern char** environ;
@@ -299,7 +299,7 @@ TEST(Server, OverloadDropsScansKeepsLatencyBoundedAndMemoryFlat) {
   EXPECT_EQ(server.stop(), 0);
 }
 
-// Hostile-input issue 28, item 1: a client may not name where the server writes. Before, `save
+// A client may not name where the server writes. Before, `save
 // --path FILE` replaced any file the server's user could write (a root-only 0600 file became a
 // world-readable .dmap).
 TEST(Server, SaveWritesOnlyPlainFileNamesIntoTheExportDirectory) {
@@ -347,7 +347,7 @@ TEST(Server, SaveWritesOnlyPlainFileNamesIntoTheExportDirectory) {
   EXPECT_EQ(server.stop(), 0);
 }
 
-// Hostile-input issue 28, item 7: a snapshot resumed under another sensor model would apply the
+// A snapshot resumed under another sensor model would apply the
 // new model to new scans only (and record it in the next snapshot): refused with the reason.
 TEST(Server, ASnapshotIsNotResumedUnderAnotherSensorModel) {
   test::TempDir dir;
@@ -381,7 +381,7 @@ TEST(Server, ASnapshotIsNotResumedUnderAnotherSensorModel) {
   EXPECT_NE(other.second.find("prob_hit: 0.9"), std::string::npos) << other.second;
 }
 
-// Hostile-input issue 28, item 5: a snapshot directory that stops working loses no map. Failed
+// A snapshot directory that stops working loses no map. Failed
 // saves show in the status (not as refused queries), and at SIGTERM a rescue copy is written.
 TEST(Server, ASnapshotDirectoryThatDisappearsLosesNoMap) {
   test::TempDir top;
@@ -412,7 +412,7 @@ TEST(Server, ASnapshotDirectoryThatDisappearsLosesNoMap) {
   EXPECT_EQ(diffMaps(*loaded->map, testing::gridOf(*fetched)).differing(), 0U);
 }
 
-// Hostile-input issue 28, item 8: two servers on one domain flipped clients between two maps.
+// Two servers on one domain flipped clients between two maps.
 // The second refuses to start (exit 2, the reason); the first keeps its map and answers.
 TEST(Server, ASecondServerOnTheSameDomainRefusesToStart) {
   test::TempDir first_dir, second_dir;
@@ -441,7 +441,7 @@ TEST(Server, ASecondServerOnTheSameDomainRefusesToStart) {
   EXPECT_EQ(first.stop(), 0);
 }
 
-// Hostile-input issue 28, item 9: query requests in flight share one memory budget. One request
+// Query requests in flight share one memory budget. One request
 // carries at most dds::kMaxQueryPoints points, less than the smallest budget (16 MiB), so a
 // large batch goes in parts that wait for the budget, and every point is answered.
 TEST(Server, PointBatchesLargerThanTheRequestBudgetAreAnsweredInParts) {
@@ -456,7 +456,7 @@ TEST(Server, PointBatchesLargerThanTheRequestBudgetAreAnsweredInParts) {
   EXPECT_EQ(server.stop(), 0);
 }
 
-// Issue 28, item 9: clients flooding the server with large point batches (sent in parts of
+// Clients flooding the server with large point batches (sent in parts of
 // dds::kMaxQueryPoints): the server's RSS stays under its request budget + 64 MiB above where it
 // started (the map is empty), and within 10 s of the flood it has handed back most of what the
 // flood took (the heap trimmed once no request is in flight). Before: 8
@@ -483,7 +483,8 @@ TEST(Server, APointQueryFloodStaysInTheRequestBudgetAndItsMemoryReturns) {
   for (auto& client : clients) {
     floods.emplace_back([&client, &answered] {
       std::vector<float> xyz(3 * 3'000'000, 1.0F);
-      if (auto a = testing::queryPointsRaw(*client, xyz); a && a->states.size() == 3'000'000) ++answered;
+      if (auto a = testing::queryPointsRaw(*client, xyz); a && a->states.size() == 3'000'000)
+        ++answered;
     });
   }
   for (auto& t : floods) t.join();
@@ -506,7 +507,7 @@ TEST(Server, APointQueryFloodStaysInTheRequestBudgetAndItsMemoryReturns) {
   EXPECT_EQ(server.stop(), 0);
 }
 
-// Issue 28, item 9: a reply reaches its asker only (every client read every reply: 30 clients'
+// A reply reaches its asker only (every client read every reply: 30 clients'
 // 2.7 MB bbox replies took 6.7 s against 0.28 s for one). Another client's reply readers, and
 // a reader in the default partition, receive nothing of a client's answers.
 TEST(Server, RepliesReachTheAskerOnly) {
@@ -547,7 +548,7 @@ TEST(Server, RepliesReachTheAskerOnly) {
   EXPECT_EQ(server.stop(), 0);
 }
 
-// Issue 28, item 9: one request carries at most dds::kMaxQueryPoints points (the server refuses
+// One request carries at most dds::kMaxQueryPoints points (the server refuses
 // more, whatever its budget); the client library sends a larger batch in parts, one after
 // another, and answers every point in order.
 TEST(Server, PointBatchesOverTheRequestLimitAreSplitByTheClientAndRefusedWhole) {

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Hostile-input issue 28, item 12: `densemap status --watch` with stdout redirected to a file
+# `densemap status --watch` with stdout redirected to a file
 # writes each status line at once (it wrote nothing: stdout was buffered), and when the server
 # stops it ends with an error within seconds (it repeated the last status forever).
 # Usage: status_watch_cli.sh SERVER_BIN CLI_BIN DOMAIN

@@ -151,8 +151,8 @@ template <int AX, class Sink>
 /// segment (in key units: no coordinate per candidate), tested over the rows and columns of
 /// centres inside the ellipse's box (at most as many as a box of its size can hold). The few
 /// end slices test the capsule's box with the segment's distance, without a branch per
-/// candidate: a candidate is written, and kept when inside (a branch there had been
-/// mispredicted about every other candidate: half this function's time at BALM 0.1 m). A short
+/// candidate: a candidate is written, and kept when inside (a branch there would be
+/// mispredicted about every other candidate). A short
 /// capsule (a ray's tip) is its box, tested whole the same way.
 template <int AX, class Sink>
 std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,

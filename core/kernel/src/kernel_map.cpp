@@ -143,6 +143,66 @@ void accumulateStencilKernel(const detail::HitStencils& stencils, const Kernel& 
   }
 }
 
+/// Adds kernel `k`'s evidence to the cells of [x0, x1] x [y0, y1] x [z0, z1] (one block) that
+/// it reaches, row by row (only each row's stretch the kernel can reach, unless
+/// `options.whole_boxes`); `point`: an isotropic point kernel (no segment to project on).
+void accumulateKernel(const VoxelGrid& grid, const KernelOptions& options, const Kernel& k,
+                      bool point, int x0, int x1, int y0, int y1, int z0, int z1,
+                      const SquaredKernelTable& table,
+                      std::array<double, block::kVoxels>& sum_alpha,
+                      std::array<double, block::kVoxels>& sum_beta, block::BlockMask& summed,
+                      std::size_t& updates) {
+  const double res = grid.resolution();
+  const double inverse_res = 1.0 / res;
+  const double base_x = grid.keyToCoord(static_cast<std::uint16_t>(x0));
+  const RowIntervals rows(k);
+  for (int z = z0; z <= z1; ++z) {
+    for (int y = y0; y <= y1; ++y) {
+      double lo = 0.0, hi = 0.0;
+      if (options.whole_boxes) {
+        lo = -std::numeric_limits<double>::infinity();
+        hi = std::numeric_limits<double>::infinity();
+      } else if (!rows(grid.keyToCoord(static_cast<std::uint16_t>(y)),
+                       grid.keyToCoord(static_cast<std::uint16_t>(z)), lo, hi)) {
+        continue;
+      }
+      // The row's cells [from, to] within [x0, x1]: ceil and floor of the interval's
+      // ends in cells, clamped first (an end may be infinite).
+      // (A product by 1 / res, not a quotient: an ulp apart, inside the interval's
+      // slack, so the same cells get evidence.)
+      const int from =
+          lo <= base_x ? x0
+                       : x0 + ceilToInt(std::min<double>(x1 + 1 - x0, (lo - base_x) * inverse_res));
+      const int to =
+          x0 + floorToInt(std::clamp<double>((hi - base_x) * inverse_res, -1.0, x1 - x0));
+      const double cy = grid.keyToCoord(static_cast<std::uint16_t>(y));
+      const double cz = grid.keyToCoord(static_cast<std::uint16_t>(z));
+      for (int x = from; x <= to; ++x) {
+        const VoxelKey key{static_cast<std::uint16_t>(x), static_cast<std::uint16_t>(y),
+                           static_cast<std::uint16_t>(z)};
+        const Eigen::Vector3d c(grid.keyToCoord(key.x), cy, cz);
+        // A point kernel (x == to) skips the segment's projection: t = 0 there, so
+        // the same value, bit for bit.
+        // A tabled hit kernel evaluated (the plain path of the table's values).
+        const double v =
+            k.stencil >= 0
+                ? k.weight *
+                      (options.hit_kernel_weight *
+                           table((c - k.x).squaredNorm() * k.inverse_length * k.inverse_length) +
+                       (key == k.stencil_key ? options.hit_weight : 0.0))
+            : point
+                ? k.weight * table((c - k.x).squaredNorm() * k.inverse_length * k.inverse_length)
+                : k.at(c, table);
+        if (!(v > 0.0)) continue;
+        const int cell = block::indexOf(key);
+        (k.occupied ? sum_alpha : sum_beta)[cell] += v;
+        block::setBit(summed, cell);
+        ++updates;
+      }
+    }
+  }
+}
+
 }  // namespace
 
 KernelMap::KernelMap(double resolution_m, const KernelOptions& options, BlockStore* store)
@@ -296,8 +356,7 @@ void KernelMap::fitKernels(const PointCloud& points_world, const Point3f& origin
           options_.free_bundle_m > grid_.resolution()
               ? std::optional<VoxelGrid>(VoxelGrid(options_.free_bundle_m))
               : std::nullopt;
-      const VoxelGrid* bundle_grid =
-          !options_.free_bundles ? nullptr : cubes ? &*cubes : &grid_;
+      const VoxelGrid* bundle_grid = !options_.free_bundles ? nullptr : cubes ? &*cubes : &grid_;
       freeExtents(points_world, origin, options_.max_range, stops, shape, bundle_grid,
                   scratch_->bundles, free_extents);
       scratch_->releaseBundles();
@@ -364,26 +423,26 @@ void KernelMap::sortKernelPairs() {
   }
   for (std::size_t i = 0; i < kernels.size(); ++i) pair_offsets[i + 1] += pair_offsets[i];
   pairs.resize(pair_offsets.back());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, kernels.size(), 1024),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-                      for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                        std::size_t out = pair_offsets[i];
-                        if (out == pair_offsets[i + 1]) continue;
-                        const VoxelKey& klo = kernels[i].key_min;
-                        const VoxelKey& khi = kernels[i].key_max;
-                        for (std::uint64_t bz = klo.z >> block::kShift;
-                             bz <= std::uint64_t{khi.z} >> block::kShift; ++bz) {
-                          for (std::uint64_t by = klo.y >> block::kShift;
-                               by <= std::uint64_t{khi.y} >> block::kShift; ++by) {
-                            for (std::uint64_t bx = klo.x >> block::kShift;
-                                 bx <= std::uint64_t{khi.x} >> block::kShift; ++bx) {
-                              pairs[out++] = {ranks.rank(bx, by, bz),
-                                              static_cast<std::uint32_t>(i)};
-                            }
-                          }
-                        }
-                      }
-                    });
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, kernels.size(), 1024),
+      [&](const tbb::blocked_range<std::size_t>& range) {
+        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+          std::size_t out = pair_offsets[i];
+          if (out == pair_offsets[i + 1]) continue;
+          const VoxelKey& klo = kernels[i].key_min;
+          const VoxelKey& khi = kernels[i].key_max;
+          for (std::uint64_t bz = klo.z >> block::kShift;
+               bz <= std::uint64_t{khi.z} >> block::kShift; ++bz) {
+            for (std::uint64_t by = klo.y >> block::kShift;
+                 by <= std::uint64_t{khi.y} >> block::kShift; ++by) {
+              for (std::uint64_t bx = klo.x >> block::kShift;
+                   bx <= std::uint64_t{khi.x} >> block::kShift; ++bx) {
+                pairs[out++] = {ranks.rank(bx, by, bz), static_cast<std::uint32_t>(i)};
+              }
+            }
+          }
+        }
+      });
   // By block (the ranks' order is the block keys'), kernels in order within each (the pairs
   // were made in kernel order).
   radixSort(
@@ -411,8 +470,8 @@ std::size_t KernelMap::accumulateKernels(
       starts.push_back(p);
       block_keys.push_back(ranks.blockKey(pairs[p].first));
       // Found or made here with its evidence (allocated by this thread, as a scan's other
-      // blocks: from parallel tasks they came from every worker's malloc arena, +3 MiB of
-      // server RSS at BALM 0.2 m), filled in parallel below.
+      // blocks: from parallel tasks they would come from every worker's malloc arena), filled
+      // in parallel below.
       BlockEntry& e = store_->entry(block_keys.back());
       (void)store_->evidence(e);
       entries.push_back(&e);
@@ -422,105 +481,58 @@ std::size_t KernelMap::accumulateKernels(
   std::atomic<std::size_t> cell_updates{0};
   const SquaredKernelTable& table = squaredKernel();
   std::vector<block::BlockMask> reached(reached_blocks != nullptr ? starts.size() - 1 : 0);
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, starts.size() - 1, 4),
-      [&](const tbb::blocked_range<std::size_t>& range) {
-        std::size_t updates = 0;
-        // A block's sums of this scan in double (in kernel order), added to its float evidence
-        // once the block is done.
-        std::array<double, block::kVoxels> sum_alpha{}, sum_beta{};
-        for (std::size_t g = range.begin(); g != range.end(); ++g) {
-          const std::uint64_t block_key = block_keys[g];
-          block::BlockMask summed{};
-          for (std::size_t p = starts[g]; p < starts[g + 1]; ++p) {
-            const Kernel& k = kernels[pairs[p].second];
-            const bool point = !k.cell && k.inverse_length != 0.0 && k.to == k.x;
-            const VoxelKey& klo = k.key_min;
-            const VoxelKey& khi = k.key_max;
-            const VoxelKey base = block::keyOf(block_key, 0);
-            const auto range_of = [&](int axis, std::uint16_t from, std::uint16_t to) {
-              const int b0 = base[axis];
-              return std::pair<int, int>(std::max<int>(from, b0),
-                                         std::min<int>(to, b0 + block::kEdge - 1));
-            };
-            const auto [x0, x1] = range_of(0, klo.x, khi.x);
-            const auto [y0, y1] = range_of(1, klo.y, khi.y);
-            const auto [z0, z1] = range_of(2, klo.z, khi.z);
-            if (k.stencil >= 0 && !options_.whole_boxes) {
-              accumulateStencilKernel(*scratch_->hit_stencils, k, x0, x1, y0, y1, z0, z1, sum_alpha,
-                                      summed, updates);
-              continue;
-            }
-            if (point && !options_.whole_boxes) {
-              accumulatePointKernel(grid_, k, x0, x1, y0, y1, z0, z1, table, sum_alpha, sum_beta,
-                                    summed, updates);
-              continue;
-            }
-            const double res = grid_.resolution();
-            const double inverse_res = 1.0 / res;
-            const double base_x = grid_.keyToCoord(static_cast<std::uint16_t>(x0));
-            const RowIntervals rows(k);
-            for (int z = z0; z <= z1; ++z) {
-              for (int y = y0; y <= y1; ++y) {
-                double lo = 0.0, hi = 0.0;
-                if (options_.whole_boxes) {
-                  lo = -std::numeric_limits<double>::infinity();
-                  hi = std::numeric_limits<double>::infinity();
-                } else if (!rows(grid_.keyToCoord(static_cast<std::uint16_t>(y)),
-                                 grid_.keyToCoord(static_cast<std::uint16_t>(z)), lo, hi)) {
-                  continue;
-                }
-                // The row's cells [from, to] within [x0, x1]: ceil and floor of the interval's
-                // ends in cells, clamped first (an end may be infinite).
-                // (A product by 1 / res, not a quotient: an ulp apart, inside the interval's
-                // slack, so the same cells get evidence.)
-                const int from = lo <= base_x ? x0
-                                              : x0 + ceilToInt(std::min<double>(
-                                                         x1 + 1 - x0, (lo - base_x) * inverse_res));
-                const int to =
-                    x0 + floorToInt(std::clamp<double>((hi - base_x) * inverse_res, -1.0, x1 - x0));
-                const double cy = grid_.keyToCoord(static_cast<std::uint16_t>(y));
-                const double cz = grid_.keyToCoord(static_cast<std::uint16_t>(z));
-                for (int x = from; x <= to; ++x) {
-                  const VoxelKey key{static_cast<std::uint16_t>(x), static_cast<std::uint16_t>(y),
-                                     static_cast<std::uint16_t>(z)};
-                  const Eigen::Vector3d c(grid_.keyToCoord(key.x), cy, cz);
-                  // A point kernel (x == to) skips the segment's projection: t = 0 there, so
-                  // the same value, bit for bit.
-                  // A tabled hit kernel evaluated (the plain path of the table's values).
-                  const double v =
-                      k.stencil >= 0
-                          ? k.weight * (options_.hit_kernel_weight *
-                                            table((c - k.x).squaredNorm() * k.inverse_length *
-                                                  k.inverse_length) +
-                                        (key == k.stencil_key ? options_.hit_weight : 0.0))
-                      : point ? k.weight * table((c - k.x).squaredNorm() * k.inverse_length *
-                                                 k.inverse_length)
-                              : k.at(c, table);
-                  if (!(v > 0.0)) continue;
-                  const int cell = block::indexOf(key);
-                  (k.occupied ? sum_alpha : sum_beta)[cell] += v;
-                  block::setBit(summed, cell);
-                  ++updates;
-                }
-              }
-            }
-          }
-          BlockEvidence& b = *entries[g]->evidence;
-          block::forEachSetBit(summed, [&](int cell) {
-            b.alpha[cell] += static_cast<float>(sum_alpha[cell]);
-            b.beta[cell] += static_cast<float>(sum_beta[cell]);
-            sum_alpha[cell] = 0.0;
-            sum_beta[cell] = 0.0;
-          });
-          for (int w = 0; w < block::kMaskWords; ++w) b.known[w] |= summed[w];
-          if (reached_blocks != nullptr) reached[g] = summed;
-        }
-        cell_updates += updates;
-      });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, starts.size() - 1, 4),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      std::size_t updates = 0;
+                      // A block's sums of this scan in double (in kernel order), added to its float
+                      // evidence once the block is done.
+                      std::array<double, block::kVoxels> sum_alpha{}, sum_beta{};
+                      for (std::size_t g = range.begin(); g != range.end(); ++g) {
+                        const std::uint64_t block_key = block_keys[g];
+                        block::BlockMask summed{};
+                        for (std::size_t p = starts[g]; p < starts[g + 1]; ++p) {
+                          const Kernel& k = kernels[pairs[p].second];
+                          const bool point = !k.cell && k.inverse_length != 0.0 && k.to == k.x;
+                          const VoxelKey& klo = k.key_min;
+                          const VoxelKey& khi = k.key_max;
+                          const VoxelKey base = block::keyOf(block_key, 0);
+                          const auto range_of = [&](int axis, std::uint16_t from,
+                                                    std::uint16_t to) {
+                            const int b0 = base[axis];
+                            return std::pair<int, int>(std::max<int>(from, b0),
+                                                       std::min<int>(to, b0 + block::kEdge - 1));
+                          };
+                          const auto [x0, x1] = range_of(0, klo.x, khi.x);
+                          const auto [y0, y1] = range_of(1, klo.y, khi.y);
+                          const auto [z0, z1] = range_of(2, klo.z, khi.z);
+                          if (k.stencil >= 0 && !options_.whole_boxes) {
+                            accumulateStencilKernel(*scratch_->hit_stencils, k, x0, x1, y0, y1, z0,
+                                                    z1, sum_alpha, summed, updates);
+                            continue;
+                          }
+                          if (point && !options_.whole_boxes) {
+                            accumulatePointKernel(grid_, k, x0, x1, y0, y1, z0, z1, table,
+                                                  sum_alpha, sum_beta, summed, updates);
+                            continue;
+                          }
+                          accumulateKernel(grid_, options_, k, point, x0, x1, y0, y1, z0, z1, table,
+                                           sum_alpha, sum_beta, summed, updates);
+                        }
+                        BlockEvidence& b = *entries[g]->evidence;
+                        block::forEachSetBit(summed, [&](int cell) {
+                          b.alpha[cell] += static_cast<float>(sum_alpha[cell]);
+                          b.beta[cell] += static_cast<float>(sum_beta[cell]);
+                          sum_alpha[cell] = 0.0;
+                          sum_beta[cell] = 0.0;
+                        });
+                        for (int w = 0; w < block::kMaskWords; ++w) b.known[w] |= summed[w];
+                        if (reached_blocks != nullptr) reached[g] = summed;
+                      }
+                      cell_updates += updates;
+                    });
   // Blocks a kernel's box overlaps but none of whose cells it reaches hold no evidence: made
   // above, dropped here (the published map never hears of them, so eviction would never drop
-  // them: on a long drive they piled up, a few MiB per 100 scans at a flat map).
+  // them, and they would pile up on a long drive).
   for (BlockEntry* e : entries) {
     if (!block::anyBit(e->evidence->known)) store_->dropEvidence(*e);
   }

@@ -115,7 +115,7 @@ class SampleIndex {
   /// `out` from index 0, in a fixed order, as Neighbours (same_label: the entry's label is
   /// `occupied`), and returns how many; `out` only grows, its elements past the count are
   /// scratch. No branch per entry: each is written, and kept when inside and accepted (the box
-  /// test, passed by about a third of the entries, had been mispredicted about every other).
+  /// test, passed by about a third of the entries, would be mispredicted about every other).
   template <class Keep>
   std::size_t neighboursInBox(const Eigen::Vector3d& centre, double half, bool occupied,
                               Keep&& keep, std::vector<Neighbour>& out) const {

@@ -77,7 +77,7 @@ TEST(DatasetDirectory, MissingOrBrokenPosesAreClearErrors) {
   writeText(dir.path() / "poses.txt", "1 0 0 nan 0 1 0 0 0 0 1 0\n");
   EXPECT_FALSE(openScanSource(dir.path()));
 
-  // Hostile-input issue 28, item 13: a scaled, zero or reflected rotation is a file:line error
+  // A scaled, zero or reflected rotation is a file:line error
   // (before, every scan was then refused by the server: "pose quaternion norm 27.39").
   const std::string good = "1 0 0 0 0 1 0 0 0 0 1 0\n";
   std::string lines;
@@ -136,7 +136,7 @@ TEST(Pcd, BinaryAndAsciiReadTheSamePointsAndViewpoint) {
   EXPECT_EQ(a->pointsWorld(), a->points);  // world-frame points are not transformed again
 }
 
-// Hostile-input issue 28, item 13: "nan" in an ASCII PCD is a missing return (a point the
+// "nan" in an ASCII PCD is a missing return (a point the
 // mapping tools drop), not a truncated file; a NaN VIEWPOINT is an error, not an empty map.
 TEST(Pcd, NanPointsAreReadAndANanViewpointIsAnError) {
   test::TempDir dir;

@@ -102,7 +102,7 @@ TEST(ScanGraph, WrittenGraphsAreReadByOctomapWithTheSameWorldPoints) {
   EXPECT_FALSE(writeScanGraph(source, 3, 1, dir.path() / "none.graph"));
 }
 
-// Hostile-input issue 28, item 13: a node 1e30 m away wrote an empty map with exit 0.
+// A node 1e30 m away wrote an empty map with exit 0.
 TEST(ScanGraph, APoseBeyondAnyMapIsAClearError) {
   test::TempDir dir;
   octomap::ScanGraph graph;
@@ -138,7 +138,7 @@ TEST(ScanGraph, TruncatedFilesAreClearErrorsAtEveryLength) {
   EXPECT_FALSE(readScanGraph(dir.path() / "a.graph"));
 }
 
-// Issue 28, item 15: liboctomap's writeBinaryConst prints "Writing N nodes ... done." on stderr
+// liboctomap's writeBinaryConst prints "Writing N nodes ... done." on stderr
 // (a bare " done." in the server's log after every .bt save); ours writes the same bytes quietly.
 TEST(OctomapExport, BinaryFilesAreOctomapsBytesWithNothingOnStderr) {
   octomap::OcTree tree(0.1);

@@ -159,7 +159,7 @@ TEST(LoadReport, SloCountsLossAndLatency) {
   EXPECT_NE(checkSlo(r, slo).broken.find("query p99"), std::string::npos);
 }
 
-// Hostile-input issue 28, item 14: the CI soak passed while it dropped 20 scans (a bad first
+// The CI soak passed while it dropped 20 scans (a bad first
 // window makes a good-looking trend). Drops and the SLO fail the soak too.
 TEST(LoadReport, SoakFailsWhenScansAreDroppedOrTheSloBreaksWhateverTheTrend) {
   const SoakPlan plan{.warm_up_s = 20, .window_s = 30};
@@ -180,7 +180,7 @@ TEST(LoadReport, SoakFailsWhenScansAreDroppedOrTheSloBreaksWhateverTheTrend) {
   EXPECT_FALSE(checkSoak(r, plan, slo).passed);
 }
 
-// Hostile-input issue 28, item 10: 7 of 45 client processes never started and the report said
+// 7 of 45 client processes never started and the report said
 // "failed 0". A client that did not start breaks the SLO.
 TEST(LoadReport, QueryClientsThatNeverStartedBreakTheSlo) {
   RunResult r = syntheticRun();

@@ -1,4 +1,4 @@
-// The mapping engine alone (issue 30: core computes): no thread, no queue, no counters; each
+// The mapping engine alone (core computes): no thread, no queue, no counters; each
 // call runs every stage on the caller's thread and publishes a version.
 #include "densemap/pipeline/engine.hpp"
 

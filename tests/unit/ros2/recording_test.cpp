@@ -1,5 +1,5 @@
 // ROS 2 recordings: CDR PointCloud2 / TFMessage both ways, MCAP bags written and read back in
-// every chunk kind, and bags cut short or corrupted (issue 32: a user's own recordings).
+// every chunk kind, and bags cut short or corrupted (a user's own recordings).
 #include <gtest/gtest.h>
 
 #include <fstream>

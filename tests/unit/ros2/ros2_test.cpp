@@ -329,7 +329,7 @@ TEST(MapTopicsState, IncrementalUpdatesEqualTheWholeMapReference) {
   EXPECT_GT(std::count(grid.data.begin(), grid.data.end(), 0), 10);
 }
 
-// Issue 32, item 3: /octomap_binary is pruned as octomap_server's is (eight equal children
+// /octomap_binary is pruned as octomap_server's is (eight equal children
 // become their parent), still every cell as densemap has it, and a pruned region updated
 // later is expanded again cell for cell.
 TEST(MapTopicsState, TheOctomapIsPrunedAndStillEveryCell) {

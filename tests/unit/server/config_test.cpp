@@ -29,8 +29,7 @@ TEST(ServerConfig, TheShippedConfigIsValidAndEqualsTheDefaults) {
   ASSERT_TRUE(defaults);
   EXPECT_EQ(options->resolution_m, defaults->resolution_m);
   EXPECT_EQ(options->max_range_m, defaults->max_range_m);
-  EXPECT_EQ(ingestOptions(*config)->queue_depth,
-            ingestOptions(proto::ServerConfig{})->queue_depth);
+  EXPECT_EQ(ingestOptions(*config)->queue_depth, ingestOptions(proto::ServerConfig{})->queue_depth);
   EXPECT_EQ(options->method, defaults->method);
   EXPECT_EQ(defaults->method, IntegrationMethod::kRaycast);
   EXPECT_EQ(options->rule, UpdateRule::kSet);
@@ -59,7 +58,7 @@ TEST(ServerConfig, Ros2OptionsAndTheirErrors) {
   ASSERT_TRUE(two && *two);
   EXPECT_EQ((*two)->clouds.size(), 2U);
   EXPECT_EQ((*two)->world_frame, "odom");
-  // The ROS node's name and the gid layout of the robot's distribution (issue 32, item 7).
+  // The ROS node's name and the gid layout of the robot's distribution.
   EXPECT_EQ((*on)->node_name, "densemap_server");
   EXPECT_EQ((*on)->gid_layout, RosGidLayout::kIronAndLater);
   auto humble = options("ros2 { enabled: true distro: \"humble\" node_name: \"map_2\" }\n");
@@ -75,7 +74,7 @@ TEST(ServerConfig, Ros2OptionsAndTheirErrors) {
         "ros2 { enabled: true distro: \"foxy\" }\n", "ros2 { enabled: true node_name: \"\" }\n",
         "ros2 { enabled: true node_name: \"2d_map\" }\n",
         "ros2 { enabled: true node_name: \"a/b\" }\n"}) {
-    // Refused at load, with the file's name (issue 28, item 15: ros2 errors had none).
+    // Refused at load, with the file's name (ros2 errors had none).
     const auto file = writeConfig(dir, bad);
     auto r = loadServerConfig(file);
     EXPECT_FALSE(r) << bad;
@@ -137,7 +136,7 @@ TEST(ServerConfig, EvictionNeedsTheGridLogOddsMapAndAValidBox) {
   EXPECT_EQ(options->bounds->first, Point3f(-100, -100, -5));
   EXPECT_EQ(options->bounds->second, Point3f(100, 100, 20));
   EXPECT_FALSE(pipelineOptions(proto::ServerConfig{})->bounds) << "no box unless configured";
-  // Issue 29: kernel maps evict too (their evidence blocks with the published grid's).
+  // Kernel maps evict too (their evidence blocks with the published grid's).
   EXPECT_TRUE(
       loadServerConfig(writeConfig(dir, "map { keep_radius_m: 40 kind: \"akimap_rays\" }\n")));
   for (const auto& [text, reason] : std::vector<std::pair<std::string, std::string>>{
@@ -176,7 +175,7 @@ TEST(ServerConfig, ErrorsNameTheFileTheLineAndTheReason) {
   auto bad_value = loadServerConfig(writeConfig(dir, "map { resolution_m: -1 }\n"));
   ASSERT_FALSE(bad_value);
   EXPECT_NE(bad_value.error().message.find("resolution_m"), std::string::npos);
-  // Issue 28, item 15: errors found after parsing carry the field's line too, or the line of
+  // Errors found after parsing carry the field's line too, or the line of
   // the nearest enclosing block the file sets (a value left at its default).
   const std::pair<const char*, const char*> located[] = {
       {"# a comment\nmap {\n  resolution_m: 0.2\n  max_range_m: 5000\n}\n",

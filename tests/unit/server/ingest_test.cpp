@@ -1,5 +1,5 @@
-#include "densemap/query/version_delta.hpp"
 #include "densemap/server/ingest.hpp"
+#include "densemap/query/version_delta.hpp"
 
 #include <gtest/gtest.h>
 
@@ -130,8 +130,8 @@ TEST(Pipeline, WarmUpLeavesTheMapEmptyAndTheScansMapUnchangedOnBothBackends) {
   // The warm-up's fan goes into a scratch map (MapKind::warmUp): the served map starts empty at
   // version 0 and ends as the offline map of the scans, cell for cell.
   for (const Backend backend : {Backend::kGrid, Backend::kOctree}) {
-    IngestOptions options{
-        .engine = {.backend = backend, .resolution_m = 0.2, .max_range_m = 5.0}, .threads = 2};
+    IngestOptions options{.engine = {.backend = backend, .resolution_m = 0.2, .max_range_m = 5.0},
+                          .threads = 2};
     options.engine.warm_up = true;
     auto sut = Ingest::create(options);
     ASSERT_TRUE(sut);
@@ -345,14 +345,16 @@ TEST(Pipeline, CommandsRunBetweenScansAndPublishTheirChanges) {
   EXPECT_EQ(after.wait_for(1s), std::future_status::ready);
 }
 
-// Issue 29: a kernel map evicts with the published grid: the pipeline's map equals an offline
+// A kernel map evicts with the published grid: the pipeline's map equals an offline
 // kernel map that evicts the same blocks after each scan (keep radius around each scan's origin).
 TEST(Pipeline, KernelMapEvictionEqualsTheOfflineMapMinusTheEvictedBlocks) {
   const auto method = kernel::KernelMethod::kAkimapRays;
   constexpr double kRadius = 3.0;
-  auto sut = Ingest::create(
-      {.engine = {.resolution_m = 0.2, .max_range_m = 5.0, .kernel = method, .keep_radius_m = kRadius},
-       .threads = 2});
+  auto sut = Ingest::create({.engine = {.resolution_m = 0.2,
+                                        .max_range_m = 5.0,
+                                        .kernel = method,
+                                        .keep_radius_m = kRadius},
+                             .threads = 2});
   ASSERT_TRUE(sut) << sut.error().message;
   (*sut)->start();
   std::vector<RawScan> raws = {rawScan(1, 1500), rawScan(30, 1500)};  // origins 3 m apart
@@ -403,9 +405,8 @@ TEST(Pipeline, KernelMapKindsPublishLogitOfTheOfflineKernelMapAndClearBothStores
   for (const auto method : {kernel::KernelMethod::kAkimap, kernel::KernelMethod::kBgk,
                             kernel::KernelMethod::kBgkl, kernel::KernelMethod::kAkimapRays}) {
     const std::string name(kernel::kernelMethodName(method));
-    auto sut =
-        Ingest::create({.engine = {.resolution_m = 0.2, .max_range_m = 5.0, .kernel = method},
-                        .threads = 2});
+    auto sut = Ingest::create(
+        {.engine = {.resolution_m = 0.2, .max_range_m = 5.0, .kernel = method}, .threads = 2});
     ASSERT_TRUE(sut) << name;
     (*sut)->start();
     std::vector<RawScan> raws = {rawScan(1, 1500), rawScan(2, 1500)};
@@ -465,9 +466,8 @@ TEST(Pipeline, UpsampleStageIntegratesTheDensifiedScan) {
     const auto up = upsample::makeUpsampleOptions(method, {.rows = 16, .cols = 256},
                                                   {.rows = 61, .cols = 512}, DENSEMAP_ILN_MODEL);
     ASSERT_TRUE(up) << up.error().message;
-    auto sut =
-        Ingest::create({.engine = {.resolution_m = 0.2, .max_range_m = 20.0, .upsample = *up},
-                        .threads = 2});
+    auto sut = Ingest::create(
+        {.engine = {.resolution_m = 0.2, .max_range_m = 20.0, .upsample = *up}, .threads = 2});
     ASSERT_TRUE(sut);
     // A 16-beam scan: a sphere of 4 m around the sensor in one sector, 6 m elsewhere.
     RawScan raw;
@@ -543,7 +543,7 @@ TEST(LatestWinsQueue, PerKeyTheLatestWinsWithinItsOwnKeyAndTheTotalIsBounded) {
   for (const char* expected : {"a2", "b2", "a3", "c1", "d1"}) EXPECT_EQ(sut.pop(0ms), expected);
 }
 
-// Issue 32, item 1: a backlog (clouds a late transform released) goes in only where it pushes
+// A backlog (clouds a late transform released) goes in only where it pushes
 // nothing out: hasRoomFor says so exactly when push would drop nothing.
 TEST(LatestWinsQueue, HasRoomForExactlyWhenAPushWouldDropNothing) {
   const std::map<std::string, std::string> letter = {{"a1", "a"}, {"a2", "a"}, {"a3", "a"},
@@ -566,7 +566,7 @@ TEST(LatestWinsQueue, HasRoomForExactlyWhenAPushWouldDropNothing) {
 }
 
 TEST(LatestWinsQueue, ManySensorsWithAScanEachLoseNoneAndTheFullestSensorGivesWay) {
-  // Issue 28, item 11: 24 sensors with one scan each against a total of 16 (8 x depth 2) lost
+  // 24 sensors with one scan each against a total of 16 (8 x depth 2) lost
   // 7 scans to the total cap. Items are "KEY:N"; the key is before the colon.
   std::vector<std::string> keys;
   LatestWinsQueue<std::string> sut(
@@ -597,7 +597,7 @@ TEST(LatestWinsQueue, ManySensorsWithAScanEachLoseNoneAndTheFullestSensorGivesWa
   EXPECT_EQ(sut.dropped(), 3U);
 }
 
-// Issue 28 (item 11's trade-off): one scan per sensor always fitting let 64 sensor ids hold
+// One scan per sensor always fitting let 64 sensor ids hold
 // 65 scans (1.5 GB at 2M points each); waiting scans now also share a byte budget: beyond it
 // the sensor with the most waiting gives up its oldest, else the oldest scan goes, and the
 // bytes waiting never exceed the budget (one item larger than all of it waits alone).

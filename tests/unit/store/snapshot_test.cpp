@@ -151,7 +151,7 @@ TEST(SnapshotGenerations, SavesKeepTheLastKAndLoadingSkipsCorruptOnes) {
   EXPECT_FALSE(saveSnapshotKeeping(*versionedView(1), SensorModel{}, Backend::kGrid, path, 0));
 }
 
-// Hostile-input issue 28, item 15: a snapshot at another resolution is the map, not a corrupt
+// A snapshot at another resolution is the map, not a corrupt
 // file: resuming stops with the way out (before: "no readable snapshot", or worse an older
 // generation silently resumed).
 TEST(SnapshotGenerations, AnotherResolutionIsRefusedNotSkipped) {
@@ -263,7 +263,7 @@ INSTANTIATE_TEST_SUITE_P(
              (param_info.param.backend == Backend::kGrid ? "_grid" : "_octree");
     });
 
-// Issue 29: a dense map's snapshot keeps its kernel evidence, so a restart resumes the kernel
+// A dense map's snapshot keeps its kernel evidence, so a restart resumes the kernel
 // map itself: the resumed pipeline's map, and its update by the next scan, equal the original's
 // bit for bit. A restart from the probabilities alone (the control) does not.
 RawScan kernelScan(std::uint64_t seq) {

@@ -1,4 +1,4 @@
-// ILN inference in C++ (issue 6): the committed model against PyTorch's golden outputs, the
+// ILN inference in C++: the committed model against PyTorch's golden outputs, the
 // weights file's errors, and the blend's invariants on constructed models.
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>

@@ -1,4 +1,4 @@
-// Range images and the interpolation baselines of issue 6 (dissertation Sec. 4.2, Table 4.1).
+// Range images and the interpolation baselines (dissertation Sec. 4.2, Table 4.1).
 #include <gtest/gtest.h>
 
 #include <filesystem>

@@ -1,4 +1,4 @@
-// The wire library's status conversion (issue 30: one definition each way): every field of a
+// The wire library's status conversion (one definition each way): every field of a
 // ServerStatus survives writeStatus -> DDS -> statusFromWire. A field either side forgets
 // arrives as its default and fails the comparison (each field gets a value of its own).
 #include "densemap/wire/status.hpp"

@@ -12,10 +12,10 @@ namespace densemap::testing {
 
 /// Sends raw coordinates unchecked (split as Client::queryPoints): the server validates them.
 [[nodiscard]] Expected<PointQueryAnswer> queryPointsRaw(Client& client,
-                                                       const std::vector<float>& xyz);
+                                                        const std::vector<float>& xyz);
 /// One request of raw coordinates, unsplit (tests of the server's limit).
 [[nodiscard]] Expected<PointQueryAnswer> queryPointsOnce(Client& client,
-                                                        std::span<const float> xyz);
+                                                         std::span<const float> xyz);
 /// The grid map a snapshot holds (comparisons cell by cell).
 [[nodiscard]] const GridMap& gridOf(const MapSnapshot& snapshot);
 

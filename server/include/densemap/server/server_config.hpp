@@ -5,10 +5,10 @@
 #include <filesystem>
 
 #include "densemap.pb.h"
-#include "densemap/wire/security.hpp"
 #include "densemap/geometry/error.hpp"
 #include "densemap/server/ingest.hpp"
 #include "densemap/server/ros2_bridge.hpp"
+#include "densemap/wire/security.hpp"
 
 namespace densemap::server {
 

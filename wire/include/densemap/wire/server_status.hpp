@@ -28,7 +28,7 @@ struct SensorCounters {
 struct RosCloudTopicStatus {
   std::string topic;
   std::uint32_t matched_writers = 0;
-  std::uint64_t incompatible_qos = 0;   // writers refused so far (total)
+  std::uint64_t incompatible_qos = 0;    // writers refused so far (total)
   std::string last_incompatible_policy;  // e.g. "reliability"; empty: none
 
   bool operator==(const RosCloudTopicStatus&) const = default;
