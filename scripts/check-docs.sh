@@ -14,7 +14,7 @@ fi
 PY=/usr/bin/python3
 [ -x "$PY" ] || PY=python3
 "$PY" scripts/config-reference.py --check || fail=1
-history=$(grep -rnE '\b[Ss]top [0-9]+\b|\bissue [0-9]+|\bitem [0-9]+ ' \
+history=$(grep -rnE '\b[Ss]tops? [0-9]+\b|\b[Ii]ssues? [0-9]+|\bitems? [0-9]+ ' \
   --include='*.cpp' --include='*.hpp' --include='*.md' --include='*.sh' --include='*.proto' \
   --include='*.textproto' --include=CMakeLists.txt --include='*.cmake' --include='*.py' --include='*.idl' \
   --exclude-dir=.git --exclude-dir='build*' --exclude-dir=node_modules . || true)

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The dense maps' accuracy benchmark (issues 5 and 17), reproducible; every method scored by
+# The dense maps' accuracy benchmark, reproducible; every method scored by
 # the same command on each dataset, with 2 worker threads:
 #   1. oracle protocol: the structured and unstructured scenes simulated with dense-oracle labels
 #      (12 scans x 3,500 points from 4 stations, 8 m range), at 0.1 m and 0.05 m;
@@ -83,4 +83,46 @@ if [ -d "$data/balm-realworld" ] && [ -z "${BENCH_SKIP_BALM:-}" ]; then
 else
   echo "dense-map-benchmark: BALM skipped (absent, or BENCH_SKIP_BALM set)"
 fi
-echo "dense-map-benchmark: wrote $out/summary.md"
+# The tables of docs/benchmarks.md: per case, each method's AUC (+- the seeds' spread) / MSE,
+# the row's best AUC and best MSE in bold (ties within the spread both bold); then the expected
+# calibration error per case, the best in bold.
+PY=/usr/bin/python3
+[ -x "$PY" ] || PY=python3
+"$PY" - "$out" "$all_methods" >"$out/tables.md" <<'PYTABLE'
+import json, os, sys
+out, methods = sys.argv[1], sys.argv[2].split(",")
+cases = [c for c in ["oracle_structured_0.1", "oracle_structured_0.05",
+                     "oracle_unstructured_0.1", "oracle_unstructured_0.05",
+                     "oracle_outdoor_hdl64_0.2", "holdout_la3dm_structured",
+                     "holdout_la3dm_unstructured", "holdout_akimap_sample"]
+         if os.path.exists(f"{out}/{c}.json")]
+cases += sorted(c[:-5] for c in os.listdir(out) if c.startswith("holdout_balm") and c.endswith(".json"))
+def load(case):
+    return {r["method"]: r for r in json.load(open(f"{out}/{case}.json"))["results"]}
+def row(case, cell, best):
+    r = load(case)
+    return f"| {case.replace('_', ' ')} | " + " | ".join(cell(r[m], best(r, m)) if m in r else "-" for m in methods) + " |"
+header = "| case | " + " | ".join(methods) + " |\n|---" * 1 + "|---" * len(methods) + "|"
+print("AUC (+- spread over seeds) / MSE; bold: the row's best (AUC ties within the spread).\n")
+print(header)
+for case in cases:
+    r = load(case)
+    top_auc = max(v["auc"] for v in r.values())
+    spread = max([v["auc_sd"] for v in r.values() if v["auc"] == top_auc] + [0.0])
+    low_mse = min(v["mse"] for v in r.values())
+    def cell(v, _):
+        auc = f"{v['auc']:.4f}" + (f" +- {v['auc_sd']:.4f}" if v["auc_sd"] >= 0.00005 else "")
+        if top_auc - v["auc"] <= max(spread, v["auc_sd"]): auc = f"**{auc}**"
+        mse = f"{v['mse']:.4f}"
+        if v["mse"] == low_mse: mse = f"**{mse}**"
+        return f"{auc} / {mse}"
+    print(row(case, cell, lambda r, m: None))
+print("\nExpected calibration error; bold: the row's best.\n")
+print(header)
+for case in cases:
+    r = load(case)
+    low = min(v["ece"] for v in r.values())
+    print(row(case, lambda v, _: f"**{v['ece']:.3f}**" if v["ece"] == low else f"{v['ece']:.3f}", lambda r, m: None))
+PYTABLE
+cat "$out/tables.md"
+echo "dense-map-benchmark: wrote $out/summary.md and $out/tables.md"

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 6's occupancy experiment (dissertation Sec. 4.4.5), reproducible: an outdoor sequence
+# The upsampling occupancy experiment (dissertation Sec. 4.4.5), reproducible: an outdoor sequence
 # is simulated with a 16-beam sensor (with dense-oracle labels at 0.2 m, 4x its beams and
 # columns) and with a true 64-beam sensor from the same poses; raycast maps are built from the
 # 16-beam scans as they are, upsampled to 64 x 1024 by nearest, bilinear and ILN, and from the
