@@ -30,6 +30,9 @@ foreach(package densemap-server libdensemap-dev)
 endforeach()
 install(FILES ${PROJECT_SOURCE_DIR}/README.md DESTINATION ${CMAKE_INSTALL_DATADIR}/doc/densemap-server
         COMPONENT server)
+# The manual beside the README, so its links resolve where the package puts it.
+install(DIRECTORY ${PROJECT_SOURCE_DIR}/docs DESTINATION ${CMAKE_INSTALL_DATADIR}/doc/densemap-server
+        COMPONENT server)
 
 set(CPACK_GENERATOR DEB)
 set(CPACK_PACKAGE_NAME densemap)

@@ -40,6 +40,7 @@ for f in ./usr/bin/densemap-server ./usr/bin/densemap ./usr/bin/densemap-map ./u
   ./etc/densemap/densemap.textproto ./lib/systemd/system/densemap-server.service \
   ./var/lib/densemap/ ./usr/share/densemap/models/iln.pb \
   ./usr/share/doc/densemap-server/copyright ./usr/share/doc/densemap-server/changelog.Debian.gz \
+  ./usr/share/doc/densemap-server/README.md ./usr/share/doc/densemap-server/docs/architecture.md \
   ./usr/share/man/man1/densemap-server.1.gz ./usr/share/man/man1/densemap.1.gz \
   ./usr/share/man/man1/densemap-make-pki.1.gz; do
   grep -qxF "$f" "$work/server.txt" || die "densemap-server lacks $f"
