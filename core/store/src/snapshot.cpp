@@ -187,6 +187,12 @@ Expected<LoadedSnapshot> loadSnapshot(const std::filesystem::path& file, Backend
     float v;
     std::memcpy(xyz, s.keys().data() + i * 6, 6);
     std::memcpy(&v, s.log_odds().data() + i * 4, 4);
+    // Values from outside: a CRC proves the file whole, not its values sane.
+    if (!std::isfinite(v)) {
+      return fileError(file, "snapshot cell " + std::to_string(i) + " (key " +
+                                 std::to_string(xyz[0]) + " " + std::to_string(xyz[1]) + " " +
+                                 std::to_string(xyz[2]) + ") has a non-finite log-odds");
+    }
     (*map)->setLogOdds(VoxelKey{xyz[0], xyz[1], xyz[2]}, v);
   }
   auto evidence = kernelEvidenceOf(s);

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <thread>
 
 #include "densemap/kernel/kernel_map.hpp"
@@ -80,6 +81,26 @@ TEST(Snapshot, BrokenFilesAreClearErrors) {
   std::ofstream(dir.path() / "junk.dmap") << "not a snapshot at all";
   EXPECT_FALSE(loadSnapshot(dir.path() / "junk.dmap", Backend::kGrid, 0.0));
   EXPECT_FALSE(loadSnapshot(dir.path() / "none.dmap", Backend::kGrid, 0.0));
+}
+
+TEST(Snapshot, NonFiniteLogOddsAreRefusedEvenWithAValidCrc) {
+  test::TempDir dir;
+  for (const float bad : {std::numeric_limits<float>::quiet_NaN(),
+                          std::numeric_limits<float>::infinity(),
+                          -std::numeric_limits<float>::infinity()}) {
+    GridMap map(0.2, SensorModel{});
+    map.setLogOdds(VoxelKey{1, 2, 3}, 1.0F);
+    map.setLogOdds(VoxelKey{4, 5, 6}, bad);
+    const auto file = dir.path() / "bad.dmap";
+    ASSERT_TRUE(saveSnapshot(*MapView::fromMap(map, 1), map.sensorModel(), Backend::kGrid, file));
+    for (const Backend backend : {Backend::kGrid, Backend::kOctree}) {
+      auto loaded = loadSnapshot(file, backend, 0.0);
+      ASSERT_FALSE(loaded) << bad;
+      EXPECT_NE(loaded.error().message.find("bad.dmap"), std::string::npos);
+      EXPECT_NE(loaded.error().message.find("non-finite log-odds"), std::string::npos)
+          << loaded.error().message;
+    }
+  }
 }
 
 /// A map with `cells` known cells valued by `version`, as a view at `version`.
