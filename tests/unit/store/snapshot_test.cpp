@@ -85,9 +85,9 @@ TEST(Snapshot, BrokenFilesAreClearErrors) {
 
 TEST(Snapshot, NonFiniteLogOddsAreRefusedEvenWithAValidCrc) {
   test::TempDir dir;
-  for (const float bad : {std::numeric_limits<float>::quiet_NaN(),
-                          std::numeric_limits<float>::infinity(),
-                          -std::numeric_limits<float>::infinity()}) {
+  for (const float bad :
+       {std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity(),
+        -std::numeric_limits<float>::infinity()}) {
     GridMap map(0.2, SensorModel{});
     map.setLogOdds(VoxelKey{1, 2, 3}, 1.0F);
     map.setLogOdds(VoxelKey{4, 5, 6}, bad);
