@@ -18,7 +18,10 @@ TARGETS=("$@")
 # 16 implements (P0848) but does not announce.
 CXXFLAGS_FUZZ="-U__cpp_concepts -D__cpp_concepts=202002L -fsanitize=fuzzer-no-link,address"
 launcher=()
-if command -v ccache >/dev/null 2>&1; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
+if command -v ccache >/dev/null 2>&1; then
+  launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+  export CCACHE_BASEDIR=${CCACHE_BASEDIR:-$PWD} CCACHE_NOHASHDIR=${CCACHE_NOHASHDIR:-true}
+fi
 cmake -S . -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_C_COMPILER=clang-16 -DCMAKE_CXX_COMPILER=clang++-16 "${launcher[@]}" \
   -DDENSEMAP_FUZZ=ON -DDENSEMAP_BUILD_TESTS=OFF -DDENSEMAP_BUILD_TOOLS=OFF \
