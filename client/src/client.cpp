@@ -10,6 +10,7 @@
 
 #include "client_parts.hpp"
 #include "densemap/client/testing.hpp"
+#include "densemap/query/map_queries.hpp"
 #include "densemap/query/version_delta.hpp"
 #include "densemap/wire/dds.hpp"
 #include "densemap/wire/delta_wire.hpp"
@@ -182,7 +183,7 @@ Expected<PointQueryAnswer> Client::queryPoints(const std::vector<Point3f>& point
 }
 
 Expected<PointQueryAnswer> Client::queryPoints(std::span<const float> xyz_world) {
-  if (xyz_world.size() % 3 != 0) return makeError("point coordinates come in threes");
+  if (auto ok = checkPointCoordinates(xyz_world.size()); !ok) return std::unexpected(ok.error());
   return impl_->queryPointsRaw(xyz_world);
 }
 

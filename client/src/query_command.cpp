@@ -12,11 +12,11 @@
 namespace densemap::cli {
 namespace {
 
-/// `query point`: xyz triples, or --random N points in a cube (counts per state).
+/// `query point`: xyz triples, or --random N points in a cube (counts per state). The
+/// arguments passed QueryCommand::check.
 int queryPointsCommand(Client& client, std::vector<float> coords, std::uint32_t random_points,
                        float random_spread) {
   if (random_points > 0) {
-    if (!coords.empty()) return fail("give xyz or --random, not both");
     std::mt19937 generator(42);
     std::uniform_real_distribution<float> axis(-random_spread, random_spread);
     coords.resize(std::size_t{random_points} * 3);
@@ -33,8 +33,6 @@ int queryPointsCommand(Client& client, std::vector<float> coords, std::uint32_t 
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
     return 0;
   }
-  if (coords.empty() || coords.size() % 3 != 0)
-    return fail("point coordinates come in threes (or give --random N)");
   auto answer = client.queryPoints(std::span<const float>(coords));
   if (!answer) return fail(answer.error().message);
   const char* names[] = {"unknown", "free", "occupied"};

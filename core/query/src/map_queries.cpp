@@ -12,7 +12,7 @@ namespace densemap {
 
 Expected<PointQueryResult> queryPoints(const MapView& view, std::span<const float> xyz,
                                        std::size_t max_points, const ChunkRunner& runner) {
-  if (xyz.size() % 3 != 0) return makeError("point query length is not a multiple of 3");
+  if (auto ok = checkPointCoordinates(xyz.size()); !ok) return std::unexpected(ok.error());
   const std::size_t n = xyz.size() / 3;
   if (n > max_points) {
     return makeError("more than " + std::to_string(max_points) + " query points");
@@ -32,6 +32,11 @@ Expected<PointQueryResult> queryPoints(const MapView& view, std::span<const floa
     }
   });
   return r;
+}
+
+Expected<void> checkPointCoordinates(std::size_t coordinates) {
+  if (coordinates % 3 != 0) return makeError("point query length is not a multiple of 3");
+  return {};
 }
 
 Expected<void> checkBox(const Point3f& min, const Point3f& max) {

@@ -37,6 +37,9 @@ struct PointQueryResult {
                                                      std::size_t max_points = 10'000'000,
                                                      const ChunkRunner& runner = serialRunner());
 
+/// The one rule for point coordinates from outside: x y z per point.
+[[nodiscard]] Expected<void> checkPointCoordinates(std::size_t coordinates);
+
 /// The one rule for a box from outside, without a map (the CLI checks before it sends): both
 /// corners finite, min <= max on every axis.
 [[nodiscard]] Expected<void> checkBox(const Point3f& min, const Point3f& max);
