@@ -13,7 +13,7 @@ set(DENSEMAP_CMAKE_DIR ${CMAKE_INSTALL_LIBDIR}/cmake/densemap)
 # (The read side, core/query, not the engine: a client does not link raycast, upsample or the
 # pipeline.)
 set(DENSEMAP_SDK_TARGETS
-    densemap_options densemap_geometry densemap_traversal densemap_map densemap_query densemap_kernel densemap_io
+    densemap_options densemap_geometry densemap_traversal densemap_map densemap_query densemap_kernel_evidence densemap_kernel densemap_io
     densemap_snapshot_proto densemap_store densemap_dds_msgs densemap_wire densemap_client)
 # The SDK's headers: the client's public API and the plain types it names, nothing more (no
 # DDS, protobuf, TBB or map internals; scripts/check-packages.sh checks it).

@@ -13,27 +13,12 @@
 
 #include "densemap/geometry/error.hpp"
 #include "densemap/geometry/voxel_grid.hpp"
+#include "densemap/kernel/kernel_evidence.hpp"
 #include "densemap/kernel/occupancy_samples.hpp"
 #include "densemap/geometry/block_layout.hpp"
 #include "densemap/map/block_store.hpp"
 
 namespace densemap::kernel {
-
-/// One engine, four configurations (dissertation Ch. 3, its baselines, and their combination).
-enum class KernelMethod {
-  kAkimap,  // adaptive anisotropic kernels, random free samples
-  kBgk,     // BGKOctoMap: isotropic kernels on points, regular free points
-  kBgkl,    // BGKOctoMap-L: isotropic kernels on points, free ray segments
-  /// AKIMap's adaptive kernels for occupied evidence (their scale fitted to the neighbouring
-  /// hits; with negative_step > 0 also against AKIMap's random free samples, which add no
-  /// evidence themselves) and free evidence from segment
-  /// kernels that cover every ray up to `free_margin` short of its hit: the rays' free space
-  /// is covered as by BGKOctoMap-L, without blurring free evidence into the surfaces.
-  kAkimapRays,
-};
-
-[[nodiscard]] std::string_view kernelMethodName(KernelMethod method);
-[[nodiscard]] Expected<KernelMethod> parseKernelMethod(std::string_view name);
 
 struct KernelOptions {
   KernelMethod method = KernelMethod::kAkimap;
@@ -136,17 +121,6 @@ struct KernelScanStats {
   /// Stage times, ms: samples, occupied kernels (fitting), occupied accumulation (scheduling and
   /// summing the kernels), free evidence (capsules), applying the free sums to the blocks.
   double ms_samples = 0, ms_kernels = 0, ms_occupied = 0, ms_free = 0, ms_apply = 0;
-};
-
-/// A kernel map's evidence, for snapshots: per known cell its alpha and beta (the
-/// prior not included), in block order, and the scans integrated (the random free samples'
-/// counter, so that a restored map's next scan draws what the original's would).
-struct KernelEvidence {
-  KernelMethod method = KernelMethod::kAkimapRays;
-  double resolution_m = 0.0;
-  std::uint64_t scans = 0;
-  std::vector<VoxelKey> keys;
-  std::vector<double> alpha, beta;
 };
 
 /// A dense occupancy map by Bayesian kernel inference: per cell Beta(alpha, beta), with the

@@ -1,6 +1,6 @@
 #pragma once
 
-#include "densemap/kernel/kernel_map.hpp"
+#include "densemap/kernel/kernel_evidence.hpp"
 
 #include <filesystem>
 #include <memory>
