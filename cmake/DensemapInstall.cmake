@@ -9,17 +9,24 @@ include(CMakePackageConfigHelpers)
 
 set(DENSEMAP_CMAKE_DIR ${CMAKE_INSTALL_LIBDIR}/cmake/densemap)
 
-# The client library and everything it links, as static libraries; exported as densemap::<name>.
-# (The read side, core/query, not the engine: a client does not link raycast, upsample or the
-# pipeline.)
+# The two SDK libraries and everything they link, as static libraries; exported as
+# densemap::<name>. densemap::client reads (core/query, the snapshot files) and talks DDS; it
+# links no engine and no TBB (scripts/check-packages.sh checks its link line).
+# densemap::mapper is the engine in the caller's process: raycast, kernel maps, upsample,
+# pipeline, TBB.
 set(DENSEMAP_SDK_TARGETS
-    densemap_options densemap_geometry densemap_traversal densemap_map densemap_query densemap_kernel_evidence densemap_kernel densemap_io
-    densemap_snapshot_proto densemap_store densemap_dds_msgs densemap_wire densemap_client)
-# The SDK's headers: the client's public API and the plain types it names, nothing more (no
-# DDS, protobuf, TBB or map internals; scripts/check-packages.sh checks it).
+    densemap_options densemap_geometry densemap_traversal densemap_map densemap_query
+    densemap_kernel_evidence densemap_io densemap_snapshot_proto densemap_store densemap_dds_msgs
+    densemap_wire densemap_client
+    densemap_parallel densemap_kernel densemap_raycast densemap_iln_proto densemap_upsample
+    densemap_pipeline densemap_mapper)
+# The SDK's headers: the client's and the mapper's public API and the plain types they name,
+# nothing more (no DDS, protobuf, TBB or map internals; scripts/check-packages.sh checks it).
 set(DENSEMAP_SDK_HEADERS
     client/include/densemap/client/client.hpp
     client/include/densemap/client/map_snapshot.hpp
+    mapper/include/densemap/mapper/mapper.hpp
+    core/map/include/densemap/map/sensor_model.hpp
     core/geometry/include/densemap/geometry/error.hpp
     core/geometry/include/densemap/geometry/point_cloud.hpp
     core/geometry/include/densemap/geometry/voxel_key.hpp

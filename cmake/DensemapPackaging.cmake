@@ -67,9 +67,10 @@ set(CPACK_DEBIAN_DEV_PACKAGE_NAME libdensemap-dev)
 set(CPACK_DEBIAN_DEV_PACKAGE_SECTION libdevel)
 set(CPACK_DEBIAN_DEV_PACKAGE_DEPENDS
     "liboctomap-dev, libtbb-dev, libeigen3-dev, cyclonedds-dev, libprotobuf-dev, libbz2-dev, zlib1g-dev")
-set(CPACK_COMPONENT_DEV_DESCRIPTION "client SDK of the densemap occupancy-mapping server
-Static libraries, headers and a CMake package (find_package(densemap), target
-densemap::client) for programs that publish scans to densemap-server, query
-its map and fetch snapshots over DDS, or read and write densemap's map and
-dataset files.")
+set(CPACK_COMPONENT_DEV_DESCRIPTION "SDK of the densemap occupancy-mapping server and library
+Static libraries, headers and a CMake package (find_package(densemap)):
+densemap::client for programs that publish scans to densemap-server, query
+its map and fetch snapshots over DDS; densemap::mapper for programs that
+build maps themselves (the server's engine, exact to OctoMap) and read and
+write densemap's and OctoMap's map files.")
 include(CPack)

@@ -49,6 +49,7 @@ done
 multiarch=$(dpkg-architecture -qDEB_HOST_MULTIARCH 2>/dev/null || gcc -print-multiarch)
 lib=./usr/lib/$multiarch
 for f in ./usr/include/densemap/client/client.hpp $lib/libdensemap_client.a \
+  ./usr/include/densemap/mapper/mapper.hpp $lib/libdensemap_mapper.a \
   $lib/cmake/densemap/densemapConfig.cmake $lib/cmake/densemap/densemapTargets.cmake \
   ./usr/share/doc/libdensemap-dev/copyright; do
   grep -qxF "$f" "$work/dev.txt" || die "libdensemap-dev lacks $f"
@@ -85,6 +86,27 @@ cmake -S client/examples/wall_scan -B "$work/example" -DCMAKE_PREFIX_PATH="$work
   -DCMAKE_BUILD_TYPE=Release >"$work/example.log" 2>&1 || { cat "$work/example.log" >&2; die "example: configure"; }
 cmake --build "$work/example" >>"$work/example.log" 2>&1 || { cat "$work/example.log" >&2; die "example: build"; }
 say "example built against the SDK in a temporary prefix"
+# The network client links no engine and no TBB: its link line names neither.
+cmake --build "$work/example" --clean-first --verbose >"$work/example-link.log" 2>&1
+grep -q 'libdensemap_client\.a' "$work/example-link.log" || die "cannot read the example's link line"
+if grep -oE '[^ ]*(tbb|densemap_(pipeline|raycast|kernel|upsample|parallel|mapper))\.(a|so)[^ ]*' \
+    "$work/example-link.log"; then
+  die "densemap::client links the engine or TBB"
+fi
+say "densemap::client's link line: no engine, no TBB"
+# The in-process Mapper: OctoMap's classic example (insert, query, save .bt), built and run.
+build_mapper_example() {
+  local dir=$1 prefix=$2
+  cmake -S mapper/examples/simple_map -B "$dir" ${prefix:+-DCMAKE_PREFIX_PATH="$prefix"} \
+    -DCMAKE_BUILD_TYPE=Release >"$dir.log" 2>&1 && cmake --build "$dir" >>"$dir.log" 2>&1 ||
+    { cat "$dir.log" >&2; die "mapper example: build"; }
+  (cd "$dir" && ./simple_map "$dir/wall.bt") >"$dir/run.txt" 2>&1 ||
+    { cat "$dir/run.txt" >&2; die "mapper example: run"; }
+  grep -q '(4.0 0.0 0.0): occupied' "$dir/run.txt" && grep -q '(2.0 0.0 0.0): free' "$dir/run.txt" &&
+    [ -s "$dir/wall.bt" ] || { cat "$dir/run.txt" >&2; die "mapper example: wrong answers"; }
+}
+build_mapper_example "$work/mapper-example" "$work/sdk"
+say "mapper example built against the SDK and run: $(tail -1 "$work/mapper-example/run.txt")"
 
 # The SDK's headers name no DDS, protobuf, TBB or map internals, and every one compiles in a
 # translation unit that reaches no Cyclone DDS, TBB, protobuf or OctoMap header.
@@ -141,6 +163,7 @@ if [ "$(id -u)" -eq 0 ] && [ "${DENSEMAP_SKIP_DPKG_INSTALL:-0}" != 1 ]; then
     cmake --build "$work/example-usr" >>"$work/example-usr.log" 2>&1 ||
     { cat "$work/example-usr.log" >&2; die "example against the installed libdensemap-dev"; }
   run_example /usr/bin/densemap-server "$work/example-usr/wall_scan" 172 >/dev/null
+  build_mapper_example "$work/mapper-example-usr" ""
   say "dpkg -i ok: --check-config passes, the example builds against /usr and talks to /usr/bin/densemap-server"
   dpkg --purge densemap-server libdensemap-dev >/dev/null
   installed=0

@@ -14,8 +14,6 @@
 namespace densemap::server {
 namespace {
 
-constexpr double kMaxRangeM = 2000.0;
-constexpr double kMaxRayCells = 65536.0;
 constexpr std::uint64_t kMaxReserveBlocks = 1'000'000;
 constexpr std::uint64_t kBlockBytes = 2304;  // one 8^3 block of the grid store, with its entry
 constexpr std::uint64_t kMaxQueryCells = 200'000'000;
@@ -88,44 +86,22 @@ Expected<void> mapOptions(const proto::ServerConfig& config, PipelineOptions& o)
     o.kernel = *kernel;
   }
   o.resolution_m = config.map().resolution_m();
-  const double keep = config.map().keep_radius_m();
-  if (!std::isfinite(keep) || keep < 0) return makeError("map.keep_radius_m must be >= 0");
-  o.keep_radius_m = keep;
+  o.keep_radius_m = config.map().keep_radius_m();
   if (config.map().has_bounds()) {
     const proto::Box& b = config.map().bounds();
-    const Point3f lo(static_cast<float>(b.min_x()), static_cast<float>(b.min_y()),
-                     static_cast<float>(b.min_z()));
-    const Point3f hi(static_cast<float>(b.max_x()), static_cast<float>(b.max_y()),
-                     static_cast<float>(b.max_z()));
-    if (!lo.allFinite() || !hi.allFinite() || (lo.array() >= hi.array()).any()) {
-      return makeError("map.bounds needs finite min_x < max_x, min_y < max_y, min_z < max_z");
-    }
-    o.bounds = std::make_pair(lo, hi);
-  }
-  if ((o.keep_radius_m > 0 || o.bounds) && config.map().backend() != "grid") {
-    return makeError("map.keep_radius_m and map.bounds (eviction) need backend \"grid\"");
-  }
-  if (!(o.resolution_m >= 0.001 && o.resolution_m <= 100.0)) {
-    return makeError("map.resolution_m must be in [0.001, 100], got " + numberText(o.resolution_m));
+    o.bounds = std::make_pair(Point3f(static_cast<float>(b.min_x()), static_cast<float>(b.min_y()),
+                                      static_cast<float>(b.min_z())),
+                              Point3f(static_cast<float>(b.max_x()), static_cast<float>(b.max_y()),
+                                      static_cast<float>(b.max_z())));
   }
   o.max_range_m = config.map().max_range_m();
-  // A bound on every ray: with "unlimited" range one scan of far points built 102.7M cells.
-  if (!(o.max_range_m > 0 && o.max_range_m <= kMaxRangeM)) {
-    return makeError("map.max_range_m must be in (0, " + std::to_string(int(kMaxRangeM)) +
-                     "] m (no unlimited range in the server), got " + numberText(o.max_range_m));
-  }
-  if (o.max_range_m / o.resolution_m > kMaxRayCells) {
-    return makeError("map.max_range_m / map.resolution_m must be at most " +
-                     std::to_string(int(kMaxRayCells)) + " cells per ray, got " +
-                     numberText(o.max_range_m / o.resolution_m));
-  }
   const auto& s = config.map().sensor();
   o.sensor = {s.prob_hit(), s.prob_miss(), s.clamp_min(), s.clamp_max()};
-  if (!SensorModel(o.sensor).isValid() || s.prob_hit() >= 1.0 || s.clamp_max() >= 1.0 ||
-      s.prob_miss() <= 0.0 || s.clamp_min() <= 0.0) {
-    return makeError(
-        "map.sensor needs 0 < clamp_min < 0.5, prob_miss < 0.5 < prob_hit < 1, "
-        "0.5 < clamp_max < 1");
+  if (auto ok = checkMapOptions(o); !ok) return makeError("map." + ok.error().message);
+  // A bound on every ray: with an unlimited range one scan of far points builds ~10^8 cells.
+  if (!(o.max_range_m > 0)) {
+    return makeError("map.max_range_m must be in (0, 2000] m (no unlimited range in the server), got " +
+                     numberText(o.max_range_m));
   }
   return {};
 }

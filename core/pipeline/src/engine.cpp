@@ -2,9 +2,61 @@
 
 #include "map_kind.hpp"
 
+#include <cmath>
+#include <cstdio>
+
 #include "densemap/parallel/tbb_runner.hpp"
 
 namespace densemap {
+namespace {
+
+constexpr double kMaxRangeM = 2000.0;
+constexpr double kMaxRayCells = 65536.0;
+
+/// A number as a person would write it: 1e-09, not 0.000000.
+std::string numberText(double v) {
+  char text[32];
+  std::snprintf(text, sizeof(text), "%g", v);
+  return text;
+}
+
+}  // namespace
+
+Expected<void> checkMapOptions(const PipelineOptions& o) {
+  if (!(o.resolution_m >= 0.001 && o.resolution_m <= 100.0)) {
+    return makeError("resolution_m must be in [0.001, 100], got " + numberText(o.resolution_m));
+  }
+  if (std::isnan(o.max_range_m) || (o.max_range_m >= 0 && !(o.max_range_m > 0 &&
+                                                            o.max_range_m <= kMaxRangeM))) {
+    return makeError("max_range_m must be < 0 (unlimited) or in (0, " +
+                     std::to_string(int(kMaxRangeM)) + "] m, got " + numberText(o.max_range_m));
+  }
+  if (o.max_range_m > 0 && o.max_range_m / o.resolution_m > kMaxRayCells) {
+    return makeError("max_range_m / resolution_m must be at most " +
+                     std::to_string(int(kMaxRayCells)) + " cells per ray, got " +
+                     numberText(o.max_range_m / o.resolution_m));
+  }
+  if (!std::isfinite(o.keep_radius_m) || o.keep_radius_m < 0) {
+    return makeError("keep_radius_m must be >= 0");
+  }
+  if (const auto& b = o.bounds) {
+    if (!b->first.allFinite() || !b->second.allFinite() ||
+        (b->first.array() >= b->second.array()).any()) {
+      return makeError("bounds needs finite min_x < max_x, min_y < max_y, min_z < max_z");
+    }
+  }
+  if ((o.keep_radius_m > 0 || o.bounds) && o.backend != Backend::kGrid) {
+    return makeError("keep_radius_m and bounds (eviction) need backend \"grid\"");
+  }
+  const auto& s = o.sensor;
+  if (!SensorModel(s).isValid() || s.hit >= 1.0 || s.clamp_max >= 1.0 || s.miss <= 0.0 ||
+      s.clamp_min <= 0.0) {
+    return makeError(
+        "sensor needs 0 < clamp_min < 0.5, prob_miss < 0.5 < prob_hit < 1, "
+        "0.5 < clamp_max < 1");
+  }
+  return {};
+}
 
 Expected<std::unique_ptr<Engine>> Engine::create(const PipelineOptions& options,
                                                  std::unique_ptr<OccupancyMap> initial,
@@ -12,9 +64,7 @@ Expected<std::unique_ptr<Engine>> Engine::create(const PipelineOptions& options,
   if (options.upsample) {
     if (auto ok = options.upsample->validate(); !ok) return std::unexpected(ok.error());
   }
-  if ((options.keep_radius_m > 0 || options.bounds) && options.backend != Backend::kGrid) {
-    return makeError("keep_radius_m and bounds (eviction) need the grid backend");
-  }
+  if (auto ok = checkMapOptions(options); !ok) return std::unexpected(ok.error());
   if (!initial) {
     auto map = makeMap(options.backend, options.resolution_m, SensorModel(options.sensor));
     if (!map) return std::unexpected(map.error());
@@ -49,15 +99,29 @@ std::expected<IntegrationResult, Rejection> Engine::integrate(const RawScan& raw
   PointCloud points_world;
   Point3f origin_world = Point3f::Zero();
   transform(*scan, points_world, origin_world);
+  IntegrationResult result = integratePoints(points_world, origin_world);
+  result.sensor_id = raw.sensor_id;
+  result.scan_seq = raw.seq;
+  result.stamp_ns = raw.stamp_ns;
+  return result;
+}
+
+std::expected<IntegrationResult, Rejection> Engine::integrateWorld(const PointCloud& points_world,
+                                                                   const Point3f& origin_world) {
+  if (auto ok = checkWorldScan(points_world, origin_world, options_.limits); !ok) {
+    return std::unexpected(std::move(ok.error()));
+  }
+  return integratePoints(points_world, origin_world);
+}
+
+IntegrationResult Engine::integratePoints(const PointCloud& points_world,
+                                          const Point3f& origin_world) {
   IntegrationResult result;
   CellChanges* changes =
       options_.collect_changes || kind_->needsChanges() ? &result.changes : nullptr;
   result.stats = kind_->integrate(points_world, origin_world, changes);
   evict(origin_world, result, changes);
   result.from_scan = true;
-  result.sensor_id = raw.sensor_id;
-  result.scan_seq = raw.seq;
-  result.stamp_ns = raw.stamp_ns;
   publish(result);
   return result;
 }

@@ -79,4 +79,32 @@ std::expected<Scan, Rejection> validateScan(const RawScan& raw, const ScanLimits
   return scan;
 }
 
+std::expected<void, Rejection> checkWorldScan(const PointCloud& points_world,
+                                              const Point3f& origin_world,
+                                              const ScanLimits& limits) {
+  auto reject = [](RejectReason r, std::string m) {
+    return std::unexpected(Rejection{r, std::move(m)});
+  };
+  if (points_world.empty()) return reject(RejectReason::kEmpty, "scan has no points");
+  if (points_world.size() > limits.max_points) {
+    return reject(RejectReason::kTooManyPoints,
+                  std::to_string(points_world.size()) + " points exceed the limit of " +
+                      std::to_string(limits.max_points));
+  }
+  for (int axis = 0; axis < 3; ++axis) {
+    const double t = origin_world[axis];
+    if (!std::isfinite(t) || std::abs(t) > limits.max_abs_position_m) {
+      return reject(
+          RejectReason::kPoseOutOfBounds,
+          "sensor origin outside +-" + std::to_string(limits.max_abs_position_m) + " m");
+    }
+  }
+  for (std::size_t i = 0; i < points_world.size(); ++i) {
+    if (!points_world[i].allFinite()) {
+      return reject(RejectReason::kNonFinitePoint, "point " + std::to_string(i) + " is NaN or Inf");
+    }
+  }
+  return {};
+}
+
 }  // namespace densemap

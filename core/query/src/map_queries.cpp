@@ -45,11 +45,20 @@ Expected<void> checkBox(const Point3f& min, const Point3f& max) {
   return {};
 }
 
+std::optional<Point3f> unitDirection(const Point3f& direction) {
+  // Scaled by its largest component first: the squares of a tiny (1e-30) or huge (1e30)
+  // direction would underflow or overflow, though it has a direction all the same.
+  const float largest = direction.cwiseAbs().maxCoeff();
+  if (!(largest > 0.0F) || !std::isfinite(largest)) return std::nullopt;
+  const Point3f scaled = direction / largest;
+  return Point3f(scaled / scaled.norm());
+}
+
 Expected<void> checkRay(const Point3f& origin, const Point3f& direction, float max_range) {
   if (!origin.allFinite() || !direction.allFinite() || !std::isfinite(max_range)) {
     return makeError("ray origin, direction or range is NaN or Inf");
   }
-  if (direction.norm() < 1e-6F) return makeError("ray direction has zero length");
+  if (!unitDirection(direction)) return makeError("ray direction has zero length");
   if (max_range <= 0.0F || max_range > 1e4F) return makeError("ray range must be in (0, 10 km]");
   return {};
 }
@@ -127,11 +136,49 @@ Expected<BoxQueryResult> queryBox(const MapView& view, const Point3f& min, const
   return r;
 }
 
+Expected<void> forEachKnownInBox(const MapView& view, const Point3f& min, const Point3f& max,
+                                 const std::function<void(const VoxelKey&, float)>& f) {
+  const auto keys = boxKeys(view.grid(), min, max);
+  if (!keys) return std::unexpected(keys.error());
+  const VoxelKey lo = keys->first, hi = keys->second;
+  constexpr int kS = block::kShift;
+  const auto visit = [&](std::uint64_t block_key, const VoxelBlock& b) {
+    for (int i = 0; i < block::kVoxels; ++i) {
+      if (!b.isKnown(i)) continue;
+      const VoxelKey k = block::keyOf(block_key, i);
+      if (k.x < lo.x || k.x > hi.x || k.y < lo.y || k.y > hi.y || k.z < lo.z || k.z > hi.z) continue;
+      f(k, b.log_odds[i]);
+    }
+  };
+  const double box_blocks = (static_cast<double>(hi.x >> kS) - (lo.x >> kS) + 1) *
+                            (static_cast<double>(hi.y >> kS) - (lo.y >> kS) + 1) *
+                            (static_cast<double>(hi.z >> kS) - (lo.z >> kS) + 1);
+  // Every block with contents holds at least one known cell.
+  if (box_blocks > static_cast<double>(view.knownCells())) {
+    const block::BlockBox blocks{{lo.x >> kS, lo.y >> kS, lo.z >> kS},
+                                 {hi.x >> kS, hi.y >> kS, hi.z >> kS}};
+    view.forEachBlock([&](std::uint64_t block_key, const VoxelBlock& b) {
+      if (blocks.contains(block_key)) visit(block_key, b);
+    });
+    return {};
+  }
+  for (unsigned bz = lo.z >> kS; bz <= (hi.z >> kS); ++bz) {
+    for (unsigned by = lo.y >> kS; by <= (hi.y >> kS); ++by) {
+      for (unsigned bx = lo.x >> kS; bx <= (hi.x >> kS); ++bx) {
+        const std::uint64_t block_key = block::blockOf(
+            VoxelKey{static_cast<std::uint16_t>(bx << kS), static_cast<std::uint16_t>(by << kS),
+                     static_cast<std::uint16_t>(bz << kS)});
+        if (const VoxelBlock* b = view.block(block_key)) visit(block_key, *b);
+      }
+    }
+  }
+  return {};
+}
+
 Expected<RayQueryResult> castRay(const MapView& view, const Point3f& origin,
                                  const Point3f& direction, float max_range) {
   if (auto ok = checkRay(origin, direction, max_range); !ok) return std::unexpected(ok.error());
-  const float norm = direction.norm();
-  const Point3f end = origin + direction / norm * max_range;
+  const Point3f end = origin + *unitDirection(direction) * max_range;
   RayQueryResult r;
   std::optional<VoxelKey> first_hit;
   BlockAccessor cells(view);  // a ray's cells share blocks

@@ -72,6 +72,14 @@ struct IntegrationResult {
   std::size_t evicted_cells = 0;
 };
 
+/// The one rule for a map's options from outside (the server's config, the Mapper's options):
+/// resolution in [0.001, 100] m; max range < 0 (unlimited) or in (0, 2000] m and at most 65,536
+/// cells per ray; keep radius finite and >= 0; bounds finite with min < max on every axis;
+/// 0 < clamp_min < 0.5, prob_miss < 0.5 < prob_hit < 1, 0.5 < clamp_max < 1; eviction on the
+/// grid backend only. Errors name the field (resolution_m, max_range_m, keep_radius_m, bounds,
+/// sensor).
+[[nodiscard]] Expected<void> checkMapOptions(const PipelineOptions& options);
+
 class MapKind;  // the map kind the engine integrates into (src/map_kind.hpp)
 
 /// The mapping engine (docs/architecture.md), one scan at a time on the caller's thread (its
@@ -99,6 +107,12 @@ class Engine {
   /// rejected (the map unchanged). The result names the scan (sensor, seq, stamp); its
   /// latency is the caller's to fill.
   [[nodiscard]] std::expected<IntegrationResult, Rejection> integrate(const RawScan& raw);
+  /// One scan already in the world frame: its points and the sensor origin (metres), checked
+  /// (checkWorldScan) and integrated as they are, so the map equals what OctoMap's
+  /// insertPointCloud(points, origin) builds. Upsampling, which needs the sensor frame, does
+  /// not apply. Evicted and published as integrate(RawScan).
+  [[nodiscard]] std::expected<IntegrationResult, Rejection> integrateWorld(
+      const PointCloud& points_world, const Point3f& origin_world);
   /// Runs `command` on the map; a non-empty change list publishes a version (`result`).
   [[nodiscard]] Expected<std::string> command(const Command& command, IntegrationResult& result);
   /// Integrates a synthetic fan into scratch buffers (PipelineOptions::warm_up).
@@ -116,6 +130,8 @@ class Engine {
   Engine(const PipelineOptions& options, std::unique_ptr<OccupancyMap> map, std::uint64_t version);
   /// The scan's points in the world frame (densified first when upsampling is on).
   void transform(Scan& scan, PointCloud& points_world, Point3f& origin_world) const;
+  /// Integrates, evicts and publishes (the stages after transform()).
+  IntegrationResult integratePoints(const PointCloud& points_world, const Point3f& origin_world);
   /// Drops the blocks keep_radius_m / bounds leave out, after a scan from `origin`.
   void evict(const Point3f& origin, IntegrationResult& result, CellChanges* changes);
   void publish(IntegrationResult& result);

@@ -46,4 +46,11 @@ struct Rejection {
 [[nodiscard]] std::expected<Scan, Rejection> validateScan(const RawScan& raw,
                                                           const ScanLimits& limits);
 
+/// The same rules for a scan already in the world frame: at least one point, at most
+/// `limits.max_points`, every point finite, the origin finite and within
+/// `limits.max_abs_position_m` on every axis. Pure.
+[[nodiscard]] std::expected<void, Rejection> checkWorldScan(const PointCloud& points_world,
+                                                            const Point3f& origin_world,
+                                                            const ScanLimits& limits);
+
 }  // namespace densemap

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <functional>
 #include <optional>
 #include <span>
 #include <utility>
@@ -44,8 +45,12 @@ struct PointQueryResult {
 /// corners finite, min <= max on every axis.
 [[nodiscard]] Expected<void> checkBox(const Point3f& min, const Point3f& max);
 
-/// The one rule for a ray from outside, without a map: finite, a direction of non-zero length,
-/// a range in (0, 10 km].
+/// `direction` scaled to unit length, judged by its own scale (1e-7 along x is +x); none for a
+/// zero or non-finite direction.
+[[nodiscard]] std::optional<Point3f> unitDirection(const Point3f& direction);
+
+/// The one rule for a ray from outside, without a map: finite, a direction of non-zero length
+/// (unitDirection), a range in (0, 10 km].
 [[nodiscard]] Expected<void> checkRay(const Point3f& origin, const Point3f& direction,
                                       float max_range);
 
@@ -61,6 +66,13 @@ struct PointQueryResult {
 [[nodiscard]] Expected<BoxQueryResult> queryBox(const MapView& view, const Point3f& min,
                                                 const Point3f& max, std::size_t max_cells,
                                                 std::size_t max_centers);
+
+/// Calls `f` with the key and log-odds of every known cell of the box [min, max] (metres; the
+/// box's checks are boxKeys'), block by block. Costs O(blocks of the box) or O(blocks of the
+/// map), whichever is fewer.
+[[nodiscard]] Expected<void> forEachKnownInBox(const MapView& view, const Point3f& min,
+                                               const Point3f& max,
+                                               const std::function<void(const VoxelKey&, float)>& f);
 
 /// Walks the ray (OctoMap's traversal) from `origin` along `direction` up to `max_range`; the
 /// first occupied cell is the hit. Unknown cells are passed through.

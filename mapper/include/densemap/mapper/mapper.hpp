@@ -1,0 +1,179 @@
+#pragma once
+
+#include <Eigen/Geometry>
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "densemap/geometry/error.hpp"
+#include "densemap/geometry/point_cloud.hpp"
+#include "densemap/map/sensor_model.hpp"
+#include "densemap/query/cell_state.hpp"
+
+namespace densemap {
+
+/// How a Mapper builds its map: the server's `map` and `pipeline` settings
+/// (docs/configuration.md), as plain values.
+struct MapperOptions {
+  /// Voxel edge, metres, 0.001 .. 100.
+  double resolution_m = 0.2;
+  /// Rays longer than this are cut and their end is not occupied; < 0: unlimited (OctoMap's
+  /// convention), else at most 2,000 m and 65,536 cells per ray.
+  double max_range_m = -1.0;
+  /// "log_odds" (OctoMap's map, exactly), or a dense kernel map: "akimap_rays", "akimap",
+  /// "bgk", "bgkl" (docs/dense-maps.md).
+  std::string kind = "log_odds";
+  /// "grid" (sparse 8^3 blocks, fast) or "octree" (OctoMap's OcTree).
+  std::string backend = "grid";
+  /// How a log-odds map integrates: "raycast", "culling", "superray" or "superray+culling".
+  /// Every one gives the same map.
+  std::string integration = "raycast";
+  /// "set" (OctoMap's: a cell changes at most once per scan) or "per_ray".
+  std::string update_rule = "set";
+  /// The inverse sensor model (OctoMap's defaults).
+  SensorProbabilities sensor{};
+  /// Worker threads for integration and batched queries; 0: all cores.
+  int threads = 0;
+  /// Bounded memory (grid backend): after each scan, blocks farther than this from the
+  /// sensor are dropped (0: off) ...
+  double keep_radius_m = 0.0;
+  /// ... and so are blocks outside this box (min, max corners, metres).
+  std::optional<std::pair<Point3f, Point3f>> bounds{};
+  /// Points a scan may hold (more are refused).
+  std::size_t max_points = 2'000'000;
+};
+
+/// What one cell holds.
+struct CellInfo {
+  CellState state = CellState::kUnknown;
+  /// log(p / (1 - p)); none where unknown.
+  std::optional<float> log_odds;
+  /// p; 0.5 where unknown.
+  [[nodiscard]] double probability() const;
+};
+
+/// What one scan did to the map.
+struct InsertResult {
+  /// The map version this scan published (one more than before).
+  std::uint64_t version = 0;
+  /// The 8^3 blocks the scan wrote (blockBox() turns a key into its box).
+  std::vector<std::uint64_t> changed_blocks;
+  std::size_t points = 0;
+  /// Blocks and cells dropped after the scan by keep_radius_m / bounds.
+  std::size_t evicted_blocks = 0;
+  std::size_t evicted_cells = 0;
+};
+
+struct BoxCounts {
+  std::size_t occupied = 0, free = 0, unknown = 0;
+};
+
+/// What a cast ray met.
+struct RayHit {
+  bool hit = false;
+  /// The centre of the first occupied cell, and its distance from the origin.
+  Point3f center = Point3f::Zero();
+  float distance = 0.0F;
+};
+
+/// Which cells forEachCell visits.
+enum class CellFilter { kKnown, kOccupied, kFree };
+
+/// An occupancy map in the caller's process: the server's engine (the same map kinds, the
+/// same exactness: a log-odds Mapper equals OctoMap's insertPointCloud cell for cell) without
+/// the server.
+///
+/// Thread-safety: every method may be called from any thread. The writers (insert*, clear,
+/// clearBox) run one at a time: a second waits for the first. Every const method reads the
+/// latest published version without waiting, also while a scan is being inserted (it then
+/// sees the version before that scan); save() of a dense kind waits for the writer (it saves
+/// the kind's evidence with the cells).
+class Mapper {
+ public:
+  /// A new, empty map; an error names the option that is out of range.
+  [[nodiscard]] static Expected<Mapper> create(const MapperOptions& options = {});
+  /// A map read from `path`: `.dmap` (densemap's snapshot: version, sensor model, and a dense
+  /// map's evidence, so its kind goes on where it stopped) or `.bt` / `.ot` (OctoMap). The file
+  /// decides the resolution (and, for `.dmap`, the sensor model and a dense kind); the other
+  /// options are `options`'. Files are checked as the server's resume checks them: corrupt,
+  /// truncated and non-finite contents are refused with the file and the reason.
+  [[nodiscard]] static Expected<Mapper> load(const std::string& path,
+                                             const MapperOptions& options = {});
+
+  Mapper(Mapper&&) noexcept;
+  Mapper& operator=(Mapper&&) noexcept;
+  ~Mapper();
+
+  /// Integrates one scan of world-frame points (metres) taken from `origin`, as OctoMap's
+  /// OcTree::insertPointCloud(points, origin, max_range). Refused (the map unchanged) when
+  /// empty, over max_points, or holding a NaN / Inf point. A writer.
+  [[nodiscard]] Expected<InsertResult> insertPointCloud(std::span<const Point3f> points_world,
+                                                        const Point3f& origin);
+  /// The same for coordinates x y z per point (its length a multiple of 3).
+  [[nodiscard]] Expected<InsertResult> insertPointCloud(std::span<const float> xyz_world,
+                                                        const Point3f& origin);
+  /// Integrates sensor-frame points with the sensor's pose in the world: each point is
+  /// transformed in double and rounded to float once, the origin is the pose's translation.
+  /// A writer.
+  [[nodiscard]] Expected<InsertResult> insertScan(std::span<const Point3f> points_sensor,
+                                                  const Eigen::Isometry3d& T_world_sensor);
+  /// Forgets every cell (a new, empty version). A writer.
+  void clear();
+  /// Forgets the cells of the box [min, max] (metres): they become unknown; returns how many
+  /// known cells it dropped. A writer.
+  [[nodiscard]] Expected<std::size_t> clearBox(const Point3f& min, const Point3f& max);
+
+  /// The cell holding `point` (metres; a non-finite or out-of-range point is unknown).
+  [[nodiscard]] CellInfo query(const Point3f& point) const;
+  /// The cells of many points, x y z each, into `log_odds` (NaN where unknown) and `states`
+  /// (each as long as the points): batches run on the Mapper's threads, all from one version,
+  /// which is returned.
+  [[nodiscard]] Expected<std::uint64_t> query(std::span<const float> xyz,
+                                              std::span<float> log_odds,
+                                              std::span<CellState> states) const;
+  /// Counts the cells of the box [min, max] (metres) by state; refused over `max_cells`.
+  [[nodiscard]] Expected<BoxCounts> queryBox(const Point3f& min, const Point3f& max,
+                                             std::size_t max_cells = 50'000'000) const;
+  /// Walks the ray from `origin` along `direction` (any non-zero length) up to `max_range`
+  /// metres (0 .. 10 km) with OctoMap's traversal; the first occupied cell is the hit, unknown
+  /// cells are passed through.
+  [[nodiscard]] Expected<RayHit> castRay(const Point3f& origin, const Point3f& direction,
+                                         float max_range) const;
+  /// Calls `f` with the centre (metres) and log-odds of every cell of the box [min, max] that
+  /// `filter` selects, block by block, from one version.
+  [[nodiscard]] Expected<void> forEachCell(
+      const Point3f& min, const Point3f& max, CellFilter filter,
+      const std::function<void(const Point3f& center, float log_odds)>& f) const;
+  /// The same over the whole map.
+  void forEachCell(CellFilter filter,
+                   const std::function<void(const Point3f& center, float log_odds)>& f) const;
+
+  /// Writes the map to `path`: `.dmap` (densemap's snapshot, with a dense map's evidence),
+  /// `.bt` (OctoMap binary: occupied and free) or `.ot` (OctoMap with log-odds); atomically.
+  /// Returns the bytes written.
+  [[nodiscard]] Expected<std::size_t> save(const std::string& path) const;
+
+  /// The latest published version: 0 for a new map, one more per scan or change.
+  [[nodiscard]] std::uint64_t version() const;
+  [[nodiscard]] double resolution() const;
+  [[nodiscard]] std::size_t knownCells() const;
+  /// Bytes the map's storage holds.
+  [[nodiscard]] std::size_t memoryBytes() const;
+  /// The box (min, max corners, metres) of a block named in InsertResult::changed_blocks.
+  [[nodiscard]] std::pair<Point3f, Point3f> blockBox(std::uint64_t block_key) const;
+  [[nodiscard]] const MapperOptions& options() const;
+
+ private:
+  struct Impl;
+  explicit Mapper(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace densemap

@@ -1,0 +1,307 @@
+#include "densemap/mapper/mapper.hpp"
+
+#include <tbb/task_arena.h>
+
+#include <cmath>
+#include <filesystem>
+#include <limits>
+#include <mutex>
+
+#include "densemap/geometry/block_layout.hpp"
+#include "densemap/geometry/rigid_transform.hpp"
+#include "densemap/io/octomap_export.hpp"
+#include "densemap/parallel/tbb_runner.hpp"
+#include "densemap/pipeline/engine.hpp"
+#include "densemap/query/map_queries.hpp"
+#include "densemap/store/snapshot.hpp"
+
+namespace densemap {
+
+struct Mapper::Impl {
+  MapperOptions options;
+  PipelineOptions pipeline;
+  std::unique_ptr<tbb::task_arena> arena;
+  std::unique_ptr<Engine> engine;
+  /// Held by every writer (and by save() for a dense kind, whose evidence the writer owns).
+  std::mutex writer;
+
+  [[nodiscard]] std::shared_ptr<const MapView> view() const { return engine->view(); }
+  [[nodiscard]] Expected<InsertResult> insert(const PointCloud& points_world,
+                                              const Point3f& origin);
+  /// Erases the cells of the key box [lo, hi]; returns how many were known.
+  std::size_t erase(const VoxelKey& lo, const VoxelKey& hi);
+  /// A Mapper's engine over `initial` (none: an empty map), in its arena.
+  [[nodiscard]] static Expected<std::unique_ptr<Impl>> make(const MapperOptions& options,
+                                                            std::unique_ptr<OccupancyMap> initial,
+                                                            std::uint64_t version);
+};
+
+namespace {
+
+/// The engine's options for `o`, or the option that is wrong.
+Expected<PipelineOptions> pipelineOptionsOf(const MapperOptions& o) {
+  PipelineOptions p;
+  auto backend = parseBackend(o.backend);
+  if (!backend) return makeError("backend: " + backend.error().message);
+  p.backend = *backend;
+  if (o.kind != "log_odds") {
+    auto kernel = kernel::parseKernelMethod(o.kind);
+    if (!kernel) {
+      return makeError("kind: unknown kind '" + o.kind +
+                       "' (expected log_odds, akimap, bgk, bgkl or akimap_rays)");
+    }
+    p.kernel = *kernel;
+  }
+  auto method = parseIntegrationMethod(o.integration);
+  if (!method) return makeError("integration: " + method.error().message);
+  p.method = *method;
+  auto rule = parseUpdateRule(o.update_rule);
+  if (!rule) return makeError("update_rule: " + rule.error().message);
+  p.rule = *rule;
+  p.resolution_m = o.resolution_m;
+  p.max_range_m = o.max_range_m;
+  p.sensor = o.sensor;
+  p.keep_radius_m = o.keep_radius_m;
+  p.bounds = o.bounds;
+  if (o.threads < 0 || o.threads > 256) return makeError("threads must be in 0 .. 256 (0: all cores)");
+  if (o.max_points == 0) return makeError("max_points must be > 0");
+  p.limits.max_points = o.max_points;
+  // The map's addressable range bounds where a sensor may be.
+  p.limits.max_abs_position_m = kMaxPoseTranslationM;
+  // A library map grows as it is used: no pool faulted in up front.
+  p.reserve_blocks = 0;
+  if (auto ok = checkMapOptions(p); !ok) return std::unexpected(ok.error());
+  return p;
+}
+
+}  // namespace
+
+Expected<std::unique_ptr<Mapper::Impl>> Mapper::Impl::make(const MapperOptions& options,
+                                                           std::unique_ptr<OccupancyMap> initial,
+                                                           std::uint64_t version) {
+  auto pipeline = pipelineOptionsOf(options);
+  if (!pipeline) return std::unexpected(pipeline.error());
+  auto impl = std::make_unique<Mapper::Impl>();
+  impl->options = options;
+  impl->pipeline = *pipeline;
+  const int automatic = tbb::task_arena::automatic;
+  impl->arena =
+      std::make_unique<tbb::task_arena>(options.threads > 0 ? options.threads : automatic);
+  Expected<std::unique_ptr<Engine>> engine = makeError("");
+  impl->arena->execute(
+      [&] { engine = Engine::create(impl->pipeline, std::move(initial), version); });
+  if (!engine) return std::unexpected(engine.error());
+  impl->engine = std::move(*engine);
+  return impl;
+}
+
+double CellInfo::probability() const {
+  return log_odds ? SensorModel::probability(*log_odds) : 0.5;
+}
+
+Mapper::Mapper(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Mapper::Mapper(Mapper&&) noexcept = default;
+Mapper& Mapper::operator=(Mapper&&) noexcept = default;
+Mapper::~Mapper() = default;
+
+Expected<Mapper> Mapper::create(const MapperOptions& options) {
+  auto impl = Impl::make(options, nullptr, 0);
+  if (!impl) return std::unexpected(impl.error());
+  return Mapper(std::move(*impl));
+}
+
+Expected<Mapper> Mapper::load(const std::string& path, const MapperOptions& options) {
+  const std::filesystem::path file(path);
+  auto backend = parseBackend(options.backend);
+  if (!backend) return makeError("backend: " + backend.error().message);
+  MapperOptions o = options;
+  const std::string ext = file.extension().string();
+  if (ext == ".bt" || ext == ".ot") {
+    auto map = importOctomap(file, *backend);
+    if (!map) return std::unexpected(map.error());
+    o.resolution_m = (*map)->resolution();
+    o.sensor = (*map)->sensorModel().probabilities();
+    auto impl = Impl::make(o, std::move(*map), 0);
+    if (!impl) return std::unexpected(impl.error());
+    return Mapper(std::move(*impl));
+  }
+  auto loaded = loadSnapshot(file, *backend, 0.0);
+  if (!loaded) return std::unexpected(loaded.error());
+  o.resolution_m = loaded->map->resolution();
+  o.sensor = loaded->map->sensorModel().probabilities();
+  if (loaded->kernel) o.kind = std::string(kernel::kernelMethodName(loaded->kernel->method));
+  auto impl = Impl::make(o, std::move(loaded->map), loaded->version);
+  if (!impl) return std::unexpected(impl.error());
+  if (loaded->kernel) {
+    if (auto ok = (*impl)->engine->restore(*loaded->kernel); !ok) {
+      return makeError(path + ": " + ok.error().message);
+    }
+  }
+  return Mapper(std::move(*impl));
+}
+
+Expected<InsertResult> Mapper::Impl::insert(const PointCloud& points_world,
+                                            const Point3f& origin) {
+  std::expected<IntegrationResult, Rejection> r = std::unexpected(Rejection{});
+  const std::lock_guard lock(writer);
+  arena->execute([&] { r = engine->integrateWorld(points_world, origin); });
+  if (!r) return makeError(r.error().message);
+  InsertResult out;
+  out.version = r->new_version;
+  out.changed_blocks = std::move(r->written_blocks);
+  out.points = points_world.size();
+  out.evicted_blocks = r->evicted_blocks;
+  out.evicted_cells = r->evicted_cells;
+  return out;
+}
+
+Expected<InsertResult> Mapper::insertPointCloud(std::span<const Point3f> points_world,
+                                                const Point3f& origin) {
+  return impl_->insert(PointCloud(points_world.begin(), points_world.end()), origin);
+}
+
+Expected<InsertResult> Mapper::insertPointCloud(std::span<const float> xyz_world,
+                                                const Point3f& origin) {
+  if (auto ok = checkPointCoordinates(xyz_world.size()); !ok) return std::unexpected(ok.error());
+  PointCloud points(xyz_world.size() / 3);
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    points[i] = Point3f(xyz_world[3 * i], xyz_world[3 * i + 1], xyz_world[3 * i + 2]);
+  }
+  return impl_->insert(points, origin);
+}
+
+Expected<InsertResult> Mapper::insertScan(std::span<const Point3f> points_sensor,
+                                          const Eigen::Isometry3d& T_world_sensor) {
+  if (auto ok = checkRigidPose(T_world_sensor); !ok) return std::unexpected(ok.error());
+  const PointCloud sensor(points_sensor.begin(), points_sensor.end());
+  return impl_->insert(transformPoints(T_world_sensor, sensor), sensorOrigin(T_world_sensor));
+}
+
+std::size_t Mapper::Impl::erase(const VoxelKey& lo, const VoxelKey& hi) {
+  std::size_t erased = 0;
+  IntegrationResult result;
+  const std::lock_guard lock(writer);
+  arena->execute([&] {
+    (void)engine->command(
+        [&](OccupancyMap& map, CellChanges& changes) -> Expected<std::string> {
+          erased = map.clearBox(lo, hi, &changes);
+          return std::string();
+        },
+        result);
+  });
+  return erased;
+}
+
+void Mapper::clear() { impl_->erase(VoxelKey{0, 0, 0}, VoxelKey{65535, 65535, 65535}); }
+
+Expected<std::size_t> Mapper::clearBox(const Point3f& min, const Point3f& max) {
+  const auto keys = boxKeys(impl_->view()->grid(), min, max);
+  if (!keys) return std::unexpected(keys.error());
+  return impl_->erase(keys->first, keys->second);
+}
+
+CellInfo Mapper::query(const Point3f& point) const {
+  const auto view = impl_->view();
+  CellInfo info;
+  const auto key = point.allFinite() ? view->grid().pointToKey(point) : std::nullopt;
+  if (key) info.log_odds = view->logOdds(*key);
+  info.state = cellState(info.log_odds);
+  return info;
+}
+
+Expected<std::uint64_t> Mapper::query(std::span<const float> xyz, std::span<float> log_odds,
+                                      std::span<CellState> states) const {
+  if (auto ok = checkPointCoordinates(xyz.size()); !ok) return std::unexpected(ok.error());
+  const std::size_t n = xyz.size() / 3;
+  if (log_odds.size() != n || states.size() != n) {
+    return makeError("query: " + std::to_string(n) + " points but " +
+                     std::to_string(log_odds.size()) + " log-odds and " +
+                     std::to_string(states.size()) + " states to fill");
+  }
+  const auto view = impl_->view();
+  Expected<PointQueryResult> r = makeError("");
+  impl_->arena->execute([&] {
+    r = queryPoints(*view, xyz, std::numeric_limits<std::size_t>::max(), tbbRunner());
+  });
+  if (!r) return std::unexpected(r.error());
+  std::copy(r->log_odds.begin(), r->log_odds.end(), log_odds.begin());
+  for (std::size_t i = 0; i < n; ++i) states[i] = static_cast<CellState>(r->states[i]);
+  return view->version();
+}
+
+Expected<BoxCounts> Mapper::queryBox(const Point3f& min, const Point3f& max,
+                                     std::size_t max_cells) const {
+  auto r = densemap::queryBox(*impl_->view(), min, max, max_cells, 0);
+  if (!r) return std::unexpected(r.error());
+  return BoxCounts{r->occupied, r->free, r->unknown};
+}
+
+Expected<RayHit> Mapper::castRay(const Point3f& origin, const Point3f& direction,
+                                 float max_range) const {
+  auto r = densemap::castRay(*impl_->view(), origin, direction, max_range);
+  if (!r) return std::unexpected(r.error());
+  return RayHit{r->hit, r->hit_center, r->distance};
+}
+
+namespace {
+
+bool selected(CellFilter filter, float log_odds) {
+  switch (filter) {
+    case CellFilter::kKnown:
+      return true;
+    case CellFilter::kOccupied:
+      return SensorModel::isOccupied(log_odds);
+    case CellFilter::kFree:
+      return !SensorModel::isOccupied(log_odds);
+  }
+  return false;
+}
+
+}  // namespace
+
+Expected<void> Mapper::forEachCell(
+    const Point3f& min, const Point3f& max, CellFilter filter,
+    const std::function<void(const Point3f& center, float log_odds)>& f) const {
+  const auto view = impl_->view();
+  return forEachKnownInBox(*view, min, max, [&](const VoxelKey& k, float v) {
+    if (selected(filter, v)) f(view->grid().keyToPoint(k), v);
+  });
+}
+
+void Mapper::forEachCell(CellFilter filter,
+                         const std::function<void(const Point3f& center, float log_odds)>& f) const {
+  const auto view = impl_->view();
+  view->forEachKnown([&](const VoxelKey& k, float v) {
+    if (selected(filter, v)) f(view->grid().keyToPoint(k), v);
+  });
+}
+
+Expected<std::size_t> Mapper::save(const std::string& path) const {
+  // A dense kind's evidence belongs to the writer: read it between scans, with the view of
+  // the same version.
+  std::unique_lock lock(impl_->writer, std::defer_lock);
+  if (impl_->pipeline.kernel) lock.lock();
+  const auto view = impl_->view();
+  const auto evidence = impl_->engine->evidence();
+  return saveSnapshot(*view, SensorModel(impl_->pipeline.sensor), impl_->pipeline.backend, path,
+                      evidence ? &*evidence : nullptr);
+}
+
+std::uint64_t Mapper::version() const { return impl_->view()->version(); }
+
+double Mapper::resolution() const { return impl_->pipeline.resolution_m; }
+
+std::size_t Mapper::knownCells() const { return impl_->view()->knownCells(); }
+
+std::size_t Mapper::memoryBytes() const { return impl_->view()->memoryBytes(); }
+
+std::pair<Point3f, Point3f> Mapper::blockBox(std::uint64_t block_key) const {
+  const VoxelGrid& grid = impl_->view()->grid();
+  const Point3f half = Point3f::Constant(static_cast<float>(grid.resolution() / 2));
+  return {grid.keyToPoint(block::keyOf(block_key, 0)) - half,
+          grid.keyToPoint(block::keyOf(block_key, block::kVoxels - 1)) + half};
+}
+
+const MapperOptions& Mapper::options() const { return impl_->options; }
+
+}  // namespace densemap
