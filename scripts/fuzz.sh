@@ -11,7 +11,7 @@ SECONDS_PER=${1:-10}
 shift || true
 BUILD=${DENSEMAP_FUZZ_BUILD_DIR:-build-fuzz}
 ALL=(fuzz_snapshot fuzz_scan_graph fuzz_scan_dat fuzz_pcd fuzz_dataset fuzz_config fuzz_iln_weights
-  fuzz_scan_validation fuzz_point_cloud2 fuzz_queries fuzz_mcap fuzz_db3)
+  fuzz_scan_validation fuzz_point_cloud2 fuzz_queries fuzz_mcap fuzz_db3 fuzz_point_array)
 TARGETS=("$@")
 [ ${#TARGETS[@]} -gt 0 ] || TARGETS=("${ALL[@]}")
 # Debian 12's clang 16 with libstdc++ 12: <expected> wants __cpp_concepts >= 202002, which clang
@@ -24,7 +24,7 @@ if command -v ccache >/dev/null 2>&1; then
 fi
 cmake -S . -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_C_COMPILER=clang-16 -DCMAKE_CXX_COMPILER=clang++-16 "${launcher[@]}" \
-  -DDENSEMAP_FUZZ=ON -DDENSEMAP_BUILD_TESTS=OFF -DDENSEMAP_BUILD_TOOLS=OFF \
+  -DDENSEMAP_FUZZ=ON -DDENSEMAP_BUILD_TESTS=OFF -DDENSEMAP_BUILD_TOOLS=OFF -DDENSEMAP_BUILD_PYTHON=OFF \
   "-DCMAKE_CXX_FLAGS=$CXXFLAGS_FUZZ" "-DCMAKE_C_FLAGS=-fsanitize=fuzzer-no-link,address" >/dev/null
 build_args=()
 for t in "${TARGETS[@]}"; do build_args+=(--target "$t"); done

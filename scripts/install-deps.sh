@@ -19,6 +19,7 @@ PACKAGES=(
   clang-16 libclang-rt-16-dev libsystemd-dev
   openssl tcpdump
   libfastrtps-dev fastddsgen  # the foreign-vendor test: eProsima Fast DDS, ROS 2's default
+  python3-dev pybind11-dev python3-numpy python3-pytest python3-matplotlib  # import densemap
 )
 if [ "${1:-}" = "--iln" ]; then
   PACKAGES+=(python3-torch python3-protobuf libopenblas0-pthread)

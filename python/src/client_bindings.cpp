@@ -1,0 +1,284 @@
+// densemap.Client: a running densemap-server's map over DDS (densemap/client/client.hpp).
+#include <pybind11/stl.h>
+#include <pybind11/stl/filesystem.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <limits>
+#include <memory>
+
+#include "bindings.hpp"
+#include "densemap/client/client.hpp"
+#include "densemap/geometry/rigid_transform.hpp"
+#include "densemap/io/scan.hpp"
+
+namespace densemap::python {
+namespace {
+
+/// A Client that can be closed: every call on a closed one raises densemap.Error.
+class PyClient {
+ public:
+  PyClient(std::uint32_t domain_id, double timeout_s, const std::string& network_interface) {
+    if (!(timeout_s > 0 && timeout_s <= 3600)) {
+      throw py::value_error("timeout must be in (0, 3600] s");
+    }
+    ClientOptions o;
+    o.domain_id = domain_id;
+    o.network_interface = network_interface;
+    o.timeout = std::chrono::milliseconds(static_cast<long>(timeout_s * 1000));
+    client_ = valueOrRaise(Client::create(o));
+  }
+
+  Client& client() {
+    if (!client_) throw DensemapError("the client is closed");
+    return *client_;
+  }
+  void close() { client_.reset(); }
+
+ private:
+  std::unique_ptr<Client> client_;
+};
+
+py::dict statusDict(const ServerStatus& s) {
+  py::dict d;
+  d["map_version"] = s.map_version;
+  d["known_cells"] = s.known_cells;
+  d["memory_bytes"] = s.memory_bytes;
+  d["received"] = s.received;
+  d["integrated"] = s.integrated;
+  d["dropped"] = s.dropped;
+  d["rejected"] = s.rejected;
+  d["last_reject_reason"] = s.last_reject_reason;
+  d["latency_p50_ms"] = s.latency_p50_ms;
+  d["latency_p99_ms"] = s.latency_p99_ms;
+  d["uptime_s"] = s.uptime_s;
+  d["cpu_s"] = s.cpu_s;
+  d["rss_bytes"] = s.rss_bytes;
+  d["queries_answered"] = s.queries_answered;
+  d["queries_rejected"] = s.queries_rejected;
+  py::list sensors;
+  for (const SensorCounters& c : s.sensors) {
+    py::dict sensor;
+    sensor["sensor_id"] = c.sensor_id;
+    sensor["received"] = c.received;
+    sensor["integrated"] = c.integrated;
+    sensor["dropped"] = c.dropped;
+    sensor["rejected"] = c.rejected;
+    sensor["seq_gaps"] = c.seq_gaps;
+    sensors.append(sensor);
+  }
+  d["sensors"] = sensors;
+  return d;
+}
+
+/// (log-odds float32 with NaN where unknown, states uint8) of an answer.
+py::tuple answerArrays(const PointQueryAnswer& a) {
+  const auto n = static_cast<py::ssize_t>(a.states.size());
+  py::array_t<float> log_odds(n);
+  py::array_t<std::uint8_t> states(n);
+  for (py::ssize_t i = 0; i < n; ++i) {
+    log_odds.mutable_data()[i] = a.log_odds[i] ? *a.log_odds[i]
+                                               : std::numeric_limits<float>::quiet_NaN();
+    states.mutable_data()[i] = static_cast<std::uint8_t>(a.states[i]);
+  }
+  return py::make_tuple(a.map_version, states, log_odds);
+}
+
+}  // namespace
+
+void bindClient(py::module_& m) {
+  py::class_<MapSnapshot>(m, "MapSnapshot",
+                          "A server's map at one version, copied into this process "
+                          "(Client.fetch_map). Read-only; thread-safe.")
+      .def_property_readonly("version", &MapSnapshot::version, "The server's map version.")
+      .def_property_readonly("resolution", &MapSnapshot::resolution, "Voxel edge, m.")
+      .def_property_readonly("known_cells", &MapSnapshot::knownCells, "Cells known.")
+      .def(
+          "cells",
+          [](const MapSnapshot& self) {
+            PointCloud centres;
+            std::vector<float> values;
+            self.forEachCell([&](const Point3f& c, float v) {
+              centres.push_back(c);
+              values.push_back(v);
+            });
+            py::array_t<float> v(static_cast<py::ssize_t>(values.size()));
+            std::copy(values.begin(), values.end(), v.mutable_data());
+            return py::make_tuple(pointsArray(centres), v);
+          },
+          "(centres float32 (M, 3), log_odds float32 (M,)) of every known cell.")
+      .def(
+          "save",
+          [](const MapSnapshot& self, const std::filesystem::path& path) {
+            py::gil_scoped_release release;
+            return valueOrRaise(self.save(path.string()));
+          },
+          py::arg("path"), "Writes .dmap, .bt or .ot; returns the bytes written.");
+
+  py::class_<PyClient>(m, "Client", R"doc(
+A client of a running densemap-server over DDS (loopback by default). Every call has a
+timeout and raises densemap.Error on it, on a refusal (with the server's message) and on a
+closed client. The GIL is released while a call waits. Use as a context manager, or close().
+)doc")
+      .def(py::init<std::uint32_t, double, const std::string&>(), py::kw_only(),
+           py::arg("domain_id") = 0, py::arg("timeout") = 5.0,
+           py::arg("network_interface") = "lo")
+      .def(
+          "wait_for_server",
+          [](PyClient& self) {
+            Client& c = self.client();
+            py::gil_scoped_release release;
+            valueOrRaise(c.waitForServer());
+          },
+          "Waits until a server's readers are matched (raises densemap.Error on timeout).")
+      .def(
+          "query_points",
+          [](PyClient& self, const py::handle& points) {
+            const PointCloud cloud =
+                pointsFrom(points, std::numeric_limits<std::size_t>::max(), "points", false);
+            Client& c = self.client();
+            PointQueryAnswer a;
+            {
+              py::gil_scoped_release release;
+              a = valueOrRaise(c.queryPoints(cloud));
+            }
+            return answerArrays(a);
+          },
+          py::arg("points"),
+          "(map_version, states uint8 (N,), log_odds float32 (N,), NaN where unknown).")
+      .def(
+          "query_box",
+          [](PyClient& self, const py::handle& box_min, const py::handle& box_max,
+             std::uint32_t max_centers) {
+            const Point3f lo = pointFrom(box_min, "box_min"), hi = pointFrom(box_max, "box_max");
+            Client& c = self.client();
+            BoxQueryAnswer a;
+            {
+              py::gil_scoped_release release;
+              a = valueOrRaise(c.queryBox(lo, hi, max_centers));
+            }
+            py::dict d;
+            d["map_version"] = a.map_version;
+            d["occupied"] = a.occupied;
+            d["free"] = a.free;
+            d["unknown"] = a.unknown;
+            d["occupied_centers"] = pointsArray(PointCloud(a.occupied_centers.begin(),
+                                                           a.occupied_centers.end()));
+            return d;
+          },
+          py::arg("box_min"), py::arg("box_max"), py::arg("max_centers") = 0,
+          "Counts of the box's cells by state, and up to max_centers occupied centres.")
+      .def(
+          "cast_ray",
+          [](PyClient& self, const py::handle& origin, const py::handle& direction,
+             float max_range) {
+            const Point3f o = pointFrom(origin, "origin"), dir = pointFrom(direction, "direction");
+            Client& c = self.client();
+            RayQueryAnswer a;
+            {
+              py::gil_scoped_release release;
+              a = valueOrRaise(c.castRay(o, dir, max_range));
+            }
+            py::dict d;
+            d["map_version"] = a.map_version;
+            d["hit"] = a.ray.hit;
+            d["center"] = py::make_tuple(a.ray.hit_center.x(), a.ray.hit_center.y(),
+                                         a.ray.hit_center.z());
+            d["distance"] = a.ray.distance;
+            return d;
+          },
+          py::arg("origin"), py::arg("direction"), py::arg("max_range"),
+          "The first occupied cell along the ray: {'map_version', 'hit', 'center', 'distance'}.")
+      .def(
+          "status",
+          [](PyClient& self) {
+            Client& c = self.client();
+            ServerStatus s;
+            {
+              py::gil_scoped_release release;
+              s = valueOrRaise(c.status());
+            }
+            return statusDict(s);
+          },
+          "The server's latest status sample (a dict).")
+      .def(
+          "fetch_map",
+          [](PyClient& self, std::uint64_t min_version) {
+            Client& c = self.client();
+            py::gil_scoped_release release;
+            return valueOrRaise(c.fetchMap(min_version));
+          },
+          py::arg("min_version") = 0,
+          "The server's map (a MapSnapshot) at min_version or later.")
+      .def(
+          "publish_scan",
+          [](PyClient& self, const py::handle& points, const py::handle& T_world_sensor,
+             const std::string& sensor_id, std::uint64_t seq, std::int64_t stamp_ns) {
+            const PointCloud cloud = pointsFrom(points, 2'000'000, "points_sensor", false);
+            const auto m4 = matrixFrom(T_world_sensor, "T_world_sensor");
+            Eigen::Matrix3d rotation;
+            for (int r = 0; r < 3; ++r) {
+              for (int c = 0; c < 3; ++c) rotation(r, c) = m4[r * 4 + c];
+            }
+            Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+            pose.linear() = rotation;
+            pose.translation() = Eigen::Vector3d(m4[3], m4[7], m4[11]);
+            valueOrRaise(checkRigidPose(pose));
+            Scan scan;
+            scan.frame = PointFrame::kSensor;
+            scan.T_world_sensor = pose;
+            scan.points = cloud;
+            RawScan raw = toRawScan(scan, seq, sensor_id);
+            if (stamp_ns != 0) raw.stamp_ns = stamp_ns;
+            Client& c = self.client();
+            py::gil_scoped_release release;
+            valueOrRaise(c.publishScan(raw));
+          },
+          py::arg("points_sensor"), py::arg("T_world_sensor"), py::arg("sensor_id") = "python",
+          py::arg("seq") = 0, py::arg("stamp_ns") = 0,
+          "Sends one sensor-frame scan with its pose (4x4) to the server (stamp_ns 0: now).")
+      .def(
+          "publish",
+          [](PyClient& self, const Scan& scan, const std::string& sensor_id, std::uint64_t seq) {
+            RawScan raw = toRawScan(scan, seq, sensor_id);
+            if (scan.stamp_ns) raw.stamp_ns = *scan.stamp_ns;
+            Client& c = self.client();
+            py::gil_scoped_release release;
+            valueOrRaise(c.publishScan(raw));
+          },
+          py::arg("scan"), py::arg("sensor_id") = "python", py::arg("seq") = 0,
+          "Sends a Scan of densemap.read_scans to the server (in its sensor frame).")
+      .def(
+          "reset",
+          [](PyClient& self) {
+            Client& c = self.client();
+            py::gil_scoped_release release;
+            return valueOrRaise(c.reset());
+          },
+          "Clears the server's map; returns its message.")
+      .def(
+          "clear_box",
+          [](PyClient& self, const py::handle& box_min, const py::handle& box_max) {
+            const Point3f lo = pointFrom(box_min, "box_min"), hi = pointFrom(box_max, "box_max");
+            Client& c = self.client();
+            py::gil_scoped_release release;
+            return valueOrRaise(c.clearBox(lo, hi));
+          },
+          py::arg("box_min"), py::arg("box_max"), "Forgets the box's cells on the server.")
+      .def(
+          "save",
+          [](PyClient& self, const std::string& name) {
+            Client& c = self.client();
+            py::gil_scoped_release release;
+            return valueOrRaise(c.save(name));
+          },
+          py::arg("name") = "",
+          "Has the server save its snapshot, or write `name` (.dmap, .bt, .ot; a file name, "
+          "never a path) into its export directory.")
+      .def("close", &PyClient::close, "Closes the client (its DDS participant).")
+      .def("__enter__", [](PyClient& self) -> PyClient& { return self; })
+      .def("__exit__", [](PyClient& self, const py::args&) { self.close(); });
+}
+
+}  // namespace densemap::python
