@@ -1,6 +1,7 @@
 # Debian packages with CPack: `cd build && cpack -G DEB` (scripts/package.sh) writes
 #   densemap-server_<version>_<arch>.deb   the server component (DensemapInstall.cmake)
-#   libdensemap-dev_<version>_<arch>.deb   the dev component: the client SDK
+#   libdensemap-dev_<version>_<arch>.deb   the dev component: the SDK (client and mapper)
+#   python3-densemap_<version>_<arch>.deb  the python component: import densemap
 # Each carries the copyright and changelog files Debian policy asks for, stripped binaries and
 # its dependencies: shared libraries found by dpkg-shlibdeps for the server, the -dev packages
 # of the SDK's dependencies for libdensemap-dev.
@@ -12,9 +13,15 @@ if(NOT DENSEMAP_MAINTAINER MATCHES "^[^<>]+ <[^<>@ ]+@[^<>@ ]+>$")
   message(FATAL_ERROR "DENSEMAP_MAINTAINER must read 'Name <address>', got '${DENSEMAP_MAINTAINER}'")
 endif()
 set(DENSEMAP_DEB_DIR ${PROJECT_SOURCE_DIR}/cmake/debian)
-foreach(package densemap-server libdensemap-dev)
+set(DENSEMAP_DEB_PACKAGES densemap-server libdensemap-dev)
+if(DENSEMAP_BUILD_PYTHON)
+  list(APPEND DENSEMAP_DEB_PACKAGES python3-densemap)
+endif()
+foreach(package IN LISTS DENSEMAP_DEB_PACKAGES)
   if(package STREQUAL densemap-server)
     set(component server)
+  elseif(package STREQUAL python3-densemap)
+    set(component python)
   else()
     set(component dev)
   endif()
@@ -46,6 +53,9 @@ set(CPACK_PACKAGING_INSTALL_PREFIX /usr)
 set(CPACK_STRIP_FILES ON)
 set(CPACK_PRE_BUILD_SCRIPTS ${PROJECT_SOURCE_DIR}/cmake/DensemapStripArchives.cmake)
 set(CPACK_COMPONENTS_ALL server dev)
+if(DENSEMAP_BUILD_PYTHON)
+  list(APPEND CPACK_COMPONENTS_ALL python)
+endif()
 set(CPACK_DEB_COMPONENT_INSTALL ON)
 set(CPACK_DEBIAN_FILE_NAME DEB-DEFAULT)
 set(CPACK_DEBIAN_PACKAGE_SECTION science)
@@ -73,4 +83,18 @@ densemap::client for programs that publish scans to densemap-server, query
 its map and fetch snapshots over DDS; densemap::mapper for programs that
 build maps themselves (the server's engine, exact to OctoMap) and read and
 write densemap's and OctoMap's map files.")
+# The Python module in Debian's dist-packages for the python3 it was built with; its shared
+# libraries (TBB, Cyclone DDS, protobuf, OctoMap) found by dpkg-shlibdeps.
+set(CPACK_DEBIAN_PYTHON_PACKAGE_NAME python3-densemap)
+set(CPACK_DEBIAN_PYTHON_PACKAGE_SECTION python)
+set(CPACK_DEBIAN_PYTHON_PACKAGE_SHLIBDEPS ON)
+set(CPACK_DEBIAN_PYTHON_PACKAGE_DEPENDS
+    "python3 (>= ${Python_VERSION_MAJOR}.${Python_VERSION_MINOR}), python3 (<< ${Python_VERSION_MAJOR}.${DENSEMAP_PYTHON_NEXT_MINOR}), python3-numpy")
+set(CPACK_COMPONENT_PYTHON_DESCRIPTION "Python module of the densemap occupancy mapper
+import densemap: build exact 3D occupancy maps of LiDAR scans in your
+process (densemap.Mapper: OctoMap's map cell for cell, many times faster,
+or a dense kernel map) from NumPy arrays, query them in batches, save them
+as .dmap or OctoMap files; read recordings (datasets, OctoMap files, ROS 2
+bags) one scan at a time; talk to a running densemap-server
+(densemap.Client).")
 include(CPack)

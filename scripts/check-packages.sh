@@ -4,11 +4,12 @@
 #     lintian finds no errors;
 #  2. installs the SDK alone to a temporary prefix (cmake --install --component dev), builds the
 #     example client (client/examples/wall_scan) against it and runs it against a server;
-#  3. as root: installs both packages with dpkg -i, checks the packaged config with
-#     `densemap-server --check-config /etc/densemap/densemap.textproto`, builds the example
-#     against the installed libdensemap-dev, then purges both packages (the machine is left as
-#     it was, but for the `densemap` system user). Not root: the server package is unpacked
-#     with dpkg-deb -x and its config checked there instead.
+#  3. as root: installs the three packages with dpkg -i, checks the packaged config with
+#     `densemap-server --check-config /etc/densemap/densemap.textproto`, builds the examples
+#     against the installed libdensemap-dev, imports densemap with /usr/bin/python3 and maps a
+#     point, then purges the packages (the machine is left as it was, but for the `densemap`
+#     system user). Not root: the packages are unpacked with dpkg-deb -x, the config checked
+#     and the module imported there instead.
 # DDS stays on loopback: run it in a private network namespace (test.sh does).
 # Usage: scripts/check-packages.sh      Env: DENSEMAP_BUILD_DIR (default build)
 set -euo pipefail
@@ -19,7 +20,7 @@ work=$(mktemp -d)
 installed=0
 cleanup() {
   if [ "$installed" -eq 1 ]; then
-    dpkg --purge densemap-server libdensemap-dev >/dev/null 2>&1 || true
+    dpkg --purge densemap-server libdensemap-dev python3-densemap >/dev/null 2>&1 || true
   fi
   rm -rf "$work"
 }
@@ -34,6 +35,8 @@ die() {
 scripts/package.sh >/dev/null
 server_deb=$(ls "$BUILD_DIR"/packages/densemap-server_*.deb)
 dev_deb=$(ls "$BUILD_DIR"/packages/libdensemap-dev_*.deb)
+python_deb=$(ls "$BUILD_DIR"/packages/python3-densemap_*.deb)
+dpkg-deb -c "$python_deb" | awk '{print $6}' >"$work/python.txt"
 dpkg-deb -c "$server_deb" | awk '{print $6}' >"$work/server.txt"
 dpkg-deb -c "$dev_deb" | awk '{print $6}' >"$work/dev.txt"
 for f in ./usr/bin/densemap-server ./usr/bin/densemap ./usr/bin/densemap-map ./usr/bin/densemap-make-pki \
@@ -54,8 +57,17 @@ for f in ./usr/include/densemap/client/client.hpp $lib/libdensemap_client.a \
   ./usr/share/doc/libdensemap-dev/copyright; do
   grep -qxF "$f" "$work/dev.txt" || die "libdensemap-dev lacks $f"
 done
+# The Python module in Debian's dist-packages, with its stubs; it depends on NumPy.
+for f in ./usr/lib/python3/dist-packages/densemap/__init__.py \
+  ./usr/lib/python3/dist-packages/densemap/__init__.pyi ./usr/lib/python3/dist-packages/densemap/py.typed \
+  ./usr/share/doc/python3-densemap/copyright; do
+  grep -qxF "$f" "$work/python.txt" || die "python3-densemap lacks $f"
+done
+grep -qE '^\./usr/lib/python3/dist-packages/densemap/_densemap\.cpython-[0-9]+-[^/]*\.so$' "$work/python.txt" ||
+  die "python3-densemap lacks the native module _densemap.cpython-*.so"
+dpkg-deb -f "$python_deb" Depends | grep -q python3-numpy || die "python3-densemap does not depend on python3-numpy"
 # Nothing of the build tree, the tests or the shared data leaks into a package.
-if grep -E '/tests?/|_test|/work/|shared/data|\.o$' "$work/server.txt" "$work/dev.txt"; then
+if grep -E '/tests?/|_test|/work/|shared/data|\.o$' "$work/server.txt" "$work/dev.txt" "$work/python.txt"; then
   die "unexpected files in a package"
 fi
 dpkg-deb -f "$server_deb" Depends | grep -q libddsc || die "densemap-server does not depend on Cyclone DDS"
@@ -65,7 +77,7 @@ grep -q '/var/lib/densemap/densemap.dmap' <(dpkg-deb --fsys-tarfile "$server_deb
   tar -xO ./etc/densemap/densemap.textproto) || die "the packaged config does not keep its snapshot in /var/lib/densemap"
 say "contents ok: densemap-server $(wc -l <"$work/server.txt") entries, libdensemap-dev $(wc -l <"$work/dev.txt")"
 if command -v lintian >/dev/null 2>&1; then
-  lintian --tag-display-limit 0 "$server_deb" "$dev_deb" >"$work/lintian.txt" 2>&1 || true
+  lintian --tag-display-limit 0 "$server_deb" "$dev_deb" "$python_deb" >"$work/lintian.txt" 2>&1 || true
   if grep -q '^E:' "$work/lintian.txt"; then
     cat "$work/lintian.txt" >&2
     die "lintian reports errors"
@@ -151,7 +163,16 @@ if [ "$(id -u)" -eq 0 ] && [ "${DENSEMAP_SKIP_DPKG_INSTALL:-0}" != 1 ]; then
     die "densemap-server is already installed on this machine; not touching it"
   fi
   installed=1
-  dpkg -i "$server_deb" "$dev_deb" >"$work/dpkg.log" 2>&1 || { cat "$work/dpkg.log" >&2; die "dpkg -i"; }
+  dpkg -i "$server_deb" "$dev_deb" "$python_deb" >"$work/dpkg.log" 2>&1 || { cat "$work/dpkg.log" >&2; die "dpkg -i"; }
+  # Debian's python3 imports the installed module from anywhere, with nothing else on its path.
+  (cd / && env -u PYTHONPATH /usr/bin/python3 -c '
+import densemap, numpy as np
+m = densemap.Mapper(resolution=0.1, max_range=10.0)
+m.insert_point_cloud(np.array([[4.0, 0.0, 0.0]], np.float32), [0, 0, 0])
+assert m.states([[4.0, 0, 0], [2, 0, 0]]).tolist() == [densemap.OCCUPIED, densemap.FREE]
+assert densemap.__file__.startswith("/usr/lib/python3/dist-packages/")
+print(densemap.__version__)') >"$work/python-import.txt" 2>&1 ||
+    { cat "$work/python-import.txt" >&2; die "the installed python3-densemap does not import and map"; }
   /usr/bin/densemap-server --check-config /etc/densemap/densemap.textproto ||
     die "the packaged config does not pass --check-config"
   [ "$(stat -c %U /var/lib/densemap)" = densemap ] || die "/var/lib/densemap is not owned by densemap"
@@ -164,8 +185,8 @@ if [ "$(id -u)" -eq 0 ] && [ "${DENSEMAP_SKIP_DPKG_INSTALL:-0}" != 1 ]; then
     { cat "$work/example-usr.log" >&2; die "example against the installed libdensemap-dev"; }
   run_example /usr/bin/densemap-server "$work/example-usr/wall_scan" 172 >/dev/null
   build_mapper_example "$work/mapper-example-usr" ""
-  say "dpkg -i ok: --check-config passes, the example builds against /usr and talks to /usr/bin/densemap-server"
-  dpkg --purge densemap-server libdensemap-dev >/dev/null
+  say "dpkg -i ok: --check-config passes, the examples build against /usr, one talks to /usr/bin/densemap-server; /usr/bin/python3 imports densemap $(cat "$work/python-import.txt")"
+  dpkg --purge densemap-server libdensemap-dev python3-densemap >/dev/null
   installed=0
   [ ! -e /usr/bin/densemap-server ] || die "dpkg --purge left /usr/bin/densemap-server"
 else
@@ -174,6 +195,9 @@ else
     "$work/root/etc/densemap/densemap.textproto" >"$work/root/check.textproto"
   "$work/root/usr/bin/densemap-server" --check-config "$work/root/check.textproto" ||
     die "the packaged config does not pass --check-config"
-  say "not root: the server package was unpacked (dpkg-deb -x) and its config checked there"
+  dpkg-deb -x "$python_deb" "$work/root"
+  (cd / && PYTHONPATH="$work/root/usr/lib/python3/dist-packages" /usr/bin/python3 -c 'import densemap') ||
+    die "the unpacked python3-densemap does not import"
+  say "not root: the packages were unpacked (dpkg-deb -x), the config checked and the module imported there"
 fi
 say "all ok"

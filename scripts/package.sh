@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Builds the Debian packages from build/ (scripts/build.sh first):
 #   build/packages/densemap-server_<version>_amd64.deb   programs, /etc/densemap, systemd unit
-#   build/packages/libdensemap-dev_<version>_amd64.deb   client SDK (find_package(densemap))
-# Usage: scripts/package.sh      (prints the two paths)
+#   build/packages/libdensemap-dev_<version>_amd64.deb   SDK (find_package(densemap)): client, mapper
+#   build/packages/python3-densemap_<version>_amd64.deb  import densemap
+# Usage: scripts/package.sh      (prints the paths)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BUILD_DIR=${DENSEMAP_BUILD_DIR:-build}
