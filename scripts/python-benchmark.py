@@ -36,9 +36,9 @@ def percentile(values, q):
     return ordered[rank - 1]
 
 
-def python_run(scans, args, bt):
+def python_run(scans, args, bt, versioned_reads=False):
     mapper = densemap.Mapper(resolution=args.resolution, max_range=args.max_range,
-                             threads=args.threads)
+                             threads=args.threads, versioned_reads=versioned_reads)
     times = []
     for points, origin in scans:
         start = time.perf_counter()
@@ -68,7 +68,7 @@ def main():
     p.add_argument("--resolution", type=float, default=0.2)
     p.add_argument("--max-range", type=float, default=30.0)
     p.add_argument("--threads", type=int, default=2)
-    p.add_argument("--runs", type=int, default=3)
+    p.add_argument("--runs", type=int, default=5)
     args = p.parse_args()
     if not os.path.isdir(args.data):
         sys.exit(f"python-benchmark: no dataset at {args.data} (give --data or DENSEMAP_DATA_DIR)")
@@ -84,25 +84,33 @@ def main():
     cpu = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo")
                 if line.startswith("model name")), platform.processor())
     print(f"Machine: {cpu}, {os.cpu_count()} vCPUs; {time.strftime('%Y-%m-%d', time.gmtime())}")
-    print(f"Data: {os.path.basename(os.path.normpath(args.data))} scans {args.first}.."
-          f"{args.first + len(scans) - 1}, {args.resolution} m, max range {args.max_range} m, "
+    print(f"Data: {os.path.basename(os.path.normpath(args.data))}, {len(scans)} scans from "
+          f"position {args.first}, {args.resolution} m, max range {args.max_range} m, "
           f"{args.threads} threads, grid backend, raycast")
     print()
     print("| run | densemap-bench p50 / p99 ms | Python Mapper p50 / p99 ms | Python / bench p50 "
-          "| .bt equals densemap-map's |")
-    print("|---|---|---|---|---|")
-    ratios = []
+          "| Python, versioned_reads=True p50 / p99 ms | .bt equals densemap-map's |")
+    print("|---|---|---|---|---|---|")
+    ratios, versioned_ratios = [], []
     for run in range(1, args.runs + 1):
         bench_p50, bench_p99 = bench_run(args, os.path.join(work, f"bench-{run}.json"))
         bt = os.path.join(work, f"python-{run}.bt")
         times, _ = python_run(scans, args, bt)
+        versioned, _ = python_run(scans, args, bt + ".versioned.bt", versioned_reads=True)
         py_p50, py_p99 = percentile(times, 50), percentile(times, 99)
-        same = filecmp.cmp(bt, reference, shallow=False)
+        v_p50, v_p99 = percentile(versioned, 50), percentile(versioned, 99)
+        same = (filecmp.cmp(bt, reference, shallow=False)
+                and filecmp.cmp(bt + ".versioned.bt", reference, shallow=False))
         ratios.append(py_p50 / bench_p50)
+        versioned_ratios.append(v_p50 / bench_p50)
         print(f"| {run} | {bench_p50:.2f} / {bench_p99:.2f} | {py_p50:.2f} / {py_p99:.2f} "
-              f"| {py_p50 / bench_p50:.3f} | {'yes (byte for byte)' if same else 'NO'} |")
+              f"| {py_p50 / bench_p50:.3f} | {v_p50:.2f} / {v_p99:.2f} "
+              f"| {'yes (byte for byte)' if same else 'NO'} |")
     print()
-    print(f"Python / bench p50: {min(ratios):.3f} .. {max(ratios):.3f} over {len(ratios)} runs.")
+    print(f"Python / bench p50: median {statistics.median(ratios):.3f}, {min(ratios):.3f} .. "
+          f"{max(ratios):.3f} over {len(ratios)} runs; with versioned_reads=True: median "
+          f"{statistics.median(versioned_ratios):.3f}, {min(versioned_ratios):.3f} .. "
+          f"{max(versioned_ratios):.3f}.")
 
 
 if __name__ == "__main__":

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <limits>
 #include <mutex>
+#include <shared_mutex>
 
 #include "densemap/geometry/block_layout.hpp"
 #include "densemap/geometry/rigid_transform.hpp"
@@ -22,8 +23,15 @@ struct Mapper::Impl {
   PipelineOptions pipeline;
   std::unique_ptr<tbb::task_arena> arena;
   std::unique_ptr<Engine> engine;
-  /// Held by every writer (and by save() for a dense kind, whose evidence the writer owns).
-  std::mutex writer;
+  /// Writers hold it alone. Readers share it, unless versioned_reads (then only save() of a
+  /// dense kind takes it, shared: the evidence belongs to the writer).
+  mutable std::shared_mutex lock;
+
+  /// What a reader holds while it reads.
+  [[nodiscard]] std::shared_lock<std::shared_mutex> reading() const {
+    return options.versioned_reads ? std::shared_lock<std::shared_mutex>()
+                                   : std::shared_lock<std::shared_mutex>(lock);
+  }
 
   [[nodiscard]] std::shared_ptr<const MapView> view() const { return engine->view(); }
   [[nodiscard]] Expected<InsertResult> insert(const PointCloud& points_world,
@@ -70,6 +78,7 @@ Expected<PipelineOptions> pipelineOptionsOf(const MapperOptions& o) {
   p.limits.max_abs_position_m = kMaxPoseTranslationM;
   // A library map grows as it is used: no pool faulted in up front.
   p.reserve_blocks = 0;
+  p.versioned_views = o.versioned_reads;
   if (auto ok = checkMapOptions(p); !ok) return std::unexpected(ok.error());
   return p;
 }
@@ -143,7 +152,7 @@ Expected<Mapper> Mapper::load(const std::string& path, const MapperOptions& opti
 Expected<InsertResult> Mapper::Impl::insert(const PointCloud& points_world,
                                             const Point3f& origin) {
   std::expected<IntegrationResult, Rejection> r = std::unexpected(Rejection{});
-  const std::lock_guard lock(writer);
+  const std::unique_lock writing(lock);
   arena->execute([&] { r = engine->integrateWorld(points_world, origin); });
   if (!r) return makeError(r.error().message);
   InsertResult out;
@@ -158,6 +167,11 @@ Expected<InsertResult> Mapper::Impl::insert(const PointCloud& points_world,
 Expected<InsertResult> Mapper::insertPointCloud(std::span<const Point3f> points_world,
                                                 const Point3f& origin) {
   return impl_->insert(PointCloud(points_world.begin(), points_world.end()), origin);
+}
+
+Expected<InsertResult> Mapper::insertPointCloud(const PointCloud& points_world,
+                                                const Point3f& origin) {
+  return impl_->insert(points_world, origin);
 }
 
 Expected<InsertResult> Mapper::insertPointCloud(std::span<const float> xyz_world,
@@ -180,7 +194,7 @@ Expected<InsertResult> Mapper::insertScan(std::span<const Point3f> points_sensor
 std::size_t Mapper::Impl::erase(const VoxelKey& lo, const VoxelKey& hi) {
   std::size_t erased = 0;
   IntegrationResult result;
-  const std::lock_guard lock(writer);
+  const std::unique_lock writing(lock);
   arena->execute([&] {
     (void)engine->command(
         [&](OccupancyMap& map, CellChanges& changes) -> Expected<std::string> {
@@ -201,6 +215,7 @@ Expected<std::size_t> Mapper::clearBox(const Point3f& min, const Point3f& max) {
 }
 
 CellInfo Mapper::query(const Point3f& point) const {
+  const auto reading = impl_->reading();
   const auto view = impl_->view();
   CellInfo info;
   const auto key = point.allFinite() ? view->grid().pointToKey(point) : std::nullopt;
@@ -218,6 +233,7 @@ Expected<std::uint64_t> Mapper::query(std::span<const float> xyz, std::span<floa
                      std::to_string(log_odds.size()) + " log-odds and " +
                      std::to_string(states.size()) + " states to fill");
   }
+  const auto reading = impl_->reading();
   const auto view = impl_->view();
   Expected<PointQueryResult> r = makeError("");
   impl_->arena->execute([&] {
@@ -231,6 +247,7 @@ Expected<std::uint64_t> Mapper::query(std::span<const float> xyz, std::span<floa
 
 Expected<BoxCounts> Mapper::queryBox(const Point3f& min, const Point3f& max,
                                      std::size_t max_cells) const {
+  const auto reading = impl_->reading();
   auto r = densemap::queryBox(*impl_->view(), min, max, max_cells, 0);
   if (!r) return std::unexpected(r.error());
   return BoxCounts{r->occupied, r->free, r->unknown};
@@ -238,6 +255,7 @@ Expected<BoxCounts> Mapper::queryBox(const Point3f& min, const Point3f& max,
 
 Expected<RayHit> Mapper::castRay(const Point3f& origin, const Point3f& direction,
                                  float max_range) const {
+  const auto reading = impl_->reading();
   auto r = densemap::castRay(*impl_->view(), origin, direction, max_range);
   if (!r) return std::unexpected(r.error());
   return RayHit{r->hit, r->hit_center, r->distance};
@@ -262,6 +280,7 @@ bool selected(CellFilter filter, float log_odds) {
 Expected<void> Mapper::forEachCell(
     const Point3f& min, const Point3f& max, CellFilter filter,
     const std::function<void(const Point3f& center, float log_odds)>& f) const {
+  const auto reading = impl_->reading();
   const auto view = impl_->view();
   return forEachKnownInBox(*view, min, max, [&](const VoxelKey& k, float v) {
     if (selected(filter, v)) f(view->grid().keyToPoint(k), v);
@@ -270,6 +289,7 @@ Expected<void> Mapper::forEachCell(
 
 void Mapper::forEachCell(CellFilter filter,
                          const std::function<void(const Point3f& center, float log_odds)>& f) const {
+  const auto reading = impl_->reading();
   const auto view = impl_->view();
   view->forEachKnown([&](const VoxelKey& k, float v) {
     if (selected(filter, v)) f(view->grid().keyToPoint(k), v);
@@ -278,9 +298,10 @@ void Mapper::forEachCell(CellFilter filter,
 
 Expected<std::size_t> Mapper::save(const std::string& path) const {
   // A dense kind's evidence belongs to the writer: read it between scans, with the view of
-  // the same version.
-  std::unique_lock lock(impl_->writer, std::defer_lock);
-  if (impl_->pipeline.kernel) lock.lock();
+  // the same version (versioned reads need no lock for the cells alone).
+  const auto reading = impl_->options.versioned_reads && !impl_->pipeline.kernel
+                           ? std::shared_lock<std::shared_mutex>()
+                           : std::shared_lock<std::shared_mutex>(impl_->lock);
   const auto view = impl_->view();
   const auto evidence = impl_->engine->evidence();
   return saveSnapshot(*view, SensorModel(impl_->pipeline.sensor), impl_->pipeline.backend, path,

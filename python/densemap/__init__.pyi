@@ -49,6 +49,7 @@ class Mapper:
         keep_radius: float = 0.0,
         bounds: Optional[Box] = None,
         max_points: int = 2000000,
+        versioned_reads: bool = False,
     ) -> None: ...
     def insert_point_cloud(self, points: ArrayLike, origin: Point) -> InsertResult: ...
     def insert_scan(self, points_sensor: ArrayLike, T_world_sensor: ArrayLike) -> InsertResult: ...
@@ -92,6 +93,7 @@ def load(
     keep_radius: float = 0.0,
     bounds: Optional[Box] = None,
     max_points: int = 2000000,
+    versioned_reads: bool = False,
 ) -> Mapper: ...
 
 class MapSnapshot:

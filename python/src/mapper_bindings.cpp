@@ -27,7 +27,8 @@ MapperOptions optionsFrom(double resolution, double max_range, const std::string
                           const std::string& backend, const std::string& integration,
                           const std::string& update_rule, int threads, double prob_hit,
                           double prob_miss, double clamp_min, double clamp_max,
-                          double keep_radius, const py::object& bounds, std::size_t max_points) {
+                          double keep_radius, const py::object& bounds, std::size_t max_points,
+                          bool versioned_reads) {
   MapperOptions o;
   o.resolution_m = resolution;
   o.max_range_m = max_range;
@@ -40,6 +41,7 @@ MapperOptions optionsFrom(double resolution, double max_range, const std::string
   o.keep_radius_m = keep_radius;
   o.bounds = boxFrom(bounds);
   o.max_points = max_points;
+  o.versioned_reads = versioned_reads;
   return o;
 }
 
@@ -182,6 +184,7 @@ py::dict optionsDict(const MapperOptions& o) {
   d["clamp_max"] = o.sensor.clamp_max;
   d["keep_radius"] = o.keep_radius_m;
   d["max_points"] = o.max_points;
+  d["versioned_reads"] = o.versioned_reads;
   return d;
 }
 
@@ -207,25 +210,27 @@ void bindMapper(py::module_& m) {
   const MapperOptions d;
   py::class_<Mapper>(m, "Mapper", R"doc(
 An occupancy map in this process: densemap's engine (the server's), exact to OctoMap for
-kind="log_odds". Thread-safe: inserts run one at a time (the GIL is released while they
-integrate); queries read the latest published version and never wait.
+kind="log_odds". Thread-safe: inserts run one at a time and the GIL is released while they
+integrate; queries read the latest version (see versioned_reads).
 
 Arguments (keyword only): resolution (m), max_range (m, < 0: unlimited), kind ("log_odds",
 "akimap_rays", "akimap", "bgk", "bgkl"), backend ("grid", "octree"), integration ("raycast",
 "culling", "superray", "superray+culling"), update_rule ("set", "per_ray"), threads (0: all
 cores), prob_hit, prob_miss, clamp_min, clamp_max (the sensor model), keep_radius (m, 0: off)
 and bounds (((min_x, min_y, min_z), (max_x, max_y, max_z)) or None) bound the memory,
-max_points (per scan). A bad option raises densemap.Error naming it.
+max_points (per scan), versioned_reads (False: inserts write in place and a query waits for an
+insert under way; True: queries never wait, inserts copy the blocks they change, about a fifth
+more time a scan). A bad option raises densemap.Error naming it.
 )doc")
       .def(py::init([](double resolution, double max_range, const std::string& kind,
                        const std::string& backend, const std::string& integration,
                        const std::string& update_rule, int threads, double prob_hit,
                        double prob_miss, double clamp_min, double clamp_max, double keep_radius,
-                       const py::object& bounds, std::size_t max_points) {
+                       const py::object& bounds, std::size_t max_points, bool versioned_reads) {
              return valueOrRaise(Mapper::create(
                  optionsFrom(resolution, max_range, kind, backend, integration, update_rule,
                              threads, prob_hit, prob_miss, clamp_min, clamp_max, keep_radius,
-                             bounds, max_points)));
+                             bounds, max_points, versioned_reads)));
            }),
            py::kw_only(), py::arg("resolution") = d.resolution_m,
            py::arg("max_range") = d.max_range_m, py::arg("kind") = d.kind,
@@ -234,7 +239,7 @@ max_points (per scan). A bad option raises densemap.Error naming it.
            py::arg("prob_hit") = d.sensor.hit, py::arg("prob_miss") = d.sensor.miss,
            py::arg("clamp_min") = d.sensor.clamp_min, py::arg("clamp_max") = d.sensor.clamp_max,
            py::arg("keep_radius") = d.keep_radius_m, py::arg("bounds") = py::none(),
-           py::arg("max_points") = d.max_points)
+           py::arg("max_points") = d.max_points, py::arg("versioned_reads") = d.versioned_reads)
       .def("insert_point_cloud", &insertPoints, py::arg("points"), py::arg("origin"),
            R"doc(Integrates world-frame points ((N, 3) float32 or float64, C- or F-contiguous)
 seen from origin (3 numbers), as OctoMap's insertPointCloud. Returns an InsertResult. Raises
@@ -364,12 +369,13 @@ where none, distances: float32 (N,), inf where none).)doc")
       "load",
       [](const std::filesystem::path& path, double max_range, const std::string& backend,
          const std::string& integration, const std::string& update_rule, int threads,
-         double keep_radius, const py::object& bounds, std::size_t max_points) {
+         double keep_radius, const py::object& bounds, std::size_t max_points,
+         bool versioned_reads) {
         const MapperOptions d;
         MapperOptions o = optionsFrom(d.resolution_m, max_range, d.kind, backend, integration,
                                       update_rule, threads, d.sensor.hit, d.sensor.miss,
                                       d.sensor.clamp_min, d.sensor.clamp_max, keep_radius, bounds,
-                                      max_points);
+                                      max_points, versioned_reads);
         py::gil_scoped_release release;
         return valueOrRaise(Mapper::load(path.string(), o));
       },
@@ -377,7 +383,7 @@ where none, distances: float32 (N,), inf where none).)doc")
       py::arg("backend") = d.backend, py::arg("integration") = d.integration,
       py::arg("update_rule") = d.update_rule, py::arg("threads") = d.threads,
       py::arg("keep_radius") = d.keep_radius_m, py::arg("bounds") = py::none(),
-      py::arg("max_points") = d.max_points,
+      py::arg("max_points") = d.max_points, py::arg("versioned_reads") = d.versioned_reads,
       R"doc(A Mapper read from a .dmap (densemap: version, sensor model, a dense map's
 evidence) or .bt / .ot (OctoMap) file; the file decides the resolution, sensor model and a
 dense kind, the arguments the rest. Corrupt, truncated and non-finite files raise

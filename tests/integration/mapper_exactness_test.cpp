@@ -49,12 +49,13 @@ TEST_P(MapperEqualsOctomap, AfterEveryScanOnBothBackendsAndEveryMethod) {
   OctreeMap oracle(c.resolution, SensorModel{});
   std::vector<std::pair<std::string, Mapper>> mappers;
   for (const std::string backend : {"grid", "octree"}) {
-    for (const std::string method : {"raycast", "superray+culling"}) {
+    for (const std::string method : {"raycast", "superray+culling", "raycast/versioned"}) {
       MapperOptions m;
+      m.versioned_reads = method == "raycast/versioned";
       m.resolution_m = c.resolution;
       m.max_range_m = c.max_range;
       m.backend = backend;
-      m.integration = method;
+      m.integration = method == "raycast/versioned" ? "raycast" : method;
       m.threads = 2;
       auto mapper = Mapper::create(m);
       ASSERT_TRUE(mapper) << mapper.error().message;

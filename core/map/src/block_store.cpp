@@ -184,28 +184,42 @@ BlockNode* BlockStore::ownHead(ChainLink* head) const {
 
 BlockNode& BlockStore::writable(BlockEntry& e) {
   ChainLink* head = e.head.load(std::memory_order_relaxed);
-  if (BlockNode* own = ownHead(head)) return *own;
+  if (BlockNode* own = ownHead(head)) {
+    // Live versions: a node's version is the last version that wrote it.
+    if (live_ && own->version != writing_) {
+      std::lock_guard lock(pool_mutex_);
+      keepBatchRoom(1);
+      written_.push_back(e.key);
+      own->version = writing_;
+    }
+    return *own;
+  }
   BlockNode* node = nullptr;
   {
     std::lock_guard lock(pool_mutex_);
-    if (versioned_) keepBatchRoom(1);  // first: it may throw before the node is taken
+    if (versioned_ || live_) keepBatchRoom(1);  // first: it may throw before the node is taken
     node = allocate();
-    if (versioned_) {
-      written_.push_back(e.key);
-      if (head != nullptr) superseded_.emplace_back(head, node);
-    }
+    if (versioned_ || live_) written_.push_back(e.key);
+    if (versioned_ && head != nullptr) superseded_.emplace_back(head, node);
   }
   return becomeHead(e, head, node);
 }
 
 BlockNode& BlockStore::WriteBatch::writable(BlockEntry& e) {
   ChainLink* head = e.head.load(std::memory_order_relaxed);
-  if (BlockNode* own = store_.ownHead(head)) return *own;
+  if (BlockNode* own = store_.ownHead(head)) {
+    if (store_.live_ && own->version != store_.writing_) {
+      keepRoomForOne();
+      written_.push_back(e.key);
+      own->version = store_.writing_;
+    }
+    return *own;
+  }
   if (next_ == nodes_.size()) {
     nodes_.clear();
     next_ = 0;
     std::lock_guard lock(store_.pool_mutex_);
-    if (store_.versioned_) {
+    if (store_.versioned_ || store_.live_) {
       store_.keepBatchRoom(kBatchNodes);  // first: it may throw before any node is taken
       store_.batch_room_ += kBatchNodes;
       room_ += kBatchNodes;
@@ -215,13 +229,24 @@ BlockNode& BlockStore::WriteBatch::writable(BlockEntry& e) {
     for (std::size_t k = 0; k < kBatchNodes; ++k) nodes_.push_back(store_.allocate());
   }
   BlockNode* node = nodes_[next_];  // in the pool's order: the most recently freed first
-  if (store_.versioned_) {
+  if (store_.versioned_ || store_.live_) {
     // Before the node counts as used: a throw here leaves it to go back to the pool.
+    if (written_.size() == room_) keepRoomForOne();
     written_.push_back(e.key);
-    if (head != nullptr) superseded_.emplace_back(head, node);
+    if (store_.versioned_ && head != nullptr) superseded_.emplace_back(head, node);
   }
   ++next_;
   return store_.becomeHead(e, head, node);
+}
+
+void BlockStore::WriteBatch::keepRoomForOne() {
+  // The destructor's merge must not allocate: room in the store's lists for every entry this
+  // batch lists, kept kBatchNodes at a time.
+  if (written_.size() < room_) return;
+  std::lock_guard lock(store_.pool_mutex_);
+  store_.keepBatchRoom(kBatchNodes);
+  store_.batch_room_ += kBatchNodes;
+  room_ += kBatchNodes;
 }
 
 BlockStore::WriteBatch::~WriteBatch() {
@@ -287,6 +312,10 @@ bool BlockStore::drop(BlockEntry& e) {
   if (contents(head) == nullptr) return false;
   std::lock_guard lock(pool_mutex_);
   if (!versioned_) {  // nobody reads another version: free it now
+    if (live_) {
+      keepBatchRoom(1);
+      written_.push_back(e.key);
+    }
     e.head.store(nullptr, std::memory_order_release);
     recycle(head);
     return true;
@@ -436,6 +465,17 @@ BlockStore::Published BlockStore::publish() {
     std::lock_guard lock(pool_mutex_);
     trim_threshold_ = free_.size() + 2 * kSlabNodes;
   }
+  return out;
+}
+
+BlockStore::Published BlockStore::advance() {
+  Published out;
+  out.version = writing_;
+  {
+    std::lock_guard lock(pool_mutex_);
+    out.written_blocks.swap(written_);
+  }
+  ++writing_;
   return out;
 }
 

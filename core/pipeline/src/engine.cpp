@@ -88,7 +88,12 @@ Engine::Engine(const PipelineOptions& options, std::unique_ptr<OccupancyMap> map
   }
   kind_->published().startVersionsAt(version);
   kind_->published().reserveBlocks(options.reserve_blocks);
-  view_.store(MapView::publish(kind_->published()));
+  if (options.versioned_views) {
+    view_.store(MapView::publish(kind_->published()));
+  } else {
+    kind_->published().startLiveVersions();
+    view_.store(MapView::advanceLive(kind_->published()));
+  }
 }
 
 Engine::~Engine() = default;
@@ -153,7 +158,10 @@ void Engine::publish(IntegrationResult& result) {
   kind_->beforePublish(result.changes);
   result.base_version = view_.load()->version();
   // A mirror follows the octree cell for cell, so its known-cell count is the map's.
-  auto next = MapView::publish(kind_->published(), kind_->ownBytes(), &result.written_blocks);
+  auto next = options_.versioned_views
+                  ? MapView::publish(kind_->published(), kind_->ownBytes(), &result.written_blocks)
+                  : MapView::advanceLive(kind_->published(), kind_->ownBytes(),
+                                         &result.written_blocks);
   result.new_version = next->version();
   view_.store(std::move(next));
 }

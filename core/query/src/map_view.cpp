@@ -12,6 +12,16 @@ std::shared_ptr<const MapView> MapView::publish(GridMap& map, std::size_t other_
                                          published.version, known, bytes);
 }
 
+std::shared_ptr<const MapView> MapView::advanceLive(GridMap& map, std::size_t other_bytes,
+                                                   std::vector<std::uint64_t>* written_blocks) {
+  const std::size_t known = map.knownCells();
+  const std::size_t bytes = map.memoryBytes() + other_bytes;
+  auto ended = map.advanceVersion();
+  if (written_blocks != nullptr) *written_blocks = std::move(ended.written_blocks);
+  return std::make_shared<const MapView>(map.store(), nullptr, map.resolution(), ended.version,
+                                         known, bytes);
+}
+
 std::shared_ptr<const MapView> MapView::fromMap(const OccupancyMap& map, std::uint64_t version) {
   GridMap copy(map.resolution(), map.sensorModel());
   map.forEachKnown([&](const VoxelKey& k, float v) { copy.setLogOdds(k, v); });

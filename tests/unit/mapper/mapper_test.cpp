@@ -6,7 +6,9 @@
 
 #include <atomic>
 #include <cmath>
+#include <algorithm>
 #include <map>
+#include <set>
 #include <thread>
 
 #include "densemap/test_support/data_dir.hpp"
@@ -279,8 +281,70 @@ TEST(Mapper, ClearAndClearBoxForgetCells) {
   EXPECT_EQ(mapper->version(), 3U);
 }
 
+TEST(Mapper, BothReadModesGiveTheSameMapsVersionsAndChangedBlocks) {
+  for (const std::string kind : {"log_odds", "akimap_rays"}) {
+    for (const std::string backend : {"grid", "octree"}) {
+      if (kind != "log_odds" && backend == "octree") continue;
+      MapperOptions in_place = options();
+      in_place.kind = kind;
+      in_place.backend = backend;
+      MapperOptions versioned = in_place;
+      versioned.versioned_reads = true;
+      auto a = Mapper::create(in_place);
+      auto b = Mapper::create(versioned);
+      ASSERT_TRUE(a && b);
+      for (std::uint64_t s = 0; s < 4; ++s) {
+        const Point3f origin(0.4F * s, 0.1F * s, 0);
+        auto ra = a->insertPointCloud(scanAt(origin, 90 + s), origin);
+        auto rb = b->insertPointCloud(scanAt(origin, 90 + s), origin);
+        ASSERT_TRUE(ra && rb);
+        EXPECT_EQ(ra->version, rb->version);
+        std::sort(ra->changed_blocks.begin(), ra->changed_blocks.end());
+        std::sort(rb->changed_blocks.begin(), rb->changed_blocks.end());
+        ra->changed_blocks.erase(std::unique(ra->changed_blocks.begin(), ra->changed_blocks.end()),
+                                 ra->changed_blocks.end());
+        rb->changed_blocks.erase(std::unique(rb->changed_blocks.begin(), rb->changed_blocks.end()),
+                                 rb->changed_blocks.end());
+        EXPECT_EQ(ra->changed_blocks, rb->changed_blocks) << kind << "/" << backend << " scan " << s;
+        EXPECT_FALSE(ra->changed_blocks.empty());
+        EXPECT_EQ(cellsOf(*a), cellsOf(*b)) << kind << "/" << backend << " scan " << s;
+      }
+      // A changed block is one whose cells differ from the version before: check the last scan's
+      // list against the cells by brute force (no block outside the list changed).
+      const auto before = cellsOf(*a);
+      const Point3f origin(2.0F, 0, 0);
+      auto r = a->insertPointCloud(scanAt(origin, 99), origin);
+      ASSERT_TRUE(r);
+      const auto after = cellsOf(*a);
+      std::set<std::uint64_t> listed(r->changed_blocks.begin(), r->changed_blocks.end());
+      std::set<std::tuple<float, float, float>> differing;
+      for (const auto& [c, v] : after) {
+        const auto it = before.find(c);
+        if (it == before.end() || it->second != v) differing.insert(c);
+      }
+      for (const auto& [c, v] : before) {
+        if (!after.contains(c)) differing.insert(c);
+      }
+      ASSERT_FALSE(differing.empty());
+      for (const auto& c : differing) {
+        bool in_a_listed_block = false;
+        for (const std::uint64_t key : listed) {
+          const auto [lo, hi] = a->blockBox(key);
+          const Point3f p(std::get<0>(c), std::get<1>(c), std::get<2>(c));
+          in_a_listed_block = in_a_listed_block || ((p.array() > lo.array()).all() &&
+                                                    (p.array() < hi.array()).all());
+        }
+        ASSERT_TRUE(in_a_listed_block) << kind << "/" << backend << ": a changed cell's block is not listed";
+      }
+    }
+  }
+}
+
 TEST(Mapper, ReadersSeeWholeVersionsWhileAWriterInserts) {
-  auto mapper = Mapper::create(options());
+  for (const bool versioned : {false, true}) {
+  MapperOptions o = options();
+  o.versioned_reads = versioned;
+  auto mapper = Mapper::create(o);
   ASSERT_TRUE(mapper);
   std::atomic<bool> done{false};
   std::atomic<std::size_t> reads{0};
@@ -303,6 +367,7 @@ TEST(Mapper, ReadersSeeWholeVersionsWhileAWriterInserts) {
   reader.join();
   EXPECT_EQ(mapper->version(), 8U);
   EXPECT_GT(reads.load(), 0U);
+  }
 }
 
 }  // namespace

@@ -124,6 +124,8 @@ class BlockStore {
     BlockNode& writable(BlockEntry& entry);
 
    private:
+    /// Keeps room for one more entry of written_ in the store's list (a refill's worth).
+    void keepRoomForOne();
     static constexpr std::size_t kBatchNodes = 16;
     BlockStore& store_;
     std::vector<BlockNode*> nodes_;  // taken from the pool; those from next_ on not used yet
@@ -140,6 +142,13 @@ class BlockStore {
     std::vector<std::uint64_t> written_blocks;
   };
   Published publish();
+  /// Live versions, the alternative to publish() for a writer whose readers wait for it (the
+  /// in-process Mapper's default): the store stays unversioned (writes in place, no copies),
+  /// and advance() ends the version being written all the same: it numbers it and lists the
+  /// blocks it wrote or dropped. No pin: a reader reads the latest contents, and only while the
+  /// writer is not writing. Call startLive() before the first write, and never publish().
+  void startLive() { live_ = true; }
+  Published advance();
   /// Grows the node pool to at least `nodes` free nodes (allocated and zeroed now, so the
   /// pages are faulted in before they are needed).
   void reserve(std::size_t nodes);
@@ -251,6 +260,7 @@ class BlockStore {
 
   std::uint64_t writing_ = 0;
   bool versioned_ = false;
+  bool live_ = false;  // startLive(): unversioned, but the blocks each version writes are listed
   StableVector<BlockEntry> entries_;
   RegionIndex<BlockEntry> regions_;  // forEachEntryIn's index (writer)
   std::atomic<Table*> table_;

@@ -74,6 +74,9 @@ class GridMap final : public OccupancyMap {
   void reserveBlocks(std::size_t blocks) { store_->reserve(blocks); }
   /// Ends the version being written; readers of it hold the returned pin.
   BlockStore::Published publishVersion() { return store_->publish(); }
+  /// Live versions instead (BlockStore::startLive, advance): in place, readers wait.
+  void startLiveVersions() { store_->startLive(); }
+  BlockStore::Published advanceVersion() { return store_->advance(); }
   [[nodiscard]] std::shared_ptr<const BlockStore> store() const { return store_; }
   /// The writer's own access to the store: a dense kernel map keeps its evidence in the
   /// blocks' entries (BlockStore::evidence), so one index serves both.

@@ -34,6 +34,12 @@ class MapView {
   [[nodiscard]] static std::shared_ptr<const MapView> publish(
       GridMap& map, std::size_t other_bytes = 0,
       std::vector<std::uint64_t>* written_blocks = nullptr);
+  /// Ends the version `map` is writing in place (live versions, GridMap::startLiveVersions) and
+  /// returns a view of its latest contents. The view holds no version: it is valid only until
+  /// the writer writes again (its readers and the writer take turns).
+  [[nodiscard]] static std::shared_ptr<const MapView> advanceLive(
+      GridMap& map, std::size_t other_bytes = 0,
+      std::vector<std::uint64_t>* written_blocks = nullptr);
   /// A view of a copy of `map` (any backend) at `version`: for loaded files and tests.
   [[nodiscard]] static std::shared_ptr<const MapView> fromMap(const OccupancyMap& map,
                                                               std::uint64_t version);
