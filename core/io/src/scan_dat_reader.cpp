@@ -4,6 +4,7 @@
 #include <sstream>
 
 #include "densemap/io/file_bytes.hpp"
+#include "densemap/io/text_lines.hpp"
 #include "densemap/io/scan_source.hpp"
 
 namespace densemap {
@@ -12,16 +13,18 @@ namespace densemap {
 // y z roll pitch yaw" starts a scan at that pose; other lines are "x y z" points in that scan's
 // sensor frame. As OctoMap does: numbers are read as float, the pose is OctoMap's float pose6d,
 // and lines that start with '#' or a space are skipped. Unlike OctoMap, a file without NODE
-// lines is one scan taken at the origin, and a malformed line is an error.
+// lines is one scan taken at the origin, and a malformed line is an error. The text is read a
+// line at a time (TextLines): memory holds the scans' points, never the file.
 Expected<std::vector<Scan>> readScanDat(const std::filesystem::path& file) {
-  auto text = readFileBytes(file);
-  if (!text) return std::unexpected(text.error());
+  auto lines = TextLines::open(file);
+  if (!lines) return std::unexpected(lines.error());
   std::vector<Scan> scans;
-  std::istringstream lines(*text);
-  std::string line;
-  std::size_t line_no = 0;
-  while (std::getline(lines, line)) {
-    ++line_no;
+  for (;;) {
+    auto next = lines->next();
+    if (!next) return std::unexpected(next.error());
+    if (!*next) break;
+    const std::string& line = **next;
+    const std::uint64_t line_no = lines->lineNumber();
     if (line.empty() || line[0] == '#' || line[0] == ' ' ||
         line.find_first_not_of(" \t\r") == std::string::npos) {
       continue;

@@ -1,10 +1,12 @@
 #include <bzlib.h>
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 
 #include <fstream>
 
 #include "densemap/io/dataset_writer.hpp"
 #include "densemap/io/scan_source.hpp"
+#include "densemap/io/text_lines.hpp"
 #include "densemap/test_support/data_dir.hpp"
 
 namespace densemap {
@@ -229,6 +231,78 @@ TEST(ScanDat, BrokenTextAndCorruptBzip2AreErrors) {
   auto corrupt = readScanDat(dir.path() / "c.dat.bz2");
   ASSERT_FALSE(corrupt);
   EXPECT_NE(corrupt.error().message.find("bzip2"), std::string::npos);
+}
+
+/// Peak resident memory of this process so far, KiB.
+long peakRssKb() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_maxrss;
+}
+
+TEST(ScanDat, ABzip2BombIsRefusedAtItsFirstChunkInBoundedMemory) {
+  test::TempDir dir;
+  // 256 MiB of zeros compress to a few hundred bytes; bzip2 them in pieces (one buffer of 256
+  // MiB would itself raise the peak this test watches).
+  std::string packed;
+  {
+    bz_stream bz{};
+    ASSERT_EQ(BZ2_bzCompressInit(&bz, 9, 0, 0), BZ_OK);
+    std::vector<char> zeros(1 << 20, '\0'), out(1 << 16);
+    for (int mib = 0; mib <= 256; ++mib) {
+      bz.next_in = zeros.data();
+      bz.avail_in = mib < 256 ? static_cast<unsigned>(zeros.size()) : 0;
+      const int action = mib < 256 ? BZ_RUN : BZ_FINISH;
+      int rc;
+      do {
+        bz.next_out = out.data();
+        bz.avail_out = static_cast<unsigned>(out.size());
+        rc = BZ2_bzCompress(&bz, action);
+        packed.append(out.data(), out.size() - bz.avail_out);
+      } while ((action == BZ_RUN && bz.avail_in > 0) || (action == BZ_FINISH && rc != BZ_STREAM_END));
+    }
+    BZ2_bzCompressEnd(&bz);
+  }
+  ASSERT_LT(packed.size(), 100'000U);
+  writeText(dir.path() / "bomb.dat.bz2", packed);
+  const long before = peakRssKb();
+  auto bomb = readScanDat(dir.path() / "bomb.dat.bz2");
+  ASSERT_FALSE(bomb);
+  EXPECT_NE(bomb.error().message.find("NUL byte"), std::string::npos) << bomb.error().message;
+  EXPECT_LT(peakRssKb() - before, 16 * 1024) << "the reader held the expanded file";
+  // Text without a line end for longer than a line may be: refused at the limit.
+  writeText(dir.path() / "long.dat.bz2", bzip2(std::string(200'000, '7')));
+  auto long_line = readScanDat(dir.path() / "long.dat.bz2");
+  ASSERT_FALSE(long_line);
+  EXPECT_NE(long_line.error().message.find("line 1 is longer than 65536 bytes"), std::string::npos)
+      << long_line.error().message;
+}
+
+TEST(TextLines, SplitsAsGetlineDoesWithCrLfAndALastLineWithoutEnd) {
+  test::TempDir dir;
+  // Lines around the reader's 64 KiB chunks: one crosses a chunk border.
+  std::string text = "a\r\n\nb c\n" + std::string(70'000, 'x') + "\n" + "last";
+  for (const std::string name : {"t.txt", "t.txt.bz2"}) {
+    writeText(dir.path() / name, name.ends_with(".bz2") ? bzip2(text) : text);
+    auto lines = TextLines::open(dir.path() / name, 100'000);
+    ASSERT_TRUE(lines);
+    std::vector<std::string> got;
+    for (;;) {
+      auto next = lines->next();
+      ASSERT_TRUE(next) << next.error().message;
+      if (!*next) break;
+      got.push_back(**next);
+    }
+    ASSERT_EQ(got.size(), 5U) << name;
+    EXPECT_EQ(got[0], "a");
+    EXPECT_EQ(got[1], "");
+    EXPECT_EQ(got[2], "b c");
+    EXPECT_EQ(got[3], std::string(70'000, 'x'));
+    EXPECT_EQ(got[4], "last");
+    EXPECT_EQ(lines->lineNumber(), 5U);
+  }
+  EXPECT_FALSE(TextLines::open(dir.path()));
+  EXPECT_FALSE(TextLines::open(dir.path() / "missing.txt"));
 }
 
 }  // namespace
