@@ -35,7 +35,9 @@ void MapSnapshot::forEachCell(
 
 Expected<std::size_t> MapSnapshot::save(const std::string& path) const {
   const auto view = MapView::fromMap(*impl_->map, impl_->version);
-  return saveSnapshot(*view, SensorModel{}, Backend::kGrid, path);
+  // The server's kind is not known here: a dense map's logit(p) may lie outside any clamp range.
+  return saveSnapshot(*view, SensorModel{}, Backend::kGrid, path, nullptr,
+                      SnapshotValues::kUnclamped);
 }
 
 }  // namespace densemap

@@ -107,7 +107,7 @@ Expected<std::optional<kernel::KernelEvidence>> kernelEvidenceOf(const proto::Sn
 
 Expected<std::size_t> saveSnapshot(const MapView& view, const SensorModel& model, Backend backend,
                                    const std::filesystem::path& file,
-                                   const kernel::KernelEvidence* kernel) {
+                                   const kernel::KernelEvidence* kernel, SnapshotValues kind) {
   const std::string ext = file.extension().string();
   if (ext == ".bt" || ext == ".ot") {
     auto map = toMap(view, model, Backend::kGrid);
@@ -136,7 +136,13 @@ Expected<std::size_t> saveSnapshot(const MapView& view, const SensorModel& model
     ++n;
   });
   s.set_cell_count(n);
-  s.set_cells_crc32(cellsCrc({&keys, &values}));
+  // The map kind is written last (field 17) and covered by the cells' CRC: a file cut before
+  // it fails the CRC like any other cut.
+  const std::string map_kind = kernel != nullptr
+                                   ? std::string(kernel::kernelMethodName(kernel->method))
+                               : kind == SnapshotValues::kLogOdds ? "log_odds"
+                                                                  : "unclamped";
+  s.set_cells_crc32(cellsCrc({&keys, &values, &map_kind}));
   s.set_keys(std::move(keys));
   s.set_log_odds(std::move(values));
   if (kernel != nullptr) {
@@ -145,6 +151,7 @@ Expected<std::size_t> saveSnapshot(const MapView& view, const SensorModel& model
     s.set_format_version(3);
     putKernelEvidence(*kernel, s);
   }
+  s.set_map_kind(map_kind);
   std::string bytes;
   if (!s.SerializeToString(&bytes)) return fileError(file, "cannot serialise snapshot");
   if (auto ok = writeFileAtomically(file, bytes); !ok) return std::unexpected(ok.error());
@@ -170,7 +177,11 @@ Expected<LoadedSnapshot> loadSnapshot(const std::filesystem::path& file, Backend
   if (s.format_version() >= 2 && !s.has_cells_crc32()) {
     return fileError(file, "snapshot lacks its CRC-32 (truncated)");
   }
-  if (s.has_cells_crc32() && s.cells_crc32() != cellsCrc({&s.keys(), &s.log_odds()})) {
+  // The kind, when the file has one, is covered by the CRC too.
+  const std::string no_kind;
+  if (s.has_cells_crc32() &&
+      s.cells_crc32() !=
+          cellsCrc({&s.keys(), &s.log_odds(), s.has_map_kind() ? &s.map_kind() : &no_kind})) {
     return fileError(file, "snapshot cells fail their CRC-32 (corrupt)");
   }
   if (expected_resolution_m > 0 && s.resolution_m() != expected_resolution_m) {
@@ -178,8 +189,20 @@ Expected<LoadedSnapshot> loadSnapshot(const std::filesystem::path& file, Backend
                                " m differs from the configured " +
                                std::to_string(expected_resolution_m) + " m");
   }
-  const SensorModel model(SensorProbabilities{s.sensor().prob_hit(), s.sensor().prob_miss(),
-                                              s.sensor().clamp_min(), s.sensor().clamp_max()});
+  const SensorProbabilities p{s.sensor().prob_hit(), s.sensor().prob_miss(),
+                              s.sensor().clamp_min(), s.sensor().clamp_max()};
+  const SensorModel model(p);
+  if (!model.isValid() || !(p.hit < 1.0 && p.clamp_max < 1.0 && p.miss > 0.0 && p.clamp_min > 0.0)) {
+    return fileError(file, "snapshot sensor model is invalid (probabilities outside (0, 1) or "
+                           "hit, miss and clamping on the wrong sides of 0.5)");
+  }
+  // A log-odds map's values never leave the clamp range (every update clamps); a dense map's
+  // logit(p) may.
+  const bool clamped = !s.has_kernel_method() && (!s.has_map_kind() || s.map_kind() == "log_odds");
+  if (s.has_map_kind() && s.map_kind() != "log_odds" && s.map_kind() != "unclamped" &&
+      !kernel::parseKernelMethod(s.map_kind())) {
+    return fileError(file, "unknown map kind '" + s.map_kind() + "'");
+  }
   auto map = makeMap(backend, s.resolution_m(), model);
   if (!map) return fileError(file, map.error().message);
   for (std::size_t i = 0; i < n; ++i) {
@@ -192,6 +215,14 @@ Expected<LoadedSnapshot> loadSnapshot(const std::filesystem::path& file, Backend
       return fileError(file, "snapshot cell " + std::to_string(i) + " (key " +
                                  std::to_string(xyz[0]) + " " + std::to_string(xyz[1]) + " " +
                                  std::to_string(xyz[2]) + ") has a non-finite log-odds");
+    }
+    if (clamped && (v < model.clampMin() || v > model.clampMax())) {
+      return fileError(file, "snapshot cell " + std::to_string(i) + " (key " +
+                                 std::to_string(xyz[0]) + " " + std::to_string(xyz[1]) + " " +
+                                 std::to_string(xyz[2]) + ") has log-odds " + std::to_string(v) +
+                                 ", outside the sensor model's clamp range [" +
+                                 std::to_string(model.clampMin()) + ", " +
+                                 std::to_string(model.clampMax()) + "]");
     }
     (*map)->setLogOdds(VoxelKey{xyz[0], xyz[1], xyz[2]}, v);
   }

@@ -103,6 +103,40 @@ TEST(Snapshot, NonFiniteLogOddsAreRefusedEvenWithAValidCrc) {
   }
 }
 
+TEST(Snapshot, ALogOddsMapOutsideItsClampRangeIsRefusedAnUnclampedOneIsNot) {
+  test::TempDir dir;
+  const SensorModel model;
+  for (const float bad : {model.clampMax() + 0.5F, model.clampMin() - 0.01F, 100.0F}) {
+    GridMap map(0.2, model);
+    map.setLogOdds(VoxelKey{1, 2, 3}, model.clampMax());  // the bounds themselves are fine
+    map.setLogOdds(VoxelKey{7, 2, 3}, model.clampMin());
+    map.setLogOdds(VoxelKey{4, 5, 6}, bad);
+    const auto file = dir.path() / "clamp.dmap";
+    ASSERT_TRUE(saveSnapshot(*MapView::fromMap(map, 1), model, Backend::kGrid, file));
+    auto loaded = loadSnapshot(file, Backend::kGrid, 0.0);
+    ASSERT_FALSE(loaded) << bad;
+    EXPECT_NE(loaded.error().message.find("clamp.dmap"), std::string::npos);
+    EXPECT_NE(loaded.error().message.find("outside the sensor model's clamp range"),
+              std::string::npos)
+        << loaded.error().message;
+    // The same values saved as unclamped (a client's copy of a dense map): finite, so loaded.
+    ASSERT_TRUE(saveSnapshot(*MapView::fromMap(map, 1), model, Backend::kGrid, file, nullptr,
+                             SnapshotValues::kUnclamped));
+    auto unclamped = loadSnapshot(file, Backend::kGrid, 0.0);
+    ASSERT_TRUE(unclamped) << unclamped.error().message;
+    EXPECT_EQ((*unclamped).map->logOdds(VoxelKey{4, 5, 6}), bad);
+  }
+  // A sensor model that is not one (prob_hit below 0.5) is refused before any cell.
+  GridMap map(0.2, SensorModel(SensorProbabilities{0.3, 0.4, 0.1192, 0.971}));
+  map.setLogOdds(VoxelKey{1, 2, 3}, 0.5F);
+  const auto file = dir.path() / "model.dmap";
+  ASSERT_TRUE(saveSnapshot(*MapView::fromMap(map, 1), map.sensorModel(), Backend::kGrid, file));
+  auto loaded = loadSnapshot(file, Backend::kGrid, 0.0);
+  ASSERT_FALSE(loaded);
+  EXPECT_NE(loaded.error().message.find("sensor model is invalid"), std::string::npos)
+      << loaded.error().message;
+}
+
 /// A map with `cells` known cells valued by `version`, as a view at `version`.
 std::shared_ptr<const MapView> versionedView(std::uint64_t version, int cells = 50) {
   GridMap map(0.1, SensorModel{});
@@ -391,9 +425,11 @@ TEST(Snapshot, KernelEvidenceCutOrCorruptedIsRefused) {
   expectSameEvidence(*loaded->kernel, e);
   // No prefix parses, not even one that ends where the log-odds cells do.
   const std::string whole = expectEveryCutRefused(file, dir.path());
-  // A flipped bit in a beta value (the last 8 bytes before the CRC field's 5) fails the CRC.
+  // A flipped bit in a beta value (the last 8 bytes before the CRC field's 5, which the map
+  // kind's field follows: a 2-byte tag, a length byte, "akimap_rays") fails the CRC.
   std::string flipped = whole;
-  flipped[flipped.size() - 7] = static_cast<char>(flipped[flipped.size() - 7] ^ 0x10);
+  const std::size_t beta_end = flipped.size() - (3 + std::string("akimap_rays").size()) - 5;
+  flipped[beta_end - 2] = static_cast<char>(flipped[beta_end - 2] ^ 0x10);
   std::ofstream(dir.path() / "flip.dmap", std::ios::binary) << flipped;
   auto corrupt = loadSnapshot(dir.path() / "flip.dmap", Backend::kGrid, 0.0);
   ASSERT_FALSE(corrupt);

@@ -20,16 +20,27 @@ struct LoadedSnapshot {
   std::optional<kernel::KernelEvidence> kernel;  // a dense map's evidence, when saved with it
 };
 
+/// What a snapshot's cells hold, for the checks at load.
+enum class SnapshotValues {
+  kLogOdds,    // log-odds clamped to the sensor model's range
+  kUnclamped,  // any finite values (a copy of a map whose kind the writer does not know)
+};
+
 /// Writes `view` as a protobuf snapshot (`.dmap`) atomically (temp file, fsync, rename), or as
 /// an OctoMap `.bt`/`.ot` when the name says so. `kernel`: a dense map's evidence, of the same
-/// version as `view`, saved with it in a .dmap (OctoMap files take the probabilities only).
+/// version as `view`, saved with it in a .dmap (OctoMap files take the probabilities only); a
+/// snapshot with evidence is of the evidence's kind, whatever `values` says.
 [[nodiscard]] Expected<std::size_t> saveSnapshot(const MapView& view, const SensorModel& model,
                                                  Backend backend,
                                                  const std::filesystem::path& file,
-                                                 const kernel::KernelEvidence* kernel = nullptr);
+                                                 const kernel::KernelEvidence* kernel = nullptr,
+                                                 SnapshotValues values = SnapshotValues::kLogOdds);
 
 /// Reads a `.dmap` snapshot into a map of `backend`. Errors for unreadable, truncated or
-/// inconsistent files, and for a resolution other than `expected_resolution_m` (if > 0).
+/// inconsistent files, for a resolution other than `expected_resolution_m` (if > 0), for an
+/// invalid sensor model, and for values a map of its kind cannot hold (whatever the format
+/// version, CRC or not): a non-finite value; a log-odds map's value outside the sensor model's
+/// clamp range; negative or non-finite kernel evidence.
 [[nodiscard]] Expected<LoadedSnapshot> loadSnapshot(const std::filesystem::path& file,
                                                     Backend backend, double expected_resolution_m);
 
