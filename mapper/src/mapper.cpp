@@ -71,7 +71,8 @@ Expected<PipelineOptions> pipelineOptionsOf(const MapperOptions& o) {
   p.sensor = o.sensor;
   p.keep_radius_m = o.keep_radius_m;
   p.bounds = o.bounds;
-  if (o.threads < 0 || o.threads > 256) return makeError("threads must be in 0 .. 256 (0: all cores)");
+  if (o.threads < 0 || o.threads > 256)
+    return makeError("threads must be in 0 .. 256 (0: all cores)");
   if (o.max_points == 0) return makeError("max_points must be > 0");
   p.limits.max_points = o.max_points;
   // The map's addressable range bounds where a sensor may be.
@@ -149,8 +150,7 @@ Expected<Mapper> Mapper::load(const std::string& path, const MapperOptions& opti
   return Mapper(std::move(*impl));
 }
 
-Expected<InsertResult> Mapper::Impl::insert(const PointCloud& points_world,
-                                            const Point3f& origin) {
+Expected<InsertResult> Mapper::Impl::insert(const PointCloud& points_world, const Point3f& origin) {
   std::expected<IntegrationResult, Rejection> r = std::unexpected(Rejection{});
   const std::unique_lock writing(lock);
   arena->execute([&] { r = engine->integrateWorld(points_world, origin); });
@@ -236,9 +236,8 @@ Expected<std::uint64_t> Mapper::query(std::span<const float> xyz, std::span<floa
   const auto reading = impl_->reading();
   const auto view = impl_->view();
   Expected<PointQueryResult> r = makeError("");
-  impl_->arena->execute([&] {
-    r = queryPoints(*view, xyz, std::numeric_limits<std::size_t>::max(), tbbRunner());
-  });
+  impl_->arena->execute(
+      [&] { r = queryPoints(*view, xyz, std::numeric_limits<std::size_t>::max(), tbbRunner()); });
   if (!r) return std::unexpected(r.error());
   std::copy(r->log_odds.begin(), r->log_odds.end(), log_odds.begin());
   for (std::size_t i = 0; i < n; ++i) states[i] = static_cast<CellState>(r->states[i]);
@@ -287,8 +286,8 @@ Expected<void> Mapper::forEachCell(
   });
 }
 
-void Mapper::forEachCell(CellFilter filter,
-                         const std::function<void(const Point3f& center, float log_odds)>& f) const {
+void Mapper::forEachCell(
+    CellFilter filter, const std::function<void(const Point3f& center, float log_odds)>& f) const {
   const auto reading = impl_->reading();
   const auto view = impl_->view();
   view->forEachKnown([&](const VoxelKey& k, float v) {

@@ -28,6 +28,23 @@ T valueOrRaise(Expected<T> e) {
   if constexpr (!std::is_void_v<T>) return std::move(*e);
 }
 
+/// Runs `f` (returning an Expected) with the GIL released: the value, or densemap.Error.
+template <class F>
+auto released(F&& f) {
+  py::gil_scoped_release release;
+  return valueOrRaise(f());
+}
+
+/// A box's cell counts as the dict both Mapper.query_box and Client.query_box return.
+template <class Counts>
+py::dict countsDict(const Counts& c) {
+  py::dict d;
+  d["occupied"] = c.occupied;
+  d["free"] = c.free;
+  d["unknown"] = c.unknown;
+  return d;
+}
+
 /// An (N, 3) float array (a NumPy array as it is, anything else through np.asarray as float64)
 /// as points: ValueError for a wrong shape, a non-contiguous array or too many points,
 /// TypeError for a dtype that is not float32 / float64.

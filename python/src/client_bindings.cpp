@@ -78,8 +78,8 @@ py::tuple answerArrays(const PointQueryAnswer& a) {
   py::array_t<float> log_odds(n);
   py::array_t<std::uint8_t> states(n);
   for (py::ssize_t i = 0; i < n; ++i) {
-    log_odds.mutable_data()[i] = a.log_odds[i] ? *a.log_odds[i]
-                                               : std::numeric_limits<float>::quiet_NaN();
+    log_odds.mutable_data()[i] =
+        a.log_odds[i] ? *a.log_odds[i] : std::numeric_limits<float>::quiet_NaN();
     states.mutable_data()[i] = static_cast<std::uint8_t>(a.states[i]);
   }
   return py::make_tuple(a.map_version, states, log_odds);
@@ -122,8 +122,7 @@ timeout and raises densemap.Error on it, on a refusal (with the server's message
 closed client. The GIL is released while a call waits. Use as a context manager, or close().
 )doc")
       .def(py::init<std::uint32_t, double, const std::string&>(), py::kw_only(),
-           py::arg("domain_id") = 0, py::arg("timeout") = 5.0,
-           py::arg("network_interface") = "lo")
+           py::arg("domain_id") = 0, py::arg("timeout") = 5.0, py::arg("network_interface") = "lo")
       .def(
           "wait_for_server",
           [](PyClient& self) {
@@ -138,11 +137,7 @@ closed client. The GIL is released while a call waits. Use as a context manager,
             const PointCloud cloud =
                 pointsFrom(points, std::numeric_limits<std::size_t>::max(), "points", false);
             Client& c = self.client();
-            PointQueryAnswer a;
-            {
-              py::gil_scoped_release release;
-              a = valueOrRaise(c.queryPoints(cloud));
-            }
+            const PointQueryAnswer a = released([&] { return c.queryPoints(cloud); });
             return answerArrays(a);
           },
           py::arg("points"),
@@ -153,18 +148,11 @@ closed client. The GIL is released while a call waits. Use as a context manager,
              std::uint32_t max_centers) {
             const Point3f lo = pointFrom(box_min, "box_min"), hi = pointFrom(box_max, "box_max");
             Client& c = self.client();
-            BoxQueryAnswer a;
-            {
-              py::gil_scoped_release release;
-              a = valueOrRaise(c.queryBox(lo, hi, max_centers));
-            }
-            py::dict d;
+            const BoxQueryAnswer a = released([&] { return c.queryBox(lo, hi, max_centers); });
+            py::dict d = countsDict(a);
             d["map_version"] = a.map_version;
-            d["occupied"] = a.occupied;
-            d["free"] = a.free;
-            d["unknown"] = a.unknown;
-            d["occupied_centers"] = pointsArray(PointCloud(a.occupied_centers.begin(),
-                                                           a.occupied_centers.end()));
+            d["occupied_centers"] =
+                pointsArray(PointCloud(a.occupied_centers.begin(), a.occupied_centers.end()));
             return d;
           },
           py::arg("box_min"), py::arg("box_max"), py::arg("max_centers") = 0,
@@ -175,16 +163,12 @@ closed client. The GIL is released while a call waits. Use as a context manager,
              float max_range) {
             const Point3f o = pointFrom(origin, "origin"), dir = pointFrom(direction, "direction");
             Client& c = self.client();
-            RayQueryAnswer a;
-            {
-              py::gil_scoped_release release;
-              a = valueOrRaise(c.castRay(o, dir, max_range));
-            }
+            const RayQueryAnswer a = released([&] { return c.castRay(o, dir, max_range); });
             py::dict d;
             d["map_version"] = a.map_version;
             d["hit"] = a.ray.hit;
-            d["center"] = py::make_tuple(a.ray.hit_center.x(), a.ray.hit_center.y(),
-                                         a.ray.hit_center.z());
+            d["center"] =
+                py::make_tuple(a.ray.hit_center.x(), a.ray.hit_center.y(), a.ray.hit_center.z());
             d["distance"] = a.ray.distance;
             return d;
           },
@@ -194,11 +178,7 @@ closed client. The GIL is released while a call waits. Use as a context manager,
           "status",
           [](PyClient& self) {
             Client& c = self.client();
-            ServerStatus s;
-            {
-              py::gil_scoped_release release;
-              s = valueOrRaise(c.status());
-            }
+            const ServerStatus s = released([&] { return c.status(); });
             return statusDict(s);
           },
           "The server's latest status sample (a dict).")
@@ -209,8 +189,7 @@ closed client. The GIL is released while a call waits. Use as a context manager,
             py::gil_scoped_release release;
             return valueOrRaise(c.fetchMap(min_version));
           },
-          py::arg("min_version") = 0,
-          "The server's map (a MapSnapshot) at min_version or later.")
+          py::arg("min_version") = 0, "The server's map (a MapSnapshot) at min_version or later.")
       .def(
           "publish_scan",
           [](PyClient& self, const py::handle& points, const py::handle& T_world_sensor,

@@ -26,9 +26,8 @@ Box boxFrom(const py::object& bounds) {
 MapperOptions optionsFrom(double resolution, double max_range, const std::string& kind,
                           const std::string& backend, const std::string& integration,
                           const std::string& update_rule, int threads, double prob_hit,
-                          double prob_miss, double clamp_min, double clamp_max,
-                          double keep_radius, const py::object& bounds, std::size_t max_points,
-                          bool versioned_reads) {
+                          double prob_miss, double clamp_min, double clamp_max, double keep_radius,
+                          const py::object& bounds, std::size_t max_points, bool versioned_reads) {
   MapperOptions o;
   o.resolution_m = resolution;
   o.max_range_m = max_range;
@@ -70,7 +69,7 @@ Eigen::Isometry3d poseFrom(const py::handle& T, const std::string& what) {
 
 /// Queries `points` once: (log-odds, states), both of length N.
 std::pair<py::array_t<float>, py::array_t<std::uint8_t>> queryArrays(const Mapper& mapper,
-                                                                   const py::handle& points) {
+                                                                     const py::handle& points) {
   const PointCloud cloud =
       pointsFrom(points, std::numeric_limits<std::size_t>::max(), "points", false);
   const auto n = static_cast<py::ssize_t>(cloud.size());
@@ -91,8 +90,9 @@ py::array_t<float> probabilities(const py::array_t<float>& log_odds) {
   const float* in = log_odds.data();
   float* out = p.mutable_data();
   for (py::ssize_t i = 0; i < log_odds.size(); ++i) {
-    out[i] = std::isnan(in[i]) ? std::numeric_limits<float>::quiet_NaN()
-                               : static_cast<float>(CellInfo{CellState::kFree, in[i]}.probability());
+    out[i] = std::isnan(in[i])
+                 ? std::numeric_limits<float>::quiet_NaN()
+                 : static_cast<float>(CellInfo{CellState::kFree, in[i]}.probability());
   }
   return p;
 }
@@ -199,12 +199,11 @@ void bindMapper(py::module_& m) {
       .def_readonly("points", &InsertResult::points, "Points integrated.")
       .def_readonly("evicted_blocks", &InsertResult::evicted_blocks,
                     "Blocks dropped after the scan by keep_radius / bounds.")
-      .def_readonly("evicted_cells", &InsertResult::evicted_cells,
-                    "Known cells dropped with them.")
+      .def_readonly("evicted_cells", &InsertResult::evicted_cells, "Known cells dropped with them.")
       .def("__repr__", [](const InsertResult& r) {
-        return "InsertResult(version=" + std::to_string(r.version) + ", points=" +
-               std::to_string(r.points) + ", changed_blocks=" +
-               std::to_string(r.changed_blocks.size()) + ")";
+        return "InsertResult(version=" + std::to_string(r.version) +
+               ", points=" + std::to_string(r.points) +
+               ", changed_blocks=" + std::to_string(r.changed_blocks.size()) + ")";
       });
 
   const MapperOptions d;
@@ -276,28 +275,18 @@ pose's translation.)doc")
           [](const Mapper& self, const py::handle& points) {
             return queryArrays(self, points).second;
           },
-          py::arg("points"),
-          "Each point's cell's state (uint8: UNKNOWN 0, FREE 1, OCCUPIED 2).")
+          py::arg("points"), "Each point's cell's state (uint8: UNKNOWN 0, FREE 1, OCCUPIED 2).")
       .def(
           "query_box",
           [](const Mapper& self, const py::handle& box_min, const py::handle& box_max,
              std::size_t max_cells) {
             const Point3f lo = pointFrom(box_min, "box_min"), hi = pointFrom(box_max, "box_max");
-            BoxCounts c;
-            {
-              py::gil_scoped_release release;
-              c = valueOrRaise(self.queryBox(lo, hi, max_cells));
-            }
-            py::dict out;
-            out["occupied"] = c.occupied;
-            out["free"] = c.free;
-            out["unknown"] = c.unknown;
-            return out;
+            const BoxCounts c = released([&] { return self.queryBox(lo, hi, max_cells); });
+            return countsDict(c);
           },
           py::arg("box_min"), py::arg("box_max"), py::arg("max_cells") = 50'000'000,
           "Counts the cells of the box by state: {'occupied', 'free', 'unknown'}.")
-      .def("cast_rays", &castRays, py::arg("origins"), py::arg("directions"),
-           py::arg("max_range"),
+      .def("cast_rays", &castRays, py::arg("origins"), py::arg("directions"), py::arg("max_range"),
            R"doc(Casts rays (OctoMap's traversal; unknown cells are passed through) from origins
 ((N, 3), or one origin for all) along directions ((N, 3), any non-zero length) up to
 max_range m. Returns (hit: bool (N,), centers: float32 (N, 3) of the first occupied cells, NaN
@@ -320,10 +309,13 @@ where none, distances: float32 (N,), inf where none).)doc")
           py::arg("which") = "known",
           "(centres float32 (M, 3), log_odds float32 (M,)) of the cells `which` selects "
           "('known', 'occupied', 'free') in the box, or the whole map.")
-      .def("clear", [](Mapper& self) {
-        py::gil_scoped_release release;
-        self.clear();
-      }, "Forgets every cell (a new, empty version).")
+      .def(
+          "clear",
+          [](Mapper& self) {
+            py::gil_scoped_release release;
+            self.clear();
+          },
+          "Forgets every cell (a new, empty version).")
       .def(
           "clear_box",
           [](Mapper& self, const py::handle& box_min, const py::handle& box_max) {
@@ -359,10 +351,10 @@ where none, distances: float32 (N,), inf where none).)doc")
           "options", [](const Mapper& self) { return optionsDict(self.options()); },
           "The options the map was made with (a dict, the constructor's names).")
       .def("__repr__", [](const Mapper& self) {
-        return "densemap.Mapper(kind='" + self.options().kind + "', resolution=" +
-               py::str(py::float_(self.resolution())).cast<std::string>() +
-               ", known_cells=" + std::to_string(self.knownCells()) + ", version=" +
-               std::to_string(self.version()) + ")";
+        return "densemap.Mapper(kind='" + self.options().kind +
+               "', resolution=" + py::str(py::float_(self.resolution())).cast<std::string>() +
+               ", known_cells=" + std::to_string(self.knownCells()) +
+               ", version=" + std::to_string(self.version()) + ")";
       });
 
   m.def(
@@ -372,10 +364,10 @@ where none, distances: float32 (N,), inf where none).)doc")
          double keep_radius, const py::object& bounds, std::size_t max_points,
          bool versioned_reads) {
         const MapperOptions d;
-        MapperOptions o = optionsFrom(d.resolution_m, max_range, d.kind, backend, integration,
-                                      update_rule, threads, d.sensor.hit, d.sensor.miss,
-                                      d.sensor.clamp_min, d.sensor.clamp_max, keep_radius, bounds,
-                                      max_points, versioned_reads);
+        MapperOptions o =
+            optionsFrom(d.resolution_m, max_range, d.kind, backend, integration, update_rule,
+                        threads, d.sensor.hit, d.sensor.miss, d.sensor.clamp_min,
+                        d.sensor.clamp_max, keep_radius, bounds, max_points, versioned_reads);
         py::gil_scoped_release release;
         return valueOrRaise(Mapper::load(path.string(), o));
       },

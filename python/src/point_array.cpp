@@ -16,9 +16,7 @@ std::string shapeText(const ArrayView& a) {
   return s + ")";
 }
 
-bool isFloat(const ArrayView& a) {
-  return a.kind == 'f' && (a.itemsize == 4 || a.itemsize == 8);
-}
+bool isFloat(const ArrayView& a) { return a.kind == 'f' && (a.itemsize == 4 || a.itemsize == 8); }
 
 Expected<void> checkFloat(const ArrayView& a, const std::string& what) {
   if (!isFloat(a)) {
@@ -63,8 +61,9 @@ Expected<std::size_t> checkPoints(const ArrayView& a, std::size_t max_points,
   const bool c_order = a.strides[1] == item && (n == 1 || a.strides[0] == 3 * item);
   const bool f_order = (n == 1 || a.strides[0] == item) && a.strides[1] == n * item;
   if (!c_order && !f_order) {
-    return makeError(what + " must be C- or F-contiguous (np.ascontiguousarray makes a copy "
-                            "that is)");
+    return makeError(what +
+                     " must be C- or F-contiguous (np.ascontiguousarray makes a copy "
+                     "that is)");
   }
   return static_cast<std::size_t>(n);
 }

@@ -29,8 +29,8 @@ struct ArrayView {
                                                 const std::string& what);
 /// Reads a checked points array into `out` (x y z per point, float; float64 rounded once).
 /// With `reject_non_finite`, an error names the first NaN / Inf point.
-[[nodiscard]] Expected<void> readPoints(const ArrayView& a, PointCloud& out,
-                                        bool reject_non_finite, const std::string& what);
+[[nodiscard]] Expected<void> readPoints(const ArrayView& a, PointCloud& out, bool reject_non_finite,
+                                        const std::string& what);
 /// Whether the checked array is float32 and C-contiguous: its buffer is x y z per point as it
 /// stands (no copy needed).
 [[nodiscard]] bool isPackedFloat32(const ArrayView& a);

@@ -68,7 +68,8 @@ Unpacks as (points_world, pose, stamp_ns): `for points, pose, stamp in densemap.
           "points", [](const Scan& s) { return pointsArray(s.points); },
           "float32 (N, 3), in `frame`.")
       .def_property_readonly(
-          "frame", [](const Scan& s) { return s.frame == PointFrame::kSensor ? "sensor" : "world"; },
+          "frame",
+          [](const Scan& s) { return s.frame == PointFrame::kSensor ? "sensor" : "world"; },
           "'sensor' or 'world': the frame the recording stores the points in.")
       .def_property_readonly(
           "points_world", [](const Scan& s) { return pointsArray(s.pointsWorld()); },
@@ -101,8 +102,7 @@ holds one scan, whatever the recording's length.
 )doc")
       .def("__len__", &ScanReader::size)
       .def("__getitem__", &ScanReader::load, py::arg("index"))
-      .def_property_readonly("description", &ScanReader::describe,
-                             "The format and location.");
+      .def_property_readonly("description", &ScanReader::describe, "The format and location.");
 
   m.def(
       "read_scans",

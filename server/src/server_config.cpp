@@ -100,8 +100,9 @@ Expected<void> mapOptions(const proto::ServerConfig& config, PipelineOptions& o)
   if (auto ok = checkMapOptions(o); !ok) return makeError("map." + ok.error().message);
   // A bound on every ray: with an unlimited range one scan of far points builds ~10^8 cells.
   if (!(o.max_range_m > 0)) {
-    return makeError("map.max_range_m must be in (0, 2000] m (no unlimited range in the server), got " +
-                     numberText(o.max_range_m));
+    return makeError(
+        "map.max_range_m must be in (0, 2000] m (no unlimited range in the server), got " +
+        numberText(o.max_range_m));
   }
   return {};
 }

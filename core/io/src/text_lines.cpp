@@ -20,7 +20,7 @@ struct TextLines::Impl {
   bool bzip2 = false;
   bz_stream bz{};
   bool bz_open = false, bz_end = false, eof = false;
-  std::vector<char> raw = std::vector<char>(1 << 16);  // bytes read, not yet decompressed
+  std::vector<char> raw = std::vector<char>(1 << 16);   // bytes read, not yet decompressed
   std::vector<char> text = std::vector<char>(1 << 16);  // text not yet split into lines
   std::size_t text_begin = 0, text_end = 0;
   std::uint64_t line_no = 0;
@@ -35,7 +35,8 @@ struct TextLines::Impl {
     for (;;) {
       const ssize_t n = ::read(fd, out, size);
       if (n >= 0) return static_cast<std::size_t>(n);
-      if (errno != EINTR) return fileError(path, std::string("read error: ") + std::strerror(errno));
+      if (errno != EINTR)
+        return fileError(path, std::string("read error: ") + std::strerror(errno));
     }
   }
 
@@ -88,8 +89,7 @@ TextLines::TextLines(TextLines&&) noexcept = default;
 TextLines& TextLines::operator=(TextLines&&) noexcept = default;
 TextLines::~TextLines() = default;
 
-Expected<TextLines> TextLines::open(const std::filesystem::path& path,
-                                    std::size_t max_line_bytes) {
+Expected<TextLines> TextLines::open(const std::filesystem::path& path, std::size_t max_line_bytes) {
   auto impl = std::make_unique<Impl>();
   impl->path = path;
   impl->max_line = max_line_bytes;
@@ -118,8 +118,8 @@ Expected<std::optional<std::string>> TextLines::next() {
     const char* begin = s.text.data() + scanned;
     const std::size_t avail = s.text_end - scanned;
     if (std::memchr(begin, '\0', avail) != nullptr) {
-      return fileError(s.path, "line " + std::to_string(s.line_no + 1) +
-                                   ": a NUL byte (not a text file)");
+      return fileError(s.path,
+                       "line " + std::to_string(s.line_no + 1) + ": a NUL byte (not a text file)");
     }
     const auto* newline = static_cast<const char*>(std::memchr(begin, '\n', avail));
     const std::size_t line_end =

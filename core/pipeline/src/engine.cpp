@@ -26,8 +26,8 @@ Expected<void> checkMapOptions(const PipelineOptions& o) {
   if (!(o.resolution_m >= 0.001 && o.resolution_m <= 100.0)) {
     return makeError("resolution_m must be in [0.001, 100], got " + numberText(o.resolution_m));
   }
-  if (std::isnan(o.max_range_m) || (o.max_range_m >= 0 && !(o.max_range_m > 0 &&
-                                                            o.max_range_m <= kMaxRangeM))) {
+  if (std::isnan(o.max_range_m) ||
+      (o.max_range_m >= 0 && !(o.max_range_m > 0 && o.max_range_m <= kMaxRangeM))) {
     return makeError("max_range_m must be < 0 (unlimited) or in (0, " +
                      std::to_string(int(kMaxRangeM)) + "] m, got " + numberText(o.max_range_m));
   }
@@ -158,10 +158,10 @@ void Engine::publish(IntegrationResult& result) {
   kind_->beforePublish(result.changes);
   result.base_version = view_.load()->version();
   // A mirror follows the octree cell for cell, so its known-cell count is the map's.
-  auto next = options_.versioned_views
-                  ? MapView::publish(kind_->published(), kind_->ownBytes(), &result.written_blocks)
-                  : MapView::advanceLive(kind_->published(), kind_->ownBytes(),
-                                         &result.written_blocks);
+  auto next =
+      options_.versioned_views
+          ? MapView::publish(kind_->published(), kind_->ownBytes(), &result.written_blocks)
+          : MapView::advanceLive(kind_->published(), kind_->ownBytes(), &result.written_blocks);
   result.new_version = next->version();
   view_.store(std::move(next));
 }

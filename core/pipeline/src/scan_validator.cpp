@@ -87,16 +87,15 @@ std::expected<void, Rejection> checkWorldScan(const PointCloud& points_world,
   };
   if (points_world.empty()) return reject(RejectReason::kEmpty, "scan has no points");
   if (points_world.size() > limits.max_points) {
-    return reject(RejectReason::kTooManyPoints,
-                  std::to_string(points_world.size()) + " points exceed the limit of " +
-                      std::to_string(limits.max_points));
+    return reject(RejectReason::kTooManyPoints, std::to_string(points_world.size()) +
+                                                    " points exceed the limit of " +
+                                                    std::to_string(limits.max_points));
   }
   for (int axis = 0; axis < 3; ++axis) {
     const double t = origin_world[axis];
     if (!std::isfinite(t) || std::abs(t) > limits.max_abs_position_m) {
-      return reject(
-          RejectReason::kPoseOutOfBounds,
-          "sensor origin outside +-" + std::to_string(limits.max_abs_position_m) + " m");
+      return reject(RejectReason::kPoseOutOfBounds,
+                    "sensor origin outside +-" + std::to_string(limits.max_abs_position_m) + " m");
     }
   }
   for (std::size_t i = 0; i < points_world.size(); ++i) {

@@ -146,7 +146,8 @@ Expected<void> forEachKnownInBox(const MapView& view, const Point3f& min, const 
     for (int i = 0; i < block::kVoxels; ++i) {
       if (!b.isKnown(i)) continue;
       const VoxelKey k = block::keyOf(block_key, i);
-      if (k.x < lo.x || k.x > hi.x || k.y < lo.y || k.y > hi.y || k.z < lo.z || k.z > hi.z) continue;
+      if (k.x < lo.x || k.x > hi.x || k.y < lo.y || k.y > hi.y || k.z < lo.z || k.z > hi.z)
+        continue;
       f(k, b.log_odds[i]);
     }
   };

@@ -13,7 +13,7 @@ std::shared_ptr<const MapView> MapView::publish(GridMap& map, std::size_t other_
 }
 
 std::shared_ptr<const MapView> MapView::advanceLive(GridMap& map, std::size_t other_bytes,
-                                                   std::vector<std::uint64_t>* written_blocks) {
+                                                    std::vector<std::uint64_t>* written_blocks) {
   const std::size_t known = map.knownCells();
   const std::size_t bytes = map.memoryBytes() + other_bytes;
   auto ended = map.advanceVersion();

@@ -189,12 +189,14 @@ Expected<LoadedSnapshot> loadSnapshot(const std::filesystem::path& file, Backend
                                " m differs from the configured " +
                                std::to_string(expected_resolution_m) + " m");
   }
-  const SensorProbabilities p{s.sensor().prob_hit(), s.sensor().prob_miss(),
-                              s.sensor().clamp_min(), s.sensor().clamp_max()};
+  const SensorProbabilities p{s.sensor().prob_hit(), s.sensor().prob_miss(), s.sensor().clamp_min(),
+                              s.sensor().clamp_max()};
   const SensorModel model(p);
-  if (!model.isValid() || !(p.hit < 1.0 && p.clamp_max < 1.0 && p.miss > 0.0 && p.clamp_min > 0.0)) {
-    return fileError(file, "snapshot sensor model is invalid (probabilities outside (0, 1) or "
-                           "hit, miss and clamping on the wrong sides of 0.5)");
+  if (!model.isValid() ||
+      !(p.hit < 1.0 && p.clamp_max < 1.0 && p.miss > 0.0 && p.clamp_min > 0.0)) {
+    return fileError(file,
+                     "snapshot sensor model is invalid (probabilities outside (0, 1) or "
+                     "hit, miss and clamping on the wrong sides of 0.5)");
   }
   // A log-odds map's values never leave the clamp range (every update clamps); a dense map's
   // logit(p) may.

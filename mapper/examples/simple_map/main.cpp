@@ -16,7 +16,7 @@ int main(int argc, char** argv) {
   for (const densemap::Point3f p : {densemap::Point3f(4.0F, 0, 0), densemap::Point3f(2, 0, 0)}) {
     const densemap::CellInfo cell = map->query(p);
     std::printf("(%.1f %.1f %.1f): %s, p = %.3f\n", p.x(), p.y(), p.z(),
-                names[static_cast<int>(cell.state)],                cell.probability());
+                names[static_cast<int>(cell.state)], cell.probability());
   }
   auto saved = map->save(argc > 1 ? argv[1] : "simple_map.bt");
   if (!saved) return std::fprintf(stderr, "%s\n", saved.error().message.c_str()), 1;

@@ -259,7 +259,8 @@ TEST(ScanDat, ABzip2BombIsRefusedAtItsFirstChunkInBoundedMemory) {
         bz.avail_out = static_cast<unsigned>(out.size());
         rc = BZ2_bzCompress(&bz, action);
         packed.append(out.data(), out.size() - bz.avail_out);
-      } while ((action == BZ_RUN && bz.avail_in > 0) || (action == BZ_FINISH && rc != BZ_STREAM_END));
+      } while ((action == BZ_RUN && bz.avail_in > 0) ||
+               (action == BZ_FINISH && rc != BZ_STREAM_END));
     }
     BZ2_bzCompressEnd(&bz);
   }

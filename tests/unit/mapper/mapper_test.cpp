@@ -4,9 +4,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
-#include <algorithm>
 #include <map>
 #include <set>
 #include <thread>
@@ -168,7 +168,11 @@ TEST(Mapper, RefusesBadOptionsAndBadScansAndKeepsTheMap) {
            {[](MapperOptions& o) { o.integration = "fast"; }, "integration"},
            {[](MapperOptions& o) { o.sensor.hit = 0.3; }, "sensor"},
            {[](MapperOptions& o) { o.threads = -1; }, "threads"},
-           {[](MapperOptions& o) { o.keep_radius_m = 10; o.backend = "octree"; }, "grid"},
+           {[](MapperOptions& o) {
+              o.keep_radius_m = 10;
+              o.backend = "octree";
+            },
+            "grid"},
            {[](MapperOptions& o) { o.bounds = std::pair(Point3f(1, 1, 1), Point3f(0, 2, 2)); },
             "bounds"}}) {
     MapperOptions o = options();
@@ -206,8 +210,8 @@ TEST(Mapper, SavesAndLoadsDmapBtAndOt) {
   auto mapper = Mapper::create(options());
   ASSERT_TRUE(mapper);
   for (std::uint64_t s = 0; s < 3; ++s) {
-    ASSERT_TRUE(mapper->insertPointCloud(scanAt(Point3f(0.3F * s, 0, 0), 20 + s),
-                                         Point3f(0.3F * s, 0, 0)));
+    ASSERT_TRUE(
+        mapper->insertPointCloud(scanAt(Point3f(0.3F * s, 0, 0), 20 + s), Point3f(0.3F * s, 0, 0)));
   }
   const auto cells = cellsOf(*mapper);
   for (const std::string name : {"map.dmap", "map.ot"}) {
@@ -305,7 +309,8 @@ TEST(Mapper, BothReadModesGiveTheSameMapsVersionsAndChangedBlocks) {
                                  ra->changed_blocks.end());
         rb->changed_blocks.erase(std::unique(rb->changed_blocks.begin(), rb->changed_blocks.end()),
                                  rb->changed_blocks.end());
-        EXPECT_EQ(ra->changed_blocks, rb->changed_blocks) << kind << "/" << backend << " scan " << s;
+        EXPECT_EQ(ra->changed_blocks, rb->changed_blocks)
+            << kind << "/" << backend << " scan " << s;
         EXPECT_FALSE(ra->changed_blocks.empty());
         EXPECT_EQ(cellsOf(*a), cellsOf(*b)) << kind << "/" << backend << " scan " << s;
       }
@@ -331,10 +336,11 @@ TEST(Mapper, BothReadModesGiveTheSameMapsVersionsAndChangedBlocks) {
         for (const std::uint64_t key : listed) {
           const auto [lo, hi] = a->blockBox(key);
           const Point3f p(std::get<0>(c), std::get<1>(c), std::get<2>(c));
-          in_a_listed_block = in_a_listed_block || ((p.array() > lo.array()).all() &&
-                                                    (p.array() < hi.array()).all());
+          in_a_listed_block = in_a_listed_block ||
+                              ((p.array() > lo.array()).all() && (p.array() < hi.array()).all());
         }
-        ASSERT_TRUE(in_a_listed_block) << kind << "/" << backend << ": a changed cell's block is not listed";
+        ASSERT_TRUE(in_a_listed_block)
+            << kind << "/" << backend << ": a changed cell's block is not listed";
       }
     }
   }
@@ -342,31 +348,31 @@ TEST(Mapper, BothReadModesGiveTheSameMapsVersionsAndChangedBlocks) {
 
 TEST(Mapper, ReadersSeeWholeVersionsWhileAWriterInserts) {
   for (const bool versioned : {false, true}) {
-  MapperOptions o = options();
-  o.versioned_reads = versioned;
-  auto mapper = Mapper::create(o);
-  ASSERT_TRUE(mapper);
-  std::atomic<bool> done{false};
-  std::atomic<std::size_t> reads{0};
-  std::thread reader([&] {
-    std::uint64_t last = 0;
-    while (!done.load()) {
-      const std::uint64_t v = mapper->version();
-      EXPECT_GE(v, last);
-      last = v;
-      (void)mapper->query(Point3f(1, 0, 0));
-      (void)mapper->queryBox(Point3f(-2, -2, -2), Point3f(2, 2, 2));
-      ++reads;
+    MapperOptions o = options();
+    o.versioned_reads = versioned;
+    auto mapper = Mapper::create(o);
+    ASSERT_TRUE(mapper);
+    std::atomic<bool> done{false};
+    std::atomic<std::size_t> reads{0};
+    std::thread reader([&] {
+      std::uint64_t last = 0;
+      while (!done.load()) {
+        const std::uint64_t v = mapper->version();
+        EXPECT_GE(v, last);
+        last = v;
+        (void)mapper->query(Point3f(1, 0, 0));
+        (void)mapper->queryBox(Point3f(-2, -2, -2), Point3f(2, 2, 2));
+        ++reads;
+      }
+    });
+    for (std::uint64_t s = 0; s < 8; ++s) {
+      ASSERT_TRUE(mapper->insertPointCloud(scanAt(Point3f(0.1F * s, 0, 0), 80 + s),
+                                           Point3f(0.1F * s, 0, 0)));
     }
-  });
-  for (std::uint64_t s = 0; s < 8; ++s) {
-    ASSERT_TRUE(mapper->insertPointCloud(scanAt(Point3f(0.1F * s, 0, 0), 80 + s),
-                                         Point3f(0.1F * s, 0, 0)));
-  }
-  done = true;
-  reader.join();
-  EXPECT_EQ(mapper->version(), 8U);
-  EXPECT_GT(reads.load(), 0U);
+    done = true;
+    reader.join();
+    EXPECT_EQ(mapper->version(), 8U);
+    EXPECT_GT(reads.load(), 0U);
   }
 }
 

@@ -144,8 +144,7 @@ class Mapper {
   /// The cells of many points, x y z each, into `log_odds` (NaN where unknown) and `states`
   /// (each as long as the points): batches run on the Mapper's threads, all from one version,
   /// which is returned.
-  [[nodiscard]] Expected<std::uint64_t> query(std::span<const float> xyz,
-                                              std::span<float> log_odds,
+  [[nodiscard]] Expected<std::uint64_t> query(std::span<const float> xyz, std::span<float> log_odds,
                                               std::span<CellState> states) const;
   /// Counts the cells of the box [min, max] (metres) by state; refused over `max_cells`.
   [[nodiscard]] Expected<BoxCounts> queryBox(const Point3f& min, const Point3f& max,

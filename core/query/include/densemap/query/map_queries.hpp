@@ -70,9 +70,9 @@ struct PointQueryResult {
 /// Calls `f` with the key and log-odds of every known cell of the box [min, max] (metres; the
 /// box's checks are boxKeys'), block by block. Costs O(blocks of the box) or O(blocks of the
 /// map), whichever is fewer.
-[[nodiscard]] Expected<void> forEachKnownInBox(const MapView& view, const Point3f& min,
-                                               const Point3f& max,
-                                               const std::function<void(const VoxelKey&, float)>& f);
+[[nodiscard]] Expected<void> forEachKnownInBox(
+    const MapView& view, const Point3f& min, const Point3f& max,
+    const std::function<void(const VoxelKey&, float)>& f);
 
 /// Walks the ray (OctoMap's traversal) from `origin` along `direction` up to `max_range`; the
 /// first occupied cell is the hit. Unknown cells are passed through.

@@ -31,8 +31,7 @@ enum class SnapshotValues {
 /// version as `view`, saved with it in a .dmap (OctoMap files take the probabilities only); a
 /// snapshot with evidence is of the evidence's kind, whatever `values` says.
 [[nodiscard]] Expected<std::size_t> saveSnapshot(const MapView& view, const SensorModel& model,
-                                                 Backend backend,
-                                                 const std::filesystem::path& file,
+                                                 Backend backend, const std::filesystem::path& file,
                                                  const kernel::KernelEvidence* kernel = nullptr,
                                                  SnapshotValues values = SnapshotValues::kLogOdds);
 
