@@ -156,8 +156,9 @@ Expected<void> forEachKnownInBox(const MapView& view, const Point3f& min, const 
                             (static_cast<double>(hi.z >> kS) - (lo.z >> kS) + 1);
   // Every block with contents holds at least one known cell.
   if (box_blocks > static_cast<double>(view.knownCells())) {
-    const block::BlockBox blocks{{lo.x >> kS, lo.y >> kS, lo.z >> kS},
-                                 {hi.x >> kS, hi.y >> kS, hi.z >> kS}};
+    const auto coord = [](std::uint16_t key) { return static_cast<std::uint32_t>(key >> kS); };
+    const block::BlockBox blocks{{coord(lo.x), coord(lo.y), coord(lo.z)},
+                                 {coord(hi.x), coord(hi.y), coord(hi.z)}};
     view.forEachBlock([&](std::uint64_t block_key, const VoxelBlock& b) {
       if (blocks.contains(block_key)) visit(block_key, b);
     });
