@@ -124,8 +124,7 @@ TEST(MapView, ReservedBlocksServeTheFirstVersionsWithoutGrowingThePool) {
     (void)MapView::publish(sut);
   }
   EXPECT_GT(sut.store()->liveNodes(), 0U);
-  EXPECT_EQ(sut.memoryBytes() - sut.store()->entryBytes() -
-                sut.store()->indexBytes(),
+  EXPECT_EQ(sut.memoryBytes() - sut.store()->entryBytes() - sut.store()->indexBytes(),
             reserved);  // the same slabs (only entries, their index and table were added)
 }
 
@@ -135,6 +134,66 @@ TEST(MapView, AnUnversionedMapWritesInPlace) {
   for (int v = 0; v < 5; ++v) randomVersion(sut, rng, 2000);
   EXPECT_EQ(sut.store()->liveNodes(), sut.store()->entryCount());
   EXPECT_FALSE(sut.store()->versioned());
+}
+
+TEST(MapView, LiveVersionsWriteInPlaceAndListEveryBlockEachVersionWrote) {
+  // Two maps take the same writes: one publishes versions (copy on write), one advances live
+  // versions (in place). Each version: the same contents, the same version number, and the
+  // live list of written blocks holds exactly the blocks whose contents changed (or a superset
+  // of them that the versioned list holds too), each once.
+  GridMap versioned(0.1, SensorModel{}), live(0.1, SensorModel{});
+  versioned.startVersionsAt(5);
+  live.startVersionsAt(5);
+  live.startLiveVersions();
+  // The empty first version, as the engine publishes at its start (a store lists the blocks a
+  // version wrote from its first published version on).
+  ASSERT_EQ(MapView::publish(versioned)->version(), MapView::advanceLive(live)->version());
+  std::mt19937 rng_a(9), rng_b(9);
+  std::map<std::uint64_t, VoxelBlock> before;
+  for (int v = 0; v < 8; ++v) {
+    randomVersion(versioned, rng_a, 300);
+    randomVersion(live, rng_b, 300);
+    std::vector<std::uint64_t> written_versioned, written_live;
+    const auto a = MapView::publish(versioned, 0, &written_versioned);
+    const auto b = MapView::advanceLive(live, 0, &written_live);
+    ASSERT_EQ(a->version(), b->version());
+    EXPECT_EQ(a->version(), 6U + static_cast<unsigned>(v));
+    EXPECT_EQ(a->knownCells(), b->knownCells());
+    EXPECT_EQ(checksum([&](const auto& f) { a->forEachKnown(f); }),
+              checksum([&](const auto& f) { b->forEachKnown(f); }));
+    std::sort(written_live.begin(), written_live.end());
+    EXPECT_EQ(std::adjacent_find(written_live.begin(), written_live.end()), written_live.end())
+        << "a block listed twice in version " << v;
+    std::sort(written_versioned.begin(), written_versioned.end());
+    written_versioned.erase(std::unique(written_versioned.begin(), written_versioned.end()),
+                            written_versioned.end());
+    EXPECT_EQ(written_live, written_versioned) << "version " << v;
+    // Every block whose contents differ from the last version is listed.
+    std::map<std::uint64_t, VoxelBlock> now;
+    b->forEachBlock([&](std::uint64_t key, const VoxelBlock& block) { now[key] = block; });
+    const auto differs = [](const VoxelBlock& x, const VoxelBlock& y) {
+      return std::memcmp(&x, &y, sizeof(VoxelBlock)) != 0;
+    };
+    for (const auto& [key, block] : now) {
+      const auto old = before.find(key);
+      if (old == before.end() || differs(old->second, block)) {
+        EXPECT_TRUE(std::binary_search(written_live.begin(), written_live.end(), key));
+      }
+    }
+    for (const auto& [key, block] : before) {
+      if (!now.contains(key)) {
+        EXPECT_TRUE(std::binary_search(written_live.begin(), written_live.end(), key));
+      }
+    }
+    before = std::move(now);
+  }
+  // In place: one node per block with contents, never a copy; still unversioned.
+  EXPECT_FALSE(live.store()->versioned());
+  std::size_t with_contents = 0;
+  live.store()->forEachEntry(
+      [&](const BlockEntry& e) { with_contents += BlockStore::latest(e) != nullptr; });
+  EXPECT_EQ(live.store()->liveNodes(), with_contents);
+  EXPECT_TRUE(versioned.store()->versioned());
 }
 
 /// Cells of `map` in a block-aligned window of `blocks`^3 blocks at block offset `at`, each with
@@ -312,7 +371,7 @@ TEST(BlockStore, ABatchUnwindsWithoutAllocatingWhenItsTaskThrows) {
   std::vector<BlockEntry*> entries;
   for (std::uint64_t k = 0; k < 1000; ++k) entries.push_back(&store.entry(k));
   const std::runtime_error failure("the task failed");  // made before allocations fail
-  std::optional<test::FailingAllocations> failing;     // outlives the batch
+  std::optional<test::FailingAllocations> failing;      // outlives the batch
   std::uint64_t failed_allocations = 0;
   bool caught = false;
   try {
