@@ -52,14 +52,9 @@ Expected<PipelineOptions> pipelineOptionsOf(const MapperOptions& o) {
   auto backend = parseBackend(o.backend);
   if (!backend) return makeError("backend: " + backend.error().message);
   p.backend = *backend;
-  if (o.kind != "log_odds") {
-    auto kernel = kernel::parseKernelMethod(o.kind);
-    if (!kernel) {
-      return makeError("kind: unknown kind '" + o.kind +
-                       "' (expected log_odds, akimap, bgk, bgkl or akimap_rays)");
-    }
-    p.kernel = *kernel;
-  }
+  auto kind = kernel::parseMapKind(o.kind);
+  if (!kind) return makeError("kind: " + kind.error().message);
+  p.kernel = *kind;
   auto method = parseIntegrationMethod(o.integration);
   if (!method) return makeError("integration: " + method.error().message);
   p.method = *method;

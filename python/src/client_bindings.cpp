@@ -12,6 +12,7 @@
 #include "densemap/client/client.hpp"
 #include "densemap/geometry/rigid_transform.hpp"
 #include "densemap/io/scan.hpp"
+#include "densemap/mapper/mapper.hpp"
 
 namespace densemap::python {
 namespace {
@@ -194,7 +195,8 @@ closed client. The GIL is released while a call waits. Use as a context manager,
           "publish_scan",
           [](PyClient& self, const py::handle& points, const py::handle& T_world_sensor,
              const std::string& sensor_id, std::uint64_t seq, std::int64_t stamp_ns) {
-            const PointCloud cloud = pointsFrom(points, 2'000'000, "points_sensor", false);
+            const PointCloud cloud =
+                pointsFrom(points, MapperOptions{}.max_points, "points_sensor", false);
             const auto m4 = matrixFrom(T_world_sensor, "T_world_sensor");
             Eigen::Matrix3d rotation;
             for (int r = 0; r < 3; ++r) {

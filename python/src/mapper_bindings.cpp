@@ -90,9 +90,8 @@ py::array_t<float> probabilities(const py::array_t<float>& log_odds) {
   const float* in = log_odds.data();
   float* out = p.mutable_data();
   for (py::ssize_t i = 0; i < log_odds.size(); ++i) {
-    out[i] = std::isnan(in[i])
-                 ? std::numeric_limits<float>::quiet_NaN()
-                 : static_cast<float>(CellInfo{CellState::kFree, in[i]}.probability());
+    out[i] = std::isnan(in[i]) ? std::numeric_limits<float>::quiet_NaN()
+                               : static_cast<float>(SensorModel::probability(in[i]));
   }
   return p;
 }

@@ -77,14 +77,9 @@ Expected<void> mapOptions(const proto::ServerConfig& config, PipelineOptions& o)
   auto backend = parseBackend(config.map().backend());
   if (!backend) return makeError("map.backend: " + backend.error().message);
   o.backend = *backend;
-  if (config.map().kind() != "log_odds") {
-    auto kernel = kernel::parseKernelMethod(config.map().kind());
-    if (!kernel) {
-      return makeError("map.kind: unknown kind '" + config.map().kind() +
-                       "' (expected log_odds, akimap, bgk, bgkl or akimap_rays)");
-    }
-    o.kernel = *kernel;
-  }
+  auto kind = kernel::parseMapKind(config.map().kind());
+  if (!kind) return makeError("map.kind: " + kind.error().message);
+  o.kernel = *kind;
   o.resolution_m = config.map().resolution_m();
   o.keep_radius_m = config.map().keep_radius_m();
   if (config.map().has_bounds()) {
@@ -100,9 +95,8 @@ Expected<void> mapOptions(const proto::ServerConfig& config, PipelineOptions& o)
   if (auto ok = checkMapOptions(o); !ok) return makeError("map." + ok.error().message);
   // A bound on every ray: with an unlimited range one scan of far points builds ~10^8 cells.
   if (!(o.max_range_m > 0)) {
-    return makeError(
-        "map.max_range_m must be in (0, 2000] m (no unlimited range in the server), got " +
-        numberText(o.max_range_m));
+    return makeError("map.max_range_m must be in (0, " + std::to_string(int(kMaxRangeM)) +
+                     "] m (no unlimited range in the server), got " + numberText(o.max_range_m));
   }
   return {};
 }

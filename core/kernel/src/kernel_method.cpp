@@ -27,4 +27,14 @@ Expected<KernelMethod> parseKernelMethod(std::string_view name) {
                    "' (expected akimap, bgk, bgkl or akimap_rays)");
 }
 
+Expected<std::optional<KernelMethod>> parseMapKind(std::string_view name) {
+  if (name == "log_odds") return std::optional<KernelMethod>();
+  auto kernel = parseKernelMethod(name);
+  if (!kernel) {
+    return makeError("unknown kind '" + std::string(name) +
+                     "' (expected log_odds, akimap, bgk, bgkl or akimap_rays)");
+  }
+  return std::optional<KernelMethod>(*kernel);
+}
+
 }  // namespace densemap::kernel

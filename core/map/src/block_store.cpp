@@ -231,7 +231,7 @@ BlockNode& BlockStore::WriteBatch::writable(BlockEntry& e) {
   BlockNode* node = nodes_[next_];  // in the pool's order: the most recently freed first
   if (store_.versioned_ || store_.live_) {
     // Before the node counts as used: a throw here leaves it to go back to the pool.
-    if (written_.size() == room_) keepRoomForOne();
+    keepRoomForOne();
     written_.push_back(e.key);
     if (store_.versioned_ && head != nullptr) superseded_.emplace_back(head, node);
   }

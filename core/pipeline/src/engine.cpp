@@ -10,7 +10,6 @@
 namespace densemap {
 namespace {
 
-constexpr double kMaxRangeM = 2000.0;
 constexpr double kMaxRayCells = 65536.0;
 
 /// A number as a person would write it: 1e-09, not 0.000000.

@@ -29,20 +29,40 @@ std::string_view rejectReasonName(RejectReason reason) {
   return "unknown";
 }
 
+namespace {
+
+std::unexpected<Rejection> reject(RejectReason r, std::string m) {
+  return std::unexpected(Rejection{r, std::move(m)});
+}
+
+/// The rules every scan meets, in whatever frame: a point count within the limit, a sensor
+/// position within limits.max_abs_position_m on every axis.
+std::expected<void, Rejection> checkCount(std::size_t n, const ScanLimits& limits) {
+  if (n > limits.max_points) {
+    return reject(RejectReason::kTooManyPoints, std::to_string(n) + " points exceed the limit of " +
+                                                    std::to_string(limits.max_points));
+  }
+  return {};
+}
+
+std::expected<void, Rejection> checkPosition(double t, const ScanLimits& limits) {
+  if (!std::isfinite(t) || std::abs(t) > limits.max_abs_position_m) {
+    return reject(RejectReason::kPoseOutOfBounds,
+                  "sensor position outside +-" + std::to_string(limits.max_abs_position_m) + " m");
+  }
+  return {};
+}
+
+}  // namespace
+
 std::expected<Scan, Rejection> validateScan(const RawScan& raw, const ScanLimits& limits) {
-  auto reject = [](RejectReason r, std::string m) {
-    return std::unexpected(Rejection{r, std::move(m)});
-  };
   if (raw.xyz.empty()) return reject(RejectReason::kEmpty, "scan has no points");
   if (raw.xyz.size() % 3 != 0) {
     return reject(RejectReason::kLengthNotMultipleOf3,
                   std::to_string(raw.xyz.size()) + " coordinates is not a multiple of 3");
   }
   const std::size_t n = raw.xyz.size() / 3;
-  if (n > limits.max_points) {
-    return reject(RejectReason::kTooManyPoints, std::to_string(n) + " points exceed the limit of " +
-                                                    std::to_string(limits.max_points));
-  }
+  if (auto ok = checkCount(n, limits); !ok) return std::unexpected(std::move(ok.error()));
   if (!raw.intensity.empty() && raw.intensity.size() != n) {
     return reject(
         RejectReason::kIntensityLength,
@@ -55,11 +75,7 @@ std::expected<Scan, Rejection> validateScan(const RawScan& raw, const ScanLimits
                   "pose quaternion norm " + std::to_string(q_norm) + " is not 1");
   }
   for (const double t : raw.t_world_sensor) {
-    if (!std::isfinite(t) || std::abs(t) > limits.max_abs_position_m) {
-      return reject(
-          RejectReason::kPoseOutOfBounds,
-          "sensor position outside +-" + std::to_string(limits.max_abs_position_m) + " m");
-    }
+    if (auto ok = checkPosition(t, limits); !ok) return std::unexpected(std::move(ok.error()));
   }
   Scan scan;
   scan.id = raw.seq;
@@ -82,21 +98,10 @@ std::expected<Scan, Rejection> validateScan(const RawScan& raw, const ScanLimits
 std::expected<void, Rejection> checkWorldScan(const PointCloud& points_world,
                                               const Point3f& origin_world,
                                               const ScanLimits& limits) {
-  auto reject = [](RejectReason r, std::string m) {
-    return std::unexpected(Rejection{r, std::move(m)});
-  };
   if (points_world.empty()) return reject(RejectReason::kEmpty, "scan has no points");
-  if (points_world.size() > limits.max_points) {
-    return reject(RejectReason::kTooManyPoints, std::to_string(points_world.size()) +
-                                                    " points exceed the limit of " +
-                                                    std::to_string(limits.max_points));
-  }
+  if (auto ok = checkCount(points_world.size(), limits); !ok) return ok;
   for (int axis = 0; axis < 3; ++axis) {
-    const double t = origin_world[axis];
-    if (!std::isfinite(t) || std::abs(t) > limits.max_abs_position_m) {
-      return reject(RejectReason::kPoseOutOfBounds,
-                    "sensor origin outside +-" + std::to_string(limits.max_abs_position_m) + " m");
-    }
+    if (auto ok = checkPosition(origin_world[axis], limits); !ok) return ok;
   }
   for (std::size_t i = 0; i < points_world.size(); ++i) {
     if (!points_world[i].allFinite()) {

@@ -201,8 +201,7 @@ Expected<LoadedSnapshot> loadSnapshot(const std::filesystem::path& file, Backend
   // A log-odds map's values never leave the clamp range (every update clamps); a dense map's
   // logit(p) may.
   const bool clamped = !s.has_kernel_method() && (!s.has_map_kind() || s.map_kind() == "log_odds");
-  if (s.has_map_kind() && s.map_kind() != "log_odds" && s.map_kind() != "unclamped" &&
-      !kernel::parseKernelMethod(s.map_kind())) {
+  if (s.has_map_kind() && s.map_kind() != "unclamped" && !kernel::parseMapKind(s.map_kind())) {
     return fileError(file, "unknown map kind '" + s.map_kind() + "'");
   }
   auto map = makeMap(backend, s.resolution_m(), model);

@@ -3,6 +3,7 @@
 // The dense map kinds by name and a kernel map's evidence as plain data: what snapshots read
 // and write, without the kernel engine (and its TBB) behind them.
 #include <cstdint>
+#include <optional>
 #include <string_view>
 #include <vector>
 
@@ -26,6 +27,9 @@ enum class KernelMethod {
 
 [[nodiscard]] std::string_view kernelMethodName(KernelMethod method);
 [[nodiscard]] Expected<KernelMethod> parseKernelMethod(std::string_view name);
+/// A map kind by name: "log_odds" (none: OctoMap's log-odds map) or a kernel method; the error
+/// lists every kind.
+[[nodiscard]] Expected<std::optional<KernelMethod>> parseMapKind(std::string_view name);
 
 /// A kernel map's evidence, for snapshots: per known cell its alpha and beta (the
 /// prior not included), in block order, and the scans integrated (the random free samples'

@@ -78,6 +78,9 @@ struct IntegrationResult {
   std::size_t evicted_cells = 0;
 };
 
+/// The longest ray a map takes, m (checkMapOptions).
+inline constexpr double kMaxRangeM = 2000.0;
+
 /// The one rule for a map's options from outside (the server's config, the Mapper's options):
 /// resolution in [0.001, 100] m; max range < 0 (unlimited) or in (0, 2000] m and at most 65,536
 /// cells per ray; keep radius finite and >= 0; bounds finite with min < max on every axis;
