@@ -16,6 +16,7 @@ set(DENSEMAP_CMAKE_DIR ${CMAKE_INSTALL_LIBDIR}/cmake/densemap)
 # pipeline, TBB.
 set(DENSEMAP_SDK_TARGETS
     densemap_options densemap_geometry densemap_traversal densemap_map densemap_query
+    densemap_planner
     densemap_kernel_evidence densemap_io densemap_snapshot_proto densemap_store densemap_dds_msgs
     densemap_wire densemap_client
     densemap_parallel densemap_kernel densemap_raycast densemap_iln_proto densemap_upsample
@@ -33,6 +34,7 @@ set(DENSEMAP_SDK_HEADERS
     core/io/include/densemap/io/raw_scan.hpp
     core/map/include/densemap/map/cell_change.hpp
     core/query/include/densemap/query/cell_state.hpp
+    core/planner/include/densemap/planner/planner_types.hpp
     wire/include/densemap/wire/security.hpp
     wire/include/densemap/wire/server_status.hpp)
 foreach(target IN LISTS DENSEMAP_SDK_TARGETS)

@@ -13,6 +13,9 @@
 #include "densemap/io/octomap_export.hpp"
 #include "densemap/parallel/tbb_runner.hpp"
 #include "densemap/pipeline/engine.hpp"
+#include "densemap/planner/distance_field.hpp"
+#include "densemap/planner/distance_query.hpp"
+#include "densemap/planner/swept_volume.hpp"
 #include "densemap/query/map_queries.hpp"
 #include "densemap/store/snapshot.hpp"
 
@@ -26,6 +29,9 @@ struct Mapper::Impl {
   /// Writers hold it alone. Readers share it, unless versioned_reads (then only save() of a
   /// dense kind takes it, shared: the evidence belongs to the writer).
   mutable std::shared_mutex lock;
+  /// The distance field (MapperOptions::distance_field), updated by the writer under `lock`;
+  /// its readers always take the lock, shared.
+  std::optional<DistanceField> field;
 
   /// What a reader holds while it reads.
   [[nodiscard]] std::shared_lock<std::shared_mutex> reading() const {
@@ -36,6 +42,10 @@ struct Mapper::Impl {
   [[nodiscard]] std::shared_ptr<const MapView> view() const { return engine->view(); }
   [[nodiscard]] Expected<InsertResult> insert(const PointCloud& points_world,
                                               const Point3f& origin);
+  /// Brings the field up to date with the blocks a version wrote (writer, under the lock).
+  void updateField(std::span<const std::uint64_t> blocks) {
+    if (field) arena->execute([&] { field->update(*view(), blocks, tbbRunner()); });
+  }
   /// Erases the cells of the key box [lo, hi]; returns how many were known.
   std::size_t erase(const VoxelKey& lo, const VoxelKey& hi);
   /// A Mapper's engine over `initial` (none: an empty map), in its arena.
@@ -97,6 +107,13 @@ Expected<std::unique_ptr<Mapper::Impl>> Mapper::Impl::make(const MapperOptions& 
       [&] { engine = Engine::create(impl->pipeline, std::move(initial), version); });
   if (!engine) return std::unexpected(engine.error());
   impl->engine = std::move(*engine);
+  if (options.distance_field) {
+    auto field = DistanceField::create(impl->pipeline.resolution_m,
+                                       {.max_distance_m = options.max_distance_m});
+    if (!field) return makeError("max_distance_m: " + field.error().message);
+    impl->field = std::move(*field);
+    impl->arena->execute([&] { impl->field->rebuild(*impl->view(), tbbRunner()); });
+  }
   return impl;
 }
 
@@ -150,6 +167,7 @@ Expected<InsertResult> Mapper::Impl::insert(const PointCloud& points_world, cons
   const std::unique_lock writing(lock);
   arena->execute([&] { r = engine->integrateWorld(points_world, origin); });
   if (!r) return makeError(r.error().message);
+  updateField(r->written_blocks);
   InsertResult out;
   out.version = r->new_version;
   out.changed_blocks = std::move(r->written_blocks);
@@ -198,6 +216,7 @@ std::size_t Mapper::Impl::erase(const VoxelKey& lo, const VoxelKey& hi) {
         },
         result);
   });
+  updateField(result.written_blocks);
   return erased;
 }
 
@@ -288,6 +307,44 @@ void Mapper::forEachCell(
   view->forEachKnown([&](const VoxelKey& k, float v) {
     if (selected(filter, v)) f(view->grid().keyToPoint(k), v);
   });
+}
+
+Expected<Distances> Mapper::distance(std::span<const float> xyz,
+                                     const DistanceQueryOptions& options,
+                                     std::size_t max_points) const {
+  if (!impl_->field)
+    return makeError("distance: the Mapper has no distance field (distance_field)");
+  const std::shared_lock reading(impl_->lock);
+  const auto view = impl_->view();
+  Expected<DistanceQueryResult> r = makeError("");
+  impl_->arena->execute(
+      [&] { r = queryDistances(*impl_->field, *view, xyz, options, max_points, tbbRunner()); });
+  if (!r) return std::unexpected(r.error());
+  Distances out;
+  static_cast<DistanceQueryResult&>(out) = std::move(*r);
+  out.version = view->version();
+  return out;
+}
+
+Expected<DistanceGrid> Mapper::distanceBox(const Point3f& min, const Point3f& max,
+                                           bool unknown_as_occupied, std::size_t max_cells) const {
+  if (!impl_->field)
+    return makeError("distance: the Mapper has no distance field (distance_field)");
+  const std::shared_lock reading(impl_->lock);
+  const auto view = impl_->view();
+  auto box = exportDistanceBox(*impl_->field, *view, min, max, unknown_as_occupied, max_cells);
+  if (!box) return std::unexpected(box.error());
+  return DistanceGrid{view->grid().keyToPoint(box->min), box->size, std::move(box->distances)};
+}
+
+Expected<SweptVolumeResult> Mapper::checkPath(std::span<const float> xyz, double radius_m) const {
+  const auto reading = impl_->reading();
+  return densemap::checkPath(*impl_->view(), xyz, radius_m);
+}
+
+Expected<SweptVolumeResult> Mapper::checkBoxes(std::span<const OrientedBox> boxes) const {
+  const auto reading = impl_->reading();
+  return densemap::checkBoxes(*impl_->view(), boxes);
 }
 
 Expected<std::size_t> Mapper::save(const std::string& path) const {

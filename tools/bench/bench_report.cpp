@@ -15,6 +15,30 @@ double RunResult::withinTurnP50() const { return densemap::percentile(ms_within_
 
 double RunResult::openingTurnP50() const { return densemap::percentile(ms_opening_turn, 0.5); }
 
+std::string formatFieldTable(const std::vector<RunResult>& runs) {
+  std::string out;
+  char line[200];
+  for (const RunResult& r : runs) {
+    if (r.esdf_ms.empty()) continue;
+    if (out.empty()) {
+      std::snprintf(line, sizeof(line), "%-16s %-7s %3s %10s %10s %10s %8s %10s %9s %9s\n",
+                    "distance field", "backend", "thr", "p50 ms", "p99 ms", "integ p50", "ratio",
+                    "chg/scan", "field MiB", "map MiB");
+      out += line;
+    }
+    const double p50 = densemap::percentile(r.esdf_ms, 0.5);
+    const double integration = r.percentile(0.5);
+    std::snprintf(
+        line, sizeof(line), "%-16s %-7s %3d %10.2f %10.2f %10.2f %8.2f %10.0f %9.1f %9.1f\n",
+        r.method.c_str(), r.backend.c_str(), r.threads, p50, densemap::percentile(r.esdf_ms, 0.99),
+        integration, integration > 0 ? p50 / integration : 0.0, r.esdf_changes_per_scan,
+        static_cast<double>(r.field_bytes) / 1048576.0,
+        static_cast<double>(r.memory_bytes) / 1048576.0);
+    out += line;
+  }
+  return out;
+}
+
 std::string formatTurnTable(const std::vector<RunResult>& runs) {
   bool turns = false;
   for (const RunResult& r : runs) turns = turns || r.ms_opening_turn.size() > 1;
@@ -79,8 +103,8 @@ std::string formatRayTable(const std::vector<RunResult>& runs) {
         r.method.c_str(), r.backend.c_str(), r.rays_per_scan, r.super_rays_per_scan,
         r.rays_per_scan > 0 ? points_per_scan / r.rays_per_scan : 0.0, r.visits_per_scan,
         r.cells_per_scan, r.cells_per_scan > 0 ? r.visits_per_scan / r.cells_per_scan : 0.0,
-        r.nsPerVisit(), r.culled_per_scan, r.region_voxels_per_scan, r.ms_stage[0], r.ms_stage[1], r.ms_stage[2],
-        r.ms_stage[3], r.ms_stage[4],
+        r.nsPerVisit(), r.culled_per_scan, r.region_voxels_per_scan, r.ms_stage[0], r.ms_stage[1],
+        r.ms_stage[2], r.ms_stage[3], r.ms_stage[4],
         r.dense ? "  (dense: samples kernels occupied free apply)" : "");
     out << line;
   }

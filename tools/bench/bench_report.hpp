@@ -48,6 +48,11 @@ struct RunResult {
   /// The share of the machine's CPU time stolen by the hypervisor while this method's scans
   /// ran (cpu_steal.hpp); negative when unknown.
   double cpu_steal_share = -1;
+  /// --esdf: each scan's distance-field update (ms), the cells that changed class per scan,
+  /// and the field's bytes after the last scan.
+  std::vector<double> esdf_ms;
+  double esdf_changes_per_scan = 0;
+  std::size_t field_bytes = 0;
 
   [[nodiscard]] double percentile(double q) const;
   /// The p50 of the scans within turns (not opening one); 0 when there are none.
@@ -68,6 +73,9 @@ struct RunResult {
 [[nodiscard]] std::string formatRayTable(const std::vector<RunResult>& runs);
 /// Each lane's p50 over the scans that opened its turns and over the rest (empty when no lane
 /// had more than one turn).
+/// --esdf: each lane's distance-field update p50 / p99 beside its integration p50, their
+/// ratio, and the field's memory beside the map's (empty when no lane kept a field).
+[[nodiscard]] std::string formatFieldTable(const std::vector<RunResult>& runs);
 [[nodiscard]] std::string formatTurnTable(const std::vector<RunResult>& runs);
 /// The cache probes of a run (cache_probe.hpp): ns a step per vCPU, before and after the lanes
 /// (empty: no probe).

@@ -227,6 +227,9 @@ int report(const Options& o, const std::vector<RunResult>& runs,
       o.rule != "set" ? "raycast" : "octomap", machine.c_str());
   std::printf("%s\n", formatTable(runs).c_str());
   std::printf("%s", formatRayTable(runs).c_str());
+  if (const std::string field = formatFieldTable(runs); !field.empty()) {
+    std::printf("\n%s", field.c_str());
+  }
   if (lanes.size() > 1) std::printf("\n%s\n", formatTurnTable(runs).c_str());
   for (const RunResult& r : runs) {
     std::printf("%s/%s: %zu known cells, %.1f MiB (%.1f MiB per million cells)", r.method.c_str(),
@@ -361,6 +364,11 @@ static int runMain(int argc, char** argv) {
                  "shared host take by the minute; 0: no probe)")
       ->check(CLI::Range(0, 1024))
       ->capture_default_str();
+  app.add_option("--esdf", o.esdf_max_distance,
+                 "Also keep a distance field (this maximum distance, metres) on each log-odds "
+                 "grid lane, updated after every scan from the blocks it wrote; its time is a "
+                 "stage of its own, beside the integration's (0: off)")
+      ->check(CLI::Range(0.0, 100.0));
   app.add_option("--growth", o.growth,
                  "Also print each method's p50 / p99 in this many consecutive parts of the scans, "
                  "with the map's size after each (per-scan cost against map size; 0: no)")

@@ -17,6 +17,8 @@
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_factory.hpp"
 #include "densemap/parallel/tbb_runner.hpp"
+#include "densemap/planner/distance_field.hpp"
+#include "densemap/query/map_view.hpp"
 #include "densemap/raycast/integrator.hpp"
 
 namespace densemap::bench {
@@ -43,6 +45,7 @@ struct Options {
   std::vector<std::string> kernel_settings;  // --kernel-set, for every dense method
   std::size_t growth = 0;                    // --growth N: per-scan time as the map grows
   std::size_t cache_probe_mib = 4;           // --cache-probe-mib: 0, no probe
+  double esdf_max_distance = 0.0;            // --esdf M: a distance field on grid lanes; 0 off
 };
 
 /// FNV-1a over a kernel map's evidence (keys, alpha, beta, in block order): equal digests mean
@@ -109,6 +112,16 @@ class Lane {
       };
     }
     name_ = method + "/" + r_.backend;
+    auto* grid = dynamic_cast<GridMap*>(map_.get());
+    if (o.esdf_max_distance > 0 && !kernel_ && grid != nullptr) {
+      auto field = DistanceField::create(o.resolution, {.max_distance_m = o.esdf_max_distance});
+      if (field) {
+        field_ = std::move(*field);
+        grid->startLiveVersions();
+      } else {
+        std::fprintf(stderr, "--esdf: %s\n", field.error().message.c_str());
+      }
+    }
   }
 
   /// Integrates one scan (the first of this lane's turn or not); returns its wall time, ms.
@@ -130,6 +143,7 @@ class Lane {
                              stats.ms_apply};
     for (int k = 0; k < 5; ++k) stage_sums_[k] += stage[k];
     region_ms_.push_back(stats.ms_region);
+    if (field_) updateField();
     known_after_.push_back(kernel_ ? 0 : map_->knownCells());
     const auto* grid = dynamic_cast<const GridMap*>(map_.get());
     blocks_after_.push_back(grid != nullptr ? grid->store()->liveNodes() : 0);
@@ -173,16 +187,36 @@ class Lane {
     for (int k = 0; k < 5; ++k) r_.ms_stage[k] = stage_sums_[k] / n;
     r_.known_cells = kernel_ ? kernel_->knownCells() : map_->knownCells();
     r_.memory_bytes = kernel_ ? kernel_->memoryBytes() : map_->memoryBytes();
+    if (field_) r_.field_bytes = field_->memoryBytes();
     if (kernel_) r_.evidence_digest = evidenceDigest(kernel_->evidence());
     return r_;
   }
 
   [[nodiscard]] const std::string& name() const { return name_; }
+  /// The distance field (--esdf), if the lane keeps one.
+  [[nodiscard]] const DistanceField* field() const { return field_ ? &*field_ : nullptr; }
   [[nodiscard]] const OccupancyMap& map() const { return *map_; }
 
  private:
+  /// --esdf: ends the scan's version and brings the field up to date from the blocks it
+  /// wrote, timed as its own stage (not in the scan's time).
+  void updateField() {
+    std::vector<std::uint64_t> written;
+    const auto t0 = std::chrono::steady_clock::now();
+    arena_.execute([&] {
+      const auto view = MapView::advanceLive(dynamic_cast<GridMap&>(*map_), 0, &written);
+      const DistanceUpdateStats s = field_->update(*view, written, tbbRunner());
+      field_changes_ += static_cast<double>(s.added + s.removed);
+    });
+    r_.esdf_ms.push_back(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    r_.esdf_changes_per_scan = field_changes_ / static_cast<double>(r_.esdf_ms.size());
+  }
+
   RunResult r_;
   std::unique_ptr<OccupancyMap> map_;
+  std::optional<DistanceField> field_;
+  double field_changes_ = 0;
   Integrate integrate_;
   std::shared_ptr<kernel::KernelMap> kernel_;  // dense methods: the map they build
   tbb::task_arena arena_;

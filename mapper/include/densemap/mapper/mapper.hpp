@@ -2,6 +2,7 @@
 
 #include <Eigen/Geometry>
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -15,6 +16,7 @@
 #include "densemap/geometry/error.hpp"
 #include "densemap/geometry/point_cloud.hpp"
 #include "densemap/map/sensor_model.hpp"
+#include "densemap/planner/planner_types.hpp"
 #include "densemap/query/cell_state.hpp"
 
 namespace densemap {
@@ -53,6 +55,12 @@ struct MapperOptions {
   /// also during an insert; the insert then copies each block it changes (copy on write),
   /// about a fifth more time a scan.
   bool versioned_reads = false;
+  /// Keeps a distance field over the occupied cells (distance(), distanceBox()), updated with
+  /// each insert from the cells whose class changed. Off by default.
+  bool distance_field = false;
+  /// The field's maximum distance (metres, 1 .. 28 cells): exact below it, reported as it
+  /// beyond.
+  double max_distance_m = 2.0;
 };
 
 /// What one cell holds.
@@ -86,6 +94,19 @@ struct RayHit {
   /// The centre of the first occupied cell, and its distance from the origin.
   Point3f center = Point3f::Zero();
   float distance = 0.0F;
+};
+
+/// distance()'s answers (DistanceQueryResult), and the version they were read from.
+struct Distances : DistanceQueryResult {
+  std::uint64_t version = 0;
+};
+
+/// A dense box of the distance field: the distance (metres) of every cell from `min_center`
+/// on, `size` cells an axis, x fastest, then y, then z.
+struct DistanceGrid {
+  Point3f min_center = Point3f::Zero();
+  std::array<std::uint32_t, 3> size{};
+  std::vector<float> distances;
 };
 
 /// Which cells forEachCell visits.
@@ -162,6 +183,26 @@ class Mapper {
   /// The same over the whole map.
   void forEachCell(CellFilter filter,
                    const std::function<void(const Point3f& center, float log_odds)>& f) const;
+
+  /// Distances (metres) from the points `xyz` (x y z each) to the nearest occupied cell
+  /// centre (or unknown cell, when options.unknown_as_occupied), with gradients and nearest
+  /// obstacles, from one version. Needs MapperOptions::distance_field; refused for a NaN or
+  /// out-of-range point or more than `max_points` points. Runs on the Mapper's threads.
+  [[nodiscard]] Expected<Distances> distance(std::span<const float> xyz,
+                                             const DistanceQueryOptions& options = {},
+                                             std::size_t max_points = 10'000'000) const;
+  /// The distance of every cell of the box [min, max] (metres); refused past `max_cells`.
+  [[nodiscard]] Expected<DistanceGrid> distanceBox(const Point3f& min, const Point3f& max,
+                                                   bool unknown_as_occupied = false,
+                                                   std::size_t max_cells = 16'777'216) const;
+  /// Whether a robot of radius `radius_m` can follow the polyline `xyz` (x y z per vertex):
+  /// every cell within the radius of the path is considered (the capsules of its segments);
+  /// the answer is occupied (with the first occupied cell along the path and its arc length),
+  /// unknown or free. Needs no distance field.
+  [[nodiscard]] Expected<SweptVolumeResult> checkPath(std::span<const float> xyz,
+                                                      double radius_m) const;
+  /// The same for a sequence of oriented boxes (a footprint along a trajectory).
+  [[nodiscard]] Expected<SweptVolumeResult> checkBoxes(std::span<const OrientedBox> boxes) const;
 
   /// Writes the map to `path`: `.dmap` (densemap's snapshot, with a dense map's evidence),
   /// `.bt` (OctoMap binary: occupied and free) or `.ot` (OctoMap with log-odds); atomically.

@@ -1,0 +1,201 @@
+#pragma once
+
+#include <array>
+#include <bit>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <span>
+#include <unordered_map>
+#include <vector>
+
+#include "densemap/geometry/block_layout.hpp"
+#include "densemap/geometry/chunk_runner.hpp"
+#include "densemap/geometry/error.hpp"
+#include "densemap/query/map_view.hpp"
+
+namespace densemap {
+
+struct DistanceFieldOptions {
+  /// Distances are exact up to this (metres) and reported as this beyond it. At most 28 cells.
+  double max_distance_m = 2.0;
+};
+
+/// A cell as integer coordinates (its key's, widened so that offsets may leave the key range).
+struct CellCoord {
+  int x = 0, y = 0, z = 0;
+  [[nodiscard]] static CellCoord of(const VoxelKey& k) { return {k.x, k.y, k.z}; }
+  [[nodiscard]] bool inRange() const {
+    return x >= 0 && x <= 0xffff && y >= 0 && y <= 0xffff && z >= 0 && z <= 0xffff;
+  }
+  [[nodiscard]] VoxelKey key() const {
+    return {static_cast<std::uint16_t>(x), static_cast<std::uint16_t>(y),
+            static_cast<std::uint16_t>(z)};
+  }
+};
+
+/// What one update did.
+struct DistanceUpdateStats {
+  std::size_t added = 0;         // cells that became occupied
+  std::size_t removed = 0;       // cells that stopped being occupied
+  std::size_t recomputed = 0;    // cells whose nearest occupied cell was removed, searched anew
+  std::size_t field_blocks = 0;  // blocks of the field afterwards
+};
+
+/// The Euclidean distance from every cell centre to the nearest occupied cell centre of a map,
+/// truncated at a maximum distance, kept current by updates that cost what the scan changed.
+///
+/// Values are squared distances in cells (integers, so exact): a cell farther than the
+/// maximum from every occupied cell holds kFar and needs no storage. An update takes the map
+/// blocks a scan wrote or dropped, compares their occupied cells with the ones the field was
+/// built from and, for each cell that changed class:
+/// - one that became occupied lowers every cell of its ball (radius: the maximum) to its
+///   distance where that is smaller;
+/// - one that stopped being occupied marks the cells of its ball whose value was its distance;
+///   each marked cell is searched anew, row by row of its ball, nearest rows first, over the
+///   occupied cells as they are now.
+/// Every other cell keeps a value some unchanged occupied cell still attains, or an added one
+/// lowered it: the field after an update equals the field built from scratch, cell for cell.
+/// Blocks of the field left with no finite cell are freed, so eviction of the map frees the
+/// field with it.
+///
+/// Thread-safety: update() and clear() are writers; the const methods may run side by side
+/// with each other but not with a writer.
+class DistanceField {
+ public:
+  static constexpr std::uint16_t kFar = 0xffff;
+  static constexpr int kMaxRadiusCells = 28;
+
+  /// An error when max_distance_m is not finite, not positive, or more than 28 cells.
+  [[nodiscard]] static Expected<DistanceField> create(double resolution_m,
+                                                      const DistanceFieldOptions& options);
+
+  /// Brings the field up to date with `view` for `blocks`: every block whose occupied cells
+  /// may have changed since the last update (written or dropped). Blocks not named must be
+  /// unchanged. The blocks of the field run on `runner` (each task writes its own).
+  DistanceUpdateStats update(const MapView& view, std::span<const std::uint64_t> blocks,
+                             const ChunkRunner& runner = serialRunner());
+  /// Builds the field of every block `view` holds (after clear()).
+  DistanceUpdateStats rebuild(const MapView& view, const ChunkRunner& runner = serialRunner());
+  void clear();
+
+  /// The squared distance (cells^2) from `cell` to the nearest occupied cell centre, or kFar.
+  [[nodiscard]] std::uint16_t distanceSquared(const VoxelKey& cell) const;
+  /// The nearest occupied cell to `cell` (one of them on a tie), or none within the maximum.
+  [[nodiscard]] std::optional<VoxelKey> nearestOccupied(const VoxelKey& cell) const;
+  /// Whether the field counts `cell` as occupied.
+  [[nodiscard]] bool isOccupied(const VoxelKey& cell) const;
+
+  [[nodiscard]] double resolution() const { return resolution_m_; }
+  [[nodiscard]] double maxDistance() const { return options_.max_distance_m; }
+  /// Squared maximum distance in cells^2 (largest exact value) and its radius in whole cells.
+  [[nodiscard]] std::uint32_t radiusSquared() const { return radius2_; }
+  [[nodiscard]] int radius() const { return radius_; }
+  [[nodiscard]] std::size_t blocks() const { return blocks_.size(); }
+  [[nodiscard]] std::size_t memoryBytes() const;
+
+  /// Calls f(cell, squared distance) for every finite cell of the field.
+  template <class F>
+  void forEachFinite(F&& f) const {
+    for (const auto& [key, b] : blocks_) {
+      for (int i = 0; i < block::kVoxels; ++i) {
+        if (b->d2[i] != kFar) f(block::keyOf(key, i), b->d2[i]);
+      }
+    }
+  }
+
+  /// The rows of a ball: (dy, dz, h = dy^2 + dz^2, half-length in x), nearest first.
+  struct BallRow {
+    int dy, dz;
+    std::uint32_t h;
+    int ext;
+  };
+  [[nodiscard]] const std::vector<BallRow>& ballRows() const { return rows_; }
+
+ private:
+  struct Block {
+    std::array<std::uint16_t, block::kVoxels> d2;
+    Block() { d2.fill(kFar); }
+  };
+  /// The changed cells whose ball reaches one block of the field, and what they did to it.
+  /// A changed cell and the occupied cells near it (offsets, nearest first): a cell strictly
+  /// nearer one of them than the changed cell cannot take its value from it, so its ball is
+  /// visited only where none is (the half-spaces of their bisectors).
+  struct Change {
+    CellCoord cell;
+    std::uint32_t near_begin, near_end;  // in Changes::near
+  };
+  struct Work {
+    std::vector<std::uint32_t> add, remove;  // indices into the batch's changes
+  };
+  struct Changes {
+    std::vector<Change> list;
+    std::vector<std::array<int, 4>> near;  // dx, dy, dz, dx^2 + dy^2 + dz^2
+  };
+  struct Target {
+    std::uint64_t key;
+    Block* block;
+    const Work* work;
+    const Changes* changes;
+    block::BlockMask marked;  // cells whose nearest occupied cell was removed
+    bool any_marked;
+  };
+  DistanceField(double resolution_m, const DistanceFieldOptions& options);
+  /// Lowers the block's cells to the added cells' distances and marks those whose value was
+  /// a removed cell's distance.
+  void stampBlock(Target& t) const;
+  /// Searches the marked cells anew in a window of the occupied cells around the block (the
+  /// block grown by the radius, one 64-bit word per x-row); returns how many.
+  std::size_t recomputeBlock(Target& t, std::vector<std::uint64_t>& window) const;
+  /// The occupied-cell bits of x in [cx - ext, cx + ext] on row (y, z), placed as
+  /// nearestInRows wants them (bit 31 is cx).
+  [[nodiscard]] std::uint64_t occupiedRow(int cx, int y, int z, int ext) const;
+  /// Applies one batch of changed cells (already recorded in sources_).
+  void apply(const std::vector<CellCoord>& added, const std::vector<CellCoord>& removed,
+             DistanceUpdateStats& stats, const ChunkRunner& runner);
+
+  double resolution_m_;
+  DistanceFieldOptions options_;
+  int radius_ = 0;
+  std::uint32_t radius2_ = 0;
+  std::vector<BallRow> rows_;
+  std::vector<int> ext_;  // ext_[h]: the ball's half-length in x on a row with dy^2 + dz^2 = h
+  std::unordered_map<std::uint64_t, std::unique_ptr<Block>> blocks_;
+  std::unordered_map<std::uint64_t, block::BlockMask> sources_;  // occupied cells per block
+};
+
+/// The squared distance (cells^2) from `c` to the nearest cell whose bit `row(cx, y, z, ext)`
+/// sets, searched over the rows of `rows` (nearest first) while below `bound2`; `row` returns
+/// the bits of x in [cx - 31, cx + 32] (bit 31 is cx), of which only [cx - ext, cx + ext] count.
+/// Returns bound2 when none is nearer, and the offset of the one found in `offset`.
+template <class RowBits>
+[[nodiscard]] std::uint32_t nearestInRows(const CellCoord& c, std::uint32_t bound2,
+                                          std::span<const DistanceField::BallRow> rows,
+                                          RowBits&& row, std::array<int, 3>* offset = nullptr) {
+  std::uint32_t best = bound2;
+  for (const DistanceField::BallRow& r : rows) {
+    if (r.h >= best) break;
+    const std::uint64_t bits = row(c.x, c.y + r.dy, c.z + r.dz, r.ext);
+    if (bits == 0) continue;
+    // Nearest set bit to bit 31, up (x >= cx) and down (x < cx).
+    int dx = 64;
+    int sign = 1;
+    if (const std::uint64_t up = bits >> 31; up != 0) dx = std::countr_zero(up);
+    if (const std::uint64_t down = bits << 33; down != 0) {
+      const int d = std::countl_zero(down) + 1;
+      if (d < dx) {
+        dx = d;
+        sign = -1;
+      }
+    }
+    if (dx > r.ext) continue;
+    const std::uint32_t d2 = r.h + static_cast<std::uint32_t>(dx * dx);
+    if (d2 < best) {
+      best = d2;
+      if (offset != nullptr) *offset = {sign * dx, r.dy, r.dz};
+    }
+  }
+  return best;
+}
+
+}  // namespace densemap
