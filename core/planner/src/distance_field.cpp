@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <mutex>
 #include <string>
 
 #include "densemap/map/sensor_model.hpp"
@@ -171,69 +172,155 @@ DistanceUpdateStats DistanceField::rebuild(const MapView& view, const ChunkRunne
   return update(view, keys, runner);
 }
 
+namespace {
+
+/// The occupied-cell masks of the (at most 2 x 2 x 2) blocks within 2 cells of a cell, looked
+/// up once each.
+class NearMasks {
+ public:
+  using Sources = std::unordered_map<std::uint64_t, block::BlockMask>;
+  NearMasks(const Sources& sources, const CellCoord& c) {
+    base_ = {std::max(c.x - 2, 0) >> 3, std::max(c.y - 2, 0) >> 3, std::max(c.z - 2, 0) >> 3};
+    for (int k = 0; k < 8; ++k) {
+      const int bx = base_[0] + (k & 1), by = base_[1] + ((k >> 1) & 1),
+                bz = base_[2] + ((k >> 2) & 1);
+      if (bx > kMaxBlockCoord || by > kMaxBlockCoord || bz > kMaxBlockCoord) continue;
+      const auto it = sources.find(packBlock(bx, by, bz));
+      masks_[static_cast<std::size_t>(k)] = it == sources.end() ? nullptr : &it->second;
+    }
+  }
+  /// Whether cell (x, y, z), within 2 cells of the cell, is occupied.
+  [[nodiscard]] bool occupied(int x, int y, int z) const {
+    if (x < 0 || x > 0xffff || y < 0 || y > 0xffff || z < 0 || z > 0xffff) return false;
+    const int k =
+        ((x >> 3) - base_[0]) | (((y >> 3) - base_[1]) << 1) | (((z >> 3) - base_[2]) << 2);
+    const block::BlockMask* m = masks_[static_cast<std::size_t>(k)];
+    return m != nullptr && block::testBit(*m, (x & 7) | ((y & 7) << 3) | ((z & 7) << 6));
+  }
+
+ private:
+  std::array<int, 3> base_{};
+  std::array<const block::BlockMask*, 8> masks_{};
+};
+
+}  // namespace
+
+void DistanceField::segmentsOf(const CellCoord& s, bool add, std::vector<Segment>& out,
+                               std::vector<std::array<int, 4>>& near) const {
+  // The occupied cells (as they are now) within 2 cells of s, nearest first: a cell strictly
+  // nearer one of them than s cannot take its value from s, so s's ball is visited only
+  // where none is (2 v.n <= |n|^2 for the cell's offset v and every near offset n).
+  near.clear();
+  const NearMasks masks(sources_, s);
+  for (int dz = -2; dz <= 2; ++dz) {
+    for (int dy = -2; dy <= 2; ++dy) {
+      for (int dx = -2; dx <= 2; ++dx) {
+        if ((dx != 0 || dy != 0 || dz != 0) && masks.occupied(s.x + dx, s.y + dy, s.z + dz)) {
+          near.push_back({dx, dy, dz, dx * dx + dy * dy + dz * dz});
+        }
+      }
+    }
+  }
+  std::sort(near.begin(), near.end(), [](const auto& u, const auto& v) { return u[3] < v[3]; });
+
+  // Near cells straight along y or z bound the rows at once (a wall's or floor's cell keeps
+  // only the rows along its normal).
+  int dy_lo = -radius_, dy_hi = radius_, dz_lo = -radius_, dz_hi = radius_;
+  for (const auto& n : near) {
+    if (n[0] != 0 || (n[1] != 0 && n[2] != 0)) continue;
+    const int a = n[1] != 0 ? n[1] : n[2];
+    int& lo = n[1] != 0 ? dy_lo : dz_lo;
+    int& hi = n[1] != 0 ? dy_hi : dz_hi;
+    if (a > 0) {
+      hi = std::min(hi, floorDiv(n[3], 2 * a));
+    } else {
+      lo = std::max(lo, -floorDiv(n[3], -2 * a));
+    }
+  }
+  for (int dz = dz_lo; dz <= dz_hi; ++dz) {
+    const int z = s.z + dz;
+    if (z < 0 || z > 0xffff) continue;
+    for (int dy = dy_lo; dy <= dy_hi; ++dy) {
+      const int y = s.y + dy;
+      const auto h = static_cast<std::uint32_t>(dy * dy + dz * dz);
+      if (h > radius2_ || y < 0 || y > 0xffff) continue;
+      int lo = -ext_[h], hi = ext_[h];
+      for (const auto& n : near) {
+        const int k = n[3] - 2 * (dy * n[1] + dz * n[2]);  // keep 2 dx n.x <= k
+        if (n[0] == 0) {
+          if (k < 0) lo = hi + 1;
+        } else if (n[0] > 0) {  // floor(k / (2 n.x)), n.x in {1, 2}: a shift
+          hi = std::min(hi, k >> n[0]);
+        } else {
+          lo = std::max(lo, -(k >> -n[0]));
+        }
+        if (lo > hi) break;
+      }
+      const int xa = std::max(s.x + lo, 0), xb = std::min(s.x + hi, 0xffff);
+      if (xa > xb) continue;
+      const auto cell_row = static_cast<std::uint8_t>((y & 7) | ((z & 7) << 3));
+      for (int bx = xa >> 3; bx <= xb >> 3; ++bx) {
+        const int ox = bx * 8;
+        out.push_back({packBlock(bx, y >> 3, z >> 3), static_cast<std::uint16_t>(h),
+                       static_cast<std::int16_t>(s.x - ox), cell_row,
+                       static_cast<std::uint8_t>(std::max(xa, ox) - ox),
+                       static_cast<std::uint8_t>(std::min(xb, ox + 7) - ox), add});
+      }
+    }
+  }
+}
+
 void DistanceField::apply(const std::vector<CellCoord>& added,
                           const std::vector<CellCoord>& removed, DistanceUpdateStats& stats,
                           const ChunkRunner& runner) {
   stats.added = added.size();
   stats.removed = removed.size();
   if (added.empty() && removed.empty()) return;
-  const int r = radius_;
-  // The changed cells, each with the occupied cells (as they are now) within 2 cells of it.
-  Changes changes;
-  auto record = [&](const CellCoord& c) {
-    const auto begin = static_cast<std::uint32_t>(changes.near.size());
-    for (int dz = -2; dz <= 2; ++dz) {
-      for (int dy = -2; dy <= 2; ++dy) {
-        const int y = c.y + dy, z = c.z + dz;
-        if (y < 0 || y > 0xffff || z < 0 || z > 0xffff) continue;
-        const std::uint64_t bits = occupiedRow(c.x, y, z, 2);
-        for (int dx = -2; dx <= 2; ++dx) {
-          if ((dx != 0 || dy != 0 || dz != 0) && ((bits >> (31 + dx)) & 1U) != 0) {
-            changes.near.push_back({dx, dy, dz, dx * dx + dy * dy + dz * dz});
-          }
-        }
-      }
+  // Each changed cell's ball as row segments, per block of the field (chunks of changed cells
+  // on the runner, each into its own list).
+  const std::size_t n = added.size() + removed.size();
+  std::vector<std::vector<Segment>> parts;
+  std::mutex parts_mutex;
+  runner.run(n, 64, [&](std::size_t begin, std::size_t end) {
+    std::vector<std::array<int, 4>> near;
+    std::vector<Segment> out;
+    for (std::size_t i = begin; i != end; ++i) {
+      const bool add = i < added.size();
+      segmentsOf(add ? added[i] : removed[i - added.size()], add, out, near);
     }
-    std::sort(changes.near.begin() + begin, changes.near.end(),
-              [](const auto& u, const auto& v) { return u[3] < v[3]; });
-    changes.list.push_back({c, begin, static_cast<std::uint32_t>(changes.near.size())});
-  };
-  // The blocks of the field each changed cell's ball reaches.
-  std::unordered_map<std::uint64_t, Work> work;
-  auto spread = [&](const CellCoord& s, bool add) {
-    record(s);
-    const auto index = static_cast<std::uint32_t>(changes.list.size() - 1);
-    const int x0 = std::max(s.x - r, 0) >> 3, x1 = std::min(s.x + r, 0xffff) >> 3;
-    const int y0 = std::max(s.y - r, 0) >> 3, y1 = std::min(s.y + r, 0xffff) >> 3;
-    const int z0 = std::max(s.z - r, 0) >> 3, z1 = std::min(s.z + r, 0xffff) >> 3;
-    for (int bz = z0; bz <= z1; ++bz) {
-      for (int by = y0; by <= y1; ++by) {
-        for (int bx = x0; bx <= x1; ++bx) {
-          Work& w = work[packBlock(bx, by, bz)];
-          (add ? w.add : w.remove).push_back(index);
-        }
-      }
-    }
-  };
-  for (const CellCoord& s : added) spread(s, true);
-  for (const CellCoord& s : removed) spread(s, false);
+    const std::lock_guard lock(parts_mutex);
+    parts.push_back(std::move(out));
+  });
+  std::vector<Segment> segments;
+  std::size_t total = 0;
+  for (const auto& p : parts) total += p.size();
+  segments.reserve(total);
+  for (auto& p : parts) segments.insert(segments.end(), p.begin(), p.end());
+  std::sort(segments.begin(), segments.end(),
+            [](const Segment& a, const Segment& b) { return a.block < b.block; });
 
-  // Blocks first (serially: the table changes), then each block's work on the runner: a
+  // Blocks first (serially: the table changes), then each block's segments on the runner: a
   // block's task writes only that block and reads the occupied cells, which stay as they are.
   std::vector<Target> targets;
-  targets.reserve(work.size());
-  for (auto& [key, w] : work) {
+  for (std::size_t i = 0; i < segments.size();) {
+    std::size_t j = i;
+    bool any_add = false;
+    while (j < segments.size() && segments[j].block == segments[i].block) {
+      any_add = any_add || segments[j].add;
+      ++j;
+    }
+    const std::uint64_t key = segments[i].block;
     Block* b = nullptr;
     if (auto it = blocks_.find(key); it != blocks_.end()) {
       b = it->second.get();
-    } else if (!w.add.empty()) {
+    } else if (any_add) {
       b = blocks_.emplace(key, std::make_unique<Block>()).first->second.get();
-    } else {
-      continue;  // no finite cell here: no removed cell was anyone's nearest
     }
-    targets.push_back({key, b, &w, &changes, {}, false});
+    // No block and nothing added: no finite cell here, no removed cell was anyone's nearest.
+    if (b != nullptr) targets.push_back({key, b, &segments[i], j - i, {}, false});
+    i = j;
   }
-  runner.run(targets.size(), 8, [&](std::size_t begin, std::size_t end) {
+  runner.run(targets.size(), 16, [&](std::size_t begin, std::size_t end) {
     for (std::size_t t = begin; t != end; ++t) stampBlock(targets[t]);
   });
   std::size_t recomputed = 0;
@@ -255,84 +342,31 @@ void DistanceField::apply(const std::vector<CellCoord>& added,
 }
 
 void DistanceField::stampBlock(Target& t) const {
-  const auto r2 = static_cast<int>(radius2_);
-  const auto bc = block::coordsOf(t.key);
-  const int ox = static_cast<int>(bc[0]) * 8, oy = static_cast<int>(bc[1]) * 8,
-            oz = static_cast<int>(bc[2]) * 8;
-  // f(y, z (block-relative), h, dx^2 of the row's 8 cells) for each x-row of the block that the
-  // source's ball reaches: all 8 cells at once (cells beyond the ball have h + dx^2 > r2).
-  auto forRows = [&](std::uint32_t index, auto&& f) {
-    const Change& change = t.changes->list[index];
-    const CellCoord& s = change.cell;
-    if (s.x + radius_ < ox || s.x - radius_ > ox + 7) return;
-    const std::span<const std::array<int, 4>> near(t.changes->near.data() + change.near_begin,
-                                                   change.near_end - change.near_begin);
-    // A cell at offset v from s keeps s's value only if 2 v.n <= |n|^2 for every near cell n.
-    for (const auto& n : near) {
-      // The block's smallest 2 v.n (at a corner): above |n|^2, n is nearer to all of it.
-      int low = 0;
-      const int lo[3] = {ox - s.x, oy - s.y, oz - s.z};
-      for (int k = 0; k < 3; ++k)
-        low += 2 * n[static_cast<std::size_t>(k)] *
-               (n[static_cast<std::size_t>(k)] >= 0 ? lo[k] : lo[k] + 7);
-      if (low > n[3]) return;
-    }
-    std::array<std::uint16_t, 8> dx2{};
-    for (int x = 0; x < 8; ++x) {
-      const int dx = std::min(std::abs(ox + x - s.x), 255);
-      dx2[static_cast<std::size_t>(x)] = static_cast<std::uint16_t>(dx * dx);
-    }
-    const int za = std::max(oz, s.z - radius_), zb = std::min(oz + 7, s.z + radius_);
-    const int ya = std::max(oy, s.y - radius_), yb = std::min(oy + 7, s.y + radius_);
-    for (int z = za; z <= zb; ++z) {
-      for (int y = ya; y <= yb; ++y) {
-        const int dy = y - s.y, dz = z - s.z;
-        const int h = dz * dz + dy * dy;
-        if (h > r2) continue;
-        // The row's x-offsets [lo, hi] (block-relative x) that no near cell excludes.
-        int lo = 0, hi = 7;
-        for (const auto& n : near) {
-          const int k = n[3] - 2 * (dy * n[1] + dz * n[2]);  // keep 2 dx n.x <= k
-          if (n[0] == 0) {
-            if (k < 0) lo = 8;
-          } else if (n[0] > 0) {
-            hi = std::min(hi, s.x - ox + floorDiv(k, 2 * n[0]));
-          } else {
-            lo = std::max(lo, s.x - ox - floorDiv(k, -2 * n[0]));
-          }
-          if (lo > hi) break;
-        }
-        if (lo > hi) continue;
-        f(y - oy, z - oz, static_cast<std::uint16_t>(h), dx2, lo, hi);
-      }
-    }
-  };
+  const auto limit = static_cast<std::uint16_t>(radius2_);
   Block& b = *t.block;
-  const auto limit = static_cast<std::uint16_t>(r2);
-  for (const std::uint32_t s : t.work->remove) {
-    forRows(s, [&](int y, int z, std::uint16_t h, const std::array<std::uint16_t, 8>& dx2, int lo,
-                   int hi) {
-      const std::uint16_t* row = &b.d2[static_cast<std::size_t>((y << 3) | (z << 6))];
-      std::uint64_t bits = 0;
-      for (std::size_t x = 0; x < 8; ++x) {
-        const auto v = static_cast<std::uint16_t>(h + dx2[x]);
-        const bool in = static_cast<int>(x) >= lo && static_cast<int>(x) <= hi;
-        bits |= static_cast<std::uint64_t>(in && v <= limit && row[x] == v) << x;
+  // Removals first, against the values before this update's additions (either order gives
+  // the same field; this one marks fewer cells).
+  for (int pass = 0; pass < 2; ++pass) {
+    const bool adding = pass == 1;
+    for (std::size_t k = 0; k < t.count; ++k) {
+      const Segment& g = t.segments[k];
+      if (g.add != adding) continue;
+      std::uint16_t* row = &b.d2[static_cast<std::size_t>(g.row) * 8];
+      if (adding) {
+        for (int x = g.xa; x <= g.xb; ++x) {
+          const auto v = static_cast<std::uint16_t>(g.h + (x - g.sx) * (x - g.sx));
+          row[x] = v <= limit && v < row[x] ? v : row[x];
+        }
+      } else {
+        std::uint64_t bits = 0;
+        for (int x = g.xa; x <= g.xb; ++x) {
+          const auto v = static_cast<std::uint16_t>(g.h + (x - g.sx) * (x - g.sx));
+          bits |= static_cast<std::uint64_t>(row[x] == v) << x;
+        }
+        t.marked[g.row >> 3] |= bits << ((g.row & 7) * 8);
+        t.any_marked = t.any_marked || bits != 0;
       }
-      t.marked[static_cast<std::size_t>(z)] |= bits << (y * 8);
-      t.any_marked = t.any_marked || bits != 0;
-    });
-  }
-  for (const std::uint32_t s : t.work->add) {
-    forRows(s, [&](int y, int z, std::uint16_t h, const std::array<std::uint16_t, 8>& dx2, int lo,
-                   int hi) {
-      std::uint16_t* row = &b.d2[static_cast<std::size_t>((y << 3) | (z << 6))];
-      for (std::size_t x = 0; x < 8; ++x) {
-        const auto v = static_cast<std::uint16_t>(h + dx2[x]);
-        const bool in = static_cast<int>(x) >= lo && static_cast<int>(x) <= hi;
-        row[x] = in && v <= limit && v < row[x] ? v : row[x];
-      }
-    });
+    }
   }
 }
 

@@ -118,29 +118,28 @@ class DistanceField {
     Block() { d2.fill(kFar); }
   };
   /// The changed cells whose ball reaches one block of the field, and what they did to it.
-  /// A changed cell and the occupied cells near it (offsets, nearest first): a cell strictly
-  /// nearer one of them than the changed cell cannot take its value from it, so its ball is
-  /// visited only where none is (the half-spaces of their bisectors).
-  struct Change {
-    CellCoord cell;
-    std::uint32_t near_begin, near_end;  // in Changes::near
+  /// Part of an x-row of one block that a changed cell's ball reaches: cells xa .. xb (in the
+  /// block) of row `row` (y | z << 3 in the block), at squared distance h + (x - sx)^2.
+  struct Segment {
+    std::uint64_t block;
+    std::uint16_t h;
+    std::int16_t sx;
+    std::uint8_t row, xa, xb;
+    bool add;
   };
-  struct Work {
-    std::vector<std::uint32_t> add, remove;  // indices into the batch's changes
-  };
-  struct Changes {
-    std::vector<Change> list;
-    std::vector<std::array<int, 4>> near;  // dx, dy, dz, dx^2 + dy^2 + dz^2
-  };
+  /// One block of the field and its segments (contiguous in the update's sorted list).
   struct Target {
     std::uint64_t key;
     Block* block;
-    const Work* work;
-    const Changes* changes;
+    const Segment* segments;
+    std::size_t count;
     block::BlockMask marked;  // cells whose nearest occupied cell was removed
     bool any_marked;
   };
   DistanceField(double resolution_m, const DistanceFieldOptions& options);
+  /// The segments of the changed cell s's ball that s may be nearest to (`near`: scratch).
+  void segmentsOf(const CellCoord& s, bool add, std::vector<Segment>& out,
+                  std::vector<std::array<int, 4>>& near) const;
   /// Lowers the block's cells to the added cells' distances and marks those whose value was
   /// a removed cell's distance.
   void stampBlock(Target& t) const;
