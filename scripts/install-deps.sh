@@ -7,7 +7,7 @@ set -euo pipefail
 
 PACKAGES=(
   build-essential cmake ninja-build pkg-config ccache
-  liboctomap-dev octomap-tools
+  liboctomap-dev octomap-tools libdynamicedt3d-dev
   libtbb-dev libeigen3-dev
   libgtest-dev libgmock-dev
   cyclonedds-dev cyclonedds-tools
