@@ -27,7 +27,8 @@ MapperOptions optionsFrom(double resolution, double max_range, const std::string
                           const std::string& backend, const std::string& integration,
                           const std::string& update_rule, int threads, double prob_hit,
                           double prob_miss, double clamp_min, double clamp_max, double keep_radius,
-                          const py::object& bounds, std::size_t max_points, bool versioned_reads) {
+                          const py::object& bounds, std::size_t max_points, bool versioned_reads,
+                          bool distance_field, double max_distance) {
   MapperOptions o;
   o.resolution_m = resolution;
   o.max_range_m = max_range;
@@ -41,7 +42,62 @@ MapperOptions optionsFrom(double resolution, double max_range, const std::string
   o.bounds = boxFrom(bounds);
   o.max_points = max_points;
   o.versioned_reads = versioned_reads;
+  o.distance_field = distance_field;
+  o.max_distance_m = max_distance;
   return o;
+}
+
+/// (distances (N,), gradients (N, 3), nearest obstacles (N, 3)) of `points`.
+py::tuple distances(const Mapper& mapper, const py::handle& points, bool unknown_as_occupied,
+                    bool interpolate, bool nearest) {
+  const PointCloud cloud =
+      pointsFrom(points, std::numeric_limits<std::size_t>::max(), "points", false);
+  const std::span<const float> xyz(cloud.empty() ? nullptr : cloud.front().data(),
+                                   cloud.size() * 3);
+  const Distances r = released([&] {
+    return mapper.distance(xyz, {.unknown_as_occupied = unknown_as_occupied,
+                                 .interpolate = interpolate,
+                                 .nearest = nearest});
+  });
+  const auto n = static_cast<py::ssize_t>(r.distances.size());
+  py::array_t<float> d(n);
+  py::array_t<float> g({n, py::ssize_t{3}});
+  py::array_t<float> c({n, py::ssize_t{3}});
+  std::copy(r.distances.begin(), r.distances.end(), d.mutable_data());
+  std::copy(r.gradients.begin(), r.gradients.end(), g.mutable_data());
+  std::copy(r.nearest.begin(), r.nearest.end(), c.mutable_data());
+  return py::make_tuple(d, g, c);
+}
+
+const char* stateName(CellState s) {
+  switch (s) {
+    case CellState::kOccupied:
+      return "occupied";
+    case CellState::kFree:
+      return "free";
+    case CellState::kUnknown:
+      break;
+  }
+  return "unknown";
+}
+
+py::object conflictDict(const std::optional<SweptConflict>& c, const char* index_name) {
+  if (!c) return py::none();
+  py::dict d;
+  d["center"] = py::make_tuple(c->center.x(), c->center.y(), c->center.z());
+  d["arc_length"] = c->arc_length;
+  d[index_name] = c->index;
+  return d;
+}
+
+/// A swept-volume answer as a dict: state, occupied and unknown (the first of each, or None).
+py::dict sweptDict(const SweptVolumeResult& r, const char* index_name) {
+  py::dict d;
+  d["state"] = stateName(r.state);
+  d["occupied"] = conflictDict(r.occupied, index_name);
+  d["unknown"] = conflictDict(r.unknown, index_name);
+  d["length"] = r.length_m;
+  return d;
 }
 
 InsertResult insertPoints(Mapper& mapper, const py::handle& points, const py::handle& origin) {
@@ -184,6 +240,8 @@ py::dict optionsDict(const MapperOptions& o) {
   d["keep_radius"] = o.keep_radius_m;
   d["max_points"] = o.max_points;
   d["versioned_reads"] = o.versioned_reads;
+  d["distance_field"] = o.distance_field;
+  d["max_distance"] = o.max_distance_m;
   return d;
 }
 
@@ -218,17 +276,20 @@ cores), prob_hit, prob_miss, clamp_min, clamp_max (the sensor model), keep_radiu
 and bounds (((min_x, min_y, min_z), (max_x, max_y, max_z)) or None) bound the memory,
 max_points (per scan), versioned_reads (False: inserts write in place and a query waits for an
 insert under way; True: queries never wait, inserts copy the blocks they change, about a fifth
-more time a scan). A bad option raises densemap.Error naming it.
+more time a scan), distance_field (keep a distance field for distance() and distance_box(),
+updated with each insert) and max_distance (its maximum, m: exact below, reported beyond). A bad
+option raises densemap.Error naming it.
 )doc")
       .def(py::init([](double resolution, double max_range, const std::string& kind,
                        const std::string& backend, const std::string& integration,
                        const std::string& update_rule, int threads, double prob_hit,
                        double prob_miss, double clamp_min, double clamp_max, double keep_radius,
-                       const py::object& bounds, std::size_t max_points, bool versioned_reads) {
+                       const py::object& bounds, std::size_t max_points, bool versioned_reads,
+                       bool distance_field, double max_distance) {
              return valueOrRaise(Mapper::create(
                  optionsFrom(resolution, max_range, kind, backend, integration, update_rule,
                              threads, prob_hit, prob_miss, clamp_min, clamp_max, keep_radius,
-                             bounds, max_points, versioned_reads)));
+                             bounds, max_points, versioned_reads, distance_field, max_distance)));
            }),
            py::kw_only(), py::arg("resolution") = d.resolution_m,
            py::arg("max_range") = d.max_range_m, py::arg("kind") = d.kind,
@@ -237,7 +298,8 @@ more time a scan). A bad option raises densemap.Error naming it.
            py::arg("prob_hit") = d.sensor.hit, py::arg("prob_miss") = d.sensor.miss,
            py::arg("clamp_min") = d.sensor.clamp_min, py::arg("clamp_max") = d.sensor.clamp_max,
            py::arg("keep_radius") = d.keep_radius_m, py::arg("bounds") = py::none(),
-           py::arg("max_points") = d.max_points, py::arg("versioned_reads") = d.versioned_reads)
+           py::arg("max_points") = d.max_points, py::arg("versioned_reads") = d.versioned_reads,
+           py::arg("distance_field") = d.distance_field, py::arg("max_distance") = d.max_distance_m)
       .def("insert_point_cloud", &insertPoints, py::arg("points"), py::arg("origin"),
            R"doc(Integrates world-frame points ((N, 3) float32 or float64, C- or F-contiguous)
 seen from origin (3 numbers), as OctoMap's insertPointCloud. Returns an InsertResult. Raises
@@ -290,6 +352,77 @@ pose's translation.)doc")
 ((N, 3), or one origin for all) along directions ((N, 3), any non-zero length) up to
 max_range m. Returns (hit: bool (N,), centers: float32 (N, 3) of the first occupied cells, NaN
 where none, distances: float32 (N,), inf where none).)doc")
+      .def("distance", &distances, py::arg("points"), py::kw_only(),
+           py::arg("unknown_as_occupied") = false, py::arg("interpolate") = false,
+           py::arg("nearest") = true,
+           R"doc(Distances from points ((N, 3)) to the nearest occupied cell centre (or unknown
+cell, with unknown_as_occupied), at most max_distance (meaning none within it), from one map
+version. Returns (distances float32 (N,), gradients float32 (N, 3): unit, away from the nearest
+obstacle, or the trilinear interpolant's with interpolate=True, zero at an obstacle or beyond
+the maximum; nearest float32 (N, 3): the nearest obstacle cell's centre, NaN where none or
+nearest=False). Needs distance_field=True; raises densemap.Error for a NaN or out-of-range
+point.)doc")
+      .def(
+          "distance_box",
+          [](const Mapper& self, const py::handle& box_min, const py::handle& box_max,
+             bool unknown_as_occupied, std::size_t max_cells) {
+            const Point3f lo = pointFrom(box_min, "box_min"), hi = pointFrom(box_max, "box_max");
+            const DistanceGrid g =
+                released([&] { return self.distanceBox(lo, hi, unknown_as_occupied, max_cells); });
+            py::array_t<float> a({static_cast<py::ssize_t>(g.size[2]),
+                                  static_cast<py::ssize_t>(g.size[1]),
+                                  static_cast<py::ssize_t>(g.size[0])});
+            std::copy(g.distances.begin(), g.distances.end(), a.mutable_data());
+            return py::make_tuple(
+                a, py::make_tuple(g.min_center.x(), g.min_center.y(), g.min_center.z()));
+          },
+          py::arg("box_min"), py::arg("box_max"), py::kw_only(),
+          py::arg("unknown_as_occupied") = false, py::arg("max_cells") = 16'777'216,
+          R"doc(The distance field over the box's cells: (distances float32 (nz, ny, nx), the
+centre of cell [0, 0, 0]). Raises densemap.Error past max_cells.)doc")
+      .def(
+          "check_path",
+          [](const Mapper& self, const py::handle& vertices, double radius) {
+            const PointCloud path =
+                pointsFrom(vertices, std::numeric_limits<std::size_t>::max(), "vertices", false);
+            const std::span<const float> xyz(path.empty() ? nullptr : path.front().data(),
+                                             path.size() * 3);
+            return sweptDict(released([&] { return self.checkPath(xyz, radius); }), "segment");
+          },
+          py::arg("vertices"), py::arg("radius"),
+          R"doc(Whether a robot of this radius (m) can follow the polyline vertices ((N, 3)):
+every cell within the radius of the path counts. Returns {'state': 'free' | 'unknown' |
+'occupied', 'occupied': the first occupied cell along the path ({'center', 'arc_length',
+'segment'}) or None, 'unknown': the first unknown cell before it or None, 'length'}.)doc")
+      .def(
+          "check_boxes",
+          [](const Mapper& self, const py::handle& centers, const py::handle& half_extents,
+             const py::handle& rotations) {
+            const std::size_t limit = std::numeric_limits<std::size_t>::max();
+            const PointCloud c = pointsFrom(centers, limit, "centers", false);
+            const PointCloud e = pointsFrom(half_extents, limit, "half_extents", false);
+            const auto q =
+                py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(rotations);
+            if (!q || q.ndim() != 2 || q.shape(1) != 4 ||
+                static_cast<std::size_t>(q.shape(0)) != c.size() || e.size() != c.size()) {
+              throw py::value_error(
+                  "centers and half_extents (N, 3) and rotations (N, 4: x y z w) must match");
+            }
+            std::vector<OrientedBox> boxes(c.size());
+            for (std::size_t i = 0; i < c.size(); ++i) {
+              const double* r = q.data(static_cast<py::ssize_t>(i), 0);
+              boxes[i].center = c[i];
+              boxes[i].half_extents = e[i];
+              boxes[i].rotation =
+                  Eigen::Quaternionf(static_cast<float>(r[3]), static_cast<float>(r[0]),
+                                     static_cast<float>(r[1]), static_cast<float>(r[2]));
+            }
+            return sweptDict(released([&] { return self.checkBoxes(boxes); }), "box");
+          },
+          py::arg("centers"), py::arg("half_extents"), py::arg("rotations"),
+          R"doc(The same for oriented boxes (a footprint along a trajectory): centers and
+half_extents (N, 3), rotations (N, 4) as quaternions x y z w (world from box). The conflicts
+name their 'box'.)doc")
       .def(
           "occupied_cells",
           [](const Mapper& self, const py::object& box_min, const py::object& box_max) {
@@ -360,13 +493,13 @@ where none, distances: float32 (N,), inf where none).)doc")
       "load",
       [](const std::filesystem::path& path, double max_range, const std::string& backend,
          const std::string& integration, const std::string& update_rule, int threads,
-         double keep_radius, const py::object& bounds, std::size_t max_points,
-         bool versioned_reads) {
+         double keep_radius, const py::object& bounds, std::size_t max_points, bool versioned_reads,
+         bool distance_field, double max_distance) {
         const MapperOptions d;
-        MapperOptions o =
-            optionsFrom(d.resolution_m, max_range, d.kind, backend, integration, update_rule,
-                        threads, d.sensor.hit, d.sensor.miss, d.sensor.clamp_min,
-                        d.sensor.clamp_max, keep_radius, bounds, max_points, versioned_reads);
+        MapperOptions o = optionsFrom(d.resolution_m, max_range, d.kind, backend, integration,
+                                      update_rule, threads, d.sensor.hit, d.sensor.miss,
+                                      d.sensor.clamp_min, d.sensor.clamp_max, keep_radius, bounds,
+                                      max_points, versioned_reads, distance_field, max_distance);
         py::gil_scoped_release release;
         return valueOrRaise(Mapper::load(path.string(), o));
       },
@@ -375,6 +508,7 @@ where none, distances: float32 (N,), inf where none).)doc")
       py::arg("update_rule") = d.update_rule, py::arg("threads") = d.threads,
       py::arg("keep_radius") = d.keep_radius_m, py::arg("bounds") = py::none(),
       py::arg("max_points") = d.max_points, py::arg("versioned_reads") = d.versioned_reads,
+      py::arg("distance_field") = d.distance_field, py::arg("max_distance") = d.max_distance_m,
       R"doc(A Mapper read from a .dmap (densemap: version, sensor model, a dense map's
 evidence) or .bt / .ot (OctoMap) file; the file decides the resolution, sensor model and a
 dense kind, the arguments the rest. Corrupt, truncated and non-finite files raise
