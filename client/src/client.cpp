@@ -56,6 +56,8 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
   make(d.pq_w, d.topics.point_request, requests, true);
   make(d.bq_w, d.topics.bbox_request, requests, true);
   make(d.rq_w, d.topics.ray_request, requests, true);
+  make(d.dq_w, d.topics.distance_request, requests, true);
+  make(d.paq_w, d.topics.path_request, requests, true);
   make(d.cq_w, d.topics.command_request, dds::kCommandQos, true);
   make(d.mq_w, d.topics.map_request, dds::kCommandQos, true);
   // Replies come in this client's own partition: the server writes each asker's replies with
@@ -66,6 +68,8 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
   make(d.pr_r, d.topics.point_reply, replies, false);
   make(d.br_r, d.topics.bbox_reply, replies, false);
   make(d.rr_r, d.topics.ray_reply, replies, false);
+  make(d.dr_r, d.topics.distance_reply, replies, false);
+  make(d.par_r, d.topics.path_reply, replies, false);
   make(d.cr_r, d.topics.command_reply, command_replies, false);
   make(d.man_r, d.topics.manifest, dds::kLatestStateQos, false);
   if (options.subscribe_deltas) make(d.delta_r, d.topics.delta, dds::kDeltaReaderQos, false);
@@ -73,7 +77,8 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
   make(d.st_r, d.topics.status, dds::kLatestStateQos, false);
   if (!status) return std::unexpected(status.error());
   for (auto [ws, reader] : {std::pair{&d.pr_ws, &d.pr_r}, std::pair{&d.br_ws, &d.br_r},
-                            std::pair{&d.rr_ws, &d.rr_r}, std::pair{&d.cr_ws, &d.cr_r}}) {
+                            std::pair{&d.rr_ws, &d.rr_r}, std::pair{&d.dr_ws, &d.dr_r},
+                            std::pair{&d.par_ws, &d.par_r}, std::pair{&d.cr_ws, &d.cr_r}}) {
     if (reader->get() <= 0) continue;
     auto w = dds::WaitSet::create(d.participant);
     if (!w) return std::unexpected(w.error());
@@ -94,7 +99,8 @@ Expected<void> Client::Impl::waitForServer() {
       return std::string(name);
     };
     for (const dds::Entity* w :
-         {&dds_->scan_w, &dds_->pq_w, &dds_->bq_w, &dds_->rq_w, &dds_->cq_w, &dds_->mq_w}) {
+         {&dds_->scan_w, &dds_->pq_w, &dds_->bq_w, &dds_->rq_w, &dds_->dq_w, &dds_->paq_w,
+          &dds_->cq_w, &dds_->mq_w}) {
       if (w->get() <= 0) continue;  // not granted by DDS Security
       dds_publication_matched_status_t s;
       if (dds_get_publication_matched_status(w->get(), &s) < 0 || s.current_count == 0)
@@ -297,6 +303,84 @@ Expected<RayQueryAnswer> Client::Impl::castRay(const Point3f& origin, const Poin
   return answer;
 }
 
+Expected<DistanceQueryAnswer> Client::Impl::queryDistancesOnce(
+    std::span<const float> xyz, const DistanceQueryOptions& options) {
+  densemap_msgs_DistanceQueryRequest req{};
+  req.id = {client_id_, next_request_++};
+  req.points = dds::borrowSequence<dds_sequence_float>(xyz);
+  req.unknown_as_occupied = options.unknown_as_occupied;
+  req.interpolate = options.interpolate;
+  req.nearest = options.nearest;
+  if (auto ok = permitted(dds_->dq_w, "distance queries"); !ok) return std::unexpected(ok.error());
+  if (auto ok = permitted(dds_->dr_r, "distance queries"); !ok) return std::unexpected(ok.error());
+  if (auto ok = dds::write(dds_->dq_w, &req); !ok) return std::unexpected(ok.error());
+  DistanceQueryAnswer answer;
+  std::string error;
+  auto ok = awaitReply<densemap_msgs_DistanceQueryReply>(
+      dds_->dr_r, *dds_->dr_ws, req.id, options_.timeout,
+      [&](const densemap_msgs_DistanceQueryReply& r) {
+        if (r.status != 0) {
+          error = text(r.error);
+          return;
+        }
+        const std::size_t n = xyz.size() / 3;
+        if (r.distances._length != n || r.gradients._length != 3 * n ||
+            r.nearest._length != 3 * n) {
+          error = "a reply whose lengths do not match the request's " + std::to_string(n) +
+                  " points";
+          return;
+        }
+        answer.map_version = r.map_version;
+        answer.max_distance = r.max_distance;
+        answer.distances.assign(r.distances._buffer, r.distances._buffer + n);
+        answer.gradients.assign(r.gradients._buffer, r.gradients._buffer + 3 * n);
+        answer.nearest.assign(r.nearest._buffer, r.nearest._buffer + 3 * n);
+      });
+  if (!ok) return std::unexpected(ok.error());
+  if (!error.empty()) return makeError("server: " + error);
+  return answer;
+}
+
+Expected<PathQueryAnswer> Client::Impl::checkPath(std::span<const float> xyz, float radius) {
+  if (xyz.size() % 3 != 0) return makeError("path length is not a multiple of 3 (x y z each)");
+  if (xyz.size() / 3 > dds::kMaxPathVertices) {
+    return makeError("path of " + std::to_string(xyz.size() / 3) + " vertices, more than the " +
+                     std::to_string(dds::kMaxPathVertices) + " one request may carry");
+  }
+  densemap_msgs_PathQueryRequest req{};
+  req.id = {client_id_, next_request_++};
+  req.vertices = dds::borrowSequence<dds_sequence_float>(xyz);
+  req.radius = radius;
+  if (auto ok = permitted(dds_->paq_w, "path queries"); !ok) return std::unexpected(ok.error());
+  if (auto ok = permitted(dds_->par_r, "path queries"); !ok) return std::unexpected(ok.error());
+  if (auto ok = dds::write(dds_->paq_w, &req); !ok) return std::unexpected(ok.error());
+  PathQueryAnswer answer;
+  std::string error;
+  const auto conflict = [](const densemap_msgs_PathConflict& c) {
+    SweptConflict out;
+    out.center = Point3f(c.center[0], c.center[1], c.center[2]);
+    out.arc_length = c.arc_length;
+    out.index = c.segment;
+    return out;
+  };
+  auto ok = awaitReply<densemap_msgs_PathQueryReply>(
+      dds_->par_r, *dds_->par_ws, req.id, options_.timeout,
+      [&](const densemap_msgs_PathQueryReply& r) {
+        if (r.status != 0) {
+          error = text(r.error);
+          return;
+        }
+        answer.map_version = r.map_version;
+        answer.state = r.state <= 2 ? static_cast<CellState>(r.state) : CellState::kUnknown;
+        if (r.has_occupied) answer.occupied = conflict(r.occupied);
+        if (r.has_unknown) answer.unknown = conflict(r.unknown);
+        answer.length_m = r.length;
+      });
+  if (!ok) return std::unexpected(ok.error());
+  if (!error.empty()) return makeError("server: " + error);
+  return answer;
+}
+
 Expected<std::string> Client::Impl::command(dds::CommandKind kind, const Point3f& min,
                                             const Point3f& max, const std::string& path) {
   auto outcome = commandReply(kind, min, max, path);
@@ -365,6 +449,31 @@ Expected<BoxQueryAnswer> Client::queryBox(const Point3f& min, const Point3f& max
                                           std::uint32_t max_centers) {
   return impl_->queryBox(min, max, max_centers);
 }
+Expected<DistanceQueryAnswer> Client::queryDistances(std::span<const float> xyz_world,
+                                                     const DistanceQueryOptions& options) {
+  if (auto ok = checkPointCoordinates(xyz_world.size()); !ok) return std::unexpected(ok.error());
+  // Parts of at most kMaxQueryPoints points, one after another, as queryPoints sends them.
+  constexpr std::size_t kPart = std::size_t{dds::kMaxQueryPoints} * 3;
+  DistanceQueryAnswer answer;
+  for (std::size_t from = 0; from < xyz_world.size() || from == 0; from += kPart) {
+    const std::size_t n = std::min(kPart, xyz_world.size() - from);
+    auto part = impl_->queryDistancesOnce(xyz_world.subspan(from, n), options);
+    if (!part) return std::unexpected(part.error());
+    answer.map_version = part->map_version;
+    answer.max_distance = part->max_distance;
+    answer.distances.insert(answer.distances.end(), part->distances.begin(), part->distances.end());
+    answer.gradients.insert(answer.gradients.end(), part->gradients.begin(), part->gradients.end());
+    answer.nearest.insert(answer.nearest.end(), part->nearest.begin(), part->nearest.end());
+    if (n != kPart) break;
+  }
+  return answer;
+}
+
+Expected<PathQueryAnswer> Client::checkPath(std::span<const float> vertices_world,
+                                            float radius_m) {
+  return impl_->checkPath(vertices_world, radius_m);
+}
+
 Expected<RayQueryAnswer> Client::castRay(const Point3f& origin, const Point3f& direction,
                                          float max_range) {
   return impl_->castRay(origin, direction, max_range);

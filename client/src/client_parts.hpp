@@ -37,10 +37,10 @@ struct ClientDds {
   dds::Entity participant;
   dds::Topics topics;
   // With DDS Security, an endpoint this identity may not use stays empty (0).
-  dds::Entity scan_w, pq_w, bq_w, rq_w, cq_w, mq_w;
-  dds::Entity pr_r, br_r, rr_r, cr_r, man_r, delta_r, event_r, st_r;
+  dds::Entity scan_w, pq_w, bq_w, rq_w, dq_w, paq_w, cq_w, mq_w;
+  dds::Entity pr_r, br_r, rr_r, dr_r, par_r, cr_r, man_r, delta_r, event_r, st_r;
   // One per reply reader: a request waits for data on its own reader, not by polling.
-  std::optional<dds::WaitSet> pr_ws, br_ws, rr_ws, cr_ws;
+  std::optional<dds::WaitSet> pr_ws, br_ws, rr_ws, dr_ws, par_ws, cr_ws;
 };
 
 /// The client itself; Client forwards to it.
@@ -56,6 +56,9 @@ struct Client::Impl {
                                     std::uint32_t max_centers);
   Expected<RayQueryAnswer> castRay(const Point3f& origin, const Point3f& direction,
                                    float max_range);
+  Expected<DistanceQueryAnswer> queryDistancesOnce(std::span<const float> xyz,
+                                                   const DistanceQueryOptions& options);
+  Expected<PathQueryAnswer> checkPath(std::span<const float> xyz, float radius);
   /// A command's reply: the detail message and send-map's counts (CommandReply's sent_*).
   struct CommandOutcome {
     std::string detail;

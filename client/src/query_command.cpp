@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <random>
 
@@ -50,6 +51,43 @@ int queryPointsCommand(Client& client, std::vector<float> coords, std::uint32_t 
 
 Point3f point3(const std::vector<float>& v) { return {v[0], v[1], v[2]}; }
 
+int queryDistancesCommand(Client& client, const std::vector<float>& coords,
+                          const DistanceQueryOptions& options) {
+  auto a = client.queryDistances(coords, options);
+  if (!a) return fail(a.error().message);
+  for (std::size_t i = 0; i < a->distances.size(); ++i) {
+    std::printf("%g %g %g: %.3f m", coords[3 * i], coords[3 * i + 1], coords[3 * i + 2],
+                a->distances[i]);
+    if (std::isnan(a->nearest[3 * i])) {
+      std::printf(" (nothing within %.3g m)\n", a->max_distance);
+      continue;
+    }
+    std::printf(", gradient %.3f %.3f %.3f, nearest obstacle %g %g %g\n", a->gradients[3 * i],
+                a->gradients[3 * i + 1], a->gradients[3 * i + 2], a->nearest[3 * i],
+                a->nearest[3 * i + 1], a->nearest[3 * i + 2]);
+  }
+  std::printf("map version %llu\n", static_cast<unsigned long long>(a->map_version));
+  return 0;
+}
+
+int checkPathCommand(Client& client, const std::vector<float>& coords, float radius) {
+  auto a = client.checkPath(coords, radius);
+  if (!a) return fail(a.error().message);
+  const char* names[] = {"unknown", "free", "occupied"};
+  std::printf("%s: path of %.3f m, radius %g m (map version %llu)\n",
+              names[static_cast<int>(a->state)], a->length_m, radius,
+              static_cast<unsigned long long>(a->map_version));
+  const auto line = [](const char* what, const std::optional<SweptConflict>& c) {
+    if (!c) return;
+    std::printf("  first %s cell %g %g %g at %.3f m along the path (segment %zu)\n", what,
+                c->center.x(), c->center.y(), c->center.z(), c->arc_length, c->index);
+  };
+  line("occupied", a->occupied);
+  line("unknown", a->unknown);
+  // Exit status for scripts: 0 free, 3 occupied, 4 unknown.
+  return a->state == CellState::kFree ? 0 : a->state == CellState::kOccupied ? 3 : 4;
+}
+
 }  // namespace
 
 Expected<void> QueryCommand::check() const {
@@ -62,6 +100,13 @@ Expected<void> QueryCommand::check() const {
   }
   if (box_->parsed()) return checkBox(point3(box_min_), point3(box_max_));
   if (ray_->parsed()) return checkRay(point3(origin_), point3(direction_), range_);
+  if (distance_->parsed()) return checkPointCoordinates(distance_coords_.size());
+  if (path_->parsed()) {
+    if (path_coords_.empty() || path_coords_.size() % 3 != 0) {
+      return makeError("path vertices come in threes (x y z ...)");
+    }
+    if (!(radius_ >= 0)) return makeError("--radius must be >= 0");
+  }
   return {};
 }
 
@@ -87,10 +132,28 @@ QueryCommand::QueryCommand(CLI::App& app) {
   ray_->add_option("--origin", origin_, "x y z")->required()->expected(3);
   ray_->add_option("--direction", direction_, "x y z")->required()->expected(3);
   ray_->add_option("--range", range_, "Max range, m")->capture_default_str();
+  distance_ = command_->add_subcommand(
+      "distance", "Distance to the nearest obstacle, gradient and nearest obstacle at points "
+                  "(the server's distance field: config esdf)");
+  distance_->add_option("xyz", distance_coords_, "x y z [x y z ...]")->required();
+  distance_->add_flag("--unknown-occupied", unknown_occupied_, "Count unknown cells as obstacles");
+  distance_->add_flag("--interpolate", interpolate_,
+                      "Trilinear between the cell centres around each point");
+  path_ = command_->add_subcommand(
+      "path", "Whether a robot of --radius can follow a path: every cell within the radius of "
+              "the polyline counts (exit 0 free, 3 occupied, 4 unknown)");
+  path_->add_option("xyz", path_coords_, "x y z x y z ... (the vertices)")->required();
+  path_->add_option("--radius", radius_, "The robot's radius, m")->capture_default_str();
 }
 
 int QueryCommand::run(Client& client) {
   if (point_->parsed()) return queryPointsCommand(client, coords_, random_points_, random_spread_);
+  if (distance_->parsed()) {
+    return queryDistancesCommand(
+        client, distance_coords_,
+        {.unknown_as_occupied = unknown_occupied_, .interpolate = interpolate_, .nearest = true});
+  }
+  if (path_->parsed()) return checkPathCommand(client, path_coords_, radius_);
   if (box_->parsed()) {
     auto a = client.queryBox(point3(box_min_), point3(box_max_), centers_);
     if (!a) return fail(a.error().message);

@@ -9,8 +9,9 @@
 
 namespace densemap::cli {
 
-/// `densemap query point | bbox | ray`: the map's cells at points, cell counts in a box, the
-/// first occupied cell along a ray.
+/// `densemap query point | bbox | ray | distance | path`: the map's cells at points, cell counts
+/// in a box, the first occupied cell along a ray, distances to the nearest obstacle, and
+/// whether a robot of some radius can follow a path.
 class QueryCommand {
  public:
   /// Adds the subcommands and their options to `app`.
@@ -22,7 +23,7 @@ class QueryCommand {
 
  private:
   CLI::App* command_;
-  CLI::App *point_, *box_, *ray_;
+  CLI::App *point_, *box_, *ray_, *distance_, *path_;
   std::vector<float> coords_;
   std::uint32_t random_points_ = 0;
   float random_spread_ = 20.0F;
@@ -30,6 +31,11 @@ class QueryCommand {
   std::uint32_t centers_ = 0;
   std::vector<float> origin_, direction_;
   float range_ = 30.0F;
+  std::vector<float> distance_coords_;
+  bool unknown_occupied_ = false;
+  bool interpolate_ = false;
+  std::vector<float> path_coords_;
+  float radius_ = 0.3F;
 };
 
 }  // namespace densemap::cli

@@ -9,6 +9,7 @@
 
 #include "densemap/geometry/error.hpp"
 #include "densemap/geometry/point_cloud.hpp"
+#include "densemap/planner/planner_types.hpp"
 #include "point_array.hpp"
 
 namespace densemap::python {
@@ -60,5 +61,39 @@ py::dict countsDict(const Counts& c) {
 void bindMapper(py::module_& m);
 void bindClient(py::module_& m);
 void bindReaders(py::module_& m);
+
+
+/// A distance answer as arrays: (distances float32 (N,), gradients (N, 3), nearest (N, 3)).
+inline py::tuple distanceArrays(const DistanceQueryResult& r) {
+  const auto n = static_cast<py::ssize_t>(r.distances.size());
+  py::array_t<float> d(n);
+  py::array_t<float> g({n, py::ssize_t{3}});
+  py::array_t<float> c({n, py::ssize_t{3}});
+  std::copy(r.distances.begin(), r.distances.end(), d.mutable_data());
+  std::copy(r.gradients.begin(), r.gradients.end(), g.mutable_data());
+  std::copy(r.nearest.begin(), r.nearest.end(), c.mutable_data());
+  return py::make_tuple(d, g, c);
+}
+
+/// A swept-volume answer as a dict: state ('free', 'unknown', 'occupied'), the first occupied
+/// and unknown cells ({'center', 'arc_length', index_name} or None), the path's length.
+inline py::dict sweptDict(const SweptVolumeResult& r, const char* index_name) {
+  const auto conflict = [&](const std::optional<SweptConflict>& c) -> py::object {
+    if (!c) return py::none();
+    py::dict d;
+    d["center"] = py::make_tuple(c->center.x(), c->center.y(), c->center.z());
+    d["arc_length"] = c->arc_length;
+    d[index_name] = c->index;
+    return d;
+  };
+  py::dict d;
+  d["state"] = r.state == CellState::kOccupied ? "occupied"
+               : r.state == CellState::kFree   ? "free"
+                                               : "unknown";
+  d["occupied"] = conflict(r.occupied);
+  d["unknown"] = conflict(r.unknown);
+  d["length"] = r.length_m;
+  return d;
+}
 
 }  // namespace densemap::python

@@ -176,6 +176,41 @@ closed client. The GIL is released while a call waits. Use as a context manager,
           py::arg("origin"), py::arg("direction"), py::arg("max_range"),
           "The first occupied cell along the ray: {'map_version', 'hit', 'center', 'distance'}.")
       .def(
+          "query_distances",
+          [](PyClient& self, const py::handle& points, bool unknown_as_occupied, bool interpolate,
+             bool nearest) {
+            const PointCloud cloud =
+                pointsFrom(points, std::numeric_limits<std::size_t>::max(), "points", false);
+            const std::span<const float> xyz(cloud.empty() ? nullptr : cloud.front().data(),
+                                             cloud.size() * 3);
+            Client& c = self.client();
+            const DistanceQueryAnswer a = released([&] {
+              return c.queryDistances(xyz, {.unknown_as_occupied = unknown_as_occupied,
+                                            .interpolate = interpolate,
+                                            .nearest = nearest});
+            });
+            return py::make_tuple(a.map_version) + distanceArrays(a);
+          },
+          py::arg("points"), py::kw_only(), py::arg("unknown_as_occupied") = false,
+          py::arg("interpolate") = false, py::arg("nearest") = true,
+          "(map_version, distances, gradients, nearest) from the server's distance field, as "
+          "Mapper.distance answers (the server needs esdf { enabled: true }).")
+      .def(
+          "check_path",
+          [](PyClient& self, const py::handle& vertices, float radius) {
+            const PointCloud path =
+                pointsFrom(vertices, std::numeric_limits<std::size_t>::max(), "vertices", false);
+            const std::span<const float> xyz(path.empty() ? nullptr : path.front().data(),
+                                             path.size() * 3);
+            Client& c = self.client();
+            const PathQueryAnswer a = released([&] { return c.checkPath(xyz, radius); });
+            py::dict d = sweptDict(a, "segment");
+            d["map_version"] = a.map_version;
+            return d;
+          },
+          py::arg("vertices"), py::arg("radius"),
+          "The server's answer to Mapper.check_path's question, with its 'map_version'.")
+      .def(
           "status",
           [](PyClient& self) {
             Client& c = self.client();

@@ -54,50 +54,11 @@ py::tuple distances(const Mapper& mapper, const py::handle& points, bool unknown
       pointsFrom(points, std::numeric_limits<std::size_t>::max(), "points", false);
   const std::span<const float> xyz(cloud.empty() ? nullptr : cloud.front().data(),
                                    cloud.size() * 3);
-  const Distances r = released([&] {
+  return distanceArrays(released([&] {
     return mapper.distance(xyz, {.unknown_as_occupied = unknown_as_occupied,
                                  .interpolate = interpolate,
                                  .nearest = nearest});
-  });
-  const auto n = static_cast<py::ssize_t>(r.distances.size());
-  py::array_t<float> d(n);
-  py::array_t<float> g({n, py::ssize_t{3}});
-  py::array_t<float> c({n, py::ssize_t{3}});
-  std::copy(r.distances.begin(), r.distances.end(), d.mutable_data());
-  std::copy(r.gradients.begin(), r.gradients.end(), g.mutable_data());
-  std::copy(r.nearest.begin(), r.nearest.end(), c.mutable_data());
-  return py::make_tuple(d, g, c);
-}
-
-const char* stateName(CellState s) {
-  switch (s) {
-    case CellState::kOccupied:
-      return "occupied";
-    case CellState::kFree:
-      return "free";
-    case CellState::kUnknown:
-      break;
-  }
-  return "unknown";
-}
-
-py::object conflictDict(const std::optional<SweptConflict>& c, const char* index_name) {
-  if (!c) return py::none();
-  py::dict d;
-  d["center"] = py::make_tuple(c->center.x(), c->center.y(), c->center.z());
-  d["arc_length"] = c->arc_length;
-  d[index_name] = c->index;
-  return d;
-}
-
-/// A swept-volume answer as a dict: state, occupied and unknown (the first of each, or None).
-py::dict sweptDict(const SweptVolumeResult& r, const char* index_name) {
-  py::dict d;
-  d["state"] = stateName(r.state);
-  d["occupied"] = conflictDict(r.occupied, index_name);
-  d["unknown"] = conflictDict(r.unknown, index_name);
-  d["length"] = r.length_m;
-  return d;
+  }));
 }
 
 InsertResult insertPoints(Mapper& mapper, const py::handle& points, const py::handle& origin) {

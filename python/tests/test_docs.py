@@ -1,5 +1,6 @@
-"""docs/python.md runs as written: its sh and python blocks in order, in a scratch directory
-(a block after a "not run" comment is skipped); examples/python/ runs on the same recording."""
+"""docs/python.md and docs/planner.md run as written: their sh and python blocks in order, in a
+scratch directory (a block after a "not run" comment is skipped); examples/python/ runs on the
+same recording."""
 
 import os
 import re
@@ -56,3 +57,16 @@ def test_map_recording_example(scratch):
                                                        "map_recording.py"), "no-such-thing"],
                          capture_output=True, text=True, env=env)
     assert bad.returncode != 0 and "map_recording:" in bad.stderr
+
+
+def test_planner_md_runs(scratch):
+    namespace = {}
+    ran = 0
+    for language, code in blocks(os.path.join(ROOT, "docs", "planner.md")):
+        assert language == "python"
+        exec(compile(code, "docs/planner.md", "exec"), namespace)  # noqa: S102
+        ran += 1
+    assert ran >= 3
+    distances = namespace["distances"]
+    assert abs(distances[0] - 0.5) < 1e-6 and distances[1] == 0 and distances[2] == 1.0
+    assert abs(namespace["answer"]["occupied"]["arc_length"] - 1.2) < 1e-4

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <chrono>
 
+#include "densemap/parallel/tbb_runner.hpp"
+
 #include "densemap/geometry/percentile.hpp"
 #include "guarded.hpp"
 
@@ -17,7 +19,19 @@ Expected<std::unique_ptr<Ingest>> Ingest::create(const IngestOptions& options,
   }
   auto engine = Engine::create(options.engine, std::move(initial), initial_version);
   if (!engine) return std::unexpected(engine.error());
-  return std::unique_ptr<Ingest>(new Ingest(options, std::move(*engine)));
+  std::optional<DistanceField> field;
+  if (options.distance_field) {
+    auto f = DistanceField::create(options.engine.resolution_m, *options.distance_field);
+    if (!f) return makeError("esdf: " + f.error().message);
+    field = std::move(*f);
+  }
+  auto ingest = std::unique_ptr<Ingest>(new Ingest(options, std::move(*engine)));
+  if (field) {
+    ingest->field_ = std::move(field);
+    ingest->field_view_ = ingest->engine_->view();
+    ingest->arena_.execute([&] { ingest->field_->rebuild(*ingest->field_view_, tbbRunner()); });
+  }
+  return ingest;
 }
 
 Ingest::Ingest(const IngestOptions& options, std::unique_ptr<Engine> engine)
@@ -155,6 +169,23 @@ void Ingest::runCommands() {
 }
 
 void Ingest::published(IntegrationResult& result) {
+  // The distance field follows the version before it is announced: a distance query reads the
+  // field with the view it was updated to.
+  if (field_) {
+    auto view = engine_->view();
+    const std::unique_lock lock(field_mutex_);
+    bool updated = false;
+    guarded("ingest: updating the distance field", [&] {
+      arena_.execute([&] { field_->update(*view, result.written_blocks, tbbRunner()); });
+      updated = true;
+    });
+    // An update cut short (out of memory) leaves the field unknown: build it anew.
+    if (!updated) {
+      guarded("ingest: rebuilding the distance field",
+              [&] { arena_.execute([&] { field_->rebuild(*view, tbbRunner()); }); });
+    }
+    field_view_ = std::move(view);
+  }
   if (result.from_scan) {
     std::lock_guard lock(counters_mutex_);
     ++counters_.integrated;

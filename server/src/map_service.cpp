@@ -25,7 +25,7 @@ namespace {
 
 // Attachment tags of the service waitset.
 constexpr dds_attach_t kPointTag = 1, kBboxTag = 2, kRayTag = 3, kCmdTag = 4, kScanTag = 5,
-                       kMapTag = 6;
+                       kMapTag = 6, kDistanceTag = 7, kPathTag = 8;
 
 }  // namespace
 
@@ -33,6 +33,7 @@ struct MapService::Dds {
   dds::Entity participant;
   dds::Topics topics;
   dds::Entity scan_reader, point_reader, bbox_reader, ray_reader, cmd_reader, map_reader;
+  dds::Entity distance_reader, path_reader;
   // Replies go out through writers made per asking client (ReplyWriters).
   dds::Entity manifest_writer, tile_writer, delta_writer, event_writer, status_writer;
   std::optional<dds::WaitSet> ingest_waitset;
@@ -80,6 +81,8 @@ Expected<std::unique_ptr<MapService>> MapService::create(Ingest& ingest,
   reader(d.point_reader, d.topics.point_request, requests);
   reader(d.bbox_reader, d.topics.bbox_request, requests);
   reader(d.ray_reader, d.topics.ray_request, requests);
+  reader(d.distance_reader, d.topics.distance_request, requests);
+  reader(d.path_reader, d.topics.path_request, requests);
   reader(d.cmd_reader, d.topics.command_request, dds::kCommandQos);
   reader(d.map_reader, d.topics.map_request, dds::kCommandQos);
   writer(d.manifest_writer, d.topics.manifest, dds::kLatestStateQos);
@@ -96,7 +99,8 @@ Expected<std::unique_ptr<MapService>> MapService::create(Ingest& ingest,
   d.service_waitset.emplace(std::move(*service_ws));
   for (auto [r, tag] : {std::pair{&d.point_reader, kPointTag}, std::pair{&d.bbox_reader, kBboxTag},
                         std::pair{&d.ray_reader, kRayTag}, std::pair{&d.cmd_reader, kCmdTag},
-                        std::pair{&d.map_reader, kMapTag}}) {
+                        std::pair{&d.map_reader, kMapTag}, std::pair{&d.distance_reader, kDistanceTag},
+                        std::pair{&d.path_reader, kPathTag}}) {
     if (auto ok = d.service_waitset->attachReader(*r, tag); !ok) return std::unexpected(ok.error());
   }
   if (auto ok = d.ingest_waitset->attachReader(d.scan_reader, kScanTag); !ok) {
@@ -119,8 +123,10 @@ void MapService::makeRooms() {
   Dds& d = *dds_;
   replies_ = std::make_unique<ReplyWriters>(d.participant, d.topics);
   queries_ = std::make_unique<QueryRoom>(
-      ingest_, QueryRoom::Readers{d.point_reader, d.bbox_reader, d.ray_reader}, *replies_, *tasks_,
-      *stats_, options_.max_query_cells);
+      ingest_,
+      QueryRoom::Readers{d.point_reader, d.bbox_reader, d.ray_reader, d.distance_reader,
+                         d.path_reader},
+      *replies_, *tasks_, *stats_, options_.max_query_cells);
   commands_ = std::make_unique<CommandRoom>(
       ingest_, CommandRoom::Endpoints{d.cmd_reader, d.map_reader, d.tile_writer}, *replies_,
       *tasks_, *stats_, *saver_, exportDirectory(options_.export_dir, options_.snapshot_path));

@@ -5,6 +5,8 @@
 #include <vector>
 
 #include "densemap/parallel/tbb_runner.hpp"
+#include "densemap/planner/distance_query.hpp"
+#include "densemap/planner/swept_volume.hpp"
 #include "densemap/query/map_queries.hpp"
 #include "densemap/wire/topics.hpp"
 #include "densemap_msgs.h"
@@ -28,6 +30,70 @@ struct RayRequest {
   Point3f origin, direction;
   float max_range;
 };
+struct DistanceRequest {
+  densemap_msgs_RequestId id;
+  std::vector<float> xyz;
+  DistanceQueryOptions options;
+};
+struct PathRequest {
+  densemap_msgs_RequestId id;
+  std::vector<float> xyz;
+  float radius;
+};
+
+/// Distances from the field and the view it was updated to (one version), or why not.
+void answerDistances(const Ingest& ingest, const dds::Entity& writer, const DistanceRequest& req,
+                     std::string& error) {
+  densemap_msgs_DistanceQueryReply rep{};
+  rep.id = req.id;
+  DistanceQueryResult result;
+  const bool kept = ingest.withDistanceField([&](const DistanceField& field, const MapView& view) {
+    rep.map_version = view.version();
+    rep.max_distance = static_cast<float>(field.maxDistance());
+    auto r = queryDistances(field, view, req.xyz, req.options, dds::kMaxQueryPoints, tbbRunner());
+    if (r) {
+      result = std::move(*r);
+    } else {
+      error = r.error().message;
+    }
+  });
+  if (!kept) error = "this server keeps no distance field (config: esdf { enabled: true })";
+  rep.status = error.empty() ? kOk : kInvalid;
+  rep.error = const_cast<char*>(error.c_str());
+  rep.distances = dds::borrowSequence<dds_sequence_float>(result.distances);
+  rep.gradients = dds::borrowSequence<dds_sequence_float>(result.gradients);
+  rep.nearest = dds::borrowSequence<dds_sequence_float>(result.nearest);
+  (void)dds::write(writer, &rep);
+}
+
+void toWire(const SweptConflict& c, densemap_msgs_PathConflict& out) {
+  for (int i = 0; i < 3; ++i) out.center[i] = c.center[i];
+  out.arc_length = c.arc_length;
+  out.segment = static_cast<std::uint32_t>(c.index);
+}
+
+void answerPath(const dds::Entity& writer, const PathRequest& req, const MapView& view,
+                std::string& error) {
+  densemap_msgs_PathQueryReply rep{};
+  rep.id = req.id;
+  rep.map_version = view.version();
+  SweptVolumeLimits limits;
+  limits.max_vertices = dds::kMaxPathVertices;
+  auto result = checkPath(view, req.xyz, req.radius, limits);
+  if (result) {
+    rep.state = static_cast<std::uint8_t>(result->state);
+    rep.has_occupied = result->occupied.has_value();
+    if (result->occupied) toWire(*result->occupied, rep.occupied);
+    rep.has_unknown = result->unknown.has_value();
+    if (result->unknown) toWire(*result->unknown, rep.unknown);
+    rep.length = result->length_m;
+  } else {
+    error = result.error().message;
+  }
+  rep.status = error.empty() ? kOk : kInvalid;
+  rep.error = const_cast<char*>(error.c_str());
+  (void)dds::write(writer, &rep);
+}
 
 void answerPoints(const dds::Entity& writer, const PointRequest& req, const MapView& view,
                   std::string& error) {
@@ -104,6 +170,11 @@ std::string pointRefusal(std::size_t points, std::size_t bytes, std::size_t budg
 }
 
 }  // namespace
+
+std::size_t QueryRoom::distanceRequestBytes(std::size_t coordinates) {
+  // The request's copy, the reply's 7 floats a point, and the DDS sample written.
+  return coordinates * sizeof(float) + coordinates / 3 * 2 * 7 * sizeof(float);
+}
 
 std::size_t QueryRoom::pointRequestBytes(std::size_t coordinates) {
   // The request's copy (12 bytes a point), the reply's values and states (5 bytes a point) and
@@ -186,6 +257,66 @@ void QueryRoom::take() {
             replies_.awaitAsker(*w, who);
             answerRay(*w, req, view, error);
           });
+        });
+    took |= dds::takeOneWithInfo<densemap_msgs_DistanceQueryRequest>(
+        readers_.distance,
+        [&](const densemap_msgs_DistanceQueryRequest& m, const dds_sample_info_t& info) {
+          const auto w = replies_.writer(ReplyTopic::kDistance, m.id.client_id);
+          if (!w) return;
+          const std::size_t bytes = distanceRequestBytes(m.points._length);
+          std::string refusal = pointRefusal(m.points._length / 3, bytes, tasks_.budgetBytes());
+          if (!refusal.empty()) {
+            densemap_msgs_DistanceQueryReply rep{};
+            rep.id = m.id;
+            rep.status = kInvalid;
+            rep.error = const_cast<char*>(refusal.c_str());
+            replies_.awaitAsker(*w, asker(readers_.distance, info));
+            (void)dds::write(*w, &rep);
+            stats_.refused(refusal);
+            return;
+          }
+          DistanceRequest req{m.id,
+                              std::vector<float>(m.points._buffer,
+                                                 m.points._buffer + m.points._length),
+                              {.unknown_as_occupied = m.unknown_as_occupied,
+                               .interpolate = m.interpolate,
+                               .nearest = m.nearest}};
+          spawn(
+              [this, w, req = std::move(req), who = asker(readers_.distance, info)](
+                  const MapView&, std::string& error) {
+                replies_.awaitAsker(*w, who);
+                answerDistances(ingest_, *w, req, error);
+              },
+              bytes);
+        });
+    took |= dds::takeOneWithInfo<densemap_msgs_PathQueryRequest>(
+        readers_.path, [&](const densemap_msgs_PathQueryRequest& m, const dds_sample_info_t& info) {
+          const auto w = replies_.writer(ReplyTopic::kPath, m.id.client_id);
+          if (!w) return;
+          if (m.vertices._length / 3 > dds::kMaxPathVertices) {
+            const std::string refusal = "path of " + std::to_string(m.vertices._length / 3) +
+                                        " vertices, more than the " +
+                                        std::to_string(dds::kMaxPathVertices) + " allowed";
+            densemap_msgs_PathQueryReply rep{};
+            rep.id = m.id;
+            rep.status = kInvalid;
+            rep.error = const_cast<char*>(refusal.c_str());
+            replies_.awaitAsker(*w, asker(readers_.path, info));
+            (void)dds::write(*w, &rep);
+            stats_.refused(refusal);
+            return;
+          }
+          PathRequest req{
+              m.id, std::vector<float>(m.vertices._buffer, m.vertices._buffer + m.vertices._length),
+              m.radius};
+          const std::size_t bytes = req.xyz.size() * sizeof(float);
+          spawn(
+              [this, w, req = std::move(req), who = asker(readers_.path, info)](
+                  const MapView& view, std::string& error) {
+                replies_.awaitAsker(*w, who);
+                answerPath(*w, req, view, error);
+              },
+              bytes);
         });
   }
 }

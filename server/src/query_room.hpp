@@ -9,7 +9,7 @@
 
 namespace densemap::server {
 
-/// Point, box and ray queries: takes one request at a time from each reader in turn (no kind
+/// Point, box, ray, distance and path queries: takes one request at a time from each reader in turn (no kind
 /// starves the others) while the request budget has room, and answers each in a task from the
 /// latest published version (one version throughout a multi-cell answer).
 class QueryRoom {
@@ -18,6 +18,8 @@ class QueryRoom {
     const dds::Entity& point;
     const dds::Entity& bbox;
     const dds::Entity& ray;
+    const dds::Entity& distance;
+    const dds::Entity& path;
   };
   QueryRoom(Ingest& ingest, Readers readers, ReplyWriters& replies, RequestTasks& tasks,
             RequestStats& stats, std::size_t max_query_cells)
@@ -32,6 +34,8 @@ class QueryRoom {
   void take();
   /// The memory a point request of `coordinates` floats holds while it is answered.
   [[nodiscard]] static std::size_t pointRequestBytes(std::size_t coordinates);
+  /// The same for a distance request (its reply carries 7 floats a point).
+  [[nodiscard]] static std::size_t distanceRequestBytes(std::size_t coordinates);
 
  private:
   Ingest& ingest_;

@@ -35,10 +35,23 @@ std::shared_ptr<const dds::Entity> ReplyWriters::writer(ReplyTopic topic, std::u
   const std::string partition = dds::replyPartition(client_id);
   dds::QosSpec qos = topic == ReplyTopic::kCommand ? dds::kCommandQos : dds::kRequestQos;
   qos.partition = partition;
-  const dds::Entity& reply_topic = topic == ReplyTopic::kPoint  ? topics_.point_reply
-                                   : topic == ReplyTopic::kBbox ? topics_.bbox_reply
-                                   : topic == ReplyTopic::kRay  ? topics_.ray_reply
-                                                                : topics_.command_reply;
+  const dds::Entity& reply_topic = [&]() -> const dds::Entity& {
+    switch (topic) {
+      case ReplyTopic::kPoint:
+        return topics_.point_reply;
+      case ReplyTopic::kBbox:
+        return topics_.bbox_reply;
+      case ReplyTopic::kRay:
+        return topics_.ray_reply;
+      case ReplyTopic::kDistance:
+        return topics_.distance_reply;
+      case ReplyTopic::kPath:
+        return topics_.path_reply;
+      case ReplyTopic::kCommand:
+        break;
+    }
+    return topics_.command_reply;
+  }();
   auto w = dds::createWriter(participant_, reply_topic, qos);
   if (!w) {
     // The request goes unanswered (its client times out): said in the log.

@@ -205,10 +205,18 @@ Expected<IngestOptions> ingestOptions(const proto::ServerConfig& config) {
   auto engine = pipelineOptions(config);
   if (!engine) return std::unexpected(engine.error());
   const auto& p = config.pipeline();
-  return IngestOptions{.engine = std::move(*engine),
-                       .threads = static_cast<int>(p.threads()),
-                       .queue_depth = p.queue_depth(),
-                       .queue_budget_bytes = std::size_t{p.queue_budget_mb()} << 20};
+  IngestOptions o{.engine = std::move(*engine),
+                  .threads = static_cast<int>(p.threads()),
+                  .queue_depth = p.queue_depth(),
+                  .queue_budget_bytes = std::size_t{p.queue_budget_mb()} << 20};
+  if (config.esdf().enabled()) {
+    const DistanceFieldOptions field{.max_distance_m = config.esdf().max_distance_m()};
+    if (auto ok = DistanceField::create(o.engine.resolution_m, field); !ok) {
+      return makeError("esdf.max_distance_m: " + ok.error().message);
+    }
+    o.distance_field = field;
+  }
+  return o;
 }
 
 Expected<std::optional<dds::SecurityFiles>> securityFiles(const proto::ServerConfig& config) {

@@ -6,6 +6,7 @@
 #include <sys/wait.h>
 
 #include <atomic>
+#include <cmath>
 #include <fstream>
 #include <thread>
 
@@ -14,6 +15,8 @@
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_diff.hpp"
 #include "densemap/pipeline/scan_validator.hpp"
+#include "densemap/planner/distance_query.hpp"
+#include "densemap/planner/swept_volume.hpp"
 #include "densemap/query/map_queries.hpp"
 #include "densemap/raycast/integrator.hpp"
 #include "densemap/sim/sequence.hpp"
@@ -138,6 +141,86 @@ TEST(Server, ReplayedScansGiveTheOfflineMapExactlyForQueriesTilesAndDeltas) {
   EXPECT_EQ(ray->ray.hit, core_ray->hit);
   EXPECT_EQ(ray->ray.hit_center, core_ray->hit_center);
   EXPECT_EQ(server.stop(), 0);
+}
+
+// The server's distance field (esdf) and path checks answer over DDS what core answers on
+// the offline map of the same scans; a server without the field says so; bad requests are
+// refused with their reason and counted.
+TEST(Server, DistanceAndPathQueriesEqualCoreOnTheOfflineMap) {
+  test::TempDir dir;
+  const auto raws = simulatedScans(dir.path(), 3);
+  ServerProcess server(dir.path(), 223, "esdf { enabled: true max_distance_m: 1.0 }\n");
+  auto client = connect(223);
+  ASSERT_TRUE(client);
+  replay(*client, raws);
+  const auto offline = offlineMap(raws);
+  const auto view = MapView::fromMap(*offline, raws.size());
+  auto field = DistanceField::create(0.2, {.max_distance_m = 1.0});
+  ASSERT_TRUE(field);
+  field->rebuild(*view);
+  std::vector<float> xyz;
+  for (float x = 0.1F; x < 10.0F; x += 0.37F) {
+    for (float y = 5.1F; y < 15.0F; y += 0.41F) xyz.insert(xyz.end(), {x, y, 1.1F});
+  }
+  for (const bool unknown : {false, true}) {
+    const DistanceQueryOptions o{.unknown_as_occupied = unknown, .interpolate = unknown};
+    auto remote = client->queryDistances(xyz, o);
+    ASSERT_TRUE(remote) << remote.error().message;
+    auto local = queryDistances(*field, *view, xyz, o, 1'000'000, serialRunner());
+    ASSERT_TRUE(local);
+    EXPECT_EQ(remote->map_version, raws.size());
+    EXPECT_EQ(remote->max_distance, 1.0F);
+    EXPECT_EQ(remote->distances, local->distances);
+    EXPECT_EQ(remote->gradients, local->gradients);
+    ASSERT_EQ(remote->nearest.size(), local->nearest.size());
+    for (std::size_t i = 0; i < local->nearest.size(); ++i) {
+      if (std::isnan(local->nearest[i])) {
+        EXPECT_TRUE(std::isnan(remote->nearest[i]));
+      } else {
+        EXPECT_EQ(remote->nearest[i], local->nearest[i]);
+      }
+    }
+  }
+  const std::vector<float> path{1.0F, 8.0F, 1.1F, 9.0F, 12.0F, 1.1F, 2.0F, 14.0F, 1.5F};
+  auto remote = client->checkPath(path, 0.3F);
+  ASSERT_TRUE(remote) << remote.error().message;
+  auto local = checkPath(*view, path, 0.3F);
+  ASSERT_TRUE(local);
+  EXPECT_EQ(remote->state, local->state);
+  ASSERT_EQ(remote->occupied.has_value(), local->occupied.has_value());
+  if (local->occupied) {
+    EXPECT_EQ(remote->occupied->arc_length, local->occupied->arc_length);
+    EXPECT_EQ(remote->occupied->center, local->occupied->center);
+  }
+  EXPECT_DOUBLE_EQ(remote->length_m, local->length_m);
+
+  // Refusals: their reasons, counted.
+  auto nan = client->queryDistances(std::vector<float>{0, 0, std::nanf("")});
+  ASSERT_FALSE(nan);
+  EXPECT_NE(nan.error().message.find("NaN"), std::string::npos) << nan.error().message;
+  auto negative = client->checkPath(path, -1.0F);
+  ASSERT_FALSE(negative);
+  EXPECT_NE(negative.error().message.find("radius"), std::string::npos);
+  auto long_path = client->checkPath(std::vector<float>(3 * 100'001, 0.0F), 0.1F);
+  ASSERT_FALSE(long_path);
+  // The status (1 Hz) counts the two refused on the server (the long path never left).
+  std::uint64_t rejected = 0;
+  for (int i = 0; i < 40 && rejected < 2; ++i) {
+    std::this_thread::sleep_for(100ms);
+    if (auto status = client->status()) rejected = status->queries_rejected;
+  }
+  EXPECT_GE(rejected, 2U);
+  EXPECT_EQ(server.stop(), 0);
+
+  // A server without the field says so.
+  test::TempDir plain_dir;
+  ServerProcess plain(plain_dir.path(), 224);
+  auto plain_client = connect(224);
+  ASSERT_TRUE(plain_client);
+  auto none = plain_client->queryDistances(xyz);
+  ASSERT_FALSE(none);
+  EXPECT_NE(none.error().message.find("esdf"), std::string::npos) << none.error().message;
+  EXPECT_EQ(plain.stop(), 0);
 }
 
 TEST(Server, IlnUpsampleStageGivesTheOfflineDensifiedMap) {

@@ -31,6 +31,7 @@
 #include "densemap/raycast/integrator.hpp"
 #include "densemap/ros2/recording.hpp"
 #include "lane.hpp"
+#include "planner_timing.hpp"
 
 namespace densemap::bench {
 namespace {
@@ -217,8 +218,9 @@ std::vector<RunResult> compareLanes(std::vector<std::unique_ptr<Lane>>& lanes,
 
 /// The tables on stdout (and --json, --growth); 1 when the JSON file cannot be written.
 int report(const Options& o, const std::vector<RunResult>& runs,
-           const std::vector<std::unique_ptr<Lane>>& lanes, std::size_t scans,
-           const CacheProbes& probes) {
+           const std::vector<std::unique_ptr<Lane>>& lanes,
+           const std::vector<WorldScan>& scans_for_queries, const CacheProbes& probes) {
+  const std::size_t scans = scans_for_queries.size();
   const std::string machine = machineDescription();
   std::printf(
       "densemap-bench: %s, resolution %g m, max range %g m, %zu scans, rule %s "
@@ -229,6 +231,15 @@ int report(const Options& o, const std::vector<RunResult>& runs,
   std::printf("%s", formatRayTable(runs).c_str());
   if (const std::string field = formatFieldTable(runs); !field.empty()) {
     std::printf("\n%s", field.c_str());
+  }
+  // Planner queries on the first lane with a field (the server's question sizes).
+  for (const auto& lane : lanes) {
+    if (lane->field() == nullptr) continue;
+    std::printf("\n%s, %d threads: %s", lane->name().c_str(), lane->threads(),
+                timePlannerQueries(*lane->fieldView(), *lane->field(), scans_for_queries,
+                                   lane->threads())
+                    .c_str());
+    break;
   }
   if (lanes.size() > 1) std::printf("\n%s\n", formatTurnTable(runs).c_str());
   for (const RunResult& r : runs) {
@@ -294,7 +305,7 @@ int run(const Options& o) {
   const std::vector<StealMeter> steal = runLanes(lanes, *scans, o.turn);
   if (o.cache_probe_mib > 0) probes.after = probeCaches(probes.bytes, cpus, kProbeSteps);
   const std::vector<RunResult> runs = compareLanes(lanes, steal, o.rule != "set");
-  return report(o, runs, lanes, scans->size(), probes);
+  return report(o, runs, lanes, *scans, probes);
 }
 
 }  // namespace

@@ -195,6 +195,11 @@ class Lane {
   [[nodiscard]] const std::string& name() const { return name_; }
   /// The distance field (--esdf), if the lane keeps one.
   [[nodiscard]] const DistanceField* field() const { return field_ ? &*field_ : nullptr; }
+  /// A view of the lane's map as the field last saw it (--esdf lanes only).
+  [[nodiscard]] std::shared_ptr<const MapView> fieldView() {
+    return MapView::advanceLive(dynamic_cast<GridMap&>(*map_));
+  }
+  [[nodiscard]] int threads() const { return r_.threads; }
   [[nodiscard]] const OccupancyMap& map() const { return *map_; }
 
  private:

@@ -126,11 +126,39 @@ std::uint64_t DistanceField::occupiedRow(int cx, int y, int z, int ext) const {
 std::optional<VoxelKey> DistanceField::nearestOccupied(const VoxelKey& cell) const {
   const std::uint16_t d2 = distanceSquared(cell);
   if (d2 == kFar) return std::nullopt;
+  if (d2 == 0) return cell;
+  // The search knows the distance: it stops at the first occupied cell there. Its rows meet
+  // the same few dozen blocks again and again: each is looked up once (a small direct-mapped
+  // cache of the occupied masks).
+  struct Slot {
+    std::uint64_t key = ~std::uint64_t{0};
+    const block::BlockMask* mask = nullptr;
+  };
+  std::array<Slot, 64> cache{};
+  auto maskOf = [&](std::uint64_t key) {
+    Slot& slot = cache[(key ^ (key >> 13) ^ (key >> 26)) & 63];
+    if (slot.key != key) {
+      const auto it = sources_.find(key);
+      slot = {key, it == sources_.end() ? nullptr : &it->second};
+    }
+    return slot.mask;
+  };
+  auto row = [&](int cx, int y, int z, int ext) -> std::uint64_t {
+    if (y < 0 || y > 0xffff || z < 0 || z > 0xffff) return 0;
+    std::uint64_t bits = 0;
+    for (int bx = std::max(cx - ext, 0) >> 3; bx <= std::min(cx + ext, 0xffff) >> 3; ++bx) {
+      const block::BlockMask* m = maskOf(packBlock(bx, y >> 3, z >> 3));
+      if (m == nullptr) continue;
+      const std::uint64_t byte = rowByte(*m, y, z);
+      const int shift = bx * 8 - (cx - 31);
+      if (shift >= 64) continue;
+      bits |= shift >= 0 ? byte << shift : byte >> -shift;
+    }
+    return bits;
+  };
   std::array<int, 3> off{};
   const CellCoord c = CellCoord::of(cell);
-  (void)nearestInRows(
-      c, std::uint32_t{d2} + 1, rows_,
-      [this](int cx, int y, int z, int ext) { return occupiedRow(cx, y, z, ext); }, &off);
+  (void)nearestInRows(c, std::uint32_t{d2} + 1, rows_, row, &off, d2);
   return CellCoord{c.x + off[0], c.y + off[1], c.z + off[2]}.key();
 }
 

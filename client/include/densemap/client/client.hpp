@@ -14,6 +14,7 @@
 #include "densemap/geometry/point_cloud.hpp"
 #include "densemap/io/raw_scan.hpp"
 #include "densemap/map/cell_change.hpp"
+#include "densemap/planner/planner_types.hpp"
 #include "densemap/query/cell_state.hpp"
 #include "densemap/wire/security.hpp"
 #include "densemap/wire/server_status.hpp"
@@ -48,6 +49,17 @@ struct BoxQueryAnswer {
 struct RayQueryAnswer {
   std::uint64_t map_version = 0;
   RayQueryResult ray;
+};
+
+/// Distances from the server's distance field (config esdf; docs/planner.md).
+struct DistanceQueryAnswer : DistanceQueryResult {
+  std::uint64_t map_version = 0;
+  float max_distance = 0.0F;  // distances are at most this (meaning none within it)
+};
+
+/// A swept-volume check of a path on the server's map.
+struct PathQueryAnswer : SweptVolumeResult {
+  std::uint64_t map_version = 0;
 };
 
 struct DeltaInfo {
@@ -94,6 +106,15 @@ class Client {
                                                   std::uint32_t max_centers = 0);
   [[nodiscard]] Expected<RayQueryAnswer> castRay(const Point3f& origin, const Point3f& direction,
                                                  float max_range);
+  /// Distances (with gradients and nearest obstacles) at the points x y z (metres, world
+  /// frame) from the server's distance field; an error when the server keeps none. A batch of
+  /// more than 250,000 points goes as several requests, as queryPoints does.
+  [[nodiscard]] Expected<DistanceQueryAnswer> queryDistances(
+      std::span<const float> xyz_world, const DistanceQueryOptions& options = {});
+  /// Whether a robot of radius `radius_m` can follow the polyline `vertices_world` (x y z per
+  /// vertex, at most 100,000): every cell within the radius of the path counts.
+  [[nodiscard]] Expected<PathQueryAnswer> checkPath(std::span<const float> vertices_world,
+                                                    float radius_m);
   /// Clears the whole map (a new, empty version). Returns the server's detail message.
   [[nodiscard]] Expected<std::string> reset();
   /// Forgets the cells of the box [min, max] (metres, world frame): they become unknown.

@@ -8,10 +8,12 @@
 #include <future>
 #include <memory>
 #include <mutex>
+#include <shared_mutex>
 #include <thread>
 
 #include "densemap/io/raw_scan.hpp"
 #include "densemap/pipeline/engine.hpp"
+#include "densemap/planner/distance_field.hpp"
 #include "densemap/server/latest_wins_queue.hpp"
 #include "densemap/server/sensor_tally.hpp"
 
@@ -34,6 +36,8 @@ struct IngestOptions {
   /// waiting gives up its oldest, else the oldest scan goes (one scan larger than all of it
   /// still waits alone). 0: no byte budget.
   std::size_t queue_budget_bytes = std::size_t{256} << 20;
+  /// The distance field planners query (config esdf), updated after every version; none: off.
+  std::optional<DistanceFieldOptions> distance_field;
 };
 
 struct PipelineCounters {
@@ -89,6 +93,16 @@ class Ingest {
   [[nodiscard]] std::future<Expected<std::string>> command(Command command);
 
   [[nodiscard]] std::shared_ptr<const MapView> view() const { return engine_->view(); }
+  /// Runs f(field, view): the distance field and the map version it was updated to, shared with
+  /// other readers (it waits for an update under way, a few ms). False, f not run, when the
+  /// server keeps no field (config esdf).
+  template <class F>
+  bool withDistanceField(F&& f) const {
+    if (!field_) return false;
+    const std::shared_lock lock(field_mutex_);
+    f(*field_, *field_view_);
+    return true;
+  }
 
   /// What a snapshot saves: the latest view and, for kernel map kinds, the kernel evidence of
   /// the same version (taken on the worker between scans, so the two agree).
@@ -117,6 +131,9 @@ class Ingest {
 
   std::unique_ptr<Engine> engine_;
   tbb::task_arena arena_;
+  std::optional<DistanceField> field_;
+  mutable std::shared_mutex field_mutex_;  // the field and field_view_ change together
+  std::shared_ptr<const MapView> field_view_;
   LatestWinsQueue<RawScan> queue_;
   Publisher publisher_;
   RejectHandler on_reject_;

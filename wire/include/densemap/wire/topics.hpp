@@ -15,6 +15,8 @@ struct Topics {
   Entity point_request, point_reply;
   Entity bbox_request, bbox_reply;
   Entity ray_request, ray_reply;
+  Entity distance_request, distance_reply;
+  Entity path_request, path_reply;
   Entity command_request, command_reply;
   /// send-map requests (CommandRequest, kind 3 only; replies on command_reply): a topic of their
   /// own so that DDS Security can grant map fetches without granting reset and clear-bbox.
@@ -31,6 +33,8 @@ enum class CommandKind : std::int32_t { kReset = 0, kClearBox = 1, kSave = 2, kS
 /// server refuses more, the client library splits a larger batch into requests of this size,
 /// sent one after another, so a client has one request's worth of memory in flight at a time.
 inline constexpr std::uint32_t kMaxQueryPoints = 250'000;
+/// The most vertices one PathQueryRequest may carry.
+inline constexpr std::uint32_t kMaxPathVertices = 100'000;
 
 /// The partition of one client's reply readers, and of the server's reply writers for that
 /// client: a reply reaches its asker only (otherwise every client reads every reply, and many

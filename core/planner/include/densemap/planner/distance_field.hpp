@@ -166,14 +166,16 @@ class DistanceField {
 /// The squared distance (cells^2) from `c` to the nearest cell whose bit `row(cx, y, z, ext)`
 /// sets, searched over the rows of `rows` (nearest first) while below `bound2`; `row` returns
 /// the bits of x in [cx - 31, cx + 32] (bit 31 is cx), of which only [cx - ext, cx + ext] count.
-/// Returns bound2 when none is nearer, and the offset of the one found in `offset`.
+/// Returns bound2 when none is nearer, and the offset of the one found in `offset`; stops at the
+/// first one found at `enough` or nearer.
 template <class RowBits>
 [[nodiscard]] std::uint32_t nearestInRows(const CellCoord& c, std::uint32_t bound2,
                                           std::span<const DistanceField::BallRow> rows,
-                                          RowBits&& row, std::array<int, 3>* offset = nullptr) {
+                                          RowBits&& row, std::array<int, 3>* offset = nullptr,
+                                          std::uint32_t enough = 0) {
   std::uint32_t best = bound2;
   for (const DistanceField::BallRow& r : rows) {
-    if (r.h >= best) break;
+    if (r.h >= best || best <= enough) break;
     const std::uint64_t bits = row(c.x, c.y + r.dy, c.z + r.dz, r.ext);
     if (bits == 0) continue;
     // Nearest set bit to bit 31, up (x >= cx) and down (x < cx).
