@@ -341,7 +341,7 @@ Expected<DistanceQueryAnswer> Client::Impl::queryDistancesOnce(
   return answer;
 }
 
-Expected<PathQueryAnswer> Client::Impl::checkPath(std::span<const float> xyz, float radius) {
+Expected<PathQueryAnswer> Client::Impl::checkPath(std::span<const float> xyz, double radius) {
   if (xyz.size() % 3 != 0) return makeError("path length is not a multiple of 3 (x y z each)");
   if (xyz.size() / 3 > dds::kMaxPathVertices) {
     return makeError("path of " + std::to_string(xyz.size() / 3) + " vertices, more than the " +
@@ -470,7 +470,7 @@ Expected<DistanceQueryAnswer> Client::queryDistances(std::span<const float> xyz_
 }
 
 Expected<PathQueryAnswer> Client::checkPath(std::span<const float> vertices_world,
-                                            float radius_m) {
+                                            double radius_m) {
   return impl_->checkPath(vertices_world, radius_m);
 }
 

@@ -58,7 +58,7 @@ struct Client::Impl {
                                    float max_range);
   Expected<DistanceQueryAnswer> queryDistancesOnce(std::span<const float> xyz,
                                                    const DistanceQueryOptions& options);
-  Expected<PathQueryAnswer> checkPath(std::span<const float> xyz, float radius);
+  Expected<PathQueryAnswer> checkPath(std::span<const float> xyz, double radius);
   /// A command's reply: the detail message and send-map's counts (CommandReply's sent_*).
   struct CommandOutcome {
     std::string detail;

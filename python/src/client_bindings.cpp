@@ -197,7 +197,7 @@ closed client. The GIL is released while a call waits. Use as a context manager,
           "Mapper.distance answers (the server needs esdf { enabled: true }).")
       .def(
           "check_path",
-          [](PyClient& self, const py::handle& vertices, float radius) {
+          [](PyClient& self, const py::handle& vertices, double radius) {
             const PointCloud path =
                 pointsFrom(vertices, std::numeric_limits<std::size_t>::max(), "vertices", false);
             const std::span<const float> xyz(path.empty() ? nullptr : path.front().data(),

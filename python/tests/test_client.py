@@ -21,7 +21,8 @@ def server(tmp_path_factory):
     config = work / "server.textproto"
     config.write_text(f'dds {{ domain_id: {DOMAIN} network_interface: "lo" }}\n'
                       f'snapshot {{ path: "{work / "map.dmap"}" }}\n'
-                      f'map {{ resolution_m: 0.1 max_range_m: 20 }}\n')
+                      f'map {{ resolution_m: 0.1 max_range_m: 20 }}\n'
+                      f'esdf {{ enabled: true max_distance_m: 1.0 }}\n')
     log = open(work / "server.log", "w")
     proc = subprocess.Popen([os.path.join(BIN, "densemap-server"), "--config", str(config)],
                             stderr=log, stdout=log)
@@ -61,6 +62,20 @@ def test_client_round_trip(server, tmp_path):
         theirs, ours = snapshot.cells(), local.cells()
         assert {tuple(c): v for c, v in zip(theirs[0].tolist(), theirs[1].tolist())} == \
             {tuple(c): v for c, v in zip(ours[0].tolist(), ours[1].tolist())}
+        # Planner queries: the server's answers are the in-process Mapper's.
+        planner = densemap.Mapper(resolution=0.1, max_range=20.0, distance_field=True,
+                                  max_distance=1.0)
+        planner.insert_scan(wall(), np.eye(4))
+        points = np.array([[3.5, 0.1, 0.0], [2.0, 0.0, 0.3], [4.02, 0.5, 0.5]], dtype=np.float32)
+        remote_version, *remote = client.query_distances(points, interpolate=True)
+        local = planner.distance(points, interpolate=True)
+        assert remote_version == version
+        for theirs_a, ours_a in zip(remote, local):
+            np.testing.assert_array_equal(theirs_a, ours_a)
+        path = np.array([[0.0, 0.0, 0.0], [6.0, 0.0, 0.0]])
+        theirs_p, ours_p = client.check_path(path, 0.2), planner.check_path(path, 0.2)
+        assert theirs_p["state"] == ours_p["state"] == "occupied"
+        assert theirs_p["occupied"] == ours_p["occupied"]
         assert snapshot.save(tmp_path / "fetched.dmap") > 0
         assert densemap.load(tmp_path / "fetched.dmap").known_cells == snapshot.known_cells
         assert "erased" in client.clear_box([3.5, -1, -1], [4.5, 1, 1])

@@ -38,7 +38,7 @@ struct DistanceRequest {
 struct PathRequest {
   densemap_msgs_RequestId id;
   std::vector<float> xyz;
-  float radius;
+  double radius;
 };
 
 /// Distances from the field and the view it was updated to (one version), or why not.

@@ -114,7 +114,7 @@ class Client {
   /// Whether a robot of radius `radius_m` can follow the polyline `vertices_world` (x y z per
   /// vertex, at most 100,000): every cell within the radius of the path counts.
   [[nodiscard]] Expected<PathQueryAnswer> checkPath(std::span<const float> vertices_world,
-                                                    float radius_m);
+                                                    double radius_m);
   /// Clears the whole map (a new, empty version). Returns the server's detail message.
   [[nodiscard]] Expected<std::string> reset();
   /// Forgets the cells of the box [min, max] (metres, world frame): they become unknown.
