@@ -50,7 +50,7 @@ for c in "${cases[@]}"; do
       on && /^raycast/ { printf "| %s | %s m | %s / %s | %s | %sx | %s | %s | %s |\n", name, res, $4, $5, $6, $7, $8, $9, $10; on = 0 }
     ' "$OUT/run.txt"
     if [ "$run" = "$RUNS" ] && [ "$res" = 0.2 ]; then
-      queries+=$'\n'"$name at $res m (last run):"$'\n'"$(sed -n '/^planner query/,/within/p' "$OUT/run.txt")"$'\n'
+      queries+=$'\n'"$name at $res m (last run):"$'\n'"$(sed -n '/planner query (final map)/,/within/p' "$OUT/run.txt")"$'\n'
     fi
   done
 done

@@ -12,7 +12,8 @@
 # built before replay's --csv and --query-bbox-edge (before/after runs), KIND=K the server's
 # map.kind (default log_odds; a dense kind such as akimap_rays is benched as that kind),
 # METHOD=M the server's pipeline.integration (raycast, culling, superray, superray+culling),
-# THREADS=N the server's pipeline.threads and the bench's --threads (default 2).
+# THREADS=N the server's pipeline.threads and the bench's --threads (default 2), ESDF=M the
+# server's distance field on (esdf.max_distance_m M; the bench keeps one too, --esdf M).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DATA=$1 RES=$2 RANGE=$3 RATE=${4:-10} FIRST=${5:-0} LIMIT=${6:-0} QUERY=${7:-0}
@@ -26,6 +27,7 @@ pipeline { threads: $THREADS queue_depth: 2 integration: "${METHOD:-raycast}" ma
            ${WARM_UP:+warm_up: $WARM_UP} }
 snapshot { path: "" autosave_period_s: 0 }
 dds { domain_id: $DOMAIN network_interface: "lo" }
+${ESDF:+esdf { enabled: true max_distance_m: $ESDF \}}
 CFG
 "$BIN/densemap-server" --config "$OUT/server.textproto" 2> "$OUT/server.log" &
 SERVER=$!
@@ -71,6 +73,6 @@ if [ "${BENCH:-1}" = 1 ]; then
   [ "${KIND:-log_odds}" != log_odds ] && method=$KIND
   "$BIN/densemap-bench" --data "$DATA" --resolution "$RES" --max-range "$RANGE" \
     --methods "$method" --backend grid --threads "$THREADS" --first "$FIRST" --limit "$LIMIT" \
-    2> "$OUT/bench.log" | tee "$OUT/bench.txt" | head -3
+    ${ESDF:+--esdf "$ESDF"} 2> "$OUT/bench.log" | tee "$OUT/bench.txt" | head -3
 fi
 echo "outputs in $OUT"

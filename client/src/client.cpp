@@ -98,9 +98,8 @@ Expected<void> Client::Impl::waitForServer() {
       (void)dds_get_name(dds_get_topic(e.get()), name, sizeof name);
       return std::string(name);
     };
-    for (const dds::Entity* w :
-         {&dds_->scan_w, &dds_->pq_w, &dds_->bq_w, &dds_->rq_w, &dds_->dq_w, &dds_->paq_w,
-          &dds_->cq_w, &dds_->mq_w}) {
+    for (const dds::Entity* w : {&dds_->scan_w, &dds_->pq_w, &dds_->bq_w, &dds_->rq_w, &dds_->dq_w,
+                                 &dds_->paq_w, &dds_->cq_w, &dds_->mq_w}) {
       if (w->get() <= 0) continue;  // not granted by DDS Security
       dds_publication_matched_status_t s;
       if (dds_get_publication_matched_status(w->get(), &s) < 0 || s.current_count == 0)
@@ -326,8 +325,8 @@ Expected<DistanceQueryAnswer> Client::Impl::queryDistancesOnce(
         const std::size_t n = xyz.size() / 3;
         if (r.distances._length != n || r.gradients._length != 3 * n ||
             r.nearest._length != 3 * n) {
-          error = "a reply whose lengths do not match the request's " + std::to_string(n) +
-                  " points";
+          error =
+              "a reply whose lengths do not match the request's " + std::to_string(n) + " points";
           return;
         }
         answer.map_version = r.map_version;

@@ -133,15 +133,17 @@ QueryCommand::QueryCommand(CLI::App& app) {
   ray_->add_option("--direction", direction_, "x y z")->required()->expected(3);
   ray_->add_option("--range", range_, "Max range, m")->capture_default_str();
   distance_ = command_->add_subcommand(
-      "distance", "Distance to the nearest obstacle, gradient and nearest obstacle at points "
-                  "(the server's distance field: config esdf)");
+      "distance",
+      "Distance to the nearest obstacle, gradient and nearest obstacle at points "
+      "(the server's distance field: config esdf)");
   distance_->add_option("xyz", distance_coords_, "x y z [x y z ...]")->required();
   distance_->add_flag("--unknown-occupied", unknown_occupied_, "Count unknown cells as obstacles");
   distance_->add_flag("--interpolate", interpolate_,
                       "Trilinear between the cell centres around each point");
   path_ = command_->add_subcommand(
-      "path", "Whether a robot of --radius can follow a path: every cell within the radius of "
-              "the polyline counts (exit 0 free, 3 occupied, 4 unknown)");
+      "path",
+      "Whether a robot of --radius can follow a path: every cell within the radius of "
+      "the polyline counts (exit 0 free, 3 occupied, 4 unknown)");
   path_->add_option("xyz", path_coords_, "x y z x y z ... (the vertices)")->required();
   path_->add_option("--radius", radius_, "The robot's radius, m")->capture_default_str();
 }

@@ -62,7 +62,6 @@ void bindMapper(py::module_& m);
 void bindClient(py::module_& m);
 void bindReaders(py::module_& m);
 
-
 /// A distance answer as arrays: (distances float32 (N,), gradients (N, 3), nearest (N, 3)).
 inline py::tuple distanceArrays(const DistanceQueryResult& r) {
   const auto n = static_cast<py::ssize_t>(r.distances.size());

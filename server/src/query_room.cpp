@@ -275,12 +275,12 @@ void QueryRoom::take() {
             stats_.refused(refusal);
             return;
           }
-          DistanceRequest req{m.id,
-                              std::vector<float>(m.points._buffer,
-                                                 m.points._buffer + m.points._length),
-                              {.unknown_as_occupied = m.unknown_as_occupied,
-                               .interpolate = m.interpolate,
-                               .nearest = m.nearest}};
+          DistanceRequest req{
+              m.id,
+              std::vector<float>(m.points._buffer, m.points._buffer + m.points._length),
+              {.unknown_as_occupied = m.unknown_as_occupied,
+               .interpolate = m.interpolate,
+               .nearest = m.nearest}};
           spawn(
               [this, w, req = std::move(req), who = asker(readers_.distance, info)](
                   const MapView&, std::string& error) {

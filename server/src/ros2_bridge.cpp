@@ -122,14 +122,21 @@ Expected<std::unique_ptr<Ros2Bridge>> Ros2Bridge::create(Ingest& ingest,
                   map_writer(nav_msgs_msg_dds__OccupancyGrid__desc, options.grid_topic,
                              d.grid_topic, d.grid_writer),
                   map_writer(sensor_msgs_msg_dds__PointCloud2__desc, options.centers_topic,
-                             d.centers_topic, d.centers_writer)}) {
+                             d.centers_topic, d.centers_writer),
+                  map_writer(sensor_msgs_msg_dds__PointCloud2__desc,
+                             ingest.hasDistanceField() ? options.esdf_slice_topic : "",
+                             d.slice_topic, d.slice_writer),
+                  map_writer(nav_msgs_msg_dds__OccupancyGrid__desc,
+                             ingest.hasDistanceField() ? options.costmap_topic : "",
+                             d.costmap_topic, d.costmap_writer)}) {
     if (!ok) return std::unexpected(ok.error());
   }
   // The server as a ROS node with these readers and writers (as rmw_cyclonedds announces its
   // nodes), so ROS tools list it and its topics.
   std::vector<const dds::Entity*> readers{&d.tf_reader, &d.tf_static_reader}, writers;
   for (const dds::Entity& r : d.cloud_readers) readers.push_back(&r);
-  for (const dds::Entity* w : {&d.octomap_writer, &d.grid_writer, &d.centers_writer}) {
+  for (const dds::Entity* w : {&d.octomap_writer, &d.grid_writer, &d.centers_writer,
+                               &d.slice_writer, &d.costmap_writer}) {
     if (w->get() > 0) writers.push_back(w);
   }
   auto node =

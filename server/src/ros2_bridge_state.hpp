@@ -25,6 +25,8 @@ struct Ros2Bridge::Dds {
   dds::Entity tf_topic, tf_static_topic, tf_reader, tf_static_reader;
   dds::Entity octomap_topic, grid_topic, centers_topic;
   dds::Entity octomap_writer, grid_writer, centers_writer;
+  /// The distance field's topics (a server with esdf): a slice and an inflated costmap.
+  dds::Entity slice_topic, costmap_topic, slice_writer, costmap_writer;
   std::optional<dds::WaitSet> waitset;
   RosNodeAnnouncement node;  // the server on ros_discovery_info (`ros2 node list`)
 };
@@ -46,6 +48,7 @@ struct Ros2Bridge::Topics {
   /// The version last written to the map topics (kept while no one listens: a viewer that
   /// returns gets it from the writers' transient-local history, not a second copy).
   std::optional<std::uint64_t> written;
+  std::optional<std::uint64_t> field_written;  // the same for the distance field's topics
   std::chrono::steady_clock::time_point next_publish = std::chrono::steady_clock::now();
 };
 

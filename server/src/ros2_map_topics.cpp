@@ -1,5 +1,6 @@
 #include <cstring>
 
+#include "densemap/planner/distance_slice.hpp"
 #include "densemap/wire/topics.hpp"
 #include "nav_msgs.h"
 #include "octomap_msgs.h"
@@ -80,6 +81,49 @@ void writeCenters(const dds::Entity& writer, const std_msgs_msg_dds__Header_& he
   (void)dds::write(writer, &msg);
 }
 
+/// The distance field's layer: PointCloud2 with x, y, z and distance (float32 each).
+void writeSlice(const dds::Entity& writer, const std_msgs_msg_dds__Header_& header,
+                const std::vector<std::array<float, 4>>& points) {
+  std::vector<std::uint8_t> data(points.size() * 16);
+  if (!points.empty()) std::memcpy(data.data(), points.data(), data.size());
+  sensor_msgs_msg_dds__PointField_ fields[4] = {{const_cast<char*>("x"), 0, 7, 1},
+                                                {const_cast<char*>("y"), 4, 7, 1},
+                                                {const_cast<char*>("z"), 8, 7, 1},
+                                                {const_cast<char*>("distance"), 12, 7, 1}};
+  sensor_msgs_msg_dds__PointCloud2_ msg{};
+  msg.header = header;
+  msg.height = 1;
+  msg.width = static_cast<std::uint32_t>(points.size());
+  msg.fields._length = msg.fields._maximum = 4;
+  msg.fields._buffer = fields;
+  msg.fields._release = false;
+  msg.is_bigendian = false;
+  msg.point_step = 16;
+  msg.row_step = static_cast<std::uint32_t>(data.size());
+  msg.data._length = msg.data._maximum = static_cast<std::uint32_t>(data.size());
+  msg.data._buffer = data.data();
+  msg.data._release = false;
+  msg.is_dense = true;
+  (void)dds::write(writer, &msg);
+}
+
+/// The inflated costmap of the layer.
+void writeCostmap(const dds::Entity& writer, const std_msgs_msg_dds__Header_& header, Costmap& map,
+                  double z_m) {
+  nav_msgs_msg_dds__OccupancyGrid_ msg{};
+  msg.header = header;
+  msg.info.map_load_time = header.stamp;
+  msg.info.resolution = static_cast<float>(map.resolution);
+  msg.info.width = map.width;
+  msg.info.height = map.height;
+  msg.info.origin.position = {map.origin_x, map.origin_y, z_m};
+  msg.info.origin.orientation = {0.0, 0.0, 0.0, 1.0};
+  msg.data._length = msg.data._maximum = static_cast<std::uint32_t>(map.data.size());
+  msg.data._buffer = map.data.data();
+  msg.data._release = false;
+  (void)dds::write(writer, &msg);
+}
+
 }  // namespace
 
 void Ros2Bridge::publishMaps() {
@@ -99,6 +143,23 @@ void Ros2Bridge::publishMaps() {
     return w.get() > 0 && dds_get_publication_matched_status(w.get(), &m) >= 0 &&
            m.current_count > 0;
   };
+  // The distance field's topics, from the field and the version it was updated to.
+  if (listened(dds_->slice_writer) || listened(dds_->costmap_writer)) {
+    ingest_.withDistanceField([&](const DistanceField& field, const MapView& view) {
+      if (view.knownCells() == 0 || s.field_written == view.version()) return;
+      s.field_written = view.version();
+      const std::string frame = options_.world_frame;
+      std_msgs_msg_dds__Header_ header{rosNow(), const_cast<char*>(frame.c_str())};
+      if (dds_->slice_writer.get() > 0) {
+        writeSlice(dds_->slice_writer, header, distanceSlice(field, options_.esdf_slice_z_m));
+      }
+      if (dds_->costmap_writer.get() > 0) {
+        Costmap costmap =
+            inflatedCostmap(field, view, options_.esdf_slice_z_m, options_.robot_radius_m);
+        writeCostmap(dds_->costmap_writer, header, costmap, options_.esdf_slice_z_m);
+      }
+    });
+  }
   if (!listened(dds_->octomap_writer) && !listened(dds_->grid_writer) &&
       !listened(dds_->centers_writer)) {
     if (s.published != nullptr) s.map->clear();

@@ -238,7 +238,8 @@ Expected<std::optional<Ros2Options>> ros2Options(const proto::ServerConfig& conf
       return makeError("ros2.clouds: '" + topic + "' is not a ROS topic name");
     }
   }
-  for (const std::string* topic : {&r.octomap_topic(), &r.grid_topic(), &r.centers_topic()}) {
+  for (const std::string* topic : {&r.octomap_topic(), &r.grid_topic(), &r.centers_topic(),
+                                   &r.esdf_slice_topic(), &r.costmap_topic()}) {
     if (!topic->empty() && ros2::ddsTopicName(*topic).empty()) {
       return makeError("ros2: '" + *topic + "' is not a ROS topic name");
     }
@@ -264,6 +265,16 @@ Expected<std::optional<Ros2Options>> ros2Options(const proto::ServerConfig& conf
   o.octomap_topic = r.octomap_topic();
   o.grid_topic = r.grid_topic();
   o.centers_topic = r.centers_topic();
+  o.esdf_slice_topic = r.esdf_slice_topic();
+  o.costmap_topic = r.costmap_topic();
+  if (!std::isfinite(r.esdf_slice_z_m()) || std::abs(r.esdf_slice_z_m()) > 1e6) {
+    return makeError("ros2.esdf_slice_z_m must be a finite height, metres");
+  }
+  o.esdf_slice_z_m = r.esdf_slice_z_m();
+  if (!(r.robot_radius_m() >= 0 && r.robot_radius_m() <= 100)) {
+    return makeError("ros2.robot_radius_m: 0 .. 100 m");
+  }
+  o.robot_radius_m = r.robot_radius_m();
   if (!(r.grid_min_z_m() <= r.grid_max_z_m())) {
     return makeError("ros2.grid_min_z_m must be <= grid_max_z_m");
   }

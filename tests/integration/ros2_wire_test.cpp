@@ -14,6 +14,7 @@
 #include "densemap/client/testing.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_diff.hpp"
+#include "densemap/planner/distance_slice.hpp"
 #include "densemap/ros2/map_topics.hpp"
 #include "densemap/ros2/names.hpp"
 #include "densemap/ros2/point_cloud2.hpp"
@@ -43,7 +44,9 @@ constexpr double kRate = 10.0;
 
 const char* kRosConfig =
     "ros2 { enabled: true reliable_clouds: true world_frame: \"map\" tf_wait_s: 3\n"
-    "       max_waiting_clouds: 20 publish_period_s: 0.2 grid_min_z_m: -0.5 grid_max_z_m: 1.5 }\n";
+    "       max_waiting_clouds: 20 publish_period_s: 0.2 grid_min_z_m: -0.5 grid_max_z_m: 1.5\n"
+    "       esdf_slice_z_m: 1.1 robot_radius_m: 0.45 }\n"
+    "esdf { enabled: true max_distance_m: 1.0 }\n";
 
 std::unique_ptr<Client> connect(std::uint32_t domain) { return test::connectClient(domain); }
 
@@ -159,6 +162,14 @@ void replayAndCompare(const fs::path& data, std::size_t scans, std::uint32_t kDo
   auto grid_reader = dds::createReader(*participant, *grid_topic, latched);
   auto centers_reader = dds::createReader(*participant, *centers_topic, latched);
   ASSERT_TRUE(octomap_reader && grid_reader && centers_reader);
+  auto slice_topic = dds::createTopic(*participant, sensor_msgs_msg_dds__PointCloud2__desc,
+                                      ros2::ddsTopicName("/esdf_slice"));
+  auto costmap_topic = dds::createTopic(*participant, nav_msgs_msg_dds__OccupancyGrid__desc,
+                                        ros2::ddsTopicName("/costmap"));
+  ASSERT_TRUE(slice_topic && costmap_topic);
+  auto slice_reader = dds::createReader(*participant, *slice_topic, latched);
+  auto costmap_reader = dds::createReader(*participant, *costmap_topic, latched);
+  ASSERT_TRUE(slice_reader && costmap_reader);
 
   ros2::ReplayFrames frames;
   frames.stamp_base_ns = kStampBase;
@@ -244,6 +255,50 @@ void replayAndCompare(const fs::path& data, std::size_t scans, std::uint32_t kDo
   EXPECT_EQ(grid.origin_y, reference.origin_y);
   EXPECT_FLOAT_EQ(static_cast<float>(grid.resolution), 0.2F);
   EXPECT_EQ(grid.data, reference.data);
+
+  // The distance field's layer and costmap: those of a field built from the same map.
+  auto field = DistanceField::create(0.2, {.max_distance_m = 1.0});
+  ASSERT_TRUE(field);
+  field->rebuild(*view);
+  const auto want_slice = distanceSlice(*field, 1.1);
+  const Costmap want_costmap = inflatedCostmap(*field, *view, 1.1, 0.45);
+  std::vector<std::array<float, 4>> slice;
+  std::vector<std::string> slice_fields;
+  Costmap costmap;
+  const auto field_deadline = std::chrono::steady_clock::now() + 20s;
+  while (std::chrono::steady_clock::now() < field_deadline) {
+    latestSample<sensor_msgs_msg_dds__PointCloud2_>(*slice_reader, [&](const auto& m) {
+      slice.resize(m.width);
+      if (m.point_step == 16 && m.data._length == 16 * m.width && m.width > 0) {
+        std::memcpy(slice.data(), m.data._buffer, m.data._length);
+      }
+      slice_fields.clear();
+      for (std::uint32_t i = 0; i < m.fields._length; ++i) {
+        slice_fields.emplace_back(m.fields._buffer[i].name);
+      }
+    });
+    latestSample<nav_msgs_msg_dds__OccupancyGrid_>(*costmap_reader, [&](const auto& m) {
+      costmap.width = m.info.width;
+      costmap.height = m.info.height;
+      costmap.origin_x = m.info.origin.position.x;
+      costmap.origin_y = m.info.origin.position.y;
+      costmap.data.assign(m.data._buffer, m.data._buffer + m.data._length);
+    });
+    if (slice.size() == want_slice.size() && costmap.data == want_costmap.data) break;
+    std::this_thread::sleep_for(100ms);
+  }
+  ASSERT_GT(want_slice.size(), 100U);
+  EXPECT_EQ(slice_fields, (std::vector<std::string>{"x", "y", "z", "distance"}));
+  auto sorted = [](std::vector<std::array<float, 4>> v) {
+    std::sort(v.begin(), v.end());
+    return v;
+  };
+  EXPECT_EQ(sorted(slice), sorted(want_slice));
+  EXPECT_EQ(costmap.width, want_costmap.width);
+  EXPECT_EQ(costmap.origin_x, want_costmap.origin_x);
+  EXPECT_EQ(costmap.origin_y, want_costmap.origin_y);
+  EXPECT_EQ(costmap.data, want_costmap.data);
+  EXPECT_GT(std::count(costmap.data.begin(), costmap.data.end(), 100), 10);
   EXPECT_EQ(server.stop(), 0);
 }
 

@@ -62,9 +62,9 @@ struct RunResult {
   /// Wall-clock ns per visit (the mean scan's time over its visits; times `threads` for the
   /// cores' time): what each visit costs, beside how many there are.
   [[nodiscard]] double nsPerVisit() const {
-    return scans > 0 && visits_per_scan > 0 ? total_s * 1e9 / static_cast<double>(scans) /
-                                                  visits_per_scan
-                                            : 0;
+    return scans > 0 && visits_per_scan > 0
+               ? total_s * 1e9 / static_cast<double>(scans) / visits_per_scan
+               : 0;
   }
 };
 

@@ -27,9 +27,9 @@
 #include "densemap/map/map_diff.hpp"
 #include "densemap/map/map_factory.hpp"
 #include "densemap/map/octree_map.hpp"
-#include "densemap/traversal/update_rule.hpp"
 #include "densemap/raycast/integrator.hpp"
 #include "densemap/ros2/recording.hpp"
+#include "densemap/traversal/update_rule.hpp"
 #include "lane.hpp"
 #include "planner_timing.hpp"
 
@@ -235,10 +235,10 @@ int report(const Options& o, const std::vector<RunResult>& runs,
   // Planner queries on the first lane with a field (the server's question sizes).
   for (const auto& lane : lanes) {
     if (lane->field() == nullptr) continue;
-    std::printf("\n%s, %d threads: %s", lane->name().c_str(), lane->threads(),
-                timePlannerQueries(*lane->fieldView(), *lane->field(), scans_for_queries,
-                                   lane->threads())
-                    .c_str());
+    std::printf(
+        "\n%s, %d threads: %s", lane->name().c_str(), lane->threads(),
+        timePlannerQueries(*lane->fieldView(), *lane->field(), scans_for_queries, lane->threads())
+            .c_str());
     break;
   }
   if (lanes.size() > 1) std::printf("\n%s\n", formatTurnTable(runs).c_str());
@@ -318,7 +318,8 @@ static int runMain(int argc, char** argv) {
   mallopt(M_TRIM_THRESHOLD, 256 << 20);
   densemap::bench::Options o;
   CLI::App app{"densemap-bench: integration speed and exactness against OctoMap, one run"};
-  app.add_option("--data", o.data, "Dataset (directory, .graph, .pcd dir, scan.dat[.bz2], ROS 2 .mcap bag)")
+  app.add_option("--data", o.data,
+                 "Dataset (directory, .graph, .pcd dir, scan.dat[.bz2], ROS 2 .mcap bag)")
       ->required();
   app.add_option("--resolution", o.resolution, "Voxel size, m")->capture_default_str();
   app.add_option("--max-range", o.max_range, "Rays are cut at this range, m (< 0: unlimited)")

@@ -120,9 +120,7 @@ std::string timePlannerQueries(const MapView& view, const DistanceField& field,
   });
   out += row("  the same as 10,000 box queries", as_boxes, "a cube of the maximum each");
   SweptVolumeResult answer;
-  const auto path_ms = timed(repeats, [&] {
-    answer = *checkPath(view, path, radius);
-  });
+  const auto path_ms = timed(repeats, [&] { answer = *checkPath(view, path, radius); });
   char note[160];
   std::snprintf(note, sizeof(note), "%zu vertices, %s", path.size() / 3,
                 answer.state == CellState::kFree       ? "free"
@@ -136,7 +134,8 @@ std::string timePlannerQueries(const MapView& view, const DistanceField& field,
       const Point3f b(path[3 * v + 3], path[3 * v + 4], path[3 * v + 5]);
       const auto steps = static_cast<int>(std::ceil((b - a).norm() / res));
       for (int s = 0; s <= steps; ++s) {
-        const Point3f c = a + (b - a) * (static_cast<float>(s) / static_cast<float>(std::max(steps, 1)));
+        const Point3f c =
+            a + (b - a) * (static_cast<float>(s) / static_cast<float>(std::max(steps, 1)));
         (void)queryBox(view, c - Point3f::Constant(static_cast<float>(radius)),
                        c + Point3f::Constant(static_cast<float>(radius)), 50'000'000, 0);
       }

@@ -11,6 +11,7 @@
 #include <tuple>
 
 #include "densemap/map/grid_map.hpp"
+#include "densemap/planner/distance_slice.hpp"
 
 namespace densemap {
 namespace {
@@ -179,6 +180,68 @@ TEST(DistanceField, RefusesMaximaItCannotHold) {
   ASSERT_TRUE(ok);
   EXPECT_EQ(ok->radiusSquared(), 100U);
   EXPECT_EQ(ok->radius(), 10);
+}
+
+}  // namespace
+}  // namespace densemap
+
+namespace densemap {
+namespace {
+
+TEST(DistanceSlice, LayerAndCostmapEqualBruteForce) {
+  World w(0.1);
+  auto field = DistanceField::create(0.1, {.max_distance_m = 0.8});
+  ASSERT_TRUE(field);
+  std::mt19937 rng(21);
+  std::uniform_int_distribution<int> coord(32760, 32800);
+  for (int i = 0; i < 200; ++i) {
+    const Cell c{coord(rng), coord(rng), coord(rng)};
+    w.set(c, i % 3 == 0 ? 1.5F : -0.7F);
+  }
+  w.publishTo(*field);
+  const auto view = MapView::advanceLive(w.map);
+  const double res = 0.1;
+  for (const int layer : {32770, 32781, 32799}) {
+    const double z = (layer - 32768 + 0.5) * res;
+    auto bruteD2 = [&](int x, int y) {
+      std::int64_t best = std::numeric_limits<std::int64_t>::max();
+      for (const auto& [ox, oy, oz] : w.occupied) {
+        const std::int64_t dx = x - ox, dy = y - oy, dz = layer - oz;
+        best = std::min(best, dx * dx + dy * dy + dz * dz);
+      }
+      return best;
+    };
+    // The slice: exactly the layer's cells within 8 cells, each at its distance.
+    const auto slice = distanceSlice(*field, z);
+    std::size_t want = 0;
+    for (int y = 32740; y < 32830; ++y) {
+      for (int x = 32740; x < 32830; ++x) want += bruteD2(x, y) <= 64 ? 1 : 0;
+    }
+    EXPECT_EQ(slice.size(), want) << layer;
+    for (const auto& p : slice) {
+      const auto k = view->grid().pointToKey(Point3f(p[0], p[1], p[2]));
+      ASSERT_TRUE(k);
+      EXPECT_EQ(k->z, layer);
+      EXPECT_FLOAT_EQ(
+          p[3], static_cast<float>(std::sqrt(static_cast<double>(bruteD2(k->x, k->y))) * res));
+    }
+    // The costmap: 100 within 0.25 m (6 cells^2) of an occupied cell, 0 known, -1 unknown.
+    const Costmap m = inflatedCostmap(*field, *view, z, 0.25);
+    ASSERT_GT(m.width, 0U);
+    std::size_t lethal = 0;
+    for (std::uint32_t gy = 0; gy < m.height; ++gy) {
+      for (std::uint32_t gx = 0; gx < m.width; ++gx) {
+        const Point3f c(static_cast<float>(m.origin_x + (gx + 0.5) * res),
+                        static_cast<float>(m.origin_y + (gy + 0.5) * res), static_cast<float>(z));
+        const VoxelKey k = *view->grid().pointToKey(c);
+        const std::int8_t got = m.data[static_cast<std::size_t>(gy) * m.width + gx];
+        const std::int8_t expect = bruteD2(k.x, k.y) <= 6 ? 100 : view->logOdds(k) ? 0 : -1;
+        ASSERT_EQ(got, expect) << layer << " at " << gx << " " << gy;
+        lethal += got == 100 ? 1 : 0;
+      }
+    }
+    EXPECT_GT(lethal, 0U) << layer;
+  }
 }
 
 }  // namespace

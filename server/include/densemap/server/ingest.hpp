@@ -96,6 +96,7 @@ class Ingest {
   /// Runs f(field, view): the distance field and the map version it was updated to, shared with
   /// other readers (it waits for an update under way, a few ms). False, f not run, when the
   /// server keeps no field (config esdf).
+  [[nodiscard]] bool hasDistanceField() const { return field_.has_value(); }
   template <class F>
   bool withDistanceField(F&& f) const {
     if (!field_) return false;

@@ -38,6 +38,10 @@ struct Ros2Options {
   std::string octomap_topic = "/octomap_binary", grid_topic = "/projected_map",
               centers_topic = "/octomap_point_cloud_centers";
   double grid_min_z_m = -1000.0, grid_max_z_m = 1000.0;
+  /// With a distance field (esdf): its layer at this height as PointCloud2 (x y z distance)
+  /// and as a costmap inflated by the robot's radius (nav_msgs/OccupancyGrid); "": off.
+  std::string esdf_slice_topic = "/esdf_slice", costmap_topic = "/costmap";
+  double esdf_slice_z_m = 0.0, robot_radius_m = 0.3;
   std::size_t max_points = 2'000'000;
   /// The ROS 2 node the server shows on ros_discovery_info (`ros2 node list`): "/" + name.
   std::string node_name = "densemap_server";

@@ -104,6 +104,15 @@ class DistanceField {
     }
   }
 
+  /// Calls f(block key, its 512 squared distances) for every block of the field whose z block
+  /// coordinate is `block_z` (a walk over the field's blocks).
+  template <class F>
+  void forEachBlockInLayer(int block_z, F&& f) const {
+    for (const auto& [key, b] : blocks_) {
+      if (static_cast<int>(block::coordsOf(key)[2]) == block_z) f(key, b->d2);
+    }
+  }
+
   /// The rows of a ball: (dy, dz, h = dy^2 + dz^2, half-length in x), nearest first.
   struct BallRow {
     int dy, dz;
