@@ -80,6 +80,23 @@ DistanceField::DistanceField(double resolution_m, const DistanceFieldOptions& op
   for (std::uint32_t h = 0; h <= radius2_; ++h) {
     ext_.push_back(static_cast<int>(std::floor(std::sqrt(static_cast<double>(radius2_ - h)))));
   }
+  std::vector<std::vector<std::array<std::int8_t, 3>>> shells(radius2_ + 1);
+  for (int dz = -radius_; dz <= radius_; ++dz) {
+    for (int dy = -radius_; dy <= radius_; ++dy) {
+      for (int dx = -radius_; dx <= radius_; ++dx) {
+        const auto d2 = static_cast<std::uint32_t>(dx * dx + dy * dy + dz * dz);
+        if (d2 <= radius2_) {
+          shells[d2].push_back({static_cast<std::int8_t>(dx), static_cast<std::int8_t>(dy),
+                                static_cast<std::int8_t>(dz)});
+        }
+      }
+    }
+  }
+  for (const auto& shell : shells) {
+    shell_begin_.push_back(static_cast<std::uint32_t>(shell_offsets_.size()));
+    shell_offsets_.insert(shell_offsets_.end(), shell.begin(), shell.end());
+  }
+  shell_begin_.push_back(static_cast<std::uint32_t>(shell_offsets_.size()));
   std::stable_sort(rows_.begin(), rows_.end(),
                    [](const BallRow& a, const BallRow& b) { return a.h < b.h; });
 }
@@ -126,40 +143,31 @@ std::uint64_t DistanceField::occupiedRow(int cx, int y, int z, int ext) const {
 std::optional<VoxelKey> DistanceField::nearestOccupied(const VoxelKey& cell) const {
   const std::uint16_t d2 = distanceSquared(cell);
   if (d2 == kFar) return std::nullopt;
-  if (d2 == 0) return cell;
-  // The search knows the distance: it stops at the first occupied cell there. Its rows meet
-  // the same few dozen blocks again and again: each is looked up once (a small direct-mapped
-  // cache of the occupied masks).
+  // The distance is known: the nearest occupied cell is one of the lattice points of that
+  // sphere; the first occupied one is the answer. The candidates meet a few blocks again and
+  // again: each is looked up once (a small direct-mapped cache of the occupied masks).
   struct Slot {
     std::uint64_t key = ~std::uint64_t{0};
     const block::BlockMask* mask = nullptr;
   };
-  std::array<Slot, 64> cache{};
-  auto maskOf = [&](std::uint64_t key) {
-    Slot& slot = cache[(key ^ (key >> 13) ^ (key >> 26)) & 63];
+  std::array<Slot, 16> cache{};
+  const CellCoord c = CellCoord::of(cell);
+  for (std::uint32_t i = shell_begin_[d2]; i < shell_begin_[d2 + 1U]; ++i) {
+    const auto& o = shell_offsets_[i];
+    const CellCoord n{c.x + o[0], c.y + o[1], c.z + o[2]};
+    if (!n.inRange()) continue;
+    const std::uint64_t key = packBlock(n.x >> 3, n.y >> 3, n.z >> 3);
+    Slot& slot = cache[(key ^ (key >> 13) ^ (key >> 26)) & 15];
     if (slot.key != key) {
       const auto it = sources_.find(key);
       slot = {key, it == sources_.end() ? nullptr : &it->second};
     }
-    return slot.mask;
-  };
-  auto row = [&](int cx, int y, int z, int ext) -> std::uint64_t {
-    if (y < 0 || y > 0xffff || z < 0 || z > 0xffff) return 0;
-    std::uint64_t bits = 0;
-    for (int bx = std::max(cx - ext, 0) >> 3; bx <= std::min(cx + ext, 0xffff) >> 3; ++bx) {
-      const block::BlockMask* m = maskOf(packBlock(bx, y >> 3, z >> 3));
-      if (m == nullptr) continue;
-      const std::uint64_t byte = rowByte(*m, y, z);
-      const int shift = bx * 8 - (cx - 31);
-      if (shift >= 64) continue;
-      bits |= shift >= 0 ? byte << shift : byte >> -shift;
+    if (slot.mask != nullptr &&
+        block::testBit(*slot.mask, (n.x & 7) | ((n.y & 7) << 3) | ((n.z & 7) << 6))) {
+      return n.key();
     }
-    return bits;
-  };
-  std::array<int, 3> off{};
-  const CellCoord c = CellCoord::of(cell);
-  (void)nearestInRows(c, std::uint32_t{d2} + 1, rows_, row, &off, d2);
-  return CellCoord{c.x + off[0], c.y + off[1], c.z + off[2]}.key();
+  }
+  return std::nullopt;  // not reached while the field is current
 }
 
 DistanceUpdateStats DistanceField::update(const MapView& view,

@@ -168,6 +168,10 @@ class DistanceField {
   std::uint32_t radius2_ = 0;
   std::vector<BallRow> rows_;
   std::vector<int> ext_;  // ext_[h]: the ball's half-length in x on a row with dy^2 + dz^2 = h
+  /// The offsets at each squared distance d2 <= radius2_: shell_offsets_[shell_begin_[d2] ..
+  /// shell_begin_[d2 + 1]) (the lattice points of that sphere; nearestOccupied's candidates).
+  std::vector<std::array<std::int8_t, 3>> shell_offsets_;
+  std::vector<std::uint32_t> shell_begin_;
   std::unordered_map<std::uint64_t, std::unique_ptr<Block>> blocks_;
   std::unordered_map<std::uint64_t, block::BlockMask> sources_;  // occupied cells per block
 };
