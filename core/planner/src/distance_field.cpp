@@ -109,19 +109,17 @@ void DistanceField::clear() {
 std::size_t DistanceField::memoryBytes() const {
   // Each entry: the node (key, pointer, hash link) and the bucket; each field block itself.
   constexpr std::size_t kNode = 4 * sizeof(void*);
-  return blocks_.size() * (sizeof(Block) + kNode) + blocks_.bucket_count() * sizeof(void*) +
-         sources_.size() * (sizeof(block::BlockMask) + kNode) +
-         sources_.bucket_count() * sizeof(void*);
+  return blocks_.size() * sizeof(Block) + blocks_.bytes() + sources_.bytes();
 }
 
 std::uint16_t DistanceField::distanceSquared(const VoxelKey& cell) const {
-  const auto it = blocks_.find(block::blockOf(cell));
-  return it == blocks_.end() ? kFar : it->second->d2[block::indexOf(cell)];
+  const auto* b = blocks_.get(block::blockOf(cell));
+  return b == nullptr ? kFar : (*b)->d2[block::indexOf(cell)];
 }
 
 bool DistanceField::isOccupied(const VoxelKey& cell) const {
-  const auto it = sources_.find(block::blockOf(cell));
-  return it != sources_.end() && block::testBit(it->second, block::indexOf(cell));
+  const block::BlockMask* m = sources_.get(block::blockOf(cell));
+  return m != nullptr && block::testBit(*m, block::indexOf(cell));
 }
 
 std::uint64_t DistanceField::occupiedRow(int cx, int y, int z, int ext) const {
@@ -130,9 +128,9 @@ std::uint64_t DistanceField::occupiedRow(int cx, int y, int z, int ext) const {
   const int hi = std::min(cx + ext, 0xffff);
   std::uint64_t bits = 0;
   for (int bx = lo >> 3; bx <= hi >> 3; ++bx) {
-    const auto it = sources_.find(packBlock(bx, y >> 3, z >> 3));
-    if (it == sources_.end()) continue;
-    const std::uint64_t byte = rowByte(it->second, y, z);
+    const block::BlockMask* m = sources_.get(packBlock(bx, y >> 3, z >> 3));
+    if (m == nullptr) continue;
+    const std::uint64_t byte = rowByte(*m, y, z);
     const int shift = bx * 8 - (cx - 31);  // where the block's x = 0 lands
     if (shift >= 64) continue;
     bits |= shift >= 0 ? byte << shift : byte >> -shift;
@@ -159,8 +157,7 @@ std::optional<VoxelKey> DistanceField::nearestOccupied(const VoxelKey& cell) con
     const std::uint64_t key = packBlock(n.x >> 3, n.y >> 3, n.z >> 3);
     Slot& slot = cache[(key ^ (key >> 13) ^ (key >> 26)) & 15];
     if (slot.key != key) {
-      const auto it = sources_.find(key);
-      slot = {key, it == sources_.end() ? nullptr : &it->second};
+      slot = {key, sources_.get(key)};
     }
     if (slot.mask != nullptr &&
         block::testBit(*slot.mask, (n.x & 7) | ((n.y & 7) << 3) | ((n.z & 7) << 6))) {
@@ -177,8 +174,8 @@ DistanceUpdateStats DistanceField::update(const MapView& view,
   std::vector<CellCoord> removed;
   for (const std::uint64_t key : blocks) {
     const block::BlockMask now = occupiedOf(view.block(key));
-    const auto it = sources_.find(key);
-    const block::BlockMask before = it == sources_.end() ? block::BlockMask{} : it->second;
+    const block::BlockMask* had = sources_.get(key);
+    const block::BlockMask before = had == nullptr ? block::BlockMask{} : *had;
     block::BlockMask plus{};
     block::BlockMask minus{};
     for (int w = 0; w < block::kMaskWords; ++w) {
@@ -191,8 +188,8 @@ DistanceUpdateStats DistanceField::update(const MapView& view,
                          [&](int i) { removed.push_back(CellCoord::of(block::keyOf(key, i))); });
     if (block::anyBit(now)) {
       sources_[key] = now;
-    } else if (it != sources_.end()) {
-      sources_.erase(it);
+    } else if (had != nullptr) {
+      sources_.erase(key);
     }
   }
   DistanceUpdateStats stats;
@@ -214,15 +211,14 @@ namespace {
 /// up once each.
 class NearMasks {
  public:
-  using Sources = std::unordered_map<std::uint64_t, block::BlockMask>;
+  using Sources = FlatMap<block::BlockMask>;
   NearMasks(const Sources& sources, const CellCoord& c) {
     base_ = {std::max(c.x - 2, 0) >> 3, std::max(c.y - 2, 0) >> 3, std::max(c.z - 2, 0) >> 3};
     for (int k = 0; k < 8; ++k) {
       const int bx = base_[0] + (k & 1), by = base_[1] + ((k >> 1) & 1),
                 bz = base_[2] + ((k >> 2) & 1);
       if (bx > kMaxBlockCoord || by > kMaxBlockCoord || bz > kMaxBlockCoord) continue;
-      const auto it = sources.find(packBlock(bx, by, bz));
-      masks_[static_cast<std::size_t>(k)] = it == sources.end() ? nullptr : &it->second;
+      masks_[static_cast<std::size_t>(k)] = sources.get(packBlock(bx, by, bz));
     }
   }
   /// Whether cell (x, y, z), within 2 cells of the cell, is occupied.
@@ -347,10 +343,10 @@ void DistanceField::apply(const std::vector<CellCoord>& added,
     }
     const std::uint64_t key = segments[i].block;
     Block* b = nullptr;
-    if (auto it = blocks_.find(key); it != blocks_.end()) {
-      b = it->second.get();
+    if (auto* found = blocks_.get(key); found != nullptr) {
+      b = found->get();
     } else if (any_add) {
-      b = blocks_.emplace(key, std::make_unique<Block>()).first->second.get();
+      b = (blocks_[key] = std::make_unique<Block>()).get();
     }
     // No block and nothing added: no finite cell here, no removed cell was anyone's nearest.
     if (b != nullptr) targets.push_back({key, b, &segments[i], j - i, {}, false});
@@ -423,16 +419,16 @@ std::size_t DistanceField::recomputeBlock(Target& t, std::vector<std::uint64_t>&
   for (int bz = bz0; bz <= bz1; ++bz) {
     for (int by = by0; by <= by1; ++by) {
       for (int bx = bx0; bx <= bx1; ++bx) {
-        const auto it = sources_.find(packBlock(bx, by, bz));
-        if (it == sources_.end()) continue;
+        const block::BlockMask* found = sources_.get(packBlock(bx, by, bz));
+        if (found == nullptr) continue;
         const int shift = bx * 8 - wx0;
         for (int zz = 0; zz < 8; ++zz) {
           const int z = bz * 8 + zz - wz0;
-          if (z < 0 || z >= w || it->second[static_cast<std::size_t>(zz)] == 0) continue;
+          if (z < 0 || z >= w || (*found)[static_cast<std::size_t>(zz)] == 0) continue;
           for (int yy = 0; yy < 8; ++yy) {
             const int y = by * 8 + yy - wy0;
             if (y < 0 || y >= w) continue;
-            const std::uint64_t byte = rowByte(it->second, yy, zz);
+            const std::uint64_t byte = rowByte(*found, yy, zz);
             window[static_cast<std::size_t>(y + z * w)] |=
                 shift >= 0 ? byte << shift : byte >> -shift;
           }

@@ -12,6 +12,7 @@
 #include "densemap/geometry/block_layout.hpp"
 #include "densemap/geometry/chunk_runner.hpp"
 #include "densemap/geometry/error.hpp"
+#include "densemap/planner/flat_map.hpp"
 #include "densemap/query/map_view.hpp"
 
 namespace densemap {
@@ -97,20 +98,20 @@ class DistanceField {
   /// Calls f(cell, squared distance) for every finite cell of the field.
   template <class F>
   void forEachFinite(F&& f) const {
-    for (const auto& [key, b] : blocks_) {
+    blocks_.forEach([&](std::uint64_t key, const std::unique_ptr<Block>& b) {
       for (int i = 0; i < block::kVoxels; ++i) {
         if (b->d2[i] != kFar) f(block::keyOf(key, i), b->d2[i]);
       }
-    }
+    });
   }
 
   /// Calls f(block key, its 512 squared distances) for every block of the field whose z block
   /// coordinate is `block_z` (a walk over the field's blocks).
   template <class F>
   void forEachBlockInLayer(int block_z, F&& f) const {
-    for (const auto& [key, b] : blocks_) {
+    blocks_.forEach([&](std::uint64_t key, const std::unique_ptr<Block>& b) {
       if (static_cast<int>(block::coordsOf(key)[2]) == block_z) f(key, b->d2);
-    }
+    });
   }
 
   /// The rows of a ball: (dy, dz, h = dy^2 + dz^2, half-length in x), nearest first.
@@ -172,8 +173,8 @@ class DistanceField {
   /// shell_begin_[d2 + 1]) (the lattice points of that sphere; nearestOccupied's candidates).
   std::vector<std::array<std::int8_t, 3>> shell_offsets_;
   std::vector<std::uint32_t> shell_begin_;
-  std::unordered_map<std::uint64_t, std::unique_ptr<Block>> blocks_;
-  std::unordered_map<std::uint64_t, block::BlockMask> sources_;  // occupied cells per block
+  FlatMap<std::unique_ptr<Block>> blocks_;
+  FlatMap<block::BlockMask> sources_;  // occupied cells per block (blocks with any)
 };
 
 /// The squared distance (cells^2) from `c` to the nearest cell whose bit `row(cx, y, z, ext)`
