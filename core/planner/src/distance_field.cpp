@@ -376,10 +376,11 @@ void DistanceField::apply(const std::vector<CellCoord>& added,
 void DistanceField::stampBlock(Target& t) const {
   const auto limit = static_cast<std::uint16_t>(radius2_);
   Block& b = *t.block;
-  // Removals first, against the values before this update's additions (either order gives
-  // the same field; this one marks fewer cells).
+  // Additions first: a cell an added cell brought nearer than a removed one holds its exact
+  // value already (every remaining occupied cell is at least as far as the removed one was)
+  // and is not marked; a cell still at a removed cell's distance is marked and searched anew.
   for (int pass = 0; pass < 2; ++pass) {
-    const bool adding = pass == 1;
+    const bool adding = pass == 0;
     for (std::size_t k = 0; k < t.count; ++k) {
       const Segment& g = t.segments[k];
       if (g.add != adding) continue;
