@@ -1,4 +1,6 @@
 #include <cstring>
+#include <initializer_list>
+#include <vector>
 
 #include "densemap/planner/distance_slice.hpp"
 #include "densemap/wire/topics.hpp"
@@ -53,26 +55,25 @@ void writeGrid(const dds::Entity& writer, const std_msgs_msg_dds__Header_& heade
   (void)dds::write(writer, &msg);
 }
 
-/// The occupied cells' centres as a PointCloud2 (x, y, z float32).
-void writeCenters(const dds::Entity& writer, const std_msgs_msg_dds__Header_& header,
-                  ros2::MapTopicsState& map) {
-  const std::vector<Point3f> centers = map.occupiedCenters();
-  std::vector<std::uint8_t> data(centers.size() * 12);
-  for (std::size_t i = 0; i < centers.size(); ++i) {
-    std::memcpy(data.data() + 12 * i, centers[i].data(), 12);
+/// A PointCloud2 of `width` points of `names` (float32 each, packed in that order) in `data`.
+void writeFloatCloud(const dds::Entity& writer, const std_msgs_msg_dds__Header_& header,
+                     std::initializer_list<const char*> names, std::uint32_t width,
+                     std::vector<std::uint8_t>& data) {
+  std::vector<sensor_msgs_msg_dds__PointField_> fields;
+  std::uint32_t offset = 0;
+  for (const char* name : names) {
+    fields.push_back({const_cast<char*>(name), offset, 7, 1});  // 7: FLOAT32
+    offset += 4;
   }
-  sensor_msgs_msg_dds__PointField_ fields[3] = {{const_cast<char*>("x"), 0, 7, 1},
-                                                {const_cast<char*>("y"), 4, 7, 1},
-                                                {const_cast<char*>("z"), 8, 7, 1}};
   sensor_msgs_msg_dds__PointCloud2_ msg{};
   msg.header = header;
   msg.height = 1;
-  msg.width = static_cast<std::uint32_t>(centers.size());
-  msg.fields._length = msg.fields._maximum = 3;
-  msg.fields._buffer = fields;
+  msg.width = width;
+  msg.fields._length = msg.fields._maximum = static_cast<std::uint32_t>(fields.size());
+  msg.fields._buffer = fields.data();
   msg.fields._release = false;
   msg.is_bigendian = false;
-  msg.point_step = 12;
+  msg.point_step = offset;
   msg.row_step = static_cast<std::uint32_t>(data.size());
   msg.data._length = msg.data._maximum = static_cast<std::uint32_t>(data.size());
   msg.data._buffer = data.data();
@@ -81,30 +82,25 @@ void writeCenters(const dds::Entity& writer, const std_msgs_msg_dds__Header_& he
   (void)dds::write(writer, &msg);
 }
 
+/// The occupied cells' centres as a PointCloud2 (x, y, z float32).
+void writeCenters(const dds::Entity& writer, const std_msgs_msg_dds__Header_& header,
+                  ros2::MapTopicsState& map) {
+  const std::vector<Point3f> centers = map.occupiedCenters();
+  std::vector<std::uint8_t> data(centers.size() * 12);
+  for (std::size_t i = 0; i < centers.size(); ++i) {
+    std::memcpy(data.data() + 12 * i, centers[i].data(), 12);
+  }
+  writeFloatCloud(writer, header, {"x", "y", "z"}, static_cast<std::uint32_t>(centers.size()),
+                  data);
+}
+
 /// The distance field's layer: PointCloud2 with x, y, z and distance (float32 each).
 void writeSlice(const dds::Entity& writer, const std_msgs_msg_dds__Header_& header,
                 const std::vector<std::array<float, 4>>& points) {
   std::vector<std::uint8_t> data(points.size() * 16);
   if (!points.empty()) std::memcpy(data.data(), points.data(), data.size());
-  sensor_msgs_msg_dds__PointField_ fields[4] = {{const_cast<char*>("x"), 0, 7, 1},
-                                                {const_cast<char*>("y"), 4, 7, 1},
-                                                {const_cast<char*>("z"), 8, 7, 1},
-                                                {const_cast<char*>("distance"), 12, 7, 1}};
-  sensor_msgs_msg_dds__PointCloud2_ msg{};
-  msg.header = header;
-  msg.height = 1;
-  msg.width = static_cast<std::uint32_t>(points.size());
-  msg.fields._length = msg.fields._maximum = 4;
-  msg.fields._buffer = fields;
-  msg.fields._release = false;
-  msg.is_bigendian = false;
-  msg.point_step = 16;
-  msg.row_step = static_cast<std::uint32_t>(data.size());
-  msg.data._length = msg.data._maximum = static_cast<std::uint32_t>(data.size());
-  msg.data._buffer = data.data();
-  msg.data._release = false;
-  msg.is_dense = true;
-  (void)dds::write(writer, &msg);
+  writeFloatCloud(writer, header, {"x", "y", "z", "distance"},
+                  static_cast<std::uint32_t>(points.size()), data);
 }
 
 /// The inflated costmap of the layer.
