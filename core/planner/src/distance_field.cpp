@@ -5,6 +5,7 @@
 #include <cmath>
 #include <mutex>
 #include <string>
+#include <utility>
 
 #include "densemap/map/sensor_model.hpp"
 
@@ -323,25 +324,45 @@ void DistanceField::apply(const std::vector<CellCoord>& added,
     const std::lock_guard lock(parts_mutex);
     parts.push_back(std::move(out));
   });
-  std::vector<Segment> segments;
+  // The segments grouped by block (a counting sort: each block's place found once per
+  // segment in a hash map of the blocks met, then each segment put in its block's run).
+  FlatMap<std::uint32_t> group_of;  // block -> its group + 1
+  std::vector<std::uint64_t> group_keys;
+  std::vector<std::size_t> group_start;  // counts, then where each group starts
+  std::vector<std::uint32_t> groups;     // each segment's group, in the parts' order
+  for (const auto& p : parts) {
+    for (const Segment& g : p) {
+      std::uint32_t& slot = group_of[g.block];
+      if (slot == 0) {
+        group_keys.push_back(g.block);
+        group_start.push_back(0);
+        slot = static_cast<std::uint32_t>(group_keys.size());
+      }
+      groups.push_back(slot - 1);
+      ++group_start[slot - 1];
+    }
+  }
   std::size_t total = 0;
-  for (const auto& p : parts) total += p.size();
-  segments.reserve(total);
-  for (auto& p : parts) segments.insert(segments.end(), p.begin(), p.end());
-  std::sort(segments.begin(), segments.end(),
-            [](const Segment& a, const Segment& b) { return a.block < b.block; });
+  for (std::size_t& start : group_start) total += std::exchange(start, total);
+  std::vector<Segment> segments(total);
+  {
+    std::vector<std::size_t> next = group_start;
+    std::size_t k = 0;
+    for (const auto& p : parts) {
+      for (const Segment& g : p) segments[next[groups[k++]]++] = g;
+    }
+  }
+  group_start.push_back(total);
 
   // Blocks first (serially: the table changes), then each block's segments on the runner: a
   // block's task writes only that block and reads the occupied cells, which stay as they are.
   std::vector<Target> targets;
-  for (std::size_t i = 0; i < segments.size();) {
-    std::size_t j = i;
-    bool any_add = false;
-    while (j < segments.size() && segments[j].block == segments[i].block) {
-      any_add = any_add || segments[j].add;
-      ++j;
-    }
-    const std::uint64_t key = segments[i].block;
+  for (std::size_t gi = 0; gi < group_keys.size(); ++gi) {
+    const std::size_t i = group_start[gi], j = group_start[gi + 1];
+    const bool any_add = std::any_of(segments.begin() + static_cast<std::ptrdiff_t>(i),
+                                     segments.begin() + static_cast<std::ptrdiff_t>(j),
+                                     [](const Segment& g) { return g.add; });
+    const std::uint64_t key = group_keys[gi];
     Block* b = nullptr;
     if (auto* found = blocks_.get(key); found != nullptr) {
       b = found->get();
@@ -350,7 +371,6 @@ void DistanceField::apply(const std::vector<CellCoord>& added,
     }
     // No block and nothing added: no finite cell here, no removed cell was anyone's nearest.
     if (b != nullptr) targets.push_back({key, b, &segments[i], j - i, {}, false});
-    i = j;
   }
   runner.run(targets.size(), 16, [&](std::size_t begin, std::size_t end) {
     for (std::size_t t = begin; t != end; ++t) stampBlock(targets[t]);
