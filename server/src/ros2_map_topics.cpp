@@ -152,7 +152,9 @@ void Ros2Bridge::publishMaps() {
       if (dds_->costmap_writer.get() > 0) {
         Costmap costmap =
             inflatedCostmap(field, view, options_.esdf_slice_z_m, options_.robot_radius_m);
-        writeCostmap(dds_->costmap_writer, header, costmap, options_.esdf_slice_z_m);
+        if (costmap.width > 0) {
+          writeCostmap(dds_->costmap_writer, header, costmap, options_.esdf_slice_z_m);
+        }
       }
     });
   }

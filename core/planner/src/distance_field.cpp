@@ -108,35 +108,13 @@ void DistanceField::clear() {
 }
 
 std::size_t DistanceField::memoryBytes() const {
-  // Each entry: the node (key, pointer, hash link) and the bucket; each field block itself.
-  constexpr std::size_t kNode = 4 * sizeof(void*);
+  // The field's blocks, and the two maps' slot arrays.
   return blocks_.size() * sizeof(Block) + blocks_.bytes() + sources_.bytes();
 }
 
 std::uint16_t DistanceField::distanceSquared(const VoxelKey& cell) const {
   const auto* b = blocks_.get(block::blockOf(cell));
   return b == nullptr ? kFar : (*b)->d2[block::indexOf(cell)];
-}
-
-bool DistanceField::isOccupied(const VoxelKey& cell) const {
-  const block::BlockMask* m = sources_.get(block::blockOf(cell));
-  return m != nullptr && block::testBit(*m, block::indexOf(cell));
-}
-
-std::uint64_t DistanceField::occupiedRow(int cx, int y, int z, int ext) const {
-  if (y < 0 || y > 0xffff || z < 0 || z > 0xffff) return 0;
-  const int lo = std::max(cx - ext, 0);
-  const int hi = std::min(cx + ext, 0xffff);
-  std::uint64_t bits = 0;
-  for (int bx = lo >> 3; bx <= hi >> 3; ++bx) {
-    const block::BlockMask* m = sources_.get(packBlock(bx, y >> 3, z >> 3));
-    if (m == nullptr) continue;
-    const std::uint64_t byte = rowByte(*m, y, z);
-    const int shift = bx * 8 - (cx - 31);  // where the block's x = 0 lands
-    if (shift >= 64) continue;
-    bits |= shift >= 0 ? byte << shift : byte >> -shift;
-  }
-  return bits;
 }
 
 std::optional<VoxelKey> DistanceField::nearestOccupied(const VoxelKey& cell) const {

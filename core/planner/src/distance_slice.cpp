@@ -52,7 +52,13 @@ Costmap inflatedCostmap(const DistanceField& field, const MapView& view, double 
   field.forEachBlockInLayer(z >> 3, [&](std::uint64_t key, const auto&) { widen(key); });
   Costmap m;
   m.resolution = grid.resolution();
-  if (bx1 < 0) return m;
+  // The layer's extent follows the map (up to 65,536 cells an axis): past kMaxCostmapCells the
+  // costmap is not built (an empty one), rather than allocated.
+  if (bx1 < 0 ||
+      static_cast<double>(bx1 - bx0 + 1) * (by1 - by0 + 1) * block::kEdge * block::kEdge >
+          static_cast<double>(kMaxCostmapCells)) {
+    return m;
+  }
   m.width = static_cast<std::uint32_t>((bx1 - bx0 + 1) * block::kEdge);
   m.height = static_cast<std::uint32_t>((by1 - by0 + 1) * block::kEdge);
   const Point3f corner = grid.keyToPoint(

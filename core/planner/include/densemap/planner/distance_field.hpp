@@ -84,8 +84,6 @@ class DistanceField {
   [[nodiscard]] std::uint16_t distanceSquared(const VoxelKey& cell) const;
   /// The nearest occupied cell to `cell` (one of them on a tie), or none within the maximum.
   [[nodiscard]] std::optional<VoxelKey> nearestOccupied(const VoxelKey& cell) const;
-  /// Whether the field counts `cell` as occupied.
-  [[nodiscard]] bool isOccupied(const VoxelKey& cell) const;
 
   [[nodiscard]] double resolution() const { return resolution_m_; }
   [[nodiscard]] double maxDistance() const { return options_.max_distance_m; }
@@ -156,9 +154,6 @@ class DistanceField {
   /// Searches the marked cells anew in a window of the occupied cells around the block (the
   /// block grown by the radius, one 64-bit word per x-row); returns how many.
   std::size_t recomputeBlock(Target& t, std::vector<std::uint64_t>& window) const;
-  /// The occupied-cell bits of x in [cx - ext, cx + ext] on row (y, z), placed as
-  /// nearestInRows wants them (bit 31 is cx).
-  [[nodiscard]] std::uint64_t occupiedRow(int cx, int y, int z, int ext) const;
   /// Applies one batch of changed cells (already recorded in sources_).
   void apply(const std::vector<CellCoord>& added, const std::vector<CellCoord>& removed,
              DistanceUpdateStats& stats, const ChunkRunner& runner);
@@ -180,16 +175,14 @@ class DistanceField {
 /// The squared distance (cells^2) from `c` to the nearest cell whose bit `row(cx, y, z, ext)`
 /// sets, searched over the rows of `rows` (nearest first) while below `bound2`; `row` returns
 /// the bits of x in [cx - 31, cx + 32] (bit 31 is cx), of which only [cx - ext, cx + ext] count.
-/// Returns bound2 when none is nearer, and the offset of the one found in `offset`; stops at the
-/// first one found at `enough` or nearer.
+/// Returns bound2 when none is nearer, and the offset of the one found in `offset`.
 template <class RowBits>
 [[nodiscard]] std::uint32_t nearestInRows(const CellCoord& c, std::uint32_t bound2,
                                           std::span<const DistanceField::BallRow> rows,
-                                          RowBits&& row, std::array<int, 3>* offset = nullptr,
-                                          std::uint32_t enough = 0) {
+                                          RowBits&& row, std::array<int, 3>* offset = nullptr) {
   std::uint32_t best = bound2;
   for (const DistanceField::BallRow& r : rows) {
-    if (r.h >= best || best <= enough) break;
+    if (r.h >= best) break;
     const std::uint64_t bits = row(c.x, c.y + r.dy, c.z + r.dz, r.ext);
     if (bits == 0) continue;
     // Nearest set bit to bit 31, up (x >= cx) and down (x < cx).

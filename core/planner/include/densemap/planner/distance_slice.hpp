@@ -25,7 +25,10 @@ struct Costmap {
   std::uint32_t width = 0, height = 0;
   std::vector<std::int8_t> data;
 };
-/// `field` and `view` of the same version; an empty costmap for an empty layer.
+/// The most cells a costmap holds (64 MiB).
+inline constexpr std::size_t kMaxCostmapCells = std::size_t{1} << 26;
+/// `field` and `view` of the same version; an empty costmap for an empty layer or one of more
+/// than kMaxCostmapCells cells.
 [[nodiscard]] Costmap inflatedCostmap(const DistanceField& field, const MapView& view, double z_m,
                                       double robot_radius_m);
 
