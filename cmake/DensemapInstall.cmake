@@ -28,6 +28,7 @@ set(DENSEMAP_SDK_HEADERS
     client/include/densemap/client/map_snapshot.hpp
     mapper/include/densemap/mapper/mapper.hpp
     core/map/include/densemap/map/sensor_model.hpp
+    core/map/include/densemap/map/decay_options.hpp
     core/geometry/include/densemap/geometry/error.hpp
     core/geometry/include/densemap/geometry/point_cloud.hpp
     core/geometry/include/densemap/geometry/voxel_key.hpp

@@ -39,6 +39,10 @@ void printStatus(const ServerStatus& s) {
                 static_cast<unsigned long long>(s.evicted_blocks),
                 static_cast<unsigned long long>(s.evicted_cells));
   }
+  if (s.decayed_cells > 0) {
+    std::printf("; %llu occupied cells decayed to unknown (map.decay)",
+                static_cast<unsigned long long>(s.decayed_cells));
+  }
   std::printf("\n");
   if (!s.last_query_error.empty()) {
     std::printf("  last refused request: %s\n", s.last_query_error.c_str());

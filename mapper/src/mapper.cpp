@@ -41,7 +41,8 @@ struct Mapper::Impl {
 
   [[nodiscard]] std::shared_ptr<const MapView> view() const { return engine->view(); }
   [[nodiscard]] Expected<InsertResult> insert(const PointCloud& points_world,
-                                              const Point3f& origin);
+                                              const Point3f& origin,
+                                              std::optional<double> stamp_s);
   /// Brings the field up to date with the blocks a version wrote (writer, under the lock).
   void updateField(std::span<const std::uint64_t> blocks) {
     if (field) arena->execute([&] { field->update(*view(), blocks, tbbRunner()); });
@@ -85,6 +86,7 @@ Expected<PipelineOptions> pipelineOptionsOf(const MapperOptions& o) {
   // A library map grows as it is used: no pool faulted in up front.
   p.reserve_blocks = 0;
   p.versioned_views = o.versioned_reads;
+  p.decay = o.decay;
   if (auto ok = checkMapOptions(p); !ok) return std::unexpected(ok.error());
   return p;
 }
@@ -162,10 +164,16 @@ Expected<Mapper> Mapper::load(const std::string& path, const MapperOptions& opti
   return Mapper(std::move(*impl));
 }
 
-Expected<InsertResult> Mapper::Impl::insert(const PointCloud& points_world, const Point3f& origin) {
+Expected<InsertResult> Mapper::Impl::insert(const PointCloud& points_world, const Point3f& origin,
+                                            std::optional<double> stamp_s) {
+  std::optional<std::int64_t> stamp_ns;
+  if (stamp_s) {
+    if (!(std::abs(*stamp_s) < 1e9)) return makeError("stamp must be finite and below 1e9 s");
+    stamp_ns = std::llround(*stamp_s * 1e9);
+  }
   std::expected<IntegrationResult, Rejection> r = std::unexpected(Rejection{});
   const std::unique_lock writing(lock);
-  arena->execute([&] { r = engine->integrateWorld(points_world, origin); });
+  arena->execute([&] { r = engine->integrateWorld(points_world, origin, stamp_ns); });
   if (!r) return makeError(r.error().message);
   updateField(r->written_blocks);
   InsertResult out;
@@ -174,34 +182,41 @@ Expected<InsertResult> Mapper::Impl::insert(const PointCloud& points_world, cons
   out.points = points_world.size();
   out.evicted_blocks = r->evicted_blocks;
   out.evicted_cells = r->evicted_cells;
+  out.decay_stepped_cells = r->decayed.stepped;
+  out.decay_erased_cells = r->decayed.erased;
   return out;
 }
 
 Expected<InsertResult> Mapper::insertPointCloud(std::span<const Point3f> points_world,
-                                                const Point3f& origin) {
-  return impl_->insert(PointCloud(points_world.begin(), points_world.end()), origin);
+                                                const Point3f& origin,
+                                                std::optional<double> stamp_s) {
+  return impl_->insert(PointCloud(points_world.begin(), points_world.end()), origin, stamp_s);
 }
 
 Expected<InsertResult> Mapper::insertPointCloud(const PointCloud& points_world,
-                                                const Point3f& origin) {
-  return impl_->insert(points_world, origin);
+                                                const Point3f& origin,
+                                                std::optional<double> stamp_s) {
+  return impl_->insert(points_world, origin, stamp_s);
 }
 
 Expected<InsertResult> Mapper::insertPointCloud(std::span<const float> xyz_world,
-                                                const Point3f& origin) {
+                                                const Point3f& origin,
+                                                std::optional<double> stamp_s) {
   if (auto ok = checkPointCoordinates(xyz_world.size()); !ok) return std::unexpected(ok.error());
   PointCloud points(xyz_world.size() / 3);
   for (std::size_t i = 0; i < points.size(); ++i) {
     points[i] = Point3f(xyz_world[3 * i], xyz_world[3 * i + 1], xyz_world[3 * i + 2]);
   }
-  return impl_->insert(points, origin);
+  return impl_->insert(points, origin, stamp_s);
 }
 
 Expected<InsertResult> Mapper::insertScan(std::span<const Point3f> points_sensor,
-                                          const Eigen::Isometry3d& T_world_sensor) {
+                                          const Eigen::Isometry3d& T_world_sensor,
+                                          std::optional<double> stamp_s) {
   if (auto ok = checkRigidPose(T_world_sensor); !ok) return std::unexpected(ok.error());
   const PointCloud sensor(points_sensor.begin(), points_sensor.end());
-  return impl_->insert(transformPoints(T_world_sensor, sensor), sensorOrigin(T_world_sensor));
+  return impl_->insert(transformPoints(T_world_sensor, sensor), sensorOrigin(T_world_sensor),
+                       stamp_s);
 }
 
 std::size_t Mapper::Impl::erase(const VoxelKey& lo, const VoxelKey& hi) {

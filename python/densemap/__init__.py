@@ -45,9 +45,10 @@ def _scans(self):
         yield self[index]
 
 
-def _insert(self, scan):
-    """Integrates a Scan of densemap.read_scans: its world-frame points from its origin."""
-    return self.insert_point_cloud(scan.points_world, scan.origin)
+def _insert(self, scan, stamp=None):
+    """Integrates a Scan of densemap.read_scans: its world-frame points from its origin
+    (stamp, s: the scan's time for decay_after)."""
+    return self.insert_point_cloud(scan.points_world, scan.origin, stamp)
 
 
 def _replay(self, scans, rate_hz=10.0, sensor_id="python"):

@@ -28,7 +28,8 @@ MapperOptions optionsFrom(double resolution, double max_range, const std::string
                           const std::string& update_rule, int threads, double prob_hit,
                           double prob_miss, double clamp_min, double clamp_max, double keep_radius,
                           const py::object& bounds, std::size_t max_points, bool versioned_reads,
-                          bool distance_field, double max_distance) {
+                          bool distance_field, double max_distance, const py::object& decay_after,
+                          double decay_period) {
   MapperOptions o;
   o.resolution_m = resolution;
   o.max_range_m = max_range;
@@ -44,6 +45,9 @@ MapperOptions optionsFrom(double resolution, double max_range, const std::string
   o.versioned_reads = versioned_reads;
   o.distance_field = distance_field;
   o.max_distance_m = max_distance;
+  if (!decay_after.is_none()) {
+    o.decay = DecayOptions{.after_s = decay_after.cast<double>(), .period_s = decay_period};
+  }
   return o;
 }
 
@@ -61,12 +65,13 @@ py::tuple distances(const Mapper& mapper, const py::handle& points, bool unknown
   }));
 }
 
-InsertResult insertPoints(Mapper& mapper, const py::handle& points, const py::handle& origin) {
+InsertResult insertPoints(Mapper& mapper, const py::handle& points, const py::handle& origin,
+                          std::optional<double> stamp) {
   // Non-finite points are the engine's to refuse (its message, the map unchanged).
   const PointCloud cloud = pointsFrom(points, mapper.options().max_points, "points", false);
   const Point3f o = pointFrom(origin, "origin");
   py::gil_scoped_release release;
-  return valueOrRaise(mapper.insertPointCloud(cloud, o));
+  return valueOrRaise(mapper.insertPointCloud(cloud, o, stamp));
 }
 
 Eigen::Isometry3d poseFrom(const py::handle& T, const std::string& what) {
@@ -203,6 +208,8 @@ py::dict optionsDict(const MapperOptions& o) {
   d["versioned_reads"] = o.versioned_reads;
   d["distance_field"] = o.distance_field;
   d["max_distance"] = o.max_distance_m;
+  d["decay_after"] = o.decay ? py::cast(o.decay->after_s) : py::none();
+  d["decay_period"] = o.decay ? o.decay->period_s : DecayOptions{}.period_s;
   return d;
 }
 
@@ -218,6 +225,10 @@ void bindMapper(py::module_& m) {
       .def_readonly("evicted_blocks", &InsertResult::evicted_blocks,
                     "Blocks dropped after the scan by keep_radius / bounds.")
       .def_readonly("evicted_cells", &InsertResult::evicted_cells, "Known cells dropped with them.")
+      .def_readonly("decay_stepped_cells", &InsertResult::decay_stepped_cells,
+                    "Occupied cells that took a decay step before the scan and stayed occupied.")
+      .def_readonly("decay_erased_cells", &InsertResult::decay_erased_cells,
+                    "Occupied cells that decayed to unknown before the scan.")
       .def("__repr__", [](const InsertResult& r) {
         return "InsertResult(version=" + std::to_string(r.version) +
                ", points=" + std::to_string(r.points) +
@@ -238,19 +249,23 @@ and bounds (((min_x, min_y, min_z), (max_x, max_y, max_z)) or None) bound the me
 max_points (per scan), versioned_reads (False: inserts write in place and a query waits for an
 insert under way; True: queries never wait, inserts copy the blocks they change, about a fifth
 more time a scan), distance_field (keep a distance field for distance() and distance_box(),
-updated with each insert) and max_distance (its maximum, m: exact below, reported beyond). A bad
-option raises densemap.Error naming it.
+updated with each insert) and max_distance (its maximum, m: exact below, reported beyond),
+decay_after (s; None: off) and decay_period (s): a map that forgets what moved, where an occupied
+cell not hit for decay_after seconds takes a miss every decay_period seconds until it is unknown
+(the clock is each insert's stamp, else the time of the insert). A bad option raises
+densemap.Error naming it.
 )doc")
       .def(py::init([](double resolution, double max_range, const std::string& kind,
                        const std::string& backend, const std::string& integration,
                        const std::string& update_rule, int threads, double prob_hit,
                        double prob_miss, double clamp_min, double clamp_max, double keep_radius,
                        const py::object& bounds, std::size_t max_points, bool versioned_reads,
-                       bool distance_field, double max_distance) {
-             return valueOrRaise(Mapper::create(
-                 optionsFrom(resolution, max_range, kind, backend, integration, update_rule,
-                             threads, prob_hit, prob_miss, clamp_min, clamp_max, keep_radius,
-                             bounds, max_points, versioned_reads, distance_field, max_distance)));
+                       bool distance_field, double max_distance, const py::object& decay_after,
+                       double decay_period) {
+             return valueOrRaise(Mapper::create(optionsFrom(
+                 resolution, max_range, kind, backend, integration, update_rule, threads,
+                 prob_hit, prob_miss, clamp_min, clamp_max, keep_radius, bounds, max_points,
+                 versioned_reads, distance_field, max_distance, decay_after, decay_period)));
            }),
            py::kw_only(), py::arg("resolution") = d.resolution_m,
            py::arg("max_range") = d.max_range_m, py::arg("kind") = d.kind,
@@ -260,22 +275,26 @@ option raises densemap.Error naming it.
            py::arg("clamp_min") = d.sensor.clamp_min, py::arg("clamp_max") = d.sensor.clamp_max,
            py::arg("keep_radius") = d.keep_radius_m, py::arg("bounds") = py::none(),
            py::arg("max_points") = d.max_points, py::arg("versioned_reads") = d.versioned_reads,
-           py::arg("distance_field") = d.distance_field, py::arg("max_distance") = d.max_distance_m)
+           py::arg("distance_field") = d.distance_field, py::arg("max_distance") = d.max_distance_m,
+           py::arg("decay_after") = py::none(), py::arg("decay_period") = DecayOptions{}.period_s)
       .def("insert_point_cloud", &insertPoints, py::arg("points"), py::arg("origin"),
+           py::arg("stamp") = py::none(),
            R"doc(Integrates world-frame points ((N, 3) float32 or float64, C- or F-contiguous)
-seen from origin (3 numbers), as OctoMap's insertPointCloud. Returns an InsertResult. Raises
+seen from origin (3 numbers), as OctoMap's insertPointCloud; stamp (s, optional) is the scan's
+time for decay_after. Returns an InsertResult. Raises
 densemap.Error for a NaN / Inf point or an empty or oversized scan (the map unchanged),
 ValueError / TypeError for a wrong shape or dtype.)doc")
       .def(
           "insert_scan",
-          [](Mapper& self, const py::handle& points, const py::handle& T_world_sensor) {
+          [](Mapper& self, const py::handle& points, const py::handle& T_world_sensor,
+             std::optional<double> stamp) {
             const PointCloud cloud =
                 pointsFrom(points, self.options().max_points, "points_sensor", false);
             const Eigen::Isometry3d pose = poseFrom(T_world_sensor, "T_world_sensor");
             py::gil_scoped_release release;
-            return valueOrRaise(self.insertScan(cloud, pose));
+            return valueOrRaise(self.insertScan(cloud, pose, stamp));
           },
-          py::arg("points_sensor"), py::arg("T_world_sensor"),
+          py::arg("points_sensor"), py::arg("T_world_sensor"), py::arg("stamp") = py::none(),
           R"doc(Integrates sensor-frame points with the sensor's pose (a 4x4 rigid transform,
 world from sensor): points are transformed in double and rounded once, the origin is the
 pose's translation.)doc")
@@ -455,12 +474,14 @@ name their 'box'.)doc")
       [](const std::filesystem::path& path, double max_range, const std::string& backend,
          const std::string& integration, const std::string& update_rule, int threads,
          double keep_radius, const py::object& bounds, std::size_t max_points, bool versioned_reads,
-         bool distance_field, double max_distance) {
+         bool distance_field, double max_distance, const py::object& decay_after,
+         double decay_period) {
         const MapperOptions d;
         MapperOptions o = optionsFrom(d.resolution_m, max_range, d.kind, backend, integration,
                                       update_rule, threads, d.sensor.hit, d.sensor.miss,
                                       d.sensor.clamp_min, d.sensor.clamp_max, keep_radius, bounds,
-                                      max_points, versioned_reads, distance_field, max_distance);
+                                      max_points, versioned_reads, distance_field, max_distance,
+                                      decay_after, decay_period);
         py::gil_scoped_release release;
         return valueOrRaise(Mapper::load(path.string(), o));
       },
@@ -470,6 +491,7 @@ name their 'box'.)doc")
       py::arg("keep_radius") = d.keep_radius_m, py::arg("bounds") = py::none(),
       py::arg("max_points") = d.max_points, py::arg("versioned_reads") = d.versioned_reads,
       py::arg("distance_field") = d.distance_field, py::arg("max_distance") = d.max_distance_m,
+      py::arg("decay_after") = py::none(), py::arg("decay_period") = DecayOptions{}.period_s,
       R"doc(A Mapper read from a .dmap (densemap: version, sensor model, a dense map's
 evidence) or .bt / .ot (OctoMap) file; the file decides the resolution, sensor model and a
 dense kind, the arguments the rest. Corrupt, truncated and non-finite files raise

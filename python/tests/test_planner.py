@@ -122,3 +122,38 @@ def test_refusals():
     with pytest.raises(densemap.Error, match="max_distance"):
         densemap.Mapper(resolution=0.1, distance_field=True, max_distance=10.0)
     assert m.options["distance_field"] and m.options["max_distance"] == 1.0
+
+
+def test_a_map_that_forgets_what_moved():
+    """A wall seen once fades: after decay_after seconds without a hit it takes a miss every
+    decay_period seconds, and when it would fall to 0.5 it is unknown; the distance field
+    follows. A wall seen again stays."""
+    m = densemap.Mapper(resolution=0.1, distance_field=True, max_distance=1.0, threads=2,
+                        decay_after=1.0, decay_period=0.5)
+    assert m.options["decay_after"] == 1.0
+    ys, zs = np.meshgrid(np.arange(-1.0, 1.0, 0.03), np.arange(-0.4, 0.4, 0.03))
+    wall = lambda x: np.stack([np.full(ys.size, x), ys.ravel(), zs.ravel()], axis=1)  # noqa: E731
+    origin = (0.0, 0.0, 0.0)
+    gone, kept = wall(2.0).astype(np.float32), wall(-1.5).astype(np.float32)
+    m.insert_point_cloud(np.vstack([gone, kept]), origin, stamp=0.0)
+    first = m.occupancy(gone[:1])[0]
+    assert first > 0.5
+    probe = np.array([[1.65, 0.0, 0.0]], dtype=np.float32)  # 0.4 m from the fading wall
+    assert m.distance(probe)[0][0] == pytest.approx(0.4)
+    # Only the kept wall is seen again, every 0.5 s.
+    stepped = erased = 0
+    for t in np.arange(0.5, 4.01, 0.5):
+        r = m.insert_point_cloud(kept, origin, stamp=float(t))
+        stepped += r.decay_stepped_cells
+        erased += r.decay_erased_cells
+        if t == 1.0:
+            # One miss: the hit's log-odds (0.847) less the miss's (0.405).
+            assert m.log_odds(gone[:1])[0] == pytest.approx(0.847298 - 0.405465, abs=1e-5)
+    assert stepped > 0 and erased > 0
+    assert np.isnan(m.occupancy(gone)).all(), "the unseen wall is unknown"
+    assert (m.occupancy(kept) > 0.5).all(), "the wall seen again stays"
+    assert m.distance(probe)[0][0] == pytest.approx(1.0), "the field forgot the wall too"
+    with pytest.raises(densemap.Error, match="stamp"):
+        m.insert_point_cloud(kept, origin, stamp=float("nan"))
+    with pytest.raises(densemap.Error, match="decay"):
+        densemap.Mapper(backend="octree", decay_after=1.0)

@@ -90,6 +90,14 @@ Expected<void> mapOptions(const proto::ServerConfig& config, PipelineOptions& o)
                                       static_cast<float>(b.max_z())));
   }
   o.max_range_m = config.map().max_range_m();
+  if (const proto::DecayConfig& d = config.map().decay(); d.enabled()) {
+    if (d.clock() != "arrival" && d.clock() != "stamp") {
+      return makeError("map.decay.clock must be \"arrival\" or \"stamp\", got \"" +
+                       d.clock().substr(0, 64) + "\"");
+    }
+    o.decay = DecayOptions{
+        .after_s = d.after_s(), .period_s = d.period_s(), .use_stamps = d.clock() == "stamp"};
+  }
   const auto& s = config.map().sensor();
   o.sensor = {s.prob_hit(), s.prob_miss(), s.clamp_min(), s.clamp_max()};
   if (auto ok = checkMapOptions(o); !ok) return makeError("map." + ok.error().message);

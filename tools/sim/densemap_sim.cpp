@@ -45,6 +45,11 @@ static int runMain(int argc, char** argv) {
   app.add_option("--points-per-scan", o.points_per_scan,
                  "Keep at most this many points per scan, drawn at random (0: all)")
       ->capture_default_str();
+  app.add_option("--walkers", o.walkers,
+                 "People walking beside the path (upright cylinders pacing 16 m at 1.4 m/s; scans "
+                 "0.1 s apart): what map.decay forgets. The ground truth has the static scene only")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 100));
   app.add_option("--oracle-factor", o.oracle_factor,
                  "Also write dense-oracle labels: a noise-free sensor with this factor times the "
                  "beams and columns, same poses (0: none)")

@@ -28,6 +28,7 @@ Expected<void> writeStatus(const Entity& writer, const ServerStatus& st) {
   s.rss_bytes = st.rss_bytes;
   s.evicted_blocks = st.evicted_blocks;
   s.evicted_cells = st.evicted_cells;
+  s.decayed_cells = st.decayed_cells;
   s.snapshot_failures = st.snapshot_failures;
   s.last_snapshot_error = lend(st.last_snapshot_error);
   s.cpu_s = st.cpu_s;
@@ -78,6 +79,7 @@ ServerStatus statusFromWire(const densemap_msgs_Status& s) {
   out.rss_bytes = s.rss_bytes;
   out.evicted_blocks = s.evicted_blocks;
   out.evicted_cells = s.evicted_cells;
+  out.decayed_cells = s.decayed_cells;
   out.snapshot_failures = s.snapshot_failures;
   out.last_snapshot_error = text(s.last_snapshot_error);
   out.cpu_s = s.cpu_s;

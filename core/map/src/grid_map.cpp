@@ -3,6 +3,7 @@
 
 #include <atomic>
 #include <bit>
+#include <cmath>
 
 #include <type_traits>
 #include <vector>
@@ -29,7 +30,7 @@ void GridMap::store(BlockNode& node, int index, float log_odds) const {
 /// first change takes the writable node (a copy when a published version still reads the head).
 struct GridMap::BlockWriter {
   struct Counts {
-    std::size_t updated = 0, changed = 0, newly_known = 0;
+    std::size_t updated = 0, changed = 0, newly_known = 0, forgotten = 0;
   };
   GridMap& map;
   BlockEntry& entry;
@@ -53,6 +54,20 @@ struct GridMap::BlockWriter {
     const bool was_known = known(i);
     if (was_known && value(i) == v) return;
     change(i, v, was_known, [&] { return key; });
+  }
+  /// Cell i (key) becomes unknown (a no-op for an unknown cell).
+  void forget(const VoxelKey& key, int i) {
+    ++counts.updated;
+    if (!known(i)) return;
+    if (write == nullptr) {
+      write = &batch.writable(entry);
+      read = write;
+    }
+    block::clearBit(write->voxels.known, i);
+    block::clearBit(write->fully_free, i);
+    ++counts.forgotten;
+    ++counts.changed;
+    if (out != nullptr) out->push_back({key, 0.0F, false});
   }
   /// A UpdateRule::kSet block (no counts): each cell of `free` or `occupied` takes
   /// model.update(value, occupied wins), as set() would, a mask word at a time and the key
@@ -253,7 +268,7 @@ ApplyStats GridMap::writeBlocks(std::span<BlockEntry* const> entries, CellChange
   // Each block records its changes in its own slot; slots are concatenated in block order.
   std::vector<CellChanges> block_changes(changes != nullptr ? entries.size() : 0);
   // Chunks of blocks may run at once: each counts its own, added once per chunk.
-  std::atomic<std::size_t> updated{0}, changed{0}, newly_known{0};
+  std::atomic<std::size_t> updated{0}, changed{0}, newly_known{0}, forgotten{0};
   runner().run(entries.size(), 16, [&](std::size_t begin, std::size_t end) {
     Counts c;
     BlockStore::WriteBatch batch(*store_);
@@ -292,10 +307,14 @@ ApplyStats GridMap::writeBlocks(std::span<BlockEntry* const> entries, CellChange
     updated += c.updated;
     changed += c.changed;
     newly_known += c.newly_known;
+    forgotten += c.forgotten;
   });
-  const Counts total{
-      .updated = updated.load(), .changed = changed.load(), .newly_known = newly_known.load()};
+  const Counts total{.updated = updated.load(),
+                     .changed = changed.load(),
+                     .newly_known = newly_known.load(),
+                     .forgotten = forgotten.load()};
   known_cells_ += total.newly_known;
+  known_cells_ -= total.forgotten;
   if (changes != nullptr) {
     for (auto& part : block_changes) changes->insert(changes->end(), part.begin(), part.end());
   }
@@ -505,12 +524,27 @@ ApplyStats GridMap::assignBlocks(std::span<const BlockCells> blocks, const Block
                                  CellChanges* changes) {
   std::vector<BlockEntry*>& entries = writeEntries(blocks.size());
   for (std::size_t j = 0; j < blocks.size(); ++j) entries[j] = &store_->entry(blocks[j].key);
-  return writeBlocks(entries, changes, [&](std::size_t j, BlockWriter& w) {
+  std::atomic<bool> forgot{false};
+  const ApplyStats stats = writeBlocks(entries, changes, [&](std::size_t j, BlockWriter& w) {
     std::array<float, block::kVoxels> values;  // only the mask's cells are read
     const BlockCells& b = blocks[j];
     values_of(b.key, b.cells, values);
-    block::forEachSetBit(b.cells, [&](int i) { w.set(block::keyOf(b.key, i), i, values[i]); });
+    block::forEachSetBit(b.cells, [&](int i) {
+      if (std::isnan(values[i])) {
+        w.forget(block::keyOf(b.key, i), i);
+        forgot.store(true, std::memory_order_relaxed);
+      } else {
+        w.set(block::keyOf(b.key, i), i, values[i]);
+      }
+    });
   });
+  if (forgot.load()) {  // blocks left with no known cell go, as clearBox's do
+    for (BlockEntry* e : entries) {
+      const BlockNode* n = BlockStore::latest(*e);
+      if (n != nullptr && !block::anyBit(n->voxels.known)) (void)store_->drop(*e);
+    }
+  }
+  return stats;
 }
 
 void GridMap::clear() {

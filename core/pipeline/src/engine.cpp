@@ -2,6 +2,7 @@
 
 #include "map_kind.hpp"
 
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 
@@ -17,6 +18,13 @@ std::string numberText(double v) {
   char text[32];
   std::snprintf(text, sizeof(text), "%g", v);
   return text;
+}
+
+/// The steady clock's time, ns (the decay clock when scans are not stamped).
+std::int64_t steadyNowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
 }
 
 }  // namespace
@@ -46,6 +54,14 @@ Expected<void> checkMapOptions(const PipelineOptions& o) {
   }
   if ((o.keep_radius_m > 0 || o.bounds) && o.backend != Backend::kGrid) {
     return makeError("keep_radius_m and bounds (eviction) need backend \"grid\"");
+  }
+  if (o.decay) {
+    if (auto ok = checkDecayOptions(*o.decay); !ok) {
+      return makeError("decay: " + ok.error().message);
+    }
+    if (o.kernel || o.backend != Backend::kGrid) {
+      return makeError("decay needs the log_odds map kind on backend \"grid\"");
+    }
   }
   const auto& s = o.sensor;
   if (!SensorModel(s).isValid() || s.hit >= 1.0 || s.clamp_max >= 1.0 || s.miss <= 0.0 ||
@@ -85,6 +101,7 @@ Engine::Engine(const PipelineOptions& options, std::unique_ptr<OccupancyMap> map
         std::move(map),
         {.method = options.method, .rule = options.rule, .max_range_m = options.max_range_m});
   }
+  if (options.decay) decay_ = std::make_unique<OccupancyDecay>(*options.decay);
   kind_->published().startVersionsAt(version);
   kind_->published().reserveBlocks(options.reserve_blocks);
   if (options.versioned_views) {
@@ -103,27 +120,35 @@ std::expected<IntegrationResult, Rejection> Engine::integrate(const RawScan& raw
   PointCloud points_world;
   Point3f origin_world = Point3f::Zero();
   transform(*scan, points_world, origin_world);
-  IntegrationResult result = integratePoints(points_world, origin_world);
+  const bool stamped = decay_ && decay_->options().use_stamps;
+  IntegrationResult result = integratePoints(
+      points_world, origin_world,
+      stamped ? raw.stamp_ns : steadyNowNs());
   result.sensor_id = raw.sensor_id;
   result.scan_seq = raw.seq;
   result.stamp_ns = raw.stamp_ns;
   return result;
 }
 
-std::expected<IntegrationResult, Rejection> Engine::integrateWorld(const PointCloud& points_world,
-                                                                   const Point3f& origin_world) {
+std::expected<IntegrationResult, Rejection> Engine::integrateWorld(
+    const PointCloud& points_world, const Point3f& origin_world,
+    std::optional<std::int64_t> stamp_ns) {
   if (auto ok = checkWorldScan(points_world, origin_world, options_.limits); !ok) {
     return std::unexpected(std::move(ok.error()));
   }
-  return integratePoints(points_world, origin_world);
+  return integratePoints(
+      points_world, origin_world,
+      stamp_ns.value_or(steadyNowNs()));
 }
 
 IntegrationResult Engine::integratePoints(const PointCloud& points_world,
-                                          const Point3f& origin_world) {
+                                          const Point3f& origin_world, std::int64_t now_ns) {
   IntegrationResult result;
   CellChanges* changes =
       options_.collect_changes || kind_->needsChanges() ? &result.changes : nullptr;
+  decayBefore(now_ns, result, changes);
   result.stats = kind_->integrate(points_world, origin_world, changes);
+  observeHits(points_world, origin_world, now_ns);
   evict(origin_world, result, changes);
   result.from_scan = true;
   publish(result);
@@ -163,6 +188,25 @@ void Engine::publish(IntegrationResult& result) {
           : MapView::advanceLive(kind_->published(), kind_->ownBytes(), &result.written_blocks);
   result.new_version = next->version();
   view_.store(std::move(next));
+}
+
+void Engine::decayBefore(std::int64_t now_ns, IntegrationResult& result, CellChanges* changes) {
+  if (!decay_) return;
+  // checkMapOptions allows decay on the grid backend only: the map is the published grid.
+  result.decayed = decay_->decay(kind_->published(), now_ns, changes);
+}
+
+void Engine::observeHits(const PointCloud& points_world, const Point3f& origin_world,
+                         std::int64_t now_ns) {
+  if (!decay_) return;
+  // The cells the scan hit: its rays' occupied end cells, as the integrator marks them.
+  const VoxelGrid& grid = kind_->published().grid();
+  hits_.clear();
+  for (const Point3f& p : points_world) {
+    const RayEnd ray = rayEndFor(grid, origin_world, p, options_.max_range_m);
+    if (ray.occupied && ray.key_valid) hits_.push_back(ray.key);
+  }
+  decay_->observe(hits_, now_ns);
 }
 
 void Engine::evict(const Point3f& origin, IntegrationResult& result, CellChanges* changes) {

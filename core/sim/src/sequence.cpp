@@ -14,6 +14,7 @@
 #include "densemap/sim/oracle_labels.hpp"
 #include "densemap/sim/procedural_scenes.hpp"
 #include "densemap/sim/trajectory.hpp"
+#include "densemap/sim/walker_scene.hpp"
 
 namespace densemap {
 namespace {
@@ -45,7 +46,8 @@ std::string describe(const SequenceOptions& o, const LidarModel& lidar) {
     << "\ndropout " << o.dropout << "\nscans " << o.scans << "\nseed " << o.seed
     << "\nelevations_deg " << lidar.elevations_deg.front() << ' ' << lidar.elevations_deg.back()
     << "\nground_truth_resolution_m " << o.ground_truth_resolution_m << "\npoints_per_scan "
-    << o.points_per_scan << "\noracle_factor " << o.oracle_factor << "\noracle_resolutions";
+    << o.points_per_scan << "\noracle_factor " << o.oracle_factor << "\nwalkers " << o.walkers
+    << "\noracle_resolutions";
   for (const double r : o.oracle_resolutions) s << ' ' << r;
   s << "\n";
   return s.str();
@@ -80,6 +82,7 @@ Expected<SequenceSummary> writeSimulatedSequence(
     const std::function<void(std::size_t, std::size_t)>& progress) {
   if (options.scans <= 0 || options.scans > 100000) return makeError("scans must be in 1..100000");
   if (options.ground_truth_resolution_m < 0) return makeError("ground truth resolution < 0");
+  if (options.walkers < 0 || options.walkers > 100) return makeError("walkers must be in 0..100");
   if (options.oracle_factor < 0 || options.oracle_factor > 16) {
     return makeError("oracle factor must be in 0..16");
   }
@@ -102,7 +105,11 @@ Expected<SequenceSummary> writeSimulatedSequence(
     for (const double r : options.oracle_resolutions) oracles.emplace_back(r);
   }
   for (std::size_t i = 0; i < poses.size(); ++i) {
-    Scan scan = simulateScan(*scene->scene, *lidar, poses[i], i, options.seed);
+    const WalkerScene with_walkers(*scene->scene,
+                                   walkersAt(poses, options.walkers, 0.1 * static_cast<double>(i)));
+    const Scene& seen_now = options.walkers > 0 ? static_cast<const Scene&>(with_walkers)
+                                                : *scene->scene;
+    Scan scan = simulateScan(seen_now, *lidar, poses[i], i, options.seed);
     subsample(scan, options.points_per_scan, options.seed);
     if (!oracles.empty()) {
       const Scan seen = simulateScan(*scene->scene, dense, poses[i], i, options.seed);

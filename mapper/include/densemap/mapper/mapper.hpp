@@ -15,6 +15,7 @@
 
 #include "densemap/geometry/error.hpp"
 #include "densemap/geometry/point_cloud.hpp"
+#include "densemap/map/decay_options.hpp"
 #include "densemap/map/sensor_model.hpp"
 #include "densemap/planner/planner_types.hpp"
 #include "densemap/query/cell_state.hpp"
@@ -61,6 +62,11 @@ struct MapperOptions {
   /// The field's maximum distance (metres, 1 .. 28 cells): exact below it, reported as it
   /// beyond.
   double max_distance_m = 2.0;
+  /// A map that forgets what moved: occupied cells not hit for `after_s` take a miss every
+  /// `period_s` until they are unknown (docs/planner.md, "A map that forgets"). std::nullopt
+  /// (default): off, and the map is OctoMap's exactly. Log-odds maps on the grid backend. The
+  /// clock is each insert's `stamp_s` where given, else the time of the insert.
+  std::optional<DecayOptions> decay;
 };
 
 /// What one cell holds.
@@ -82,6 +88,10 @@ struct InsertResult {
   /// Blocks and cells dropped after the scan by keep_radius_m / bounds.
   std::size_t evicted_blocks = 0;
   std::size_t evicted_cells = 0;
+  /// Occupied cells that decayed before the scan (MapperOptions::decay): those that took a
+  /// miss and stayed occupied, and those that became unknown.
+  std::size_t decay_stepped_cells = 0;
+  std::size_t decay_erased_cells = 0;
 };
 
 struct BoxCounts {
@@ -141,19 +151,25 @@ class Mapper {
   /// Integrates one scan of world-frame points (metres) taken from `origin`, as OctoMap's
   /// OcTree::insertPointCloud(points, origin, max_range). Refused (the map unchanged) when
   /// empty, over max_points, or holding a NaN / Inf point. A writer.
+  /// `stamp_s`: the scan's time in seconds, the decay clock (none: the time of the insert;
+  /// refused unless finite and below 10^9 in magnitude).
   [[nodiscard]] Expected<InsertResult> insertPointCloud(std::span<const Point3f> points_world,
-                                                        const Point3f& origin);
+                                                        const Point3f& origin,
+                                                        std::optional<double> stamp_s = {});
   /// The same without copying the points.
   [[nodiscard]] Expected<InsertResult> insertPointCloud(const PointCloud& points_world,
-                                                        const Point3f& origin);
+                                                        const Point3f& origin,
+                                                        std::optional<double> stamp_s = {});
   /// The same for coordinates x y z per point (its length a multiple of 3).
   [[nodiscard]] Expected<InsertResult> insertPointCloud(std::span<const float> xyz_world,
-                                                        const Point3f& origin);
+                                                        const Point3f& origin,
+                                                        std::optional<double> stamp_s = {});
   /// Integrates sensor-frame points with the sensor's pose in the world: each point is
   /// transformed in double and rounded to float once, the origin is the pose's translation.
   /// A writer.
   [[nodiscard]] Expected<InsertResult> insertScan(std::span<const Point3f> points_sensor,
-                                                  const Eigen::Isometry3d& T_world_sensor);
+                                                  const Eigen::Isometry3d& T_world_sensor,
+                                                  std::optional<double> stamp_s = {});
   /// Forgets every cell (a new, empty version). A writer.
   void clear();
   /// Forgets the cells of the box [min, max] (metres): they become unknown; returns how many

@@ -51,6 +51,7 @@ struct PipelineCounters {
   double latency_p99_ms = 0.0;
   std::uint64_t evicted_blocks = 0;  // dropped by keep_radius_m / bounds, and their known cells
   std::uint64_t evicted_cells = 0;
+  std::uint64_t decayed_cells = 0;  // occupied cells map.decay made unknown
   std::vector<SensorCounters> sensors;  // the same counts per sensor id, with seq gaps
 };
 

@@ -50,6 +50,7 @@ struct ServerStatus {
   std::uint64_t rss_bytes = 0;          // the server process's resident memory
   std::uint64_t evicted_blocks = 0;     // dropped by map.keep_radius_m / map.bounds
   std::uint64_t evicted_cells = 0;
+  std::uint64_t decayed_cells = 0;      // occupied cells map.decay made unknown
   std::uint64_t snapshot_failures = 0;  // saves that failed (command, autosave, shutdown)
   std::string last_snapshot_error;
   double cpu_s = 0;  // and its CPU time since start

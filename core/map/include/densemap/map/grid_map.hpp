@@ -61,8 +61,10 @@ class GridMap final : public OccupancyMap {
                                          std::array<float, block::kVoxels>& values)>;
   /// Sets each block's cells to the values `values_of` gives them, in parallel, a block per
   /// task (missing blocks created first, serially, so the result is the same for any number
-  /// of threads); a known cell whose value is unchanged is not written. `blocks` has each block
-  /// once; changes come in its order. How a dense map's published grid follows its evidence.
+  /// of threads); a known cell whose value is unchanged is not written, a cell given NaN
+  /// becomes unknown (a block left with no known cell is dropped). `blocks` has each block
+  /// once; changes come in its order. How a dense map's published grid follows its evidence,
+  /// and how occupied cells decay (OccupancyDecay).
   ApplyStats assignBlocks(std::span<const BlockCells> blocks, const BlockValues& values_of,
                           CellChanges* changes = nullptr);
 

@@ -11,6 +11,7 @@
 #include "densemap/kernel/kernel_map.hpp"
 #include "densemap/map/grid_map.hpp"
 #include "densemap/map/map_factory.hpp"
+#include "densemap/map/occupancy_decay.hpp"
 #include "densemap/pipeline/scan_validator.hpp"
 #include "densemap/query/map_view.hpp"
 #include "densemap/raycast/integrator.hpp"
@@ -58,6 +59,10 @@ struct PipelineOptions {
   /// only until the next write (MapView::advanceLive): for a caller whose readers and writer
   /// take turns (the in-process Mapper's default), about a fifth less time a scan.
   bool versioned_views = true;
+  /// A map that forgets what moved (OccupancyDecay): occupied cells not hit for a while decay
+  /// to unknown. std::nullopt (default): off, and the map is OctoMap's exactly. Log-odds maps
+  /// on the grid backend.
+  std::optional<DecayOptions> decay;
 };
 
 /// What the publish stage hands on for every integrated scan.
@@ -76,6 +81,7 @@ struct IntegrationResult {
   double latency_ms = 0.0;         // received -> published
   std::size_t evicted_blocks = 0;  // dropped by keep_radius_m / bounds with this scan
   std::size_t evicted_cells = 0;
+  DecayStats decayed;  // cells that decayed with this scan (PipelineOptions::decay)
 };
 
 /// The longest ray a map takes, m (checkMapOptions).
@@ -86,7 +92,7 @@ inline constexpr double kMaxRangeM = 2000.0;
 /// cells per ray; keep radius finite and >= 0; bounds finite with min < max on every axis;
 /// 0 < clamp_min < 0.5, prob_miss < 0.5 < prob_hit < 1, 0.5 < clamp_max < 1; eviction on the
 /// grid backend only. Errors name the field (resolution_m, max_range_m, keep_radius_m, bounds,
-/// sensor).
+/// sensor); decay (checkDecayOptions) on a log-odds map on the grid backend (decay).
 [[nodiscard]] Expected<void> checkMapOptions(const PipelineOptions& options);
 
 class MapKind;  // the map kind the engine integrates into (src/map_kind.hpp)
@@ -119,9 +125,11 @@ class Engine {
   /// One scan already in the world frame: its points and the sensor origin (metres), checked
   /// (checkWorldScan) and integrated as they are, so the map equals what OctoMap's
   /// insertPointCloud(points, origin) builds. Upsampling, which needs the sensor frame, does
-  /// not apply. Evicted and published as integrate(RawScan).
+  /// not apply. Evicted and published as integrate(RawScan). `stamp_ns` is the scan's time
+  /// for decay (none: the time it is integrated).
   [[nodiscard]] std::expected<IntegrationResult, Rejection> integrateWorld(
-      const PointCloud& points_world, const Point3f& origin_world);
+      const PointCloud& points_world, const Point3f& origin_world,
+      std::optional<std::int64_t> stamp_ns = std::nullopt);
   /// Runs `command` on the map; a non-empty change list publishes a version (`result`).
   [[nodiscard]] Expected<std::string> command(const Command& command, IntegrationResult& result);
   /// Integrates a synthetic fan into scratch buffers (PipelineOptions::warm_up).
@@ -140,8 +148,15 @@ class Engine {
   Engine(const PipelineOptions& options, std::unique_ptr<OccupancyMap> map, std::uint64_t version);
   /// The scan's points in the world frame (densified first when upsampling is on).
   void transform(Scan& scan, PointCloud& points_world, Point3f& origin_world) const;
-  /// Integrates, evicts and publishes (the stages after transform()).
-  IntegrationResult integratePoints(const PointCloud& points_world, const Point3f& origin_world);
+  /// Decays, integrates, evicts and publishes (the stages after transform()); `now_ns` is the
+  /// decay clock's time of the scan.
+  IntegrationResult integratePoints(const PointCloud& points_world, const Point3f& origin_world,
+                                    std::int64_t now_ns);
+  /// Before a scan at `now_ns`: the decay steps due (PipelineOptions::decay) ...
+  void decayBefore(std::int64_t now_ns, IntegrationResult& result, CellChanges* changes);
+  /// ... and after it: its hit cells wait again.
+  void observeHits(const PointCloud& points_world, const Point3f& origin_world,
+                   std::int64_t now_ns);
   /// Drops the blocks keep_radius_m / bounds leave out, after a scan from `origin`.
   void evict(const Point3f& origin, IntegrationResult& result, CellChanges* changes);
   void publish(IntegrationResult& result);
@@ -150,6 +165,8 @@ class Engine {
   /// The map kind (log-odds or a kernel map) behind one interface (map_kind.hpp).
   std::unique_ptr<MapKind> kind_;
   std::atomic<std::shared_ptr<const MapView>> view_;
+  std::unique_ptr<OccupancyDecay> decay_;  // PipelineOptions::decay; null when off
+  std::vector<VoxelKey> hits_;             // observeHits' scratch
 };
 
 }  // namespace densemap

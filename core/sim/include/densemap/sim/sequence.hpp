@@ -35,6 +35,9 @@ struct SequenceOptions {
   /// beams and columns, from the same poses, at each of `oracle_resolutions` (0: none).
   int oracle_factor = 0;
   std::vector<double> oracle_resolutions = {0.1, 0.05};
+  /// People walking beside the path (walkersAt), scans 0.1 s apart: what a map that forgets
+  /// (map.decay) is for. The ground truth and oracle labels hold the static scene only.
+  int walkers = 0;
 };
 
 struct SequenceSummary {
