@@ -27,13 +27,7 @@ sys.path.insert(0, os.path.join(BUILD, "python"))
 import numpy as np  # noqa: E402
 
 import densemap  # noqa: E402
-
-
-def percentile(values, q):
-    """The nearest-rank percentile, as densemap-bench reports it."""
-    ordered = sorted(values)
-    rank = max(1, int(np.ceil(q / 100.0 * len(ordered))))
-    return ordered[rank - 1]
+from bench_stats import percentile  # noqa: E402
 
 
 def python_run(scans, args, bt, versioned_reads=False):

@@ -168,7 +168,7 @@ Expected<InsertResult> Mapper::Impl::insert(const PointCloud& points_world, cons
                                             std::optional<double> stamp_s) {
   std::optional<std::int64_t> stamp_ns;
   if (stamp_s) {
-    if (!(std::abs(*stamp_s) < 1e9)) return makeError("stamp must be finite and below 1e9 s");
+    if (!(std::abs(*stamp_s) < 9e9)) return makeError("stamp must be finite and below 9e9 s");
     stamp_ns = std::llround(*stamp_s * 1e9);
   }
   std::expected<IntegrationResult, Rejection> r = std::unexpected(Rejection{});

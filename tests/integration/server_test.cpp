@@ -14,6 +14,7 @@
 #include "densemap/client/testing.hpp"
 #include "densemap/io/scan_source.hpp"
 #include "densemap/map/map_diff.hpp"
+#include "densemap/mapper/mapper.hpp"
 #include "densemap/pipeline/scan_validator.hpp"
 #include "densemap/planner/distance_query.hpp"
 #include "densemap/planner/swept_volume.hpp"
@@ -221,6 +222,65 @@ TEST(Server, DistanceAndPathQueriesEqualCoreOnTheOfflineMap) {
   ASSERT_FALSE(none);
   EXPECT_NE(none.error().message.find("esdf"), std::string::npos) << none.error().message;
   EXPECT_EQ(plain.stop(), 0);
+}
+
+// map.decay with the scans' stamps as the clock: the server's map after each replayed scan of
+// a scene with people walking equals a Mapper's with the same decay and stamps, and the status
+// counts the cells that decayed to unknown.
+TEST(Server, DecayFollowsTheScanStampsAsTheMapperDoes) {
+  test::TempDir dir;
+  SequenceOptions o;
+  o.scene = "indoor";
+  o.sensor = "vlp16";
+  o.columns = 600;
+  o.scans = 12;
+  o.walkers = 2;
+  o.ground_truth_resolution_m = 0;
+  auto raws = test::simulatedRawScans(dir.path(), o, "test");
+  ASSERT_EQ(raws.size(), 12U);
+  for (std::size_t i = 0; i < raws.size(); ++i) {
+    raws[i].stamp_ns = 1'700'000'000'000'000'000 + static_cast<std::int64_t>(i) * 100'000'000;
+  }
+  ServerProcess server(dir.path(), 226, "", false, 0,
+                       "decay { enabled: true after_s: 0.2 period_s: 0.1 clock: \"stamp\" }");
+  auto client = connect(226);
+  ASSERT_TRUE(client);
+  replay(*client, raws);
+
+  MapperOptions m;
+  m.resolution_m = 0.2;
+  m.max_range_m = 25.0;
+  m.threads = 2;
+  m.decay = DecayOptions{.after_s = 0.2, .period_s = 0.1};
+  auto mapper = Mapper::create(m);
+  ASSERT_TRUE(mapper);
+  std::size_t erased = 0;
+  for (const RawScan& raw : raws) {
+    const Scan scan = *validateScan(raw, ScanLimits{});
+    auto r = mapper->insertPointCloud(scan.pointsWorld(), scan.originWorld(),
+                                      static_cast<double>(raw.stamp_ns) * 1e-9);
+    ASSERT_TRUE(r);
+    erased += r->decay_erased_cells;
+  }
+  ASSERT_GT(erased, 0U) << "the sequence should make cells decay";
+  auto fetched = client->fetchMap(raws.size());
+  ASSERT_TRUE(fetched) << fetched.error().message;
+  const GridMap& served = testing::gridOf(*fetched);
+  EXPECT_EQ(served.knownCells(), mapper->knownCells());
+  std::size_t differ = 0;
+  mapper->forEachCell(CellFilter::kKnown, [&](const Point3f& centre, float v) {
+    const auto key = served.grid().pointToKey(centre);
+    const auto theirs = key ? served.logOdds(*key) : std::nullopt;
+    differ += !theirs || *theirs != v;
+  });
+  EXPECT_EQ(differ, 0U);
+  std::uint64_t decayed = 0;
+  for (int i = 0; i < 40 && decayed < erased; ++i) {
+    if (auto status = client->status()) decayed = status->decayed_cells;
+    if (decayed < erased) std::this_thread::sleep_for(100ms);
+  }
+  EXPECT_EQ(decayed, erased);
+  EXPECT_EQ(server.stop(), 0);
 }
 
 TEST(Server, IlnUpsampleStageGivesTheOfflineDensifiedMap) {

@@ -79,23 +79,23 @@ std::int64_t OccupancyDecay::firstDue(const Block& b) {
 
 void OccupancyDecay::observe(std::span<const VoxelKey> hits, std::int64_t now_ns) {
   const std::int64_t due = tick(now_ns) + after_ms_;
-  std::uint64_t last_key = 0;
-  Block* last = nullptr;
+  cache_.assign(kCacheSlots, {0, nullptr});
   for (const VoxelKey& key : hits) {
     const std::uint64_t bk = block::blockOf(key);
-    if (last == nullptr || bk != last_key) {
+    auto& [cached_key, b] = cache_[(bk * 0x9E3779B97F4A7C15ULL) >> 52];
+    if (b == nullptr || cached_key != bk) {
       auto& slot = blocks_[bk];
       if (!slot) {
         slot = std::make_unique<Block>();
         slot->base = due;
       }
-      last = slot.get();
-      last_key = bk;
+      b = slot.get();
+      cached_key = bk;
     }
     const int i = block::indexOf(key);
-    setDue(*last, i, due);
-    block::setBit(last->tracked, i);
-    enqueue(bk, *last, due);
+    setDue(*b, i, due);
+    block::setBit(b->tracked, i);
+    enqueue(bk, *b, due);
   }
 }
 

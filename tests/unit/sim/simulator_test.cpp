@@ -10,6 +10,7 @@
 #include "densemap/sim/procedural_scenes.hpp"
 #include "densemap/sim/sequence.hpp"
 #include "densemap/sim/trajectory.hpp"
+#include "densemap/sim/walker_scene.hpp"
 #include "densemap/test_support/data_dir.hpp"
 
 namespace densemap {
@@ -62,6 +63,35 @@ TEST(LidarSimulator, HitsAnalyticSurfacesExactly) {
   const Scan scan = simulateScan(scene, lidar, T, 0, 1);
   ASSERT_EQ(scan.points.size(), 180U);
   for (const Point3f& p : transformPoints(T, scan.points)) EXPECT_NEAR(p.z(), 0.0, 1e-5);
+}
+
+TEST(Walkers, PaceBesideThePathAndRaysMeetTheNearerSurface) {
+  std::vector<Transform> poses(11, Transform::Identity());
+  for (int i = 0; i < 11; ++i) poses[i].translation() = Eigen::Vector3d(i, 0, 1.5);
+  // One walker, centred at the middle pose, 2.5 m to the left of the path (+y), starting at
+  // the back end of its 16 m: 1.4 m/s along +x, turning at the far end.
+  auto w = walkersAt(poses, 1, 0.0);
+  ASSERT_EQ(w.size(), 1U);
+  EXPECT_NEAR(w[0].center_xy.x(), 5.0 - 8.0, 1e-9);
+  EXPECT_NEAR(w[0].center_xy.y(), 2.5, 1e-9);
+  EXPECT_NEAR(walkersAt(poses, 1, 1.0)[0].center_xy.x(), 5.0 - 8.0 + 1.4, 1e-9);
+  EXPECT_NEAR(walkersAt(poses, 1, 16.0 / 1.4 + 1.0)[0].center_xy.x(), 5.0 + 8.0 - 1.4, 1e-9);
+  EXPECT_EQ(walkersAt(poses, 2, 0.0)[1].center_xy.y(), -2.5) << "the sides alternate";
+  EXPECT_TRUE(walkersAt(poses, 0, 0.0).empty());
+
+  PrimitiveScene room(Eigen::AlignedBox3d(Eigen::Vector3d(-20, -20, -1), Eigen::Vector3d(20, 20, 5)));
+  room.add(BoxShape{Eigen::Vector3d(-20, 10, 0), Eigen::Vector3d(20, 11, 3)});  // a wall at y = 10
+  const WalkerScene scene(room, walkersAt(poses, 1, 0.0));
+  const Eigen::Vector3d origin(-3.0, 0.0, 1.0);
+  // Towards +y the walker (at y = 2.5, radius 0.25) comes before the wall; beside it, the wall.
+  EXPECT_NEAR(*scene.castRay(origin, Eigen::Vector3d::UnitY(), 50.0), 2.25, 1e-9);
+  EXPECT_NEAR(*room.castRay(origin, Eigen::Vector3d::UnitY(), 50.0), 10.0, 1e-9);
+  const Eigen::Vector3d beside(-1.0, 0.0, 1.0);
+  EXPECT_NEAR(*scene.castRay(beside, Eigen::Vector3d::UnitY(), 50.0), 10.0, 1e-9);
+  // Above its head the walker is not there; the ground truth is the static room's.
+  EXPECT_NEAR(*scene.castRay(Eigen::Vector3d(-3, 0, 2.0), Eigen::Vector3d::UnitY(), 50.0), 10.0,
+              1e-9);
+  EXPECT_FALSE(scene.overlapsBox(Eigen::Vector3d(-3.1, 2.4, 0.5), Eigen::Vector3d(-2.9, 2.6, 0.7)));
 }
 
 TEST(BeamTables, MatchTheRealSensors) {

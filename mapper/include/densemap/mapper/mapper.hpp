@@ -152,7 +152,7 @@ class Mapper {
   /// OcTree::insertPointCloud(points, origin, max_range). Refused (the map unchanged) when
   /// empty, over max_points, or holding a NaN / Inf point. A writer.
   /// `stamp_s`: the scan's time in seconds, the decay clock (none: the time of the insert;
-  /// refused unless finite and below 10^9 in magnitude).
+  /// refused unless finite and below 9 * 10^9 in magnitude).
   [[nodiscard]] Expected<InsertResult> insertPointCloud(std::span<const Point3f> points_world,
                                                         const Point3f& origin,
                                                         std::optional<double> stamp_s = {});

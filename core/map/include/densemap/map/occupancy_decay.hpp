@@ -85,6 +85,10 @@ class OccupancyDecay {
   std::int64_t period_ms_;
   std::int64_t latest_ = std::numeric_limits<std::int64_t>::min();  // the clock, ms
   std::unordered_map<std::uint64_t, std::unique_ptr<Block>> blocks_;
+  /// observe()'s direct-mapped cache of blocks_ (a scan's hits come back to the same blocks
+  /// column after column): cleared at each observe, as decay() may erase blocks.
+  static constexpr std::size_t kCacheSlots = 4096;
+  std::vector<std::pair<std::uint64_t, Block*>> cache_;
   std::priority_queue<Entry, std::vector<Entry>, std::greater<>> queue_;
 };
 
