@@ -34,6 +34,14 @@ SETTINGS = [("off (OctoMap's map)", None, 1.0), ("after 2 s, a miss every 0.5 s"
             ("after 5 s, a miss every 1 s", 5.0, 1.0)]
 
 
+def cpu_model():
+    with open("/proc/cpuinfo") as f:
+        for line in f:
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    return platform.machine()
+
+
 def run(scans, static, args, decay_after, decay_period):
     mapper = densemap.Mapper(resolution=args.resolution, max_range=args.max_range,
                              threads=args.threads, decay_after=decay_after,
@@ -78,7 +86,7 @@ def main():
                 results[label].append(run(scans, static, args, after, period))
     commit = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"],
                             capture_output=True, text=True).stdout.strip()
-    print(f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} vCPUs; "
+    print(f"Machine: {cpu_model()}, {os.cpu_count()} vCPUs; "
           f"commit {commit}; simulated indoor drive (os128, 1024 columns), {args.scans} scans "
           f"0.1 s apart, {args.walkers} walkers; {args.resolution} m / {args.max_range} m, "
           f"{args.threads} threads, {args.runs} runs (median, min .. max of the runs' p50)")

@@ -1,8 +1,7 @@
 #!/usr/bin/env bash
-# One-shot `densemap query point` runs, each a new DDS
-# participant, against one server. Before the fix 1-3% timed out although the server had
-# answered (its reply writer had not yet matched the new client's reply reader); every reply
-# now waits for that match. Fails on any failed run.
+# One-shot `densemap query point` runs, each a new DDS participant, against one server: every
+# run must get its reply, so a reply must wait until the server's reply writer has matched the
+# new client's reply reader. Fails on any failed run.
 # Usage: one_shot_queries_cli.sh SERVER_BIN CLI_BIN RUNS DOMAIN
 set -euo pipefail
 server=$1 cli=$2 runs=$3 domain=$4

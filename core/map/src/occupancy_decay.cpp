@@ -1,6 +1,7 @@
 #include "densemap/map/occupancy_decay.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 
@@ -113,58 +114,81 @@ DecayStats OccupancyDecay::decay(GridMap& map, std::int64_t now_ns, CellChanges*
   DecayStats stats;
   if (due_blocks.empty()) return stats;
 
+  // Each due block on its own (its cells and times are its own; the map is only read), in
+  // parallel on the map's runner; then, in order, the blocks go back in the queue or away.
   const SensorModel& model = map.sensorModel();
   const BlockStore& store = map.writerStore();
-  std::vector<BlockCells> writes;
-  std::vector<std::array<float, block::kVoxels>> values;
-  for (const std::uint64_t key : due_blocks) {
-    Block& b = *blocks_.at(key);
-    const BlockNode* node = store.latest(key);
-    BlockCells write{key, {}};
-    std::array<float, block::kVoxels> v{};
-    block::forEachSetBit(b.tracked, [&](int i) {
-      const std::int64_t due = b.base + b.due[i];
-      if (due > now) return;
-      const float old = node != nullptr && node->voxels.isKnown(i) ? node->voxels.log_odds[i] : 0.0F;
-      if (!SensorModel::isOccupied(old)) {  // unknown, free, or cleared by other means
-        block::clearBit(b.tracked, i);
-        return;
-      }
-      // One miss per period elapsed since it fell due; the loop ends once the cell leaves
-      // the occupied class (at most clamp_max / |miss| + 1 steps).
-      const std::int64_t steps = (now - due) / period_ms_ + 1;
-      float value = old;
-      bool gone = false;
-      for (std::int64_t s = 0; s < steps; ++s) {
-        value = model.updateBy(value, model.miss());
-        if (!SensorModel::isOccupied(value)) {
-          gone = true;
-          break;
+  const std::size_t n = due_blocks.size();
+  std::vector<Block*> blocks(n);
+  for (std::size_t j = 0; j < n; ++j) blocks[j] = blocks_.at(due_blocks[j]).get();
+  std::vector<BlockCells> writes(n);
+  std::vector<std::array<float, block::kVoxels>> values(n);
+  std::atomic<std::size_t> stepped{0}, erased{0};
+  map.runner().run(n, 8, [&](std::size_t begin, std::size_t end) {
+    std::size_t my_stepped = 0, my_erased = 0;
+    for (std::size_t j = begin; j != end; ++j) {
+      Block& b = *blocks[j];
+      const BlockNode* node = store.latest(due_blocks[j]);
+      BlockCells& write = writes[j];
+      write.key = due_blocks[j];
+      std::array<float, block::kVoxels>& v = values[j];
+      block::forEachSetBit(b.tracked, [&](int i) {
+        const std::int64_t due = b.base + b.due[i];
+        if (due > now) return;
+        const float old =
+            node != nullptr && node->voxels.isKnown(i) ? node->voxels.log_odds[i] : 0.0F;
+        if (!SensorModel::isOccupied(old)) {  // unknown, free, or cleared by other means
+          block::clearBit(b.tracked, i);
+          return;
         }
-      }
-      block::setBit(write.cells, i);
-      if (gone) {
-        v[i] = std::numeric_limits<float>::quiet_NaN();  // assignBlocks: becomes unknown
-        block::clearBit(b.tracked, i);
-        ++stats.erased;
-      } else {
-        v[i] = value;
-        // Due after now, at most period_s on: within the block's span (setDue keeps it so).
-        setDue(b, i, due + steps * period_ms_);
-        ++stats.stepped;
-      }
-    });
-    if (block::anyBit(write.cells)) {
-      writes.push_back(write);
-      values.push_back(v);
+        // One miss per period elapsed since it fell due; the loop ends once the cell leaves
+        // the occupied class (at most clamp_max / |miss| + 1 steps).
+        const std::int64_t steps = (now - due) / period_ms_ + 1;
+        float value = old;
+        bool gone = false;
+        for (std::int64_t s = 0; s < steps; ++s) {
+          value = model.updateBy(value, model.miss());
+          if (!SensorModel::isOccupied(value)) {
+            gone = true;
+            break;
+          }
+        }
+        block::setBit(write.cells, i);
+        if (gone) {
+          v[i] = std::numeric_limits<float>::quiet_NaN();  // assignBlocks: becomes unknown
+          block::clearBit(b.tracked, i);
+          ++my_erased;
+        } else {
+          v[i] = value;
+          // Due after now, at most period_s on: within the block's span (setDue keeps it so).
+          setDue(b, i, due + steps * period_ms_);
+          ++my_stepped;
+        }
+      });
     }
-    const std::int64_t first = firstDue(b);
+    stepped += my_stepped;
+    erased += my_erased;
+  });
+  stats.stepped = stepped.load();
+  stats.erased = erased.load();
+  std::size_t kept = 0;
+  for (std::size_t j = 0; j < n; ++j) {
+    const std::int64_t first = firstDue(*blocks[j]);
     if (first == kNever) {
-      blocks_.erase(key);
+      blocks_.erase(due_blocks[j]);
     } else {
-      enqueue(key, b, first);
+      enqueue(due_blocks[j], *blocks[j], first);
+    }
+    if (block::anyBit(writes[j].cells)) {
+      if (kept != j) {
+        writes[kept] = writes[j];
+        values[kept] = values[j];
+      }
+      ++kept;
     }
   }
+  writes.resize(kept);
+  values.resize(kept);
   if (writes.empty()) return stats;
   std::unordered_map<std::uint64_t, std::size_t> index;
   index.reserve(writes.size());

@@ -7,6 +7,7 @@
 #include <cstdio>
 
 #include "densemap/parallel/tbb_runner.hpp"
+#include "densemap/raycast/ray_ends.hpp"
 
 namespace densemap {
 namespace {
@@ -199,11 +200,17 @@ void Engine::decayBefore(std::int64_t now_ns, IntegrationResult& result, CellCha
 void Engine::observeHits(const PointCloud& points_world, const Point3f& origin_world,
                          std::int64_t now_ns) {
   if (!decay_) return;
-  // The cells the scan hit: its rays' occupied end cells, as the integrator marks them.
+  // The cells the scan hit: its rays' occupied end cells, as the integrator marks them (ray
+  // ends in parallel, in place of each ray's end; the hits kept in the scan's order).
   const VoxelGrid& grid = kind_->published().grid();
+  ray_ends_.resize(points_world.size());
+  kind_->published().runner().run(
+      points_world.size(), 4096, [&](std::size_t begin, std::size_t end) {
+        rayEndsInto(grid, origin_world, points_world.data() + begin, end - begin,
+                    options_.max_range_m, ray_ends_.data() + begin);
+      });
   hits_.clear();
-  for (const Point3f& p : points_world) {
-    const RayEnd ray = rayEndFor(grid, origin_world, p, options_.max_range_m);
+  for (const RayEnd& ray : ray_ends_) {
     if (ray.occupied && ray.key_valid) hits_.push_back(ray.key);
   }
   decay_->observe(hits_, now_ns);

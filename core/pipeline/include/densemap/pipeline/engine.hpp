@@ -166,7 +166,8 @@ class Engine {
   std::unique_ptr<MapKind> kind_;
   std::atomic<std::shared_ptr<const MapView>> view_;
   std::unique_ptr<OccupancyDecay> decay_;  // PipelineOptions::decay; null when off
-  std::vector<VoxelKey> hits_;             // observeHits' scratch
+  std::vector<RayEnd> ray_ends_;           // observeHits' scratch
+  std::vector<VoxelKey> hits_;
 };
 
 }  // namespace densemap
