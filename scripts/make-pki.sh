@@ -135,9 +135,11 @@ topics() {  # topics() NAME... -> <topics><topic>NAME</topic>...</topics>
   printf '</topics>'
 }
 queries_out=(densemap/query/point/request densemap/query/bbox/request densemap/query/ray/request
-             densemap/query/distance/request densemap/query/path/request densemap/map/request)
+             densemap/query/distance/request densemap/query/path/request
+             densemap/query/boxes/request densemap/query/distance_box/request densemap/map/request)
 queries_in=(densemap/query/point/reply densemap/query/bbox/reply densemap/query/ray/reply
-            densemap/query/distance/reply densemap/query/path/reply densemap/cmd/reply)
+            densemap/query/distance/reply densemap/query/path/reply densemap/query/boxes/reply
+            densemap/query/distance_box/reply densemap/cmd/reply)
 map_in=(densemap/map/manifest densemap/map/tiles densemap/map/delta densemap/map/events
         densemap/status rt/octomap_binary rt/projected_map rt/octomap_point_cloud_centers)
 

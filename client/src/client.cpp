@@ -10,6 +10,7 @@
 
 #include "client_parts.hpp"
 #include "densemap/client/testing.hpp"
+#include "densemap/planner/swept_volume.hpp"
 #include "densemap/query/map_queries.hpp"
 #include "densemap/query/version_delta.hpp"
 #include "densemap/wire/dds.hpp"
@@ -58,6 +59,8 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
   make(d.rq_w, d.topics.ray_request, requests, true);
   make(d.dq_w, d.topics.distance_request, requests, true);
   make(d.paq_w, d.topics.path_request, requests, true);
+  make(d.oq_w, d.topics.boxes_request, requests, true);
+  make(d.dbq_w, d.topics.distance_box_request, requests, true);
   make(d.cq_w, d.topics.command_request, dds::kCommandQos, true);
   make(d.mq_w, d.topics.map_request, dds::kCommandQos, true);
   // Replies come in this client's own partition: the server writes each asker's replies with
@@ -70,6 +73,8 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
   make(d.rr_r, d.topics.ray_reply, replies, false);
   make(d.dr_r, d.topics.distance_reply, replies, false);
   make(d.par_r, d.topics.path_reply, replies, false);
+  make(d.or_r, d.topics.boxes_reply, replies, false);
+  make(d.dbr_r, d.topics.distance_box_reply, replies, false);
   make(d.cr_r, d.topics.command_reply, command_replies, false);
   make(d.man_r, d.topics.manifest, dds::kLatestStateQos, false);
   if (options.subscribe_deltas) make(d.delta_r, d.topics.delta, dds::kDeltaReaderQos, false);
@@ -78,7 +83,8 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
   if (!status) return std::unexpected(status.error());
   for (auto [ws, reader] : {std::pair{&d.pr_ws, &d.pr_r}, std::pair{&d.br_ws, &d.br_r},
                             std::pair{&d.rr_ws, &d.rr_r}, std::pair{&d.dr_ws, &d.dr_r},
-                            std::pair{&d.par_ws, &d.par_r}, std::pair{&d.cr_ws, &d.cr_r}}) {
+                            std::pair{&d.par_ws, &d.par_r}, std::pair{&d.or_ws, &d.or_r},
+                            std::pair{&d.dbr_ws, &d.dbr_r}, std::pair{&d.cr_ws, &d.cr_r}}) {
     if (reader->get() <= 0) continue;
     auto w = dds::WaitSet::create(d.participant);
     if (!w) return std::unexpected(w.error());
@@ -99,7 +105,8 @@ Expected<void> Client::Impl::waitForServer() {
       return std::string(name);
     };
     for (const dds::Entity* w : {&dds_->scan_w, &dds_->pq_w, &dds_->bq_w, &dds_->rq_w, &dds_->dq_w,
-                                 &dds_->paq_w, &dds_->cq_w, &dds_->mq_w}) {
+                                 &dds_->paq_w, &dds_->oq_w, &dds_->dbq_w, &dds_->cq_w,
+                                 &dds_->mq_w}) {
       if (w->get() <= 0) continue;  // not granted by DDS Security
       dds_publication_matched_status_t s;
       if (dds_get_publication_matched_status(w->get(), &s) < 0 || s.current_count == 0)
@@ -340,6 +347,19 @@ Expected<DistanceQueryAnswer> Client::Impl::queryDistancesOnce(
   return answer;
 }
 
+namespace {
+
+/// A swept-volume conflict from the wire (paths and boxes alike).
+SweptConflict conflictOf(const densemap_msgs_PathConflict& c) {
+  SweptConflict out;
+  out.center = Point3f(c.center[0], c.center[1], c.center[2]);
+  out.arc_length = c.arc_length;
+  out.index = c.segment;
+  return out;
+}
+
+}  // namespace
+
 Expected<PathQueryAnswer> Client::Impl::checkPath(std::span<const float> xyz, double radius) {
   if (xyz.size() % 3 != 0) return makeError("path length is not a multiple of 3 (x y z each)");
   if (xyz.size() / 3 > dds::kMaxPathVertices) {
@@ -355,13 +375,6 @@ Expected<PathQueryAnswer> Client::Impl::checkPath(std::span<const float> xyz, do
   if (auto ok = dds::write(dds_->paq_w, &req); !ok) return std::unexpected(ok.error());
   PathQueryAnswer answer;
   std::string error;
-  const auto conflict = [](const densemap_msgs_PathConflict& c) {
-    SweptConflict out;
-    out.center = Point3f(c.center[0], c.center[1], c.center[2]);
-    out.arc_length = c.arc_length;
-    out.index = c.segment;
-    return out;
-  };
   auto ok = awaitReply<densemap_msgs_PathQueryReply>(
       dds_->par_r, *dds_->par_ws, req.id, options_.timeout,
       [&](const densemap_msgs_PathQueryReply& r) {
@@ -371,9 +384,81 @@ Expected<PathQueryAnswer> Client::Impl::checkPath(std::span<const float> xyz, do
         }
         answer.map_version = r.map_version;
         answer.state = r.state <= 2 ? static_cast<CellState>(r.state) : CellState::kUnknown;
-        if (r.has_occupied) answer.occupied = conflict(r.occupied);
-        if (r.has_unknown) answer.unknown = conflict(r.unknown);
+        if (r.has_occupied) answer.occupied = conflictOf(r.occupied);
+        if (r.has_unknown) answer.unknown = conflictOf(r.unknown);
         answer.length_m = r.length;
+      });
+  if (!ok) return std::unexpected(ok.error());
+  if (!error.empty()) return makeError("server: " + error);
+  return answer;
+}
+
+Expected<PathQueryAnswer> Client::Impl::checkBoxes(std::span<const OrientedBox> boxes) {
+  if (boxes.empty() || boxes.size() > dds::kMaxQueryBoxes) {
+    return makeError("1 to " + std::to_string(dds::kMaxQueryBoxes) +
+                     " boxes in one request, got " + std::to_string(boxes.size()));
+  }
+  std::vector<float> floats;
+  floats.reserve(boxes.size() * kBoxFloats);
+  for (const OrientedBox& b : boxes) appendBoxFloats(b, floats);
+  densemap_msgs_BoxesQueryRequest req{};
+  req.id = {client_id_, next_request_++};
+  req.boxes = dds::borrowSequence<dds_sequence_float>(floats);
+  if (auto ok = permitted(dds_->oq_w, "box queries"); !ok) return std::unexpected(ok.error());
+  if (auto ok = permitted(dds_->or_r, "box queries"); !ok) return std::unexpected(ok.error());
+  if (auto ok = dds::write(dds_->oq_w, &req); !ok) return std::unexpected(ok.error());
+  PathQueryAnswer answer;
+  std::string error;
+  auto ok = awaitReply<densemap_msgs_BoxesQueryReply>(
+      dds_->or_r, *dds_->or_ws, req.id, options_.timeout,
+      [&](const densemap_msgs_BoxesQueryReply& r) {
+        if (r.status != 0) {
+          error = text(r.error);
+          return;
+        }
+        answer.map_version = r.map_version;
+        answer.state = r.state <= 2 ? static_cast<CellState>(r.state) : CellState::kUnknown;
+        if (r.has_occupied) answer.occupied = conflictOf(r.occupied);
+        if (r.has_unknown) answer.unknown = conflictOf(r.unknown);
+      });
+  if (!ok) return std::unexpected(ok.error());
+  if (!error.empty()) return makeError("server: " + error);
+  return answer;
+}
+
+Expected<DistanceBoxAnswer> Client::Impl::distanceBox(const Point3f& min, const Point3f& max,
+                                                      bool unknown_as_occupied) {
+  densemap_msgs_DistanceBoxRequest req{};
+  req.id = {client_id_, next_request_++};
+  for (int i = 0; i < 3; ++i) {
+    req.min[i] = min[i];
+    req.max[i] = max[i];
+  }
+  req.unknown_as_occupied = unknown_as_occupied;
+  if (auto ok = permitted(dds_->dbq_w, "distance boxes"); !ok) return std::unexpected(ok.error());
+  if (auto ok = permitted(dds_->dbr_r, "distance boxes"); !ok) return std::unexpected(ok.error());
+  if (auto ok = dds::write(dds_->dbq_w, &req); !ok) return std::unexpected(ok.error());
+  DistanceBoxAnswer answer;
+  std::string error;
+  auto ok = awaitReply<densemap_msgs_DistanceBoxReply>(
+      dds_->dbr_r, *dds_->dbr_ws, req.id, options_.timeout,
+      [&](const densemap_msgs_DistanceBoxReply& r) {
+        if (r.status != 0) {
+          error = text(r.error);
+          return;
+        }
+        const std::uint64_t cells =
+            std::uint64_t{r.size[0]} * std::uint64_t{r.size[1]} * std::uint64_t{r.size[2]};
+        if (cells != r.distances._length) {
+          error = "a distance box of " + std::to_string(r.distances._length) +
+                  " values for " + std::to_string(cells) + " cells";
+          return;
+        }
+        answer.map_version = r.map_version;
+        answer.max_distance = r.max_distance;
+        answer.min_center = Point3f(r.min_center[0], r.min_center[1], r.min_center[2]);
+        answer.size = {r.size[0], r.size[1], r.size[2]};
+        answer.distances.assign(r.distances._buffer, r.distances._buffer + r.distances._length);
       });
   if (!ok) return std::unexpected(ok.error());
   if (!error.empty()) return makeError("server: " + error);
@@ -466,6 +551,15 @@ Expected<DistanceQueryAnswer> Client::queryDistances(std::span<const float> xyz_
     if (n != kPart) break;
   }
   return answer;
+}
+
+Expected<PathQueryAnswer> Client::checkBoxes(std::span<const OrientedBox> boxes) {
+  return impl_->checkBoxes(boxes);
+}
+
+Expected<DistanceBoxAnswer> Client::distanceBox(const Point3f& min, const Point3f& max,
+                                                bool unknown_as_occupied) {
+  return impl_->distanceBox(min, max, unknown_as_occupied);
 }
 
 Expected<PathQueryAnswer> Client::checkPath(std::span<const float> vertices_world,

@@ -37,10 +37,10 @@ struct ClientDds {
   dds::Entity participant;
   dds::Topics topics;
   // With DDS Security, an endpoint this identity may not use stays empty (0).
-  dds::Entity scan_w, pq_w, bq_w, rq_w, dq_w, paq_w, cq_w, mq_w;
-  dds::Entity pr_r, br_r, rr_r, dr_r, par_r, cr_r, man_r, delta_r, event_r, st_r;
+  dds::Entity scan_w, pq_w, bq_w, rq_w, dq_w, paq_w, oq_w, dbq_w, cq_w, mq_w;
+  dds::Entity pr_r, br_r, rr_r, dr_r, par_r, or_r, dbr_r, cr_r, man_r, delta_r, event_r, st_r;
   // One per reply reader: a request waits for data on its own reader, not by polling.
-  std::optional<dds::WaitSet> pr_ws, br_ws, rr_ws, dr_ws, par_ws, cr_ws;
+  std::optional<dds::WaitSet> pr_ws, br_ws, rr_ws, dr_ws, par_ws, or_ws, dbr_ws, cr_ws;
 };
 
 /// The client itself; Client forwards to it.
@@ -59,6 +59,9 @@ struct Client::Impl {
   Expected<DistanceQueryAnswer> queryDistancesOnce(std::span<const float> xyz,
                                                    const DistanceQueryOptions& options);
   Expected<PathQueryAnswer> checkPath(std::span<const float> xyz, double radius);
+  Expected<PathQueryAnswer> checkBoxes(std::span<const OrientedBox> boxes);
+  Expected<DistanceBoxAnswer> distanceBox(const Point3f& min, const Point3f& max,
+                                          bool unknown_as_occupied);
   /// A command's reply: the detail message and send-map's counts (CommandReply's sent_*).
   struct CommandOutcome {
     std::string detail;

@@ -95,4 +95,17 @@ inline py::dict sweptDict(const SweptVolumeResult& r, const char* index_name) {
   return d;
 }
 
+/// Oriented boxes from centers and half_extents (N, 3) and rotations (N, 4: x y z w).
+std::vector<OrientedBox> boxesFrom(const py::handle& centers, const py::handle& half_extents,
+                                   const py::handle& rotations);
+
+/// A dense distance box as (distances float32 (nz, ny, nx), the centre of cell [0, 0, 0]).
+inline py::tuple distanceGrid(const std::array<std::uint32_t, 3>& size,
+                              const std::vector<float>& distances, const Point3f& min_center) {
+  py::array_t<float> a({static_cast<py::ssize_t>(size[2]), static_cast<py::ssize_t>(size[1]),
+                        static_cast<py::ssize_t>(size[0])});
+  std::copy(distances.begin(), distances.end(), a.mutable_data());
+  return py::make_tuple(a, py::make_tuple(min_center.x(), min_center.y(), min_center.z()));
+}
+
 }  // namespace densemap::python

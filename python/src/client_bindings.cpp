@@ -211,6 +211,33 @@ closed client. The GIL is released while a call waits. Use as a context manager,
           py::arg("vertices"), py::arg("radius"),
           "The server's answer to Mapper.check_path's question, with its 'map_version'.")
       .def(
+          "check_boxes",
+          [](PyClient& self, const py::handle& centers, const py::handle& half_extents,
+             const py::handle& rotations) {
+            const std::vector<OrientedBox> boxes = boxesFrom(centers, half_extents, rotations);
+            Client& c = self.client();
+            const PathQueryAnswer a = released([&] { return c.checkBoxes(boxes); });
+            py::dict d = sweptDict(a, "box");
+            d["map_version"] = a.map_version;
+            return d;
+          },
+          py::arg("centers"), py::arg("half_extents"), py::arg("rotations"),
+          "The server's answer to Mapper.check_boxes's question, with its 'map_version'.")
+      .def(
+          "distance_box",
+          [](PyClient& self, const py::handle& box_min, const py::handle& box_max,
+             bool unknown_as_occupied) {
+            const Point3f lo = pointFrom(box_min, "box_min"), hi = pointFrom(box_max, "box_max");
+            Client& c = self.client();
+            const DistanceBoxAnswer a =
+                released([&] { return c.distanceBox(lo, hi, unknown_as_occupied); });
+            return distanceGrid(a.size, a.distances, a.min_center);
+          },
+          py::arg("box_min"), py::arg("box_max"), py::kw_only(),
+          py::arg("unknown_as_occupied") = false,
+          R"doc(The server's distance field over the box, as Mapper.distance_box gives it (at
+most 4,194,304 cells; the server needs esdf { enabled: true }).)doc")
+      .def(
           "status",
           [](PyClient& self) {
             Client& c = self.client();

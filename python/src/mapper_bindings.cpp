@@ -215,6 +215,27 @@ py::dict optionsDict(const MapperOptions& o) {
 
 }  // namespace
 
+std::vector<OrientedBox> boxesFrom(const py::handle& centers, const py::handle& half_extents,
+                                   const py::handle& rotations) {
+  const std::size_t limit = std::numeric_limits<std::size_t>::max();
+  const PointCloud c = pointsFrom(centers, limit, "centers", false);
+  const PointCloud e = pointsFrom(half_extents, limit, "half_extents", false);
+  const auto q = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(rotations);
+  if (!q || q.ndim() != 2 || q.shape(1) != 4 || static_cast<std::size_t>(q.shape(0)) != c.size() ||
+      e.size() != c.size()) {
+    throw py::value_error("centers and half_extents (N, 3) and rotations (N, 4: x y z w) must match");
+  }
+  std::vector<OrientedBox> boxes(c.size());
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    const double* r = q.data(static_cast<py::ssize_t>(i), 0);
+    boxes[i].center = c[i];
+    boxes[i].half_extents = e[i];
+    boxes[i].rotation = Eigen::Quaternionf(static_cast<float>(r[3]), static_cast<float>(r[0]),
+                                           static_cast<float>(r[1]), static_cast<float>(r[2]));
+  }
+  return boxes;
+}
+
 void bindMapper(py::module_& m) {
   py::class_<InsertResult>(m, "InsertResult", "What one scan did to the map.")
       .def_readonly("version", &InsertResult::version, "The map version the scan published.")
@@ -349,12 +370,7 @@ point.)doc")
             const Point3f lo = pointFrom(box_min, "box_min"), hi = pointFrom(box_max, "box_max");
             const DistanceGrid g =
                 released([&] { return self.distanceBox(lo, hi, unknown_as_occupied, max_cells); });
-            py::array_t<float> a({static_cast<py::ssize_t>(g.size[2]),
-                                  static_cast<py::ssize_t>(g.size[1]),
-                                  static_cast<py::ssize_t>(g.size[0])});
-            std::copy(g.distances.begin(), g.distances.end(), a.mutable_data());
-            return py::make_tuple(
-                a, py::make_tuple(g.min_center.x(), g.min_center.y(), g.min_center.z()));
+            return distanceGrid(g.size, g.distances, g.min_center);
           },
           py::arg("box_min"), py::arg("box_max"), py::kw_only(),
           py::arg("unknown_as_occupied") = false, py::arg("max_cells") = 16'777'216,
@@ -378,25 +394,7 @@ every cell within the radius of the path counts. Returns {'state': 'free' | 'unk
           "check_boxes",
           [](const Mapper& self, const py::handle& centers, const py::handle& half_extents,
              const py::handle& rotations) {
-            const std::size_t limit = std::numeric_limits<std::size_t>::max();
-            const PointCloud c = pointsFrom(centers, limit, "centers", false);
-            const PointCloud e = pointsFrom(half_extents, limit, "half_extents", false);
-            const auto q =
-                py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(rotations);
-            if (!q || q.ndim() != 2 || q.shape(1) != 4 ||
-                static_cast<std::size_t>(q.shape(0)) != c.size() || e.size() != c.size()) {
-              throw py::value_error(
-                  "centers and half_extents (N, 3) and rotations (N, 4: x y z w) must match");
-            }
-            std::vector<OrientedBox> boxes(c.size());
-            for (std::size_t i = 0; i < c.size(); ++i) {
-              const double* r = q.data(static_cast<py::ssize_t>(i), 0);
-              boxes[i].center = c[i];
-              boxes[i].half_extents = e[i];
-              boxes[i].rotation =
-                  Eigen::Quaternionf(static_cast<float>(r[3]), static_cast<float>(r[0]),
-                                     static_cast<float>(r[1]), static_cast<float>(r[2]));
-            }
+            const std::vector<OrientedBox> boxes = boxesFrom(centers, half_extents, rotations);
             return sweptDict(released([&] { return self.checkBoxes(boxes); }), "box");
           },
           py::arg("centers"), py::arg("half_extents"), py::arg("rotations"),

@@ -76,6 +76,17 @@ def test_client_round_trip(server, tmp_path):
         theirs_p, ours_p = client.check_path(path, 0.2), planner.check_path(path, 0.2)
         assert theirs_p["state"] == ours_p["state"] == "occupied"
         assert theirs_p["occupied"] == ours_p["occupied"]
+        centers = np.array([[1.0, 0.0, 0.0], [3.0, 0.0, 0.0], [4.5, 0.0, 0.0]])
+        half = np.full((3, 3), 0.3)
+        turns = np.array([[0.0, 0.0, np.sin(a / 2), np.cos(a / 2)] for a in (0.0, 0.4, 0.8)])
+        theirs_b = client.check_boxes(centers, half, turns)
+        ours_b = planner.check_boxes(centers, half, turns)
+        assert theirs_b["state"] == ours_b["state"] and theirs_b["occupied"] == ours_b["occupied"]
+        assert theirs_b["map_version"] == version
+        theirs_d, theirs_c = client.distance_box([3.0, -0.5, -0.5], [4.5, 0.5, 0.5])
+        ours_d, ours_c = planner.distance_box([3.0, -0.5, -0.5], [4.5, 0.5, 0.5])
+        np.testing.assert_array_equal(theirs_d, ours_d)
+        assert theirs_c == ours_c and theirs_d.shape == ours_d.shape
         assert snapshot.save(tmp_path / "fetched.dmap") > 0
         assert densemap.load(tmp_path / "fetched.dmap").known_cells == snapshot.known_cells
         assert "erased" in client.clear_box([3.5, -1, -1], [4.5, 1, 1])

@@ -25,7 +25,8 @@ namespace {
 
 // Attachment tags of the service waitset.
 constexpr dds_attach_t kPointTag = 1, kBboxTag = 2, kRayTag = 3, kCmdTag = 4, kScanTag = 5,
-                       kMapTag = 6, kDistanceTag = 7, kPathTag = 8;
+                       kMapTag = 6, kDistanceTag = 7, kPathTag = 8, kBoxesTag = 9,
+                       kDistanceBoxTag = 10;
 
 }  // namespace
 
@@ -33,7 +34,7 @@ struct MapService::Dds {
   dds::Entity participant;
   dds::Topics topics;
   dds::Entity scan_reader, point_reader, bbox_reader, ray_reader, cmd_reader, map_reader;
-  dds::Entity distance_reader, path_reader;
+  dds::Entity distance_reader, path_reader, boxes_reader, distance_box_reader;
   // Replies go out through writers made per asking client (ReplyWriters).
   dds::Entity manifest_writer, tile_writer, delta_writer, event_writer, status_writer;
   std::optional<dds::WaitSet> ingest_waitset;
@@ -83,6 +84,8 @@ Expected<std::unique_ptr<MapService>> MapService::create(Ingest& ingest,
   reader(d.ray_reader, d.topics.ray_request, requests);
   reader(d.distance_reader, d.topics.distance_request, requests);
   reader(d.path_reader, d.topics.path_request, requests);
+  reader(d.boxes_reader, d.topics.boxes_request, requests);
+  reader(d.distance_box_reader, d.topics.distance_box_request, requests);
   reader(d.cmd_reader, d.topics.command_request, dds::kCommandQos);
   reader(d.map_reader, d.topics.map_request, dds::kCommandQos);
   writer(d.manifest_writer, d.topics.manifest, dds::kLatestStateQos);
@@ -100,7 +103,8 @@ Expected<std::unique_ptr<MapService>> MapService::create(Ingest& ingest,
   for (auto [r, tag] : {std::pair{&d.point_reader, kPointTag}, std::pair{&d.bbox_reader, kBboxTag},
                         std::pair{&d.ray_reader, kRayTag}, std::pair{&d.cmd_reader, kCmdTag},
                         std::pair{&d.map_reader, kMapTag}, std::pair{&d.distance_reader, kDistanceTag},
-                        std::pair{&d.path_reader, kPathTag}}) {
+                        std::pair{&d.path_reader, kPathTag}, std::pair{&d.boxes_reader, kBoxesTag},
+                        std::pair{&d.distance_box_reader, kDistanceBoxTag}}) {
     if (auto ok = d.service_waitset->attachReader(*r, tag); !ok) return std::unexpected(ok.error());
   }
   if (auto ok = d.ingest_waitset->attachReader(d.scan_reader, kScanTag); !ok) {
@@ -125,7 +129,7 @@ void MapService::makeRooms() {
   queries_ = std::make_unique<QueryRoom>(
       ingest_,
       QueryRoom::Readers{d.point_reader, d.bbox_reader, d.ray_reader, d.distance_reader,
-                         d.path_reader},
+                         d.path_reader, d.boxes_reader, d.distance_box_reader},
       *replies_, *tasks_, *stats_, options_.max_query_cells);
   commands_ = std::make_unique<CommandRoom>(
       ingest_, CommandRoom::Endpoints{d.cmd_reader, d.map_reader, d.tile_writer}, *replies_,

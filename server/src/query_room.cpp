@@ -1,6 +1,7 @@
 #include "query_room.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -39,6 +40,15 @@ struct PathRequest {
   densemap_msgs_RequestId id;
   std::vector<float> xyz;
   double radius;
+};
+struct BoxesRequest {
+  densemap_msgs_RequestId id;
+  std::vector<float> floats;  // kBoxFloats a box
+};
+struct DistanceBoxRequest {
+  densemap_msgs_RequestId id;
+  Point3f min, max;
+  bool unknown_as_occupied;
 };
 
 /// Distances from the field and the view it was updated to (one version), or why not.
@@ -93,6 +103,70 @@ void answerPath(const dds::Entity& writer, const PathRequest& req, const MapView
   rep.status = error.empty() ? kOk : kInvalid;
   rep.error = const_cast<char*>(error.c_str());
   (void)dds::write(writer, &rep);
+}
+
+void answerBoxes(const dds::Entity& writer, const BoxesRequest& req, const MapView& view,
+                 std::string& error) {
+  densemap_msgs_BoxesQueryReply rep{};
+  rep.id = req.id;
+  rep.map_version = view.version();
+  auto boxes = boxesFromFloats(req.floats, dds::kMaxQueryBoxes);
+  SweptVolumeLimits limits;
+  limits.max_boxes = dds::kMaxQueryBoxes;
+  auto result = boxes ? checkBoxes(view, *boxes, limits)
+                      : Expected<SweptVolumeResult>(std::unexpected(boxes.error()));
+  if (result) {
+    rep.state = static_cast<std::uint8_t>(result->state);
+    rep.has_occupied = result->occupied.has_value();
+    if (result->occupied) toWire(*result->occupied, rep.occupied);
+    rep.has_unknown = result->unknown.has_value();
+    if (result->unknown) toWire(*result->unknown, rep.unknown);
+  } else {
+    error = result.error().message;
+  }
+  rep.status = error.empty() ? kOk : kInvalid;
+  rep.error = const_cast<char*>(error.c_str());
+  (void)dds::write(writer, &rep);
+}
+
+/// A dense box of the field and the view it was updated to (one version), or why not.
+void answerDistanceBox(const Ingest& ingest, const dds::Entity& writer,
+                       const DistanceBoxRequest& req, std::string& error) {
+  densemap_msgs_DistanceBoxReply rep{};
+  rep.id = req.id;
+  DistanceBox box;
+  const bool kept = ingest.withDistanceField([&](const DistanceField& field, const MapView& view) {
+    rep.map_version = view.version();
+    rep.max_distance = static_cast<float>(field.maxDistance());
+    auto r = exportDistanceBox(field, view, req.min, req.max, req.unknown_as_occupied,
+                               dds::kMaxDistanceBoxCells);
+    if (r) {
+      box = std::move(*r);
+      const Point3f first = view.grid().keyToPoint(box.min);
+      for (int i = 0; i < 3; ++i) {
+        rep.min_center[i] = first[i];
+        rep.size[i] = box.size[static_cast<std::size_t>(i)];
+      }
+    } else {
+      error = r.error().message;
+    }
+  });
+  if (!kept) error = "this server keeps no distance field (config: esdf { enabled: true })";
+  rep.status = error.empty() ? kOk : kInvalid;
+  rep.error = const_cast<char*>(error.c_str());
+  rep.distances = dds::borrowSequence<dds_sequence_float>(box.distances);
+  (void)dds::write(writer, &rep);
+}
+
+/// The cells of the box [min, max] at `resolution`, capped at `cap` (0 for a box that is not
+/// finite or inverted: exportDistanceBox says why).
+std::size_t boxCells(const Point3f& min, const Point3f& max, double resolution, std::size_t cap) {
+  double cells = 1.0;
+  for (int i = 0; i < 3; ++i) {
+    if (!std::isfinite(min[i]) || !std::isfinite(max[i]) || min[i] > max[i]) return 0;
+    cells *= std::floor(max[i] / resolution) - std::floor(min[i] / resolution) + 1.0;
+  }
+  return cells >= static_cast<double>(cap) ? cap : static_cast<std::size_t>(cells);
 }
 
 void answerPoints(const dds::Entity& writer, const PointRequest& req, const MapView& view,
@@ -315,6 +389,66 @@ void QueryRoom::take() {
                   const MapView& view, std::string& error) {
                 replies_.awaitAsker(*w, who);
                 answerPath(*w, req, view, error);
+              },
+              bytes);
+        });
+    took |= dds::takeOneWithInfo<densemap_msgs_BoxesQueryRequest>(
+        readers_.boxes,
+        [&](const densemap_msgs_BoxesQueryRequest& m, const dds_sample_info_t& info) {
+          const auto w = replies_.writer(ReplyTopic::kBoxes, m.id.client_id);
+          if (!w) return;
+          if (m.boxes._length / kBoxFloats > dds::kMaxQueryBoxes) {
+            const std::string refusal = std::to_string(m.boxes._length / kBoxFloats) +
+                                        " boxes, more than the " +
+                                        std::to_string(dds::kMaxQueryBoxes) + " allowed";
+            densemap_msgs_BoxesQueryReply rep{};
+            rep.id = m.id;
+            rep.status = kInvalid;
+            rep.error = const_cast<char*>(refusal.c_str());
+            replies_.awaitAsker(*w, asker(readers_.boxes, info));
+            (void)dds::write(*w, &rep);
+            stats_.refused(refusal);
+            return;
+          }
+          BoxesRequest req{m.id,
+                           std::vector<float>(m.boxes._buffer, m.boxes._buffer + m.boxes._length)};
+          const std::size_t bytes = req.floats.size() * sizeof(float);
+          spawn(
+              [this, w, req = std::move(req), who = asker(readers_.boxes, info)](
+                  const MapView& view, std::string& error) {
+                replies_.awaitAsker(*w, who);
+                answerBoxes(*w, req, view, error);
+              },
+              bytes);
+        });
+    took |= dds::takeOneWithInfo<densemap_msgs_DistanceBoxRequest>(
+        readers_.distance_box,
+        [&](const densemap_msgs_DistanceBoxRequest& m, const dds_sample_info_t& info) {
+          const auto w = replies_.writer(ReplyTopic::kDistanceBox, m.id.client_id);
+          if (!w) return;
+          DistanceBoxRequest req{m.id, toPoint(m.min), toPoint(m.max), m.unknown_as_occupied};
+          const std::size_t bytes = distanceBoxBytes(boxCells(
+              req.min, req.max, ingest_.view()->grid().resolution(), dds::kMaxDistanceBoxCells));
+          if (bytes > tasks_.budgetBytes()) {
+            const std::string refusal =
+                "a distance box needing " + std::to_string(bytes >> 20) +
+                " MiB, over the server's request budget of " +
+                std::to_string(tasks_.budgetBytes() >> 20) +
+                " MiB (pipeline.request_budget_mb): ask for smaller boxes";
+            densemap_msgs_DistanceBoxReply rep{};
+            rep.id = m.id;
+            rep.status = kInvalid;
+            rep.error = const_cast<char*>(refusal.c_str());
+            replies_.awaitAsker(*w, asker(readers_.distance_box, info));
+            (void)dds::write(*w, &rep);
+            stats_.refused(refusal);
+            return;
+          }
+          spawn(
+              [this, w, req, who = asker(readers_.distance_box, info)](const MapView&,
+                                                                     std::string& error) {
+                replies_.awaitAsker(*w, who);
+                answerDistanceBox(ingest_, *w, req, error);
               },
               bytes);
         });

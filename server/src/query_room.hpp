@@ -9,8 +9,8 @@
 
 namespace densemap::server {
 
-/// Point, box, ray, distance and path queries: takes one request at a time from each reader in turn (no kind
-/// starves the others) while the request budget has room, and answers each in a task from the
+/// Point, box, ray, distance, path, oriented-box and distance-box queries: takes one request at a
+/// time from each reader in turn (no kind starves the others) while the request budget has room, and answers each in a task from the
 /// latest published version (one version throughout a multi-cell answer).
 class QueryRoom {
  public:
@@ -20,6 +20,8 @@ class QueryRoom {
     const dds::Entity& ray;
     const dds::Entity& distance;
     const dds::Entity& path;
+    const dds::Entity& boxes;
+    const dds::Entity& distance_box;
   };
   QueryRoom(Ingest& ingest, Readers readers, ReplyWriters& replies, RequestTasks& tasks,
             RequestStats& stats, std::size_t max_query_cells)
@@ -36,6 +38,10 @@ class QueryRoom {
   [[nodiscard]] static std::size_t pointRequestBytes(std::size_t coordinates);
   /// The same for a distance request (its reply carries 7 floats a point).
   [[nodiscard]] static std::size_t distanceRequestBytes(std::size_t coordinates);
+  /// The same for a distance box of `cells` (the reply's float a cell, and its sample).
+  [[nodiscard]] static std::size_t distanceBoxBytes(std::size_t cells) {
+    return cells * 2 * sizeof(float);
+  }
 
  private:
   Ingest& ingest_;

@@ -47,6 +47,10 @@ std::shared_ptr<const dds::Entity> ReplyWriters::writer(ReplyTopic topic, std::u
         return topics_.distance_reply;
       case ReplyTopic::kPath:
         return topics_.path_reply;
+      case ReplyTopic::kBoxes:
+        return topics_.boxes_reply;
+      case ReplyTopic::kDistanceBox:
+        return topics_.distance_box_reply;
       case ReplyTopic::kCommand:
         break;
     }

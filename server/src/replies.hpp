@@ -23,7 +23,7 @@ inline constexpr std::int32_t kOk = 0, kInvalid = 1, kInternal = 2;
 [[nodiscard]] inline Point3f toPoint(const float (&v)[3]) { return {v[0], v[1], v[2]}; }
 
 /// The reply topics.
-enum class ReplyTopic { kPoint, kBbox, kRay, kCommand, kDistance, kPath };
+enum class ReplyTopic { kPoint, kBbox, kRay, kCommand, kDistance, kPath, kBoxes, kDistanceBox };
 
 /// Replies to one asker only: the writer of a reply topic for one client,
 /// in that client's partition (dds::replyPartition), made at its first request on that topic,

@@ -1,6 +1,6 @@
 // Planner requests as the server and the Mapper take them (any floats, any lengths): distance
-// batches (either unknown policy, interpolated or not), paths with a radius, oriented boxes and
-// distance boxes, against a small map with its distance field, through the functions that
+// batches (either unknown policy, interpolated or not), paths with a radius, oriented boxes (from
+// the wire's flat floats) and distance boxes, against a small map with its distance field, through the functions that
 // answer them (core/planner). Nothing may crash, hang or allocate beyond the request's own size
 // and the limits.
 #include <cstring>
@@ -75,18 +75,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       (void)densemap::checkPath(*map.view, xyz, radius, limits);
       break;
     }
-    case 2: {  // oriented boxes: centre, half extents, quaternion (10 floats each)
-      std::vector<densemap::OrientedBox> boxes;
-      while (in.restSize() >= 10 * sizeof(float) && boxes.size() < 1000) {
-        densemap::OrientedBox b;
-        b.center = takePoint(in);
-        b.half_extents = takePoint(in);
-        const float w = in.take<float>(), x = in.take<float>(), y = in.take<float>(),
-                    z = in.take<float>();
-        b.rotation = Eigen::Quaternionf(w, x, y, z);
-        boxes.push_back(b);
-      }
-      (void)densemap::checkBoxes(*map.view, boxes, limits);
+    case 2: {  // oriented boxes as the wire carries them (10 floats each), as the server reads them
+      const std::vector<float> floats = restAsFloats(in);
+      auto boxes = densemap::boxesFromFloats(floats, limits.max_boxes);
+      if (boxes) (void)densemap::checkBoxes(*map.view, *boxes, limits);
       break;
     }
     default: {  // a distance box

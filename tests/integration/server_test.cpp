@@ -195,7 +195,47 @@ TEST(Server, DistanceAndPathQueriesEqualCoreOnTheOfflineMap) {
   }
   EXPECT_DOUBLE_EQ(remote->length_m, local->length_m);
 
+  // Oriented boxes (a footprint turning along the path) and the dense distance box.
+  std::vector<OrientedBox> boxes;
+  for (int i = 0; i < 20; ++i) {
+    OrientedBox b;
+    b.center = Point3f(1.0F + 0.4F * static_cast<float>(i), 8.0F + 0.2F * static_cast<float>(i), 1.1F);
+    b.half_extents = Point3f(0.4F, 0.25F, 0.3F);
+    b.rotation = Eigen::Quaternionf(Eigen::AngleAxisf(0.1F * static_cast<float>(i), Eigen::Vector3f::UnitZ()));
+    boxes.push_back(b);
+  }
+  auto remote_boxes = client->checkBoxes(boxes);
+  ASSERT_TRUE(remote_boxes) << remote_boxes.error().message;
+  auto local_boxes = checkBoxes(*view, boxes);
+  ASSERT_TRUE(local_boxes);
+  EXPECT_EQ(remote_boxes->state, local_boxes->state);
+  ASSERT_EQ(remote_boxes->occupied.has_value(), local_boxes->occupied.has_value());
+  if (local_boxes->occupied) {
+    EXPECT_EQ(remote_boxes->occupied->index, local_boxes->occupied->index);
+    EXPECT_EQ(remote_boxes->occupied->center, local_boxes->occupied->center);
+  }
+  ASSERT_EQ(remote_boxes->unknown.has_value(), local_boxes->unknown.has_value());
+  for (const bool unknown : {false, true}) {
+    auto remote_box = client->distanceBox(Point3f(1, 6, 0.5F), Point3f(6, 12, 2), unknown);
+    ASSERT_TRUE(remote_box) << remote_box.error().message;
+    auto local_box =
+        exportDistanceBox(*field, *view, Point3f(1, 6, 0.5F), Point3f(6, 12, 2), unknown, 1u << 24);
+    ASSERT_TRUE(local_box);
+    EXPECT_EQ(remote_box->map_version, raws.size());
+    EXPECT_EQ(remote_box->size, local_box->size);
+    EXPECT_EQ(remote_box->min_center, view->grid().keyToPoint(local_box->min));
+    EXPECT_EQ(remote_box->distances, local_box->distances);
+  }
+
   // Refusals: their reasons, counted.
+  auto huge_box = client->distanceBox(Point3f(-500, -500, -500), Point3f(500, 500, 500));
+  ASSERT_FALSE(huge_box);
+  EXPECT_NE(huge_box.error().message.find("cells"), std::string::npos) << huge_box.error().message;
+  std::vector<OrientedBox> bad_boxes = boxes;
+  bad_boxes[3].rotation = Eigen::Quaternionf(2.0F, 0.0F, 0.0F, 0.0F);
+  auto bad = client->checkBoxes(bad_boxes);
+  ASSERT_FALSE(bad);
+  EXPECT_NE(bad.error().message.find("quaternion"), std::string::npos) << bad.error().message;
   auto nan = client->queryDistances(std::vector<float>{0, 0, std::nanf("")});
   ASSERT_FALSE(nan);
   EXPECT_NE(nan.error().message.find("NaN"), std::string::npos) << nan.error().message;
@@ -204,13 +244,13 @@ TEST(Server, DistanceAndPathQueriesEqualCoreOnTheOfflineMap) {
   EXPECT_NE(negative.error().message.find("radius"), std::string::npos);
   auto long_path = client->checkPath(std::vector<float>(3 * 100'001, 0.0F), 0.1F);
   ASSERT_FALSE(long_path);
-  // The status (1 Hz) counts the two refused on the server (the long path never left).
+  // The status (1 Hz) counts the four refused on the server (the long path never left).
   std::uint64_t rejected = 0;
-  for (int i = 0; i < 40 && rejected < 2; ++i) {
+  for (int i = 0; i < 40 && rejected < 4; ++i) {
     std::this_thread::sleep_for(100ms);
     if (auto status = client->status()) rejected = status->queries_rejected;
   }
-  EXPECT_GE(rejected, 2U);
+  EXPECT_GE(rejected, 4U);
   EXPECT_EQ(server.stop(), 0);
 
   // A server without the field says so.
@@ -221,6 +261,9 @@ TEST(Server, DistanceAndPathQueriesEqualCoreOnTheOfflineMap) {
   auto none = plain_client->queryDistances(xyz);
   ASSERT_FALSE(none);
   EXPECT_NE(none.error().message.find("esdf"), std::string::npos) << none.error().message;
+  auto no_box = plain_client->distanceBox(Point3f(0, 0, 0), Point3f(1, 1, 1));
+  ASSERT_FALSE(no_box);
+  EXPECT_NE(no_box.error().message.find("esdf"), std::string::npos) << no_box.error().message;
   EXPECT_EQ(plain.stop(), 0);
 }
 

@@ -293,4 +293,30 @@ Expected<SweptVolumeResult> checkBoxes(const MapView& view, std::span<const Orie
   return r;
 }
 
+void appendBoxFloats(const OrientedBox& box, std::vector<float>& out) {
+  const Eigen::Quaternionf& q = box.rotation;
+  out.insert(out.end(), {box.center.x(), box.center.y(), box.center.z(), box.half_extents.x(),
+                         box.half_extents.y(), box.half_extents.z(), q.x(), q.y(), q.z(), q.w()});
+}
+
+Expected<std::vector<OrientedBox>> boxesFromFloats(std::span<const float> floats,
+                                                   std::size_t max_boxes) {
+  if (floats.size() % kBoxFloats != 0) {
+    return makeError("boxes need 10 numbers each (centre, half extents, rotation x y z w), got " +
+                     std::to_string(floats.size()));
+  }
+  const std::size_t n = floats.size() / kBoxFloats;
+  if (n == 0 || n > max_boxes) {
+    return makeError("1 to " + std::to_string(max_boxes) + " boxes, got " + std::to_string(n));
+  }
+  std::vector<OrientedBox> boxes(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const float* f = floats.data() + i * kBoxFloats;
+    boxes[i].center = Point3f(f[0], f[1], f[2]);
+    boxes[i].half_extents = Point3f(f[3], f[4], f[5]);
+    boxes[i].rotation = Eigen::Quaternionf(f[9], f[6], f[7], f[8]);
+  }
+  return boxes;
+}
+
 }  // namespace densemap

@@ -279,3 +279,31 @@ TEST(SweptVolume, RefusesRequestsPastTheirBounds) {
 
 }  // namespace
 }  // namespace densemap
+
+namespace densemap {
+namespace {
+
+TEST(BoxFloats, RoundTripAndRefuseBadLengths) {
+  OrientedBox a;
+  a.center = Point3f(1.5F, -2.0F, 0.25F);
+  a.half_extents = Point3f(0.5F, 0.25F, 1.0F);
+  a.rotation = Eigen::Quaternionf(Eigen::AngleAxisf(0.7F, Eigen::Vector3f(0, 0.6F, 0.8F)));
+  OrientedBox b;
+  std::vector<float> floats;
+  appendBoxFloats(a, floats);
+  appendBoxFloats(b, floats);
+  ASSERT_EQ(floats.size(), 2 * kBoxFloats);
+  auto back = boxesFromFloats(floats, 2);
+  ASSERT_TRUE(back);
+  ASSERT_EQ(back->size(), 2U);
+  EXPECT_EQ((*back)[0].center, a.center);
+  EXPECT_EQ((*back)[0].half_extents, a.half_extents);
+  EXPECT_EQ((*back)[0].rotation.coeffs(), a.rotation.coeffs());
+  EXPECT_EQ((*back)[1].rotation.coeffs(), b.rotation.coeffs());
+  EXPECT_FALSE(boxesFromFloats(floats, 1)) << "more boxes than allowed";
+  EXPECT_FALSE(boxesFromFloats(std::span<const float>(floats).first(15), 2)) << "a partial box";
+  EXPECT_FALSE(boxesFromFloats({}, 2)) << "no box";
+}
+
+}  // namespace
+}  // namespace densemap

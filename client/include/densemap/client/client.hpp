@@ -1,5 +1,6 @@
 #pragma once
 
+#include <array>
 #include <chrono>
 #include <cstdint>
 #include <functional>
@@ -57,9 +58,19 @@ struct DistanceQueryAnswer : DistanceQueryResult {
   float max_distance = 0.0F;  // distances are at most this (meaning none within it)
 };
 
-/// A swept-volume check of a path on the server's map.
+/// A swept-volume check of a path (or of oriented boxes) on the server's map.
 struct PathQueryAnswer : SweptVolumeResult {
   std::uint64_t map_version = 0;
+};
+
+/// A dense box of the server's distance field: the distance (metres) of every cell from
+/// `min_center` on, `size` cells an axis, x fastest, then y, then z.
+struct DistanceBoxAnswer {
+  std::uint64_t map_version = 0;
+  float max_distance = 0.0F;
+  Point3f min_center = Point3f::Zero();
+  std::array<std::uint32_t, 3> size{};
+  std::vector<float> distances;
 };
 
 struct DeltaInfo {
@@ -115,6 +126,13 @@ class Client {
   /// vertex, at most 100,000): every cell within the radius of the path counts.
   [[nodiscard]] Expected<PathQueryAnswer> checkPath(std::span<const float> vertices_world,
                                                     double radius_m);
+  /// Whether oriented boxes (a footprint at poses along a trajectory, at most 100,000) are
+  /// free: every cell a box touches counts; the conflict's index is the box.
+  [[nodiscard]] Expected<PathQueryAnswer> checkBoxes(std::span<const OrientedBox> boxes);
+  /// The server's distance field over the box [min, max] (metres) as a dense array, at most
+  /// 4,194,304 cells (and the server's request budget).
+  [[nodiscard]] Expected<DistanceBoxAnswer> distanceBox(const Point3f& min, const Point3f& max,
+                                                        bool unknown_as_occupied = false);
   /// Clears the whole map (a new, empty version). Returns the server's detail message.
   [[nodiscard]] Expected<std::string> reset();
   /// Forgets the cells of the box [min, max] (metres, world frame): they become unknown.

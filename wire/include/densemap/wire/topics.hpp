@@ -17,6 +17,8 @@ struct Topics {
   Entity ray_request, ray_reply;
   Entity distance_request, distance_reply;
   Entity path_request, path_reply;
+  Entity boxes_request, boxes_reply;
+  Entity distance_box_request, distance_box_reply;
   Entity command_request, command_reply;
   /// send-map requests (CommandRequest, kind 3 only; replies on command_reply): a topic of their
   /// own so that DDS Security can grant map fetches without granting reset and clear-bbox.
@@ -35,6 +37,10 @@ enum class CommandKind : std::int32_t { kReset = 0, kClearBox = 1, kSave = 2, kS
 inline constexpr std::uint32_t kMaxQueryPoints = 250'000;
 /// The most vertices one PathQueryRequest may carry.
 inline constexpr std::uint32_t kMaxPathVertices = 100'000;
+/// The most boxes one BoxesQueryRequest may carry.
+inline constexpr std::uint32_t kMaxQueryBoxes = 100'000;
+/// The most cells one DistanceBoxReply may carry (16 MiB of distances).
+inline constexpr std::uint32_t kMaxDistanceBoxCells = 4'194'304;
 
 /// The partition of one client's reply readers, and of the server's reply writers for that
 /// client: a reply reaches its asker only (otherwise every client reads every reply, and many

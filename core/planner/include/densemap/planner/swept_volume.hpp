@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <optional>
 #include <span>
+#include <vector>
 
 #include "densemap/geometry/error.hpp"
 #include "densemap/planner/planner_types.hpp"
@@ -33,6 +34,15 @@ struct SweptVolumeLimits {
 [[nodiscard]] Expected<SweptVolumeResult> checkPath(const MapView& view, std::span<const float> xyz,
                                                     double radius_m,
                                                     const SweptVolumeLimits& limits = {});
+
+/// Oriented boxes as flat floats (the wire's form): 10 per box, centre x y z, half extents
+/// x y z, rotation x y z w.
+inline constexpr std::size_t kBoxFloats = 10;
+void appendBoxFloats(const OrientedBox& box, std::vector<float>& out);
+/// The boxes of `floats`: a multiple of kBoxFloats, at most `max_boxes` boxes (checkBoxes
+/// checks the values themselves).
+[[nodiscard]] Expected<std::vector<OrientedBox>> boxesFromFloats(std::span<const float> floats,
+                                                                 std::size_t max_boxes);
 
 /// The boxes in order: every cell whose closed cube intersects a box (separating axes, exact
 /// up to the same tolerance). The conflict's `index` is the box; arc_length is 0.
