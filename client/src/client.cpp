@@ -81,10 +81,10 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
   make(d.event_r, d.topics.events, dds::kEventReaderQos, false);
   make(d.st_r, d.topics.status, dds::kLatestStateQos, false);
   if (!status) return std::unexpected(status.error());
-  for (auto [ws, reader] : {std::pair{&d.pr_ws, &d.pr_r}, std::pair{&d.br_ws, &d.br_r},
-                            std::pair{&d.rr_ws, &d.rr_r}, std::pair{&d.dr_ws, &d.dr_r},
-                            std::pair{&d.par_ws, &d.par_r}, std::pair{&d.or_ws, &d.or_r},
-                            std::pair{&d.dbr_ws, &d.dbr_r}, std::pair{&d.cr_ws, &d.cr_r}}) {
+  for (auto [ws, reader] :
+       {std::pair{&d.pr_ws, &d.pr_r}, std::pair{&d.br_ws, &d.br_r}, std::pair{&d.rr_ws, &d.rr_r},
+        std::pair{&d.dr_ws, &d.dr_r}, std::pair{&d.par_ws, &d.par_r}, std::pair{&d.or_ws, &d.or_r},
+        std::pair{&d.dbr_ws, &d.dbr_r}, std::pair{&d.cr_ws, &d.cr_r}}) {
     if (reader->get() <= 0) continue;
     auto w = dds::WaitSet::create(d.participant);
     if (!w) return std::unexpected(w.error());
@@ -104,9 +104,9 @@ Expected<void> Client::Impl::waitForServer() {
       (void)dds_get_name(dds_get_topic(e.get()), name, sizeof name);
       return std::string(name);
     };
-    for (const dds::Entity* w : {&dds_->scan_w, &dds_->pq_w, &dds_->bq_w, &dds_->rq_w, &dds_->dq_w,
-                                 &dds_->paq_w, &dds_->oq_w, &dds_->dbq_w, &dds_->cq_w,
-                                 &dds_->mq_w}) {
+    for (const dds::Entity* w :
+         {&dds_->scan_w, &dds_->pq_w, &dds_->bq_w, &dds_->rq_w, &dds_->dq_w, &dds_->paq_w,
+          &dds_->oq_w, &dds_->dbq_w, &dds_->cq_w, &dds_->mq_w}) {
       if (w->get() <= 0) continue;  // not granted by DDS Security
       dds_publication_matched_status_t s;
       if (dds_get_publication_matched_status(w->get(), &s) < 0 || s.current_count == 0)
@@ -187,6 +187,26 @@ Expected<void> awaitReply(const dds::Entity& reader, dds::WaitSet& waitset,
 
 }  // namespace
 
+template <class Reply, class Request, class Read>
+Expected<void> Client::Impl::ask(const dds::Entity& writer, const dds::Entity& reader,
+                                 std::optional<dds::WaitSet>& waitset, const Request& req,
+                                 const char* what, Read&& read) {
+  if (auto ok = permitted(writer, what); !ok) return std::unexpected(ok.error());
+  if (auto ok = permitted(reader, what); !ok) return std::unexpected(ok.error());
+  if (auto ok = dds::write(writer, &req); !ok) return std::unexpected(ok.error());
+  std::string error;
+  auto ok = awaitReply<Reply>(reader, *waitset, req.id, options_.timeout, [&](const Reply& r) {
+    if (r.status != 0) {
+      error = text(r.error);
+      return;
+    }
+    read(r, error);
+  });
+  if (!ok) return std::unexpected(ok.error());
+  if (!error.empty()) return makeError("server: " + error);
+  return {};
+}
+
 Expected<PointQueryAnswer> Client::queryPoints(const std::vector<Point3f>& points_world) {
   std::vector<float> xyz;
   xyz.reserve(points_world.size() * 3);
@@ -223,18 +243,10 @@ Expected<PointQueryAnswer> Client::Impl::queryPointsOnce(std::span<const float> 
   densemap_msgs_PointQueryRequest req{};
   req.id = {client_id_, next_request_++};
   req.points = dds::borrowSequence<dds_sequence_float>(xyz);
-  if (auto ok = permitted(dds_->pq_w, "point queries"); !ok) return std::unexpected(ok.error());
-  if (auto ok = permitted(dds_->pr_r, "point queries"); !ok) return std::unexpected(ok.error());
-  if (auto ok = dds::write(dds_->pq_w, &req); !ok) return std::unexpected(ok.error());
   PointQueryAnswer answer;
-  std::string error;
-  auto ok = awaitReply<densemap_msgs_PointQueryReply>(
-      dds_->pr_r, *dds_->pr_ws, req.id, options_.timeout,
-      [&](const densemap_msgs_PointQueryReply& r) {
-        if (r.status != 0) {
-          error = text(r.error);
-          return;
-        }
+  auto ok = ask<densemap_msgs_PointQueryReply>(
+      dds_->pq_w, dds_->pr_r, dds_->pr_ws, req, "point queries",
+      [&](const densemap_msgs_PointQueryReply& r, std::string& /*error*/) {
         answer.map_version = r.map_version;
         for (std::uint32_t i = 0; i < r.log_odds._length; ++i) {
           const float v = r.log_odds._buffer[i];
@@ -243,7 +255,6 @@ Expected<PointQueryAnswer> Client::Impl::queryPointsOnce(std::span<const float> 
         }
       });
   if (!ok) return std::unexpected(ok.error());
-  if (!error.empty()) return makeError("server: " + error);
   return answer;
 }
 
@@ -254,18 +265,10 @@ Expected<BoxQueryAnswer> Client::Impl::queryBox(const Point3f& min, const Point3
   copy3(req.min, min);
   copy3(req.max, max);
   req.max_centers = max_centers;
-  if (auto ok = permitted(dds_->bq_w, "box queries"); !ok) return std::unexpected(ok.error());
-  if (auto ok = permitted(dds_->br_r, "box queries"); !ok) return std::unexpected(ok.error());
-  if (auto ok = dds::write(dds_->bq_w, &req); !ok) return std::unexpected(ok.error());
   BoxQueryAnswer answer;
-  std::string error;
-  auto ok = awaitReply<densemap_msgs_BboxQueryReply>(
-      dds_->br_r, *dds_->br_ws, req.id, options_.timeout,
-      [&](const densemap_msgs_BboxQueryReply& r) {
-        if (r.status != 0) {
-          error = text(r.error);
-          return;
-        }
+  auto ok = ask<densemap_msgs_BboxQueryReply>(
+      dds_->bq_w, dds_->br_r, dds_->br_ws, req, "box queries",
+      [&](const densemap_msgs_BboxQueryReply& r, std::string& /*error*/) {
         answer.map_version = r.map_version;
         answer.occupied = r.occupied;
         answer.free = r.free_cells;
@@ -276,7 +279,6 @@ Expected<BoxQueryAnswer> Client::Impl::queryBox(const Point3f& min, const Point3
         }
       });
   if (!ok) return std::unexpected(ok.error());
-  if (!error.empty()) return makeError("server: " + error);
   return answer;
 }
 
@@ -287,25 +289,16 @@ Expected<RayQueryAnswer> Client::Impl::castRay(const Point3f& origin, const Poin
   copy3(req.origin, origin);
   copy3(req.direction, direction);
   req.max_range = max_range;
-  if (auto ok = permitted(dds_->rq_w, "ray queries"); !ok) return std::unexpected(ok.error());
-  if (auto ok = permitted(dds_->rr_r, "ray queries"); !ok) return std::unexpected(ok.error());
-  if (auto ok = dds::write(dds_->rq_w, &req); !ok) return std::unexpected(ok.error());
   RayQueryAnswer answer;
-  std::string error;
-  auto ok = awaitReply<densemap_msgs_RayQueryReply>(
-      dds_->rr_r, *dds_->rr_ws, req.id, options_.timeout,
-      [&](const densemap_msgs_RayQueryReply& r) {
-        if (r.status != 0) {
-          error = text(r.error);
-          return;
-        }
+  auto ok = ask<densemap_msgs_RayQueryReply>(
+      dds_->rq_w, dds_->rr_r, dds_->rr_ws, req, "ray queries",
+      [&](const densemap_msgs_RayQueryReply& r, std::string& /*error*/) {
         answer.map_version = r.map_version;
         answer.ray.hit = r.hit;
         answer.ray.hit_center = Point3f(r.hit_point[0], r.hit_point[1], r.hit_point[2]);
         answer.ray.distance = r.distance;
       });
   if (!ok) return std::unexpected(ok.error());
-  if (!error.empty()) return makeError("server: " + error);
   return answer;
 }
 
@@ -317,18 +310,10 @@ Expected<DistanceQueryAnswer> Client::Impl::queryDistancesOnce(
   req.unknown_as_occupied = options.unknown_as_occupied;
   req.interpolate = options.interpolate;
   req.nearest = options.nearest;
-  if (auto ok = permitted(dds_->dq_w, "distance queries"); !ok) return std::unexpected(ok.error());
-  if (auto ok = permitted(dds_->dr_r, "distance queries"); !ok) return std::unexpected(ok.error());
-  if (auto ok = dds::write(dds_->dq_w, &req); !ok) return std::unexpected(ok.error());
   DistanceQueryAnswer answer;
-  std::string error;
-  auto ok = awaitReply<densemap_msgs_DistanceQueryReply>(
-      dds_->dr_r, *dds_->dr_ws, req.id, options_.timeout,
-      [&](const densemap_msgs_DistanceQueryReply& r) {
-        if (r.status != 0) {
-          error = text(r.error);
-          return;
-        }
+  auto ok = ask<densemap_msgs_DistanceQueryReply>(
+      dds_->dq_w, dds_->dr_r, dds_->dr_ws, req, "distance queries",
+      [&](const densemap_msgs_DistanceQueryReply& r, std::string& error) {
         const std::size_t n = xyz.size() / 3;
         if (r.distances._length != n || r.gradients._length != 3 * n ||
             r.nearest._length != 3 * n) {
@@ -343,7 +328,6 @@ Expected<DistanceQueryAnswer> Client::Impl::queryDistancesOnce(
         answer.nearest.assign(r.nearest._buffer, r.nearest._buffer + 3 * n);
       });
   if (!ok) return std::unexpected(ok.error());
-  if (!error.empty()) return makeError("server: " + error);
   return answer;
 }
 
@@ -370,18 +354,10 @@ Expected<PathQueryAnswer> Client::Impl::checkPath(std::span<const float> xyz, do
   req.id = {client_id_, next_request_++};
   req.vertices = dds::borrowSequence<dds_sequence_float>(xyz);
   req.radius = radius;
-  if (auto ok = permitted(dds_->paq_w, "path queries"); !ok) return std::unexpected(ok.error());
-  if (auto ok = permitted(dds_->par_r, "path queries"); !ok) return std::unexpected(ok.error());
-  if (auto ok = dds::write(dds_->paq_w, &req); !ok) return std::unexpected(ok.error());
   PathQueryAnswer answer;
-  std::string error;
-  auto ok = awaitReply<densemap_msgs_PathQueryReply>(
-      dds_->par_r, *dds_->par_ws, req.id, options_.timeout,
-      [&](const densemap_msgs_PathQueryReply& r) {
-        if (r.status != 0) {
-          error = text(r.error);
-          return;
-        }
+  auto ok = ask<densemap_msgs_PathQueryReply>(
+      dds_->paq_w, dds_->par_r, dds_->par_ws, req, "path queries",
+      [&](const densemap_msgs_PathQueryReply& r, std::string& /*error*/) {
         answer.map_version = r.map_version;
         answer.state = r.state <= 2 ? static_cast<CellState>(r.state) : CellState::kUnknown;
         if (r.has_occupied) answer.occupied = conflictOf(r.occupied);
@@ -389,14 +365,13 @@ Expected<PathQueryAnswer> Client::Impl::checkPath(std::span<const float> xyz, do
         answer.length_m = r.length;
       });
   if (!ok) return std::unexpected(ok.error());
-  if (!error.empty()) return makeError("server: " + error);
   return answer;
 }
 
 Expected<PathQueryAnswer> Client::Impl::checkBoxes(std::span<const OrientedBox> boxes) {
   if (boxes.empty() || boxes.size() > dds::kMaxQueryBoxes) {
-    return makeError("1 to " + std::to_string(dds::kMaxQueryBoxes) +
-                     " boxes in one request, got " + std::to_string(boxes.size()));
+    return makeError("1 to " + std::to_string(dds::kMaxQueryBoxes) + " boxes in one request, got " +
+                     std::to_string(boxes.size()));
   }
   std::vector<float> floats;
   floats.reserve(boxes.size() * kBoxFloats);
@@ -404,25 +379,16 @@ Expected<PathQueryAnswer> Client::Impl::checkBoxes(std::span<const OrientedBox> 
   densemap_msgs_BoxesQueryRequest req{};
   req.id = {client_id_, next_request_++};
   req.boxes = dds::borrowSequence<dds_sequence_float>(floats);
-  if (auto ok = permitted(dds_->oq_w, "box queries"); !ok) return std::unexpected(ok.error());
-  if (auto ok = permitted(dds_->or_r, "box queries"); !ok) return std::unexpected(ok.error());
-  if (auto ok = dds::write(dds_->oq_w, &req); !ok) return std::unexpected(ok.error());
   PathQueryAnswer answer;
-  std::string error;
-  auto ok = awaitReply<densemap_msgs_BoxesQueryReply>(
-      dds_->or_r, *dds_->or_ws, req.id, options_.timeout,
-      [&](const densemap_msgs_BoxesQueryReply& r) {
-        if (r.status != 0) {
-          error = text(r.error);
-          return;
-        }
+  auto ok = ask<densemap_msgs_BoxesQueryReply>(
+      dds_->oq_w, dds_->or_r, dds_->or_ws, req, "oriented-box queries",
+      [&](const densemap_msgs_BoxesQueryReply& r, std::string& /*error*/) {
         answer.map_version = r.map_version;
         answer.state = r.state <= 2 ? static_cast<CellState>(r.state) : CellState::kUnknown;
         if (r.has_occupied) answer.occupied = conflictOf(r.occupied);
         if (r.has_unknown) answer.unknown = conflictOf(r.unknown);
       });
   if (!ok) return std::unexpected(ok.error());
-  if (!error.empty()) return makeError("server: " + error);
   return answer;
 }
 
@@ -435,23 +401,15 @@ Expected<DistanceBoxAnswer> Client::Impl::distanceBox(const Point3f& min, const 
     req.max[i] = max[i];
   }
   req.unknown_as_occupied = unknown_as_occupied;
-  if (auto ok = permitted(dds_->dbq_w, "distance boxes"); !ok) return std::unexpected(ok.error());
-  if (auto ok = permitted(dds_->dbr_r, "distance boxes"); !ok) return std::unexpected(ok.error());
-  if (auto ok = dds::write(dds_->dbq_w, &req); !ok) return std::unexpected(ok.error());
   DistanceBoxAnswer answer;
-  std::string error;
-  auto ok = awaitReply<densemap_msgs_DistanceBoxReply>(
-      dds_->dbr_r, *dds_->dbr_ws, req.id, options_.timeout,
-      [&](const densemap_msgs_DistanceBoxReply& r) {
-        if (r.status != 0) {
-          error = text(r.error);
-          return;
-        }
+  auto ok = ask<densemap_msgs_DistanceBoxReply>(
+      dds_->dbq_w, dds_->dbr_r, dds_->dbr_ws, req, "distance boxes",
+      [&](const densemap_msgs_DistanceBoxReply& r, std::string& error) {
         const std::uint64_t cells =
             std::uint64_t{r.size[0]} * std::uint64_t{r.size[1]} * std::uint64_t{r.size[2]};
         if (cells != r.distances._length) {
-          error = "a distance box of " + std::to_string(r.distances._length) +
-                  " values for " + std::to_string(cells) + " cells";
+          error = "a distance box of " + std::to_string(r.distances._length) + " values for " +
+                  std::to_string(cells) + " cells";
           return;
         }
         answer.map_version = r.map_version;
@@ -461,7 +419,6 @@ Expected<DistanceBoxAnswer> Client::Impl::distanceBox(const Point3f& min, const 
         answer.distances.assign(r.distances._buffer, r.distances._buffer + r.distances._length);
       });
   if (!ok) return std::unexpected(ok.error());
-  if (!error.empty()) return makeError("server: " + error);
   return answer;
 }
 

@@ -58,6 +58,13 @@ struct Client::Impl {
                                    float max_range);
   Expected<DistanceQueryAnswer> queryDistancesOnce(std::span<const float> xyz,
                                                    const DistanceQueryOptions& options);
+  /// One request and its reply: the endpoints allowed (DDS Security), `req` written, the reply
+  /// to its id awaited; `read(reply, error)` takes a reply the server answered (and may set
+  /// `error` for one it cannot use); a refused one is the server's error.
+  template <class Reply, class Request, class Read>
+  Expected<void> ask(const dds::Entity& writer, const dds::Entity& reader,
+                     std::optional<dds::WaitSet>& waitset, const Request& req, const char* what,
+                     Read&& read);
   Expected<PathQueryAnswer> checkPath(std::span<const float> xyz, double radius);
   Expected<PathQueryAnswer> checkBoxes(std::span<const OrientedBox> boxes);
   Expected<DistanceBoxAnswer> distanceBox(const Point3f& min, const Point3f& max,

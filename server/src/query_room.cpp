@@ -276,6 +276,18 @@ void QueryRoom::take() {
   const auto asker = [](const dds::Entity& reader, const dds_sample_info_t& info) {
     return dds::participantOfWriter(reader, info.publication_handle);
   };
+  // A request refused before it is taken: its reply (`rep`, a reply type's empty value) says
+  // why, once the asker can hear it; counted.
+  const auto refuse = [&](auto rep, const dds::Entity& writer, const dds::Entity& reader,
+                          const dds_sample_info_t& info, const densemap_msgs_RequestId& id,
+                          const std::string& refusal) {
+    rep.id = id;
+    rep.status = kInvalid;
+    rep.error = const_cast<char*>(refusal.c_str());
+    replies_.awaitAsker(writer, asker(reader, info));
+    (void)dds::write(writer, &rep);
+    stats_.refused(refusal);
+  };
   // Requests in flight share one memory budget (pipeline.request_budget_mb): while it is spent,
   // new requests wait in DDS (bounded by the readers' depth); one that could never fit is refused.
   bool took = true;
@@ -287,15 +299,11 @@ void QueryRoom::take() {
           const std::string refusal =
               pointRefusal(m.points._length / 3, bytes, tasks_.budgetBytes());
           if (!refusal.empty()) {
-            densemap_msgs_PointQueryReply rep{};
-            rep.id = m.id;
-            rep.status = kInvalid;
-            rep.error = const_cast<char*>(refusal.c_str());
             if (const auto w = replies_.writer(ReplyTopic::kPoint, m.id.client_id)) {
-              replies_.awaitAsker(*w, asker(readers_.point, info));
-              (void)dds::write(*w, &rep);
+              refuse(densemap_msgs_PointQueryReply{}, *w, readers_.point, info, m.id, refusal);
+            } else {
+              stats_.refused(refusal);
             }
-            stats_.refused(refusal);
             return;
           }
           PointRequest req{
@@ -340,13 +348,7 @@ void QueryRoom::take() {
           const std::size_t bytes = distanceRequestBytes(m.points._length);
           std::string refusal = pointRefusal(m.points._length / 3, bytes, tasks_.budgetBytes());
           if (!refusal.empty()) {
-            densemap_msgs_DistanceQueryReply rep{};
-            rep.id = m.id;
-            rep.status = kInvalid;
-            rep.error = const_cast<char*>(refusal.c_str());
-            replies_.awaitAsker(*w, asker(readers_.distance, info));
-            (void)dds::write(*w, &rep);
-            stats_.refused(refusal);
+            refuse(densemap_msgs_DistanceQueryReply{}, *w, readers_.distance, info, m.id, refusal);
             return;
           }
           DistanceRequest req{
@@ -371,13 +373,7 @@ void QueryRoom::take() {
             const std::string refusal = "path of " + std::to_string(m.vertices._length / 3) +
                                         " vertices, more than the " +
                                         std::to_string(dds::kMaxPathVertices) + " allowed";
-            densemap_msgs_PathQueryReply rep{};
-            rep.id = m.id;
-            rep.status = kInvalid;
-            rep.error = const_cast<char*>(refusal.c_str());
-            replies_.awaitAsker(*w, asker(readers_.path, info));
-            (void)dds::write(*w, &rep);
-            stats_.refused(refusal);
+            refuse(densemap_msgs_PathQueryReply{}, *w, readers_.path, info, m.id, refusal);
             return;
           }
           PathRequest req{
@@ -401,13 +397,7 @@ void QueryRoom::take() {
             const std::string refusal = std::to_string(m.boxes._length / kBoxFloats) +
                                         " boxes, more than the " +
                                         std::to_string(dds::kMaxQueryBoxes) + " allowed";
-            densemap_msgs_BoxesQueryReply rep{};
-            rep.id = m.id;
-            rep.status = kInvalid;
-            rep.error = const_cast<char*>(refusal.c_str());
-            replies_.awaitAsker(*w, asker(readers_.boxes, info));
-            (void)dds::write(*w, &rep);
-            stats_.refused(refusal);
+            refuse(densemap_msgs_BoxesQueryReply{}, *w, readers_.boxes, info, m.id, refusal);
             return;
           }
           BoxesRequest req{m.id,
@@ -430,23 +420,17 @@ void QueryRoom::take() {
           const std::size_t bytes = distanceBoxBytes(boxCells(
               req.min, req.max, ingest_.view()->grid().resolution(), dds::kMaxDistanceBoxCells));
           if (bytes > tasks_.budgetBytes()) {
-            const std::string refusal =
-                "a distance box needing " + std::to_string(bytes >> 20) +
-                " MiB, over the server's request budget of " +
-                std::to_string(tasks_.budgetBytes() >> 20) +
-                " MiB (pipeline.request_budget_mb): ask for smaller boxes";
-            densemap_msgs_DistanceBoxReply rep{};
-            rep.id = m.id;
-            rep.status = kInvalid;
-            rep.error = const_cast<char*>(refusal.c_str());
-            replies_.awaitAsker(*w, asker(readers_.distance_box, info));
-            (void)dds::write(*w, &rep);
-            stats_.refused(refusal);
+            const std::string refusal = "a distance box needing " + std::to_string(bytes >> 20) +
+                                        " MiB, over the server's request budget of " +
+                                        std::to_string(tasks_.budgetBytes() >> 20) +
+                                        " MiB (pipeline.request_budget_mb): ask for smaller boxes";
+            refuse(densemap_msgs_DistanceBoxReply{}, *w, readers_.distance_box, info, m.id,
+                   refusal);
             return;
           }
           spawn(
               [this, w, req, who = asker(readers_.distance_box, info)](const MapView&,
-                                                                     std::string& error) {
+                                                                       std::string& error) {
                 replies_.awaitAsker(*w, who);
                 answerDistanceBox(ingest_, *w, req, error);
               },
