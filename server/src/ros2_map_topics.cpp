@@ -37,22 +37,30 @@ void writeOctomap(const dds::Entity& writer, const std_msgs_msg_dds__Header_& he
   (void)dds::write(writer, &msg);
 }
 
-/// /projected_map: the 2D occupancy grid.
-void writeGrid(const dds::Entity& writer, const std_msgs_msg_dds__Header_& header,
-               ros2::MapTopicsState& map) {
-  ros2::GridImage grid = map.projectedGrid();
+/// A nav_msgs/OccupancyGrid of `grid` (ros2::GridImage or Costmap: origin, resolution, width,
+/// height, int8 cells) in the plane z = `z_m`.
+template <class Grid>
+void writeOccupancyGrid(const dds::Entity& writer, const std_msgs_msg_dds__Header_& header,
+                        Grid& grid, double z_m) {
   nav_msgs_msg_dds__OccupancyGrid_ msg{};
   msg.header = header;
   msg.info.map_load_time = header.stamp;
   msg.info.resolution = static_cast<float>(grid.resolution);
   msg.info.width = grid.width;
   msg.info.height = grid.height;
-  msg.info.origin.position = {grid.origin_x, grid.origin_y, 0.0};
+  msg.info.origin.position = {grid.origin_x, grid.origin_y, z_m};
   msg.info.origin.orientation = {0.0, 0.0, 0.0, 1.0};
   msg.data._length = msg.data._maximum = static_cast<std::uint32_t>(grid.data.size());
   msg.data._buffer = grid.data.data();
   msg.data._release = false;
   (void)dds::write(writer, &msg);
+}
+
+/// /projected_map: the 2D occupancy grid.
+void writeGrid(const dds::Entity& writer, const std_msgs_msg_dds__Header_& header,
+               ros2::MapTopicsState& map) {
+  ros2::GridImage grid = map.projectedGrid();
+  writeOccupancyGrid(writer, header, grid, 0.0);
 }
 
 /// A PointCloud2 of `width` points of `names` (float32 each, packed in that order) in `data`.
@@ -106,18 +114,7 @@ void writeSlice(const dds::Entity& writer, const std_msgs_msg_dds__Header_& head
 /// The inflated costmap of the layer.
 void writeCostmap(const dds::Entity& writer, const std_msgs_msg_dds__Header_& header, Costmap& map,
                   double z_m) {
-  nav_msgs_msg_dds__OccupancyGrid_ msg{};
-  msg.header = header;
-  msg.info.map_load_time = header.stamp;
-  msg.info.resolution = static_cast<float>(map.resolution);
-  msg.info.width = map.width;
-  msg.info.height = map.height;
-  msg.info.origin.position = {map.origin_x, map.origin_y, z_m};
-  msg.info.origin.orientation = {0.0, 0.0, 0.0, 1.0};
-  msg.data._length = msg.data._maximum = static_cast<std::uint32_t>(map.data.size());
-  msg.data._buffer = map.data.data();
-  msg.data._release = false;
-  (void)dds::write(writer, &msg);
+  writeOccupancyGrid(writer, header, map, z_m);
 }
 
 }  // namespace

@@ -13,7 +13,7 @@
 #include "densemap/sim/sequence.hpp"
 #include "densemap/test_support/data_dir.hpp"
 #include "distance_field_reference.hpp"
-#include "exactness_harness.hpp"
+#include "simulated_scans.hpp"
 
 namespace densemap {
 namespace {
@@ -104,10 +104,7 @@ TEST(DecayExactness, EqualsThePlainRuleAfterEveryScanWithWalkers) {
   o.seed = 5;
   o.walkers = 3;
   o.ground_truth_resolution_m = 0;
-  ASSERT_TRUE(writeSimulatedSequence(o, dir.path()));
-  auto source = openScanSource(dir.path());
-  ASSERT_TRUE(source);
-  const auto scans = test::loadWorldScans(**source, 0, 30);
+  const auto scans = test::simulatedWorldScans(o, dir.path());
   ASSERT_EQ(scans.size(), 30U);
 
   // Short times, so cells fall due, step several times at once (a scan every 0.1 s, a step

@@ -8,7 +8,7 @@
 #include "densemap/sim/sequence.hpp"
 #include "densemap/test_support/data_dir.hpp"
 #include "distance_field_reference.hpp"
-#include "exactness_harness.hpp"
+#include "simulated_scans.hpp"
 
 namespace densemap {
 namespace {
@@ -26,10 +26,7 @@ TEST(DistanceFieldExactness, EqualsBruteForceAfterEverySimulatedScan) {
     o.scans = 5;
     o.seed = 9;
     o.ground_truth_resolution_m = 0;
-    ASSERT_TRUE(writeSimulatedSequence(o, dir.path()));
-    auto source = openScanSource(dir.path());
-    ASSERT_TRUE(source);
-    const auto scans = test::loadWorldScans(**source, 0, 5);
+    const auto scans = test::simulatedWorldScans(o, dir.path());
     ASSERT_EQ(scans.size(), 5U);
     MapperOptions m;
     m.resolution_m = res;

@@ -5,7 +5,7 @@
 
 #include "densemap/sim/sequence.hpp"
 #include "densemap/test_support/data_dir.hpp"
-#include "exactness_harness.hpp"
+#include "simulated_scans.hpp"
 
 namespace densemap {
 namespace {
@@ -34,12 +34,9 @@ TEST_P(MethodsOnSimulatedSequences, EqualReferenceAfterEveryScan) {
   o.scans = 6;
   o.seed = 42;
   o.ground_truth_resolution_m = 0;
-  ASSERT_TRUE(writeSimulatedSequence(o, dir.path()));
-  auto source = openScanSource(dir.path());
-  ASSERT_TRUE(source);
   // A robot that stands still for its first scans (so free cells saturate and the culling
   // region grows), then drives on.
-  const auto loaded = test::loadWorldScans(**source, 0, 6);
+  const auto loaded = test::simulatedWorldScans(o, dir.path());
   ASSERT_EQ(loaded.size(), 6U);
   std::vector<test::WorldScan> scans(7, loaded[0]);
   scans.insert(scans.end(), loaded.begin() + 1, loaded.end());

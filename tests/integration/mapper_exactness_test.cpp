@@ -6,7 +6,7 @@
 #include "densemap/mapper/mapper.hpp"
 #include "densemap/sim/sequence.hpp"
 #include "densemap/test_support/data_dir.hpp"
-#include "exactness_harness.hpp"
+#include "simulated_scans.hpp"
 
 namespace densemap {
 namespace {
@@ -41,10 +41,7 @@ TEST_P(MapperEqualsOctomap, AfterEveryScanOnBothBackendsAndEveryMethod) {
   o.scans = 5;
   o.seed = 7;
   o.ground_truth_resolution_m = 0;
-  ASSERT_TRUE(writeSimulatedSequence(o, dir.path()));
-  auto source = openScanSource(dir.path());
-  ASSERT_TRUE(source);
-  const auto scans = test::loadWorldScans(**source, 0, 5);
+  const auto scans = test::simulatedWorldScans(o, dir.path());
   ASSERT_EQ(scans.size(), 5U);
   OctreeMap oracle(c.resolution, SensorModel{});
   std::vector<std::pair<std::string, Mapper>> mappers;
