@@ -120,8 +120,8 @@ SegmentBoxContact segmentBoxContact(const Vec3& a, const Vec3& b, const Vec3& lo
   return out;
 }
 
-Expected<void> checkPathRequest(const VoxelGrid& grid, std::span<const float> xyz, double radius_m,
-                                const SweptVolumeLimits& limits) {
+Expected<double> checkPathRequest(const VoxelGrid& grid, std::span<const float> xyz,
+                                  double radius_m, const SweptVolumeLimits& limits) {
   if (xyz.size() % 3 != 0) return makeError("path length is not a multiple of 3 (x y z each)");
   const std::size_t n = xyz.size() / 3;
   if (n == 0) return makeError("path has no vertices");
@@ -161,15 +161,14 @@ Expected<void> checkPathRequest(const VoxelGrid& grid, std::span<const float> xy
                      " cells, more than the " +
                      std::to_string(static_cast<std::uint64_t>(limits.max_cells)) + " allowed");
   }
-  return {};
+  return length;
 }
 
 Expected<SweptVolumeResult> checkPath(const MapView& view, std::span<const float> xyz,
                                       double radius_m, const SweptVolumeLimits& limits) {
   const VoxelGrid& grid = view.grid();
-  if (auto ok = checkPathRequest(grid, xyz, radius_m, limits); !ok) {
-    return std::unexpected(ok.error());
-  }
+  const Expected<double> length = checkPathRequest(grid, xyz, radius_m, limits);
+  if (!length) return std::unexpected(length.error());
   const double res = grid.resolution();
   const double half = 0.5 * res;
   // Conservative: a cell within a millionth of a cell of the radius counts as touched.
@@ -212,8 +211,7 @@ Expected<SweptVolumeResult> checkPath(const MapView& view, std::span<const float
     arc += len;
     if (r.occupied && arc > r.occupied->arc_length) break;
   }
-  r.length_m = 0.0;
-  for (std::size_t i = 1; i < n; ++i) r.length_m += (vertex(i) - vertex(i - 1)).norm();
+  r.length_m = *length;
   finish(r);
   return r;
 }

@@ -125,12 +125,12 @@ TEST(CheckPath, EqualsBruteForceOnRandomMapsAndPaths) {
             const double reach = r + 1e-5;
             if (d2 > reach * reach) continue;
             // The first contact: bisect between 0 and the closest point.
-            auto first = [&](double radius) {
-              if (boxD2(a, lo, hi) <= radius * radius) return arc;
+            auto first = [&](double within) {
+              if (boxD2(a, lo, hi) <= within * within) return arc;
               double l = 0.0, h = at;
               for (int it = 0; it < 100; ++it) {
                 const double m = 0.5 * (l + h);
-                (boxD2(a + m * (b - a), lo, hi) <= radius * radius ? h : l) = m;
+                (boxD2(a + m * (b - a), lo, hi) <= within * within ? h : l) = m;
               }
               return arc + h * len;
             };

@@ -25,7 +25,8 @@ struct SweptVolumeLimits {
 
 /// The one rule for a path from outside: x y z per vertex, 1 .. max_vertices vertices, finite,
 /// inside the map's range, radius finite in [0, max_radius_m], length within the limit.
-[[nodiscard]] Expected<void> checkPathRequest(const VoxelGrid& grid, std::span<const float> xyz,
+/// Returns the path's length (metres).
+[[nodiscard]] Expected<double> checkPathRequest(const VoxelGrid& grid, std::span<const float> xyz,
                                               double radius_m, const SweptVolumeLimits& limits);
 
 /// The capsules of the polyline `xyz` (x y z per vertex) with radius `radius_m`: every cell
