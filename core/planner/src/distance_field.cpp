@@ -443,8 +443,11 @@ std::size_t DistanceField::recomputeBlock(Target& t, std::vector<std::uint64_t>&
   std::size_t count = 0;
   Block& b = *t.block;
   block::forEachSetBit(t.marked, [&](int i) {
-    const std::uint32_t d2 =
-        nearestInRows(CellCoord::of(block::keyOf(t.key, i)), radius2_ + 1, rows_, row);
+    // A marked cell holds the distance of a removed cell it was nearest to; every occupied
+    // cell left or added is at least as far (an added one nearer would have lowered it): a cell
+    // found at that distance is the nearest.
+    const std::uint32_t d2 = nearestInRows(CellCoord::of(block::keyOf(t.key, i)), radius2_ + 1,
+                                           rows_, row, nullptr, b.d2[static_cast<std::size_t>(i)]);
     b.d2[static_cast<std::size_t>(i)] = d2 > radius2_ ? kFar : static_cast<std::uint16_t>(d2);
     ++count;
   });

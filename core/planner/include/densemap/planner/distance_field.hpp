@@ -175,11 +175,14 @@ class DistanceField {
 /// The squared distance (cells^2) from `c` to the nearest cell whose bit `row(cx, y, z, ext)`
 /// sets, searched over the rows of `rows` (nearest first) while below `bound2`; `row` returns
 /// the bits of x in [cx - 31, cx + 32] (bit 31 is cx), of which only [cx - ext, cx + ext] count.
-/// Returns bound2 when none is nearer, and the offset of the one found in `offset`.
+/// Returns bound2 when none is nearer, and the offset of the one found in `offset`. The search
+/// stops at the first cell found at `enough` or nearer (a lower bound the caller knows: none
+/// can be nearer).
 template <class RowBits>
 [[nodiscard]] std::uint32_t nearestInRows(const CellCoord& c, std::uint32_t bound2,
                                           std::span<const DistanceField::BallRow> rows,
-                                          RowBits&& row, std::array<int, 3>* offset = nullptr) {
+                                          RowBits&& row, std::array<int, 3>* offset = nullptr,
+                                          std::uint32_t enough = 0) {
   std::uint32_t best = bound2;
   for (const DistanceField::BallRow& r : rows) {
     if (r.h >= best) break;
@@ -201,6 +204,7 @@ template <class RowBits>
     if (d2 < best) {
       best = d2;
       if (offset != nullptr) *offset = {sign * dx, r.dy, r.dz};
+      if (best <= enough) break;
     }
   }
   return best;
