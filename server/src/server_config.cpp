@@ -216,7 +216,8 @@ Expected<IngestOptions> ingestOptions(const proto::ServerConfig& config) {
   IngestOptions o{.engine = std::move(*engine),
                   .threads = static_cast<int>(p.threads()),
                   .queue_depth = p.queue_depth(),
-                  .queue_budget_bytes = std::size_t{p.queue_budget_mb()} << 20};
+                  .queue_budget_bytes = std::size_t{p.queue_budget_mb()} << 20,
+                  .distance_field = std::nullopt};
   if (config.esdf().enabled()) {
     const DistanceFieldOptions field{.max_distance_m = config.esdf().max_distance_m()};
     if (auto ok = DistanceField::create(o.engine.resolution_m, field); !ok) {

@@ -70,6 +70,7 @@ DistanceField::DistanceField(double resolution_m, const DistanceFieldOptions& op
   // 0.2 m is 100 cells^2, not 99 by rounding).
   radius2_ = static_cast<std::uint32_t>(std::floor(cells * cells * (1 + 1e-9)));
   radius_ = static_cast<int>(std::floor(std::sqrt(static_cast<double>(radius2_))));
+  narrow_ = radius2_ < std::numeric_limits<std::uint8_t>::max();
   for (int dz = -radius_; dz <= radius_; ++dz) {
     for (int dy = -radius_; dy <= radius_; ++dy) {
       const auto h = static_cast<std::uint32_t>(dy * dy + dz * dz);
@@ -103,18 +104,26 @@ DistanceField::DistanceField(double resolution_m, const DistanceFieldOptions& op
 }
 
 void DistanceField::clear() {
-  blocks_.clear();
+  narrow_blocks_.clear();
+  wide_blocks_.clear();
   sources_.clear();
 }
 
 std::size_t DistanceField::memoryBytes() const {
-  // The field's blocks, and the two maps' slot arrays.
-  return blocks_.size() * sizeof(Block) + blocks_.bytes() + sources_.bytes();
+  // The field's blocks, and the maps' slot arrays.
+  const std::size_t block_bytes =
+      narrow_ ? sizeof(Block<std::uint8_t>) : sizeof(Block<std::uint16_t>);
+  return withBlocks([&](const auto& b) { return b.size() * block_bytes + b.bytes(); }) +
+         sources_.bytes();
 }
 
 std::uint16_t DistanceField::distanceSquared(const VoxelKey& cell) const {
-  const auto* b = blocks_.get(block::blockOf(cell));
-  return b == nullptr ? kFar : (*b)->d2[block::indexOf(cell)];
+  return withBlocks([&](const auto& blocks) -> std::uint16_t {
+    const auto* b = blocks.get(block::blockOf(cell));
+    if (b == nullptr) return kFar;
+    const auto v = (*b)->d2[block::indexOf(cell)];
+    return isFar(v) ? kFar : static_cast<std::uint16_t>(v);
+  });
 }
 
 std::optional<VoxelKey> DistanceField::nearestOccupied(const VoxelKey& cell) const {
@@ -173,7 +182,7 @@ DistanceUpdateStats DistanceField::update(const MapView& view,
   }
   DistanceUpdateStats stats;
   apply(added, removed, stats, runner);
-  stats.field_blocks = blocks_.size();
+  stats.field_blocks = this->blocks();
   return stats;
 }
 
@@ -332,20 +341,30 @@ void DistanceField::apply(const std::vector<CellCoord>& added,
   }
   group_start.push_back(total);
 
+  withBlocks([&](auto& blocks) {
+    applySegments(blocks, segments, group_keys, group_start, stats, runner);
+  });
+}
+
+template <class T>
+void DistanceField::applySegments(Blocks<T>& blocks, std::vector<Segment>& segments,
+                                  const std::vector<std::uint64_t>& group_keys,
+                                  const std::vector<std::size_t>& group_start,
+                                  DistanceUpdateStats& stats, const ChunkRunner& runner) {
   // Blocks first (serially: the table changes), then each block's segments on the runner: a
   // block's task writes only that block and reads the occupied cells, which stay as they are.
-  std::vector<Target> targets;
+  std::vector<Target<T>> targets;
   for (std::size_t gi = 0; gi < group_keys.size(); ++gi) {
     const std::size_t i = group_start[gi], j = group_start[gi + 1];
     const bool any_add = std::any_of(segments.begin() + static_cast<std::ptrdiff_t>(i),
                                      segments.begin() + static_cast<std::ptrdiff_t>(j),
                                      [](const Segment& g) { return g.add; });
     const std::uint64_t key = group_keys[gi];
-    Block* b = nullptr;
-    if (auto* found = blocks_.get(key); found != nullptr) {
+    Block<T>* b = nullptr;
+    if (auto* found = blocks.get(key); found != nullptr) {
       b = found->get();
     } else if (any_add) {
-      b = (blocks_[key] = std::make_unique<Block>()).get();
+      b = (blocks[key] = std::make_unique<Block<T>>()).get();
     }
     // No block and nothing added: no finite cell here, no removed cell was anyone's nearest.
     if (b != nullptr) targets.push_back({key, b, &segments[i], j - i, {}, false});
@@ -363,17 +382,18 @@ void DistanceField::apply(const std::vector<CellCoord>& added,
     std::atomic_ref<std::size_t>(recomputed).fetch_add(count, std::memory_order_relaxed);
   });
   stats.recomputed = recomputed;
-  for (const Target& t : targets) {
-    if (std::all_of(t.block->d2.begin(), t.block->d2.end(),
-                    [](std::uint16_t v) { return v == kFar; })) {
-      blocks_.erase(t.key);
+  for (const Target<T>& t : targets) {
+    if (std::all_of(t.block->d2.begin(), t.block->d2.end(), [](T v) { return isFar(v); })) {
+      blocks.erase(t.key);
     }
   }
 }
 
-void DistanceField::stampBlock(Target& t) const {
+template <class T>
+void DistanceField::stampBlock(Target<T>& t) const {
+  // Segments lie within the ball: every value written is at most radius2_, below the far mark.
   const auto limit = static_cast<std::uint16_t>(radius2_);
-  Block& b = *t.block;
+  Block<T>& b = *t.block;
   // Additions first: a cell an added cell brought nearer than a removed one holds its exact
   // value already (every remaining occupied cell is at least as far as the removed one was)
   // and is not marked; a cell still at a removed cell's distance is marked and searched anew.
@@ -382,11 +402,11 @@ void DistanceField::stampBlock(Target& t) const {
     for (std::size_t k = 0; k < t.count; ++k) {
       const Segment& g = t.segments[k];
       if (g.add != adding) continue;
-      std::uint16_t* row = &b.d2[static_cast<std::size_t>(g.row) * 8];
+      T* row = &b.d2[static_cast<std::size_t>(g.row) * 8];
       if (adding) {
         for (int x = g.xa; x <= g.xb; ++x) {
           const auto v = static_cast<std::uint16_t>(g.h + (x - g.sx) * (x - g.sx));
-          row[x] = v <= limit && v < row[x] ? v : row[x];
+          row[x] = v <= limit && v < row[x] ? static_cast<T>(v) : row[x];
         }
       } else {
         std::uint64_t bits = 0;
@@ -401,7 +421,8 @@ void DistanceField::stampBlock(Target& t) const {
   }
 }
 
-std::size_t DistanceField::recomputeBlock(Target& t, std::vector<std::uint64_t>& window) const {
+template <class T>
+std::size_t DistanceField::recomputeBlock(Target<T>& t, std::vector<std::uint64_t>& window) const {
   const auto bc = block::coordsOf(t.key);
   const int w = 8 + 2 * radius_;
   const int wx0 = static_cast<int>(bc[0]) * 8 - radius_;
@@ -441,14 +462,15 @@ std::size_t DistanceField::recomputeBlock(Target& t, std::vector<std::uint64_t>&
     return px >= 31 ? bits >> (px - 31) : bits << (31 - px);
   };
   std::size_t count = 0;
-  Block& b = *t.block;
+  Block<T>& b = *t.block;
   block::forEachSetBit(t.marked, [&](int i) {
     // A marked cell holds the distance of a removed cell it was nearest to; every occupied
     // cell left or added is at least as far (an added one nearer would have lowered it): a cell
     // found at that distance is the nearest.
     const std::uint32_t d2 = nearestInRows(CellCoord::of(block::keyOf(t.key, i)), radius2_ + 1,
                                            rows_, row, nullptr, b.d2[static_cast<std::size_t>(i)]);
-    b.d2[static_cast<std::size_t>(i)] = d2 > radius2_ ? kFar : static_cast<std::uint16_t>(d2);
+    b.d2[static_cast<std::size_t>(i)] =
+        d2 > radius2_ ? std::numeric_limits<T>::max() : static_cast<T>(d2);
     ++count;
   });
   return count;

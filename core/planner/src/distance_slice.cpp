@@ -22,7 +22,7 @@ std::vector<std::array<float, 4>> distanceSlice(const DistanceField& field, doub
   std::vector<std::array<float, 4>> out;
   field.forEachBlockInLayer(z >> 3, [&](std::uint64_t key, const auto& d2) {
     for (int i = (z & 7) << 6; i < ((z & 7) + 1) << 6; ++i) {
-      if (d2[static_cast<std::size_t>(i)] == DistanceField::kFar) continue;
+      if (DistanceField::isFar(d2[static_cast<std::size_t>(i)])) continue;
       const Point3f c = grid.keyToPoint(block::keyOf(key, i));
       out.push_back(
           {c.x(), c.y(), c.z(),

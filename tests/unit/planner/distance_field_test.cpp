@@ -79,7 +79,8 @@ std::size_t expectBruteForce(const DistanceField& field, const World& w, int lo,
 }
 
 TEST(DistanceField, EqualsBruteForceAfterEveryBatchOfRandomChanges) {
-  for (const double max_distance : {0.6, 1.0}) {
+  // 6 and 10 cells (one byte a cell), 16 cells (squared 256: two bytes a cell).
+  for (const double max_distance : {0.6, 1.0, 1.6}) {
     World w(0.1);
     auto field = DistanceField::create(0.1, {.max_distance_m = max_distance});
     ASSERT_TRUE(field);
@@ -242,6 +243,32 @@ TEST(DistanceSlice, LayerAndCostmapEqualBruteForce) {
     }
     EXPECT_GT(lethal, 0U) << layer;
   }
+}
+
+TEST(DistanceField, StoresOneByteACellUpTo15Cells) {
+  const SensorModel model;
+  GridMap map(0.2, model);
+  for (int x = 0; x < 40; ++x) {
+    for (int y = 0; y < 40; ++y)
+      map.setLogOdds(*map.grid().pointToKey({0.2F * x, 0.2F * y, 0.1F}), 2.0F);
+  }
+  const auto view = MapView::fromMap(map, 1);
+  auto narrow = DistanceField::create(0.2, {.max_distance_m = 3.0});  // 15 cells
+  auto wide = DistanceField::create(0.2, {.max_distance_m = 3.2});    // 16 cells
+  ASSERT_TRUE(narrow && wide);
+  narrow->rebuild(*view);
+  wide->rebuild(*view);
+  ASSERT_GT(narrow->blocks(), 0U);
+  // Per block: 512 bytes against 1024 (plus the same slot arrays).
+  EXPECT_LT(narrow->memoryBytes(), wide->memoryBytes() * 6 / 10);
+  std::size_t cells = 0;
+  narrow->forEachFinite([&](const VoxelKey& k, std::uint16_t d2) {
+    ++cells;
+    if (d2 != wide->distanceSquared(k)) ADD_FAILURE() << "cell differs at " << d2;
+  });
+  EXPECT_GT(cells, 0U);
+  EXPECT_EQ(narrow->distanceSquared(*map.grid().pointToKey({-3.1F, 0.1F, 0.1F})),
+            DistanceField::kFar);
 }
 
 }  // namespace

@@ -3,6 +3,7 @@
 #include <array>
 #include <bit>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <span>
@@ -47,7 +48,9 @@ struct DistanceUpdateStats {
 /// truncated at a maximum distance, kept current by updates that cost what the scan changed.
 ///
 /// Values are squared distances in cells (integers, so exact): a cell farther than the
-/// maximum from every occupied cell holds kFar and needs no storage. An update takes the map
+/// maximum from every occupied cell holds kFar and needs no storage. A block stores them in
+/// one byte a cell when the squared maximum is below 255 (up to 15 cells: 2 m at 0.2 m), else
+/// in two. An update takes the map
 /// blocks a scan wrote or dropped, compares their occupied cells with the ones the field was
 /// built from and, for each cell that changed class:
 /// - one that became occupied lowers every cell of its ball (radius: the maximum) to its
@@ -90,25 +93,38 @@ class DistanceField {
   /// Squared maximum distance in cells^2 (largest exact value) and its radius in whole cells.
   [[nodiscard]] std::uint32_t radiusSquared() const { return radius2_; }
   [[nodiscard]] int radius() const { return radius_; }
-  [[nodiscard]] std::size_t blocks() const { return blocks_.size(); }
+  [[nodiscard]] std::size_t blocks() const {
+    return narrow_ ? narrow_blocks_.size() : wide_blocks_.size();
+  }
   [[nodiscard]] std::size_t memoryBytes() const;
+
+  /// Whether a stored value (forEachBlockInLayer's, of either width) is beyond the maximum.
+  template <class T>
+  [[nodiscard]] static bool isFar(T v) {
+    return v == std::numeric_limits<T>::max();
+  }
 
   /// Calls f(cell, squared distance) for every finite cell of the field.
   template <class F>
   void forEachFinite(F&& f) const {
-    blocks_.forEach([&](std::uint64_t key, const std::unique_ptr<Block>& b) {
-      for (int i = 0; i < block::kVoxels; ++i) {
-        if (b->d2[i] != kFar) f(block::keyOf(key, i), b->d2[i]);
-      }
+    withBlocks([&](const auto& blocks) {
+      blocks.forEach([&](std::uint64_t key, const auto& b) {
+        for (int i = 0; i < block::kVoxels; ++i) {
+          if (!isFar(b->d2[i])) f(block::keyOf(key, i), static_cast<std::uint16_t>(b->d2[i]));
+        }
+      });
     });
   }
 
-  /// Calls f(block key, its 512 squared distances) for every block of the field whose z block
-  /// coordinate is `block_z` (a walk over the field's blocks).
+  /// Calls f(block key, its 512 squared distances: a std::array of uint8_t or uint16_t, isFar
+  /// telling the far ones) for every block of the field whose z block coordinate is `block_z`
+  /// (a walk over the field's blocks).
   template <class F>
   void forEachBlockInLayer(int block_z, F&& f) const {
-    blocks_.forEach([&](std::uint64_t key, const std::unique_ptr<Block>& b) {
-      if (static_cast<int>(block::coordsOf(key)[2]) == block_z) f(key, b->d2);
+    withBlocks([&](const auto& blocks) {
+      blocks.forEach([&](std::uint64_t key, const auto& b) {
+        if (static_cast<int>(block::coordsOf(key)[2]) == block_z) f(key, b->d2);
+      });
     });
   }
 
@@ -121,10 +137,23 @@ class DistanceField {
   [[nodiscard]] const std::vector<BallRow>& ballRows() const { return rows_; }
 
  private:
+  /// A block of the field: squared distances of width T (isFar: none within the maximum).
+  template <class T>
   struct Block {
-    std::array<std::uint16_t, block::kVoxels> d2;
-    Block() { d2.fill(kFar); }
+    std::array<T, block::kVoxels> d2;
+    Block() { d2.fill(std::numeric_limits<T>::max()); }
   };
+  template <class T>
+  using Blocks = FlatMap<std::unique_ptr<Block<T>>>;
+  /// f(the blocks) of the field's width.
+  template <class F>
+  decltype(auto) withBlocks(F&& f) const {
+    return narrow_ ? f(narrow_blocks_) : f(wide_blocks_);
+  }
+  template <class F>
+  decltype(auto) withBlocks(F&& f) {
+    return narrow_ ? f(narrow_blocks_) : f(wide_blocks_);
+  }
   /// The changed cells whose ball reaches one block of the field, and what they did to it.
   /// Part of an x-row of one block that a changed cell's ball reaches: cells xa .. xb (in the
   /// block) of row `row` (y | z << 3 in the block), at squared distance h + (x - sx)^2.
@@ -136,9 +165,10 @@ class DistanceField {
     bool add;
   };
   /// One block of the field and its segments (contiguous in the update's sorted list).
+  template <class T>
   struct Target {
     std::uint64_t key;
-    Block* block;
+    Block<T>* block;
     const Segment* segments;
     std::size_t count;
     block::BlockMask marked;  // cells whose nearest occupied cell was removed
@@ -150,13 +180,23 @@ class DistanceField {
                   std::vector<std::array<int, 4>>& near) const;
   /// Lowers the block's cells to the added cells' distances and marks those whose value was
   /// a removed cell's distance.
-  void stampBlock(Target& t) const;
+  template <class T>
+  void stampBlock(Target<T>& t) const;
   /// Searches the marked cells anew in a window of the occupied cells around the block (the
   /// block grown by the radius, one 64-bit word per x-row); returns how many.
-  std::size_t recomputeBlock(Target& t, std::vector<std::uint64_t>& window) const;
+  template <class T>
+  std::size_t recomputeBlock(Target<T>& t, std::vector<std::uint64_t>& window) const;
   /// Applies one batch of changed cells (already recorded in sources_).
   void apply(const std::vector<CellCoord>& added, const std::vector<CellCoord>& removed,
              DistanceUpdateStats& stats, const ChunkRunner& runner);
+  /// apply()'s second half: the segments (grouped by block: group g is
+  /// segments[group_start[g] .. group_start[g + 1])) stamped into `blocks`, the marked cells
+  /// searched anew, blocks left with no finite cell freed.
+  template <class T>
+  void applySegments(Blocks<T>& blocks, std::vector<Segment>& segments,
+                     const std::vector<std::uint64_t>& group_keys,
+                     const std::vector<std::size_t>& group_start, DistanceUpdateStats& stats,
+                     const ChunkRunner& runner);
 
   double resolution_m_;
   DistanceFieldOptions options_;
@@ -168,7 +208,9 @@ class DistanceField {
   /// shell_begin_[d2 + 1]) (the lattice points of that sphere; nearestOccupied's candidates).
   std::vector<std::array<std::int8_t, 3>> shell_offsets_;
   std::vector<std::uint32_t> shell_begin_;
-  FlatMap<std::unique_ptr<Block>> blocks_;
+  bool narrow_ = false;  // radius2_ < 255: one byte a cell
+  Blocks<std::uint8_t> narrow_blocks_;
+  Blocks<std::uint16_t> wide_blocks_;
   FlatMap<block::BlockMask> sources_;  // occupied cells per block (blocks with any)
 };
 
