@@ -111,12 +111,6 @@ void writeSlice(const dds::Entity& writer, const std_msgs_msg_dds__Header_& head
                   static_cast<std::uint32_t>(points.size()), data);
 }
 
-/// The inflated costmap of the layer.
-void writeCostmap(const dds::Entity& writer, const std_msgs_msg_dds__Header_& header, Costmap& map,
-                  double z_m) {
-  writeOccupancyGrid(writer, header, map, z_m);
-}
-
 }  // namespace
 
 void Ros2Bridge::publishMaps() {
@@ -150,7 +144,7 @@ void Ros2Bridge::publishMaps() {
         Costmap costmap =
             inflatedCostmap(field, view, options_.esdf_slice_z_m, options_.robot_radius_m);
         if (costmap.width > 0) {
-          writeCostmap(dds_->costmap_writer, header, costmap, options_.esdf_slice_z_m);
+          writeOccupancyGrid(dds_->costmap_writer, header, costmap, options_.esdf_slice_z_m);
         }
       }
     });

@@ -74,8 +74,8 @@ TEST_P(MapperEqualsOctomap, AfterEveryScanOnBothBackendsAndEveryMethod) {
 INSTANTIATE_TEST_SUITE_P(Sequences, MapperEqualsOctomap,
                          ::testing::Values(Case{"indoor", "os128", 512, 0.1, -1.0},
                                            Case{"outdoor", "hdl64", 1024, 0.2, 40.0}),
-                         [](const ::testing::TestParamInfo<Case>& info) {
-                           return info.param.scene + "_" + info.param.sensor;
+                         [](const ::testing::TestParamInfo<Case>& param_info) {
+                           return param_info.param.scene + "_" + param_info.param.sensor;
                          });
 
 }  // namespace

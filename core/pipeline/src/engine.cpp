@@ -7,7 +7,6 @@
 #include <cstdio>
 
 #include "densemap/parallel/tbb_runner.hpp"
-#include "densemap/raycast/ray_ends.hpp"
 
 namespace densemap {
 namespace {
@@ -149,7 +148,7 @@ IntegrationResult Engine::integratePoints(const PointCloud& points_world,
       options_.collect_changes || kind_->needsChanges() ? &result.changes : nullptr;
   decayBefore(now_ns, result, changes);
   result.stats = kind_->integrate(points_world, origin_world, changes);
-  observeHits(points_world, origin_world, now_ns);
+  observeHits(now_ns);
   evict(origin_world, result, changes);
   result.from_scan = true;
   publish(result);
@@ -197,20 +196,12 @@ void Engine::decayBefore(std::int64_t now_ns, IntegrationResult& result, CellCha
   result.decayed = decay_->decay(kind_->published(), now_ns, changes);
 }
 
-void Engine::observeHits(const PointCloud& points_world, const Point3f& origin_world,
-                         std::int64_t now_ns) {
+void Engine::observeHits(std::int64_t now_ns) {
   if (!decay_) return;
-  // The cells the scan hit: its rays' occupied end cells, as the integrator marks them (ray
-  // ends in parallel, in place of each ray's end; the hits kept in the scan's order).
-  const VoxelGrid& grid = kind_->published().grid();
-  ray_ends_.resize(points_world.size());
-  kind_->published().runner().run(
-      points_world.size(), 4096, [&](std::size_t begin, std::size_t end) {
-        rayEndsInto(grid, origin_world, points_world.data() + begin, end - begin,
-                    options_.max_range_m, ray_ends_.data() + begin);
-      });
+  // The cells the scan hit: the occupied end cells of the rays the integrator just marked
+  // (checkMapOptions allows decay on the log-odds kind only), in the scan's order.
   hits_.clear();
-  for (const RayEnd& ray : ray_ends_) {
+  for (const RayEnd& ray : kind_->rayEnds()) {
     if (ray.occupied && ray.key_valid) hits_.push_back(ray.key);
   }
   decay_->observe(hits_, now_ns);

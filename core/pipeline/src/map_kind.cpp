@@ -49,6 +49,8 @@ class LogOddsKind final : public MapKind {
     return integrator_.integrate(map(), points_world, origin, changes);
   }
 
+  std::span<const RayEnd> rayEnds() const override { return integrator_.rayEnds(); }
+
   Expected<void> restore(const kernel::KernelEvidence& evidence) override {
     return makeError("the map kind is log_odds: kernel evidence of " +
                      std::string(kernel::kernelMethodName(evidence.method)) + " has no place");

@@ -3,6 +3,7 @@
 #include <functional>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 
 #include "densemap/geometry/error.hpp"
@@ -56,6 +57,8 @@ class MapKind {
   [[nodiscard]] virtual Expected<void> restore(const kernel::KernelEvidence& evidence) = 0;
   /// Allocates the integrator's per-worker buffers before the first scan (log-odds kind).
   virtual void warmUp(double max_range_m) { (void)max_range_m; }
+  /// The last scan's ray ends, one per point (log-odds kind; none for a kernel kind).
+  [[nodiscard]] virtual std::span<const RayEnd> rayEnds() const { return {}; }
 
  protected:
   [[nodiscard]] OccupancyMap& map() { return *map_; }

@@ -155,8 +155,7 @@ class Engine {
   /// Before a scan at `now_ns`: the decay steps due (PipelineOptions::decay) ...
   void decayBefore(std::int64_t now_ns, IntegrationResult& result, CellChanges* changes);
   /// ... and after it: its hit cells wait again.
-  void observeHits(const PointCloud& points_world, const Point3f& origin_world,
-                   std::int64_t now_ns);
+  void observeHits(std::int64_t now_ns);
   /// Drops the blocks keep_radius_m / bounds leave out, after a scan from `origin`.
   void evict(const Point3f& origin, IntegrationResult& result, CellChanges* changes);
   void publish(IntegrationResult& result);
@@ -166,8 +165,7 @@ class Engine {
   std::unique_ptr<MapKind> kind_;
   std::atomic<std::shared_ptr<const MapView>> view_;
   std::unique_ptr<OccupancyDecay> decay_;  // PipelineOptions::decay; null when off
-  std::vector<RayEnd> ray_ends_;           // observeHits' scratch
-  std::vector<VoxelKey> hits_;
+  std::vector<VoxelKey> hits_;             // observeHits' scratch
 };
 
 }  // namespace densemap

@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <limits>
 #include <optional>
+#include <span>
 #include <string_view>
 #include <vector>
 
@@ -107,6 +108,9 @@ class Integrator {
   /// Builds the scan's update set (against `map`'s current state) without applying it.
   ScanStats computeUpdate(const OccupancyMap& map, const PointCloud& points_world,
                           const Point3f& origin_world, ScanUpdate& update);
+
+  /// The last scan's ray ends, one per point in its order (valid until the next scan).
+  [[nodiscard]] std::span<const RayEnd> rayEnds() const { return rays_; }
 
  private:
   struct Local {
