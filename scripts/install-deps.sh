@@ -20,6 +20,8 @@ PACKAGES=(
   openssl tcpdump
   libfastrtps-dev fastddsgen  # the foreign-vendor test: eProsima Fast DDS, ROS 2's default
   python3-dev pybind11-dev python3-numpy python3-pytest python3-matplotlib  # import densemap
+  libboost-dev libssl-dev  # the Foxglove WebSocket endpoint (Boost.Beast; wss)
+  nodejs npm  # its test client, @foxglove/ws-protocol (tests/foxglove: npm ci)
 )
 if [ "${1:-}" = "--iln" ]; then
   PACKAGES+=(python3-torch python3-protobuf libopenblas0-pthread)

@@ -6,6 +6,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 start=$(date +%s)
 ./scripts/install-deps.sh
+# The Foxglove test's client packages (@foxglove/ws-protocol and Foxglove's decoders), pinned by
+# tests/foxglove/package-lock.json; the one step that needs the npm registry.
+(cd tests/foxglove && npm ci --no-audit --no-fund --loglevel=error)
 ./scripts/build.sh -DDENSEMAP_BUILD_TESTS=ON
 built=$(date +%s)
 echo "test.sh: build took $((built - start)) s"

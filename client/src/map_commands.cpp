@@ -52,6 +52,15 @@ void printStatus(const ServerStatus& s) {
                 static_cast<unsigned long long>(s.snapshot_failures),
                 s.last_snapshot_error.c_str());
   }
+  if (s.foxglove_enabled) {
+    std::printf(
+        "  foxglove: %llu clients; %llu frames dropped for full send queues, %llu clients closed "
+        "for stalled queues, %llu connections or operations refused\n",
+        static_cast<unsigned long long>(s.foxglove_clients),
+        static_cast<unsigned long long>(s.foxglove_dropped_frames),
+        static_cast<unsigned long long>(s.foxglove_closed_clients),
+        static_cast<unsigned long long>(s.foxglove_rejected));
+  }
   if (s.ros_enabled) {
     std::printf(
         "  ros2: clouds received %llu, submitted %llu, malformed %llu%s%s, no transform %llu; "

@@ -115,11 +115,14 @@ class CdrWriter {
     out_.append(s);
     out_.push_back('\0');
   }
-  void header(const CdrHeader& h) {
-    const std::int64_t sec = h.stamp_ns >= 0 ? h.stamp_ns / 1'000'000'000
-                                             : -((-h.stamp_ns + 999'999'999) / 1'000'000'000);
+  /// builtin_interfaces/Time: seconds (floored) and nanoseconds in [0, 1e9).
+  void time(std::int64_t ns) {
+    const std::int64_t sec = ns >= 0 ? ns / 1'000'000'000 : -((-ns + 999'999'999) / 1'000'000'000);
     write(static_cast<std::int32_t>(sec));
-    write(static_cast<std::uint32_t>(h.stamp_ns - sec * 1'000'000'000));
+    write(static_cast<std::uint32_t>(ns - sec * 1'000'000'000));
+  }
+  void header(const CdrHeader& h) {
+    time(h.stamp_ns);
     string(h.frame_id);
   }
   void bytes(const void* p, std::size_t n) { out_.append(static_cast<const char*>(p), n); }
@@ -238,6 +241,19 @@ std::string encodeCdrTfMessage(std::span<const CdrTransform> transforms) {
       w.write(v);
     }
   }
+  return w.take();
+}
+
+std::string encodeCdrOccupancyGrid(const CdrHeader& header, const GridImage& grid, double z_m) {
+  CdrWriter w;
+  w.header(header);
+  w.time(header.stamp_ns);  // map_load_time
+  w.write(static_cast<float>(grid.resolution));
+  w.write(grid.width);
+  w.write(grid.height);
+  for (double v : {grid.origin_x, grid.origin_y, z_m, 0.0, 0.0, 0.0, 1.0}) w.write(v);
+  w.write(static_cast<std::uint32_t>(grid.data.size()));
+  w.bytes(grid.data.data(), grid.data.size());
   return w.take();
 }
 

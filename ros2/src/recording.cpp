@@ -7,6 +7,7 @@
 #include "densemap/io/file_bytes.hpp"
 #include "densemap/ros2/cdr.hpp"
 #include "densemap/ros2/db3.hpp"
+#include "densemap/ros2/msg_definitions.hpp"
 #include "densemap/ros2/point_cloud2.hpp"
 #include "densemap/ros2/replay_frames.hpp"
 #include "densemap/ros2/tf_buffer.hpp"
@@ -70,18 +71,6 @@ class RecordingSource final : public ScanSource {
   std::string description_;
   std::size_t max_points_;
 };
-
-const std::string kRule(80, '=');
-
-std::string withDependencies(const std::string& main,
-                             std::initializer_list<std::pair<const char*, const char*>> deps) {
-  std::string s = main;
-  for (const auto& [name, text] : deps) s += kRule + "\nMSG: " + name + "\n" + text;
-  return s;
-}
-
-const char* kHeaderMsg = "builtin_interfaces/Time stamp\nstring frame_id\n";
-const char* kTimeMsg = "int32 sec\nuint32 nanosec\n";
 
 /// The storage of a bag: .mcap, .db3, or a rosbag2 directory's one storage file.
 Expected<std::unique_ptr<BagReader>> openBag(const std::filesystem::path& path) {
@@ -219,24 +208,8 @@ Expected<std::unique_ptr<ScanSource>> openAnyScanSource(const std::filesystem::p
 Expected<void> writeRecording(const ScanSource& source, std::size_t first, std::size_t count,
                               const std::filesystem::path& file, McapCompression compression,
                               const std::function<void(std::size_t)>& progress) {
-  const std::string cloud_definition = withDependencies(
-      "std_msgs/Header header\nuint32 height\nuint32 width\nPointField[] fields\nbool "
-      "is_bigendian\nuint32 point_step\nuint32 row_step\nuint8[] data\nbool is_dense\n",
-      {{"std_msgs/Header", kHeaderMsg},
-       {"builtin_interfaces/Time", kTimeMsg},
-       {"sensor_msgs/PointField",
-        "uint8 INT8 = 1\nuint8 UINT8 = 2\nuint8 INT16 = 3\nuint8 UINT16 = 4\nuint8 INT32 = "
-        "5\nuint8 UINT32 = 6\nuint8 FLOAT32 = 7\nuint8 FLOAT64 = 8\nstring name\nuint32 "
-        "offset\nuint8 datatype\nuint32 count\n"}});
-  const std::string tf_definition = withDependencies(
-      "geometry_msgs/TransformStamped[] transforms\n",
-      {{"geometry_msgs/TransformStamped",
-        "std_msgs/Header header\nstring child_frame_id\nTransform transform\n"},
-       {"std_msgs/Header", kHeaderMsg},
-       {"builtin_interfaces/Time", kTimeMsg},
-       {"geometry_msgs/Transform", "Vector3 translation\nQuaternion rotation\n"},
-       {"geometry_msgs/Vector3", "float64 x\nfloat64 y\nfloat64 z\n"},
-       {"geometry_msgs/Quaternion", "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"}});
+  const std::string& cloud_definition = pointCloud2Definition();
+  const std::string& tf_definition = tfMessageDefinition();
   // Topics 0 /points, 1 /tf, 2 /tf_static; the messages in the order they are recorded.
   const std::vector<Db3Topic> topics{
       {"/points", kCloudType}, {"/tf", kTfType}, {"/tf_static", kTfType}};

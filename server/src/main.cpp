@@ -93,6 +93,18 @@ OrExit<densemap::server::ServiceOptions> serviceOptions(const densemap::proto::S
   auto ros2 = densemap::server::ros2Options(config);
   if (!ros2) return std::unexpected(Exit{"config: " + ros2.error().message});
   o.ros2 = *ros2;
+  auto foxglove = densemap::server::foxgloveOptions(config);
+  if (!foxglove) return std::unexpected(Exit{"config: " + foxglove.error().message});
+  o.foxglove = *foxglove;
+  if (o.foxglove && !o.foxglove->tls) {
+    bool loopback = densemap::server::isLoopbackAddress(o.foxglove->address).value_or(false);
+    if (!loopback) {
+      spdlog::warn(
+          "Foxglove endpoint on {} without TLS (foxglove.allow_insecure_remote): anyone who "
+          "reaches it can watch the map",
+          o.foxglove->address);
+    }
+  }
   return o;
 }
 

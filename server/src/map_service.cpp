@@ -115,6 +115,11 @@ Expected<std::unique_ptr<MapService>> MapService::create(Ingest& ingest,
     if (!bridge) return std::unexpected(bridge.error());
     service->ros2_ = std::move(*bridge);
   }
+  if (options.foxglove) {
+    auto room = FoxgloveRoom::create(*options.foxglove, ingest.view());
+    if (!room) return std::unexpected(room.error());
+    service->foxglove_ = std::move(*room);
+  }
   service->makeRooms();
   ingest.setPublisher([p = service->publisher_.get()](const IntegrationResult& r,
                                                       const std::shared_ptr<const MapView>& v) {
@@ -135,10 +140,12 @@ void MapService::makeRooms() {
       ingest_, CommandRoom::Endpoints{d.cmd_reader, d.map_reader, d.tile_writer}, *replies_,
       *tasks_, *stats_, *saver_, exportDirectory(options_.export_dir, options_.snapshot_path));
   publisher_ = std::make_unique<Publisher>(
-      ingest_, Publisher::Writers{d.event_writer, d.delta_writer, d.manifest_writer}, ros2_.get());
+      ingest_, Publisher::Writers{d.event_writer, d.delta_writer, d.manifest_writer}, ros2_.get(),
+      foxglove_.get());
   status_ = std::make_unique<StatusRoom>(ingest_, d.status_writer, d.participant, d.status_probe,
                                          options_.domain_id,
-                                         StatusRoom::Sources{*stats_, *saver_, ros2_.get()});
+                                         StatusRoom::Sources{*stats_, *saver_, ros2_.get(),
+                                                             foxglove_.get()});
 }
 
 Expected<void> MapService::checkAlone(std::chrono::milliseconds discovery) const {
@@ -172,6 +179,7 @@ void MapService::start() {
   service_ = std::thread([this] { serviceLoop(); });
   publish_ = std::thread([this] { publishLoop(); });
   if (ros2_) ros2_->start();
+  if (foxglove_) foxglove_->start();
 }
 
 void MapService::stop() {
@@ -184,6 +192,7 @@ void MapService::stop() {
   if (service_.joinable()) service_.join();
   tasks_->wait();
   if (publish_.joinable()) publish_.join();
+  if (foxglove_) foxglove_->stop();  // after the last version and status went to it
 }
 
 Expected<std::size_t> MapService::save(const std::filesystem::path& file) {

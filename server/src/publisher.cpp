@@ -17,6 +17,7 @@ void Publisher::onIntegrated(const IntegrationResult& r,
                              const std::shared_ptr<const MapView>& view) {
   // On the pipeline's worker: a small event now, everything else on the publish thread.
   if (ros2_) ros2_->onVersion(r, view);
+  if (foxglove_) foxglove_->onVersion(r, view);
   densemap_msgs_MapEvent event{};
   event.base_version = r.base_version;
   event.new_version = r.new_version;

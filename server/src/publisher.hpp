@@ -10,6 +10,7 @@
 #include "densemap/wire/dds.hpp"
 #include "densemap/server/ingest.hpp"
 #include "densemap/server/ros2_bridge.hpp"
+#include "foxglove_room.hpp"
 
 namespace densemap::server {
 
@@ -24,8 +25,12 @@ class Publisher {
     const dds::Entity& manifest;
   };
   /// The map loaded at start (a snapshot) is the first delta's base.
-  Publisher(Ingest& ingest, Writers writers, Ros2Bridge* ros2)
-      : ingest_(ingest), writers_(writers), ros2_(ros2), delta_base_(ingest.view()) {}
+  Publisher(Ingest& ingest, Writers writers, Ros2Bridge* ros2, FoxgloveRoom* foxglove)
+      : ingest_(ingest),
+        writers_(writers),
+        ros2_(ros2),
+        foxglove_(foxglove),
+        delta_base_(ingest.view()) {}
 
   /// The pipeline's publisher (its worker): the event now, the version to the publish thread.
   void onIntegrated(const IntegrationResult& result, const std::shared_ptr<const MapView>& view);
@@ -47,6 +52,7 @@ class Publisher {
   Ingest& ingest_;
   Writers writers_;
   Ros2Bridge* ros2_;
+  FoxgloveRoom* foxglove_;  // null: the Foxglove endpoint is off
   std::mutex mutex_;
   std::condition_variable cv_;
   std::deque<Version> versions_;

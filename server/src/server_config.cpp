@@ -1,5 +1,6 @@
 #include "densemap/server/server_config.hpp"
 
+#include <arpa/inet.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -67,6 +68,7 @@ Expected<proto::ServerConfig> loadServerConfig(const std::filesystem::path& file
   if (auto options = pipelineOptions(config); !options) return refused(options.error());
   if (auto security = securityFiles(config); !security) return refused(security.error());
   if (auto ros2 = ros2Options(config); !ros2) return refused(ros2.error());
+  if (auto foxglove = foxgloveOptions(config); !foxglove) return refused(foxglove.error());
   return config;
 }
 
@@ -300,6 +302,81 @@ Expected<std::optional<Ros2Options>> ros2Options(const proto::ServerConfig& conf
   if (!layout) return std::unexpected(layout.error());
   o.gid_layout = *layout;
   return std::optional<Ros2Options>(std::move(o));
+}
+
+Expected<bool> isLoopbackAddress(const std::string& address) {
+  in_addr v4{};
+  in6_addr v6{};
+  if (::inet_pton(AF_INET, address.c_str(), &v4) == 1) {
+    return (ntohl(v4.s_addr) >> 24) == 127;  // 127.0.0.0/8
+  }
+  if (::inet_pton(AF_INET6, address.c_str(), &v6) == 1) {
+    return IN6_IS_ADDR_LOOPBACK(&v6) != 0;
+  }
+  return makeError("'" + address.substr(0, 64) + "' is not an IPv4 or IPv6 address");
+}
+
+Expected<std::optional<FoxgloveOptions>> foxgloveOptions(const proto::ServerConfig& config) {
+  const proto::FoxgloveConfig& f = config.foxglove();
+  if (!f.enabled()) return std::optional<FoxgloveOptions>();
+  FoxgloveOptions o;
+  o.address = f.address();
+  const auto loopback = isLoopbackAddress(o.address);
+  if (!loopback) return makeError("foxglove.address: " + loopback.error().message);
+  if (f.port() == 0 || f.port() > 65535) return makeError("foxglove.port: 1 .. 65535");
+  o.port = static_cast<std::uint16_t>(f.port());
+  if (f.max_clients() < 1 || f.max_clients() > 1024) {
+    return makeError("foxglove.max_clients: 1 .. 1024");
+  }
+  o.max_clients = f.max_clients();
+  if (f.max_queue_bytes() < (std::uint64_t{64} << 10) ||
+      f.max_queue_bytes() > (std::uint64_t{1} << 30)) {
+    return makeError("foxglove.max_queue_bytes: 65536 .. 1073741824 (64 KiB .. 1 GiB)");
+  }
+  o.max_queue_bytes = f.max_queue_bytes();
+  if (!(f.stall_close_s() >= 0.1 && f.stall_close_s() <= 3600)) {
+    return makeError("foxglove.stall_close_s: 0.1 .. 3600 s");
+  }
+  o.stall_close_s = f.stall_close_s();
+  if (!(f.grid_period_s() >= 0.05 && f.grid_period_s() <= 3600)) {
+    return makeError("foxglove.grid_period_s: 0.05 .. 3600 s");
+  }
+  o.grid_period_s = f.grid_period_s();
+  if (!std::isfinite(f.grid_min_z_m()) || !std::isfinite(f.grid_max_z_m()) ||
+      f.grid_min_z_m() > f.grid_max_z_m()) {
+    return makeError("foxglove.grid_min_z_m must be finite and <= grid_max_z_m");
+  }
+  o.grid_min_z_m = f.grid_min_z_m();
+  o.grid_max_z_m = f.grid_max_z_m();
+  if (f.voxel_window_cells() < 8 || f.voxel_window_cells() > 256) {
+    return makeError("foxglove.voxel_window_cells: 8 .. 256");
+  }
+  o.voxel_window_cells = f.voxel_window_cells();
+  if (f.max_trajectory_poses() < 2 || f.max_trajectory_poses() > 1'000'000) {
+    return makeError("foxglove.max_trajectory_poses: 2 .. 1000000");
+  }
+  o.max_trajectory_poses = f.max_trajectory_poses();
+  const auto kind = kernel::parseMapKind(config.map().kind());
+  o.voxels = kind && kind->has_value();  // a dense kind
+  if (f.has_certificate_chain() != f.has_private_key()) {
+    return makeError("foxglove: TLS needs both certificate_chain and private_key");
+  }
+  if (f.has_certificate_chain()) {
+    for (const std::string& file : {f.certificate_chain(), f.private_key()}) {
+      if (::access(file.c_str(), R_OK) != 0) {
+        return makeError("foxglove: cannot read " + file.substr(0, 256));
+      }
+    }
+    o.tls = FoxgloveOptions::Tls{f.certificate_chain(), f.private_key()};
+  }
+  if (!*loopback && !o.tls && !f.allow_insecure_remote()) {
+    return makeError("foxglove.address '" + o.address +
+                     "' is not loopback and there is no TLS: anyone who reaches it could watch "
+                     "the map. Set foxglove.certificate_chain and foxglove.private_key (clients "
+                     "then open wss://), or set foxglove.allow_insecure_remote: true to accept "
+                     "that");
+  }
+  return std::optional<FoxgloveOptions>(std::move(o));
 }
 
 }  // namespace densemap::server

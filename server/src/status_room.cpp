@@ -88,6 +88,15 @@ void StatusRoom::publish() {
   s.ros_last_reject = ros.last_reject;
   s.ros_maps_published = ros.maps_published;
   s.ros_clouds = ros.clouds;
+  if (sources_.foxglove != nullptr) {
+    const FoxgloveRoom::Counters f = sources_.foxglove->counters();
+    s.foxglove_enabled = true;
+    s.foxglove_clients = f.clients;
+    s.foxglove_dropped_frames = f.dropped_frames;
+    s.foxglove_closed_clients = f.closed_clients;
+    s.foxglove_rejected = f.rejected;
+    sources_.foxglove->onStatus(s);
+  }
   (void)dds::writeStatus(writer_, s);
 }
 

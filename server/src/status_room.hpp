@@ -8,6 +8,7 @@
 #include "densemap/wire/dds.hpp"
 #include "densemap/server/ingest.hpp"
 #include "densemap/server/ros2_bridge.hpp"
+#include "foxglove_room.hpp"
 #include "request_tasks.hpp"
 #include "snapshot_saver.hpp"
 
@@ -26,6 +27,7 @@ class StatusRoom {
     const RequestStats& requests;
     const SnapshotSaver& snapshots;
     const Ros2Bridge* ros2;  // null: ROS 2 off
+    FoxgloveRoom* foxglove;  // null: the Foxglove endpoint is off (else it gets each status)
   };
   StatusRoom(Ingest& ingest, const dds::Entity& writer, const dds::Entity& participant,
              const dds::Entity& status_probe, std::uint32_t domain_id, Sources sources)

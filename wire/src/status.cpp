@@ -58,6 +58,11 @@ Expected<void> writeStatus(const Entity& writer, const ServerStatus& st) {
         {lend(c.topic), c.matched_writers, c.incompatible_qos, lend(c.last_incompatible_policy)});
   }
   s.ros_clouds = borrowSequence<dds_sequence_densemap_msgs_RosCloudTopic>(clouds);
+  s.foxglove_enabled = st.foxglove_enabled;
+  s.foxglove_clients = st.foxglove_clients;
+  s.foxglove_dropped_frames = st.foxglove_dropped_frames;
+  s.foxglove_closed_clients = st.foxglove_closed_clients;
+  s.foxglove_rejected = st.foxglove_rejected;
   return write(writer, &s);
 }
 
@@ -112,6 +117,11 @@ ServerStatus statusFromWire(const densemap_msgs_Status& s) {
                               .incompatible_qos = c.incompatible_qos,
                               .last_incompatible_policy = text(c.last_incompatible_policy)});
   }
+  out.foxglove_enabled = s.foxglove_enabled;
+  out.foxglove_clients = s.foxglove_clients;
+  out.foxglove_dropped_frames = s.foxglove_dropped_frames;
+  out.foxglove_closed_clients = s.foxglove_closed_clients;
+  out.foxglove_rejected = s.foxglove_rejected;
   return out;
 }
 

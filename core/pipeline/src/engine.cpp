@@ -127,6 +127,8 @@ std::expected<IntegrationResult, Rejection> Engine::integrate(const RawScan& raw
   result.sensor_id = raw.sensor_id;
   result.scan_seq = raw.seq;
   result.stamp_ns = raw.stamp_ns;
+  result.T_world_sensor = scan->T_world_sensor;
+  result.points_world = std::make_shared<const PointCloud>(std::move(points_world));
   return result;
 }
 

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "densemap/geometry/error.hpp"
+#include "densemap/ros2/map_topics.hpp"
 #include "densemap/ros2/point_cloud2.hpp"
 #include "densemap/ros2/tf_buffer.hpp"
 
@@ -51,6 +52,9 @@ struct CdrTransform {
 /// Encoders (little-endian CDR with its 4-byte encapsulation header).
 [[nodiscard]] std::string encodeCdrPointCloud2(const CdrHeader& header, std::span<const float> xyz);
 [[nodiscard]] std::string encodeCdrTfMessage(std::span<const CdrTransform> transforms);
+/// nav_msgs/OccupancyGrid of `grid` in the plane z = `z_m` (map_load_time: the header's stamp).
+[[nodiscard]] std::string encodeCdrOccupancyGrid(const CdrHeader& header, const GridImage& grid,
+                                                 double z_m);
 
 /// The bounds the decoders keep (refused beyond): characters of a string, fields of a cloud,
 /// transforms of a message.

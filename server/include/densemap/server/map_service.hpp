@@ -8,6 +8,7 @@
 #include <thread>
 
 #include "densemap/wire/dds.hpp"
+#include "densemap/server/foxglove_options.hpp"
 #include "densemap/server/ingest.hpp"
 #include "densemap/server/ros2_bridge.hpp"
 
@@ -21,6 +22,7 @@ class QueryRoom;
 class CommandRoom;
 class Publisher;
 class StatusRoom;
+class FoxgloveRoom;
 
 struct ServiceOptions {
   std::uint32_t domain_id = 0;
@@ -36,6 +38,7 @@ struct ServiceOptions {
   std::size_t request_budget_bytes = std::size_t{256} << 20;
   int query_threads = 2;            // the query task arena: requests are answered in parallel
   std::optional<Ros2Options> ros2;  // the ROS 2 face (Ros2Bridge); none: off
+  std::optional<FoxgloveOptions> foxglove;  // the Foxglove WebSocket endpoint; none: off
   /// How long create() listens for another server's status writer before it creates the
   /// endpoints clients match (docs/security.md: two servers on one domain are detected).
   std::chrono::milliseconds alone_discovery{1000};
@@ -92,6 +95,7 @@ class MapService {
   ServiceOptions options_;
   std::unique_ptr<Dds> dds_;  // before the rooms: they hold its endpoints
   std::unique_ptr<Ros2Bridge> ros2_;
+  std::unique_ptr<FoxgloveRoom> foxglove_;  // the Foxglove endpoint's own thread
   // Rooms of one job each (server/src): shared request counters, the request task arena with
   // its memory budget, snapshots; the per-client reply writers; queries; commands; publishing
   // of versions; status.

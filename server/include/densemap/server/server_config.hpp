@@ -6,6 +6,7 @@
 
 #include "densemap.pb.h"
 #include "densemap/geometry/error.hpp"
+#include "densemap/server/foxglove_options.hpp"
 #include "densemap/server/ingest.hpp"
 #include "densemap/server/ros2_bridge.hpp"
 #include "densemap/wire/security.hpp"
@@ -28,5 +29,13 @@ namespace densemap::server {
 
 /// The ROS 2 face's options, or none when `ros2.enabled` is false. Errors name the field.
 [[nodiscard]] Expected<std::optional<Ros2Options>> ros2Options(const proto::ServerConfig& config);
+
+/// The Foxglove endpoint's options, or none when `foxglove.enabled` is false. Errors name the
+/// field.
+[[nodiscard]] Expected<std::optional<FoxgloveOptions>> foxgloveOptions(
+    const proto::ServerConfig& config);
+
+/// Whether `address` (an IPv4 or IPv6 literal) is a loopback address.
+[[nodiscard]] Expected<bool> isLoopbackAddress(const std::string& address);
 
 }  // namespace densemap::server

@@ -62,6 +62,12 @@ struct ServerStatus {
   std::string ros_last_reject;
   std::uint64_t ros_maps_published = 0;
   std::vector<RosCloudTopicStatus> ros_clouds;  // per cloud topic (ros2.clouds)
+  /// The Foxglove WebSocket endpoint (server config foxglove): clients connected now, frames
+  /// a client's full send queue did not take, clients closed for a stalled queue, and
+  /// connections and client operations refused (over max_clients, bad handshake, bad frame).
+  bool foxglove_enabled = false;
+  std::uint64_t foxglove_clients = 0, foxglove_dropped_frames = 0, foxglove_closed_clients = 0,
+                foxglove_rejected = 0;
 
   bool operator==(const ServerStatus&) const = default;
 };

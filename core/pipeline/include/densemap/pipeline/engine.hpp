@@ -7,6 +7,8 @@
 #include <string>
 #include <utility>
 
+#include "densemap/geometry/point_cloud.hpp"
+#include "densemap/geometry/rigid_transform.hpp"
 #include "densemap/io/raw_scan.hpp"
 #include "densemap/kernel/kernel_map.hpp"
 #include "densemap/map/grid_map.hpp"
@@ -82,6 +84,10 @@ struct IntegrationResult {
   std::size_t evicted_blocks = 0;  // dropped by keep_radius_m / bounds with this scan
   std::size_t evicted_cells = 0;
   DecayStats decayed;  // cells that decayed with this scan (PipelineOptions::decay)
+  /// Scans (Engine::integrate): the points as integrated, in the world frame, and the sensor's
+  /// pose, for live viewers of the latest scan (the server's Foxglove endpoint).
+  std::shared_ptr<const PointCloud> points_world;
+  Transform T_world_sensor = Transform::Identity();
 };
 
 /// The longest ray a map takes, m (checkMapOptions).
