@@ -13,7 +13,11 @@
 # map.kind (default log_odds; a dense kind such as akimap_rays is benched as that kind),
 # METHOD=M the server's pipeline.integration (raycast, culling, superray, superray+culling),
 # THREADS=N the server's pipeline.threads and the bench's --threads (default 2), ESDF=M the
-# server's distance field on (esdf.max_distance_m M; the bench keeps one too, --esdf M).
+# server's distance field on (esdf.max_distance_m M; the bench keeps one too, --esdf M),
+# FOXGLOVE=N the server's Foxglove endpoint on (port FOXGLOVE_PORT, default 18766) with N
+# Node clients subscribed to every channel from before the replay (tests/foxglove/client.mjs
+# --follow; the last one --stall, a client that never reads; at nice 19, as viewers on other
+# machines would not take the server's cores), their counts in $OUT/foxglove-*.json.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DATA=$1 RES=$2 RANGE=$3 RATE=${4:-10} FIRST=${5:-0} LIMIT=${6:-0} QUERY=${7:-0}
@@ -29,6 +33,11 @@ snapshot { path: "" autosave_period_s: 0 }
 dds { domain_id: $DOMAIN network_interface: "lo" }
 ${ESDF:+esdf { enabled: true max_distance_m: $ESDF \}}
 CFG
+FOXGLOVE=${FOXGLOVE:-0}
+FOXGLOVE_PORT=${FOXGLOVE_PORT:-18766}
+if [ "$FOXGLOVE" -gt 0 ]; then
+  echo "foxglove { enabled: true port: $FOXGLOVE_PORT }" >> "$OUT/server.textproto"
+fi
 "$BIN/densemap-server" --config "$OUT/server.textproto" 2> "$OUT/server.log" &
 SERVER=$!
 trap 'kill $SERVER 2>/dev/null || true' EXIT
@@ -43,6 +52,15 @@ fi
 # The machine's CPU ticks (all, stolen) from /proc/stat's cpu line, for the replay's steal
 # share (densemap-bench prints its own: tools/bench/cpu_steal.hpp).
 cpu_ticks() { awk '/^cpu / {t = 0; for (i = 2; i <= 9; ++i) t += $i; print t, $9; exit}' /proc/stat; }
+CLIENTS=()
+for i in $(seq "$FOXGLOVE"); do
+  mode=--follow
+  [ "$i" = "$FOXGLOVE" ] && mode=--stall
+  nice -n 19 node tests/foxglove/client.mjs --url "ws://127.0.0.1:$FOXGLOVE_PORT" $mode \
+    --out "$OUT/foxglove-$i.json" 2> "$OUT/foxglove-$i.log" &
+  CLIENTS+=($!)
+done
+[ "$FOXGLOVE" -gt 0 ] && sleep 2  # connected and subscribed before the first scan
 read -r ticks0 steal0 < <(cpu_ticks)
 extra=(--query-bbox-edge "${BBOX_EDGE:-0}" --csv "$OUT/scans.csv")
 [ "${LEGACY:-0}" = 1 ] && extra=()  # a densemap from before these options (A/B runs)
@@ -61,6 +79,8 @@ if [ "${SNAPSHOT:-0}" = 1 ]; then  # a late joiner fetches the whole map
   "$BIN/densemap" --domain-id "$DOMAIN" snapshot --out "$OUT/map.dmap" | tee -a "$OUT/replay.txt"
   echo "late-joiner fetch took $(echo "$(date +%s.%N) - $start" | bc) s"
 fi
+for c in "${CLIENTS[@]}"; do kill -TERM "$c" 2>/dev/null || true; done
+for c in "${CLIENTS[@]}"; do wait "$c" 2>/dev/null || true; done
 [ -n "${PERF_PID:-}" ] && kill -INT "$PERF_PID" && wait "$PERF_PID" || true
 # The kernel's high-water mark: the true peak, not just the 0.5 s samples' largest.
 HWM=$(awk '/VmHWM/ {print $2}' /proc/$SERVER/status 2>/dev/null || echo 0)

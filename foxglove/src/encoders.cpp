@@ -6,6 +6,7 @@
 #include <google/protobuf/io/zero_copy_stream_impl_lite.h>
 
 #include <cmath>
+#include <bit>
 #include <cstring>
 #include <functional>
 #include <limits>
@@ -88,46 +89,57 @@ std::string protobufSchema(std::string_view full_name) {
   return base64(serialized(set));
 }
 
-std::string blockEntityId(std::uint64_t block_key) { return "b" + std::to_string(block_key); }
-
-double shownProbability(float log_odds) {
-  const double p = 1.0 / (1.0 + std::exp(-static_cast<double>(log_odds)));
-  return std::round(p * 20.0) / 20.0;
+std::string layerEntityId(std::uint64_t layer) {
+  return "b" + std::to_string(layer >> 3) + "z" + std::to_string(layer & 7);
 }
 
-std::string blockEntityField(const VoxelGrid& grid, std::uint64_t block_key,
-                             const VoxelBlock& block) {
+block::BlockMask occupiedCells(const VoxelBlock& block) {
+  block::BlockMask m{};
+  for (int i = 0; i < block::kVoxels; ++i) {
+    if (block.isKnown(i) && SensorModel::isOccupied(block.log_odds[i])) block::setBit(m, i);
+  }
+  return m;
+}
+
+std::string layerEntityField(const VoxelGrid& grid, std::uint64_t layer, std::uint64_t occupied) {
+  static_assert(block::kEdge * block::kEdge == 64, "a layer is one word of the block's mask");
+  if (occupied == 0) return {};
   ::foxglove::SceneEntity entity;
   const double r = grid.resolution();
-  for (int i = 0; i < block::kVoxels; ++i) {
-    if (!block.isKnown(i) || !SensorModel::isOccupied(block.log_odds[i])) continue;
-    const VoxelKey k = block::keyOf(block_key, i);
+  const std::uint64_t block_key = layer >> 3;
+  const int z_index = static_cast<int>(layer & 7) << (2 * block::kShift);
+  // Hue by height, a full turn every kHeightCycleM (saturated, HSV with V = 1): one per layer.
+  const double z = grid.keyToCoord(block::keyOf(block_key, z_index).z);
+  const double h = 6.0 * (z / kHeightCycleM - std::floor(z / kHeightCycleM));
+  const double x = 1.0 - std::abs(std::fmod(h, 2.0) - 1.0);
+  const int sector = std::min(static_cast<int>(h), 5);
+  const double rgb[6][3] = {{1, x, 0}, {x, 1, 0}, {0, 1, x}, {0, x, 1}, {x, 0, 1}, {1, 0, x}};
+  for (std::uint64_t bits = occupied; bits != 0; bits &= bits - 1) {
+    const VoxelKey k = block::keyOf(block_key, z_index | std::countr_zero(bits));
     ::foxglove::CubePrimitive* cube = entity.add_cubes();
     auto* position = cube->mutable_pose()->mutable_position();
     position->set_x(grid.keyToCoord(k.x));
     position->set_y(grid.keyToCoord(k.y));
-    position->set_z(grid.keyToCoord(k.z));
+    position->set_z(z);
     cube->mutable_pose()->mutable_orientation()->set_w(1.0);
     cube->mutable_size()->set_x(r);
     cube->mutable_size()->set_y(r);
     cube->mutable_size()->set_z(r);
-    // From yellow (just occupied) to red (certain).
-    const double p = shownProbability(block.log_odds[i]);
     auto* color = cube->mutable_color();
-    color->set_r(1.0);
-    color->set_g(std::clamp(2.0 * (1.0 - p), 0.0, 1.0));
+    color->set_r(rgb[sector][0]);
+    color->set_g(rgb[sector][1]);
+    color->set_b(rgb[sector][2]);
     color->set_a(1.0);
   }
-  if (entity.cubes_size() == 0) return {};
   entity.set_frame_id("map");
-  entity.set_id(blockEntityId(block_key));
+  entity.set_id(layerEntityId(layer));
   return lengthDelimited(::foxglove::SceneUpdate::kEntitiesFieldNumber, serialized(entity));
 }
 
-std::string blockDeletionField(std::uint64_t block_key) {
+std::string layerDeletionField(std::uint64_t layer) {
   ::foxglove::SceneEntityDeletion deletion;
   deletion.set_type(::foxglove::SceneEntityDeletion::MATCHING_ID);
-  deletion.set_id(blockEntityId(block_key));
+  deletion.set_id(layerEntityId(layer));
   // A deletion removes entities older than its timestamp: the largest one removes any.
   deletion.mutable_timestamp()->set_seconds(253402300799);  // 9999-12-31T23:59:59Z
   return lengthDelimited(::foxglove::SceneUpdate::kDeletionsFieldNumber, serialized(deletion));

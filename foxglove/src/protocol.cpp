@@ -33,6 +33,19 @@ std::string toJson(const google::protobuf::Message& m) {
 
 }  // namespace
 
+bool offersSubprotocol(std::string_view value) {
+  while (!value.empty()) {
+    const std::size_t comma = value.find(',');
+    std::string_view item = value.substr(0, comma);
+    while (!item.empty() && (item.front() == ' ' || item.front() == '\t')) item.remove_prefix(1);
+    while (!item.empty() && (item.back() == ' ' || item.back() == '\t')) item.remove_suffix(1);
+    if (item == kSubprotocol) return true;
+    if (comma == std::string_view::npos) break;
+    value.remove_prefix(comma + 1);
+  }
+  return false;
+}
+
 Expected<ClientOp> parseClientText(std::string_view text) {
   if (text.size() > kMaxClientFrameBytes) {
     return makeError("a frame of " + std::to_string(text.size()) + " bytes (at most " +

@@ -1,6 +1,8 @@
 #include "foxglove_room.hpp"
 
 #include <spdlog/spdlog.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include <boost/asio.hpp>
 #include <boost/asio/ssl.hpp>
@@ -51,13 +53,17 @@ enum Channel : std::uint32_t {
   kVoxels = 7,
 };
 
-// A map-channel message holds blocks up to about this many bytes.
+// A map-channel message holds layers up to about this many bytes, and the map channel adds
+// messages to a client's queue only while it holds less than kMapQueueBytes (or half the
+// queue): each client's catch-up is its own copy, so this bounds their memory together.
 constexpr std::size_t kMapMessageBytes = 256 * 1024;
+constexpr std::size_t kMapQueueBytes = 2 * 1024 * 1024;
 // Versions whose written blocks wait for the endpoint's thread, beyond which it re-reads the
 // whole map instead (the thread was held up: coalesced, never unbounded).
 constexpr std::size_t kMaxPendingBlocks = std::size_t{1} << 22;
 constexpr std::size_t kMaxPendingPoses = 4096;
 constexpr std::size_t kMaxHttpHeaderBytes = 8 * 1024;
+constexpr int kThreadNice = 10;
 // How many sensors keep a trajectory and a pose (a sensor id past them is not shown).
 constexpr std::size_t kMaxSensorsShown = 256;
 
@@ -87,20 +93,6 @@ std::int64_t wallNowNs() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
              std::chrono::system_clock::now().time_since_epoch())
       .count();
-}
-
-/// Whether a comma-separated header value lists `token`.
-bool listsToken(std::string_view value, std::string_view token) {
-  while (!value.empty()) {
-    const std::size_t comma = value.find(',');
-    std::string_view item = value.substr(0, comma);
-    while (!item.empty() && (item.front() == ' ' || item.front() == '\t')) item.remove_prefix(1);
-    while (!item.empty() && (item.back() == ' ' || item.back() == '\t')) item.remove_suffix(1);
-    if (item == token) return true;
-    if (comma == std::string_view::npos) break;
-    value.remove_prefix(comma + 1);
-  }
-  return false;
 }
 
 /// One frame waiting in a client's queue: a Message Data header and payload (binary), or a
@@ -157,10 +149,15 @@ struct FoxgloveRoom::Impl {
   std::unordered_map<std::uint64_t, std::shared_ptr<SessionBase>> sessions;
   std::uint64_t next_session = 1;
   std::shared_ptr<const MapView> view;
-  // The map channel's encoded blocks (SceneUpdate fields), kept while anyone subscribes.
-  std::unordered_map<std::uint64_t, Payload> blocks;
-  bool blocks_valid = false;
-  std::uint64_t blocks_version = 0;
+  // The map channel's layers (foxglove::layerOf) with an occupied cell, kept while anyone
+  // subscribes: which cells are occupied and the encoded SceneUpdate field.
+  struct ShownLayer {
+    std::uint64_t occupied = 0;
+    Payload field;
+  };
+  std::unordered_map<std::uint64_t, ShownLayer> layers;
+  bool layers_valid = false;
+  std::uint64_t layers_version = 0;
   Payload last_grid, last_scan, last_transforms, last_trajectories, last_status, last_voxels;
   std::map<std::string, std::deque<Point3f>> paths;
   std::map<std::string, foxglove::Pose> poses;
@@ -251,15 +248,32 @@ struct FoxgloveRoom::Impl {
   }
 
   // ---- the map channel ----
-  void buildBlocks() {
-    blocks.clear();
+  /// Brings a block's layers to `occupied`; calls changed(layer) for each that changed.
+  template <class Changed>
+  void showBlock(std::uint64_t key, const block::BlockMask& occupied, Changed&& changed) {
+    for (int z = 0; z < block::kEdge; ++z) {
+      const std::uint64_t layer = foxglove::layerOf(key, z);
+      const std::uint64_t word = occupied[static_cast<std::size_t>(z)];
+      const auto it = layers.find(layer);
+      if (word == 0) {
+        if (it == layers.end()) continue;
+        layers.erase(it);
+      } else {
+        // The same cells occupied: the entity is the same, nothing is resent.
+        if (it != layers.end() && it->second.occupied == word) continue;
+        layers[layer] = ShownLayer{word, std::make_shared<const std::string>(
+                                             foxglove::layerEntityField(view->grid(), layer, word))};
+      }
+      changed(layer);
+    }
+  }
+  void buildLayers() {
+    layers.clear();
     view->forEachBlock([&](std::uint64_t key, const VoxelBlock& block) {
-      std::string field = foxglove::blockEntityField(view->grid(), key, block);
-      if (!field.empty())
-        blocks.emplace(key, std::make_shared<const std::string>(std::move(field)));
+      showBlock(key, foxglove::occupiedCells(block), [](std::uint64_t) {});
     });
-    blocks_valid = true;
-    blocks_version = view->version();
+    layers_valid = true;
+    layers_version = view->version();
   }
   void markDirty(SessionBase& s, std::uint64_t key) {
     if (s.dirty.insert(key).second) s.dirty_list.push_back(key);
@@ -343,7 +357,9 @@ class Session final : public SessionBase {
     http::async_read(ws_.next_layer(), buffer_, *parser_,
                      [this, self](beast::error_code ec, std::size_t) {
                        if (ec) {
-                         room.reject();
+                         // A connection closed before sending anything (a port probe) is not
+                         // counted; a bad or slow request is.
+                         if (ec != http::error::end_of_stream) room.reject();
                          return room.remove(self, false);
                        }
                        upgrade(parser_->release());
@@ -354,7 +370,7 @@ class Session final : public SessionBase {
     auto self = shared_from_this();
     const auto offered = request[http::field::sec_websocket_protocol];
     if (!websocket::is_upgrade(request) ||
-        !listsToken(std::string_view(offered.data(), offered.size()), foxglove::kSubprotocol)) {
+        !foxglove::offersSubprotocol(std::string_view(offered.data(), offered.size()))) {
       room.reject();
       // A plain HTTP answer for a person who opened the address in a browser or with curl.
       auto response = std::make_shared<http::response<http::string_body>>(http::status::bad_request,
@@ -450,9 +466,9 @@ void FoxgloveRoom::Impl::remove(const std::shared_ptr<SessionBase>& s, bool stal
   if (stalled) n_closed.fetch_add(1, std::memory_order_relaxed);
   // The queue goes with the session, once no operation in flight refers to it.
   if (!s->closing) s->closeNow();
-  if (blocks_valid && !anyoneOn(kMap)) {  // nobody watches the map: its blocks are let go
-    blocks.clear();
-    blocks_valid = false;
+  if (layers_valid && !anyoneOn(kMap)) {  // nobody watches the map: its blocks are let go
+    layers.clear();
+    layers_valid = false;
   }
 }
 
@@ -490,10 +506,10 @@ void FoxgloveRoom::Impl::subscribe(SessionBase& s, std::uint32_t sub, std::uint3
   switch (channel) {
     case kMap:
       // The whole map first (every block with an occupied cell), then what versions change.
-      if (!blocks_valid) buildBlocks();
+      if (!layers_valid) buildLayers();
       s.dirty.clear();
       s.dirty_list.clear();
-      for (const auto& [key, field] : blocks) markDirty(s, key);
+      for (const auto& [layer, shown] : layers) markDirty(s, layer);
       s.marker_due = true;
       pumpMap(s);
       break;
@@ -526,8 +542,8 @@ void FoxgloveRoom::Impl::unsubscribe(SessionBase& s, std::uint32_t sub) {
     s.dirty_list.clear();
     s.marker_due = false;
     if (!anyoneOn(kMap)) {
-      blocks.clear();
-      blocks_valid = false;
+      layers.clear();
+      layers_valid = false;
     }
   }
 }
@@ -536,34 +552,25 @@ void FoxgloveRoom::Impl::unsubscribe(SessionBase& s, std::uint32_t sub) {
 // The map channel
 
 void FoxgloveRoom::Impl::updateBlocks(const std::vector<std::uint64_t>& written, bool all) {
-  if (!blocks_valid) return;
+  if (!layers_valid) return;
   std::vector<std::uint64_t> changed;
+  const auto note = [&](std::uint64_t layer) { changed.push_back(layer); };
   if (all) {
-    std::unordered_map<std::uint64_t, Payload> before = std::move(blocks);
-    buildBlocks();
-    for (const auto& [key, field] : before) {
-      const auto it = blocks.find(key);
-      if (it == blocks.end() || *it->second != *field) changed.push_back(key);
+    std::unordered_map<std::uint64_t, ShownLayer> before = std::move(layers);
+    buildLayers();
+    for (const auto& [layer, shown] : before) {
+      const auto it = layers.find(layer);
+      if (it == layers.end() || it->second.occupied != shown.occupied) note(layer);
     }
-    for (const auto& [key, field] : blocks) {
-      if (!before.contains(key)) changed.push_back(key);
+    for (const auto& [layer, shown] : layers) {
+      if (!before.contains(layer)) note(layer);
     }
   } else {
     for (const std::uint64_t key : written) {
       const VoxelBlock* block = view->block(key);
-      std::string field =
-          block != nullptr ? foxglove::blockEntityField(view->grid(), key, *block) : std::string();
-      const auto it = blocks.find(key);
-      if (field.empty()) {
-        if (it == blocks.end()) continue;
-        blocks.erase(it);
-      } else {
-        if (it != blocks.end() && *it->second == field) continue;  // looks the same: not resent
-        blocks[key] = std::make_shared<const std::string>(std::move(field));
-      }
-      changed.push_back(key);
+      showBlock(key, block != nullptr ? foxglove::occupiedCells(*block) : block::BlockMask{}, note);
     }
-    blocks_version = view->version();
+    layers_version = view->version();
   }
   for (auto& [id, s] : sessions) {
     if (!s->subscription_of.contains(kMap)) continue;
@@ -573,20 +580,21 @@ void FoxgloveRoom::Impl::updateBlocks(const std::vector<std::uint64_t>& written,
 }
 
 void FoxgloveRoom::Impl::pumpMap(SessionBase& s) {
-  if (!s.subscription_of.contains(kMap) || !blocks_valid) return;
+  if (!s.subscription_of.contains(kMap) || !layers_valid) return;
   // Only while the queue is less than half full: the map channel waits for a slow client
   // (it catches up with the blocks' latest content) instead of losing cells.
-  while (s.queued_bytes < options.max_queue_bytes / 2 && (!s.dirty_list.empty() || s.marker_due)) {
+  const std::size_t fill = std::min(kMapQueueBytes, options.max_queue_bytes / 2);
+  while (s.queued_bytes < fill && (!s.dirty_list.empty() || s.marker_due)) {
     std::string message;
     while (!s.dirty_list.empty() && message.size() < kMapMessageBytes) {
       const std::uint64_t key = s.dirty_list.back();
       s.dirty_list.pop_back();
       s.dirty.erase(key);
-      const auto it = blocks.find(key);
-      message += it != blocks.end() ? *it->second : foxglove::blockDeletionField(key);
+      const auto it = layers.find(key);
+      message += it != layers.end() ? *it->second.field : foxglove::layerDeletionField(key);
     }
     if (s.dirty_list.empty()) {
-      message += foxglove::versionMarkerField(blocks_version);
+      message += foxglove::versionMarkerField(layers_version);
       s.marker_due = false;
     }
     sendMessage(s, kMap, std::make_shared<const std::string>(std::move(message)), true);
@@ -740,6 +748,9 @@ void FoxgloveRoom::start() {
   impl_->acceptNext();
   impl_->tick();
   impl_->thread = std::thread([impl = impl_.get()] {
+    // Viewers get the CPU the map leaves: this thread runs at a lower priority (Linux: a
+    // thread's own nice value) than the pipeline's.
+    (void)::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), kThreadNice);
     while (true) {
       bool done = false;
       guarded("foxglove", [&] {

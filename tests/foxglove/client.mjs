@@ -10,6 +10,8 @@
 // map version V and the server's catch-up marker says V, then writes the cells (one "x y z" key
 // a line, sorted), a summary of every channel's decoded messages and exits 0.
 // --stall: subscribes to everything, then never reads again (a client that stopped reading).
+// --follow: subscribes to everything and counts messages and bytes per topic without decoding
+// them (a load-test viewer that costs its machine little); on SIGTERM writes the counts to OUT.
 import fs from "node:fs";
 import net from "node:net";
 import process from "node:process";
@@ -24,7 +26,7 @@ import WebSocket from "ws";
 const { FoxgloveClient } = wsProtocol;
 
 function args() {
-  const a = { timeoutS: 120, stall: false };
+  const a = { timeoutS: 120, stall: false, follow: false };
   const argv = process.argv.slice(2);
   for (let i = 0; i < argv.length; ++i) {
     const k = argv[i];
@@ -34,6 +36,7 @@ function args() {
     else if (k === "--version-file") a.versionFile = argv[++i];
     else if (k === "--timeout-s") a.timeoutS = Number(argv[++i]);
     else if (k === "--stall") a.stall = true;
+    else if (k === "--follow") a.follow = true;
     else throw new Error(`unknown argument ${k}`);
   }
   if (!a.url) throw new Error("--url is required");
@@ -46,7 +49,10 @@ function fail(message) {
 }
 
 const opts = args();
-const deadline = setTimeout(() => fail(`timed out after ${opts.timeoutS} s`), opts.timeoutS * 1000);
+const deadline =
+  opts.follow || opts.stall
+    ? null
+    : setTimeout(() => fail(`timed out after ${opts.timeoutS} s`), opts.timeoutS * 1000);
 
 // Waits until the server listens (it may still be starting): TCP connection attempts.
 async function waitForPort(url) {
@@ -106,7 +112,8 @@ client.on("serverInfo", (info) => {
 });
 client.on("error", (e) => fail(`client error: ${e?.message ?? e}`));
 client.on("close", () => {
-  if (!opts.stall) fail("the server closed the connection");
+  closedByServer = true;
+  if (!opts.stall && !opts.follow) fail("the server closed the connection");
 });
 client.on("status", (s) => {
   if (s.level >= 2) console.error(`client: server status: ${s.message}`);
@@ -156,9 +163,28 @@ function applySceneUpdate(update) {
   }
 }
 
+const bytesOf = new Map(); // topic -> payload bytes (--follow)
+let closedByServer = false;
+process.on("SIGTERM", () => {
+  if (opts.out) {
+    fs.writeFileSync(opts.out, JSON.stringify({
+      messages: Object.fromEntries(counts),
+      bytes: Object.fromEntries(bytesOf),
+      markerVersion,
+      closedByServer,
+    }));
+  }
+  process.exit(0);
+});
+
 client.on("message", ({ subscriptionId, data }) => {
   const channel = subscriptions.get(subscriptionId);
   if (!channel) fail(`a message for unknown subscription ${subscriptionId}`);
+  if (opts.follow) {
+    counts.set(channel.topic, counts.get(channel.topic) + 1);
+    bytesOf.set(channel.topic, (bytesOf.get(channel.topic) ?? 0) + data.byteLength);
+    return;
+  }
   const bytes = new Uint8Array(data.buffer, data.byteOffset, data.byteLength);
   const message = decoders.get(channel.id)(bytes);
   counts.set(channel.topic, counts.get(channel.topic) + 1);
@@ -211,10 +237,12 @@ function maybeDone() {
     transformsSeen,
   };
   fs.writeFileSync(`${opts.out}.json`, JSON.stringify(summary, null, 1));
-  clearTimeout(deadline);
+  if (deadline) clearTimeout(deadline);
   client.close();
   process.exit(0);
 }
 
 // The version file may appear while no message arrives (an idle server): look every 100 ms.
-if (!opts.stall) setInterval(maybeDone, 100);
+if (!opts.stall && !opts.follow) setInterval(maybeDone, 100);
+// --stall, --follow: until SIGTERM.
+if (opts.stall || opts.follow) setInterval(() => {}, 1 << 30);

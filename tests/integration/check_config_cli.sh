@@ -34,6 +34,21 @@ expect_fail "insecure remote" "allow_insecure_remote" "$dir/remote.textproto"
 printf 'dds { network_interface: "eth0" allow_insecure_remote: true }\nsnapshot { path: "" }\n' \
   >"$dir/remote-ok.textproto"
 "$server" --check-config "$dir/remote-ok.textproto" >/dev/null
+# The Foxglove endpoint: loopback by default; another address needs TLS or an explicit opt-out.
+printf 'foxglove { enabled: true address: "10.1.2.3" }\n' >"$dir/fox.textproto"
+expect_fail "foxglove remote" "allow_insecure_remote" "$dir/fox.textproto"
+printf 'foxglove { enabled: true address: "10.1.2.3" allow_insecure_remote: true }\nsnapshot { path: "" }\n' \
+  >"$dir/fox-ok.textproto"
+"$server" --check-config "$dir/fox-ok.textproto" >/dev/null
+printf 'foxglove { enabled: true address: "robot.local" }\n' >"$dir/fox-name.textproto"
+expect_fail "foxglove address" "not an IPv4 or IPv6 address" "$dir/fox-name.textproto"
+printf 'foxglove { enabled: true address: "::1" port: 0 }\n' >"$dir/fox-port.textproto"
+expect_fail "foxglove port" "foxglove.port" "$dir/fox-port.textproto"
+printf 'foxglove { enabled: true certificate_chain: "%s/none.pem" }\n' "$dir" >"$dir/fox-tls.textproto"
+expect_fail "foxglove half TLS" "both certificate_chain and private_key" "$dir/fox-tls.textproto"
+printf 'foxglove { enabled: true certificate_chain: "%s/none.pem" private_key: "%s/none.key" }\n' \
+  "$dir" "$dir" >"$dir/fox-tls2.textproto"
+expect_fail "foxglove TLS files" "cannot read" "$dir/fox-tls2.textproto"
 # A remote interface with a security block (make-pki.sh's server files): valid.
 if command -v openssl >/dev/null; then
   "$src/scripts/make-pki.sh" --days 1 "$dir/pki" >/dev/null

@@ -117,6 +117,15 @@ TEST(FoxgloveOps, BinaryFramesAreRefusedByOpcode) {
   EXPECT_NE(binaryFrameError({}).find("empty"), std::string::npos);
 }
 
+TEST(FoxgloveOps, FindsTheSubprotocolInTheOfferedList) {
+  EXPECT_TRUE(offersSubprotocol("foxglove.websocket.v1"));
+  EXPECT_TRUE(offersSubprotocol("x, foxglove.websocket.v1 ,y"));
+  EXPECT_TRUE(offersSubprotocol(",,\tfoxglove.websocket.v1"));
+  EXPECT_FALSE(offersSubprotocol(""));
+  EXPECT_FALSE(offersSubprotocol("foxglove.websocket.v2, foxglove.websocket.v1x"));
+  EXPECT_FALSE(offersSubprotocol("foxglove.websocket"));
+}
+
 TEST(FoxgloveOps, MessageDataHeaderIsLittleEndian) {
   const auto h = messageDataHeader(0x04030201U, 0x0c0b0a0908070605ULL);
   const std::array<std::uint8_t, 13> expected{0x01, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12};
@@ -166,7 +175,7 @@ TEST(FoxgloveEncoders, ProtobufSchemaHoldsTheTypeAndItsImports) {
   EXPECT_EQ(protobufSchema("foxglove.NoSuchType"), "");
 }
 
-TEST(FoxgloveEncoders, BlockEntitiesHoldEveryOccupiedCellAndConcatenate) {
+TEST(FoxgloveEncoders, LayerEntitiesHoldEveryOccupiedCellAndConcatenate) {
   const VoxelGrid grid(0.2);
   const std::uint64_t key = block::blockOf(VoxelKey{32768 + 40, 32768 - 16, 32768 + 3});
   VoxelBlock b;
@@ -182,35 +191,48 @@ TEST(FoxgloveEncoders, BlockEntitiesHoldEveryOccupiedCellAndConcatenate) {
     }
   }
   ASSERT_GT(occupied.size(), 50U);
-  const std::string field = blockEntityField(grid, key, b);
+  // Every layer's entity, one message: the block's occupied cells, each once.
+  const block::BlockMask mask = occupiedCells(b);
+  std::string message;
+  for (int z = 0; z < 8; ++z) {
+    message += layerEntityField(grid, layerOf(key, z), mask[static_cast<std::size_t>(z)]);
+  }
+  message += layerDeletionField(layerOf(key + 1, 2)) + versionMarkerField(42);
   ::foxglove::SceneUpdate update;
-  ASSERT_TRUE(update.ParseFromString(field + blockDeletionField(key + 1) + versionMarkerField(42)));
-  ASSERT_EQ(update.entities_size(), 2);
+  ASSERT_TRUE(update.ParseFromString(message));
   ASSERT_EQ(update.deletions_size(), 1);
-  EXPECT_EQ(update.deletions(0).id(), blockEntityId(key + 1));
-  const auto& e = update.entities(0);
-  EXPECT_EQ(e.id(), blockEntityId(key));
-  EXPECT_EQ(e.frame_id(), "map");
+  EXPECT_EQ(update.deletions(0).id(), "b" + std::to_string(key + 1) + "z2");
   std::set<std::tuple<double, double, double>> shown;
-  for (const auto& cube : e.cubes()) {
-    const auto& p = cube.pose().position();
-    shown.emplace(p.x(), p.y(), p.z());
-    EXPECT_DOUBLE_EQ(cube.size().x(), 0.2);
-    EXPECT_EQ(cube.pose().orientation().w(), 1.0);
-    EXPECT_GE(cube.color().a(), 1.0);
+  std::set<std::string> ids;
+  for (const auto& e : update.entities()) {
+    ids.insert(e.id());
+    if (e.id() == kVersionMarkerId) {
+      EXPECT_EQ(e.metadata(0).value(), "42");
+      EXPECT_EQ(e.cubes_size(), 0);
+      continue;
+    }
+    EXPECT_EQ(e.frame_id(), "map");
+    for (const auto& cube : e.cubes()) {
+      const auto& p = cube.pose().position();
+      EXPECT_TRUE(shown.emplace(p.x(), p.y(), p.z()).second);
+      EXPECT_DOUBLE_EQ(cube.size().x(), 0.2);
+      EXPECT_EQ(cube.pose().orientation().w(), 1.0);
+      EXPECT_GE(cube.color().a(), 1.0);
+      EXPECT_GE(std::max({cube.color().r(), cube.color().g(), cube.color().b()}), 1.0);
+    }
   }
   EXPECT_EQ(shown, occupied);
-  EXPECT_EQ(update.entities(1).id(), kVersionMarkerId);
-  EXPECT_EQ(update.entities(1).metadata(0).value(), "42");
-  EXPECT_EQ(update.entities(1).cubes_size(), 0);
-  // A block without an occupied cell has no entity.
+  EXPECT_EQ(ids.size(), static_cast<std::size_t>(update.entities_size()));  // ids are unique
+  // A layer without an occupied cell has no entity.
   VoxelBlock free_block;
   free_block.markKnown(5);
   free_block.log_odds[5] = -1.0F;
-  EXPECT_EQ(blockEntityField(grid, key, free_block), "");
-  // A small change of probability is not shown (the block is not resent).
-  EXPECT_EQ(shownProbability(2.0F), shownProbability(2.01F));
-  EXPECT_NE(shownProbability(0.2F), shownProbability(2.0F));
+  EXPECT_FALSE(block::anyBit(occupiedCells(free_block)));
+  EXPECT_EQ(layerEntityField(grid, layerOf(key, 0), 0), "");
+  // An entity depends only on which cells are occupied: a stronger hit changes nothing.
+  VoxelBlock stronger = b;
+  for (float& l : stronger.log_odds) l = l > 0 ? l + 0.5F : l;
+  EXPECT_EQ(occupiedCells(stronger), mask);
 }
 
 TEST(FoxgloveEncoders, VoxelWindowIsTheMapAroundTheRobot) {

@@ -21,25 +21,34 @@ namespace densemap::foxglove {
 [[nodiscard]] std::string protobufSchema(std::string_view full_name);
 [[nodiscard]] std::string base64(std::string_view bytes);
 
-// The occupied cells as a foxglove.SceneUpdate stream: an entity per map block holding a cube
-// per occupied cell (log-odds > 0), coloured by probability. A message is a concatenation of
-// the fields below (protobuf's repeated fields concatenate), so each block's field is encoded
-// once and shared by every client.
+// The occupied cells as a foxglove.SceneUpdate stream: an entity per z-layer of a map block
+// (8 x 8 cells: one 64-bit word of the block's mask) holding a cube per occupied cell
+// (log-odds > 0), coloured by height (hue cycling every kHeightCycleM), as RViz colours an
+// OctoMap. An entity depends only on which of its cells are occupied, so a version that only
+// strengthens or frees cells resends nothing, and a changed cell resends at most 64 cubes.
+// A message is a concatenation of the fields below (protobuf's repeated fields concatenate), so
+// each layer's field is encoded once and shared by every client.
+inline constexpr double kHeightCycleM = 4.0;
 
-/// The entity id of a block ("b" and its key in decimal).
-[[nodiscard]] std::string blockEntityId(std::uint64_t block_key);
-/// The SceneUpdate field (entities, 2) of one block's occupied cells; empty when it has none.
-[[nodiscard]] std::string blockEntityField(const VoxelGrid& grid, std::uint64_t block_key,
-                                           const VoxelBlock& block);
-/// The SceneUpdate field (deletions, 1) removing a block's entity.
-[[nodiscard]] std::string blockDeletionField(std::uint64_t block_key);
+/// The occupied cells of a block (known, log-odds > 0).
+[[nodiscard]] block::BlockMask occupiedCells(const VoxelBlock& block);
+
+/// A layer of a block: the block's key and the layer's z (0 .. 7), packed.
+[[nodiscard]] inline std::uint64_t layerOf(std::uint64_t block_key, int z) {
+  return block_key << 3 | static_cast<std::uint64_t>(z);
+}
+/// The entity id of a layer ("b<block key>z<z>").
+[[nodiscard]] std::string layerEntityId(std::uint64_t layer);
+/// The SceneUpdate field (entities, 2) of a layer's occupied cells (`occupied`: its word of
+/// occupiedCells(); bit x + 8 y); empty when none is.
+[[nodiscard]] std::string layerEntityField(const VoxelGrid& grid, std::uint64_t layer,
+                                           std::uint64_t occupied);
+/// The SceneUpdate field (deletions, 1) removing a layer's entity.
+[[nodiscard]] std::string layerDeletionField(std::uint64_t layer);
 /// The marker entity ("densemap/version", no primitives, metadata map_version = `version`) that
 /// ends a client's catch-up: everything sent before it shows that map version.
 [[nodiscard]] std::string versionMarkerField(std::uint64_t version);
 inline constexpr std::string_view kVersionMarkerId = "densemap/version";
-/// The probability shown for a log-odds value (quantized to 0.05: colours do not change, and no
-/// block is resent, for small changes).
-[[nodiscard]] double shownProbability(float log_odds);
 
 /// foxglove.FrameTransforms: `parent` -> `child` at `stamp_ns`.
 struct Pose {

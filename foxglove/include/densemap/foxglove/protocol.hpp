@@ -39,6 +39,10 @@ struct Unsubscribe {
 };
 using ClientOp = std::variant<Subscribe, Unsubscribe>;
 
+/// Whether a handshake's Sec-WebSocket-Protocol value (a comma-separated list) offers
+/// kSubprotocol.
+[[nodiscard]] bool offersSubprotocol(std::string_view header_value);
+
 /// A client's text frame: `subscribe` or `unsubscribe`. Errors say why (not JSON, no `op`, an
 /// operation that needs a capability this server does not offer, too many items, a number out
 /// of range), in at most ~200 characters whatever the input.
