@@ -95,8 +95,14 @@ std::string layerEntityId(std::uint64_t layer) {
 
 block::BlockMask occupiedCells(const VoxelBlock& block) {
   block::BlockMask m{};
-  for (int i = 0; i < block::kVoxels; ++i) {
-    if (block.isKnown(i) && SensorModel::isOccupied(block.log_odds[i])) block::setBit(m, i);
+  for (int w = 0; w < block::kMaskWords; ++w) {
+    // 64 comparisons into one word (vectorized), then the known cells of it.
+    std::uint64_t positive = 0;
+    const float* values = block.log_odds.data() + 64 * w;
+    for (int j = 0; j < 64; ++j) {
+      positive |= static_cast<std::uint64_t>(SensorModel::isOccupied(values[j])) << j;
+    }
+    m[static_cast<std::size_t>(w)] = positive & block.known[static_cast<std::size_t>(w)];
   }
   return m;
 }

@@ -96,12 +96,14 @@ std::int64_t wallNowNs() {
 }
 
 /// One frame waiting in a client's queue: a Message Data header and payload (binary), or a
-/// JSON operation (text). The payload is shared by every client it goes to.
+/// JSON operation (text). The payload is the concatenation of its parts (the map channel's
+/// layers), each shared by every client it goes to, never copied into one string per client.
 struct Frame {
   std::array<std::uint8_t, foxglove::kMessageDataHeaderBytes> header{};
   bool binary = true;
-  Payload payload;
-  [[nodiscard]] std::size_t bytes() const { return payload->size() + (binary ? header.size() : 0); }
+  std::vector<Payload> parts;
+  std::size_t size = 0;  // the parts' bytes
+  [[nodiscard]] std::size_t bytes() const { return size + (binary ? header.size() : 0); }
 };
 
 }  // namespace
@@ -202,16 +204,22 @@ struct FoxgloveRoom::Impl {
   void sendText(SessionBase& s, std::string text) {
     Frame f;
     f.binary = false;
-    f.payload = std::make_shared<const std::string>(std::move(text));
+    f.size = text.size();
+    f.parts.push_back(std::make_shared<const std::string>(std::move(text)));
     enqueue(s, std::move(f), /*force=*/true);
   }
-  void sendMessage(SessionBase& s, std::uint32_t channel, const Payload& payload, bool force) {
+  void sendMessage(SessionBase& s, std::uint32_t channel, std::vector<Payload> parts,
+                   std::size_t size, bool force) {
     const auto it = s.subscription_of.find(channel);
     if (it == s.subscription_of.end()) return;
     Frame f;
     f.header = foxglove::messageDataHeader(it->second, static_cast<std::uint64_t>(wallNowNs()));
-    f.payload = payload;
+    f.parts = std::move(parts);
+    f.size = size;
     enqueue(s, std::move(f), force);
+  }
+  void sendMessage(SessionBase& s, std::uint32_t channel, const Payload& payload, bool force) {
+    sendMessage(s, channel, std::vector<Payload>{payload}, payload->size(), force);
   }
   void broadcast(std::uint32_t channel, const Payload& payload) {
     for (auto& [id, s] : sessions) sendMessage(*s, channel, payload, false);
@@ -325,13 +333,10 @@ class Session final : public SessionBase {
     ws_.binary(f.binary);
     auto self = shared_from_this();
     auto done = [this, self](beast::error_code ec, std::size_t) { room.onWritten(self, ec); };
-    if (f.binary) {
-      const std::array<net::const_buffer, 2> buffers{net::buffer(f.header),
-                                                     net::buffer(*f.payload)};
-      ws_.async_write(buffers, std::move(done));
-    } else {
-      ws_.async_write(net::buffer(*f.payload), std::move(done));
-    }
+    buffers_.clear();
+    if (f.binary) buffers_.push_back(net::buffer(f.header));
+    for (const Payload& part : f.parts) buffers_.push_back(net::buffer(*part));
+    ws_.async_write(buffers_, std::move(done));
   }
 
   void closeNow() override {
@@ -426,6 +431,7 @@ class Session final : public SessionBase {
   }
 
   websocket::stream<Layer> ws_;
+  std::vector<net::const_buffer> buffers_;  // the frame being written
   beast::flat_buffer buffer_;
   std::optional<http::request_parser<http::empty_body>> parser_;
 };
@@ -585,19 +591,26 @@ void FoxgloveRoom::Impl::pumpMap(SessionBase& s) {
   // (it catches up with the blocks' latest content) instead of losing cells.
   const std::size_t fill = std::min(kMapQueueBytes, options.max_queue_bytes / 2);
   while (s.queued_bytes < fill && (!s.dirty_list.empty() || s.marker_due)) {
-    std::string message;
-    while (!s.dirty_list.empty() && message.size() < kMapMessageBytes) {
+    std::vector<Payload> parts;
+    std::size_t size = 0;
+    const auto add = [&](Payload part) {
+      size += part->size();
+      parts.push_back(std::move(part));
+    };
+    while (!s.dirty_list.empty() && size < kMapMessageBytes) {
       const std::uint64_t key = s.dirty_list.back();
       s.dirty_list.pop_back();
       s.dirty.erase(key);
       const auto it = layers.find(key);
-      message += it != layers.end() ? *it->second.field : foxglove::layerDeletionField(key);
+      add(it != layers.end()
+              ? it->second.field
+              : std::make_shared<const std::string>(foxglove::layerDeletionField(key)));
     }
     if (s.dirty_list.empty()) {
-      message += foxglove::versionMarkerField(layers_version);
+      add(std::make_shared<const std::string>(foxglove::versionMarkerField(layers_version)));
       s.marker_due = false;
     }
-    sendMessage(s, kMap, std::make_shared<const std::string>(std::move(message)), true);
+    sendMessage(s, kMap, std::move(parts), size, true);
   }
 }
 
