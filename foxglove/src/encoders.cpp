@@ -5,8 +5,8 @@
 #include <google/protobuf/io/coded_stream.h>
 #include <google/protobuf/io/zero_copy_stream_impl_lite.h>
 
-#include <cmath>
 #include <bit>
+#include <cmath>
 #include <cstring>
 #include <functional>
 #include <limits>

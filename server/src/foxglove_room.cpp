@@ -269,8 +269,9 @@ struct FoxgloveRoom::Impl {
       } else {
         // The same cells occupied: the entity is the same, nothing is resent.
         if (it != layers.end() && it->second.occupied == word) continue;
-        layers[layer] = ShownLayer{word, std::make_shared<const std::string>(
-                                             foxglove::layerEntityField(view->grid(), layer, word))};
+        layers[layer] =
+            ShownLayer{word, std::make_shared<const std::string>(
+                                 foxglove::layerEntityField(view->grid(), layer, word))};
       }
       changed(layer);
     }

@@ -3,8 +3,9 @@
 # (@foxglove/ws-protocol) under Node: a client connected before the scans and one joining
 # after them each rebuild the occupied cells from /densemap/occupied, and both equal the
 # server's .dmap snapshot at the same version; every advertised channel decodes. Then the
-# hostile cases (hostile.mjs) leave the server running with its map intact, and a client over
-# wss (TLS, a self-signed certificate) sees the same map.
+# hostile cases (hostile.mjs) leave the server running with its map intact, a client that never
+# reads is closed once its send stalls (counted in status) while the others go on, and a client
+# over wss (TLS, a self-signed certificate) sees the same map.
 # Usage: foxglove_cli.sh SERVER CLI SIM DMAP_OCCUPIED DOMAIN PORT
 set -euo pipefail
 server=$1 cli=$2 sim=$3 occupied=$4 domain=$5 port=$6
@@ -28,7 +29,7 @@ start_server() {  # CONFIG_EXTRA
 map { resolution_m: 0.2 max_range_m: 30 }
 dds { domain_id: $domain network_interface: "lo" }
 snapshot { path: "" }
-foxglove { enabled: true port: $port grid_period_s: 0.2 max_clients: 8 $1 }
+foxglove { enabled: true port: $port grid_period_s: 0.2 max_clients: 8 stall_close_s: 1 $1 }
 EOF
   "$server" --config "$dir/server.textproto" 2>>"$dir/server.log" &
   pid=$!
@@ -96,6 +97,28 @@ grep -q "foxglove: .* connections or operations refused" "$dir/status.txt" ||
 refused=$(sed -n 's/.*stalled queues, \([0-9]*\) connections or operations refused.*/\1/p' "$dir/status.txt")
 [ "${refused:-0}" -gt 10 ] || { echo "foxglove_cli: $refused refusals counted"; cat "$dir/status.txt"; exit 1; }
 echo "foxglove_cli: hostile clients refused ($refused counted), the map intact"
+
+# A client that never reads, while a 128-beam drive streams (more than the kernel's socket
+# buffers hold): its queue fills, its frames are dropped, it is closed and counted; a client
+# that reads gets the whole map.
+"$sim" --out "$dir/sim128" --scene indoor --sensor os128 --scans 15 --gt-resolution 0 --threads 2 >/dev/null 2>&1
+node "$here/client.mjs" --url "$url" --stall --out "$dir/stall.json" &
+stall=$!
+sleep 1
+"$cli" --domain-id "$domain" replay --data "$dir/sim128" --rate 10 >/dev/null 2>&1
+for _ in $(seq 300); do [ "$(integrated)" = "$((scans + 15))" ] && break; sleep 0.1; done
+sleep 2
+"$cli" --domain-id "$domain" status >"$dir/status.txt"
+closed=$(sed -n 's/.* \([0-9]*\) clients closed for stalled queues.*/\1/p' "$dir/status.txt")
+dropped=$(sed -n 's/.*; \([0-9]*\) frames dropped for full send queues.*/\1/p' "$dir/status.txt")
+[ "${closed:-0}" -ge 1 ] && [ "${dropped:-0}" -ge 1 ] ||
+  { echo "foxglove_cli: the stalled client: closed $closed, dropped $dropped"; cat "$dir/status.txt"; exit 1; }
+kill "$stall" 2>/dev/null || true
+"$cli" --domain-id "$domain" snapshot --out "$dir/map3.dmap" >/dev/null
+version=$("$occupied" "$dir/map3.dmap" "$dir/snapshot.txt")
+echo "$version" >"$dir/version"
+node "$here/client.mjs" --url "$url" --out "$dir/after-stall.txt" --version-file "$dir/version"
+compare "a stalled client closed ($closed; $dropped frames dropped), then a client" "$dir/after-stall.txt"
 kill -TERM "$pid"
 wait "$pid"
 pid=""

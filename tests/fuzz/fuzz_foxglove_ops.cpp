@@ -18,7 +18,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       if (!op && op.error().message.size() > 400) std::abort();
       if (op) {
         if (const auto* s = std::get_if<densemap::foxglove::Subscribe>(&*op)) {
-          if (s->subscriptions.empty() || s->subscriptions.size() > densemap::foxglove::kMaxOpItems) {
+          if (s->subscriptions.empty() ||
+              s->subscriptions.size() > densemap::foxglove::kMaxOpItems) {
             std::abort();
           }
         }
