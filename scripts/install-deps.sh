@@ -21,8 +21,11 @@ PACKAGES=(
   libfastrtps-dev fastddsgen  # the foreign-vendor test: eProsima Fast DDS, ROS 2's default
   python3-dev pybind11-dev python3-numpy python3-pytest python3-matplotlib  # import densemap
   libboost-dev libssl-dev  # the Foxglove WebSocket endpoint (Boost.Beast; wss)
-  nodejs npm  # its test client, @foxglove/ws-protocol (tests/foxglove: npm ci)
+  nodejs  # its test client, @foxglove/ws-protocol (tests/foxglove: npm ci)
 )
+# Debian's nodejs comes without npm (the npm package); a Node.js that brings its own npm
+# (NodeSource's) conflicts with that package: it is only needed when no npm is on the PATH.
+command -v npm >/dev/null 2>&1 || PACKAGES+=(npm)
 if [ "${1:-}" = "--iln" ]; then
   PACKAGES+=(python3-torch python3-protobuf libopenblas0-pthread)
 elif [ $# -gt 0 ]; then
