@@ -161,6 +161,17 @@ std::string versionMarkerField(std::uint64_t version) {
   return lengthDelimited(::foxglove::SceneUpdate::kEntitiesFieldNumber, serialized(entity));
 }
 
+std::string sensorFrameId(std::string_view sensor_id) {
+  if (sensor_id.empty()) return "sensor";
+  std::string id(sensor_id.substr(0, 128));
+  for (char& c : id) {
+    const bool kept = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
+                      c == '_' || c == '.' || c == '/' || c == '-';
+    if (!kept) c = '_';
+  }
+  return id;
+}
+
 std::string frameTransforms(std::string_view parent, std::span<const Pose> poses) {
   ::foxglove::FrameTransforms message;
   for (const Pose& p : poses) {

@@ -64,8 +64,9 @@ constexpr std::size_t kMaxPendingBlocks = std::size_t{1} << 22;
 constexpr std::size_t kMaxPendingPoses = 4096;
 constexpr std::size_t kMaxHttpHeaderBytes = 8 * 1024;
 constexpr int kThreadNice = 10;
-// How many sensors keep a trajectory and a pose (a sensor id past them is not shown).
-constexpr std::size_t kMaxSensorsShown = 256;
+// How many sensors keep a trajectory and a pose (a sensor id past them is not shown): with
+// max_trajectory_poses each, a trajectories message stays within a client's queue.
+constexpr std::size_t kMaxSensorsShown = 64;
 
 std::vector<foxglove::ChannelInfo> channelsFor(const FoxgloveOptions& o) {
   const std::string scene = foxglove::protobufSchema("foxglove.SceneUpdate");
@@ -811,7 +812,7 @@ void FoxgloveRoom::onVersion(const IntegrationResult& result,
       p.scan_stamp_ns = result.stamp_ns;
       if (p.poses.size() < kMaxPendingPoses) {
         foxglove::Pose pose;
-        pose.child = result.sensor_id.empty() ? "sensor" : result.sensor_id.substr(0, 128);
+        pose.child = foxglove::sensorFrameId(result.sensor_id);
         const Eigen::Vector3d t = result.T_world_sensor.translation();
         const Eigen::Quaterniond q(result.T_world_sensor.rotation());
         pose.t[0] = t.x();

@@ -276,6 +276,21 @@ TEST(FoxgloveEncoders, VoxelWindowIsTheMapAroundTheRobot) {
   EXPECT_EQ(known, 2);
 }
 
+TEST(FoxgloveEncoders, SensorFramesAreShortAndPlain) {
+  EXPECT_EQ(sensorFrameId("lidar/front_1.a-b"), "lidar/front_1.a-b");
+  EXPECT_EQ(sensorFrameId(""), "sensor");
+  EXPECT_EQ(sensorFrameId(std::string("a\xff\"\n b", 6)), "a____b");
+  EXPECT_EQ(sensorFrameId(std::string(1 << 20, 'x')).size(), 128U);
+  // Through FrameTransforms: the id survives protobuf's round trip unchanged.
+  const std::vector<Pose> poses{{.child = sensorFrameId("\xc3\x28 id"), .stamp_ns = -1}};
+  ::foxglove::FrameTransforms decoded;
+  ASSERT_TRUE(decoded.ParseFromString(frameTransforms("map", poses)));
+  EXPECT_EQ(decoded.transforms(0).child_frame_id(), "___id");
+  EXPECT_EQ(decoded.transforms(0).timestamp().seconds(), -1);
+  EXPECT_EQ(decoded.transforms(0).timestamp().nanos(), 999'999'999);
+  EXPECT_EQ(decoded.transforms(0).rotation().w(), 1.0);
+}
+
 TEST(FoxgloveEncoders, StatusIsValidJsonWhateverTheSensorIds) {
   ServerStatus s;
   s.map_version = 12;

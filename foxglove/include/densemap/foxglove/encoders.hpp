@@ -50,6 +50,11 @@ inline constexpr double kHeightCycleM = 4.0;
 [[nodiscard]] std::string versionMarkerField(std::uint64_t version);
 inline constexpr std::string_view kVersionMarkerId = "densemap/version";
 
+/// The frame id a sensor id is shown under: at most 128 characters of [A-Za-z0-9_./-], any
+/// other byte as '_' (a sensor id comes from the wire; protobuf strings must be UTF-8), and
+/// "sensor" for an empty id.
+[[nodiscard]] std::string sensorFrameId(std::string_view sensor_id);
+
 /// foxglove.FrameTransforms: `parent` -> `child` at `stamp_ns`.
 struct Pose {
   std::string child;
