@@ -128,7 +128,7 @@ struct SessionBase : std::enable_shared_from_this<SessionBase> {
   Clock::time_point write_began{};
   std::unordered_map<std::uint32_t, std::uint32_t> subscription_of;  // channel -> client's id
   std::unordered_map<std::uint32_t, std::uint32_t> channel_of;       // client's id -> channel
-  // The map channel: blocks this client has not been sent at their cached content.
+  // The map channel: layers this client has not been sent at their cached content.
   std::vector<std::uint64_t> dirty_list;
   std::unordered_set<std::uint64_t> dirty;
   bool marker_due = false;
@@ -474,7 +474,7 @@ void FoxgloveRoom::Impl::remove(const std::shared_ptr<SessionBase>& s, bool stal
   if (stalled) n_closed.fetch_add(1, std::memory_order_relaxed);
   // The queue goes with the session, once no operation in flight refers to it.
   if (!s->closing) s->closeNow();
-  if (layers_valid && !anyoneOn(kMap)) {  // nobody watches the map: its blocks are let go
+  if (layers_valid && !anyoneOn(kMap)) {  // nobody watches the map: its layers are let go
     layers.clear();
     layers_valid = false;
   }
@@ -513,7 +513,7 @@ void FoxgloveRoom::Impl::subscribe(SessionBase& s, std::uint32_t sub, std::uint3
   s.channel_of.emplace(sub, channel);
   switch (channel) {
     case kMap:
-      // The whole map first (every block with an occupied cell), then what versions change.
+      // The whole map first (every layer with an occupied cell), then what versions change.
       if (!layers_valid) buildLayers();
       s.dirty.clear();
       s.dirty_list.clear();
@@ -589,8 +589,9 @@ void FoxgloveRoom::Impl::updateBlocks(const std::vector<std::uint64_t>& written,
 
 void FoxgloveRoom::Impl::pumpMap(SessionBase& s) {
   if (!s.subscription_of.contains(kMap) || !layers_valid) return;
-  // Only while the queue is less than half full: the map channel waits for a slow client
-  // (it catches up with the blocks' latest content) instead of losing cells.
+  // Only while the queue holds less than kMapQueueBytes (or half of max_queue_bytes): the map
+  // channel waits for a slow client (it catches up with the layers' latest content) instead
+  // of losing cells.
   const std::size_t fill = std::min(kMapQueueBytes, options.max_queue_bytes / 2);
   while (s.queued_bytes < fill && (!s.dirty_list.empty() || s.marker_due)) {
     std::vector<Payload> parts;

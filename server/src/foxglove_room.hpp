@@ -13,14 +13,15 @@
 namespace densemap::server {
 
 /// The Foxglove WebSocket endpoint (docs/foxglove.md): a Boost.Beast server on one thread of
-/// its own. Channels: the occupied cells (foxglove.SceneUpdate, an entity per map block: a
-/// client gets every block first, then only the blocks a version changed), the 2D grid
+/// its own. Channels: the occupied cells (foxglove.SceneUpdate, an entity per 8x8 layer of a
+/// map block: a client gets every layer first, then only the layers whose occupied cells a
+/// version changed), the 2D grid
 /// (nav_msgs/OccupancyGrid, CDR), the latest scan (sensor_msgs/PointCloud2, CDR), the sensors'
 /// poses (foxglove.FrameTransforms) and trajectories (foxglove.SceneUpdate), the status (JSON)
 /// and, for dense kinds, a voxel window around the robot (foxglove.VoxelGrid).
 /// It never slows the map: onVersion only records the version for the endpoint's thread; each
 /// client has a send queue of at most max_queue_bytes (a frame that does not fit is dropped
-/// and counted; the map channel sends blocks only as the queue drains, so it never drops but
+/// and counted; the map channel sends layers only as the queue drains, so it never drops but
 /// catches up), and a client whose write has not finished for stall_close_s is closed.
 class FoxgloveRoom {
  public:
