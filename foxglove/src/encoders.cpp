@@ -13,6 +13,7 @@
 #include <set>
 
 #include "densemap/foxglove/protocol.hpp"
+#include "densemap/geometry/stamp.hpp"
 #include "densemap/map/sensor_model.hpp"
 #include "foxglove_schemas.pb.h"
 
@@ -34,12 +35,9 @@ std::string lengthDelimited(int field, const std::string& bytes) {
 }
 
 void setStamp(pb::Timestamp* t, std::int64_t ns) {
-  t->set_seconds(ns / 1'000'000'000);
-  t->set_nanos(static_cast<std::int32_t>(ns % 1'000'000'000));
-  if (t->nanos() < 0) {  // a stamp before 1970: nanos stay in [0, 1e9)
-    t->set_seconds(t->seconds() - 1);
-    t->set_nanos(t->nanos() + 1'000'000'000);
-  }
+  const SplitStamp split = splitStamp(ns);
+  t->set_seconds(split.sec);
+  t->set_nanos(static_cast<std::int32_t>(split.nanosec));
 }
 
 std::string serialized(const pb::Message& m) {

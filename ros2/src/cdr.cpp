@@ -1,5 +1,7 @@
 #include "densemap/ros2/cdr.hpp"
 
+#include "densemap/geometry/stamp.hpp"
+
 #include <algorithm>
 #include <bit>
 #include <cmath>
@@ -117,9 +119,9 @@ class CdrWriter {
   }
   /// builtin_interfaces/Time: seconds (floored) and nanoseconds in [0, 1e9).
   void time(std::int64_t ns) {
-    const std::int64_t sec = ns >= 0 ? ns / 1'000'000'000 : -((-ns + 999'999'999) / 1'000'000'000);
-    write(static_cast<std::int32_t>(sec));
-    write(static_cast<std::uint32_t>(ns - sec * 1'000'000'000));
+    const SplitStamp t = splitStamp(ns);
+    write(static_cast<std::int32_t>(t.sec));
+    write(t.nanosec);
   }
   void header(const CdrHeader& h) {
     time(h.stamp_ns);

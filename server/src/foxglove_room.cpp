@@ -182,6 +182,17 @@ struct FoxgloveRoom::Impl {
   std::mutex mutex;
   Pending pending;
   bool drain_posted = false;
+  /// Any thread: `fill(pending)` under the lock, then one drain posted for all that waits.
+  template <class Fill>
+  void handOver(Fill&& fill) {
+    bool post = false;
+    {
+      std::lock_guard lock(mutex);
+      fill(pending);
+      post = !std::exchange(drain_posted, true);
+    }
+    if (post) net::post(ioc, [this] { guarded("foxglove", [&] { drain(); }); });
+  }
 
   // ---- connections ----
   void acceptNext();
@@ -191,7 +202,7 @@ struct FoxgloveRoom::Impl {
 
   // ---- sending ----
   /// Queues a frame unless it does not fit (then dropped and counted); `force`: queued anyway
-  /// (the map channel's, sent only when the queue has room, and operations' replies).
+  /// (the handshake's operations, and the map channel's, sent only when the queue has room).
   void enqueue(SessionBase& s, Frame frame, bool force = false) {
     if (s.closing) return;
     if (!force && s.queued_bytes + frame.bytes() > options.max_queue_bytes) {
@@ -202,12 +213,15 @@ struct FoxgloveRoom::Impl {
     s.queue.push_back(std::move(frame));
     if (!s.writing) s.writeFront();
   }
-  void sendText(SessionBase& s, std::string text) {
+  /// A JSON operation: `force` for the handshake's (serverInfo, advertise); a status answering
+  /// a client's frame is dropped like any frame when the queue is full, so a client that sends
+  /// bad frames and never reads cannot grow its queue.
+  void sendText(SessionBase& s, std::string text, bool force) {
     Frame f;
     f.binary = false;
     f.size = text.size();
     f.parts.push_back(std::make_shared<const std::string>(std::move(text)));
-    enqueue(s, std::move(f), /*force=*/true);
+    enqueue(s, std::move(f), force);
   }
   void sendMessage(SessionBase& s, std::uint32_t channel, std::vector<Payload> parts,
                    std::size_t size, bool force) {
@@ -245,15 +259,15 @@ struct FoxgloveRoom::Impl {
   void onOpen(const std::shared_ptr<SessionBase>& s) {
     s->open = true;
     n_clients.fetch_add(1, std::memory_order_relaxed);
-    sendText(*s, server_info);
-    sendText(*s, advertise);
+    sendText(*s, server_info, true);
+    sendText(*s, advertise, true);
   }
   void onClientFrame(SessionBase& s, bool text, std::string_view bytes);
   void subscribe(SessionBase& s, std::uint32_t sub, std::uint32_t channel);
   void unsubscribe(SessionBase& s, std::uint32_t sub);
   void error(SessionBase& s, const std::string& why) {
     reject();
-    sendText(s, foxglove::statusJson(foxglove::StatusLevel::kError, why));
+    sendText(s, foxglove::statusJson(foxglove::StatusLevel::kError, why), false);
   }
 
   // ---- the map channel ----
@@ -288,7 +302,7 @@ struct FoxgloveRoom::Impl {
   void markDirty(SessionBase& s, std::uint64_t key) {
     if (s.dirty.insert(key).second) s.dirty_list.push_back(key);
   }
-  void updateBlocks(const std::vector<std::uint64_t>& written, bool all);
+  void updateLayers(const std::vector<std::uint64_t>& written, bool all);
   void pumpMap(SessionBase& s);
 
   // ---- the other channels ----
@@ -307,8 +321,8 @@ class Session final : public SessionBase {
  public:
   using Layer = std::conditional_t<kTls, beast::ssl_stream<beast::tcp_stream>, beast::tcp_stream>;
 
-  Session(FoxgloveRoom::Impl& room, std::uint64_t id, tcp::socket socket)
-      : SessionBase(room, id), ws_(makeStream(room, std::move(socket))) {}
+  Session(FoxgloveRoom::Impl& owner, std::uint64_t session_id, tcp::socket socket)
+      : SessionBase(owner, session_id), ws_(makeStream(owner, std::move(socket))) {}
 
   void begin() override {
     auto self = shared_from_this();
@@ -559,7 +573,7 @@ void FoxgloveRoom::Impl::unsubscribe(SessionBase& s, std::uint32_t sub) {
 // ---------------------------------------------------------------------------------------------
 // The map channel
 
-void FoxgloveRoom::Impl::updateBlocks(const std::vector<std::uint64_t>& written, bool all) {
+void FoxgloveRoom::Impl::updateLayers(const std::vector<std::uint64_t>& written, bool all) {
   if (!layers_valid) return;
   std::vector<std::uint64_t> changed;
   const auto note = [&](std::uint64_t layer) { changed.push_back(layer); };
@@ -630,7 +644,7 @@ void FoxgloveRoom::Impl::drain() {
   }
   if (p.view) {
     view = std::move(p.view);
-    updateBlocks(p.blocks, p.all_blocks);
+    updateLayers(p.blocks, p.all_blocks);
   }
   const std::int64_t now = wallNowNs();
   if (p.scan && anyoneOn(kScan)) {
@@ -675,8 +689,9 @@ void FoxgloveRoom::Impl::periodic() {
     grid_version = view->version();
     const ros2::GridImage grid =
         ros2::MapTopicsState::project(*view, options.grid_min_z_m, options.grid_max_z_m);
-    last_grid = std::make_shared<const std::string>(ros2::encodeCdrOccupancyGrid(
-        {wallNowNs(), "map"}, grid, std::max(options.grid_min_z_m, -1.0)));
+    // In the plane z = 0, as the ROS 2 face's /projected_map.
+    last_grid = std::make_shared<const std::string>(
+        ros2::encodeCdrOccupancyGrid({wallNowNs(), "map"}, grid, 0.0));
     broadcast(kGrid, last_grid);
   }
   if (paths_changed && anyoneOn(kTrajectories)) {
@@ -795,11 +810,7 @@ void FoxgloveRoom::stop() {
 
 void FoxgloveRoom::onVersion(const IntegrationResult& result,
                              const std::shared_ptr<const MapView>& view) {
-  Impl& m = *impl_;
-  bool post = false;
-  {
-    std::lock_guard lock(m.mutex);
-    Impl::Pending& p = m.pending;
+  impl_->handOver([&](Impl::Pending& p) {
     p.view = view;
     if (!p.all_blocks) {
       p.blocks.insert(p.blocks.end(), result.written_blocks.begin(), result.written_blocks.end());
@@ -827,24 +838,11 @@ void FoxgloveRoom::onVersion(const IntegrationResult& result,
         p.poses.push_back(std::move(pose));
       }
     }
-    post = !std::exchange(m.drain_posted, true);
-  }
-  if (post) {
-    net::post(m.ioc, [&m] { guarded("foxglove", [&] { m.drain(); }); });
-  }
+  });
 }
 
 void FoxgloveRoom::onStatus(const ServerStatus& status) {
-  Impl& m = *impl_;
-  bool post = false;
-  {
-    std::lock_guard lock(m.mutex);
-    m.pending.status = status;
-    post = !std::exchange(m.drain_posted, true);
-  }
-  if (post) {
-    net::post(m.ioc, [&m] { guarded("foxglove", [&] { m.drain(); }); });
-  }
+  impl_->handOver([&](Impl::Pending& p) { p.status = status; });
 }
 
 FoxgloveRoom::Counters FoxgloveRoom::counters() const {
