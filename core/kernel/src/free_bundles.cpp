@@ -9,9 +9,18 @@
 #include <utility>
 
 namespace densemap::kernel {
+int bundleLevel(double range, double bundle_range) {
+  if (!(bundle_range > 0.0) || !(range >= bundle_range)) return 0;
+  int level = 1;
+  for (double edge = 2.0 * bundle_range; level < kMaxBundleLevel && range >= edge; edge *= 2.0) {
+    ++level;
+  }
+  return level;
+}
+
 void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, double max_range,
                  std::span<const RayStop> stops, const CapsuleShape& shape,
-                 const VoxelGrid* bundle_grid, FreeBundleBuffers& buffers,
+                 const VoxelGrid* bundle_grid, double bundle_range, FreeBundleBuffers& buffers,
                  std::vector<FreeExtent>& out) {
   out.clear();
   const bool bundle = bundle_grid != nullptr;
@@ -37,8 +46,19 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
     alone = sortByVoxel(
         n,
         [&](std::size_t i) {
-          return takes[i] != 0 ? bundle_grid->pointToKey(points_world[i])
-                               : std::optional<VoxelKey>();
+          if (takes[i] == 0) return std::optional<VoxelKey>();
+          std::optional<VoxelKey> key = bundle_grid->pointToKey(points_world[i]);
+          const int level =
+              bundleLevel((points_world[i].cast<double>() - origin).norm(), bundle_range);
+          if (key && level > 0) {
+            // The coarser cube's first key: keys are offset by 2^15, so clearing low bits
+            // aligns cubes of 2^level keys on the grid's origin.
+            const auto mask = static_cast<std::uint16_t>(~((1U << level) - 1U));
+            key = VoxelKey{static_cast<std::uint16_t>(key->x & mask),
+                           static_cast<std::uint16_t>(key->y & mask),
+                           static_cast<std::uint16_t>(key->z & mask)};
+          }
+          return key;
         },
         KeyWindow::around(*bundle_grid, origin, max_range), rays, buffers.rays_other,
         buffers.radix_counts);
@@ -58,8 +78,8 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
   // Each group's rays' tips then its capsule, in group order, in one pass: group g's slots
   // start at group_starts[g] + g, a slot per ray then one for the capsule. A ray without a tip,
   // or a group without free extent, leaves a hole (no length, weight 0: FreeTraversal skips
-  // it), so no counting pass over every ray is needed. The order does not change the evidence (FreeTraversal's
-  // sums are integers).
+  // it), so no counting pass over every ray is needed. The order does not change the evidence
+  // (FreeTraversal's sums are integers).
   const FreeExtent hole{Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), 0.0, 0.0};
   out.resize(n + groups);
   tbb::parallel_for(std::size_t{0}, groups, [&](std::size_t g) {

@@ -41,10 +41,16 @@ struct FreeBundleBuffers {
   std::vector<std::size_t> group_starts;
 };
 
-/// `bundle_grid`: the cubes whose hits' rays are bundled (null: no bundles).
+/// `bundle_grid`: the cubes whose hits' rays are bundled (null: no bundles). `bundle_range`
+/// (> 0): a hit at least this far from the origin is bundled by the cube of 2^b of them that
+/// holds it (aligned on the grid's keys), b = 1 + floor(log2(range / bundle_range)), at most
+/// kMaxBundleLevel.
+inline constexpr int kMaxBundleLevel = 3;
 void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, double max_range,
                  std::span<const RayStop> stops, const CapsuleShape& shape,
-                 const VoxelGrid* bundle_grid, FreeBundleBuffers& buffers,
+                 const VoxelGrid* bundle_grid, double bundle_range, FreeBundleBuffers& buffers,
                  std::vector<FreeExtent>& out);
+/// The bundle level (0 .. kMaxBundleLevel) of a hit `range` from the origin.
+[[nodiscard]] int bundleLevel(double range, double bundle_range);
 
 }  // namespace densemap::kernel

@@ -358,7 +358,7 @@ void KernelMap::fitKernels(const PointCloud& points_world, const Point3f& origin
               : std::nullopt;
       const VoxelGrid* bundle_grid = !options_.free_bundles ? nullptr : cubes ? &*cubes : &grid_;
       freeExtents(points_world, origin, options_.max_range, stops, shape, bundle_grid,
-                  scratch_->bundles, free_extents);
+                  options_.free_bundle_range_m, scratch_->bundles, free_extents);
       scratch_->releaseBundles();
     }
     release(segments_);

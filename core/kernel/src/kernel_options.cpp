@@ -81,7 +81,8 @@ Expected<void> applySettings(KernelOptions& options, const std::vector<std::stri
       {"aggregate_min_hits", &KernelOptions::aggregate_min_hits},
       {"shared_fit_min_hits", &KernelOptions::shared_fit_min_hits},
       {"free_reach", &KernelOptions::free_reach},
-      {"free_bundle_m", &KernelOptions::free_bundle_m}};
+      {"free_bundle_m", &KernelOptions::free_bundle_m},
+      {"free_bundle_range_m", &KernelOptions::free_bundle_range_m}};
   for (const std::string& setting : settings) {
     const auto eq = setting.find('=');
     const std::string name = setting.substr(0, eq);
@@ -109,7 +110,8 @@ Expected<void> applySettings(KernelOptions& options, const std::vector<std::stri
     // Steps, scales and the prior must be positive; margins and hit weights may be 0.
     if (!std::isfinite(value) || value < 0.0 ||
         (value == 0.0 && name != "free_margin" && name != "tip_margin" && name != "hit_weight" &&
-         name != "hit_kernel_weight" && name != "free_bundle_m" && name != "hit_stencil_steps" &&
+         name != "hit_kernel_weight" && name != "free_bundle_m" &&
+         name != "free_bundle_range_m" && name != "hit_stencil_steps" &&
          name != "shared_fit_min_hits" && name != "hit_centre_pull") ||
         value > (name == "free_reach" || name == "hit_centre_pull" ? 1.0 : 1000.0) ||
         (name == "hit_stencil_steps" && (value > 4.0 || value != std::floor(value)))) {
