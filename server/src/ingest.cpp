@@ -63,6 +63,22 @@ void Ingest::stop() {
 }
 
 void Ingest::submit(RawScan scan) {
+  if (auto ok = checkSensorId(scan.sensor_id); !ok) {
+    // Counted and reported under the id's first kMaxSensorIdBytes bytes: the whole id is
+    // neither kept nor echoed.
+    scan.sensor_id.resize(kMaxSensorIdBytes);
+    {
+      std::lock_guard lock(counters_mutex_);
+      ++counters_.received;
+      ++counters_.rejected;
+      ++counters_.rejected_by_reason[static_cast<std::size_t>(ok.error().reason)];
+      sensors_.received(scan.sensor_id, scan.seq);
+      sensors_.rejected(scan.sensor_id);
+      counters_.last_reject_reason = ok.error().message;
+    }
+    if (on_reject_) on_reject_(scan, ok.error());
+    return;
+  }
   {
     std::lock_guard lock(counters_mutex_);
     ++counters_.received;

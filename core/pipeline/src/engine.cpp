@@ -47,8 +47,8 @@ Expected<void> checkMapOptions(const PipelineOptions& o) {
     return makeError("keep_radius_m must be >= 0");
   }
   if (!std::isfinite(o.dense_lod_range_m) || o.dense_lod_range_m < 0 ||
-      o.dense_lod_range_m > 10000) {
-    return makeError("dense_lod_range_m must be in 0 .. 10000, got " +
+      o.dense_lod_range_m > 1000) {
+    return makeError("dense_lod_range_m must be in 0 .. 1000, got " +
                      numberText(o.dense_lod_range_m));
   }
   if (o.dense_lod_range_m > 0 && o.kernel != kernel::KernelMethod::kAkimapRays) {

@@ -23,6 +23,8 @@ std::string_view rejectReasonName(RejectReason reason) {
       return "pose_out_of_bounds";
     case RejectReason::kInternal:
       return "internal";
+    case RejectReason::kSensorIdTooLong:
+      return "sensor_id_too_long";
     case RejectReason::kCount:
       break;
   }
@@ -55,7 +57,17 @@ std::expected<void, Rejection> checkPosition(double t, const ScanLimits& limits)
 
 }  // namespace
 
+std::expected<void, Rejection> checkSensorId(std::string_view sensor_id) {
+  if (sensor_id.size() > kMaxSensorIdBytes) {
+    return reject(RejectReason::kSensorIdTooLong,
+                  "sensor id of " + std::to_string(sensor_id.size()) + " bytes exceeds " +
+                      std::to_string(kMaxSensorIdBytes));
+  }
+  return {};
+}
+
 std::expected<Scan, Rejection> validateScan(const RawScan& raw, const ScanLimits& limits) {
+  if (auto ok = checkSensorId(raw.sensor_id); !ok) return std::unexpected(std::move(ok.error()));
   if (raw.xyz.empty()) return reject(RejectReason::kEmpty, "scan has no points");
   if (raw.xyz.size() % 3 != 0) {
     return reject(RejectReason::kLengthNotMultipleOf3,

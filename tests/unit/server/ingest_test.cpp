@@ -663,6 +663,43 @@ TEST(SensorTally, KeepsAtMostSixtyFourIdsApartAndCountsTheRestTogether) {
   }));
 }
 
+TEST(Pipeline, ASensorIdBeyondTheBoundIsACountedRejectionNeitherKeptNorEchoed) {
+  auto sut = Ingest::create({.engine = {.resolution_m = 0.2}, .threads = 1, .queue_depth = 2});
+  ASSERT_TRUE(sut);
+  std::vector<std::string> rejected_ids;
+  (*sut)->setRejectHandler(
+      [&](const RawScan& raw, const Rejection&) { rejected_ids.push_back(raw.sensor_id); });
+  (*sut)->start();
+  RawScan huge = rawScan(1, 1000);
+  huge.sensor_id = std::string(1'000'000, 'x');
+  (*sut)->submit(std::move(huge));
+  RawScan bound = rawScan(2, 1000);
+  bound.sensor_id = std::string(kMaxSensorIdBytes, 'y');
+  (*sut)->submit(std::move(bound));
+  ASSERT_TRUE(waitFor([&] {
+    const auto c = (*sut)->counters();
+    return c.integrated + c.rejected == 2;
+  }));
+  (*sut)->stop();
+  const auto c = (*sut)->counters();
+  EXPECT_EQ(c.received, 2U);
+  EXPECT_EQ(c.integrated, 1U);
+  EXPECT_EQ(c.rejected_by_reason[static_cast<int>(RejectReason::kSensorIdTooLong)], 1U);
+  EXPECT_NE(c.last_reject_reason.find("1000000 bytes"), std::string::npos) << c.last_reject_reason;
+  ASSERT_EQ(rejected_ids.size(), 1U);
+  EXPECT_EQ(rejected_ids[0].size(), kMaxSensorIdBytes);
+  std::size_t id_bytes = 0;
+  for (const auto& sensor : c.sensors) id_bytes += sensor.sensor_id.size();
+  EXPECT_EQ(id_bytes, 2 * kMaxSensorIdBytes);
+  // The library path refuses it too.
+  RawScan direct = rawScan(3, 10);
+  direct.sensor_id = std::string(kMaxSensorIdBytes + 1, 'z');
+  const auto refused = validateScan(direct, ScanLimits{});
+  ASSERT_FALSE(refused);
+  EXPECT_EQ(refused.error().reason, RejectReason::kSensorIdTooLong);
+  EXPECT_EQ(rejectReasonName(RejectReason::kSensorIdTooLong), "sensor_id_too_long");
+}
+
 TEST(Pipeline, OneSensorsBurstNeverPushesOutAnotherSensorsScan) {
   // The worker is busy with front's first scan while rear's scan waits and front floods the
   // queue: front's own older scans are dropped, rear's is integrated.

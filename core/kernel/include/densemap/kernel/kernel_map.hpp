@@ -115,8 +115,8 @@ struct KernelOptions {
 /// occupied_weight, hit_weight, hit_kernel_weight, hit_length_voxels, hit_stencil_steps,
 /// hit_centre_pull,
 /// negative_step, search_max, search_range, min_thickness, aggregate_min_hits,
-/// shared_fit_min_hits, free_reach, free_bundle_m, free_bundle_range_m), and free_traversal=0|1, aggregate_hits=0|1,
-/// free_bundles=0|1; errors name the setting.
+/// shared_fit_min_hits, free_reach, free_bundle_m, free_bundle_range_m), and
+/// free_traversal=0|1, aggregate_hits=0|1, free_bundles=0|1; errors name the setting.
 [[nodiscard]] Expected<void> applySettings(KernelOptions& options,
                                            const std::vector<std::string>& settings);
 

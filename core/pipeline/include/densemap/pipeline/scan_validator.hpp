@@ -5,8 +5,8 @@
 #include <string_view>
 
 #include "densemap/geometry/error.hpp"
-#include "densemap/io/scan.hpp"
 #include "densemap/io/raw_scan.hpp"
+#include "densemap/io/scan.hpp"
 
 namespace densemap {
 
@@ -22,11 +22,16 @@ enum class RejectReason {
   /// The engine failed on a valid scan (out of memory, say): the scan is not integrated, the
   /// server goes on (Ingest).
   kInternal,
+  /// A sensor id longer than kMaxSensorIdBytes (checked before the id is counted or queued).
+  kSensorIdTooLong,
   kCount
 };
 inline constexpr std::size_t kRejectReasonCount = static_cast<std::size_t>(RejectReason::kCount);
 
 [[nodiscard]] std::string_view rejectReasonName(RejectReason reason);
+
+/// The longest sensor id a scan may carry, bytes: status replies and events echo it.
+inline constexpr std::size_t kMaxSensorIdBytes = 256;
 
 struct ScanLimits {
   std::size_t max_points = 2'000'000;
@@ -41,6 +46,9 @@ struct Rejection {
   RejectReason reason;
   std::string message;
 };
+
+/// A Rejection when `sensor_id` is longer than kMaxSensorIdBytes.
+[[nodiscard]] std::expected<void, Rejection> checkSensorId(std::string_view sensor_id);
 
 /// Checks a raw scan and turns it into a sensor-frame Scan, or says why not. Pure.
 [[nodiscard]] std::expected<Scan, Rejection> validateScan(const RawScan& raw,
