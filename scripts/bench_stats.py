@@ -1,6 +1,7 @@
-"""Statistics the benchmark scripts report, defined once."""
+"""Statistics and machine facts the benchmark scripts report, defined once."""
 
 import math
+import platform
 
 
 def percentile(values, q):
@@ -8,3 +9,12 @@ def percentile(values, q):
     ordered = sorted(values)
     rank = max(1, int(math.ceil(q / 100.0 * len(ordered))))
     return ordered[rank - 1]
+
+
+def cpu_model():
+    """The CPU's model name from /proc/cpuinfo (the machine's architecture where it has none)."""
+    with open("/proc/cpuinfo") as f:
+        for line in f:
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    return platform.machine()

@@ -14,7 +14,6 @@ The module is taken from <build>/python (DENSEMAP_BUILD_DIR, default build), den
 
 import argparse
 import os
-import platform
 import statistics
 import subprocess
 import sys
@@ -27,19 +26,11 @@ sys.path.insert(0, os.path.join(BUILD, "python"))
 import numpy as np  # noqa: E402
 
 import densemap  # noqa: E402
-from bench_stats import percentile  # noqa: E402
+from bench_stats import cpu_model, percentile  # noqa: E402
 
 # (label, decay_after s, decay_period s); None: no decay.
 SETTINGS = [("off (OctoMap's map)", None, 1.0), ("after 2 s, a miss every 0.5 s", 2.0, 0.5),
             ("after 5 s, a miss every 1 s", 5.0, 1.0)]
-
-
-def cpu_model():
-    with open("/proc/cpuinfo") as f:
-        for line in f:
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    return platform.machine()
 
 
 def run(scans, static, args, decay_after, decay_period):
