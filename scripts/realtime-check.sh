@@ -11,8 +11,7 @@
 # $OUT/perf.data, WARM_UP=true turns the pipeline's warm-up on, LEGACY=1 drives a densemap
 # built before replay's --csv and --query-bbox-edge (before/after runs), KIND=K the server's
 # map.kind (default log_odds; a dense kind such as akimap_rays is benched as that kind),
-# DENSE_LOD=M the server's map.dense_lod_range_m (akimap_rays; the bench's lane gets the same
-# setting), METHOD=M the server's pipeline.integration (raycast, culling, superray, superray+culling),
+# METHOD=M the server's pipeline.integration (raycast, culling, superray, superray+culling),
 # THREADS=N the server's pipeline.threads and the bench's --threads (default 2), ESDF=M the
 # server's distance field on (esdf.max_distance_m M; the bench keeps one too, --esdf M),
 # FOXGLOVE=N the server's Foxglove endpoint on (port FOXGLOVE_PORT, default 18766) with N
@@ -27,8 +26,7 @@ BIN=${DENSEMAP_BIN:-build/bin}
 DOMAIN=${DENSEMAP_DOMAIN:-77}
 OUT=$(mktemp -d /tmp/densemap-rt.XXXXXX)
 cat > "$OUT/server.textproto" <<CFG
-map { backend: "grid" kind: "${KIND:-log_odds}" resolution_m: $RES max_range_m: $RANGE
-      ${DENSE_LOD:+dense_lod_range_m: $DENSE_LOD} }
+map { backend: "grid" kind: "${KIND:-log_odds}" resolution_m: $RES max_range_m: $RANGE }
 pipeline { threads: $THREADS queue_depth: 2 integration: "${METHOD:-raycast}" max_abs_position_m: 10000
            ${WARM_UP:+warm_up: $WARM_UP} }
 snapshot { path: "" autosave_period_s: 0 }
@@ -93,7 +91,6 @@ echo "server peak RSS: $(sort -n "$OUT/rss.txt" | tail -1) KiB (sampled), high-w
 if [ "${BENCH:-1}" = 1 ]; then
   method=${METHOD:-raycast}
   [ "${KIND:-log_odds}" != log_odds ] && method=$KIND
-  [ -n "${DENSE_LOD:-}" ] && method="$method@set=free_bundle_range_m=$DENSE_LOD"
   "$BIN/densemap-bench" --data "$DATA" --resolution "$RES" --max-range "$RANGE" \
     --methods "$method" --backend grid --threads "$THREADS" --first "$FIRST" --limit "$LIMIT" \
     ${ESDF:+--esdf "$ESDF"} 2> "$OUT/bench.log" | tee "$OUT/bench.txt" | head -3

@@ -76,7 +76,6 @@ Expected<PipelineOptions> pipelineOptionsOf(const MapperOptions& o) {
   p.max_range_m = o.max_range_m;
   p.sensor = o.sensor;
   p.keep_radius_m = o.keep_radius_m;
-  p.dense_lod_range_m = o.dense_lod_range_m;
   p.bounds = o.bounds;
   if (o.threads < 0 || o.threads > 256)
     return makeError("threads must be in 0 .. 256 (0: all cores)");

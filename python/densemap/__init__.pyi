@@ -58,7 +58,6 @@ class Mapper:
         max_distance: float = 2.0,
         decay_after: Optional[float] = None,
         decay_period: float = 1.0,
-        dense_lod_range: float = 0.0,
     ) -> None: ...
     def insert_point_cloud(
         self, points: ArrayLike, origin: Point, stamp: Optional[float] = None
@@ -119,7 +118,6 @@ def load(
     max_distance: float = 2.0,
     decay_after: Optional[float] = None,
     decay_period: float = 1.0,
-    dense_lod_range: float = 0.0,
 ) -> Mapper: ...
 
 class MapSnapshot:

@@ -29,7 +29,7 @@ MapperOptions optionsFrom(double resolution, double max_range, const std::string
                           double prob_miss, double clamp_min, double clamp_max, double keep_radius,
                           const py::object& bounds, std::size_t max_points, bool versioned_reads,
                           bool distance_field, double max_distance, const py::object& decay_after,
-                          double decay_period, double dense_lod_range) {
+                          double decay_period) {
   MapperOptions o;
   o.resolution_m = resolution;
   o.max_range_m = max_range;
@@ -40,7 +40,6 @@ MapperOptions optionsFrom(double resolution, double max_range, const std::string
   o.threads = threads;
   o.sensor = {prob_hit, prob_miss, clamp_min, clamp_max};
   o.keep_radius_m = keep_radius;
-  o.dense_lod_range_m = dense_lod_range;
   o.bounds = boxFrom(bounds);
   o.max_points = max_points;
   o.versioned_reads = versioned_reads;
@@ -205,7 +204,6 @@ py::dict optionsDict(const MapperOptions& o) {
   d["clamp_min"] = o.sensor.clamp_min;
   d["clamp_max"] = o.sensor.clamp_max;
   d["keep_radius"] = o.keep_radius_m;
-  d["dense_lod_range"] = o.dense_lod_range_m;
   d["max_points"] = o.max_points;
   d["versioned_reads"] = o.versioned_reads;
   d["distance_field"] = o.distance_field;
@@ -225,8 +223,7 @@ std::vector<OrientedBox> boxesFrom(const py::handle& centers, const py::handle& 
   const auto q = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(rotations);
   if (!q || q.ndim() != 2 || q.shape(1) != 4 || static_cast<std::size_t>(q.shape(0)) != c.size() ||
       e.size() != c.size()) {
-    throw py::value_error(
-        "centers and half_extents (N, 3) and rotations (N, 4: x y z w) must match");
+    throw py::value_error("centers and half_extents (N, 3) and rotations (N, 4: x y z w) must match");
   }
   std::vector<OrientedBox> boxes(c.size());
   for (std::size_t i = 0; i < c.size(); ++i) {
@@ -276,9 +273,7 @@ more time a scan), distance_field (keep a distance field for distance() and dist
 updated with each insert) and max_distance (its maximum, m: exact below, reported beyond),
 decay_after (s; None: off) and decay_period (s): a map that forgets what moved, where an occupied
 cell not hit for decay_after seconds takes a miss every decay_period seconds until it is unknown
-(the clock is each insert's stamp, else the time of the insert), dense_lod_range (m, 0: off;
-kind="akimap_rays": far rays share free capsules by coarser cubes, the server's
-map.dense_lod_range_m). A bad option raises
+(the clock is each insert's stamp, else the time of the insert). A bad option raises
 densemap.Error naming it.
 )doc")
       .def(py::init([](double resolution, double max_range, const std::string& kind,
@@ -287,11 +282,11 @@ densemap.Error naming it.
                        double prob_miss, double clamp_min, double clamp_max, double keep_radius,
                        const py::object& bounds, std::size_t max_points, bool versioned_reads,
                        bool distance_field, double max_distance, const py::object& decay_after,
-                       double decay_period, double dense_lod_range) {
+                       double decay_period) {
              return valueOrRaise(Mapper::create(optionsFrom(
-                 resolution, max_range, kind, backend, integration, update_rule, threads, prob_hit,
-                 prob_miss, clamp_min, clamp_max, keep_radius, bounds, max_points, versioned_reads,
-                 distance_field, max_distance, decay_after, decay_period, dense_lod_range)));
+                 resolution, max_range, kind, backend, integration, update_rule, threads,
+                 prob_hit, prob_miss, clamp_min, clamp_max, keep_radius, bounds, max_points,
+                 versioned_reads, distance_field, max_distance, decay_after, decay_period)));
            }),
            py::kw_only(), py::arg("resolution") = d.resolution_m,
            py::arg("max_range") = d.max_range_m, py::arg("kind") = d.kind,
@@ -302,8 +297,7 @@ densemap.Error naming it.
            py::arg("keep_radius") = d.keep_radius_m, py::arg("bounds") = py::none(),
            py::arg("max_points") = d.max_points, py::arg("versioned_reads") = d.versioned_reads,
            py::arg("distance_field") = d.distance_field, py::arg("max_distance") = d.max_distance_m,
-           py::arg("decay_after") = py::none(), py::arg("decay_period") = DecayOptions{}.period_s,
-           py::arg("dense_lod_range") = d.dense_lod_range_m)
+           py::arg("decay_after") = py::none(), py::arg("decay_period") = DecayOptions{}.period_s)
       .def("insert_point_cloud", &insertPoints, py::arg("points"), py::arg("origin"),
            py::arg("stamp") = py::none(),
            R"doc(Integrates world-frame points ((N, 3) float32 or float64, C- or F-contiguous)
@@ -479,13 +473,13 @@ name their 'box'.)doc")
          const std::string& integration, const std::string& update_rule, int threads,
          double keep_radius, const py::object& bounds, std::size_t max_points, bool versioned_reads,
          bool distance_field, double max_distance, const py::object& decay_after,
-         double decay_period, double dense_lod_range) {
+         double decay_period) {
         const MapperOptions d;
-        MapperOptions o =
-            optionsFrom(d.resolution_m, max_range, d.kind, backend, integration, update_rule,
-                        threads, d.sensor.hit, d.sensor.miss, d.sensor.clamp_min,
-                        d.sensor.clamp_max, keep_radius, bounds, max_points, versioned_reads,
-                        distance_field, max_distance, decay_after, decay_period, dense_lod_range);
+        MapperOptions o = optionsFrom(d.resolution_m, max_range, d.kind, backend, integration,
+                                      update_rule, threads, d.sensor.hit, d.sensor.miss,
+                                      d.sensor.clamp_min, d.sensor.clamp_max, keep_radius, bounds,
+                                      max_points, versioned_reads, distance_field, max_distance,
+                                      decay_after, decay_period);
         py::gil_scoped_release release;
         return valueOrRaise(Mapper::load(path.string(), o));
       },
@@ -496,7 +490,6 @@ name their 'box'.)doc")
       py::arg("max_points") = d.max_points, py::arg("versioned_reads") = d.versioned_reads,
       py::arg("distance_field") = d.distance_field, py::arg("max_distance") = d.max_distance_m,
       py::arg("decay_after") = py::none(), py::arg("decay_period") = DecayOptions{}.period_s,
-      py::arg("dense_lod_range") = d.dense_lod_range_m,
       R"doc(A Mapper read from a .dmap (densemap: version, sensor model, a dense map's
 evidence) or .bt / .ot (OctoMap) file; the file decides the resolution, sensor model and a
 dense kind, the arguments the rest. Corrupt, truncated and non-finite files raise

@@ -203,28 +203,6 @@ def test_dense_kind_and_clearing():
     assert m.known_cells == 0
 
 
-def test_dense_level_of_detail_by_range():
-    """dense_lod_range bundles far rays by coarser cubes: the wall is still occupied and the space
-    near the sensor free, the map differs; the option is checked and refused for other kinds."""
-    far = wall(9.0)
-    maps = {}
-    for lod in (0.0, 4.0):
-        m = densemap.Mapper(resolution=0.1, max_range=12.0, kind="akimap_rays", threads=2,
-                            dense_lod_range=lod)
-        m.insert_point_cloud(far, [0, 0, 0])
-        assert m.options["dense_lod_range"] == lod
-        maps[lod] = m
-    assert maps[4.0].states([[9.0, 0.0, 0.0]])[0] == densemap.OCCUPIED
-    # Near the sensor the bundles' capsules still overlap: free as without it.
-    assert maps[4.0].states([[1.5, 0.0, 0.0]])[0] == densemap.FREE
-    assert maps[0.0].states([[1.5, 0.0, 0.0]])[0] == densemap.FREE
-    assert maps[0.0].known_cells != maps[4.0].known_cells
-    with pytest.raises(densemap.Error, match="dense_lod_range_m needs the akimap_rays"):
-        densemap.Mapper(dense_lod_range=4.0)
-    with pytest.raises(densemap.Error, match="dense_lod_range_m must be"):
-        densemap.Mapper(kind="akimap_rays", dense_lod_range=-1.0)
-
-
 def test_queries_run_while_another_thread_inserts():
     m = densemap.Mapper(resolution=0.2, max_range=10.0, threads=2)
     rng = np.random.default_rng(13)

@@ -84,7 +84,6 @@ Expected<void> mapOptions(const proto::ServerConfig& config, PipelineOptions& o)
   o.kernel = *kind;
   o.resolution_m = config.map().resolution_m();
   o.keep_radius_m = config.map().keep_radius_m();
-  o.dense_lod_range_m = config.map().dense_lod_range_m();
   if (config.map().has_bounds()) {
     const proto::Box& b = config.map().bounds();
     o.bounds = std::make_pair(Point3f(static_cast<float>(b.min_x()), static_cast<float>(b.min_y()),

@@ -4,23 +4,15 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <utility>
 
 namespace densemap::kernel {
-int bundleLevel(double range, double bundle_range) {
-  if (!(bundle_range > 0.0) || !(range >= bundle_range)) return 0;
-  int level = 1;
-  for (double edge = 2.0 * bundle_range; level < kMaxBundleLevel && range >= edge; edge *= 2.0) {
-    ++level;
-  }
-  return level;
-}
-
 void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, double max_range,
                  std::span<const RayStop> stops, const CapsuleShape& shape,
-                 const VoxelGrid* bundle_grid, double bundle_range, FreeBundleBuffers& buffers,
+                 const VoxelGrid* bundle_grid, FreeBundleBuffers& buffers,
                  std::vector<FreeExtent>& out) {
   out.clear();
   const bool bundle = bundle_grid != nullptr;
@@ -46,19 +38,8 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
     alone = sortByVoxel(
         n,
         [&](std::size_t i) {
-          if (takes[i] == 0) return std::optional<VoxelKey>();
-          std::optional<VoxelKey> key = bundle_grid->pointToKey(points_world[i]);
-          const int level =
-              bundleLevel((points_world[i].cast<double>() - origin).norm(), bundle_range);
-          if (key && level > 0) {
-            // The coarser cube's first key: keys are offset by 2^15, so clearing low bits
-            // aligns cubes of 2^level keys on the grid's origin.
-            const auto mask = static_cast<std::uint16_t>(~((1U << level) - 1U));
-            key = VoxelKey{static_cast<std::uint16_t>(key->x & mask),
-                           static_cast<std::uint16_t>(key->y & mask),
-                           static_cast<std::uint16_t>(key->z & mask)};
-          }
-          return key;
+          return takes[i] != 0 ? bundle_grid->pointToKey(points_world[i])
+                               : std::optional<VoxelKey>();
         },
         KeyWindow::around(*bundle_grid, origin, max_range), rays, buffers.rays_other,
         buffers.radix_counts);
@@ -106,6 +87,168 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
     out[o] = frees > 0.0 ? FreeExtent{origin, free_sum / frees, shape.free_radius_m,
                                       shape.free_weight * frees}
                          : hole;
+  });
+}
+
+namespace {
+
+/// Bits 0..15 of v spread to every third bit (Morton order).
+std::uint64_t spreadBits(std::uint64_t v) {
+  v &= 0xffff;
+  v = (v | (v << 16)) & 0x0000ff0000ffULL;
+  v = (v | (v << 8)) & 0x00f00f00f00fULL;
+  v = (v | (v << 4)) & 0x0c30c30c30c3ULL;
+  v = (v | (v << 2)) & 0x249249249249ULL;
+  return v;
+}
+
+/// A key's Morton code: the cubes of 2^b keys a side aligned on the keys (and so on the grid's
+/// origin, keys being offset by 2^15) are the runs of equal code >> 3b.
+std::uint64_t mortonOf(const VoxelKey& k) {
+  return spreadBits(k.x) | (spreadBits(k.y) << 1) | (spreadBits(k.z) << 2);
+}
+
+}  // namespace
+
+void freeExtentsTree(const PointCloud& points_world, const Eigen::Vector3d& origin,
+                     double max_range, std::span<const RayStop> stops, const CapsuleShape& shape,
+                     const VoxelGrid& bundle_grid, int levels, FreeBundleBuffers& buffers,
+                     std::vector<FreeExtent>& out) {
+  out.clear();
+  levels = std::clamp(levels, 1, kMaxTreeLevels);
+  const std::size_t n = points_world.size();
+  std::vector<std::uint32_t>& hit_of = buffers.hit_of;
+  hit_of.assign(n + 1, 0);
+  tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
+    hit_of[i + 1] = takesStop(points_world[i], origin, max_range) ? 1 : 0;
+  });
+  for (std::size_t i = 0; i < n; ++i) hit_of[i + 1] += hit_of[i];
+  // Each ray by the Morton code of the cube of its end (its hit, or its cut point), shifted
+  // up a bit whose set value marks a cut ray (a level-0 bundle of its own); rays of no length
+  // or outside the addressable range last, alone.
+  constexpr std::uint64_t kAlone = std::uint64_t{1} << 49;  // above every code << 1 | 1
+  std::vector<std::pair<std::uint64_t, std::uint32_t>>& rays = buffers.rays;
+  rays.resize(n);
+  tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
+    const Eigen::Vector3d d = points_world[i].cast<double>() - origin;
+    const double length = d.norm();
+    std::uint64_t key = kAlone;
+    if (length > 0.0) {
+      const bool cut = max_range >= 0.0 && length > max_range;
+      const Eigen::Vector3d end = cut ? Eigen::Vector3d(origin + d * (max_range / length))
+                                      : Eigen::Vector3d(points_world[i].cast<double>());
+      if (const auto voxel = bundle_grid.pointToKey(end.cast<float>())) {
+        key = (mortonOf(*voxel) << 1) | (cut ? 1U : 0U);
+      }
+    }
+    rays[i] = {key, static_cast<std::uint32_t>(i)};
+  });
+  radixSort(
+      rays, buffers.rays_other, 50, [](const auto& pair) { return pair.first; },
+      buffers.radix_counts);
+  // Level-0 bundles: runs of one cube's hits; a cut or alone ray on its own.
+  std::vector<std::size_t>& group_starts = buffers.group_starts;
+  group_starts.clear();
+  const auto single = [&](std::size_t p) {
+    return rays[p].first == kAlone || (rays[p].first & 1U);
+  };
+  for (std::size_t p = 0; p < n; ++p) {
+    if (p == 0 || rays[p].first != rays[p - 1].first || single(p)) group_starts.push_back(p);
+  }
+  group_starts.push_back(n);
+  const std::size_t groups = group_starts.size() - 1;
+  // Higher levels: runs of level-0 bundles whose cube codes agree above 3b bits (alone rays
+  // each a run of their own), as indices of their first level-0 bundle.
+  const auto code = [&](std::size_t g) { return rays[group_starts[g]].first >> 1; };
+  const auto aloneGroup = [&](std::size_t g) { return rays[group_starts[g]].first == kAlone; };
+  std::vector<std::uint32_t>& level_starts = buffers.level_starts;
+  level_starts.clear();
+  std::vector<std::size_t> level_first(static_cast<std::size_t>(levels) + 2, 0);
+  for (int b = 1; b <= levels; ++b) {
+    level_first[static_cast<std::size_t>(b)] = level_starts.size();
+    for (std::size_t g = 0; g < groups; ++g) {
+      if (g == 0 || aloneGroup(g) || aloneGroup(g - 1) ||
+          (code(g) >> (3 * b)) != (code(g - 1) >> (3 * b))) {
+        level_starts.push_back(static_cast<std::uint32_t>(g));
+      }
+    }
+    level_starts.push_back(static_cast<std::uint32_t>(groups));  // the level's end
+  }
+  level_first[static_cast<std::size_t>(levels) + 1] = level_starts.size();
+  // Level 0: tips, and each bundle's sum of free ends and count.
+  const FreeExtent hole{Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), 0.0, 0.0};
+  std::vector<Eigen::Vector3d>& ends = buffers.ends;
+  std::vector<double>& counts = buffers.counts;
+  ends.assign(groups, Eigen::Vector3d::Zero());
+  counts.assign(groups, 0.0);
+  const std::size_t upper_slots = level_starts.size();
+  out.assign(n + groups + upper_slots, hole);
+  tbb::parallel_for(std::size_t{0}, groups, [&](std::size_t g) {
+    std::size_t o = group_starts[g] + g;
+    RayFreeSpace ray;
+    for (std::size_t p = group_starts[g]; p < group_starts[g + 1]; ++p, ++o) {
+      const std::uint32_t i = rays[p].second;
+      std::size_t hit = hit_of[i];
+      if (!rayFreeSpace(points_world[i], origin, max_range, stops, hit, ray)) continue;
+      if (ray.extent > 0.0) {
+        ends[g] += origin + ray.extent * ray.direction;
+        counts[g] += 1.0;
+      }
+      if (ray.has_tip) {
+        out[o] =
+            FreeExtent{origin + ray.tip_from * ray.direction, origin + ray.tip_to * ray.direction,
+                       shape.tip_radius_m, shape.tip_weight};
+      }
+    }
+  });
+  // From the top level down: each bundle's start (a fraction of the way to its mean end),
+  // handed to its child where it has only one. start_of[g]: the start of the level-0 bundle
+  // g's chain at the level being visited.
+  std::vector<double> start_of(groups, 0.0);
+  const auto fraction = [](int b) { return std::ldexp(1.0, -b); };
+  const auto emit = [&](std::size_t slot, const Eigen::Vector3d& sum, double count, double from,
+                        double to) {
+    if (!(count > 0.0) || !(to > from)) return;
+    const Eigen::Vector3d mean_end = sum / count;
+    // The origin and the end themselves where a capsule starts or ends there (a lone ray's
+    // capsule bit for bit as freeExtents makes it).
+    // Joints are open: the pieces on either side cover their own sides, and no voxel gets a
+    // cap from each.
+    out[slot] = FreeExtent{
+        .from = from == 0.0 ? origin : Eigen::Vector3d(origin + from * (mean_end - origin)),
+        .to = to == 1.0 ? mean_end : Eigen::Vector3d(origin + to * (mean_end - origin)),
+        .radius_m = shape.free_radius_m,
+        .weight = shape.free_weight * count,
+        .open_from = from > 0.0,
+        .open_to = to < 1.0};
+  };
+  for (int b = levels; b >= 1; --b) {
+    const std::size_t first = level_first[static_cast<std::size_t>(b)];
+    const std::size_t last = level_first[static_cast<std::size_t>(b) + 1] - 1;  // the end marker
+    tbb::parallel_for(first, last, [&](std::size_t u) {
+      const std::size_t g0 = level_starts[u], g1 = level_starts[u + 1];
+      // Its start: the origin at the top level, else as its parent handed it down.
+      const double start = b == levels ? 0.0 : start_of[g0];
+      // Its children: the runs of level b - 1 within [g0, g1).
+      std::size_t children = 0;
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      double count = 0.0;
+      for (std::size_t g = g0; g < g1; ++g) {
+        sum += ends[g];
+        count += counts[g];
+        if (g == g0 || aloneGroup(g) || aloneGroup(g - 1) ||
+            (code(g) >> (3 * (b - 1))) != (code(g - 1) >> (3 * (b - 1)))) {
+          ++children;
+        }
+      }
+      const double own_end = fraction(b);
+      if (children > 1) emit(n + groups + u, sum, count, start, own_end);
+      const double child_start = children > 1 ? own_end : start;
+      for (std::size_t g = g0; g < g1; ++g) start_of[g] = child_start;
+    });
+  }
+  tbb::parallel_for(std::size_t{0}, groups, [&](std::size_t g) {
+    emit(group_starts[g + 1] + g, ends[g], counts[g], start_of[g], 1.0);
   });
 }
 

@@ -36,21 +36,40 @@ struct CapsuleShape {
 /// freeExtents' per-scan arrays (the caller releases them once the extents are made).
 struct FreeBundleBuffers {
   std::vector<std::uint32_t> hit_of, takes;
+  std::vector<Eigen::Vector3d> ends;  // freeExtentsTree: each level-0 bundle's sum of free ends
+  std::vector<double> counts;         // ... and its count of rays with free extents
+  std::vector<std::uint32_t> level_starts;  // ... each level's bundles (level-0 bundle index)
   std::vector<std::pair<std::uint64_t, std::uint32_t>> rays, rays_other;
   std::vector<std::uint32_t> radix_counts;
   std::vector<std::size_t> group_starts;
 };
 
-/// `bundle_grid`: the cubes whose hits' rays are bundled (null: no bundles). `bundle_range`
-/// (> 0): a hit at least this far from the origin is bundled by the cube of 2^b of them that
-/// holds it (aligned on the grid's keys), b = 1 + floor(log2(range / bundle_range)), at most
-/// kMaxBundleLevel.
-inline constexpr int kMaxBundleLevel = 3;
+/// `bundle_grid`: the cubes whose hits' rays are bundled (null: no bundles).
 void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, double max_range,
                  std::span<const RayStop> stops, const CapsuleShape& shape,
-                 const VoxelGrid* bundle_grid, double bundle_range, FreeBundleBuffers& buffers,
+                 const VoxelGrid* bundle_grid, FreeBundleBuffers& buffers,
                  std::vector<FreeExtent>& out);
-/// The bundle level (0 .. kMaxBundleLevel) of a hit `range` from the origin.
-[[nodiscard]] int bundleLevel(double range, double bundle_range);
+
+/// The most levels of freeExtentsTree.
+inline constexpr int kMaxTreeLevels = 12;
+/// kAkimapRays' free extents as a tree of bundles (`levels` >= 1): the rays are bundled by the
+/// cube of `bundle_grid` their hit lies in (level 0), those cubes by the aligned cubes of 2^3
+/// of them (level 1), and so on up to `levels`. A bundle of level b (edge c_b = 2^b c_0) is one
+/// capsule over the part of its rays from 2^-(b+1) to 2^-b of the way from the origin to the
+/// mean of their free ends (level 0: from half way to the end; the top level: from the
+/// origin), weighing the count of its rays: there its rays lie within c_b 2^-b = c_0 of each
+/// other, as a level-0 bundle's do at its end, so a ray's evidence moves sideways no more than
+/// a level-0 bundle moves it, and near the origin, where every ray of a scan runs close to the
+/// others, a few capsules stand for thousands. A bundle whose rays are those of a single child
+/// gives no capsule of its own: the child's starts where the parent's would (a lone ray is
+/// still one capsule, bit for bit). Joints between levels are open ends (FreeExtent). A cut ray is
+/// a level-0 bundle of its own, bundled from level 1 by its cut point; a ray outside the
+/// addressable range is never bundled. Tips stay one per ray. Slots: a slot per ray (its tip), per
+/// level-0 bundle, then per bundle of each higher level in order, with holes (no length, weight 0)
+/// where none is given.
+void freeExtentsTree(const PointCloud& points_world, const Eigen::Vector3d& origin,
+                     double max_range, std::span<const RayStop> stops, const CapsuleShape& shape,
+                     const VoxelGrid& bundle_grid, int levels, FreeBundleBuffers& buffers,
+                     std::vector<FreeExtent>& out);
 
 }  // namespace densemap::kernel

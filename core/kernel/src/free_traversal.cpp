@@ -153,11 +153,13 @@ template <int AX, class Sink>
 /// end slices test the capsule's box with the segment's distance, without a branch per
 /// candidate: a candidate is written, and kept when inside (a branch there would be
 /// mispredicted about every other candidate). A short
-/// capsule (a ray's tip) is its box, tested whole the same way.
+/// capsule (a ray's tip) is its box, tested whole the same way. An open end (open_from at a,
+/// open_to at b) drops the candidates whose nearest point of the line lies beyond it (only end
+/// slices and short boxes hold such candidates).
 template <int AX, class Sink>
 std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
-                                const Eigen::Vector3d& b, double reach, std::vector<Near>& out,
-                                double u_per_m2, Sink& sink) {
+                                const Eigen::Vector3d& b, bool open_from, bool open_to,
+                                double reach, std::vector<Near>& out, double u_per_m2, Sink& sink) {
   constexpr int ax = AX, bx = (AX + 1) % 3, cx = (AX + 2) % 3;
   const Eigen::Vector3d seg = b - a;
   const double len2 = seg.squaredNorm();
@@ -207,11 +209,12 @@ std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
         std::uint64_t key = keyOf(i, j, k0_box);
         for (int k = k0_box; k <= k1_box; ++k, key += step_c) {
           const double wc = centreOf(k) - a[cx];
-          const double t = std::clamp((dot_ab + wc * seg[cx]) * inverse_len2, 0.0, 1.0);
+          const double t_line = (dot_ab + wc * seg[cx]) * inverse_len2;
+          const double t = std::clamp(t_line, 0.0, 1.0);
           const double da = wa - t * seg[ax], db = wb - t * seg[bx], dc = wc - t * seg[cx];
           const double d2 = da * da + db * db + dc * dc;
           box_out[n] = {key, d2};
-          n += d2 < r2;
+          n += d2 < r2 && !(open_from && t_line < 0.0) && !(open_to && t_line > 1.0);
         }
       }
     }
@@ -325,10 +328,11 @@ std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
       for (int k = k0; k <= k1; ++k, key += step_c) {
         c[cx] = centreOf(k);
         const Eigen::Vector3d w = c - a;
-        const double t = std::clamp(w.dot(seg) * inverse_len2, 0.0, 1.0);
+        const double t_line = w.dot(seg) * inverse_len2;
+        const double t = std::clamp(t_line, 0.0, 1.0);
         const double d2 = (w - t * seg).squaredNorm();
         box_out[n] = {key, d2};
-        n += d2 < r2;
+        n += d2 < r2 && !(open_from && t_line < 0.0) && !(open_to && t_line > 1.0);
       }
     }
   }
@@ -361,8 +365,8 @@ std::size_t rasterise(const VoxelGrid& grid, const FreeExtent& e, double reach,
                       double scaled_weight, const SquaredKernelTable& table, ThreadBlocks& blocks) {
   const double u_per_m2 = 1.0 / (e.radius_m * e.radius_m);
   CapsuleSink sink{blocks, table, scaled_weight};
-  const std::size_t count =
-      collectVoxelsNearOn<AX>(grid, e.from, e.to, reach, blocks.near, u_per_m2, sink);
+  const std::size_t count = collectVoxelsNearOn<AX>(grid, e.from, e.to, e.open_from, e.open_to,
+                                                    reach, blocks.near, u_per_m2, sink);
   for (std::size_t q = 0; q < count; ++q) {
     const Near& v = blocks.near[q];
     sink.add(block::blockOfPacked(v.key), block::indexOfPacked(v.key), v.d2 * u_per_m2);

@@ -9,8 +9,8 @@
 
 #include <Eigen/Core>
 
-#include "densemap/geometry/voxel_grid.hpp"
 #include "densemap/geometry/block_layout.hpp"
+#include "densemap/geometry/voxel_grid.hpp"
 
 namespace densemap::kernel {
 
@@ -19,6 +19,9 @@ struct FreeExtent {
   Eigen::Vector3d from, to;
   double radius_m = 0.1;  // the kernel's support radius (length scale)
   double weight = 1.0;    // its value on the extent (sf2)
+  /// An open end has no cap: a voxel whose nearest point of the axis' line lies beyond it gets
+  /// nothing (a joint with the next piece of the same rays, which covers that side).
+  bool open_from = false, open_to = false;
 };
 
 /// kAkimapRays' fast free evidence: instead of one capsule kernel per 0.3 m piece of

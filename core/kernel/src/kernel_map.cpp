@@ -357,8 +357,14 @@ void KernelMap::fitKernels(const PointCloud& points_world, const Point3f& origin
               ? std::optional<VoxelGrid>(VoxelGrid(options_.free_bundle_m))
               : std::nullopt;
       const VoxelGrid* bundle_grid = !options_.free_bundles ? nullptr : cubes ? &*cubes : &grid_;
-      freeExtents(points_world, origin, options_.max_range, stops, shape, bundle_grid,
-                  options_.free_bundle_range_m, scratch_->bundles, free_extents);
+      if (bundle_grid != nullptr && options_.free_bundle_levels >= 1.0) {
+        freeExtentsTree(points_world, origin, options_.max_range, stops, shape, *bundle_grid,
+                        static_cast<int>(options_.free_bundle_levels), scratch_->bundles,
+                        free_extents);
+      } else {
+        freeExtents(points_world, origin, options_.max_range, stops, shape, bundle_grid,
+                    scratch_->bundles, free_extents);
+      }
       scratch_->releaseBundles();
     }
     release(segments_);

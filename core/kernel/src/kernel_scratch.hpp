@@ -63,6 +63,9 @@ struct KernelMap::Scratch {
     release(bundles.rays_other);
     release(bundles.radix_counts);
     release(bundles.group_starts);
+    release(bundles.ends);
+    release(bundles.counts);
+    release(bundles.level_starts);
   }
   /// After the kernels are summed: the kernels and their (block, kernel) pairs.
   void releaseKernels() {

@@ -46,14 +46,6 @@ Expected<void> checkMapOptions(const PipelineOptions& o) {
   if (!std::isfinite(o.keep_radius_m) || o.keep_radius_m < 0) {
     return makeError("keep_radius_m must be >= 0");
   }
-  if (!std::isfinite(o.dense_lod_range_m) || o.dense_lod_range_m < 0 ||
-      o.dense_lod_range_m > 1000) {
-    return makeError("dense_lod_range_m must be in 0 .. 1000, got " +
-                     numberText(o.dense_lod_range_m));
-  }
-  if (o.dense_lod_range_m > 0 && o.kernel != kernel::KernelMethod::kAkimapRays) {
-    return makeError("dense_lod_range_m needs the akimap_rays map kind");
-  }
   if (const auto& b = o.bounds) {
     if (!b->first.allFinite() || !b->second.allFinite() ||
         (b->first.array() >= b->second.array()).any()) {
@@ -103,7 +95,6 @@ Engine::Engine(const PipelineOptions& options, std::unique_ptr<OccupancyMap> map
   if (options.kernel) {
     auto kernel_options = kernel::KernelOptions::defaults(*options.kernel);
     kernel_options.max_range = options.max_range_m;
-    kernel_options.free_bundle_range_m = options.dense_lod_range_m;
     kind_ = makeKernelKind(std::move(map), kernel_options);
   } else {
     kind_ = makeLogOddsKind(
@@ -130,8 +121,9 @@ std::expected<IntegrationResult, Rejection> Engine::integrate(const RawScan& raw
   Point3f origin_world = Point3f::Zero();
   transform(*scan, points_world, origin_world);
   const bool stamped = decay_ && decay_->options().use_stamps;
-  IntegrationResult result =
-      integratePoints(points_world, origin_world, stamped ? raw.stamp_ns : steadyNowNs());
+  IntegrationResult result = integratePoints(
+      points_world, origin_world,
+      stamped ? raw.stamp_ns : steadyNowNs());
   result.sensor_id = raw.sensor_id;
   result.scan_seq = raw.seq;
   result.stamp_ns = raw.stamp_ns;
@@ -146,7 +138,9 @@ std::expected<IntegrationResult, Rejection> Engine::integrateWorld(
   if (auto ok = checkWorldScan(points_world, origin_world, options_.limits); !ok) {
     return std::unexpected(std::move(ok.error()));
   }
-  return integratePoints(points_world, origin_world, stamp_ns.value_or(steadyNowNs()));
+  return integratePoints(
+      points_world, origin_world,
+      stamp_ns.value_or(steadyNowNs()));
 }
 
 IntegrationResult Engine::integratePoints(const PointCloud& points_world,

@@ -220,10 +220,13 @@ TEST(FreeTraversal, ResultDoesNotDependOnTheThreadCount) {
 }
 
 // Rays whose hits share a voxel give one free capsule (free_bundles).
-KernelMap mapOf(const PointCloud& points, bool bundles, double resolution = 0.1) {
+/// `levels`: free_bundle_levels (< 0: the default).
+KernelMap mapOf(const PointCloud& points, bool bundles, double resolution = 0.1,
+                double levels = -1.0) {
   KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
   options.max_range = 15.0;
   options.free_bundles = bundles;
+  if (levels >= 0.0) options.free_bundle_levels = levels;
   KernelMap map(resolution, options);
   map.integrate(points, Point3f(0, 0, 0));
   map.integrate(points, Point3f(0.3F, 0.2F, 0.1F));
@@ -264,14 +267,15 @@ void expectAnotherMapOfTheSameShape(const KernelMap& a, const KernelMap& b) {
 }
 
 TEST(FreeBundles, AVoxelHitByOneRayGivesThatRaysCapsuleBitForBit) {
-  // A wall's hits 0.31 m apart: one hit per voxel, nothing to bundle.
+  // A wall's hits 0.31 m apart: one hit per voxel, nothing to bundle (in cubes: the tree above
+  // them bundles their rays near the origin, FreeBundles.ATreeOfBundles...).
   PointCloud sparse;
   for (double y = -1.5; y <= 1.5; y += 0.31) {
     for (double z = -0.9; z <= 0.9; z += 0.31) {
       sparse.emplace_back(3.0F, static_cast<float>(y), static_cast<float>(z));
     }
   }
-  const auto bundled = cellsOf(mapOf(sparse, true, 0.05));
+  const auto bundled = cellsOf(mapOf(sparse, true, 0.05, 0.0));
   ASSERT_GT(bundled.size(), 1000U);
   EXPECT_EQ(bundled, cellsOf(mapOf(sparse, false, 0.05)));
 }
@@ -313,42 +317,45 @@ TEST(FreeBundles, CubesBundleTheRaysOfNeighbouringVoxels) {
   EXPECT_EQ(same_visits, voxel_visits);
 }
 
-// Level of detail by range: a hit's bundle level from its range (none below the range, one
-// more each time the range doubles, at most kMaxBundleLevel; none when off).
-TEST(FreeBundles, BundleLevelGrowsWithRange) {
-  EXPECT_EQ(bundleLevel(100.0, 0.0), 0);
-  EXPECT_EQ(bundleLevel(5.99, 6.0), 0);
-  EXPECT_EQ(bundleLevel(6.0, 6.0), 1);
-  EXPECT_EQ(bundleLevel(11.9, 6.0), 1);
-  EXPECT_EQ(bundleLevel(12.0, 6.0), 2);
-  EXPECT_EQ(bundleLevel(24.0, 6.0), 3);
-  EXPECT_EQ(bundleLevel(1e6, 6.0), kMaxBundleLevel);
-  EXPECT_EQ(bundleLevel(std::numeric_limits<double>::quiet_NaN(), 6.0), 0);
-}
-
-// Far hits bundled by coarser cubes: fewer capsule visits, the same evidence per metre of ray
-// (within 3%) and the same map's shape; a range beyond every hit leaves the map bit for bit.
-TEST(FreeBundles, RangeLevelsBundleFarRaysByCoarserCubes) {
-  const auto run = [](double bundle_range, std::size_t* visits) {
+// The tree of bundles (free_bundle_levels, on by default) against the cubes' bundles alone:
+// fewer capsule visits, the same evidence per metre of ray (within 3%) and the same map's
+// shape; a scan of rays far apart (no bundle with siblings) is the same map bit for bit.
+TEST(FreeBundles, ATreeOfBundlesKeepsTheEvidenceAndTheShapeWithFewerVisits) {
+  const auto run = [](const PointCloud& scan, double levels, std::size_t* visits) {
     KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
     options.max_range = 15.0;
-    options.free_bundle_range_m = bundle_range;
+    options.free_bundle_levels = levels;
     KernelMap map(0.1, options);
     *visits = 0;
     for (const Point3f& origin : {Point3f(0, 0, 0), Point3f(0.3F, 0.2F, 0.1F)}) {
-      *visits += map.integrate(roomScan(), origin).free_visits;
+      *visits += map.integrate(scan, origin).free_visits;
     }
     return map;
   };
-  std::size_t off_visits = 0, near_visits = 0, beyond_visits = 0;
-  const KernelMap off = run(0.0, &off_visits);
-  const KernelMap near = run(3.0, &near_visits);
-  EXPECT_LT(static_cast<double>(near_visits), 0.8 * static_cast<double>(off_visits));
-  EXPECT_NEAR(totalBeta(near) / totalBeta(off), 1.0, 0.03);
-  const auto cells = cellsOf(off);
-  expectTheSameShape(cellsOf(near), cells);
-  EXPECT_EQ(cellsOf(run(100.0, &beyond_visits)), cells);
-  EXPECT_EQ(beyond_visits, off_visits);
+  EXPECT_EQ(KernelOptions::defaults(KernelMethod::kAkimapRays).free_bundle_levels, 6.0);
+  std::size_t flat_visits = 0, tree_visits = 0;
+  const KernelMap flat = run(roomScan(), 0.0, &flat_visits);
+  const KernelMap tree = run(roomScan(), 6.0, &tree_visits);
+  EXPECT_LT(static_cast<double>(tree_visits), 0.85 * static_cast<double>(flat_visits));
+  EXPECT_NEAR(totalBeta(tree) / totalBeta(flat), 1.0, 0.03);
+  expectTheSameShape(cellsOf(tree), cellsOf(flat));
+  // Eight rays 45 degrees apart: their cubes share no parent below the top levels, whose
+  // segments (within 1/64 of the way) then hold one ray each.
+  PointCloud apart;
+  for (int k = 0; k < 8; ++k) {
+    const double a = k * std::numbers::pi / 4.0;
+    apart.emplace_back(static_cast<float>(6.0 * std::cos(a)), static_cast<float>(6.0 * std::sin(a)),
+                       0.5F);
+  }
+  std::size_t a0 = 0, a6 = 0;
+  const KernelMap apart_flat = run(apart, 0.0, &a0);
+  const KernelMap apart_tree = run(apart, 6.0, &a6);
+  std::size_t a1 = 0;
+  const KernelMap apart_one = run(apart, 1.0, &a1);
+  EXPECT_EQ(cellsOf(apart_one), cellsOf(apart_flat));
+  EXPECT_EQ(a1, a0);
+  // The top levels' cubes (6.4 and 12.8 m) bundle them near the origin: the same shape.
+  expectTheSameShape(cellsOf(apart_tree), cellsOf(apart_flat));
 }
 
 // The fast path (each row's stretch; point kernels by per-axis squared offsets) against the
@@ -520,6 +527,7 @@ void expectCutRaysGiveEveryVoxelInReachTheKernelOfItsDistance(const Point3f& ori
   KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
   ASSERT_TRUE(options.free_traversal);
   options.max_range = 4.0;
+  options.free_bundle_levels = 0.0;  // each ray its own capsule (the tree bundles cut rays)
   const double resolution = 0.1;
   KernelMap map(resolution, options);
   PointCloud points;

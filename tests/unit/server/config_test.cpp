@@ -150,28 +150,6 @@ TEST(ServerConfig, EvictionNeedsTheGridLogOddsMapAndAValidBox) {
   }
 }
 
-TEST(ServerConfig, DenseLevelOfDetailNeedsAkimapRaysAndAFiniteRange) {
-  const test::TempDir dir;
-  auto ok = loadServerConfig(
-      writeConfig(dir, "map { kind: \"akimap_rays\" resolution_m: 0.1 dense_lod_range_m: 6 }\n"));
-  ASSERT_TRUE(ok) << ok.error().message;
-  auto options = pipelineOptions(*ok);
-  ASSERT_TRUE(options);
-  EXPECT_EQ(options->dense_lod_range_m, 6.0);
-  EXPECT_EQ(pipelineOptions(proto::ServerConfig{})->dense_lod_range_m, 0.0) << "off by default";
-  for (const auto& [text, reason] : std::vector<std::pair<std::string, std::string>>{
-           {"map { dense_lod_range_m: 6 }", "needs the akimap_rays map kind"},
-           {"map { kind: \"bgk\" dense_lod_range_m: 6 }", "needs the akimap_rays map kind"},
-           {"map { kind: \"akimap_rays\" dense_lod_range_m: -1 }", "dense_lod_range_m must be"},
-           {"map { kind: \"akimap_rays\" dense_lod_range_m: inf }", "dense_lod_range_m must be"},
-           {"map { kind: \"akimap_rays\" dense_lod_range_m: 1e5 }", "dense_lod_range_m must be"},
-       }) {
-    auto refused = loadServerConfig(writeConfig(dir, text + "\n"));
-    ASSERT_FALSE(refused) << text;
-    EXPECT_NE(refused.error().message.find(reason), std::string::npos) << refused.error().message;
-  }
-}
-
 TEST(DdsConfig, LoopbackStaysOnLoopbackOtherInterfacesDiscoverByMulticast) {
   for (const char* lo : {"lo", "127.0.0.1", "localhost", "::1"}) {
     EXPECT_TRUE(dds::isLoopbackInterface(lo)) << lo;

@@ -47,9 +47,6 @@ struct MapperOptions {
   /// Bounded memory (grid backend): after each scan, blocks farther than this from the
   /// sensor are dropped (0: off) ...
   double keep_radius_m = 0.0;
-  /// kind "akimap_rays": level of detail by range for the free space, m (the server's
-  /// map.dense_lod_range_m; 0: off).
-  double dense_lod_range_m = 0.0;
   /// ... and so are blocks outside this box (min, max corners, metres).
   std::optional<std::pair<Point3f, Point3f>> bounds{};
   /// Points a scan may hold (more are refused).

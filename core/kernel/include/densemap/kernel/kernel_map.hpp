@@ -83,12 +83,10 @@ struct KernelOptions {
   /// kAkimapRays with free_bundles: the edge of the cubes whose hits' rays are bundled, m
   /// (<= the resolution: the map's voxels).
   double free_bundle_m = 0.0;
-  /// kAkimapRays with free_bundles: level of detail by range. Rays whose hit lies at least this
-  /// far from the origin, m, are bundled by cubes twice as large (and four times beyond twice
-  /// the range, eight times beyond four times), as the beams' spacing grows with range: a far
-  /// cube holds a ray or two at the base size and its long capsules cost the most (0: one
-  /// size at every range).
-  double free_bundle_range_m = 0.0;
+  /// kAkimapRays with free_bundles: the levels of the tree of bundles above the cubes'
+  /// (free_bundles.hpp, freeExtentsTree; 6 in KernelOptions::defaults; 0: each cube's bundle
+  /// one capsule from the origin), 0 .. 12.
+  double free_bundle_levels = 0.0;
   /// kAkimapRays: one adaptive kernel per voxel of at least `aggregate_min_hits` hits (3 in
   /// KernelOptions::defaults) (at their
   /// mean, weighing their count, fitted to the neighbourhood outside the voxel; its normal sets
@@ -115,7 +113,7 @@ struct KernelOptions {
 /// occupied_weight, hit_weight, hit_kernel_weight, hit_length_voxels, hit_stencil_steps,
 /// hit_centre_pull,
 /// negative_step, search_max, search_range, min_thickness, aggregate_min_hits,
-/// shared_fit_min_hits, free_reach, free_bundle_m, free_bundle_range_m), and
+/// shared_fit_min_hits, free_reach, free_bundle_m, free_bundle_levels), and
 /// free_traversal=0|1, aggregate_hits=0|1, free_bundles=0|1; errors name the setting.
 [[nodiscard]] Expected<void> applySettings(KernelOptions& options,
                                            const std::vector<std::string>& settings);

@@ -55,9 +55,6 @@ struct PipelineOptions {
   double keep_radius_m = 0.0;
   /// ... and so are blocks whose centre lies outside this box (min, max; none: no box).
   std::optional<std::pair<Point3f, Point3f>> bounds{};
-  /// akimap_rays: rays whose hit lies at least this far from the origin are bundled by coarser
-  /// cubes (kernel::KernelOptions::free_bundle_range_m; 0: off).
-  double dense_lod_range_m = 0.0;
   /// How readers get versions. true: every version is published (MapView::publish) and a
   /// reader holds it while the engine writes the next one, which copies each block it changes
   /// (the server: queries never wait). false: the map is written in place and view() is valid
