@@ -19,6 +19,7 @@
 #include <systemd/sd-daemon.h>
 #endif
 
+#include "densemap/cli/allocator.hpp"
 #include "densemap/cli/guarded_main.hpp"
 #include "densemap/server/export_path.hpp"
 #include "densemap/server/map_service.hpp"
@@ -50,15 +51,13 @@ struct Exit {
 template <class T>
 using OrExit = std::expected<T, Exit>;
 
-/// Scans, their world-frame copies and DDS buffers are megabytes each, every scan: keep such
-/// blocks in the heap for reuse instead of mmap/munmap per buffer (each fresh mapping costs a
-/// page fault per 4 KiB; profiles of 64-beam replays showed 5% of the time there).
+/// Scan-sized buffers (DDS's too) stay in the heap (cli::keepScanBuffersInHeap).
 void configureAllocator() {
-  mallopt(M_MMAP_THRESHOLD, 64 << 20);
   // Free memory at the top of a heap beyond 32 MiB goes back to the OS. A thread's heap arena
   // gives its top back only past this threshold (malloc_trim does not trim it), so a larger
-  // one leaves a point-query flood's memory behind; scans at 10 Hz are not slower for it.
-  mallopt(M_TRIM_THRESHOLD, 32 << 20);
+  // one leaves a point-query flood's memory behind. A dense map at 0.1 m pays for it in page
+  // faults between its stages (docs/benchmarks.md); at 0.2 m it does not.
+  densemap::cli::keepScanBuffersInHeap(std::size_t{32} << 20);
   // Two heap arenas for all threads (glibc makes up to 8 per core): fewer thread heaps to hold
   // freed memory after point-query floods; integration at 10 Hz does not need more.
   mallopt(M_ARENA_MAX, 2);

@@ -1,7 +1,6 @@
 // densemap-bench: offline integration benchmark (no DDS). Every method integrates the same
 // scans in one run, the methods taking turns a few scans at a time; speed is reported as ratios
 // against OctoMap's insertPointCloud, and every map is compared with OctoMap's cell by cell.
-#include <malloc.h>
 #include <tbb/task_arena.h>
 #include <CLI/CLI.hpp>
 
@@ -18,6 +17,7 @@
 #include "bench_report.hpp"
 #include "cache_probe.hpp"
 #include "cpu_steal.hpp"
+#include "densemap/cli/allocator.hpp"
 #include "densemap/cli/guarded_main.hpp"
 #include "densemap/cli/progress.hpp"
 #include "densemap/geometry/percentile.hpp"
@@ -312,10 +312,8 @@ int run(const Options& o) {
 }  // namespace densemap::bench
 
 static int runMain(int argc, char** argv) {
-  // As densemap-server does (server/src/main.cpp): per-scan buffers stay in the heap for reuse
-  // instead of fresh mappings (a page fault per 4 KiB), so the bench measures the server's path.
-  mallopt(M_MMAP_THRESHOLD, 64 << 20);
-  mallopt(M_TRIM_THRESHOLD, 256 << 20);
+  // As densemap-server and the Python module do: per-scan buffers stay in the heap for reuse.
+  densemap::cli::keepScanBuffersInHeap(std::size_t{256} << 20);
   densemap::bench::Options o;
   CLI::App app{"densemap-bench: integration speed and exactness against OctoMap, one run"};
   app.add_option("--data", o.data,
