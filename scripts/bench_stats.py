@@ -2,6 +2,7 @@
 
 import math
 import platform
+import statistics
 
 
 def percentile(values, q):
@@ -18,3 +19,9 @@ def cpu_model():
             if line.startswith("model name"):
                 return line.split(":", 1)[1].strip()
     return platform.machine()
+
+
+def spread(values, fmt="{:.1f}"):
+    """'median (min .. max)' of several runs, each formatted with fmt."""
+    return (fmt.format(statistics.median(values)) + " (" + fmt.format(min(values)) + " .. " +
+            fmt.format(max(values)) + ")")

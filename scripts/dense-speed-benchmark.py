@@ -22,11 +22,10 @@ DATA: a dataset densemap-bench reads. --accuracy-data: the dense-map benchmark's
 import argparse
 import os
 import re
-import statistics
 import subprocess
 import tempfile
 
-from bench_stats import cpu_model
+from bench_stats import cpu_model, spread
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BUILD = os.path.join(ROOT, os.environ.get("DENSEMAP_BUILD_DIR", "build"))
@@ -99,11 +98,6 @@ def accuracy(args, setting, work):
     rows[f"holdout {os.path.basename(os.path.normpath(args.data))} {args.resolution:g} / "
          f"{args.max_range:g} m (40 scans)"] = f"{float(m.group(1)):.4f} / {float(m.group(2)):.4f}"
     return rows
-
-
-def spread(values, fmt="{:.1f}"):
-    return (fmt.format(statistics.median(values)) + " (" + fmt.format(min(values)) + " .. " +
-            fmt.format(max(values)) + ")")
 
 
 def main():

@@ -21,7 +21,7 @@ import statistics
 import subprocess
 import sys
 
-from bench_stats import cpu_model
+from bench_stats import cpu_model, spread
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BUILD = os.path.join(ROOT, os.environ.get("DENSEMAP_BUILD_DIR", "build"))
@@ -55,10 +55,6 @@ def run(args, clients):
         if total > 0:
             r["mb"].append(total / 1e6)
     return r
-
-
-def spread(values, fmt):
-    return f"{fmt.format(statistics.median(values))} ({fmt.format(min(values))} .. {fmt.format(max(values))})"
 
 
 def main():

@@ -13,11 +13,10 @@ The module is taken from <build>/python (DENSEMAP_BUILD_DIR, default build).
 import argparse
 import json
 import os
-import statistics
 import subprocess
 import sys
 
-from bench_stats import cpu_model, percentile
+from bench_stats import cpu_model, percentile, spread
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BUILD = os.path.join(ROOT, os.environ.get("DENSEMAP_BUILD_DIR", "build"))
@@ -54,11 +53,6 @@ def run(args, default_malloc):
                           args.kind, str(args.resolution), str(args.max_range), str(args.threads)],
                          env=env, capture_output=True, text=True, check=True).stdout
     return json.loads(out.strip().splitlines()[-1])
-
-
-def spread(values, fmt="{:.1f}"):
-    return (fmt.format(statistics.median(values)) + " (" + fmt.format(min(values)) + " .. " +
-            fmt.format(max(values)) + ")")
 
 
 def main():
