@@ -211,9 +211,8 @@ void freeExtentsTree(const PointCloud& points_world, const Eigen::Vector3d& orig
     if (!(count > 0.0) || !(to > from)) return;
     const Eigen::Vector3d mean_end = sum / count;
     // The origin and the end themselves where a capsule starts or ends there (a lone ray's
-    // capsule bit for bit as freeExtents makes it).
-    // Joints are open: the pieces on either side cover their own sides, and no voxel gets a
-    // cap from each.
+    // capsule bit for bit as freeExtents makes it); joints are open, so that no voxel gets a
+    // cap from the pieces on either side.
     out[slot] = FreeExtent{
         .from = from == 0.0 ? origin : Eigen::Vector3d(origin + from * (mean_end - origin)),
         .to = to == 1.0 ? mean_end : Eigen::Vector3d(origin + to * (mean_end - origin)),
@@ -229,14 +228,15 @@ void freeExtentsTree(const PointCloud& points_world, const Eigen::Vector3d& orig
       const std::size_t g0 = level_starts[u], g1 = level_starts[u + 1];
       // Its start: the origin at the top level, else as its parent handed it down.
       const double start = b == levels ? 0.0 : start_of[g0];
-      // Its children: the runs of level b - 1 within [g0, g1).
+      // Its children: the runs of level b - 1 within [g0, g1) (level 0: every bundle, a cut
+      // ray's too, though it shares its cube's code).
       std::size_t children = 0;
       Eigen::Vector3d sum = Eigen::Vector3d::Zero();
       double count = 0.0;
       for (std::size_t g = g0; g < g1; ++g) {
         sum += ends[g];
         count += counts[g];
-        if (g == g0 || aloneGroup(g) || aloneGroup(g - 1) ||
+        if (b == 1 || g == g0 || aloneGroup(g) || aloneGroup(g - 1) ||
             (code(g) >> (3 * (b - 1))) != (code(g - 1) >> (3 * (b - 1)))) {
           ++children;
         }

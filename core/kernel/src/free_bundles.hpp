@@ -62,11 +62,11 @@ inline constexpr int kMaxTreeLevels = 12;
 /// a level-0 bundle moves it, and near the origin, where every ray of a scan runs close to the
 /// others, a few capsules stand for thousands. A bundle whose rays are those of a single child
 /// gives no capsule of its own: the child's starts where the parent's would (a lone ray is
-/// still one capsule, bit for bit). Joints between levels are open ends (FreeExtent). A cut ray is
-/// a level-0 bundle of its own, bundled from level 1 by its cut point; a ray outside the
-/// addressable range is never bundled. Tips stay one per ray. Slots: a slot per ray (its tip), per
-/// level-0 bundle, then per bundle of each higher level in order, with holes (no length, weight 0)
-/// where none is given.
+/// still one capsule, bit for bit). Joints between levels are open ends (FreeExtent). A cut
+/// ray is a level-0 bundle of its own, bundled from level 1 by its cut point; a ray outside
+/// the addressable range is never bundled. Tips stay one per ray. Slots: a slot per ray (its
+/// tip), per level-0 bundle, then per bundle of each higher level in order, with holes (no
+/// length, weight 0) where none is given.
 void freeExtentsTree(const PointCloud& points_world, const Eigen::Vector3d& origin,
                      double max_range, std::span<const RayStop> stops, const CapsuleShape& shape,
                      const VoxelGrid& bundle_grid, int levels, FreeBundleBuffers& buffers,

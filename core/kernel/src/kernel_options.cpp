@@ -48,8 +48,8 @@ KernelOptions KernelOptions::defaults(KernelMethod method) {
     o.free_bundle_m = 0.2;
     // The cubes' bundles bundled again up a tree of cubes twice as large a level, each level
     // over the part of its rays where they run as close as a cube's rays do at its end: the
-    // same accuracy on every row, a quarter fewer capsule visits. Six levels reach 12.8 m
-    // cubes at 0.2 m, within a few metres of the origin.
+    // same accuracy on every row with fewer capsule visits (docs/benchmarks.md). Six levels
+    // reach 12.8 m cubes at 0.2 m, within a few metres of the origin.
     o.free_bundle_levels = 6.0;
     // From 3 hits a voxel gets one kernel at their mean; at 2 a grazing floor loses its cells
     // (the AkimapRays test), so 2 hits keep a kernel each, of one shape fitted once.

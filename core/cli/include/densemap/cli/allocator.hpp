@@ -7,10 +7,9 @@
 namespace densemap::cli {
 
 /// Scans, their world-frame copies and a dense map's stage buffers are megabytes each, every
-/// scan: blocks up to 64 MiB come from the heap, for reuse, instead of a fresh mapping each
-/// (a page fault per 4 KiB; 5% of a 64-beam replay's time in the server's profiles, and with
-/// glibc's defaults up to 1.8x a dense map's CPU a scan in a Python process), and free memory
-/// at a heap's top goes back to the system only beyond `trim_threshold_bytes`.
+/// scan: blocks up to 64 MiB come from the heap, for reuse, instead of a fresh mapping each (a
+/// page fault per 4 KiB, every scan; docs/benchmarks.md), and free memory at a heap's top goes
+/// back to the system only beyond `trim_threshold_bytes`.
 inline void keepScanBuffersInHeap(std::size_t trim_threshold_bytes) {
   mallopt(M_MMAP_THRESHOLD, 64 << 20);
   mallopt(M_TRIM_THRESHOLD, static_cast<int>(trim_threshold_bytes));
