@@ -48,7 +48,9 @@ compare() {  # NAME CELLS_FILE
   echo "foxglove_cli: $1: $(wc -l <"$2") occupied cells, equal to the snapshot's"
 }
 
-start_server ""
+# Send queues of 4 MiB: the stalled client below fills its queue (two 128-beam scans) within
+# its stall_close_s however slowly a loaded machine integrates the drive.
+start_server "max_queue_bytes: 4194304"
 url="ws://127.0.0.1:$port"
 # The early client: connected and subscribed before any scan.
 node "$here/client.mjs" --url "$url" --out "$dir/early.txt" --channels "$dir/channels.json" \
