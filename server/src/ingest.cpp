@@ -70,13 +70,9 @@ void Ingest::submit(RawScan scan) {
     {
       std::lock_guard lock(counters_mutex_);
       ++counters_.received;
-      ++counters_.rejected;
-      ++counters_.rejected_by_reason[static_cast<std::size_t>(ok.error().reason)];
       sensors_.received(scan.sensor_id, scan.seq);
-      sensors_.rejected(scan.sensor_id);
-      counters_.last_reject_reason = ok.error().message;
     }
-    if (on_reject_) on_reject_(scan, ok.error());
+    rejected(scan, ok.error());
     return;
   }
   {
@@ -155,14 +151,18 @@ void Ingest::process(const RawScan& raw) {
     published(*outcome);
     return;
   }
+  rejected(raw, outcome.error());
+}
+
+void Ingest::rejected(const RawScan& raw, const Rejection& rejection) {
   {
     std::lock_guard lock(counters_mutex_);
     ++counters_.rejected;
-    ++counters_.rejected_by_reason[static_cast<std::size_t>(outcome.error().reason)];
+    ++counters_.rejected_by_reason[static_cast<std::size_t>(rejection.reason)];
     sensors_.rejected(raw.sensor_id);
-    counters_.last_reject_reason = outcome.error().message;
+    counters_.last_reject_reason = rejection.message;
   }
-  if (on_reject_) on_reject_(raw, outcome.error());
+  if (on_reject_) on_reject_(raw, rejection);
 }
 
 void Ingest::runCommands() {

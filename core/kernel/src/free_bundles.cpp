@@ -10,14 +10,13 @@
 #include <utility>
 
 namespace densemap::kernel {
-void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, double max_range,
-                 std::span<const RayStop> stops, const CapsuleShape& shape,
-                 const VoxelGrid* bundle_grid, FreeBundleBuffers& buffers,
-                 std::vector<FreeExtent>& out) {
-  out.clear();
-  const bool bundle = bundle_grid != nullptr;
+namespace {
+
+/// Each ray's hit number into buffers.hit_of (the stop it takes: rays with a length that are
+/// not cut, in order; n + 1 entries) and whether it takes one into buffers.takes.
+void numberHits(const PointCloud& points_world, const Eigen::Vector3d& origin, double max_range,
+                FreeBundleBuffers& buffers) {
   const std::size_t n = points_world.size();
-  // Each ray's hit number (the stop it takes: rays with a length that are not cut, in order).
   std::vector<std::uint32_t>& hit_of = buffers.hit_of;
   hit_of.assign(n + 1, 0);
   tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
@@ -29,6 +28,20 @@ void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, 
     takes[i] = hit_of[i + 1];
     hit_of[i + 1] += hit_of[i];
   }
+}
+
+}  // namespace
+
+void freeExtents(const PointCloud& points_world, const Eigen::Vector3d& origin, double max_range,
+                 std::span<const RayStop> stops, const CapsuleShape& shape,
+                 const VoxelGrid* bundle_grid, FreeBundleBuffers& buffers,
+                 std::vector<FreeExtent>& out) {
+  out.clear();
+  const bool bundle = bundle_grid != nullptr;
+  const std::size_t n = points_world.size();
+  numberHits(points_world, origin, max_range, buffers);
+  const std::vector<std::uint32_t>& hit_of = buffers.hit_of;
+  const std::vector<std::uint32_t>& takes = buffers.takes;
   // Rays by the cube of their hit (a cut ray, or one outside the addressable range, alone: the
   // key `alone`), rays in order within each, lone rays last; the cubes ranked in the window of
   // the max range around the origin.
@@ -117,12 +130,8 @@ void freeExtentsTree(const PointCloud& points_world, const Eigen::Vector3d& orig
   out.clear();
   levels = std::clamp(levels, 1, kMaxTreeLevels);
   const std::size_t n = points_world.size();
-  std::vector<std::uint32_t>& hit_of = buffers.hit_of;
-  hit_of.assign(n + 1, 0);
-  tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
-    hit_of[i + 1] = takesStop(points_world[i], origin, max_range) ? 1 : 0;
-  });
-  for (std::size_t i = 0; i < n; ++i) hit_of[i + 1] += hit_of[i];
+  numberHits(points_world, origin, max_range, buffers);
+  const std::vector<std::uint32_t>& hit_of = buffers.hit_of;
   // Each ray by the Morton code of the cube of its end (its hit, or its cut point), shifted
   // up a bit whose set value marks a cut ray (a level-0 bundle of its own); rays of no length
   // or outside the addressable range last, alone.

@@ -291,20 +291,25 @@ TEST(FreeBundles, RaysEndingInOneVoxelKeepTheirEvidenceAndTheMapsShape) {
   expectTheSameShape(cellsOf(bundled), cellsOf(each));
 }
 
+/// `scan` from two origins at 0.1 m with `options` (max range 15 m); the free visits into *visits.
+KernelMap twoOriginsMap(const PointCloud& scan, KernelOptions options, std::size_t* visits) {
+  options.max_range = 15.0;
+  KernelMap map(0.1, options);
+  *visits = 0;
+  for (const Point3f& origin : {Point3f(0, 0, 0), Point3f(0.3F, 0.2F, 0.1F)}) {
+    *visits += map.integrate(scan, origin).free_visits;
+  }
+  return map;
+}
+
 // Where voxels are finer than free_bundle_m, the rays whose hits share
 // a cube of that edge give one capsule: far fewer capsule visits at 0.1 m, the same evidence per
 // metre of ray and the same map's shape; a cube no larger than a voxel is the voxel, bit for bit.
 TEST(FreeBundles, CubesBundleTheRaysOfNeighbouringVoxels) {
   const auto run = [](double bundle_m, std::size_t* visits) {
     KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
-    options.max_range = 15.0;
     options.free_bundle_m = bundle_m;
-    KernelMap map(0.1, options);
-    *visits = 0;
-    for (const Point3f& origin : {Point3f(0, 0, 0), Point3f(0.3F, 0.2F, 0.1F)}) {
-      *visits += map.integrate(roomScan(), origin).free_visits;
-    }
-    return map;
+    return twoOriginsMap(roomScan(), options, visits);
   };
   std::size_t voxel_visits = 0, cube_visits = 0, same_visits = 0;
   const KernelMap voxels = run(0.0, &voxel_visits);
@@ -323,14 +328,8 @@ TEST(FreeBundles, CubesBundleTheRaysOfNeighbouringVoxels) {
 TEST(FreeBundles, ATreeOfBundlesKeepsTheEvidenceAndTheShapeWithFewerVisits) {
   const auto run = [](const PointCloud& scan, double levels, std::size_t* visits) {
     KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
-    options.max_range = 15.0;
     options.free_bundle_levels = levels;
-    KernelMap map(0.1, options);
-    *visits = 0;
-    for (const Point3f& origin : {Point3f(0, 0, 0), Point3f(0.3F, 0.2F, 0.1F)}) {
-      *visits += map.integrate(scan, origin).free_visits;
-    }
-    return map;
+    return twoOriginsMap(scan, options, visits);
   };
   EXPECT_EQ(KernelOptions::defaults(KernelMethod::kAkimapRays).free_bundle_levels, 6.0);
   std::size_t flat_visits = 0, tree_visits = 0;

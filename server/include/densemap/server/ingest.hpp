@@ -51,7 +51,7 @@ struct PipelineCounters {
   double latency_p99_ms = 0.0;
   std::uint64_t evicted_blocks = 0;  // dropped by keep_radius_m / bounds, and their known cells
   std::uint64_t evicted_cells = 0;
-  std::uint64_t decayed_cells = 0;  // occupied cells map.decay made unknown
+  std::uint64_t decayed_cells = 0;      // occupied cells map.decay made unknown
   std::vector<SensorCounters> sensors;  // the same counts per sensor id, with seq gaps
 };
 
@@ -126,6 +126,8 @@ class Ingest {
   void run();
   void runCommands();
   void process(const RawScan& raw);
+  /// Counts `raw`'s rejection (in all, by reason, for its sensor) and tells the reject handler.
+  void rejected(const RawScan& raw, const Rejection& rejection);
   /// The engine's integration in the arena; anything it throws becomes a kInternal rejection.
   std::expected<IntegrationResult, Rejection> integrate(const RawScan& raw);
   /// Counts an integrated scan (its latency, evictions) and hands the result on.
