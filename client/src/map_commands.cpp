@@ -28,10 +28,12 @@ void printStatus(const ServerStatus& s) {
       static_cast<unsigned long long>(s.queries_rejected), s.uptime_s);
   for (const SensorCounters& c : s.sensors) {
     std::printf(
-        "  sensor %s: received %llu, integrated %llu, dropped %llu, rejected %llu, seq gaps %llu\n",
+        "  sensor %s: received %llu, integrated %llu, dropped %llu, rejected %llu, seq gaps %llu; "
+        "latency p50 %.1f ms p99 %.1f ms\n",
         c.sensor_id.c_str(), static_cast<unsigned long long>(c.received),
         static_cast<unsigned long long>(c.integrated), static_cast<unsigned long long>(c.dropped),
-        static_cast<unsigned long long>(c.rejected), static_cast<unsigned long long>(c.seq_gaps));
+        static_cast<unsigned long long>(c.rejected), static_cast<unsigned long long>(c.seq_gaps),
+        c.latency_p50_ms, c.latency_p99_ms);
   }
   std::printf("  memory: process RSS %.1f MiB", s.rss_bytes / 1048576.0);
   if (s.evicted_blocks > 0) {

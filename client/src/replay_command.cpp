@@ -202,6 +202,7 @@ class ReplayRun {
 
 /// --ros: a ROS 2 robot's publisher, once the server's face is known to be on and listening.
 Expected<std::unique_ptr<RosReplayPublisher>> rosPublisher(const ClientOptions& o,
+                                                           const std::string& ns,
                                                            const std::string& topic,
                                                            ros2::ReplayFrames frames, bool reliable,
                                                            double rate, double static_delay_s,
@@ -216,7 +217,7 @@ Expected<std::unique_ptr<RosReplayPublisher>> rosPublisher(const ClientOptions& 
   }
   if (rate > 0) frames.period_ns = static_cast<std::int64_t>(1e9 / rate);
   auto p = RosReplayPublisher::create(
-      {o.domain_id, o.network_interface, o.security}, topic, frames, reliable,
+      {o.domain_id, o.network_interface, o.security}, ns, topic, frames, reliable,
       std::chrono::milliseconds(static_cast<std::int64_t>(static_delay_s * 1000)));
   if (!p) return std::unexpected(p.error());
   if (auto ok = (*p)->waitForReader(static_cast<int>(o.timeout.count())); !ok) {
@@ -276,6 +277,14 @@ ReplayCommand::ReplayCommand(CLI::App& app)
              "(map -> odom static, odom -> base_link per scan, base_link -> lidar static) "
              "on rt/tf and rt/tf_static; the server needs ros2 { enabled: true }");
   c.add_option("--ros-topic", ros_topic_, "ROS topic of the clouds")->capture_default_str();
+  c.add_option("--ros-namespace", ros_namespace_,
+               "Publish as the robot of this namespace (e.g. /robot1): the clouds on "
+               "NS/--ros-topic and TF on NS/tf and NS/tf_static, as a server with "
+               "ros2.robots reads them");
+  c.add_option("--sensor-id", sensor_id_,
+               "Without --ros: the scans' sensor id, what the server counts them under "
+               "(at most 256 bytes)")
+      ->capture_default_str();
   c.add_option("--ros-stamp-offset", ros_frames_.stamp_offset,
                "Stamp each cloud this fraction of a scan period after its pose's TF sample "
                "(0.5: the server interpolates between two samples and waits for the next)")
@@ -309,8 +318,8 @@ int ReplayCommand::run(const ClientOptions& o) {
   const auto before = (*client)->status();
   std::unique_ptr<RosReplayPublisher> ros_out;
   if (ros_) {
-    auto p =
-        rosPublisher(o, ros_topic_, ros_frames_, ros_reliable_, rate_, ros_static_delay_s_, before);
+    auto p = rosPublisher(o, ros_namespace_, ros_topic_, ros_frames_, ros_reliable_, rate_,
+                          ros_static_delay_s_, before);
     if (!p) return fail(p.error().message);
     ros_out = std::move(*p);
   }
@@ -349,7 +358,7 @@ int ReplayCommand::run(const ClientOptions& o) {
       scan->intensities.clear();
     }
     // The server numbers ROS clouds per topic as they arrive (1, 2, ...): key events on that.
-    const RawScan raw = toRawScan(*scan, ros_ ? sent + 1 : i + 1, "replay");
+    const RawScan raw = toRawScan(*scan, ros_ ? sent + 1 : i + 1, sensor_id_);
     if (auto ok = run.send(raw, slot, ros_out.get(), sent); !ok) return fail(ok.error().message);
     if (ros_out) last_raw = raw;
     ++sent;

@@ -32,6 +32,8 @@ class ReplayCommand {
   double fov_top_ = 15.0, fov_bottom_ = -15.0;
   bool ros_ = false;
   std::string ros_topic_ = "/points";
+  std::string ros_namespace_;  // a robot's namespace: its clouds and TF under it
+  std::string sensor_id_ = "replay";
   ros2::ReplayFrames ros_frames_;
   bool ros_reliable_ = true;
   double ros_static_delay_s_ = 0;

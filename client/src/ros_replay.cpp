@@ -5,9 +5,9 @@
 #include <thread>
 #include <vector>
 
+#include "densemap/ros2/names.hpp"
 #include "densemap/wire/dds.hpp"
 #include "densemap/wire/topics.hpp"
-#include "densemap/ros2/names.hpp"
 #include "sensor_msgs.h"
 #include "tf2_msgs.h"
 
@@ -35,28 +35,32 @@ RosReplayPublisher::RosReplayPublisher(const ros2::ReplayFrames& frames)
 RosReplayPublisher::~RosReplayPublisher() = default;
 
 Expected<std::unique_ptr<RosReplayPublisher>> RosReplayPublisher::create(
-    const dds::ParticipantOptions& participant_options, const std::string& topic,
-    const ros2::ReplayFrames& frames, bool reliable, std::chrono::milliseconds static_delay) {
+    const dds::ParticipantOptions& participant_options, const std::string& ns,
+    const std::string& topic, const ros2::ReplayFrames& frames, bool reliable,
+    std::chrono::milliseconds static_delay) {
   std::unique_ptr<RosReplayPublisher> p(new RosReplayPublisher(frames));
   Dds& d = *p->dds_;
-  const std::string cloud_name = ros2::ddsTopicName(topic);
+  const std::string cloud_name =
+      ros2::ddsTopicName(ns.empty() ? topic : ros2::inNamespace(ns, topic));
   if (cloud_name.empty()) return makeError("'" + topic + "' is not a ROS topic name");
+  if (!ns.empty() && ros2::inNamespace(ns, "tf").empty()) {
+    return makeError("'" + ns + "' is not a ROS namespace");
+  }
   auto participant = dds::createParticipant(participant_options);
   if (!participant) return std::unexpected(participant.error());
   d.participant = std::move(*participant);
   auto ct = dds::createTopic(d.participant, sensor_msgs_msg_dds__PointCloud2__desc, cloud_name);
-  auto tt =
-      dds::createTopic(d.participant, tf2_msgs_msg_dds__TFMessage__desc, ros2::ddsTopicName("/tf"));
+  auto tt = dds::createTopic(d.participant, tf2_msgs_msg_dds__TFMessage__desc,
+                             ros2::ddsTopicName(ros2::inNamespace(ns, "tf")));
   auto st = dds::createTopic(d.participant, tf2_msgs_msg_dds__TFMessage__desc,
-                             ros2::ddsTopicName("/tf_static"));
+                             ros2::ddsTopicName(ros2::inNamespace(ns, "tf_static")));
   if (!ct || !tt || !st) return makeError("cannot create the ROS 2 topics");
   d.cloud_topic = std::move(*ct);
   d.tf_topic = std::move(*tt);
   d.tf_static_topic = std::move(*st);
   // A LiDAR driver publishes best effort; the replay can be reliable (the default) so that a
   // reliable reader gets every cloud. /tf: reliable, keep last 100; /tf_static: latched.
-  auto cw = dds::createWriter(d.participant, d.cloud_topic,
-                              dds::rosCloudQos(reliable));
+  auto cw = dds::createWriter(d.participant, d.cloud_topic, dds::rosCloudQos(reliable));
   auto tw = dds::createWriter(d.participant, d.tf_topic, dds::kTfQos);
   auto sw = dds::createWriter(d.participant, d.tf_static_topic, dds::kLatchedQos);
   if (!cw || !tw || !sw) return makeError("cannot create the ROS 2 writers");

@@ -4,22 +4,23 @@
 #include <memory>
 #include <string>
 
-#include "densemap/wire/dds.hpp"
 #include "densemap/geometry/error.hpp"
 #include "densemap/io/raw_scan.hpp"
 #include "densemap/ros2/replay_frames.hpp"
+#include "densemap/wire/dds.hpp"
 
 namespace densemap::cli {
 
 /// `densemap replay --ros`: publishes scans as a ROS 2 robot would (ros2/replay_frames.hpp):
-/// sensor_msgs/PointCloud2 on `topic` and tf2_msgs/TFMessage on rt/tf and rt/tf_static.
+/// sensor_msgs/PointCloud2 on `topic` and tf2_msgs/TFMessage on rt/tf and rt/tf_static, all
+/// under the robot's namespace `ns` when one is given (rt/robot1/points, rt/robot1/tf...).
 /// Loopback only, like every densemap participant (docs/architecture.md).
 class RosReplayPublisher {
  public:
   /// `static_delay` > 0: /tf_static goes out that long after creation (with the first scan
   /// after it), as a late static broadcaster's does; else at once.
   [[nodiscard]] static Expected<std::unique_ptr<RosReplayPublisher>> create(
-      const dds::ParticipantOptions& participant, const std::string& topic,
+      const dds::ParticipantOptions& participant, const std::string& ns, const std::string& topic,
       const ros2::ReplayFrames& frames, bool reliable,
       std::chrono::milliseconds static_delay = std::chrono::milliseconds(0));
   ~RosReplayPublisher();

@@ -307,7 +307,9 @@ std::string statusObject(const ServerStatus& s) {
     const SensorCounters& c = s.sensors[i];
     out += std::string(i ? "," : "") + "{\"sensor_id\":" + jsonString(c.sensor_id) +
            ",\"received\":" + u(c.received) + ",\"integrated\":" + u(c.integrated) +
-           ",\"dropped\":" + u(c.dropped) + ",\"rejected\":" + u(c.rejected) + "}";
+           ",\"dropped\":" + u(c.dropped) + ",\"rejected\":" + u(c.rejected) +
+           ",\"latency_p50_ms\":" + d(c.latency_p50_ms) +
+           ",\"latency_p99_ms\":" + d(c.latency_p99_ms) + "}";
   }
   return out + "]}";
 }
@@ -327,7 +329,8 @@ std::string statusJsonSchema() {
          R"("sensors":{"type":"array","items":{"type":"object","properties":{)"
          R"("sensor_id":{"type":"string"},"received":{"type":"integer"},)"
          R"("integrated":{"type":"integer"},"dropped":{"type":"integer"},)"
-         R"("rejected":{"type":"integer"}}}}}})";
+         R"("rejected":{"type":"integer"},"latency_p50_ms":{"type":"number"},)"
+         R"("latency_p99_ms":{"type":"number"}}}}}})";
 }
 
 }  // namespace densemap::foxglove

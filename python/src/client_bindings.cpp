@@ -67,6 +67,8 @@ py::dict statusDict(const ServerStatus& s) {
     sensor["dropped"] = c.dropped;
     sensor["rejected"] = c.rejected;
     sensor["seq_gaps"] = c.seq_gaps;
+    sensor["latency_p50_ms"] = c.latency_p50_ms;
+    sensor["latency_p99_ms"] = c.latency_p99_ms;
     sensors.append(sensor);
   }
   d["sensors"] = sensors;

@@ -14,6 +14,16 @@ std::string ddsTopicName(std::string_view ros_name) {
   return ros_name.front() == '/' ? "rt" + std::string(ros_name) : "rt/" + std::string(ros_name);
 }
 
+std::string inNamespace(std::string_view ns, std::string_view name) {
+  while (!name.empty() && name.front() == '/') name.remove_prefix(1);
+  std::string base(ns);
+  if (!base.empty() && base.front() != '/') base.insert(base.begin(), '/');
+  if (base == "/") base.clear();
+  if (!base.empty() && ddsTopicName(base).empty()) return {};
+  std::string full = base + "/" + std::string(name);
+  return ddsTopicName(full).empty() ? std::string() : full;
+}
+
 bool isNodeName(std::string_view name) {
   if (name.empty() || name.size() > 255) return false;
   if (std::isdigit(static_cast<unsigned char>(name.front())) != 0) return false;

@@ -208,7 +208,7 @@ void Ingest::published(IntegrationResult& result) {
     counters_.evicted_blocks += result.evicted_blocks;
     counters_.evicted_cells += result.evicted_cells;
     counters_.decayed_cells += result.decayed.erased;
-    sensors_.integrated(result.sensor_id);
+    sensors_.integrated(result.sensor_id, result.latency_ms);
     if (latencies_.size() < 1024) {
       latencies_.push_back(result.latency_ms);
     } else {

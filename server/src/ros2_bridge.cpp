@@ -64,7 +64,8 @@ Ros2Bridge::Ros2Bridge(Ingest& ingest, const Ros2Options& options)
       options_(options),
       dds_(std::make_unique<Dds>()),
       state_(std::make_unique<Topics>()) {
-  state_->tf = ros2::TfBuffer(options.tf_buffer_ns);
+  state_->tf.assign(std::max<std::size_t>(options.robots.size(), 1),
+                    ros2::TfBuffer(options.tf_buffer_ns));
 }
 
 Ros2Bridge::~Ros2Bridge() { stop(); }
@@ -83,27 +84,36 @@ Expected<std::unique_ptr<Ros2Bridge>> Ros2Bridge::create(Ingest& ingest,
   // ROS sensor data QoS (best effort, keep last 5) unless told otherwise; a best-effort reader
   // also matches reliable writers.
   const dds::QosSpec cloud_qos = dds::rosCloudQos(options.reliable_clouds);
-  for (const std::string& name : options.clouds) {
-    auto t = topic(sensor_msgs_msg_dds__PointCloud2__desc, name);
-    if (!t) return std::unexpected(t.error());
-    auto r = dds::createReader(participant, *t, cloud_qos);
-    if (!r) return std::unexpected(r.error());
-    d.cloud_topics.push_back(std::move(*t));
-    d.cloud_readers.push_back(std::move(*r));
-    d.cloud_names.push_back(name);
-    d.cloud_seq.push_back(0);
+  // One robot at the root, or one a namespace: its clouds and its TF tree under it.
+  const std::vector<std::string> namespaces =
+      options.robots.empty() ? std::vector<std::string>{""} : options.robots;
+  for (std::size_t robot = 0; robot < namespaces.size(); ++robot) {
+    const std::string& ns = namespaces[robot];
+    for (const std::string& cloud : options.clouds) {
+      const std::string name = ns.empty() ? cloud : ros2::inNamespace(ns, cloud);
+      auto t = topic(sensor_msgs_msg_dds__PointCloud2__desc, name);
+      if (!t) return std::unexpected(t.error());
+      auto r = dds::createReader(participant, *t, cloud_qos);
+      if (!r) return std::unexpected(r.error());
+      d.cloud_topics.push_back(std::move(*t));
+      d.cloud_readers.push_back(std::move(*r));
+      d.cloud_names.push_back(name);
+      d.cloud_seq.push_back(0);
+      d.cloud_robot.push_back(robot);
+    }
+    RobotTfReaders& tfr = d.robots.emplace_back();
+    auto tf = topic(tf2_msgs_msg_dds__TFMessage__desc, ros2::inNamespace(ns, "tf"));
+    auto tf_static = topic(tf2_msgs_msg_dds__TFMessage__desc, ros2::inNamespace(ns, "tf_static"));
+    if (!tf || !tf_static) return makeError("ros2: cannot create the TF topics of '" + ns + "'");
+    tfr.tf_topic = std::move(*tf);
+    tfr.tf_static_topic = std::move(*tf_static);
+    auto tf_reader = dds::createReader(participant, tfr.tf_topic, dds::kTfQos);
+    auto tf_static_reader =
+        dds::createReader(participant, tfr.tf_static_topic, dds::kTfStaticReaderQos);
+    if (!tf_reader || !tf_static_reader) return makeError("ros2: cannot create the TF readers");
+    tfr.tf_reader = std::move(*tf_reader);
+    tfr.tf_static_reader = std::move(*tf_static_reader);
   }
-  auto tf = topic(tf2_msgs_msg_dds__TFMessage__desc, "/tf");
-  auto tf_static = topic(tf2_msgs_msg_dds__TFMessage__desc, "/tf_static");
-  if (!tf || !tf_static) return makeError("ros2: cannot create the TF topics");
-  d.tf_topic = std::move(*tf);
-  d.tf_static_topic = std::move(*tf_static);
-  auto tf_reader = dds::createReader(participant, d.tf_topic, dds::kTfQos);
-  auto tf_static_reader =
-      dds::createReader(participant, d.tf_static_topic, dds::kTfStaticReaderQos);
-  if (!tf_reader || !tf_static_reader) return makeError("ros2: cannot create the TF readers");
-  d.tf_reader = std::move(*tf_reader);
-  d.tf_static_reader = std::move(*tf_static_reader);
   // Maps for late joiners (RViz, Nav2): reliable, transient-local, keep-last 1.
   const dds::QosSpec latched = dds::kLatchedQos;
   auto map_writer = [&](const dds_topic_descriptor_t& desc, const std::string& ros_name,
@@ -133,10 +143,14 @@ Expected<std::unique_ptr<Ros2Bridge>> Ros2Bridge::create(Ingest& ingest,
   }
   // The server as a ROS node with these readers and writers (as rmw_cyclonedds announces its
   // nodes), so ROS tools list it and its topics.
-  std::vector<const dds::Entity*> readers{&d.tf_reader, &d.tf_static_reader}, writers;
+  std::vector<const dds::Entity*> readers, writers;
+  for (const RobotTfReaders& tfr : d.robots) {
+    readers.push_back(&tfr.tf_reader);
+    readers.push_back(&tfr.tf_static_reader);
+  }
   for (const dds::Entity& r : d.cloud_readers) readers.push_back(&r);
-  for (const dds::Entity* w : {&d.octomap_writer, &d.grid_writer, &d.centers_writer,
-                               &d.slice_writer, &d.costmap_writer}) {
+  for (const dds::Entity* w :
+       {&d.octomap_writer, &d.grid_writer, &d.centers_writer, &d.slice_writer, &d.costmap_writer}) {
     if (w->get() > 0) writers.push_back(w);
   }
   auto node =
@@ -146,10 +160,13 @@ Expected<std::unique_ptr<Ros2Bridge>> Ros2Bridge::create(Ingest& ingest,
   auto ws = dds::WaitSet::create(participant);
   if (!ws) return std::unexpected(ws.error());
   d.waitset.emplace(std::move(*ws));
-  if (auto ok = d.waitset->attachReader(d.tf_reader, kTfTag); !ok)
-    return std::unexpected(ok.error());
-  if (auto ok = d.waitset->attachReader(d.tf_static_reader, kTfStaticTag); !ok) {
-    return std::unexpected(ok.error());
+  for (const RobotTfReaders& tfr : d.robots) {
+    if (auto ok = d.waitset->attachReader(tfr.tf_reader, kTfTag); !ok) {
+      return std::unexpected(ok.error());
+    }
+    if (auto ok = d.waitset->attachReader(tfr.tf_static_reader, kTfStaticTag); !ok) {
+      return std::unexpected(ok.error());
+    }
   }
   for (std::size_t i = 0; i < d.cloud_readers.size(); ++i) {
     if (auto ok = d.waitset->attachReader(d.cloud_readers[i], kCloudTag0 + i); !ok) {
@@ -240,8 +257,20 @@ void Ros2Bridge::loop() {
 
 void Ros2Bridge::takeTransforms() {
   std::uint64_t refused = 0;
+  for (std::size_t robot = 0; robot < dds_->robots.size(); ++robot) {
+    takeTransforms(robot, refused);
+  }
+  if (refused > 0) {
+    std::lock_guard lock(counters_mutex_);
+    counters_.tf_rejected += refused;
+  }
+}
+
+void Ros2Bridge::takeTransforms(std::size_t robot, std::uint64_t& refused) {
+  ros2::TfBuffer& buffer = state_->tf[robot];
   for (const bool is_static : {true, false}) {
-    const dds::Entity& reader = is_static ? dds_->tf_static_reader : dds_->tf_reader;
+    const RobotTfReaders& tfr = dds_->robots[robot];
+    const dds::Entity& reader = is_static ? tfr.tf_static_reader : tfr.tf_reader;
     dds::takeAll<tf2_msgs_msg_dds__TFMessage_>(reader, [&](const tf2_msgs_msg_dds__TFMessage_& m) {
       for (std::uint32_t i = 0; i < m.transforms._length; ++i) {
         const auto& ts = m.transforms._buffer[i];
@@ -252,13 +281,9 @@ void Ros2Bridge::takeTransforms() {
             Eigen::Quaterniond(tr.rotation.w, tr.rotation.x, tr.rotation.y, tr.rotation.z)};
         const char* parent = ts.header.frame_id != nullptr ? ts.header.frame_id : "";
         const char* child = ts.child_frame_id != nullptr ? ts.child_frame_id : "";
-        if (!state_->tf.set(parent, child, s, is_static)) ++refused;
+        if (!buffer.set(parent, child, s, is_static)) ++refused;
       }
     });
-  }
-  if (refused > 0) {
-    std::lock_guard lock(counters_mutex_);
-    counters_.tf_rejected += refused;
   }
 }
 
@@ -301,6 +326,7 @@ void Ros2Bridge::takeClouds(std::size_t topic) {
         Waiting w;
         w.frame = dds::text(m.header.frame_id);
         w.sensor_id = dds_->cloud_names[topic];
+        w.robot = dds_->cloud_robot[topic];
         w.stamp_ns = stampNs(m.header.stamp);
         w.seq = seq;
         w.cloud = std::move(*cloud);
@@ -331,7 +357,7 @@ void Ros2Bridge::resolveWaiting(Clock::time_point now) {
     return std::find(held.begin(), held.end(), id) != held.end();
   };
   for (auto it = waiting.begin(); it != waiting.end();) {
-    auto T = state_->tf.lookup(options_.world_frame, it->frame, it->stamp_ns);
+    auto T = state_->tf[it->robot].lookup(options_.world_frame, it->frame, it->stamp_ns);
     const bool expired = now - it->received > options_.tf_wait;
     if (!T && !expired && T.error() != ros2::TfFailure::kTooOld) {
       it->waited = true;

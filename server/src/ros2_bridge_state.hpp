@@ -18,11 +18,17 @@
 
 namespace densemap::server {
 
+/// One robot's TF topics (rt/tf and rt/tf_static, or <ns>/tf and <ns>/tf_static).
+struct RobotTfReaders {
+  dds::Entity tf_topic, tf_static_topic, tf_reader, tf_static_reader;
+};
+
 struct Ros2Bridge::Dds {
   std::vector<dds::Entity> cloud_topics, cloud_readers;
   std::vector<std::string> cloud_names;  // ROS names, the scans' sensor ids
   std::vector<std::uint64_t> cloud_seq;
-  dds::Entity tf_topic, tf_static_topic, tf_reader, tf_static_reader;
+  std::vector<std::size_t> cloud_robot;  // the robot (index in robots) each cloud topic is of
+  std::vector<RobotTfReaders> robots;    // one a robot; one for the root without ros2.robots
   dds::Entity octomap_topic, grid_topic, centers_topic;
   dds::Entity octomap_writer, grid_writer, centers_writer;
   /// The distance field's topics (a server with esdf): a slice and an inflated costmap.
@@ -33,6 +39,7 @@ struct Ros2Bridge::Dds {
 
 struct Ros2Bridge::Waiting {
   std::string frame, sensor_id;
+  std::size_t robot = 0;  // whose TF tree transforms it
   std::int64_t stamp_ns = 0;
   std::uint64_t seq = 0;
   ros2::DecodedCloud cloud;
@@ -41,7 +48,7 @@ struct Ros2Bridge::Waiting {
 };
 
 struct Ros2Bridge::Topics {
-  ros2::TfBuffer tf;
+  std::vector<ros2::TfBuffer> tf;  // one a robot, as Dds::robots
   std::deque<Waiting> waiting;
   std::unique_ptr<ros2::MapTopicsState> map;
   std::shared_ptr<const MapView> published;  // the version `map` holds

@@ -1,14 +1,18 @@
 #include "densemap/server/sensor_tally.hpp"
 
+#include "densemap/geometry/percentile.hpp"
+
 namespace densemap::server {
 
-SensorCounters& SensorTally::at(const std::string& sensor_id) {
+SensorCounters& SensorTally::at(const std::string& sensor_id) { return sensor(sensor_id).counters; }
+
+SensorTally::Sensor& SensorTally::sensor(const std::string& sensor_id) {
   auto it = by_id_.find(sensor_id);
   if (it != by_id_.end()) return it->second;
   const std::string& id = by_id_.size() < kMaxSensors ? sensor_id : std::string(kOtherSensors);
-  SensorCounters& c = by_id_[id];
-  c.sensor_id = id;
-  return c;
+  Sensor& s = by_id_[id];
+  s.counters.sensor_id = id;
+  return s;
 }
 
 void SensorTally::received(const std::string& sensor_id, std::uint64_t seq) {
@@ -22,10 +26,28 @@ void SensorTally::received(const std::string& sensor_id, std::uint64_t seq) {
   c.last_seq = seq;
 }
 
+void SensorTally::integrated(const std::string& sensor_id, double latency_ms) {
+  Sensor& s = sensor(sensor_id);
+  ++s.counters.integrated;
+  if (s.latencies.size() < kLatencyWindow) {
+    s.latencies.push_back(latency_ms);
+  } else {
+    s.latencies[s.next] = latency_ms;
+    s.next = (s.next + 1) % kLatencyWindow;
+  }
+}
+
 std::vector<SensorCounters> SensorTally::sensors() const {
   std::vector<SensorCounters> out;
   out.reserve(by_id_.size());
-  for (const auto& [id, c] : by_id_) out.push_back(c);
+  for (const auto& [id, s] : by_id_) {
+    SensorCounters c = s.counters;
+    if (!s.latencies.empty()) {
+      c.latency_p50_ms = percentile(s.latencies, 0.5);
+      c.latency_p99_ms = percentile(s.latencies, 0.99);
+    }
+    out.push_back(std::move(c));
+  }
   return out;
 }
 

@@ -249,6 +249,25 @@ Expected<std::optional<Ros2Options>> ros2Options(const proto::ServerConfig& conf
       return makeError("ros2.clouds: '" + topic + "' is not a ROS topic name");
     }
   }
+  if (static_cast<std::size_t>(r.robots_size()) > kMaxRosRobots) {
+    return makeError("ros2.robots: at most " + std::to_string(kMaxRosRobots) + " robots");
+  }
+  for (const std::string& ns : r.robots()) {
+    if (ns.empty() || ns == "/" || ros2::inNamespace(ns, "tf").empty()) {
+      return makeError("ros2.robots: '" + ns + "' is not a ROS namespace (e.g. \"/robot1\")");
+    }
+    const std::string canonical = ros2::inNamespace(ns, "tf");
+    for (const std::string& other : o.robots) {
+      if (ros2::inNamespace(other, "tf") == canonical) {
+        return makeError("ros2.robots: '" + ns + "' is listed twice");
+      }
+    }
+    o.robots.push_back(canonical.substr(0, canonical.size() - 3));
+  }
+  if (std::max<std::size_t>(o.robots.size(), 1) * o.clouds.size() > kMaxRosRobots) {
+    return makeError("ros2: at most " + std::to_string(kMaxRosRobots) +
+                     " cloud topics in all (robots times clouds)");
+  }
   for (const std::string* topic : {&r.octomap_topic(), &r.grid_topic(), &r.centers_topic(),
                                    &r.esdf_slice_topic(), &r.costmap_topic()}) {
     if (!topic->empty() && ros2::ddsTopicName(*topic).empty()) {

@@ -7,6 +7,8 @@
 #include <octomap/OcTree.h>
 
 #include <cstring>
+#include <future>
+#include <map>
 #include <sstream>
 #include <thread>
 
@@ -82,16 +84,16 @@ ServerStatus waitForStatus(Client& client, const std::function<bool(const Server
   return last;
 }
 
-/// The map the server must hold: the same clouds, at the poses a TF buffer fed the replay's
-/// transforms gives at the clouds' stamps, through a pipeline with the server's options.
-std::shared_ptr<const MapView> expectedMap(const fs::path& data, std::size_t scans,
-                                           const fs::path& config,
-                                           const ros2::ReplayFrames& frames) {
+/// Scans [first, first + count) of `data` as the server gets them from `densemap replay --ros
+/// --first FIRST`: posed as a TF buffer fed the replay's transforms gives at the clouds'
+/// stamps, numbered 1, 2 ... as the server numbers a topic's clouds.
+std::vector<RawScan> rosScans(const fs::path& data, std::size_t first, std::size_t count,
+                              const ros2::ReplayFrames& frames, const std::string& sensor_id) {
   auto source = openScanSource(data);
   EXPECT_TRUE(source);
   std::vector<RawScan> raws;
-  for (std::size_t i = 0; i < std::min(scans, (*source)->size()); ++i) {
-    raws.push_back(toRawScan(*(*source)->load(i), i + 1, "/points"));
+  for (std::size_t i = first; i < std::min(first + count, (*source)->size()); ++i) {
+    raws.push_back(toRawScan(*(*source)->load(i), raws.size() + 1, sensor_id));
   }
   ros2::TfBuffer tf;
   EXPECT_TRUE(tf.set(frames.map, frames.odom,
@@ -105,6 +107,20 @@ std::shared_ptr<const MapView> expectedMap(const fs::path& data, std::size_t sca
         ros2::odomToBase(ros2::fromScanPose(r.t_world_sensor, r.q_world_sensor), frames.stampOf(k)),
         false));
   }
+  for (std::size_t k = 0; k < raws.size(); ++k) {
+    auto T = tf.lookup(frames.map, frames.sensor, frames.cloudStamp(k));
+    EXPECT_TRUE(T);
+    const ros2::ScanPose pose = ros2::toScanPose(*T);
+    raws[k].t_world_sensor = pose.t;
+    raws[k].q_world_sensor = pose.q;
+  }
+  return raws;
+}
+
+/// The map of `raws` integrated in order, one at a time, through a pipeline with the options of
+/// the server configured by `config`.
+std::shared_ptr<const MapView> offlineMap(const std::vector<RawScan>& raws,
+                                          const fs::path& config) {
   auto cfg = server::loadServerConfig(config);
   EXPECT_TRUE(cfg) << cfg.error().message;
   auto options = server::ingestOptions(*cfg);
@@ -113,19 +129,30 @@ std::shared_ptr<const MapView> expectedMap(const fs::path& data, std::size_t sca
   EXPECT_TRUE(pipeline);
   (*pipeline)->start();
   for (std::size_t k = 0; k < raws.size(); ++k) {
-    auto T = tf.lookup(frames.map, frames.sensor, frames.cloudStamp(k));
-    EXPECT_TRUE(T);
-    RawScan raw = raws[k];
-    const ros2::ScanPose pose = ros2::toScanPose(*T);
-    raw.t_world_sensor = pose.t;
-    raw.q_world_sensor = pose.q;
-    (*pipeline)->submit(std::move(raw));
+    (*pipeline)->submit(RawScan(raws[k]));
     for (int i = 0; i < 3000 && (*pipeline)->counters().integrated <= k; ++i) {
       std::this_thread::sleep_for(1ms);
     }
   }
   (*pipeline)->stop();
   return (*pipeline)->view();
+}
+
+/// The map the server must hold: the same clouds, at the poses the replay's transforms give,
+/// through a pipeline with the server's options.
+std::shared_ptr<const MapView> expectedMap(const fs::path& data, std::size_t scans,
+                                           const fs::path& config,
+                                           const ros2::ReplayFrames& frames) {
+  return offlineMap(rosScans(data, 0, scans, frames, "/points"), config);
+}
+
+/// Whether `map` holds exactly `expected`'s cells and values.
+void expectSameMap(const GridMap& map, const MapView& expected) {
+  GridMap expected_map(map.resolution(), map.sensorModel());
+  expected.forEachKnown([&](const VoxelKey& k, float v) { expected_map.setLogOdds(k, v); });
+  const MapDiff diff = diffMaps(map, expected_map);
+  EXPECT_EQ(diff.differing(), 0U) << diff.only_in_a << " / " << diff.only_in_b << " / "
+                                  << diff.value_mismatch << " of " << diff.union_cells;
 }
 
 /// The latest sample of a transient-local ROS topic, copied out by `copy`.
@@ -193,11 +220,7 @@ void replayAndCompare(const fs::path& data, std::size_t scans, std::uint32_t kDo
   const GridMap& map = testing::gridOf(*fetched);
   const auto expected = expectedMap(data, scans, dir / "server.textproto", frames);
   ASSERT_GT(map.knownCells(), 10000U);
-  GridMap expected_map(map.resolution(), map.sensorModel());
-  expected->forEachKnown([&](const VoxelKey& k, float v) { expected_map.setLogOdds(k, v); });
-  const MapDiff diff = diffMaps(map, expected_map);
-  EXPECT_EQ(diff.differing(), 0U) << diff.only_in_a << " / " << diff.only_in_b << " / "
-                                  << diff.value_mismatch << " of " << diff.union_cells;
+  expectSameMap(map, *expected);
 
   // The map topics, once they carry the final map (published at most every 0.2 s).
   const auto view = MapView::fromMap(map, scans);
@@ -319,6 +342,114 @@ TEST(Ros2Wire, RealScansThroughPointCloud2AndTfGiveTheOfflineMap) {
   DENSEMAP_REQUIRE_DATA(balm, "balm-realworld");
   test::TempDir dir;
   replayAndCompare(balm, 5, 168, dir.path());
+}
+#endif
+
+#ifndef DENSEMAP_ROS2_REALDATA
+// A fleet into one map: four robots along one scene's path, two as ROS 2 robots in their own
+// namespaces (their own TF trees, every one with frames named odom and base_link) and two with
+// native scans, all at once. The map equals the offline map of all their scans in the order the
+// server integrated them (its map events say which scan each version was), cell for cell, and
+// status counts each robot's sensor apart, with its latency.
+TEST(Ros2Wire, FourRobotsThroughNamespacesAndNativeScansGiveTheOfflineMapInArrivalOrder) {
+  constexpr std::uint32_t kDomain = 201;
+  constexpr std::size_t kPerRobot = 4;
+  test::TempDir dir;
+  const fs::path data = dir.path() / "data";
+  ASSERT_TRUE(writeSmallIndoorScans(data, 4 * kPerRobot));
+  test::ServerProcess server(
+      dir.path(), kDomain,
+      "ros2 { enabled: true reliable_clouds: true tf_wait_s: 3 publish_period_s: 0\n"
+      "       robots: \"/robot1\" robots: \"robot2\" }\n");
+  auto client = connect(kDomain);
+  ASSERT_TRUE(client);
+
+  ros2::ReplayFrames frames;
+  frames.stamp_base_ns = kStampBase;
+  frames.stamp_offset = 0.5;
+  const auto robotArgs = [&](std::size_t r) {
+    const std::string common = "--domain-id " + std::to_string(kDomain) + " replay --data " +
+                               data.string() + " --rate 10 --first " +
+                               std::to_string(r * kPerRobot) + " --limit " +
+                               std::to_string(kPerRobot);
+    if (r < 2) {
+      return common + " --ros --ros-namespace /robot" + std::to_string(r + 1) +
+             " --ros-stamp-offset 0.5 --ros-stamp-base-ns " + std::to_string(kStampBase);
+    }
+    return common + " --sensor-id robot" + std::to_string(r + 1) + "/lidar";
+  };
+  const std::array<std::string, 4> sensor_ids{"/robot1/points", "/robot2/points", "robot3/lidar",
+                                              "robot4/lidar"};
+  std::vector<std::future<int>> robots;
+  for (std::size_t r = 0; r < 4; ++r) {
+    robots.push_back(std::async(std::launch::async, [&, r] { return runCli(robotArgs(r)); }));
+  }
+  // The order of integration, from the map events (the server keeps 64 for a slow reader).
+  std::vector<std::pair<std::string, std::uint64_t>> order;
+  const auto poll = [&] {
+    client->pollEvents([&](const MapEventInfo& e) {
+      if (e.from_scan) order.emplace_back(e.sensor_id, e.scan_seq);
+    });
+  };
+  const auto deadline = std::chrono::steady_clock::now() + 60s;
+  while (order.size() < 4 * kPerRobot && std::chrono::steady_clock::now() < deadline) {
+    poll();
+    std::this_thread::sleep_for(50ms);
+  }
+  for (auto& r : robots) EXPECT_EQ(r.get(), 0);
+  poll();
+  ASSERT_EQ(order.size(), 4 * kPerRobot);
+
+  // Each robot's scans as the server got them: the ROS robots' at the poses of their own TF
+  // trees, numbered per topic; the native robots' as sent (numbered by dataset index + 1).
+  std::map<std::pair<std::string, std::uint64_t>, RawScan> sent;
+  for (std::size_t r = 0; r < 4; ++r) {
+    if (r < 2) {
+      for (RawScan& raw : rosScans(data, r * kPerRobot, kPerRobot, frames, sensor_ids[r])) {
+        sent.emplace(std::make_pair(raw.sensor_id, raw.seq), std::move(raw));
+      }
+      continue;
+    }
+    auto source = openScanSource(data);
+    ASSERT_TRUE(source);
+    for (std::size_t i = r * kPerRobot; i < (r + 1) * kPerRobot; ++i) {
+      RawScan raw = toRawScan(*(*source)->load(i), i + 1, sensor_ids[r]);
+      sent.emplace(std::make_pair(raw.sensor_id, raw.seq), std::move(raw));
+    }
+  }
+  std::vector<RawScan> arrival;
+  for (const auto& key : order) {
+    auto it = sent.find(key);
+    ASSERT_NE(it, sent.end()) << key.first << " #" << key.second;
+    arrival.push_back(it->second);
+  }
+  // The robots really were interleaved: not every robot's scans came in one run.
+  std::size_t switches = 0;
+  for (std::size_t i = 1; i < order.size(); ++i) switches += order[i].first != order[i - 1].first;
+  EXPECT_GT(switches, 3U);
+
+  auto fetched = client->fetchMap(order.size());
+  ASSERT_TRUE(fetched) << fetched.error().message;
+  const GridMap& map = testing::gridOf(*fetched);
+  ASSERT_GT(map.knownCells(), 10000U);
+  expectSameMap(map, *offlineMap(arrival, dir.path() / "server.textproto"));
+
+  const ServerStatus status = waitForStatus(*client, [&](const ServerStatus& s) {
+    return s.integrated == 4 * kPerRobot && s.sensors.size() == 4;
+  });
+  EXPECT_EQ(status.ros_submitted, 2 * kPerRobot);
+  EXPECT_EQ(status.ros_no_transform, 0U);
+  ASSERT_EQ(status.sensors.size(), 4U);
+  for (const SensorCounters& c : status.sensors) {
+    EXPECT_NE(std::find(sensor_ids.begin(), sensor_ids.end(), c.sensor_id), sensor_ids.end())
+        << c.sensor_id;
+    EXPECT_EQ(c.received, kPerRobot) << c.sensor_id;
+    EXPECT_EQ(c.integrated, kPerRobot) << c.sensor_id;
+    EXPECT_EQ(c.seq_gaps, 0U) << c.sensor_id;
+    EXPECT_GT(c.latency_p50_ms, 0.0) << c.sensor_id;
+    EXPECT_GE(c.latency_p99_ms, c.latency_p50_ms) << c.sensor_id;
+  }
+  EXPECT_EQ(server.stop(), 0);
 }
 #endif
 
@@ -501,6 +632,15 @@ TEST(Ros2Wire, TopicAndTypeNamesFollowRmwCycloneddsConventions) {
   EXPECT_EQ(ros2::ddsTopicName(""), "");
   EXPECT_EQ(ros2::ddsTopicName("/points/"), "");
   EXPECT_EQ(ros2::ddsTopicName("/bad name"), "");
+  // A robot's topics under its namespace.
+  EXPECT_EQ(ros2::inNamespace("/robot1", "/points"), "/robot1/points");
+  EXPECT_EQ(ros2::inNamespace("robot1", "points"), "/robot1/points");
+  EXPECT_EQ(ros2::inNamespace("/fleet/robot1", "tf"), "/fleet/robot1/tf");
+  EXPECT_EQ(ros2::inNamespace("", "/points"), "/points");
+  EXPECT_EQ(ros2::inNamespace("/", "tf_static"), "/tf_static");
+  EXPECT_EQ(ros2::inNamespace("/robot 1", "tf"), "");
+  EXPECT_EQ(ros2::inNamespace("/robot1/", "tf"), "");
+  EXPECT_EQ(ros2::inNamespace("/robot1", ""), "");
   EXPECT_STREQ(sensor_msgs_msg_dds__PointCloud2__desc.m_typename,
                "sensor_msgs::msg::dds_::PointCloud2_");
   EXPECT_STREQ(tf2_msgs_msg_dds__TFMessage__desc.m_typename, "tf2_msgs::msg::dds_::TFMessage_");

@@ -39,7 +39,8 @@ Expected<void> writeStatus(const Entity& writer, const ServerStatus& st) {
   sensors.reserve(st.sensors.size());
   for (const SensorCounters& sc : st.sensors) {
     sensors.push_back(
-        {lend(sc.sensor_id), sc.received, sc.integrated, sc.dropped, sc.rejected, sc.seq_gaps});
+        {lend(sc.sensor_id), sc.received, sc.integrated, sc.dropped, sc.rejected, sc.seq_gaps,
+         sc.latency_p50_ms, sc.latency_p99_ms});
   }
   s.sensors = borrowSequence<dds_sequence_densemap_msgs_SensorStatus>(sensors);
   s.ros_enabled = st.ros_enabled;
@@ -98,7 +99,9 @@ ServerStatus statusFromWire(const densemap_msgs_Status& s) {
                            .integrated = sc.integrated,
                            .dropped = sc.dropped,
                            .rejected = sc.rejected,
-                           .seq_gaps = sc.seq_gaps});
+                           .seq_gaps = sc.seq_gaps,
+                           .latency_p50_ms = sc.latency_p50_ms,
+                           .latency_p99_ms = sc.latency_p99_ms});
   }
   out.ros_enabled = s.ros_enabled;
   out.ros_received = s.ros_received;

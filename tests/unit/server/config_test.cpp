@@ -65,6 +65,20 @@ TEST(ServerConfig, Ros2OptionsAndTheirErrors) {
   ASSERT_TRUE(humble && *humble);
   EXPECT_EQ((*humble)->gid_layout, RosGidLayout::kHumble);
   EXPECT_EQ((*humble)->node_name, "map_2");
+  // Robots' namespaces, written as the user likes, kept in one form.
+  auto fleet = options("ros2 { enabled: true robots: \"/robot1\" robots: \"robot_2\" }\n");
+  ASSERT_TRUE(fleet && *fleet);
+  EXPECT_EQ((*fleet)->robots, (std::vector<std::string>{"/robot1", "/robot_2"}));
+  std::string too_many = "ros2 { enabled: true ";
+  for (int i = 0; i <= 64; ++i) too_many += "robots: \"/r" + std::to_string(i) + "\" ";
+  too_many += "}\n";
+  std::string too_many_topics = "ros2 { enabled: true clouds: \"a\" clouds: \"b\" ";
+  for (int i = 0; i < 33; ++i) too_many_topics += "robots: \"/r" + std::to_string(i) + "\" ";
+  too_many_topics += "}\n";
+  for (const std::string& bad : {too_many, too_many_topics}) {
+    auto config = loadServerConfig(writeConfig(dir, bad));
+    EXPECT_FALSE(config) << bad;
+  }
   for (const char* bad :
        {"ros2 { enabled: true clouds: \"/bad topic\" }\n",
         "ros2 { enabled: true world_frame: \"\" }\n", "ros2 { enabled: true tf_wait_s: -1 }\n",
@@ -73,7 +87,11 @@ TEST(ServerConfig, Ros2OptionsAndTheirErrors) {
         "ros2 { enabled: true octomap_topic: \"/a//b\" }\n",
         "ros2 { enabled: true distro: \"foxy\" }\n", "ros2 { enabled: true node_name: \"\" }\n",
         "ros2 { enabled: true node_name: \"2d_map\" }\n",
-        "ros2 { enabled: true node_name: \"a/b\" }\n"}) {
+        "ros2 { enabled: true node_name: \"a/b\" }\n",
+        "ros2 { enabled: true robots: \"/\" }\n", "ros2 { enabled: true robots: \"\" }\n",
+        "ros2 { enabled: true robots: \"/robot 1\" }\n",
+        "ros2 { enabled: true robots: \"/r1\" robots: \"r1\" }\n",
+        "ros2 { enabled: true robots: \"/r1/\" }\n"}) {
     // Refused at load, with the file's name (ros2 errors had none).
     const auto file = writeConfig(dir, bad);
     auto r = loadServerConfig(file);

@@ -636,7 +636,7 @@ TEST(SensorTally, CountsGapsWithinEachSensorsIncreasingSequence) {
   SensorTally sut;
   for (std::uint64_t seq : {1, 2, 5, 6, 10}) sut.received("a", seq);  // 2 + 3 skipped
   for (std::uint64_t seq : {7, 8, 1, 2}) sut.received("b", seq);      // a restart, no gap
-  sut.integrated("a");
+  sut.integrated("a", 5.0);
   sut.dropped("b");
   sut.rejected("b");
   const auto sensors = sut.sensors();
@@ -648,6 +648,24 @@ TEST(SensorTally, CountsGapsWithinEachSensorsIncreasingSequence) {
   EXPECT_EQ(sensors[1].seq_gaps, 0U);
   EXPECT_EQ(sensors[1].dropped, 1U);
   EXPECT_EQ(sensors[1].rejected, 1U);
+}
+
+TEST(SensorTally, EachSensorsLatencyPercentilesAreOverItsOwnLastScans) {
+  SensorTally sut;
+  // "a": 1 .. 100 ms, then 300 more at 1000 ms push all but 1000 ms out of its window.
+  for (int i = 1; i <= 100; ++i) sut.integrated("a", i);
+  sut.integrated("b", 7.0);
+  auto sensors = sut.sensors();
+  ASSERT_EQ(sensors.size(), 2U);
+  EXPECT_EQ(sensors[0].latency_p50_ms, 50.0);
+  EXPECT_EQ(sensors[0].latency_p99_ms, 99.0);
+  EXPECT_EQ(sensors[1].latency_p50_ms, 7.0);
+  EXPECT_EQ(sensors[1].latency_p99_ms, 7.0);
+  for (int i = 0; i < 300; ++i) sut.integrated("a", 1000.0);
+  sensors = sut.sensors();
+  EXPECT_EQ(sensors[0].integrated, 400U);
+  EXPECT_EQ(sensors[0].latency_p50_ms, 1000.0);
+  EXPECT_EQ(sensors[1].latency_p50_ms, 7.0);
 }
 
 TEST(SensorTally, KeepsAtMostSixtyFourIdsApartAndCountsTheRestTogether) {

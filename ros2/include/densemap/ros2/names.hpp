@@ -12,6 +12,10 @@ namespace densemap::ros2 {
 /// ("/points" and "points" -> "rt/points"). Errors (empty string) for an empty name, a name
 /// ending in '/', or characters ROS does not allow (letters, digits, '_' and '/' only).
 [[nodiscard]] std::string ddsTopicName(std::string_view ros_name);
+/// `name` resolved in the namespace `ns` as a ROS name is ("/robot1" and "/points" or "points"
+/// -> "/robot1/points"; an empty or "/" namespace leaves "/points"). Empty when either is not a
+/// valid ROS name (ddsTopicName's rules).
+[[nodiscard]] std::string inNamespace(std::string_view ns, std::string_view name);
 /// Whether `name` is a valid ROS 2 node name (rcl's rules: letters, digits and '_', not
 /// empty, not starting with a digit; at most 255 characters, rmw_dds_common's bound 256).
 [[nodiscard]] bool isNodeName(std::string_view name);

@@ -21,8 +21,15 @@ namespace densemap::server {
 /// the server must be told which its robot runs: ros2.distro).
 enum class RosGidLayout { kHumble, kIronAndLater };
 
+/// At most this many robots (ros2.robots) and cloud topics in all, as many as the ingest keeps
+/// sensors apart (SensorTally::kMaxSensors).
+inline constexpr std::size_t kMaxRosRobots = 64;
+
 struct Ros2Options {
   std::vector<std::string> clouds{"/points"};  // ROS topic names
+  /// Robots' namespaces: each reads `clouds` under its namespace and its own TF tree
+  /// (<ns>/tf, <ns>/tf_static). Empty: one robot, `clouds` as given, TF on /tf, /tf_static.
+  std::vector<std::string> robots;
   bool reliable_clouds = false;
   std::string world_frame = "map";
   /// A cloud whose transform is not there yet waits this long (octomap_server's TF filter
@@ -65,7 +72,8 @@ struct Ros2Counters {
 /// The server's ROS 2 face (docs/ros2.md), one thread on the server's participant:
 /// - sensor_msgs/PointCloud2 on each configured cloud topic, transformed into `world_frame`
 ///   with the TF buffer (rt/tf, rt/tf_static) at the cloud's stamp and submitted to the
-///   pipeline as sensor-frame scans (sensor id = the topic name). A cloud whose transform is
+///   pipeline as sensor-frame scans (sensor id = the topic name). With ros2.robots, each
+///   robot's clouds are looked up in its own TF tree (<ns>/tf, <ns>/tf_static). A cloud whose transform is
 ///   not there yet waits up to tf_wait (at most max_waiting clouds; the oldest goes first).
 /// - octomap_msgs/Octomap, nav_msgs/OccupancyGrid and sensor_msgs/PointCloud2 of occupied
 ///   centres, transient-local, at most every publish_period_s and only after the map changed,
@@ -92,6 +100,8 @@ class Ros2Bridge {
   Ros2Bridge(Ingest& ingest, const Ros2Options& options);
   void loop();
   void takeTransforms();
+  /// One robot's transforms into its TF buffer; counts those refused into `refused`.
+  void takeTransforms(std::size_t robot, std::uint64_t& refused);
   void takeClouds(std::size_t topic);
   /// Submits what can be transformed now; drops what waited too long (or can never resolve).
   void resolveWaiting(std::chrono::steady_clock::time_point now);

@@ -20,6 +20,9 @@ struct SensorCounters {
   /// pipeline saw them (e.g. overwritten in the DDS reader's history) or never sent.
   std::uint64_t seq_gaps = 0;
   std::uint64_t last_seq = 0;
+  /// Received -> published of its last 256 integrated scans (0 before the first).
+  double latency_p50_ms = 0.0;
+  double latency_p99_ms = 0.0;
 
   bool operator==(const SensorCounters&) const = default;
 };
