@@ -2,10 +2,12 @@
 
 #include "map_kind.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 
+#include "densemap/geometry/block_layout.hpp"
 #include "densemap/parallel/tbb_runner.hpp"
 
 namespace densemap {
@@ -121,9 +123,8 @@ std::expected<IntegrationResult, Rejection> Engine::integrate(const RawScan& raw
   Point3f origin_world = Point3f::Zero();
   transform(*scan, points_world, origin_world);
   const bool stamped = decay_ && decay_->options().use_stamps;
-  IntegrationResult result = integratePoints(
-      points_world, origin_world,
-      stamped ? raw.stamp_ns : steadyNowNs());
+  IntegrationResult result =
+      integratePoints(points_world, origin_world, stamped ? raw.stamp_ns : steadyNowNs());
   result.sensor_id = raw.sensor_id;
   result.scan_seq = raw.seq;
   result.stamp_ns = raw.stamp_ns;
@@ -138,9 +139,7 @@ std::expected<IntegrationResult, Rejection> Engine::integrateWorld(
   if (auto ok = checkWorldScan(points_world, origin_world, options_.limits); !ok) {
     return std::unexpected(std::move(ok.error()));
   }
-  return integratePoints(
-      points_world, origin_world,
-      stamp_ns.value_or(steadyNowNs()));
+  return integratePoints(points_world, origin_world, stamp_ns.value_or(steadyNowNs()));
 }
 
 IntegrationResult Engine::integratePoints(const PointCloud& points_world,
@@ -149,7 +148,8 @@ IntegrationResult Engine::integratePoints(const PointCloud& points_world,
   CellChanges* changes =
       options_.collect_changes || kind_->needsChanges() ? &result.changes : nullptr;
   decayBefore(now_ns, result, changes);
-  result.stats = kind_->integrate(points_world, origin_world, changes);
+  result.stats =
+      kind_->integrate(raysReachingBounds(points_world, origin_world), origin_world, changes);
   observeHits(now_ns);
   evict(origin_world, result, changes);
   result.from_scan = true;
@@ -226,6 +226,49 @@ void Engine::evict(const Point3f& origin, IntegrationResult& result, CellChanges
   const EvictStats stats = kind_->evict(keep, changes);
   result.evicted_blocks = stats.blocks;
   result.evicted_cells = stats.cells;
+}
+
+bool segmentMeetsBox(const Point3f& from, const Point3f& to, const Point3f& lo, const Point3f& hi) {
+  double t0 = 0.0, t1 = 1.0;
+  for (int a = 0; a < 3; ++a) {
+    const double o = from[a], d = static_cast<double>(to[a]) - o;
+    if (d == 0.0) {
+      if (o < lo[a] || o > hi[a]) return false;
+      continue;
+    }
+    double ta = (lo[a] - o) / d, tb = (hi[a] - o) / d;
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+    if (t0 > t1) return false;
+  }
+  return true;
+}
+
+const PointCloud& Engine::raysReachingBounds(const PointCloud& points_world,
+                                             const Point3f& origin) {
+  if (!options_.bounds || options_.kernel) return points_world;
+  // Every cell of a kept block (centre in the box) lies within half a block of the box; one
+  // cell more covers a ray that grazes a kept cell's corner.
+  const float margin = static_cast<float>(options_.resolution_m * (block::kEdge / 2 + 1));
+  const Point3f lo = options_.bounds->first - Point3f::Constant(margin);
+  const Point3f hi = options_.bounds->second + Point3f::Constant(margin);
+  const double max_range = options_.max_range_m;
+  rays_in_bounds_.clear();
+  for (const Point3f& p : points_world) {
+    // A ray ending in the box meets it; only the others need the slab test.
+    if ((p.array() >= lo.array()).all() && (p.array() <= hi.array()).all()) {
+      rays_in_bounds_.push_back(p);
+      continue;
+    }
+    Point3f end = p;
+    const double length2 = (p - origin).cast<double>().squaredNorm();
+    if (max_range >= 0 && length2 > max_range * max_range) {
+      end = origin + ((p - origin).cast<double>() * (max_range / std::sqrt(length2))).cast<float>();
+    }
+    if (segmentMeetsBox(origin, end, lo, hi)) rays_in_bounds_.push_back(p);
+  }
+  return rays_in_bounds_;
 }
 
 }  // namespace densemap

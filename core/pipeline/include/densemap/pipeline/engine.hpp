@@ -53,7 +53,10 @@ struct PipelineOptions {
   /// blocks whose centre is farther than this from the scan's sensor origin are dropped (their
   /// cells become unknown; 0: off) ...
   double keep_radius_m = 0.0;
-  /// ... and so are blocks whose centre lies outside this box (min, max; none: no box).
+  /// ... and so are blocks whose centre lies outside this box (min, max; none: no box). A
+  /// log-odds map with a box traverses only the rays that reach it (boundsReach): a cell's
+  /// value depends only on the rays through it, so the box's cells are those of a map without
+  /// it, and servers whose boxes tile space (spatial shards) together hold that map.
   std::optional<std::pair<Point3f, Point3f>> bounds{};
   /// How readers get versions. true: every version is published (MapView::publish) and a
   /// reader holds it while the engine writes the next one, which copies each block it changes
@@ -66,6 +69,10 @@ struct PipelineOptions {
   /// on the grid backend.
   std::optional<DecayOptions> decay;
 };
+
+/// Whether the segment from `from` to `to` meets the box [lo, hi] (closed; slab test).
+[[nodiscard]] bool segmentMeetsBox(const Point3f& from, const Point3f& to, const Point3f& lo,
+                                   const Point3f& hi);
 
 /// What the publish stage hands on for every integrated scan.
 struct IntegrationResult {
@@ -165,6 +172,10 @@ class Engine {
   /// Drops the blocks keep_radius_m / bounds leave out, after a scan from `origin`.
   void evict(const Point3f& origin, IntegrationResult& result, CellChanges* changes);
   void publish(IntegrationResult& result);
+  /// The points whose rays reach the cells `bounds` keeps (all when there is no box or the kind
+  /// is a kernel map, whose cells depend on the hits around them): `points_world` itself or
+  /// rays_in_bounds_.
+  const PointCloud& raysReachingBounds(const PointCloud& points_world, const Point3f& origin);
 
   PipelineOptions options_;
   /// The map kind (log-odds or a kernel map) behind one interface (map_kind.hpp).
@@ -172,6 +183,7 @@ class Engine {
   std::atomic<std::shared_ptr<const MapView>> view_;
   std::unique_ptr<OccupancyDecay> decay_;  // PipelineOptions::decay; null when off
   std::vector<VoxelKey> hits_;             // observeHits' scratch
+  PointCloud rays_in_bounds_;              // raysReachingBounds' scratch
 };
 
 }  // namespace densemap
