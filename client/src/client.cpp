@@ -544,6 +544,7 @@ std::size_t Client::pollDeltas(const std::function<void(const DeltaInfo&)>& f) {
 std::size_t Client::pollEvents(const std::function<void(const MapEventInfo&)>& f) {
   return impl_->pollEvents(f);
 }
+Expected<MapManifestInfo> Client::manifest() { return impl_->manifest(); }
 Expected<MapSnapshot> Client::fetchMap(std::uint64_t min_version) {
   return impl_->fetchMap(min_version);
 }

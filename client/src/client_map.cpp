@@ -1,3 +1,4 @@
+#include <cmath>
 #include <thread>
 
 #include "client_parts.hpp"
@@ -39,6 +40,36 @@ std::size_t Client::Impl::pollEvents(const std::function<void(const MapEventInfo
     info.latency_ms = e.latency_ms;
     f(info);
   });
+}
+
+Expected<MapManifestInfo> Client::Impl::manifest() {
+  if (auto ok = permitted(dds_->man_r, "reading the manifest"); !ok) {
+    return std::unexpected(ok.error());
+  }
+  const auto deadline = Clock::now() + options_.timeout;
+  std::optional<densemap_msgs_MapManifest> latest;
+  while (!latest) {
+    dds::forEachSample<densemap_msgs_MapManifest>(
+        dds_->man_r, false, [&](const densemap_msgs_MapManifest& m) { latest = m; });
+    if (latest) break;
+    if (Clock::now() > deadline) return makeError("no map manifest from densemap-server");
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  MapManifestInfo info{latest->version, latest->resolution, latest->known_cells, std::nullopt};
+  if (latest->bounded) {
+    const Point3f lo(static_cast<float>(latest->min_x), static_cast<float>(latest->min_y),
+                     static_cast<float>(latest->min_z));
+    const Point3f hi(static_cast<float>(latest->max_x), static_cast<float>(latest->max_y),
+                     static_cast<float>(latest->max_z));
+    if (!lo.allFinite() || !hi.allFinite() || (lo.array() > hi.array()).any()) {
+      return makeError("the server's manifest holds a malformed box");
+    }
+    info.bounds = std::make_pair(lo, hi);
+  }
+  if (!(std::isfinite(info.resolution) && info.resolution > 0)) {
+    return makeError("the server's manifest holds a malformed resolution");
+  }
+  return info;
 }
 
 Expected<MapSnapshot> Client::Impl::fetchMap(std::uint64_t min_version) {

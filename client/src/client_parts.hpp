@@ -81,6 +81,7 @@ struct Client::Impl {
   Expected<ServerStatus> status();
   std::size_t pollDeltas(const std::function<void(const DeltaInfo&)>& f);
   std::size_t pollEvents(const std::function<void(const MapEventInfo&)>& f);
+  Expected<MapManifestInfo> manifest();
   Expected<MapSnapshot> fetchMap(std::uint64_t min_version);
 
   ClientOptions options_;

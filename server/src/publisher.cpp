@@ -1,7 +1,7 @@
 #include "publisher.hpp"
 
-#include "densemap/wire/delta_wire.hpp"
 #include "densemap/query/version_delta.hpp"
+#include "densemap/wire/delta_wire.hpp"
 #include "densemap_msgs.h"
 
 namespace densemap::server {
@@ -99,6 +99,15 @@ void Publisher::publishManifest() {
   manifest.version = view->version();
   manifest.resolution = view->grid().resolution();
   manifest.known_cells = view->knownCells();
+  if (const auto& box = ingest_.options().bounds) {
+    manifest.bounded = true;
+    manifest.min_x = box->first.x();
+    manifest.min_y = box->first.y();
+    manifest.min_z = box->first.z();
+    manifest.max_x = box->second.x();
+    manifest.max_y = box->second.y();
+    manifest.max_z = box->second.z();
+  }
   (void)dds::write(writers_.manifest, &manifest);
 }
 

@@ -92,6 +92,15 @@ struct MapEventInfo {
   double latency_ms = 0.0;  // the server's receive -> published
 };
 
+/// The server's map/manifest: its latest version and, for a spatial shard (map.bounds), the
+/// box whose blocks (by their centre) it keeps.
+struct MapManifestInfo {
+  std::uint64_t version = 0;
+  double resolution = 0.0;
+  std::uint64_t known_cells = 0;
+  std::optional<std::pair<Point3f, Point3f>> bounds;  // none: all of space
+};
+
 struct ClientAccess;
 
 /// A densemap-server client over DDS (loopback by default). Requests carry a random client id
@@ -148,6 +157,9 @@ class Client {
   std::size_t pollDeltas(const std::function<void(const DeltaInfo&)>& f);
   /// Calls `f` for every map event received since the last call; returns how many.
   std::size_t pollEvents(const std::function<void(const MapEventInfo&)>& f);
+  /// The server's latest manifest (published at 1 Hz, transient-local); waits for the first
+  /// up to the timeout.
+  [[nodiscard]] Expected<MapManifestInfo> manifest();
   /// Fetches the server's map (what a late joiner does): waits until the manifest reaches
   /// `min_version`, asks for the map (send-map) and rebuilds it from the tiles of one version.
   /// Times out only when tiles stop arriving.

@@ -1,0 +1,154 @@
+// Spatial shards end to end, as separate processes on loopback: a server over all of space and
+// two whose map.bounds split it (each on its own DDS domain), fed the same scans. Together the
+// shards hold the single server's map cell for cell, their manifests say where each is, and
+// ShardedClient's point, box and ray queries across the border equal the single server's.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <set>
+
+#include "densemap/client/client.hpp"
+#include "densemap/client/sharded_client.hpp"
+#include "densemap/client/testing.hpp"
+#include "densemap/map/map_diff.hpp"
+#include "densemap/test_support/data_dir.hpp"
+#include "densemap/test_support/server_clients.hpp"
+#include "densemap/test_support/server_process.hpp"
+
+namespace densemap {
+namespace {
+
+using namespace std::chrono_literals;
+
+constexpr std::uint32_t kSingle = 202, kWest = 203, kEast = 204;
+
+std::string boundsConfig(float min_x, float max_x) {
+  return "bounds { min_x: " + std::to_string(min_x) +
+         " min_y: -1000 min_z: -100 max_x: " + std::to_string(max_x) + " max_y: 1000 max_z: 100 }";
+}
+
+TEST(Shards, TwoShardsHoldTheSingleServersMapAndTheirRoutedQueriesEqualItsAnswers) {
+  test::TempDir dir;
+  SequenceOptions o;
+  o.scene = "indoor";
+  o.sensor = "vlp16";
+  o.columns = 300;
+  o.scans = 6;
+  o.ground_truth_resolution_m = 0;
+  const auto raws = test::simulatedRawScans(dir.path(), o, "front");
+  ASSERT_EQ(raws.size(), 6U);
+  // The split: between the first and last scan's origins, inside a block (a block belongs to
+  // the shard its centre lies in).
+  const float split = static_cast<float>(
+      0.5 * (raws.front().t_world_sensor[0] + raws.back().t_world_sensor[0]) + 0.3);
+  for (const char* name : {"single", "west", "east"})
+    std::filesystem::create_directory(dir.path() / name);
+  test::ServerProcess single(dir.path() / "single", kSingle);
+  test::ServerProcess west(dir.path() / "west", kWest, "", false, 0, boundsConfig(-1000, split));
+  test::ServerProcess east(dir.path() / "east", kEast, "", false, 0, boundsConfig(split, 1000));
+  std::vector<std::unique_ptr<Client>> clients;
+  for (std::uint32_t domain : {kSingle, kWest, kEast}) {
+    clients.push_back(test::connectClient(domain));
+    ASSERT_TRUE(clients.back());
+    test::replayScans(*clients.back(), raws);
+  }
+
+  // The manifests say where each server's map is.
+  auto single_manifest = clients[0]->manifest();
+  auto west_manifest = clients[1]->manifest();
+  ASSERT_TRUE(single_manifest && west_manifest);
+  EXPECT_FALSE(single_manifest->bounds);
+  ASSERT_TRUE(west_manifest->bounds);
+  EXPECT_EQ(west_manifest->bounds->second.x(), split);
+  EXPECT_EQ(west_manifest->bounds->first.y(), -1000.0F);
+
+  // Together the shards hold the single server's map, cell for cell, each cell once.
+  auto whole = clients[0]->fetchMap(raws.size());
+  auto west_map = clients[1]->fetchMap(raws.size());
+  auto east_map = clients[2]->fetchMap(raws.size());
+  ASSERT_TRUE(whole && west_map && east_map);
+  const GridMap& w = testing::gridOf(*west_map);
+  const GridMap& e = testing::gridOf(*east_map);
+  ASSERT_GT(w.knownCells(), 1000U);
+  ASSERT_GT(e.knownCells(), 1000U);
+  GridMap both(w.resolution(), w.sensorModel());
+  std::size_t twice = 0;
+  w.forEachKnown([&](const VoxelKey& k, float v) { both.setLogOdds(k, v); });
+  e.forEachKnown([&](const VoxelKey& k, float v) {
+    twice += both.logOdds(k).has_value();
+    both.setLogOdds(k, v);
+  });
+  EXPECT_EQ(twice, 0U);
+  const MapDiff diff = diffMaps(testing::gridOf(*whole), both);
+  EXPECT_EQ(diff.differing(), 0U) << diff.only_in_a << " / " << diff.only_in_b << " / "
+                                  << diff.value_mismatch << " of " << diff.union_cells;
+
+  // Queries across the border, routed, equal the single server's answers.
+  auto sharded = ShardedClient::create(
+      {{.domain_id = kWest, .timeout = 10s}, {.domain_id = kEast, .timeout = 10s}});
+  ASSERT_TRUE(sharded) << sharded.error().message;
+  const Point3f centre(split, static_cast<float>(raws.front().t_world_sensor[1]),
+                       static_cast<float>(raws.front().t_world_sensor[2]));
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(-8.0F, 8.0F), uz(-1.0F, 3.0F);
+  std::vector<float> xyz;
+  for (int i = 0; i < 5000; ++i) {
+    xyz.insert(xyz.end(), {centre.x() + u(rng), centre.y() + u(rng), uz(rng)});
+  }
+  auto routed = (*sharded)->queryPoints(xyz);
+  auto direct = clients[0]->queryPoints(std::span<const float>(xyz));
+  ASSERT_TRUE(routed && direct);
+  EXPECT_EQ(routed->states, direct->states);
+  EXPECT_EQ(routed->log_odds, direct->log_odds);
+  EXPECT_GT(std::count(direct->states.begin(), direct->states.end(), CellState::kOccupied), 50);
+  std::set<std::size_t> owners;
+  for (std::size_t k = 0; k < xyz.size() / 3; ++k) {
+    if (auto o = (*sharded)->ownerOf({xyz[3 * k], xyz[3 * k + 1], xyz[3 * k + 2]}))
+      owners.insert(*o);
+  }
+  EXPECT_EQ(owners.size(), 2U);
+  const auto sorted = [](std::vector<Point3f> v) {
+    std::sort(v.begin(), v.end(), [](const Point3f& a, const Point3f& b) {
+      return std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3);
+    });
+    return v;
+  };
+  for (float half : {0.7F, 2.5F, 6.0F}) {
+    const Point3f lo = centre - Point3f(half, half, 1.5F), hi = centre + Point3f(half, half, 1.5F);
+    auto a = (*sharded)->queryBox(lo, hi, 1'000'000);
+    auto b = clients[0]->queryBox(lo, hi, 1'000'000);
+    ASSERT_TRUE(a && b);
+    EXPECT_EQ(a->occupied, b->occupied) << half;
+    EXPECT_EQ(a->free, b->free) << half;
+    EXPECT_EQ(a->unknown, b->unknown) << half;
+    EXPECT_EQ(sorted(a->occupied_centers), sorted(b->occupied_centers)) << half;
+  }
+  int hits = 0;
+  for (int i = 0; i < 64; ++i) {
+    const float angle = static_cast<float>(i) * 0.0981748F;  // 64 headings around the circle
+    const Point3f origin(centre.x() - 3.0F, centre.y(), centre.z());
+    const Point3f direction(std::cos(angle), std::sin(angle), -0.05F);
+    auto a = (*sharded)->castRay(origin, direction, 20.0F);
+    auto b = clients[0]->castRay(origin, direction, 20.0F);
+    ASSERT_TRUE(a && b);
+    EXPECT_EQ(a->ray.hit, b->ray.hit) << i;
+    if (a->ray.hit && b->ray.hit) {
+      EXPECT_EQ(a->ray.hit_center, b->ray.hit_center) << i;
+      EXPECT_EQ(a->ray.distance, b->ray.distance) << i;
+    }
+    hits += b->ray.hit;
+  }
+  EXPECT_GT(hits, 32);
+
+  // A server over all of space cannot be a shard beside others.
+  auto mixed = ShardedClient::create(
+      {{.domain_id = kSingle, .timeout = 10s}, {.domain_id = kWest, .timeout = 10s}});
+  ASSERT_FALSE(mixed);
+  EXPECT_NE(mixed.error().message.find("no map.bounds"), std::string::npos)
+      << mixed.error().message;
+}
+
+}  // namespace
+}  // namespace densemap
