@@ -63,63 +63,51 @@ Ros2Bridge::Ros2Bridge(Ingest& ingest, const Ros2Options& options)
     : ingest_(ingest),
       options_(options),
       dds_(std::make_unique<Dds>()),
-      state_(std::make_unique<Topics>()) {
-  state_->tf.assign(std::max<std::size_t>(options.robots.size(), 1),
-                    ros2::TfBuffer(options.tf_buffer_ns));
-}
+      state_(std::make_unique<Topics>()) {}
 
 Ros2Bridge::~Ros2Bridge() { stop(); }
+
+namespace {
+
+Expected<dds::Entity> rosTopic(const dds::Entity& participant, const dds_topic_descriptor_t& desc,
+                               const std::string& ros_name) {
+  const std::string name = ros2::ddsTopicName(ros_name);
+  if (name.empty()) return makeError("ros2: '" + ros_name + "' is not a valid ROS topic name");
+  return dds::createTopic(participant, desc, name);
+}
+
+}  // namespace
 
 Expected<std::unique_ptr<Ros2Bridge>> Ros2Bridge::create(Ingest& ingest,
                                                          const dds::Entity& participant,
                                                          const Ros2Options& options) {
   std::unique_ptr<Ros2Bridge> bridge(new Ros2Bridge(ingest, options));
   Dds& d = *bridge->dds_;
-  auto topic = [&](const dds_topic_descriptor_t& desc,
-                   const std::string& ros_name) -> Expected<dds::Entity> {
-    const std::string name = ros2::ddsTopicName(ros_name);
-    if (name.empty()) return makeError("ros2: '" + ros_name + "' is not a valid ROS topic name");
-    return dds::createTopic(participant, desc, name);
-  };
-  // ROS sensor data QoS (best effort, keep last 5) unless told otherwise; a best-effort reader
-  // also matches reliable writers.
-  const dds::QosSpec cloud_qos = dds::rosCloudQos(options.reliable_clouds);
+  d.participant = &participant;
+  auto ws = dds::WaitSet::create(participant);
+  if (!ws) return std::unexpected(ws.error());
+  d.waitset.emplace(std::move(*ws));
   // One robot at the root, or one a namespace: its clouds and its TF tree under it.
   const std::vector<std::string> namespaces =
-      options.robots.empty() ? std::vector<std::string>{""} : options.robots;
-  for (std::size_t robot = 0; robot < namespaces.size(); ++robot) {
-    const std::string& ns = namespaces[robot];
-    for (const std::string& cloud : options.clouds) {
-      const std::string name = ns.empty() ? cloud : ros2::inNamespace(ns, cloud);
-      auto t = topic(sensor_msgs_msg_dds__PointCloud2__desc, name);
-      if (!t) return std::unexpected(t.error());
-      auto r = dds::createReader(participant, *t, cloud_qos);
-      if (!r) return std::unexpected(r.error());
-      d.cloud_topics.push_back(std::move(*t));
-      d.cloud_readers.push_back(std::move(*r));
-      d.cloud_names.push_back(name);
-      d.cloud_seq.push_back(0);
-      d.cloud_robot.push_back(robot);
+      options.robots.empty() && options.robot_pattern.empty() ? std::vector<std::string>{""}
+                                                              : options.robots;
+  for (const std::string& ns : namespaces) {
+    if (auto ok = bridge->addRobot(ns); !ok) return std::unexpected(ok.error());
+  }
+  if (!options.robot_pattern.empty()) {
+    const dds_entity_t found =
+        dds_create_reader(participant.get(), DDS_BUILTIN_TOPIC_DCPSPUBLICATION, nullptr, nullptr);
+    if (auto ok = dds::check(found, "dds_create_reader(DCPSPublication)"); !ok) {
+      return std::unexpected(ok.error());
     }
-    RobotTfReaders& tfr = d.robots.emplace_back();
-    auto tf = topic(tf2_msgs_msg_dds__TFMessage__desc, ros2::inNamespace(ns, "tf"));
-    auto tf_static = topic(tf2_msgs_msg_dds__TFMessage__desc, ros2::inNamespace(ns, "tf_static"));
-    if (!tf || !tf_static) return makeError("ros2: cannot create the TF topics of '" + ns + "'");
-    tfr.tf_topic = std::move(*tf);
-    tfr.tf_static_topic = std::move(*tf_static);
-    auto tf_reader = dds::createReader(participant, tfr.tf_topic, dds::kTfQos);
-    auto tf_static_reader =
-        dds::createReader(participant, tfr.tf_static_topic, dds::kTfStaticReaderQos);
-    if (!tf_reader || !tf_static_reader) return makeError("ros2: cannot create the TF readers");
-    tfr.tf_reader = std::move(*tf_reader);
-    tfr.tf_static_reader = std::move(*tf_static_reader);
+    d.publications = dds::Entity(found);
   }
   // Maps for late joiners (RViz, Nav2): reliable, transient-local, keep-last 1.
   const dds::QosSpec latched = dds::kLatchedQos;
   auto map_writer = [&](const dds_topic_descriptor_t& desc, const std::string& ros_name,
                         dds::Entity& t_out, dds::Entity& w_out) -> Expected<void> {
     if (ros_name.empty() || options.publish_period_s <= 0) return {};
-    auto t = topic(desc, ros_name);
+    auto t = rosTopic(participant, desc, ros_name);
     if (!t) return std::unexpected(t.error());
     auto w = dds::createWriter(participant, *t, latched);
     if (!w) return std::unexpected(w.error());
@@ -141,8 +129,69 @@ Expected<std::unique_ptr<Ros2Bridge>> Ros2Bridge::create(Ingest& ingest,
                              d.costmap_topic, d.costmap_writer)}) {
     if (!ok) return std::unexpected(ok.error());
   }
+  if (auto ok = bridge->announce(); !ok) return std::unexpected(ok.error());
+  const PipelineOptions& p = ingest.options();
+  bridge->state_->map = std::make_unique<ros2::MapTopicsState>(p.resolution_m, options.grid_min_z_m,
+                                                               options.grid_max_z_m);
+  bridge->latest_ = ingest.view();
+  return bridge;
+}
+
+Expected<void> Ros2Bridge::addRobot(const std::string& ns) {
+  Dds& d = *dds_;
+  const dds::Entity& participant = *d.participant;
+  // ROS sensor data QoS (best effort, keep last 5) unless told otherwise; a best-effort reader
+  // also matches reliable writers.
+  const dds::QosSpec cloud_qos = dds::rosCloudQos(options_.reliable_clouds);
+  RobotTfReaders tfr;
+  auto tf = rosTopic(participant, tf2_msgs_msg_dds__TFMessage__desc, ros2::inNamespace(ns, "tf"));
+  auto tf_static =
+      rosTopic(participant, tf2_msgs_msg_dds__TFMessage__desc, ros2::inNamespace(ns, "tf_static"));
+  if (!tf || !tf_static) return makeError("ros2: cannot create the TF topics of '" + ns + "'");
+  tfr.tf_topic = std::move(*tf);
+  tfr.tf_static_topic = std::move(*tf_static);
+  auto tf_reader = dds::createReader(participant, tfr.tf_topic, dds::kTfQos);
+  auto tf_static_reader =
+      dds::createReader(participant, tfr.tf_static_topic, dds::kTfStaticReaderQos);
+  if (!tf_reader || !tf_static_reader) return makeError("ros2: cannot create the TF readers");
+  tfr.tf_reader = std::move(*tf_reader);
+  tfr.tf_static_reader = std::move(*tf_static_reader);
+  std::vector<dds::Entity> topics, readers;
+  std::vector<std::string> names;
+  for (const std::string& cloud : options_.clouds) {
+    const std::string name = ns.empty() ? cloud : ros2::inNamespace(ns, cloud);
+    auto t = rosTopic(participant, sensor_msgs_msg_dds__PointCloud2__desc, name);
+    if (!t) return std::unexpected(t.error());
+    auto r = dds::createReader(participant, *t, cloud_qos);
+    if (!r) return std::unexpected(r.error());
+    topics.push_back(std::move(*t));
+    readers.push_back(std::move(*r));
+    names.push_back(name);
+  }
+  if (auto ok = d.waitset->attachReader(tfr.tf_reader, kTfTag); !ok) return ok;
+  if (auto ok = d.waitset->attachReader(tfr.tf_static_reader, kTfStaticTag); !ok) return ok;
+  const std::size_t robot = d.robots.size();
+  std::lock_guard lock(topics_mutex_);
+  for (std::size_t i = 0; i < readers.size(); ++i) {
+    if (auto ok = d.waitset->attachReader(readers[i], kCloudTag0 + d.cloud_readers.size()); !ok) {
+      return ok;
+    }
+    d.cloud_topics.push_back(std::move(topics[i]));
+    d.cloud_readers.push_back(std::move(readers[i]));
+    d.cloud_names.push_back(names[i]);
+    d.cloud_seq.push_back(0);
+    d.cloud_robot.push_back(robot);
+  }
+  d.robots.push_back(std::move(tfr));
+  d.robot_names.push_back(ns);
+  state_->tf.emplace_back(options_.tf_buffer_ns);
+  return {};
+}
+
+Expected<void> Ros2Bridge::announce() {
   // The server as a ROS node with these readers and writers (as rmw_cyclonedds announces its
   // nodes), so ROS tools list it and its topics.
+  Dds& d = *dds_;
   std::vector<const dds::Entity*> readers, writers;
   for (const RobotTfReaders& tfr : d.robots) {
     readers.push_back(&tfr.tf_reader);
@@ -153,31 +202,62 @@ Expected<std::unique_ptr<Ros2Bridge>> Ros2Bridge::create(Ingest& ingest,
        {&d.octomap_writer, &d.grid_writer, &d.centers_writer, &d.slice_writer, &d.costmap_writer}) {
     if (w->get() > 0) writers.push_back(w);
   }
-  auto node =
-      announceRosNode(participant, options.gid_layout, "/", options.node_name, readers, writers);
+  d.node = RosNodeAnnouncement{};  // one announcement writer at a time
+  auto node = announceRosNode(*d.participant, options_.gid_layout, "/", options_.node_name, readers,
+                              writers);
   if (!node) return std::unexpected(node.error());
   d.node = std::move(*node);
-  auto ws = dds::WaitSet::create(participant);
-  if (!ws) return std::unexpected(ws.error());
-  d.waitset.emplace(std::move(*ws));
-  for (const RobotTfReaders& tfr : d.robots) {
-    if (auto ok = d.waitset->attachReader(tfr.tf_reader, kTfTag); !ok) {
-      return std::unexpected(ok.error());
+  return {};
+}
+
+void Ros2Bridge::discoverRobots() {
+  Dds& d = *dds_;
+  if (d.publications.get() <= 0) return;
+  constexpr std::int32_t kBatch = 64;
+  std::vector<std::string> found;
+  for (;;) {
+    void* samples[kBatch] = {};
+    dds_sample_info_t infos[kBatch];
+    const dds_return_t n = dds_take(d.publications.get(), samples, infos, kBatch, kBatch);
+    if (n <= 0) break;
+    for (dds_return_t k = 0; k < n; ++k) {
+      const auto* e = static_cast<const dds_builtintopic_endpoint_t*>(samples[k]);
+      if (!infos[k].valid_data || e->topic_name == nullptr || e->type_name == nullptr) continue;
+      if (std::strcmp(e->type_name, sensor_msgs_msg_dds__PointCloud2__desc.m_typename) != 0) {
+        continue;
+      }
+      for (const std::string& cloud : options_.clouds) {
+        std::string ns = ros2::namespaceOfCloud(e->topic_name, cloud);
+        if (!ns.empty() && ros2::matchesGlob(options_.robot_pattern, ns)) {
+          found.push_back(std::move(ns));
+        }
+      }
     }
-    if (auto ok = d.waitset->attachReader(tfr.tf_static_reader, kTfStaticTag); !ok) {
-      return std::unexpected(ok.error());
-    }
+    dds_return_loan(d.publications.get(), samples, n);
+    if (n < kBatch) break;
   }
-  for (std::size_t i = 0; i < d.cloud_readers.size(); ++i) {
-    if (auto ok = d.waitset->attachReader(d.cloud_readers[i], kCloudTag0 + i); !ok) {
-      return std::unexpected(ok.error());
+  bool added = false;
+  for (const std::string& ns : found) {
+    if (std::find(d.robot_names.begin(), d.robot_names.end(), ns) != d.robot_names.end()) continue;
+    if (d.robots.size() >= kMaxRosRobots ||
+        d.cloud_readers.size() + options_.clouds.size() > kMaxRosRobots) {
+      if (!d.full_logged) {
+        spdlog::warn("ros2: robot {} not added: at most {} robots and cloud topics", ns,
+                     kMaxRosRobots);
+        d.full_logged = true;
+      }
+      continue;
     }
+    if (auto ok = addRobot(ns); !ok) {
+      spdlog::warn("ros2: robot {} not added: {}", ns, ok.error().message);
+      continue;
+    }
+    spdlog::info("ros2: robot {} found (ros2.robot_pattern {})", ns, options_.robot_pattern);
+    added = true;
   }
-  const PipelineOptions& p = ingest.options();
-  bridge->state_->map = std::make_unique<ros2::MapTopicsState>(p.resolution_m, options.grid_min_z_m,
-                                                               options.grid_max_z_m);
-  bridge->latest_ = ingest.view();
-  return bridge;
+  if (added) {
+    if (auto ok = announce(); !ok) spdlog::warn("ros2: node announcement: {}", ok.error().message);
+  }
 }
 
 void Ros2Bridge::start() {
@@ -206,6 +286,7 @@ Ros2Counters Ros2Bridge::counters() const {
     c = counters_;
   }
   // Why no clouds may arrive, per topic: DDS's own matched and incompatible-QoS statuses.
+  std::lock_guard lock(topics_mutex_);
   for (std::size_t i = 0; i < dds_->cloud_readers.size(); ++i) {
     RosCloudTopicStatus t;
     t.topic = dds_->cloud_names[i];
@@ -239,6 +320,7 @@ void Ros2Bridge::loop() {
     const auto fired = dds_->waitset->wait(std::chrono::milliseconds(20));
     if (!running_.load()) break;
     guarded("ros2 bridge", [&] {
+      discoverRobots();
       takeTransforms();  // first: clouds taken below may need them
       for (dds_attach_t tag : fired) {
         if (tag >= kCloudTag0) takeClouds(static_cast<std::size_t>(tag - kCloudTag0));

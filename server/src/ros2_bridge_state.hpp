@@ -24,11 +24,15 @@ struct RobotTfReaders {
 };
 
 struct Ros2Bridge::Dds {
+  const dds::Entity* participant = nullptr;  // the server's; outlives the bridge
   std::vector<dds::Entity> cloud_topics, cloud_readers;
   std::vector<std::string> cloud_names;  // ROS names, the scans' sensor ids
   std::vector<std::uint64_t> cloud_seq;
   std::vector<std::size_t> cloud_robot;  // the robot (index in robots) each cloud topic is of
   std::vector<RobotTfReaders> robots;    // one a robot; one for the root without ros2.robots
+  std::vector<std::string> robot_names;  // their namespaces ("" : the root)
+  dds::Entity publications;  // DCPSPublication, with ros2.robot_pattern: where robots appear
+  bool full_logged = false;  // the robot bound was reached and said so
   dds::Entity octomap_topic, grid_topic, centers_topic;
   dds::Entity octomap_writer, grid_writer, centers_writer;
   /// The distance field's topics (a server with esdf): a slice and an inflated costmap.

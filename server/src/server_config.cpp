@@ -3,6 +3,7 @@
 #include <arpa/inet.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -263,6 +264,16 @@ Expected<std::optional<Ros2Options>> ros2Options(const proto::ServerConfig& conf
       }
     }
     o.robots.push_back(canonical.substr(0, canonical.size() - 3));
+  }
+  o.robot_pattern = r.robot_pattern();
+  if (!o.robot_pattern.empty()) {
+    std::string probe = o.robot_pattern;
+    std::replace(probe.begin(), probe.end(), '*', 'a');
+    std::replace(probe.begin(), probe.end(), '?', 'a');
+    if (o.robot_pattern.front() != '/' || ros2::inNamespace(probe, "tf").empty()) {
+      return makeError("ros2.robot_pattern: '" + o.robot_pattern +
+                       "' is not a namespace glob (e.g. \"/robot*\")");
+    }
   }
   if (std::max<std::size_t>(o.robots.size(), 1) * o.clouds.size() > kMaxRosRobots) {
     return makeError("ros2: at most " + std::to_string(kMaxRosRobots) +

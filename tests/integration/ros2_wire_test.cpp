@@ -346,42 +346,44 @@ TEST(Ros2Wire, RealScansThroughPointCloud2AndTfGiveTheOfflineMap) {
 #endif
 
 #ifndef DENSEMAP_ROS2_REALDATA
-// A fleet into one map: four robots along one scene's path, two as ROS 2 robots in their own
-// namespaces (their own TF trees, every one with frames named odom and base_link) and two with
-// native scans, all at once. The map equals the offline map of all their scans in the order the
-// server integrated them (its map events say which scan each version was), cell for cell, and
-// status counts each robot's sensor apart, with its latency.
-TEST(Ros2Wire, FourRobotsThroughNamespacesAndNativeScansGiveTheOfflineMapInArrivalOrder) {
-  constexpr std::uint32_t kDomain = 201;
-  constexpr std::size_t kPerRobot = 4;
+/// A robot of a fleet test: a ROS 2 namespace ("/robot1") or a native sensor id.
+struct FleetRobot {
+  std::string name;
+  bool ros = true;
+  [[nodiscard]] std::string sensorId() const { return ros ? name + "/points" : name; }
+};
+
+/// Replays `per_robot` scans for each robot, all at once, each robot its own stretch of one
+/// simulated path, into a server on `domain` with `ros2_config`. Checks that the map equals the
+/// offline map of all their scans in the order the server integrated them (its map events say
+/// which scan each version was), cell for cell, and that status counts each robot's sensor
+/// apart, with its latency.
+void replayFleetAndCompare(std::uint32_t domain, const std::string& ros2_config,
+                           const std::vector<FleetRobot>& fleet, std::size_t per_robot) {
   test::TempDir dir;
   const fs::path data = dir.path() / "data";
-  ASSERT_TRUE(writeSmallIndoorScans(data, 4 * kPerRobot));
-  test::ServerProcess server(
-      dir.path(), kDomain,
-      "ros2 { enabled: true reliable_clouds: true tf_wait_s: 3 publish_period_s: 0\n"
-      "       robots: \"/robot1\" robots: \"robot2\" }\n");
-  auto client = connect(kDomain);
+  const std::size_t n = fleet.size() * per_robot;
+  ASSERT_TRUE(writeSmallIndoorScans(data, static_cast<int>(n)));
+  test::ServerProcess server(dir.path(), domain, ros2_config);
+  auto client = connect(domain);
   ASSERT_TRUE(client);
 
   ros2::ReplayFrames frames;
   frames.stamp_base_ns = kStampBase;
   frames.stamp_offset = 0.5;
   const auto robotArgs = [&](std::size_t r) {
-    const std::string common = "--domain-id " + std::to_string(kDomain) + " replay --data " +
+    const std::string common = "--domain-id " + std::to_string(domain) + " replay --data " +
                                data.string() + " --rate 10 --first " +
-                               std::to_string(r * kPerRobot) + " --limit " +
-                               std::to_string(kPerRobot);
-    if (r < 2) {
-      return common + " --ros --ros-namespace /robot" + std::to_string(r + 1) +
+                               std::to_string(r * per_robot) + " --limit " +
+                               std::to_string(per_robot);
+    if (fleet[r].ros) {
+      return common + " --ros --ros-namespace " + fleet[r].name +
              " --ros-stamp-offset 0.5 --ros-stamp-base-ns " + std::to_string(kStampBase);
     }
-    return common + " --sensor-id robot" + std::to_string(r + 1) + "/lidar";
+    return common + " --sensor-id " + fleet[r].name;
   };
-  const std::array<std::string, 4> sensor_ids{"/robot1/points", "/robot2/points", "robot3/lidar",
-                                              "robot4/lidar"};
   std::vector<std::future<int>> robots;
-  for (std::size_t r = 0; r < 4; ++r) {
+  for (std::size_t r = 0; r < fleet.size(); ++r) {
     robots.push_back(std::async(std::launch::async, [&, r] { return runCli(robotArgs(r)); }));
   }
   // The order of integration, from the map events (the server keeps 64 for a slow reader).
@@ -392,28 +394,30 @@ TEST(Ros2Wire, FourRobotsThroughNamespacesAndNativeScansGiveTheOfflineMapInArriv
     });
   };
   const auto deadline = std::chrono::steady_clock::now() + 60s;
-  while (order.size() < 4 * kPerRobot && std::chrono::steady_clock::now() < deadline) {
+  while (order.size() < n && std::chrono::steady_clock::now() < deadline) {
     poll();
     std::this_thread::sleep_for(50ms);
   }
   for (auto& r : robots) EXPECT_EQ(r.get(), 0);
   poll();
-  ASSERT_EQ(order.size(), 4 * kPerRobot);
+  ASSERT_EQ(order.size(), n);
 
   // Each robot's scans as the server got them: the ROS robots' at the poses of their own TF
   // trees, numbered per topic; the native robots' as sent (numbered by dataset index + 1).
   std::map<std::pair<std::string, std::uint64_t>, RawScan> sent;
-  for (std::size_t r = 0; r < 4; ++r) {
-    if (r < 2) {
-      for (RawScan& raw : rosScans(data, r * kPerRobot, kPerRobot, frames, sensor_ids[r])) {
+  std::size_t ros_robots = 0;
+  for (std::size_t r = 0; r < fleet.size(); ++r) {
+    if (fleet[r].ros) {
+      ++ros_robots;
+      for (RawScan& raw : rosScans(data, r * per_robot, per_robot, frames, fleet[r].sensorId())) {
         sent.emplace(std::make_pair(raw.sensor_id, raw.seq), std::move(raw));
       }
       continue;
     }
     auto source = openScanSource(data);
     ASSERT_TRUE(source);
-    for (std::size_t i = r * kPerRobot; i < (r + 1) * kPerRobot; ++i) {
-      RawScan raw = toRawScan(*(*source)->load(i), i + 1, sensor_ids[r]);
+    for (std::size_t i = r * per_robot; i < (r + 1) * per_robot; ++i) {
+      RawScan raw = toRawScan(*(*source)->load(i), i + 1, fleet[r].sensorId());
       sent.emplace(std::make_pair(raw.sensor_id, raw.seq), std::move(raw));
     }
   }
@@ -426,7 +430,7 @@ TEST(Ros2Wire, FourRobotsThroughNamespacesAndNativeScansGiveTheOfflineMapInArriv
   // The robots really were interleaved: not every robot's scans came in one run.
   std::size_t switches = 0;
   for (std::size_t i = 1; i < order.size(); ++i) switches += order[i].first != order[i - 1].first;
-  EXPECT_GT(switches, 3U);
+  EXPECT_GE(switches, fleet.size());
 
   auto fetched = client->fetchMap(order.size());
   ASSERT_TRUE(fetched) << fetched.error().message;
@@ -435,21 +439,43 @@ TEST(Ros2Wire, FourRobotsThroughNamespacesAndNativeScansGiveTheOfflineMapInArriv
   expectSameMap(map, *offlineMap(arrival, dir.path() / "server.textproto"));
 
   const ServerStatus status = waitForStatus(*client, [&](const ServerStatus& s) {
-    return s.integrated == 4 * kPerRobot && s.sensors.size() == 4;
+    return s.integrated == n && s.sensors.size() == fleet.size();
   });
-  EXPECT_EQ(status.ros_submitted, 2 * kPerRobot);
+  EXPECT_EQ(status.ros_submitted, ros_robots * per_robot);
   EXPECT_EQ(status.ros_no_transform, 0U);
-  ASSERT_EQ(status.sensors.size(), 4U);
+  ASSERT_EQ(status.sensors.size(), fleet.size());
   for (const SensorCounters& c : status.sensors) {
-    EXPECT_NE(std::find(sensor_ids.begin(), sensor_ids.end(), c.sensor_id), sensor_ids.end())
+    EXPECT_TRUE(std::any_of(fleet.begin(), fleet.end(),
+                            [&](const FleetRobot& r) { return r.sensorId() == c.sensor_id; }))
         << c.sensor_id;
-    EXPECT_EQ(c.received, kPerRobot) << c.sensor_id;
-    EXPECT_EQ(c.integrated, kPerRobot) << c.sensor_id;
+    EXPECT_EQ(c.received, per_robot) << c.sensor_id;
+    EXPECT_EQ(c.integrated, per_robot) << c.sensor_id;
     EXPECT_EQ(c.seq_gaps, 0U) << c.sensor_id;
     EXPECT_GT(c.latency_p50_ms, 0.0) << c.sensor_id;
     EXPECT_GE(c.latency_p99_ms, c.latency_p50_ms) << c.sensor_id;
   }
   EXPECT_EQ(server.stop(), 0);
+}
+
+// A fleet into one map: four robots along one scene's path, two as ROS 2 robots in their own
+// namespaces (their own TF trees, every one with frames named odom and base_link) and two with
+// native scans, all at once.
+TEST(Ros2Wire, FourRobotsThroughNamespacesAndNativeScansGiveTheOfflineMapInArrivalOrder) {
+  replayFleetAndCompare(201,
+                        "ros2 { enabled: true reliable_clouds: true tf_wait_s: 3 "
+                        "publish_period_s: 0 robots: \"/robot1\" robots: \"robot2\" }\n",
+                        {{"/robot1"}, {"/robot2"}, {"robot3/lidar", false},
+                         {"robot4/lidar", false}},
+                        4);
+}
+
+// Robots found on the wire: no robot is listed, the namespace glob admits both when their
+// publishers appear (each replay waits for the server's reader of its cloud topic).
+TEST(Ros2Wire, RobotsWhoseNamespaceMatchesThePatternAreFoundWhenTheyAppear) {
+  replayFleetAndCompare(205,
+                        "ros2 { enabled: true reliable_clouds: true tf_wait_s: 3 "
+                        "publish_period_s: 0 robot_pattern: \"/robot*\" }\n",
+                        {{"/robot_a"}, {"/robot_b"}}, 4);
 }
 #endif
 
@@ -641,6 +667,18 @@ TEST(Ros2Wire, TopicAndTypeNamesFollowRmwCycloneddsConventions) {
   EXPECT_EQ(ros2::inNamespace("/robot 1", "tf"), "");
   EXPECT_EQ(ros2::inNamespace("/robot1/", "tf"), "");
   EXPECT_EQ(ros2::inNamespace("/robot1", ""), "");
+  EXPECT_EQ(ros2::namespaceOfCloud("rt/robot1/points", "/points"), "/robot1");
+  EXPECT_EQ(ros2::namespaceOfCloud("rt/fleet/r2/points", "points"), "/fleet/r2");
+  EXPECT_EQ(ros2::namespaceOfCloud("rt/points", "/points"), "");
+  EXPECT_EQ(ros2::namespaceOfCloud("rt/robot1/points_raw", "/points"), "");
+  EXPECT_EQ(ros2::namespaceOfCloud("densemap/scan", "/points"), "");
+  EXPECT_TRUE(ros2::matchesGlob("/robot*", "/robot12"));
+  EXPECT_TRUE(ros2::matchesGlob("/robot*", "/robot"));
+  EXPECT_TRUE(ros2::matchesGlob("/r?bot_*/a*", "/robot_7/arm"));
+  EXPECT_TRUE(ros2::matchesGlob("*", "/anything"));
+  EXPECT_FALSE(ros2::matchesGlob("/robot*", "/rover1"));
+  EXPECT_FALSE(ros2::matchesGlob("/robot?", "/robot12"));
+  EXPECT_FALSE(ros2::matchesGlob("/robot", "/robot1"));
   EXPECT_STREQ(sensor_msgs_msg_dds__PointCloud2__desc.m_typename,
                "sensor_msgs::msg::dds_::PointCloud2_");
   EXPECT_STREQ(tf2_msgs_msg_dds__TFMessage__desc.m_typename, "tf2_msgs::msg::dds_::TFMessage_");

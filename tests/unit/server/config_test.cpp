@@ -69,6 +69,9 @@ TEST(ServerConfig, Ros2OptionsAndTheirErrors) {
   auto fleet = options("ros2 { enabled: true robots: \"/robot1\" robots: \"robot_2\" }\n");
   ASSERT_TRUE(fleet && *fleet);
   EXPECT_EQ((*fleet)->robots, (std::vector<std::string>{"/robot1", "/robot_2"}));
+  auto found = options("ros2 { enabled: true robot_pattern: \"/fleet/r?_*\" }\n");
+  ASSERT_TRUE(found && *found);
+  EXPECT_EQ((*found)->robot_pattern, "/fleet/r?_*");
   std::string too_many = "ros2 { enabled: true ";
   for (int i = 0; i <= 64; ++i) too_many += "robots: \"/r" + std::to_string(i) + "\" ";
   too_many += "}\n";
@@ -91,7 +94,9 @@ TEST(ServerConfig, Ros2OptionsAndTheirErrors) {
         "ros2 { enabled: true robots: \"/\" }\n", "ros2 { enabled: true robots: \"\" }\n",
         "ros2 { enabled: true robots: \"/robot 1\" }\n",
         "ros2 { enabled: true robots: \"/r1\" robots: \"r1\" }\n",
-        "ros2 { enabled: true robots: \"/r1/\" }\n"}) {
+        "ros2 { enabled: true robots: \"/r1/\" }\n",
+        "ros2 { enabled: true robot_pattern: \"robot*\" }\n",
+        "ros2 { enabled: true robot_pattern: \"/robot *\" }\n"}) {
     // Refused at load, with the file's name (ros2 errors had none).
     const auto file = writeConfig(dir, bad);
     auto r = loadServerConfig(file);

@@ -16,6 +16,11 @@ namespace densemap::ros2 {
 /// -> "/robot1/points"; an empty or "/" namespace leaves "/points"). Empty when either is not a
 /// valid ROS name (ddsTopicName's rules).
 [[nodiscard]] std::string inNamespace(std::string_view ns, std::string_view name);
+/// Whether `name` matches the glob `pattern`: '*' stands for any run of characters, '?' for one.
+[[nodiscard]] bool matchesGlob(std::string_view pattern, std::string_view name);
+/// The namespace of a cloud topic's DDS name: "rt/robot1/points" with `cloud` "/points" (or
+/// "points") -> "/robot1"; empty unless the topic is `cloud` under a namespace.
+[[nodiscard]] std::string namespaceOfCloud(std::string_view dds_topic, std::string_view cloud);
 /// Whether `name` is a valid ROS 2 node name (rcl's rules: letters, digits and '_', not
 /// empty, not starting with a digit; at most 255 characters, rmw_dds_common's bound 256).
 [[nodiscard]] bool isNodeName(std::string_view name);

@@ -30,6 +30,9 @@ struct Ros2Options {
   /// Robots' namespaces: each reads `clouds` under its namespace and its own TF tree
   /// (<ns>/tf, <ns>/tf_static). Empty: one robot, `clouds` as given, TF on /tf, /tf_static.
   std::vector<std::string> robots;
+  /// A glob on namespaces: a publisher of a `clouds` topic under a matching namespace adds
+  /// that robot while the server runs (up to kMaxRosRobots). Empty: off.
+  std::string robot_pattern;
   bool reliable_clouds = false;
   std::string world_frame = "map";
   /// A cloud whose transform is not there yet waits this long (octomap_server's TF filter
@@ -103,6 +106,12 @@ class Ros2Bridge {
   /// One robot's transforms into its TF buffer; counts those refused into `refused`.
   void takeTransforms(std::size_t robot, std::uint64_t& refused);
   void takeClouds(std::size_t topic);
+  /// A robot's cloud readers and TF readers (ns "" : the root's), attached to the wait set.
+  [[nodiscard]] Expected<void> addRobot(const std::string& ns);
+  /// ros2.robot_pattern: robots whose cloud publishers appeared since the last call.
+  void discoverRobots();
+  /// (Re)writes the server's ROS node announcement with its readers and writers.
+  [[nodiscard]] Expected<void> announce();
   /// Submits what can be transformed now; drops what waited too long (or can never resolve).
   void resolveWaiting(std::chrono::steady_clock::time_point now);
   void publishMaps();
@@ -121,6 +130,8 @@ class Ros2Bridge {
 
   mutable std::mutex counters_mutex_;
   Ros2Counters counters_;
+  /// Guards Dds's cloud topics (the bridge thread adds robots; counters() reads them).
+  mutable std::mutex topics_mutex_;
 };
 
 }  // namespace densemap::server
