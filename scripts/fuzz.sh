@@ -11,7 +11,7 @@ SECONDS_PER=${1:-10}
 shift || true
 BUILD=${DENSEMAP_FUZZ_BUILD_DIR:-build-fuzz}
 ALL=(fuzz_snapshot fuzz_scan_graph fuzz_scan_dat fuzz_pcd fuzz_dataset fuzz_config fuzz_iln_weights
-  fuzz_scan_validation fuzz_point_cloud2 fuzz_queries fuzz_planner_queries fuzz_mcap fuzz_db3
+  fuzz_scan_validation fuzz_point_cloud2 fuzz_queries fuzz_planner_queries fuzz_mcap fuzz_db3 fuzz_ros_names
   fuzz_point_array fuzz_foxglove_ops)
 TARGETS=("$@")
 [ ${#TARGETS[@]} -gt 0 ] || TARGETS=("${ALL[@]}")

@@ -222,7 +222,12 @@ void Ros2Bridge::discoverRobots() {
     if (n <= 0) break;
     for (dds_return_t k = 0; k < n; ++k) {
       const auto* e = static_cast<const dds_builtintopic_endpoint_t*>(samples[k]);
-      if (!infos[k].valid_data || e->topic_name == nullptr || e->type_name == nullptr) continue;
+      // Names come off the wire: longer ones than ROS allows (a topic name of at most 255
+      // characters after "rt") are not a robot's.
+      if (!infos[k].valid_data || e->topic_name == nullptr || e->type_name == nullptr ||
+          strnlen(e->topic_name, 259) > 258) {
+        continue;
+      }
       if (std::strcmp(e->type_name, sensor_msgs_msg_dds__PointCloud2__desc.m_typename) != 0) {
         continue;
       }
