@@ -10,6 +10,7 @@
 
 #include "bindings.hpp"
 #include "densemap/client/client.hpp"
+#include "densemap/client/sharded_client.hpp"
 #include "densemap/geometry/rigid_transform.hpp"
 #include "densemap/io/scan.hpp"
 #include "densemap/mapper/mapper.hpp"
@@ -39,6 +40,35 @@ class PyClient {
 
  private:
   std::unique_ptr<Client> client_;
+};
+
+/// A ShardedClient that can be closed, as PyClient.
+class PyShardedClient {
+ public:
+  PyShardedClient(const std::vector<std::uint32_t>& domain_ids, double timeout_s,
+                  const std::string& network_interface) {
+    if (!(timeout_s > 0 && timeout_s <= 3600)) {
+      throw py::value_error("timeout must be in (0, 3600] s");
+    }
+    std::vector<ClientOptions> shards;
+    for (std::uint32_t domain : domain_ids) {
+      ClientOptions o;
+      o.domain_id = domain;
+      o.network_interface = network_interface;
+      o.timeout = std::chrono::milliseconds(static_cast<long>(timeout_s * 1000));
+      shards.push_back(std::move(o));
+    }
+    client_ = valueOrRaise(ShardedClient::create(shards));
+  }
+
+  ShardedClient& client() {
+    if (!client_) throw DensemapError("the client is closed");
+    return *client_;
+  }
+  void close() { client_.reset(); }
+
+ private:
+  std::unique_ptr<ShardedClient> client_;
 };
 
 py::dict statusDict(const ServerStatus& s) {
@@ -324,6 +354,71 @@ most 4,194,304 cells; the server needs esdf { enabled: true }).)doc")
       .def("close", &PyClient::close, "Closes the client (its DDS participant).")
       .def("__enter__", [](PyClient& self) -> PyClient& { return self; })
       .def("__exit__", [](PyClient& self, const py::args&) { self.close(); });
+
+  py::class_<PyShardedClient>(m, "ShardedClient", R"doc(
+Queries over spatial shards: densemap-servers whose map.bounds tile space, each on its own DDS
+domain, answered as one map (docs/fleet.md). Each point goes to the shard that keeps its cell, a
+box to every shard it may touch, a ray to every shard (the nearest hit wins); map_version is the
+oldest among the shards that answered. Raises densemap.Error as Client does.
+)doc")
+      .def(py::init<const std::vector<std::uint32_t>&, double, const std::string&>(), py::kw_only(),
+           py::arg("domain_ids"), py::arg("timeout") = 5.0, py::arg("network_interface") = "lo")
+      .def_property_readonly(
+          "shards", [](PyShardedClient& self) { return self.client().shards(); },
+          "How many shards.")
+      .def(
+          "owner_of",
+          [](PyShardedClient& self, const py::handle& point) -> std::optional<std::size_t> {
+            return self.client().ownerOf(pointFrom(point, "point"));
+          },
+          py::arg("point"), "The index of the shard that keeps the cell at the point, or None.")
+      .def(
+          "query_points",
+          [](PyShardedClient& self, const py::handle& points) {
+            const PointCloud cloud =
+                pointsFrom(points, std::numeric_limits<std::size_t>::max(), "points", false);
+            const std::span<const float> xyz(cloud.empty() ? nullptr : cloud.front().data(),
+                                             cloud.size() * 3);
+            ShardedClient& c = self.client();
+            const PointQueryAnswer a = released([&] { return c.queryPoints(xyz); });
+            return answerArrays(a);
+          },
+          py::arg("points"), "As Client.query_points, over all shards.")
+      .def(
+          "query_box",
+          [](PyShardedClient& self, const py::handle& box_min, const py::handle& box_max,
+             std::uint32_t max_centers) {
+            const Point3f lo = pointFrom(box_min, "box_min"), hi = pointFrom(box_max, "box_max");
+            ShardedClient& c = self.client();
+            const BoxQueryAnswer a = released([&] { return c.queryBox(lo, hi, max_centers); });
+            py::dict d = countsDict(a);
+            d["map_version"] = a.map_version;
+            d["occupied_centers"] =
+                pointsArray(PointCloud(a.occupied_centers.begin(), a.occupied_centers.end()));
+            return d;
+          },
+          py::arg("box_min"), py::arg("box_max"), py::arg("max_centers") = 0,
+          "As Client.query_box, over all shards.")
+      .def(
+          "cast_ray",
+          [](PyShardedClient& self, const py::handle& origin, const py::handle& direction,
+             float max_range) {
+            const Point3f o = pointFrom(origin, "origin"), dir = pointFrom(direction, "direction");
+            ShardedClient& c = self.client();
+            const RayQueryAnswer a = released([&] { return c.castRay(o, dir, max_range); });
+            py::dict d;
+            d["map_version"] = a.map_version;
+            d["hit"] = a.ray.hit;
+            d["center"] =
+                py::make_tuple(a.ray.hit_center.x(), a.ray.hit_center.y(), a.ray.hit_center.z());
+            d["distance"] = a.ray.distance;
+            return d;
+          },
+          py::arg("origin"), py::arg("direction"), py::arg("max_range"),
+          "As Client.cast_ray, over all shards.")
+      .def("close", &PyShardedClient::close, "Closes every shard's client.")
+      .def("__enter__", [](PyShardedClient& self) -> PyShardedClient& { return self; })
+      .def("__exit__", [](PyShardedClient& self, const py::args&) { self.close(); });
 }
 
 }  // namespace densemap::python
