@@ -29,18 +29,36 @@ Client::Impl::Impl(const ClientOptions& options)
       dds_(std::make_unique<Dds>()),
       client_id_(std::random_device{}() * 4294967296ULL + std::random_device{}()) {}
 
-Client::Client(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Client::Client(std::vector<std::unique_ptr<Impl>> replicas) : impl_(std::move(replicas.front())) {
+  for (std::size_t i = 1; i < replicas.size(); ++i) standby_.push_back(std::move(replicas[i]));
+}
 
 Client::~Client() = default;
 
 Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
+  if (options.replicas.size() > 16) return makeError("at most 16 replicas to fail over to");
+  std::vector<std::unique_ptr<Impl>> replicas;
+  std::vector<std::string> names{options.instance};
+  names.insert(names.end(), options.replicas.begin(), options.replicas.end());
+  for (const std::string& name : names) {
+    ClientOptions one = options;
+    one.instance = name;
+    one.replicas.clear();
+    auto impl = Impl::create(one);
+    if (!impl) return std::unexpected(impl.error());
+    replicas.push_back(std::move(*impl));
+  }
+  return std::unique_ptr<Client>(new Client(std::move(replicas)));
+}
+
+Expected<std::unique_ptr<Client::Impl>> Client::Impl::create(const ClientOptions& options) {
   auto c = std::make_unique<Impl>(options);
   auto& d = *c->dds_;
   auto p = dds::createParticipant({options.domain_id, options.network_interface, options.security});
   if (!p) return std::unexpected(p.error());
   d.participant = std::move(*p);
   Expected<void> status;
-  auto topics = dds::Topics::create(d.participant);
+  auto topics = dds::Topics::create(d.participant, options.instance);
   if (!topics) return std::unexpected(topics.error());
   d.topics = std::move(*topics);
   auto make = [&](dds::Entity& out, const dds::Entity& t, dds::QosSpec q, bool writer) {
@@ -91,7 +109,21 @@ Expected<std::unique_ptr<Client>> Client::create(const ClientOptions& options) {
     if (auto ok = w->attachReader(*reader, 1); !ok) return std::unexpected(ok.error());
     ws->emplace(std::move(*w));
   }
-  return std::unique_ptr<Client>(new Client(std::move(c)));
+  return c;
+}
+
+template <class F>
+auto Client::failingOver(F&& ask) -> decltype(ask(std::declval<Impl&>())) {
+  auto answer = ask(*impl_);
+  for (std::size_t tried = 0; !answer && impl_->unanswered && tried < standby_.size(); ++tried) {
+    // The server in use did not answer: the next replica serves this call and the later ones;
+    // the silent one goes to the back of the line.
+    standby_.push_back(std::move(impl_));
+    impl_ = std::move(standby_.front());
+    standby_.erase(standby_.begin());
+    answer = ask(*impl_);
+  }
+  return answer;
 }
 
 Expected<void> Client::Impl::waitForServer() {
@@ -195,6 +227,7 @@ Expected<void> Client::Impl::ask(const dds::Entity& writer, const dds::Entity& r
   if (auto ok = permitted(reader, what); !ok) return std::unexpected(ok.error());
   if (auto ok = dds::write(writer, &req); !ok) return std::unexpected(ok.error());
   std::string error;
+  unanswered = false;
   auto ok = awaitReply<Reply>(reader, *waitset, req.id, options_.timeout, [&](const Reply& r) {
     if (r.status != 0) {
       error = text(r.error);
@@ -202,7 +235,10 @@ Expected<void> Client::Impl::ask(const dds::Entity& writer, const dds::Entity& r
     }
     read(r, error);
   });
-  if (!ok) return std::unexpected(ok.error());
+  if (!ok) {
+    unanswered = true;
+    return std::unexpected(ok.error());
+  }
   if (!error.empty()) return makeError("server: " + error);
   return {};
 }
@@ -211,12 +247,12 @@ Expected<PointQueryAnswer> Client::queryPoints(const std::vector<Point3f>& point
   std::vector<float> xyz;
   xyz.reserve(points_world.size() * 3);
   for (const auto& p : points_world) xyz.insert(xyz.end(), {p.x(), p.y(), p.z()});
-  return impl_->queryPointsRaw(xyz);
+  return failingOver([&](Impl& i) { return i.queryPointsRaw(xyz); });
 }
 
 Expected<PointQueryAnswer> Client::queryPoints(std::span<const float> xyz_world) {
   if (auto ok = checkPointCoordinates(xyz_world.size()); !ok) return std::unexpected(ok.error());
-  return impl_->queryPointsRaw(xyz_world);
+  return failingOver([&](Impl& i) { return i.queryPointsRaw(xyz_world); });
 }
 
 Expected<PointQueryAnswer> Client::Impl::queryPointsRaw(std::span<const float> xyz) {
@@ -488,7 +524,7 @@ Expected<void> Client::waitForServer() { return impl_->waitForServer(); }
 Expected<void> Client::publishScan(const RawScan& scan) { return impl_->publishScan(scan); }
 Expected<BoxQueryAnswer> Client::queryBox(const Point3f& min, const Point3f& max,
                                           std::uint32_t max_centers) {
-  return impl_->queryBox(min, max, max_centers);
+  return failingOver([&](Impl& i) { return i.queryBox(min, max, max_centers); });
 }
 Expected<DistanceQueryAnswer> Client::queryDistances(std::span<const float> xyz_world,
                                                      const DistanceQueryOptions& options) {
@@ -498,7 +534,8 @@ Expected<DistanceQueryAnswer> Client::queryDistances(std::span<const float> xyz_
   DistanceQueryAnswer answer;
   for (std::size_t from = 0; from < xyz_world.size() || from == 0; from += kPart) {
     const std::size_t n = std::min(kPart, xyz_world.size() - from);
-    auto part = impl_->queryDistancesOnce(xyz_world.subspan(from, n), options);
+    auto part = failingOver(
+        [&](Impl& i) { return i.queryDistancesOnce(xyz_world.subspan(from, n), options); });
     if (!part) return std::unexpected(part.error());
     answer.map_version = part->map_version;
     answer.max_distance = part->max_distance;
@@ -511,22 +548,22 @@ Expected<DistanceQueryAnswer> Client::queryDistances(std::span<const float> xyz_
 }
 
 Expected<PathQueryAnswer> Client::checkBoxes(std::span<const OrientedBox> boxes) {
-  return impl_->checkBoxes(boxes);
+  return failingOver([&](Impl& i) { return i.checkBoxes(boxes); });
 }
 
 Expected<DistanceBoxAnswer> Client::distanceBox(const Point3f& min, const Point3f& max,
                                                 bool unknown_as_occupied) {
-  return impl_->distanceBox(min, max, unknown_as_occupied);
+  return failingOver([&](Impl& i) { return i.distanceBox(min, max, unknown_as_occupied); });
 }
 
 Expected<PathQueryAnswer> Client::checkPath(std::span<const float> vertices_world,
                                             double radius_m) {
-  return impl_->checkPath(vertices_world, radius_m);
+  return failingOver([&](Impl& i) { return i.checkPath(vertices_world, radius_m); });
 }
 
 Expected<RayQueryAnswer> Client::castRay(const Point3f& origin, const Point3f& direction,
                                          float max_range) {
-  return impl_->castRay(origin, direction, max_range);
+  return failingOver([&](Impl& i) { return i.castRay(origin, direction, max_range); });
 }
 Expected<std::string> Client::reset() {
   return impl_->command(dds::CommandKind::kReset, {0, 0, 0}, {0, 0, 0}, {});

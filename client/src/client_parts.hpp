@@ -47,6 +47,8 @@ struct ClientDds {
 struct Client::Impl {
   using Dds = ClientDds;
   explicit Impl(const ClientOptions& options);
+  /// A client of one server (options.instance), its endpoints made.
+  static Expected<std::unique_ptr<Impl>> create(const ClientOptions& options);
 
   Expected<void> waitForServer();
   Expected<void> publishScan(const RawScan& scan);
@@ -88,6 +90,7 @@ struct Client::Impl {
   std::unique_ptr<Dds> dds_;
   std::uint64_t client_id_;
   std::uint64_t next_request_ = 1;
+  bool unanswered = false;  // the last request got no reply within the timeout
 };
 
 /// Test access (client/testing/densemap/client/testing.hpp).

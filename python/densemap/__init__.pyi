@@ -145,7 +145,15 @@ class ShardedClient:
     def __exit__(self, *args: Any) -> None: ...
 
 class Client:
-    def __init__(self, *, domain_id: int = 0, timeout: float = 5.0, network_interface: str = "lo") -> None: ...
+    def __init__(
+        self,
+        *,
+        domain_id: int = 0,
+        timeout: float = 5.0,
+        network_interface: str = "lo",
+        instance: str = "",
+        replicas: Sequence[str] = (),
+    ) -> None: ...
     def wait_for_server(self) -> None: ...
     def query_points(
         self, points: ArrayLike

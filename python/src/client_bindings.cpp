@@ -21,13 +21,16 @@ namespace {
 /// A Client that can be closed: every call on a closed one raises densemap.Error.
 class PyClient {
  public:
-  PyClient(std::uint32_t domain_id, double timeout_s, const std::string& network_interface) {
+  PyClient(std::uint32_t domain_id, double timeout_s, const std::string& network_interface,
+           const std::string& instance, const std::vector<std::string>& replicas) {
     if (!(timeout_s > 0 && timeout_s <= 3600)) {
       throw py::value_error("timeout must be in (0, 3600] s");
     }
     ClientOptions o;
     o.domain_id = domain_id;
     o.network_interface = network_interface;
+    o.instance = instance;
+    o.replicas = replicas;
     o.timeout = std::chrono::milliseconds(static_cast<long>(timeout_s * 1000));
     client_ = valueOrRaise(Client::create(o));
   }
@@ -153,9 +156,14 @@ void bindClient(py::module_& m) {
 A client of a running densemap-server over DDS (loopback by default). Every call has a
 timeout and raises densemap.Error on it, on a refusal (with the server's message) and on a
 closed client. The GIL is released while a call waits. Use as a context manager, or close().
+instance names the server among replicas on the domain (its dds.instance); a query the
+server in use leaves unanswered goes to the next of `replicas`, which serves from then on.
 )doc")
-      .def(py::init<std::uint32_t, double, const std::string&>(), py::kw_only(),
-           py::arg("domain_id") = 0, py::arg("timeout") = 5.0, py::arg("network_interface") = "lo")
+      .def(py::init<std::uint32_t, double, const std::string&, const std::string&,
+                    const std::vector<std::string>&>(),
+           py::kw_only(), py::arg("domain_id") = 0, py::arg("timeout") = 5.0,
+           py::arg("network_interface") = "lo", py::arg("instance") = "",
+           py::arg("replicas") = std::vector<std::string>{})
       .def(
           "wait_for_server",
           [](PyClient& self) {

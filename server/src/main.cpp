@@ -70,6 +70,7 @@ OrExit<densemap::server::ServiceOptions> serviceOptions(const densemap::proto::S
   o.domain_id =
       domain_override >= 0 ? static_cast<std::uint32_t>(domain_override) : config.dds().domain_id();
   o.network_interface = config.dds().network_interface();
+  o.instance = config.dds().instance();
   o.snapshot_path = config.snapshot().path();
   o.autosave_period_s = config.snapshot().autosave_period_s();
   o.max_query_cells = config.pipeline().max_query_cells();

@@ -51,7 +51,7 @@ Expected<std::unique_ptr<MapService>> MapService::create(Ingest& ingest,
   if (!participant) return std::unexpected(participant.error());
   d.participant = std::move(*participant);
   Expected<void> status;
-  auto topics = dds::Topics::create(d.participant);
+  auto topics = dds::Topics::create(d.participant, options.instance);
   if (!topics) return std::unexpected(topics.error());
   d.topics = std::move(*topics);
   auto reader = [&](dds::Entity& out, const dds::Entity& t, dds::QosSpec q) {
@@ -155,7 +155,8 @@ Expected<void> MapService::checkAlone(std::chrono::milliseconds discovery) const
       return makeError(std::string(kAnotherServer) + " (participant " + others.front() +
                        ") already runs on DDS domain " + std::to_string(options_.domain_id) +
                        ": two servers on one domain would answer the same clients with two "
-                       "maps; stop it, or give this one another dds.domain_id / --domain-id");
+                       "maps; stop it, or give this one another dds.domain_id / --domain-id, or "
+                       "a dds.instance of its own (a replica)");
     }
     if (std::chrono::steady_clock::now() >= deadline) return {};
     std::this_thread::sleep_for(std::chrono::milliseconds(20));

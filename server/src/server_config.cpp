@@ -11,6 +11,7 @@
 #include "densemap/idl/text_format.hpp"
 #include "densemap/io/file_bytes.hpp"
 #include "densemap/ros2/names.hpp"
+#include "densemap/wire/topics.hpp"
 #include "ros2_discovery.hpp"
 
 namespace densemap::server {
@@ -187,6 +188,10 @@ Expected<void> checkSnapshotAndDds(const proto::ServerConfig& config) {
     return makeError("snapshot.path: " + dir.error().message);
   }
   if (config.dds().domain_id() > 232) return makeError("dds.domain_id must be in 0..232");
+  if (!config.dds().instance().empty() && !dds::isInstanceName(config.dds().instance())) {
+    return makeError("dds.instance: '" + config.dds().instance() +
+                     "' is not an instance name (1 to 64 letters, digits and _)");
+  }
   if (config.dds().network_interface().empty()) {
     return makeError("dds.network_interface must name an interface (default lo)");
   }

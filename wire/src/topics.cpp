@@ -1,10 +1,23 @@
 #include "densemap/wire/topics.hpp"
 
+#include <algorithm>
+#include <cctype>
+
 #include "densemap_msgs.h"
 
 namespace densemap::dds {
 
-Expected<Topics> Topics::create(const Entity& participant) {
+bool isInstanceName(std::string_view name) {
+  return !name.empty() && name.size() <= 64 && std::all_of(name.begin(), name.end(), [](char c) {
+    return std::isalnum(static_cast<unsigned char>(c)) != 0 || c == '_';
+  });
+}
+
+Expected<Topics> Topics::create(const Entity& participant, const std::string& instance) {
+  if (!instance.empty() && !isInstanceName(instance)) {
+    return makeError("'" + instance +
+                     "' is not a server instance name (1 to 64 letters, digits, _)");
+  }
   Topics t;
   const struct {
     Entity* topic;
@@ -37,7 +50,10 @@ Expected<Topics> Topics::create(const Entity& participant) {
       {&t.status, &densemap_msgs_Status_desc, "status"},
   };
   for (const auto& row : table) {
-    auto topic = createTopic(participant, *row.descriptor, std::string("densemap/") + row.name);
+    const bool shared = row.topic == &t.scan;  // every instance reads the same scans
+    auto topic = createTopic(
+        participant, *row.descriptor,
+        std::string("densemap/") + (instance.empty() || shared ? "" : instance + "/") + row.name);
     // A topic this identity may neither publish nor subscribe stays empty; its readers and
     // writers then fail with the same "not allowed" error.
     if (!topic && isNotAllowedBySecurity(topic.error())) continue;

@@ -33,6 +33,14 @@ struct ClientOptions {
   /// security, requests its permissions do not grant fail with a "not allowed" error. One
   /// identity per process and domain (Cyclone DDS): a Client with another is refused.
   std::optional<dds::SecurityFiles> security{};
+  /// The server to ask among several on the domain (its dds.instance; docs/fleet.md). Empty:
+  /// the domain's one server.
+  std::string instance{};
+  /// Replicas to fail over to, in order, after `instance`: a request that gets no reply within
+  /// `timeout` is sent again to the next replica, which then serves every later call (scans
+  /// reach all of them anyway). Their endpoints are made at create(), so the switch costs no
+  /// discovery. Empty: no failover.
+  std::vector<std::string> replicas{};
 };
 
 struct PointQueryAnswer {
@@ -168,8 +176,12 @@ class Client {
  private:
   friend struct ClientAccess;
   struct Impl;
-  explicit Client(std::unique_ptr<Impl> impl);
-  std::unique_ptr<Impl> impl_;
+  explicit Client(std::vector<std::unique_ptr<Impl>> replicas);
+  /// Runs `ask` on the replica in use; while it goes unanswered, on the next ones in turn.
+  template <class F>
+  auto failingOver(F&& ask) -> decltype(ask(std::declval<Impl&>()));
+  std::unique_ptr<Impl> impl_;                   // the server in use
+  std::vector<std::unique_ptr<Impl>> standby_;  // the replicas after it, in order
 };
 
 }  // namespace densemap

@@ -27,6 +27,8 @@ class FoxgloveRoom;
 struct ServiceOptions {
   std::uint32_t domain_id = 0;
   std::string network_interface = "lo";
+  /// dds.instance: this server's name among replicas on the domain ("": the only server).
+  std::string instance;
   std::optional<dds::SecurityFiles> security;  // DDS Security; none: plain DDS
   std::filesystem::path snapshot_path;         // empty: no snapshots
   int snapshot_keep = 3;                       // files kept: path, path.1, ... (core/store)

@@ -25,8 +25,15 @@ struct Topics {
   Entity map_request;
   Entity manifest, tiles, delta, events, status;
 
-  [[nodiscard]] static Expected<Topics> create(const Entity& participant);
+  /// `instance` names one server of several on a domain (replicas, docs/fleet.md): every topic
+  /// but the scans' is then densemap/<instance>/..., so each server answers its own clients
+  /// while all of them read the same scans. Empty: densemap/... (one server).
+  [[nodiscard]] static Expected<Topics> create(const Entity& participant,
+                                               const std::string& instance = {});
 };
+
+/// Whether `name` may name a server instance: 1 to 64 letters, digits and '_'.
+[[nodiscard]] bool isInstanceName(std::string_view name);
 
 /// CommandRequest.kind on the wire (densemap_msgs.idl), for the server and the client alike.
 enum class CommandKind : std::int32_t { kReset = 0, kClearBox = 1, kSave = 2, kSendMap = 3 };

@@ -23,16 +23,17 @@ class ServerProcess {
  public:
   /// `capture_log`: the server's stderr goes to `dir/server.log` (appended; see log()).
   /// `autosave_s` > 0: autosave that often, keeping 3 snapshot files.
-  /// `map_extra`: more fields of the map block (e.g. "keep_radius_m: 40").
+  /// `map_extra`: more fields of the map block (e.g. "keep_radius_m: 40"); `dds_extra` of the
+  /// dds block (e.g. "instance: \"a\"").
   ServerProcess(const std::filesystem::path& dir, std::uint32_t domain,
                 const std::string& extra = "", bool capture_log = false, double autosave_s = 0,
-                const std::string& map_extra = "")
+                const std::string& map_extra = "", const std::string& dds_extra = "")
       : dir_(dir), capture_log_(capture_log) {
     std::ofstream(dir / "server.textproto")
         << "map { resolution_m: 0.2 max_range_m: 25 " << map_extra << " }\n"
         << "snapshot { path: \"" << (dir / "map.dmap").string()
         << "\" autosave_period_s: " << autosave_s << " keep: 3 }\n"
-        << "dds { domain_id: " << domain << " }\n"
+        << "dds { domain_id: " << domain << " " << dds_extra << " }\n"
         << extra;
     start();
   }
