@@ -55,6 +55,12 @@ static int runMain(int argc, char** argv) {
   app.add_option("--timeout-ms", timeout_ms, "Request timeout")
       ->check(CLI::Range(1, 3'600'000))
       ->capture_default_str();
+  app.add_option("--instance", o.instance,
+                 "The server to ask among replicas on the domain (its dds.instance)");
+  app.add_option("--replicas", o.replicas,
+                 "Replicas to fail over to, in order, when --instance leaves a request "
+                 "unanswered (comma-separated instances)")
+      ->delimiter(',');
   std::string pki_dir, pki_role;
   dds::SecurityFiles security;
   app.add_option("--pki", pki_dir,
