@@ -121,6 +121,25 @@ py::tuple answerArrays(const PointQueryAnswer& a) {
   return py::make_tuple(a.map_version, states, log_odds);
 }
 
+/// A box query's answer as Client.query_box returns it.
+py::dict boxDict(const BoxQueryAnswer& a) {
+  py::dict d = countsDict(a);
+  d["map_version"] = a.map_version;
+  d["occupied_centers"] =
+      pointsArray(PointCloud(a.occupied_centers.begin(), a.occupied_centers.end()));
+  return d;
+}
+
+/// A ray's answer as Client.cast_ray returns it.
+py::dict rayDict(const RayQueryAnswer& a) {
+  py::dict d;
+  d["map_version"] = a.map_version;
+  d["hit"] = a.ray.hit;
+  d["center"] = py::make_tuple(a.ray.hit_center.x(), a.ray.hit_center.y(), a.ray.hit_center.z());
+  d["distance"] = a.ray.distance;
+  return d;
+}
+
 }  // namespace
 
 void bindClient(py::module_& m) {
@@ -189,12 +208,7 @@ server in use leaves unanswered goes to the next of `replicas`, which serves fro
              std::uint32_t max_centers) {
             const Point3f lo = pointFrom(box_min, "box_min"), hi = pointFrom(box_max, "box_max");
             Client& c = self.client();
-            const BoxQueryAnswer a = released([&] { return c.queryBox(lo, hi, max_centers); });
-            py::dict d = countsDict(a);
-            d["map_version"] = a.map_version;
-            d["occupied_centers"] =
-                pointsArray(PointCloud(a.occupied_centers.begin(), a.occupied_centers.end()));
-            return d;
+            return boxDict(released([&] { return c.queryBox(lo, hi, max_centers); }));
           },
           py::arg("box_min"), py::arg("box_max"), py::arg("max_centers") = 0,
           "Counts of the box's cells by state, and up to max_centers occupied centres.")
@@ -204,14 +218,7 @@ server in use leaves unanswered goes to the next of `replicas`, which serves fro
              float max_range) {
             const Point3f o = pointFrom(origin, "origin"), dir = pointFrom(direction, "direction");
             Client& c = self.client();
-            const RayQueryAnswer a = released([&] { return c.castRay(o, dir, max_range); });
-            py::dict d;
-            d["map_version"] = a.map_version;
-            d["hit"] = a.ray.hit;
-            d["center"] =
-                py::make_tuple(a.ray.hit_center.x(), a.ray.hit_center.y(), a.ray.hit_center.z());
-            d["distance"] = a.ray.distance;
-            return d;
+            return rayDict(released([&] { return c.castRay(o, dir, max_range); }));
           },
           py::arg("origin"), py::arg("direction"), py::arg("max_range"),
           "The first occupied cell along the ray: {'map_version', 'hit', 'center', 'distance'}.")
@@ -398,12 +405,7 @@ oldest among the shards that answered. Raises densemap.Error as Client does.
              std::uint32_t max_centers) {
             const Point3f lo = pointFrom(box_min, "box_min"), hi = pointFrom(box_max, "box_max");
             ShardedClient& c = self.client();
-            const BoxQueryAnswer a = released([&] { return c.queryBox(lo, hi, max_centers); });
-            py::dict d = countsDict(a);
-            d["map_version"] = a.map_version;
-            d["occupied_centers"] =
-                pointsArray(PointCloud(a.occupied_centers.begin(), a.occupied_centers.end()));
-            return d;
+            return boxDict(released([&] { return c.queryBox(lo, hi, max_centers); }));
           },
           py::arg("box_min"), py::arg("box_max"), py::arg("max_centers") = 0,
           "As Client.query_box, over all shards.")
@@ -413,14 +415,7 @@ oldest among the shards that answered. Raises densemap.Error as Client does.
              float max_range) {
             const Point3f o = pointFrom(origin, "origin"), dir = pointFrom(direction, "direction");
             ShardedClient& c = self.client();
-            const RayQueryAnswer a = released([&] { return c.castRay(o, dir, max_range); });
-            py::dict d;
-            d["map_version"] = a.map_version;
-            d["hit"] = a.ray.hit;
-            d["center"] =
-                py::make_tuple(a.ray.hit_center.x(), a.ray.hit_center.y(), a.ray.hit_center.z());
-            d["distance"] = a.ray.distance;
-            return d;
+            return rayDict(released([&] { return c.castRay(o, dir, max_range); }));
           },
           py::arg("origin"), py::arg("direction"), py::arg("max_range"),
           "As Client.cast_ray, over all shards.")

@@ -30,13 +30,7 @@ std::vector<std::tuple<std::uint64_t, float, bool>> canonical(const CellChanges&
 
 TEST(Replicas, TwoReplicasPublishTheSameChangesAtEveryVersionAndAClientFailsOver) {
   test::TempDir dir;
-  SequenceOptions o;
-  o.scene = "indoor";
-  o.sensor = "vlp16";
-  o.columns = 90;
-  o.scans = 1000;
-  o.ground_truth_resolution_m = 0;
-  const auto raws = test::simulatedRawScans(dir.path(), o, "robot");
+  const auto raws = test::simulatedRawScans(dir.path(), test::smallIndoorDrive(1000, 90), "robot");
   ASSERT_EQ(raws.size(), 1000U);
   std::filesystem::create_directory(dir.path() / "a");
   std::filesystem::create_directory(dir.path() / "b");

@@ -31,13 +31,7 @@ std::string boundsConfig(float min_x, float max_x) {
 
 TEST(Shards, TwoShardsHoldTheSingleServersMapAndTheirRoutedQueriesEqualItsAnswers) {
   test::TempDir dir;
-  SequenceOptions o;
-  o.scene = "indoor";
-  o.sensor = "vlp16";
-  o.columns = 300;
-  o.scans = 6;
-  o.ground_truth_resolution_m = 0;
-  const auto raws = test::simulatedRawScans(dir.path(), o, "front");
+  const auto raws = test::simulatedRawScans(dir.path(), test::smallIndoorDrive(6, 300), "front");
   ASSERT_EQ(raws.size(), 6U);
   // The split: between the first and last scan's origins, inside a block (a block belongs to
   // the shard its centre lies in).

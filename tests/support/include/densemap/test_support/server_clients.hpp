@@ -48,6 +48,18 @@ inline void replayScans(Client& client, const std::vector<RawScan>& raws) {
   }
 }
 
+/// A small simulated drive: `scans` VLP-16 scans of `columns` columns through the indoor scene,
+/// no ground truth.
+inline SequenceOptions smallIndoorDrive(int scans, int columns) {
+  SequenceOptions o;
+  o.scene = "indoor";
+  o.sensor = "vlp16";
+  o.columns = columns;
+  o.scans = scans;
+  o.ground_truth_resolution_m = 0;
+  return o;
+}
+
 /// Writes a simulated sequence to `dir/data` and returns its scans as a sender publishes them
 /// (seq 1, 2, ...; `sensor_id`).
 inline std::vector<RawScan> simulatedRawScans(const std::filesystem::path& dir,
