@@ -170,12 +170,17 @@ Expected<void> Ros2Bridge::addRobot(const std::string& ns) {
   }
   if (auto ok = d.waitset->attachReader(tfr.tf_reader, kTfTag); !ok) return ok;
   if (auto ok = d.waitset->attachReader(tfr.tf_static_reader, kTfStaticTag); !ok) return ok;
+  for (std::size_t i = 0; i < readers.size(); ++i) {
+    // All attached before any is kept: a robot is added whole or not at all (a reader
+    // deleted on the way out leaves the wait set with it).
+    if (auto ok = d.waitset->attachReader(readers[i], kCloudTag0 + d.cloud_readers.size() + i);
+        !ok) {
+      return ok;
+    }
+  }
   const std::size_t robot = d.robots.size();
   std::lock_guard lock(topics_mutex_);
   for (std::size_t i = 0; i < readers.size(); ++i) {
-    if (auto ok = d.waitset->attachReader(readers[i], kCloudTag0 + d.cloud_readers.size()); !ok) {
-      return ok;
-    }
     d.cloud_topics.push_back(std::move(topics[i]));
     d.cloud_readers.push_back(std::move(readers[i]));
     d.cloud_names.push_back(names[i]);
