@@ -49,14 +49,18 @@ class PyClient {
 class PyShardedClient {
  public:
   PyShardedClient(const std::vector<std::uint32_t>& domain_ids, double timeout_s,
-                  const std::string& network_interface) {
+                  const std::string& network_interface, const std::vector<std::string>& instances) {
     if (!(timeout_s > 0 && timeout_s <= 3600)) {
       throw py::value_error("timeout must be in (0, 3600] s");
     }
+    if (!instances.empty() && instances.size() != domain_ids.size()) {
+      throw py::value_error("instances: one per shard, as domain_ids");
+    }
     std::vector<ClientOptions> shards;
-    for (std::uint32_t domain : domain_ids) {
+    for (std::size_t i = 0; i < domain_ids.size(); ++i) {
       ClientOptions o;
-      o.domain_id = domain;
+      o.domain_id = domain_ids[i];
+      if (!instances.empty()) o.instance = instances[i];
       o.network_interface = network_interface;
       o.timeout = std::chrono::milliseconds(static_cast<long>(timeout_s * 1000));
       shards.push_back(std::move(o));
@@ -372,12 +376,14 @@ most 4,194,304 cells; the server needs esdf { enabled: true }).)doc")
 
   py::class_<PyShardedClient>(m, "ShardedClient", R"doc(
 Queries over spatial shards: densemap-servers whose map.bounds tile space, each on its own DDS
-domain, answered as one map (docs/fleet.md). Each point goes to the shard that keeps its cell, a
+domain or with its own dds.instance (domain_ids and instances: one per shard), answered as one map (docs/fleet.md). Each point goes to the shard that keeps its cell, a
 box to every shard it may touch, a ray to every shard (the nearest hit wins); map_version is the
 oldest among the shards that answered. Raises densemap.Error as Client does.
 )doc")
-      .def(py::init<const std::vector<std::uint32_t>&, double, const std::string&>(), py::kw_only(),
-           py::arg("domain_ids"), py::arg("timeout") = 5.0, py::arg("network_interface") = "lo")
+      .def(py::init<const std::vector<std::uint32_t>&, double, const std::string&,
+                    const std::vector<std::string>&>(),
+           py::kw_only(), py::arg("domain_ids"), py::arg("timeout") = 5.0,
+           py::arg("network_interface") = "lo", py::arg("instances") = std::vector<std::string>{})
       .def_property_readonly(
           "shards", [](PyShardedClient& self) { return self.client().shards(); },
           "How many shards.")

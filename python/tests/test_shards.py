@@ -80,3 +80,5 @@ def test_sharded_queries_equal_one_map(shards):
             assert ray["distance"] == pytest.approx(float(distance[0]), abs=1e-5)
     with pytest.raises(densemap.Error, match="the client is closed"):
         sharded.query_points([[0, 0, 0]])
+    with pytest.raises(ValueError, match="one per shard"):
+        densemap.ShardedClient(domain_ids=list(DOMAINS), instances=["west"])

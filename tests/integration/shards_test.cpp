@@ -1,5 +1,6 @@
 // Spatial shards end to end, as separate processes on loopback: a server over all of space and
-// two whose map.bounds split it (each on its own DDS domain), fed the same scans. Together the
+// two whose map.bounds split it (on one DDS domain, each its own dds.instance), fed the same
+// scans. Together the
 // shards hold the single server's map cell for cell, their manifests say where each is, and
 // ShardedClient's point, box and ray queries across the border equal the single server's.
 #include <gtest/gtest.h>
@@ -16,13 +17,17 @@
 #include "densemap/test_support/data_dir.hpp"
 #include "densemap/test_support/server_clients.hpp"
 #include "densemap/test_support/server_process.hpp"
+#include "densemap/wire/topics.hpp"
+#include "densemap_msgs.h"
 
 namespace densemap {
 namespace {
 
 using namespace std::chrono_literals;
 
-constexpr std::uint32_t kSingle = 202, kWest = 203, kEast = 204;
+// The single server on a domain of its own; the two shards on one domain, each with its own
+// dds.instance, so that every scan reaches both (DDS fan-out).
+constexpr std::uint32_t kSingle = 202, kShards = 203;
 
 std::string boundsConfig(float min_x, float max_x) {
   return "bounds { min_x: " + std::to_string(min_x) +
@@ -40,14 +45,23 @@ TEST(Shards, TwoShardsHoldTheSingleServersMapAndTheirRoutedQueriesEqualItsAnswer
   for (const char* name : {"single", "west", "east"})
     std::filesystem::create_directory(dir.path() / name);
   test::ServerProcess single(dir.path() / "single", kSingle);
-  test::ServerProcess west(dir.path() / "west", kWest, "", false, 0, boundsConfig(-1000, split));
-  test::ServerProcess east(dir.path() / "east", kEast, "", false, 0, boundsConfig(split, 1000));
+  test::ServerProcess west(dir.path() / "west", kShards, "", false, 0, boundsConfig(-1000, split),
+                           "instance: \"west\"");
+  test::ServerProcess east(dir.path() / "east", kShards, "", false, 0, boundsConfig(split, 1000),
+                           "instance: \"east\"");
+  const ClientOptions single_options{.domain_id = kSingle, .timeout = 10s},
+      west_options{.domain_id = kShards, .timeout = 10s, .instance = "west"},
+      east_options{.domain_id = kShards, .timeout = 10s, .instance = "east"};
   std::vector<std::unique_ptr<Client>> clients;
-  for (std::uint32_t domain : {kSingle, kWest, kEast}) {
-    clients.push_back(test::connectClient(domain));
-    ASSERT_TRUE(clients.back());
-    test::replayScans(*clients.back(), raws);
+  for (const ClientOptions& o : {single_options, west_options, east_options}) {
+    auto c = Client::create(o);
+    ASSERT_TRUE(c) << c.error().message;
+    ASSERT_TRUE((*c)->waitForServer());
+    clients.push_back(std::move(*c));
   }
+  // Once to the single server, once to the shards' domain: both shards read every scan.
+  test::replayScans(*clients[0], raws);
+  test::replayScans(*clients[1], raws);
 
   // The manifests say where each server's map is.
   auto single_manifest = clients[0]->manifest();
@@ -80,8 +94,7 @@ TEST(Shards, TwoShardsHoldTheSingleServersMapAndTheirRoutedQueriesEqualItsAnswer
                                   << diff.value_mismatch << " of " << diff.union_cells;
 
   // Queries across the border, routed, equal the single server's answers.
-  auto sharded = ShardedClient::create(
-      {{.domain_id = kWest, .timeout = 10s}, {.domain_id = kEast, .timeout = 10s}});
+  auto sharded = ShardedClient::create({west_options, east_options});
   ASSERT_TRUE(sharded) << sharded.error().message;
   const Point3f centre(split, static_cast<float>(raws.front().t_world_sensor[1]),
                        static_cast<float>(raws.front().t_world_sensor[2]));
@@ -137,11 +150,54 @@ TEST(Shards, TwoShardsHoldTheSingleServersMapAndTheirRoutedQueriesEqualItsAnswer
   EXPECT_GT(hits, 32);
 
   // A server over all of space cannot be a shard beside others.
-  auto mixed = ShardedClient::create(
-      {{.domain_id = kSingle, .timeout = 10s}, {.domain_id = kWest, .timeout = 10s}});
+  auto mixed = ShardedClient::create({single_options, west_options});
   ASSERT_FALSE(mixed);
   EXPECT_NE(mixed.error().message.find("no map.bounds"), std::string::npos)
       << mixed.error().message;
+}
+
+// A manifest is outside bytes too: a box that is not finite or is inverted, or a resolution
+// that is not positive, is an error of Client::manifest, never a shard's box.
+TEST(Shards, AManifestWithAMalformedBoxOrResolutionIsRefused) {
+  constexpr std::uint32_t kDomain = 207;
+  auto participant = dds::createParticipant({kDomain, "lo", std::nullopt});
+  ASSERT_TRUE(participant) << participant.error().message;
+  auto topics = dds::Topics::create(*participant);
+  ASSERT_TRUE(topics);
+  auto writer = dds::createWriter(*participant, topics->manifest, dds::kLatestStateQos);
+  ASSERT_TRUE(writer);
+  auto client = Client::create({.domain_id = kDomain, .timeout = 3s});
+  ASSERT_TRUE(client) << client.error().message;
+  const auto send = [&](densemap_msgs_MapManifest m) {
+    ASSERT_TRUE(dds::write(*writer, &m));
+    std::this_thread::sleep_for(200ms);
+  };
+  densemap_msgs_MapManifest good{};
+  good.version = 3;
+  good.resolution = 0.2;
+  good.bounded = true;
+  good.min_x = good.min_y = good.min_z = -1;
+  good.max_x = good.max_y = good.max_z = 1;
+  send(good);
+  auto read = (*client)->manifest();
+  ASSERT_TRUE(read) << read.error().message;
+  ASSERT_TRUE(read->bounds);
+  EXPECT_EQ(read->bounds->second.x(), 1.0F);
+  auto nan_box = good;
+  nan_box.max_y = std::nan("");
+  auto inverted = good;
+  inverted.min_z = 5;
+  auto infinite = good;
+  infinite.min_x = -HUGE_VAL;
+  auto no_resolution = good;
+  no_resolution.resolution = 0;
+  for (const auto& bad : {nan_box, inverted, infinite, no_resolution}) {
+    send(bad);
+    auto refused = (*client)->manifest();
+    ASSERT_FALSE(refused);
+    EXPECT_NE(refused.error().message.find("malformed"), std::string::npos)
+        << refused.error().message;
+  }
 }
 
 }  // namespace

@@ -10,11 +10,11 @@
 namespace densemap {
 
 /// Queries across spatial shards (docs/fleet.md): servers whose map.bounds tile space, each on
-/// its own DDS domain, answered as one map. Each server's box comes from its manifest; a cell
-/// belongs to the shard whose box holds its block's centre (the rule by which a shard keeps
-/// blocks). Points go to the shard of their cell; a box goes to every shard whose blocks it
-/// may touch and the counts add up; a ray goes to every shard and the nearest hit wins (a
-/// shard's map is unknown outside its box, and rays pass unknown cells). The answer's
+/// its own DDS domain or with its own dds.instance, answered as one map. Each server's box comes
+/// from its manifest; a cell belongs to the shard whose box holds its block's centre (the rule by
+/// which a shard keeps blocks). Points go to the shard of their cell; a box goes to every shard
+/// whose blocks it may touch and the counts add up; a ray goes to every shard and the nearest hit
+/// wins (a shard's map is unknown outside its box, and rays pass unknown cells). The answer's
 /// map_version is the oldest version among the shards that answered.
 /// Thread-safety: one thread at a time, as Client.
 class ShardedClient {
