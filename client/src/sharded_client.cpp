@@ -59,10 +59,7 @@ std::optional<std::size_t> ShardedClient::ownerOf(const Point3f& p) const {
   const Point3f centre = block::centreOf(grid, block::blockOf(*key));
   for (std::size_t i = 0; i < shards_.size(); ++i) {
     const auto& box = shards_[i].bounds;
-    if (!box || ((centre.array() >= box->first.array()).all() &&
-                 (centre.array() <= box->second.array()).all())) {
-      return i;
-    }
+    if (!box || block::boxKeeps(box->first, box->second, centre)) return i;
   }
   return std::nullopt;
 }
@@ -70,9 +67,9 @@ std::optional<std::size_t> ShardedClient::ownerOf(const Point3f& p) const {
 bool ShardedClient::mayTouch(std::size_t i, const Point3f& min, const Point3f& max) const {
   const auto& box = shards_[i].bounds;
   if (!box) return true;
-  const auto half = static_cast<float>(resolution_ * block::kEdge / 2 + resolution_);
-  return (min.array() <= box->second.array() + half).all() &&
-         (box->first.array() - half <= max.array()).all();
+  const auto margin = static_cast<float>(block::boxKeepMargin(resolution_));
+  return (min.array() <= box->second.array() + margin).all() &&
+         (box->first.array() - margin <= max.array()).all();
 }
 
 Expected<PointQueryAnswer> ShardedClient::queryPoints(std::span<const float> xyz_world) {

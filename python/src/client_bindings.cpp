@@ -18,20 +18,27 @@
 namespace densemap::python {
 namespace {
 
+/// A client's options from Python's arguments (the timeout in seconds, checked).
+ClientOptions clientOptions(std::uint32_t domain_id, double timeout_s,
+                            const std::string& network_interface, const std::string& instance) {
+  if (!(timeout_s > 0 && timeout_s <= 3600)) {
+    throw py::value_error("timeout must be in (0, 3600] s");
+  }
+  ClientOptions o;
+  o.domain_id = domain_id;
+  o.network_interface = network_interface;
+  o.timeout = std::chrono::milliseconds(static_cast<long>(timeout_s * 1000));
+  o.instance = instance;
+  return o;
+}
+
 /// A Client that can be closed: every call on a closed one raises densemap.Error.
 class PyClient {
  public:
   PyClient(std::uint32_t domain_id, double timeout_s, const std::string& network_interface,
            const std::string& instance, const std::vector<std::string>& replicas) {
-    if (!(timeout_s > 0 && timeout_s <= 3600)) {
-      throw py::value_error("timeout must be in (0, 3600] s");
-    }
-    ClientOptions o;
-    o.domain_id = domain_id;
-    o.network_interface = network_interface;
-    o.instance = instance;
+    ClientOptions o = clientOptions(domain_id, timeout_s, network_interface, instance);
     o.replicas = replicas;
-    o.timeout = std::chrono::milliseconds(static_cast<long>(timeout_s * 1000));
     client_ = valueOrRaise(Client::create(o));
   }
 
@@ -50,20 +57,17 @@ class PyShardedClient {
  public:
   PyShardedClient(const std::vector<std::uint32_t>& domain_ids, double timeout_s,
                   const std::string& network_interface, const std::vector<std::string>& instances) {
-    if (!(timeout_s > 0 && timeout_s <= 3600)) {
-      throw py::value_error("timeout must be in (0, 3600] s");
+    if (domain_ids.empty() || domain_ids.size() > ShardedClient::kMaxShards) {
+      throw py::value_error("domain_ids: 1 .. " + std::to_string(ShardedClient::kMaxShards) +
+                            " shards");
     }
     if (!instances.empty() && instances.size() != domain_ids.size()) {
       throw py::value_error("instances: one per shard, as domain_ids");
     }
     std::vector<ClientOptions> shards;
     for (std::size_t i = 0; i < domain_ids.size(); ++i) {
-      ClientOptions o;
-      o.domain_id = domain_ids[i];
-      if (!instances.empty()) o.instance = instances[i];
-      o.network_interface = network_interface;
-      o.timeout = std::chrono::milliseconds(static_cast<long>(timeout_s * 1000));
-      shards.push_back(std::move(o));
+      shards.push_back(clientOptions(domain_ids[i], timeout_s, network_interface,
+                                     instances.empty() ? std::string() : instances[i]));
     }
     client_ = valueOrRaise(ShardedClient::create(shards));
   }

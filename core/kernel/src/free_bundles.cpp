@@ -170,16 +170,18 @@ void freeExtentsTree(const PointCloud& points_world, const Eigen::Vector3d& orig
   // each a run of their own), as indices of their first level-0 bundle.
   const auto code = [&](std::size_t g) { return rays[group_starts[g]].first >> 1; };
   const auto aloneGroup = [&](std::size_t g) { return rays[group_starts[g]].first == kAlone; };
+  // Whether level-0 bundle g opens a bundle of level b (level 0: every one does).
+  const auto opens = [&](std::size_t g, int b) {
+    return b == 0 || g == 0 || aloneGroup(g) || aloneGroup(g - 1) ||
+           (code(g) >> (3 * b)) != (code(g - 1) >> (3 * b));
+  };
   std::vector<std::uint32_t>& level_starts = buffers.level_starts;
   level_starts.clear();
   std::vector<std::size_t> level_first(static_cast<std::size_t>(levels) + 2, 0);
   for (int b = 1; b <= levels; ++b) {
     level_first[static_cast<std::size_t>(b)] = level_starts.size();
     for (std::size_t g = 0; g < groups; ++g) {
-      if (g == 0 || aloneGroup(g) || aloneGroup(g - 1) ||
-          (code(g) >> (3 * b)) != (code(g - 1) >> (3 * b))) {
-        level_starts.push_back(static_cast<std::uint32_t>(g));
-      }
+      if (opens(g, b)) level_starts.push_back(static_cast<std::uint32_t>(g));
     }
     level_starts.push_back(static_cast<std::uint32_t>(groups));  // the level's end
   }
@@ -245,10 +247,7 @@ void freeExtentsTree(const PointCloud& points_world, const Eigen::Vector3d& orig
       for (std::size_t g = g0; g < g1; ++g) {
         sum += ends[g];
         count += counts[g];
-        if (b == 1 || g == g0 || aloneGroup(g) || aloneGroup(g - 1) ||
-            (code(g) >> (3 * (b - 1))) != (code(g - 1) >> (3 * (b - 1)))) {
-          ++children;
-        }
+        children += g == g0 || opens(g, b - 1);
       }
       const double own_end = fraction(b);
       if (children > 1) emit(n + groups + u, sum, count, start, own_end);

@@ -217,10 +217,7 @@ void Engine::evict(const Point3f& origin, IntegrationResult& result, CellChanges
     if (options_.keep_radius_m > 0 && (centre - origin).cast<double>().squaredNorm() > r2) {
       return false;
     }
-    if (const auto& box = options_.bounds) {
-      return (centre.array() >= box->first.array()).all() &&
-             (centre.array() <= box->second.array()).all();
-    }
+    if (const auto& box = options_.bounds) return block::boxKeeps(box->first, box->second, centre);
     return true;
   };
   const EvictStats stats = kind_->evict(keep, changes);
@@ -248,9 +245,8 @@ bool segmentMeetsBox(const Point3f& from, const Point3f& to, const Point3f& lo, 
 const PointCloud& Engine::raysReachingBounds(const PointCloud& points_world,
                                              const Point3f& origin) {
   if (!options_.bounds || options_.kernel) return points_world;
-  // Every cell of a kept block (centre in the box) lies within half a block of the box; one
-  // cell more covers a ray that grazes a kept cell's corner.
-  const float margin = static_cast<float>(options_.resolution_m * (block::kEdge / 2 + 1));
+  // Every cell of a kept block lies within the box grown by its keep margin.
+  const auto margin = static_cast<float>(block::boxKeepMargin(options_.resolution_m));
   const Point3f lo = options_.bounds->first - Point3f::Constant(margin);
   const Point3f hi = options_.bounds->second + Point3f::Constant(margin);
   const double max_range = options_.max_range_m;

@@ -53,7 +53,7 @@ class ShardedClient {
     std::optional<std::pair<Point3f, Point3f>> bounds;
   };
   ShardedClient(std::vector<Shard> shards, double resolution);
-  /// Whether shard i may keep cells of the box [min, max] (its box grown by half a block).
+  /// Whether shard i may keep cells of the box [min, max] (its box grown by its keep margin).
   [[nodiscard]] bool mayTouch(std::size_t i, const Point3f& min, const Point3f& max) const;
 
   std::vector<Shard> shards_;

@@ -23,7 +23,7 @@ enum class RosGidLayout { kHumble, kIronAndLater };
 
 /// At most this many robots (ros2.robots) and cloud topics in all, as many as the ingest keeps
 /// sensors apart (SensorTally::kMaxSensors).
-inline constexpr std::size_t kMaxRosRobots = 64;
+inline constexpr std::size_t kMaxRosRobots = SensorTally::kMaxSensors;
 
 struct Ros2Options {
   std::vector<std::string> clouds{"/points"};  // ROS topic names

@@ -147,6 +147,18 @@ struct BlockBox {
          Point3f::Constant(static_cast<float>((half - 0.5) * grid.resolution()));
 }
 
+/// Whether a box [lo, hi] keeps the block centred at `centre`: a block belongs to the box its
+/// centre lies in, faces included (map.bounds' eviction, and which shard holds a cell).
+[[nodiscard]] inline bool boxKeeps(const Point3f& lo, const Point3f& hi, const Point3f& centre) {
+  return (centre.array() >= lo.array()).all() && (centre.array() <= hi.array()).all();
+}
+
+/// How far outside a box the cells of the blocks it keeps may lie, m: half a block, and a cell
+/// more for a ray that grazes a kept cell's corner.
+[[nodiscard]] inline double boxKeepMargin(double resolution_m) {
+  return resolution_m * (kEdge / 2 + 1);
+}
+
 }  // namespace densemap::block
 
 namespace densemap {
