@@ -66,6 +66,20 @@ std::expected<void, Rejection> checkSensorId(std::string_view sensor_id) {
   return {};
 }
 
+std::expected<void, Rejection> checkScanPose(const std::array<double, 3>& t,
+                                             const std::array<double, 4>& q,
+                                             const ScanLimits& limits) {
+  const double q_norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  if (!std::isfinite(q_norm) || std::abs(q_norm - 1.0) > limits.quaternion_tolerance) {
+    return reject(RejectReason::kBadQuaternion,
+                  "pose quaternion norm " + std::to_string(q_norm) + " is not 1");
+  }
+  for (const double v : t) {
+    if (auto ok = checkPosition(v, limits); !ok) return ok;
+  }
+  return {};
+}
+
 std::expected<Scan, Rejection> validateScan(const RawScan& raw, const ScanLimits& limits) {
   if (auto ok = checkSensorId(raw.sensor_id); !ok) return std::unexpected(std::move(ok.error()));
   if (raw.xyz.empty()) return reject(RejectReason::kEmpty, "scan has no points");
@@ -80,15 +94,10 @@ std::expected<Scan, Rejection> validateScan(const RawScan& raw, const ScanLimits
         RejectReason::kIntensityLength,
         std::to_string(raw.intensity.size()) + " intensities for " + std::to_string(n) + " points");
   }
+  if (auto ok = checkScanPose(raw.t_world_sensor, raw.q_world_sensor, limits); !ok) {
+    return std::unexpected(std::move(ok.error()));
+  }
   const auto& q = raw.q_world_sensor;
-  const double q_norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-  if (!std::isfinite(q_norm) || std::abs(q_norm - 1.0) > limits.quaternion_tolerance) {
-    return reject(RejectReason::kBadQuaternion,
-                  "pose quaternion norm " + std::to_string(q_norm) + " is not 1");
-  }
-  for (const double t : raw.t_world_sensor) {
-    if (auto ok = checkPosition(t, limits); !ok) return std::unexpected(std::move(ok.error()));
-  }
   Scan scan;
   scan.id = raw.seq;
   scan.frame = PointFrame::kSensor;

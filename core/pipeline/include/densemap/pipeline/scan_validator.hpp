@@ -50,6 +50,13 @@ struct Rejection {
 /// A Rejection when `sensor_id` is longer than kMaxSensorIdBytes.
 [[nodiscard]] std::expected<void, Rejection> checkSensorId(std::string_view sensor_id);
 
+/// A sensor pose from outside (a scan's, a pose correction's): the quaternion's norm within
+/// `limits.quaternion_tolerance` of 1, the position finite and within
+/// `limits.max_abs_position_m` on every axis.
+[[nodiscard]] std::expected<void, Rejection> checkScanPose(const std::array<double, 3>& t,
+                                                           const std::array<double, 4>& q,
+                                                           const ScanLimits& limits);
+
 /// Checks a raw scan and turns it into a sensor-frame Scan, or says why not. Pure.
 [[nodiscard]] std::expected<Scan, Rejection> validateScan(const RawScan& raw,
                                                           const ScanLimits& limits);
