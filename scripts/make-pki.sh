@@ -6,7 +6,8 @@
 #                             discovery and data encrypted (AES-GCM); no unauthenticated joins
 #   permissions.xml/.p7s      one grant per role, default DENY:
 #     server    publishes and subscribes every topic
-#     robot     publishes scans (densemap/scan, ROS clouds and /tf), reads status and map
+#     robot     publishes scans (densemap/scan, ROS clouds and /tf) and pose corrections
+#               (densemap/pose_correction), reads status and map
 #               events (which scans the map holds)
 #     operator  commands (reset, clear-bbox, save), queries, map fetches, map topics, status
 #     viewer    queries, map fetches, map topics and status only
@@ -168,7 +169,8 @@ EOF
   <permissions>
 EOF
   grant server "$(topics '*')" "$(topics '*')"
-  grant robot "$(topics densemap/scan rt/points 'rt/points*' rt/tf rt/tf_static)" \
+  grant robot "$(topics densemap/scan densemap/pose_correction rt/points 'rt/points*' rt/tf \
+    rt/tf_static)" \
     "$(topics densemap/status densemap/map/events)"
   grant operator "$(topics densemap/cmd/request "${queries_out[@]}")" \
     "$(topics "${queries_in[@]}" "${map_in[@]}")"

@@ -13,6 +13,7 @@
 #include "densemap/planner/swept_volume.hpp"
 #include "densemap/query/map_queries.hpp"
 #include "densemap/query/version_delta.hpp"
+#include "densemap/wire/correction_wire.hpp"
 #include "densemap/wire/dds.hpp"
 #include "densemap/wire/delta_wire.hpp"
 #include "densemap/wire/status.hpp"
@@ -72,6 +73,7 @@ Expected<std::unique_ptr<Client::Impl>> Client::Impl::create(const ClientOptions
   };
   const dds::QosSpec requests = dds::kRequestQos;
   make(d.scan_w, d.topics.scan, dds::kScanQos, true);
+  make(d.pc_w, d.topics.pose_correction, dds::kCorrectionQos, true);
   make(d.pq_w, d.topics.point_request, requests, true);
   make(d.bq_w, d.topics.bbox_request, requests, true);
   make(d.rq_w, d.topics.ray_request, requests, true);
@@ -186,6 +188,13 @@ Expected<void> Client::Impl::publishScan(const RawScan& scan) {
   if (auto ok = permitted(dds_->scan_w, "publishing scans"); !ok)
     return std::unexpected(ok.error());
   return dds::write(dds_->scan_w, &msg);
+}
+
+Expected<void> Client::Impl::publishPoseCorrection(const PoseCorrection& correction) {
+  if (auto ok = permitted(dds_->pc_w, "publishing pose corrections"); !ok) {
+    return std::unexpected(ok.error());
+  }
+  return dds::writePoseCorrection(dds_->pc_w, correction);
 }
 
 namespace {
@@ -522,6 +531,10 @@ Expected<ServerStatus> Client::Impl::status() {
 
 Expected<void> Client::waitForServer() { return impl_->waitForServer(); }
 Expected<void> Client::publishScan(const RawScan& scan) { return impl_->publishScan(scan); }
+
+Expected<void> Client::publishPoseCorrection(const PoseCorrection& correction) {
+  return impl_->publishPoseCorrection(correction);
+}
 Expected<BoxQueryAnswer> Client::queryBox(const Point3f& min, const Point3f& max,
                                           std::uint32_t max_centers) {
   return failingOver([&](Impl& i) { return i.queryBox(min, max, max_centers); });

@@ -37,7 +37,7 @@ struct ClientDds {
   dds::Entity participant;
   dds::Topics topics;
   // With DDS Security, an endpoint this identity may not use stays empty (0).
-  dds::Entity scan_w, pq_w, bq_w, rq_w, dq_w, paq_w, oq_w, dbq_w, cq_w, mq_w;
+  dds::Entity scan_w, pc_w, pq_w, bq_w, rq_w, dq_w, paq_w, oq_w, dbq_w, cq_w, mq_w;
   dds::Entity pr_r, br_r, rr_r, dr_r, par_r, or_r, dbr_r, cr_r, man_r, delta_r, event_r, st_r;
   // One per reply reader: a request waits for data on its own reader, not by polling.
   std::optional<dds::WaitSet> pr_ws, br_ws, rr_ws, dr_ws, par_ws, or_ws, dbr_ws, cr_ws;
@@ -52,6 +52,7 @@ struct Client::Impl {
 
   Expected<void> waitForServer();
   Expected<void> publishScan(const RawScan& scan);
+  Expected<void> publishPoseCorrection(const PoseCorrection& correction);
   Expected<PointQueryAnswer> queryPointsRaw(std::span<const float> xyz);
   Expected<PointQueryAnswer> queryPointsOnce(std::span<const float> xyz);
   Expected<BoxQueryAnswer> queryBox(const Point3f& min, const Point3f& max,

@@ -7,6 +7,7 @@
 
 #include "densemap/geometry/percentile.hpp"
 #include "guarded.hpp"
+#include "ingest_background.hpp"
 
 namespace densemap::server {
 
@@ -25,7 +26,21 @@ Expected<std::unique_ptr<Ingest>> Ingest::create(const IngestOptions& options,
     if (!f) return makeError("esdf: " + f.error().message);
     field = std::move(*f);
   }
+  if (options.history_threads < 1 || options.history_threads > 256) {
+    return makeError("history threads must be in 1..256");
+  }
+  std::unique_ptr<ScanHistory> history;
+  if (options.history) {
+    if (options.engine.kernel || options.engine.decay) {
+      return makeError("history: pose corrections need a log_odds map without map.decay");
+    }
+    auto h = ScanHistory::create(*options.history, (*engine)->view());
+    if (!h) return std::unexpected(h.error());
+    history = std::move(*h);
+  }
   auto ingest = std::unique_ptr<Ingest>(new Ingest(options, std::move(*engine)));
+  ingest->history_ = std::move(history);
+  ingest->history_status_.enabled = ingest->history_ != nullptr;
   if (field) {
     ingest->field_ = std::move(field);
     ingest->field_view_ = ingest->engine_->view();
@@ -37,6 +52,7 @@ Expected<std::unique_ptr<Ingest>> Ingest::create(const IngestOptions& options,
 Ingest::Ingest(const IngestOptions& options, std::unique_ptr<Engine> engine)
     : engine_(std::move(engine)),
       arena_(options.threads),
+      history_arena_(options.history_threads),
       queue_(
           options.queue_depth, options.queue_depth * kQueueSensorShare,
           [](const RawScan& scan) -> const std::string& { return scan.sensor_id; },
@@ -59,6 +75,7 @@ void Ingest::stop() {
     for (const RawScan& scan : discarded) sensors_.dropped(scan.sensor_id);
   }
   if (worker_.joinable()) worker_.join();
+  cancelReintegration();
   runCommands();  // commands queued while stopping (e.g. the shutdown snapshot) still run
 }
 
@@ -123,6 +140,8 @@ void Ingest::run() {
     // guarded() takes the rest (a counter's allocation, a reject handler).
     guarded("ingest", [&] {
       runCommands();
+      applyCorrections();
+      finishReintegration();
       auto raw = queue_.pop(std::chrono::milliseconds(20));
       if (raw) process(*raw);
     });
@@ -148,6 +167,7 @@ void Ingest::process(const RawScan& raw) {
     outcome->latency_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - raw.received)
             .count();
+    recordScan(raw);
     published(*outcome);
     return;
   }
@@ -176,7 +196,10 @@ void Ingest::runCommands() {
     Expected<std::string> outcome;
     try {
       arena_.execute([&] { outcome = engine_->command(command, result); });
-      if (!result.changes.empty()) published(result);
+      if (!result.changes.empty()) {
+        restartHistory();  // the scans before it no longer make the map
+        published(result);
+      }
     } catch (...) {
       outcome = makeError("command failed: " + cli::currentFailure());
     }
@@ -226,6 +249,12 @@ PipelineCounters Ingest::counters() const {
   PipelineCounters c = counters_;
   c.dropped = queue_.dropped();
   c.sensors = sensors_.sensors();
+  c.history = history_status_;
+  if (history_) {
+    const ScanStore& store = history_->store();
+    c.history.scans = store.end() - store.first();
+    c.history.bytes = store.bytes();
+  }
   if (!latencies_.empty()) {
     std::vector<double> v = latencies_;
     std::sort(v.begin(), v.end());

@@ -9,6 +9,7 @@
 
 #include "command_room.hpp"
 #include "densemap/server/export_path.hpp"
+#include "densemap/wire/correction_wire.hpp"
 #include "densemap/wire/topics.hpp"
 #include "densemap_msgs.h"
 #include "guarded.hpp"
@@ -26,14 +27,15 @@ namespace {
 // Attachment tags of the service waitset.
 constexpr dds_attach_t kPointTag = 1, kBboxTag = 2, kRayTag = 3, kCmdTag = 4, kScanTag = 5,
                        kMapTag = 6, kDistanceTag = 7, kPathTag = 8, kBoxesTag = 9,
-                       kDistanceBoxTag = 10;
+                       kDistanceBoxTag = 10, kCorrectionTag = 11;
 
 }  // namespace
 
 struct MapService::Dds {
   dds::Entity participant;
   dds::Topics topics;
-  dds::Entity scan_reader, point_reader, bbox_reader, ray_reader, cmd_reader, map_reader;
+  dds::Entity scan_reader, correction_reader, point_reader, bbox_reader, ray_reader, cmd_reader,
+      map_reader;
   dds::Entity distance_reader, path_reader, boxes_reader, distance_box_reader;
   // Replies go out through writers made per asking client (ReplyWriters).
   dds::Entity manifest_writer, tile_writer, delta_writer, event_writer, status_writer;
@@ -79,6 +81,7 @@ Expected<std::unique_ptr<MapService>> MapService::create(Ingest& ingest,
   }
   const dds::QosSpec requests = dds::kRequestQos;
   reader(d.scan_reader, d.topics.scan, dds::kScanQos);
+  reader(d.correction_reader, d.topics.pose_correction, dds::kCorrectionQos);
   reader(d.point_reader, d.topics.point_request, requests);
   reader(d.bbox_reader, d.topics.bbox_request, requests);
   reader(d.ray_reader, d.topics.ray_request, requests);
@@ -100,15 +103,17 @@ Expected<std::unique_ptr<MapService>> MapService::create(Ingest& ingest,
   if (!ingest_ws || !service_ws) return makeError("cannot create DDS waitsets");
   d.ingest_waitset.emplace(std::move(*ingest_ws));
   d.service_waitset.emplace(std::move(*service_ws));
-  for (auto [r, tag] : {std::pair{&d.point_reader, kPointTag}, std::pair{&d.bbox_reader, kBboxTag},
-                        std::pair{&d.ray_reader, kRayTag}, std::pair{&d.cmd_reader, kCmdTag},
-                        std::pair{&d.map_reader, kMapTag}, std::pair{&d.distance_reader, kDistanceTag},
-                        std::pair{&d.path_reader, kPathTag}, std::pair{&d.boxes_reader, kBoxesTag},
-                        std::pair{&d.distance_box_reader, kDistanceBoxTag}}) {
+  for (auto [r, tag] :
+       {std::pair{&d.point_reader, kPointTag}, std::pair{&d.bbox_reader, kBboxTag},
+        std::pair{&d.ray_reader, kRayTag}, std::pair{&d.cmd_reader, kCmdTag},
+        std::pair{&d.map_reader, kMapTag}, std::pair{&d.distance_reader, kDistanceTag},
+        std::pair{&d.path_reader, kPathTag}, std::pair{&d.boxes_reader, kBoxesTag},
+        std::pair{&d.distance_box_reader, kDistanceBoxTag}}) {
     if (auto ok = d.service_waitset->attachReader(*r, tag); !ok) return std::unexpected(ok.error());
   }
-  if (auto ok = d.ingest_waitset->attachReader(d.scan_reader, kScanTag); !ok) {
-    return std::unexpected(ok.error());
+  for (auto [r, tag] :
+       {std::pair{&d.scan_reader, kScanTag}, std::pair{&d.correction_reader, kCorrectionTag}}) {
+    if (auto ok = d.ingest_waitset->attachReader(*r, tag); !ok) return std::unexpected(ok.error());
   }
   if (options.ros2) {
     auto bridge = Ros2Bridge::create(ingest, d.participant, *options.ros2);
@@ -142,10 +147,9 @@ void MapService::makeRooms() {
   publisher_ = std::make_unique<Publisher>(
       ingest_, Publisher::Writers{d.event_writer, d.delta_writer, d.manifest_writer}, ros2_.get(),
       foxglove_.get());
-  status_ = std::make_unique<StatusRoom>(ingest_, d.status_writer, d.participant, d.status_probe,
-                                         options_.domain_id,
-                                         StatusRoom::Sources{*stats_, *saver_, ros2_.get(),
-                                                             foxglove_.get()});
+  status_ = std::make_unique<StatusRoom>(
+      ingest_, d.status_writer, d.participant, d.status_probe, options_.domain_id,
+      StatusRoom::Sources{*stats_, *saver_, ros2_.get(), foxglove_.get()});
 }
 
 Expected<void> MapService::checkAlone(std::chrono::milliseconds discovery) const {
@@ -216,6 +220,13 @@ void MapService::ingestLoop() {
         raw.intensity.assign(msg.intensity._buffer, msg.intensity._buffer + msg.intensity._length);
         ingest_.submit(std::move(raw));
       });
+      dds::takeAll<densemap_msgs_PoseCorrection>(
+          dds_->correction_reader, [&](const densemap_msgs_PoseCorrection& msg) {
+            auto correction = dds::correctionFromWire(msg);
+            auto ok = correction ? ingest_.correct(std::move(*correction))
+                                 : ingest_.refuseCorrection(correction.error().message);
+            if (!ok) spdlog::warn("{}", ok.error().message);
+          });
     });
   }
 }

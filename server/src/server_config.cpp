@@ -67,7 +67,7 @@ Expected<proto::ServerConfig> loadServerConfig(const std::filesystem::path& file
   const auto refused = [&](const Error& e) {
     return fileError(file, locatedError(where, e.message));
   };
-  if (auto options = pipelineOptions(config); !options) return refused(options.error());
+  if (auto options = ingestOptions(config); !options) return refused(options.error());
   if (auto security = securityFiles(config); !security) return refused(security.error());
   if (auto ros2 = ros2Options(config); !ros2) return refused(ros2.error());
   if (auto foxglove = foxgloveOptions(config); !foxglove) return refused(foxglove.error());
@@ -232,6 +232,26 @@ Expected<IngestOptions> ingestOptions(const proto::ServerConfig& config) {
       return makeError("esdf.max_distance_m: " + ok.error().message);
     }
     o.distance_field = field;
+  }
+  if (const proto::HistoryConfig& h = config.history(); h.enabled()) {
+    if (h.directory().empty()) return makeError("history.directory must name a directory");
+    if (h.max_mb() < 1 || h.max_mb() > (std::uint64_t{1} << 24)) {
+      return makeError("history.max_mb must be in 1..16777216");
+    }
+    if (h.checkpoint_every() < 1 || h.checkpoint_every() > 1'000'000) {
+      return makeError("history.checkpoint_every must be in 1..1000000");
+    }
+    if (h.max_checkpoints() < 1 || h.max_checkpoints() > 1024) {
+      return makeError("history.max_checkpoints must be in 1..1024");
+    }
+    if (h.threads() < 1 || h.threads() > 256) return makeError("history.threads must be in 1..256");
+    if (o.engine.kernel || o.engine.decay) {
+      return makeError("history: pose corrections need map.kind log_odds without map.decay");
+    }
+    o.history = HistoryOptions{.store = {.directory = h.directory(), .max_bytes = h.max_mb() << 20},
+                               .checkpoint_every = h.checkpoint_every(),
+                               .max_checkpoints = h.max_checkpoints()};
+    o.history_threads = static_cast<int>(h.threads());
   }
   return o;
 }

@@ -72,6 +72,7 @@ void StatusRoom::publish() {
   s.evicted_blocks = c.evicted_blocks;
   s.evicted_cells = c.evicted_cells;
   s.decayed_cells = c.decayed_cells;
+  s.history = c.history;
   s.snapshot_failures = sources_.snapshots.failures();
   s.last_snapshot_error = sources_.snapshots.lastError();
   s.queries_answered = sources_.requests.answeredCount();

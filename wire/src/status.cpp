@@ -38,9 +38,8 @@ Expected<void> writeStatus(const Entity& writer, const ServerStatus& st) {
   std::vector<densemap_msgs_SensorStatus> sensors;
   sensors.reserve(st.sensors.size());
   for (const SensorCounters& sc : st.sensors) {
-    sensors.push_back(
-        {lend(sc.sensor_id), sc.received, sc.integrated, sc.dropped, sc.rejected, sc.seq_gaps,
-         sc.latency_p50_ms, sc.latency_p99_ms});
+    sensors.push_back({lend(sc.sensor_id), sc.received, sc.integrated, sc.dropped, sc.rejected,
+                       sc.seq_gaps, sc.latency_p50_ms, sc.latency_p99_ms});
   }
   s.sensors = borrowSequence<dds_sequence_densemap_msgs_SensorStatus>(sensors);
   s.ros_enabled = st.ros_enabled;
@@ -64,6 +63,21 @@ Expected<void> writeStatus(const Entity& writer, const ServerStatus& st) {
   s.foxglove_dropped_frames = st.foxglove_dropped_frames;
   s.foxglove_closed_clients = st.foxglove_closed_clients;
   s.foxglove_rejected = st.foxglove_rejected;
+  const HistoryStatus& h = st.history;
+  s.history_enabled = h.enabled;
+  s.history_scans = h.scans;
+  s.history_bytes = h.bytes;
+  s.corrections = h.corrections;
+  s.corrections_rejected = h.corrections_rejected;
+  s.corrected_scans = h.corrected_scans;
+  s.unmatched_poses = h.unmatched_poses;
+  s.reintegrating = h.reintegrating;
+  s.reintegration_done = h.reintegration_done;
+  s.reintegration_total = h.reintegration_total;
+  s.reintegrations = h.reintegrations;
+  s.last_reintegration_ms_per_scan = h.last_ms_per_scan;
+  s.last_reintegration_version = h.last_version;
+  s.last_history_error = lend(h.last_error);
   return write(writer, &s);
 }
 
@@ -125,6 +139,20 @@ ServerStatus statusFromWire(const densemap_msgs_Status& s) {
   out.foxglove_dropped_frames = s.foxglove_dropped_frames;
   out.foxglove_closed_clients = s.foxglove_closed_clients;
   out.foxglove_rejected = s.foxglove_rejected;
+  out.history = {.enabled = s.history_enabled,
+                 .scans = s.history_scans,
+                 .bytes = s.history_bytes,
+                 .corrections = s.corrections,
+                 .corrections_rejected = s.corrections_rejected,
+                 .corrected_scans = s.corrected_scans,
+                 .unmatched_poses = s.unmatched_poses,
+                 .reintegrating = s.reintegrating,
+                 .reintegration_done = s.reintegration_done,
+                 .reintegration_total = s.reintegration_total,
+                 .reintegrations = s.reintegrations,
+                 .last_ms_per_scan = s.last_reintegration_ms_per_scan,
+                 .last_version = s.last_reintegration_version,
+                 .last_error = text(s.last_history_error)};
   return out;
 }
 

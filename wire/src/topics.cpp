@@ -25,6 +25,7 @@ Expected<Topics> Topics::create(const Entity& participant, const std::string& in
     const char* name;
   } table[] = {
       {&t.scan, &densemap_msgs_Scan_desc, "scan"},
+      {&t.pose_correction, &densemap_msgs_PoseCorrection_desc, "pose_correction"},
       {&t.point_request, &densemap_msgs_PointQueryRequest_desc, "query/point/request"},
       {&t.point_reply, &densemap_msgs_PointQueryReply_desc, "query/point/reply"},
       {&t.bbox_request, &densemap_msgs_BboxQueryRequest_desc, "query/bbox/request"},
@@ -50,7 +51,8 @@ Expected<Topics> Topics::create(const Entity& participant, const std::string& in
       {&t.status, &densemap_msgs_Status_desc, "status"},
   };
   for (const auto& row : table) {
-    const bool shared = row.topic == &t.scan;  // every instance reads the same scans
+    // Every instance reads the same scans and pose corrections.
+    const bool shared = row.topic == &t.scan || row.topic == &t.pose_correction;
     auto topic = createTopic(
         participant, *row.descriptor,
         std::string("densemap/") + (instance.empty() || shared ? "" : instance + "/") + row.name);

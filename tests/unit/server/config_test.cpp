@@ -90,9 +90,8 @@ TEST(ServerConfig, Ros2OptionsAndTheirErrors) {
         "ros2 { enabled: true octomap_topic: \"/a//b\" }\n",
         "ros2 { enabled: true distro: \"foxy\" }\n", "ros2 { enabled: true node_name: \"\" }\n",
         "ros2 { enabled: true node_name: \"2d_map\" }\n",
-        "ros2 { enabled: true node_name: \"a/b\" }\n",
-        "ros2 { enabled: true robots: \"/\" }\n", "ros2 { enabled: true robots: \"\" }\n",
-        "ros2 { enabled: true robots: \"/robot 1\" }\n",
+        "ros2 { enabled: true node_name: \"a/b\" }\n", "ros2 { enabled: true robots: \"/\" }\n",
+        "ros2 { enabled: true robots: \"\" }\n", "ros2 { enabled: true robots: \"/robot 1\" }\n",
         "ros2 { enabled: true robots: \"/r1\" robots: \"r1\" }\n",
         "ros2 { enabled: true robots: \"/r1/\" }\n",
         "ros2 { enabled: true robot_pattern: \"robot*\" }\n",
@@ -166,6 +165,36 @@ TEST(ServerConfig, EvictionNeedsTheGridLogOddsMapAndAValidBox) {
            {"map { keep_radius_m: -1 }", "keep_radius_m must be >= 0"},
            {"map { keep_radius_m: 40 backend: \"octree\" }", "need backend \"grid\""},
            {"map { bounds { min_x: 1 max_x: 1 max_y: 1 max_z: 1 } }", "map.bounds needs"},
+       }) {
+    auto refused = loadServerConfig(writeConfig(dir, text + "\n"));
+    ASSERT_FALSE(refused) << text;
+    EXPECT_NE(refused.error().message.find(reason), std::string::npos) << refused.error().message;
+  }
+}
+
+TEST(ServerConfig, HistoryOptionsAndTheirErrors) {
+  const test::TempDir dir;
+  EXPECT_FALSE(ingestOptions(proto::ServerConfig{})->history) << "off unless enabled";
+  auto ok = loadServerConfig(
+      writeConfig(dir,
+                  "history { enabled: true directory: \"/tmp/h\" max_mb: 10 checkpoint_every: 20 "
+                  "max_checkpoints: 3 threads: 2 }\n"));
+  ASSERT_TRUE(ok) << ok.error().message;
+  auto options = ingestOptions(*ok);
+  ASSERT_TRUE(options && options->history);
+  EXPECT_EQ(options->history->store.directory, "/tmp/h");
+  EXPECT_EQ(options->history->store.max_bytes, std::size_t{10} << 20);
+  EXPECT_EQ(options->history->checkpoint_every, 20U);
+  EXPECT_EQ(options->history->max_checkpoints, 3U);
+  EXPECT_EQ(options->history_threads, 2);
+  for (const auto& [text, reason] : std::vector<std::pair<std::string, std::string>>{
+           {"history { enabled: true directory: \"\" }", "history.directory"},
+           {"history { enabled: true max_mb: 0 }", "history.max_mb"},
+           {"history { enabled: true checkpoint_every: 0 }", "history.checkpoint_every"},
+           {"history { enabled: true max_checkpoints: 2000 }", "history.max_checkpoints"},
+           {"history { enabled: true threads: 0 }", "history.threads"},
+           {"history { enabled: true } map { kind: \"akimap_rays\" }", "need map.kind log_odds"},
+           {"history { enabled: true } map { decay { enabled: true } }", "without map.decay"},
        }) {
     auto refused = loadServerConfig(writeConfig(dir, text + "\n"));
     ASSERT_FALSE(refused) << text;

@@ -124,6 +124,10 @@ class Client {
   /// Waits until a server's scan reader and request readers are matched.
   [[nodiscard]] Expected<void> waitForServer();
   [[nodiscard]] Expected<void> publishScan(const RawScan& scan);
+  /// Publishes new poses for past scans of one sensor (densemap/pose_correction): every server
+  /// with a history (config history) on the domain re-integrates them (docs/fleet.md). An error
+  /// for more than kMaxCorrectedPoses poses; the server counts what it refuses in its status.
+  [[nodiscard]] Expected<void> publishPoseCorrection(const PoseCorrection& correction);
   /// The cells at the points (metres, world frame). A batch of more than 250,000 points goes as
   /// several requests, one after another, each answered from one map version; map_version is
   /// then the last part's.

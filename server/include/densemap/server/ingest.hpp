@@ -11,6 +11,7 @@
 #include <shared_mutex>
 #include <thread>
 
+#include "densemap/history/scan_history.hpp"
 #include "densemap/io/raw_scan.hpp"
 #include "densemap/pipeline/engine.hpp"
 #include "densemap/planner/distance_field.hpp"
@@ -38,7 +39,15 @@ struct IngestOptions {
   std::size_t queue_budget_bytes = std::size_t{256} << 20;
   /// The distance field planners query (config esdf), updated after every version; none: off.
   std::optional<DistanceFieldOptions> distance_field;
+  /// The map's history (config history): the scans integrated, kept so that pose corrections
+  /// re-integrate them (log-odds maps without decay); none: off, corrections refused.
+  std::optional<HistoryOptions> history;
+  /// Threads of the background re-integration, beside the `threads` integrating live scans.
+  int history_threads = 1;
 };
+
+/// Corrections waiting for the worker at most; more are refused (counted).
+inline constexpr std::size_t kMaxPendingCorrections = 16;
 
 struct PipelineCounters {
   std::uint64_t received = 0;
@@ -53,6 +62,7 @@ struct PipelineCounters {
   std::uint64_t evicted_cells = 0;
   std::uint64_t decayed_cells = 0;      // occupied cells map.decay made unknown
   std::vector<SensorCounters> sensors;  // the same counts per sensor id, with seq gaps
+  HistoryStatus history;                // pose corrections (IngestOptions::history)
 };
 
 /// The server's ingest (docs/architecture.md): a bounded latest-wins queue in front of the
@@ -92,6 +102,19 @@ class Ingest {
   [[nodiscard]] bool hasRoomFor(const RawScan& scan) const { return queue_.hasRoomFor(scan); }
   /// Runs `command` on the worker between scans; a non-empty change list publishes a version.
   [[nodiscard]] std::future<Expected<std::string>> command(Command command);
+  /// New poses for past scans (IngestOptions::history), from any thread: checked
+  /// (checkCorrection) and queued. The worker replaces the stored poses and re-integrates from
+  /// the checkpoint before the earliest corrected scan on a background thread, while scans go
+  /// on into the live map; once it has caught up, the worker integrates the last few scans
+  /// into it and patches the live map to equal it, published as one version. Readers keep
+  /// the latest version meanwhile. A correction during a re-integration restarts it from the
+  /// earlier checkpoint of the two; a command that changes the map (reset, clear) cancels it
+  /// and restarts the history. An error, counted, when the history is off, the correction is
+  /// malformed, or kMaxPendingCorrections wait.
+  [[nodiscard]] Expected<void> correct(PoseCorrection correction);
+  /// Counts a correction refused before correct() could read it (malformed on the wire) and
+  /// returns the error.
+  Expected<void> refuseCorrection(const std::string& why);
 
   [[nodiscard]] std::shared_ptr<const MapView> view() const { return engine_->view(); }
   /// Runs f(field, view): the distance field and the map version it was updated to, shared with
@@ -132,6 +155,15 @@ class Ingest {
   std::expected<IntegrationResult, Rejection> integrate(const RawScan& raw);
   /// Counts an integrated scan (its latency, evictions) and hands the result on.
   void published(IntegrationResult& result);
+  // The map's history (ingest_history.cpp), on the worker: after a scan; after a command that
+  // changed the map; the corrections waiting; a background re-integration that has caught up.
+  void recordScan(const RawScan& raw);
+  void restartHistory();
+  void applyCorrections();
+  void startReintegration(std::uint64_t from_index);
+  void finishReintegration();
+  void cancelReintegration();
+  void historyError(const std::string& message);
 
   std::unique_ptr<Engine> engine_;
   tbb::task_arena arena_;
@@ -150,6 +182,14 @@ class Ingest {
   SensorTally sensors_;
   std::vector<double> latencies_;  // ring of the last 1024
   std::size_t latency_next_ = 0;
+
+  std::unique_ptr<ScanHistory> history_;
+  tbb::task_arena history_arena_;
+  struct Background;  // a re-integration under way: its thread and progress
+  std::unique_ptr<Background> background_;
+  std::mutex corrections_mutex_;
+  std::vector<PoseCorrection> corrections_;  // waiting for the worker
+  HistoryStatus history_status_;             // under counters_mutex_
 
   std::atomic<bool> running_{false};
   std::thread worker_;

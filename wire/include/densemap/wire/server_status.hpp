@@ -37,6 +37,25 @@ struct RosCloudTopicStatus {
   bool operator==(const RosCloudTopicStatus&) const = default;
 };
 
+/// A map's history (server config history, docs/fleet.md): the scans kept for re-integration,
+/// pose corrections, and their re-integration.
+struct HistoryStatus {
+  bool enabled = false;
+  std::uint64_t scans = 0, bytes = 0;      // kept in the scan store
+  std::uint64_t corrections = 0;           // received
+  std::uint64_t corrections_rejected = 0;  // malformed, or not applicable
+  std::uint64_t corrected_scans = 0;       // kept scans whose pose a correction replaced
+  std::uint64_t unmatched_poses = 0;       // poses that named no kept scan
+  bool reintegrating = false;              // a re-integration under way: done of total scans
+  std::uint64_t reintegration_done = 0, reintegration_total = 0;
+  std::uint64_t reintegrations = 0;  // swapped into the map
+  double last_ms_per_scan = 0;       // the last one's re-integration time per scan
+  std::uint64_t last_version = 0;    // the map version that swapped it in
+  std::string last_error;
+
+  bool operator==(const HistoryStatus&) const = default;
+};
+
 /// A server's status as densemap/status carries it (densemap_msgs.idl Status): built once by
 /// the server from its counters, written and read by the conversions below only, for the server
 /// and the client alike (one definition on each side of the wire).
@@ -71,6 +90,7 @@ struct ServerStatus {
   bool foxglove_enabled = false;
   std::uint64_t foxglove_clients = 0, foxglove_dropped_frames = 0, foxglove_closed_clients = 0,
                 foxglove_rejected = 0;
+  HistoryStatus history;
 
   bool operator==(const ServerStatus&) const = default;
 };

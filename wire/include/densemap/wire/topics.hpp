@@ -12,6 +12,8 @@ namespace densemap::dds {
 /// permissions do not name is left empty (its readers and writers fail as "not allowed").
 struct Topics {
   Entity scan;
+  /// densemap/pose_correction: read, like the scans, by every instance on the domain.
+  Entity pose_correction;
   Entity point_request, point_reply;
   Entity bbox_request, bbox_reply;
   Entity ray_request, ray_reply;
@@ -63,6 +65,8 @@ inline constexpr QosSpec kLatestStateQos{.depth = 1, .transient_local = true};
 inline constexpr QosSpec kTileQos{.depth = 0};
 /// densemap/scan: reliable, keep-last 4 on both sides (the pipeline's queue does the rest).
 inline constexpr QosSpec kScanQos{.depth = 4};
+/// densemap/pose_correction: reliable, keep-last 16 (each replaces poses; none may be lost).
+inline constexpr QosSpec kCorrectionQos{.depth = 16};
 /// Per-version streams: the server keeps the last 32 deltas and 64 events for slow readers; a
 /// client keeps 256 and 1024 it has not polled yet.
 inline constexpr QosSpec kDeltaWriterQos{.depth = 32}, kDeltaReaderQos{.depth = 256};

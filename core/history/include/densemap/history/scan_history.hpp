@@ -29,24 +29,6 @@ struct HistoryOptions {
   std::size_t max_checkpoints = 8;
 };
 
-/// One corrected pose: the scan of the correction's sensor stamped `stamp_ns` now has this
-/// pose (world <- sensor: translation, quaternion w, x, y, z), as a scan carries it.
-struct CorrectedPose {
-  std::int64_t stamp_ns = 0;
-  std::array<double, 3> t{};
-  std::array<double, 4> q{1, 0, 0, 0};
-};
-
-/// New poses for past scans of one sensor (densemap/pose_correction, or a ROS 2 robot's
-/// corrected path).
-struct PoseCorrection {
-  std::string sensor_id;
-  std::vector<CorrectedPose> poses;
-};
-
-/// The most poses one correction may carry.
-inline constexpr std::size_t kMaxCorrectedPoses = 100'000;
-
 /// A correction from outside: its sensor id (checkSensorId), at most kMaxCorrectedPoses poses,
 /// each pose by the scans' rule (checkScanPose). The error names the first bad pose.
 [[nodiscard]] Expected<void> checkCorrection(const PoseCorrection& correction,

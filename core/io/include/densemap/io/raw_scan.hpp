@@ -22,6 +22,24 @@ struct RawScan {
   std::chrono::steady_clock::time_point received = std::chrono::steady_clock::now();
 };
 
+/// One corrected pose: the scan of the correction's sensor stamped `stamp_ns` now has this
+/// pose (world <- sensor: translation, quaternion w, x, y, z), as a scan carries it.
+struct CorrectedPose {
+  std::int64_t stamp_ns = 0;
+  std::array<double, 3> t{};
+  std::array<double, 4> q{1, 0, 0, 0};
+};
+
+/// New poses for past scans of one sensor (densemap/pose_correction, or a ROS 2 robot's
+/// corrected path).
+struct PoseCorrection {
+  std::string sensor_id;
+  std::vector<CorrectedPose> poses;
+};
+
+/// The most poses one correction may carry.
+inline constexpr std::size_t kMaxCorrectedPoses = 100'000;
+
 /// The memory a waiting scan holds: its arrays and strings (the ingest queue's byte budget).
 [[nodiscard]] inline std::size_t rawScanBytes(const RawScan& scan) {
   return sizeof(RawScan) + scan.sensor_id.capacity() +
