@@ -12,7 +12,7 @@ shift || true
 BUILD=${DENSEMAP_FUZZ_BUILD_DIR:-build-fuzz}
 ALL=(fuzz_snapshot fuzz_scan_graph fuzz_scan_dat fuzz_pcd fuzz_dataset fuzz_config fuzz_iln_weights
   fuzz_scan_validation fuzz_point_cloud2 fuzz_queries fuzz_planner_queries fuzz_mcap fuzz_db3 fuzz_ros_names
-  fuzz_point_array fuzz_foxglove_ops)
+  fuzz_point_array fuzz_foxglove_ops fuzz_scan_record)
 TARGETS=("$@")
 [ ${#TARGETS[@]} -gt 0 ] || TARGETS=("${ALL[@]}")
 # Debian 12's clang 16 with libstdc++ 12: <expected> wants __cpp_concepts >= 202002, which clang

@@ -54,6 +54,28 @@ void printStatus(const ServerStatus& s) {
                 static_cast<unsigned long long>(s.snapshot_failures),
                 s.last_snapshot_error.c_str());
   }
+  if (const HistoryStatus& h = s.history; h.enabled) {
+    std::printf(
+        "  history: %llu scans kept (%.1f MB); corrections %llu (%llu refused), %llu scans "
+        "corrected, %llu poses matched no scan; %llu re-integrations",
+        static_cast<unsigned long long>(h.scans), h.bytes / 1e6,
+        static_cast<unsigned long long>(h.corrections),
+        static_cast<unsigned long long>(h.corrections_rejected),
+        static_cast<unsigned long long>(h.corrected_scans),
+        static_cast<unsigned long long>(h.unmatched_poses),
+        static_cast<unsigned long long>(h.reintegrations));
+    if (h.reintegrations > 0) {
+      std::printf(" (last %.2f ms a scan, in version %llu)", h.last_ms_per_scan,
+                  static_cast<unsigned long long>(h.last_version));
+    }
+    if (h.reintegrating) {
+      std::printf("; RE-INTEGRATING: %llu of %llu scans",
+                  static_cast<unsigned long long>(h.reintegration_done),
+                  static_cast<unsigned long long>(h.reintegration_total));
+    }
+    std::printf("\n");
+    if (!h.last_error.empty()) std::printf("  history, last error: %s\n", h.last_error.c_str());
+  }
   if (s.foxglove_enabled) {
     std::printf(
         "  foxglove: %llu clients; %llu frames dropped for full send queues, %llu clients closed "

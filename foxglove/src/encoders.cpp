@@ -302,7 +302,11 @@ std::string statusObject(const ServerStatus& s) {
          ",\"foxglove_clients\":" + u(s.foxglove_clients) +
          ",\"foxglove_dropped_frames\":" + u(s.foxglove_dropped_frames) +
          ",\"foxglove_closed_clients\":" + u(s.foxglove_closed_clients) +
-         ",\"foxglove_rejected\":" + u(s.foxglove_rejected) + ",\"sensors\":[";
+         ",\"foxglove_rejected\":" + u(s.foxglove_rejected) +
+         ",\"reintegrating\":" + (s.history.reintegrating ? "true" : "false") +
+         ",\"reintegration_done\":" + u(s.history.reintegration_done) +
+         ",\"reintegration_total\":" + u(s.history.reintegration_total) +
+         ",\"reintegrations\":" + u(s.history.reintegrations) + ",\"sensors\":[";
   for (std::size_t i = 0; i < s.sensors.size(); ++i) {
     const SensorCounters& c = s.sensors[i];
     out += std::string(i ? "," : "") + "{\"sensor_id\":" + jsonString(c.sensor_id) +
@@ -326,6 +330,8 @@ std::string statusJsonSchema() {
          R"("decayed_cells":{"type":"integer"},"evicted_cells":{"type":"integer"},)"
          R"("foxglove_clients":{"type":"integer"},"foxglove_dropped_frames":{"type":"integer"},)"
          R"("foxglove_closed_clients":{"type":"integer"},"foxglove_rejected":{"type":"integer"},)"
+         R"("reintegrating":{"type":"boolean"},"reintegration_done":{"type":"integer"},)"
+         R"("reintegration_total":{"type":"integer"},"reintegrations":{"type":"integer"},)"
          R"("sensors":{"type":"array","items":{"type":"object","properties":{)"
          R"("sensor_id":{"type":"string"},"received":{"type":"integer"},)"
          R"("integrated":{"type":"integer"},"dropped":{"type":"integer"},)"

@@ -113,6 +113,23 @@ py::dict statusDict(const ServerStatus& s) {
     sensors.append(sensor);
   }
   d["sensors"] = sensors;
+  const HistoryStatus& h = s.history;
+  py::dict history;
+  history["enabled"] = h.enabled;
+  history["scans"] = h.scans;
+  history["bytes"] = h.bytes;
+  history["corrections"] = h.corrections;
+  history["corrections_rejected"] = h.corrections_rejected;
+  history["corrected_scans"] = h.corrected_scans;
+  history["unmatched_poses"] = h.unmatched_poses;
+  history["reintegrating"] = h.reintegrating;
+  history["reintegration_done"] = h.reintegration_done;
+  history["reintegration_total"] = h.reintegration_total;
+  history["reintegrations"] = h.reintegrations;
+  history["last_ms_per_scan"] = h.last_ms_per_scan;
+  history["last_version"] = h.last_version;
+  history["last_error"] = h.last_error;
+  d["history"] = history;
   return d;
 }
 
