@@ -60,6 +60,21 @@ std::array<double, 16> matrixFrom(const py::handle& object, const std::string& w
   return *m;
 }
 
+Eigen::Isometry3d poseFrom(const py::handle& T, const std::string& what) {
+  const auto m = matrixFrom(T, what);
+  Eigen::Matrix4d matrix;
+  for (int r = 0; r < 4; ++r) {
+    for (int c = 0; c < 4; ++c) matrix(r, c) = m[r * 4 + c];
+  }
+  const Eigen::Vector4d last_row(0, 0, 0, 1);
+  if (!matrix.allFinite() || !matrix.row(3).transpose().isApprox(last_row, 1e-9)) {
+    throw py::value_error(what + " must be a finite 4x4 transform with last row (0, 0, 0, 1)");
+  }
+  Eigen::Isometry3d pose;
+  pose.matrix() = matrix;
+  return pose;
+}
+
 py::array_t<float> pointsArray(const PointCloud& points) {
   py::array_t<float> out({static_cast<py::ssize_t>(points.size()), py::ssize_t{3}});
   if (!points.empty()) std::memcpy(out.mutable_data(), points.data(), points.size() * 12);

@@ -55,6 +55,8 @@ py::dict countsDict(const Counts& c) {
 [[nodiscard]] Point3f pointFrom(const py::handle& object, const std::string& what);
 /// A 4x4 transform (any sequence or array), row-major.
 [[nodiscard]] std::array<double, 16> matrixFrom(const py::handle& object, const std::string& what);
+/// A 4x4 transform (matrixFrom), finite, with last row (0, 0, 0, 1); ValueError otherwise.
+[[nodiscard]] Eigen::Isometry3d poseFrom(const py::handle& T, const std::string& what);
 /// `points` as an (N, 3) float32 array (a copy Python owns).
 [[nodiscard]] py::array_t<float> pointsArray(const PointCloud& points);
 

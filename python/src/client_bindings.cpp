@@ -331,14 +331,7 @@ most 4,194,304 cells; the server needs esdf { enabled: true }).)doc")
              const std::string& sensor_id, std::uint64_t seq, std::int64_t stamp_ns) {
             const PointCloud cloud =
                 pointsFrom(points, MapperOptions{}.max_points, "points_sensor", false);
-            const auto m4 = matrixFrom(T_world_sensor, "T_world_sensor");
-            Eigen::Matrix3d rotation;
-            for (int r = 0; r < 3; ++r) {
-              for (int c = 0; c < 3; ++c) rotation(r, c) = m4[r * 4 + c];
-            }
-            Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-            pose.linear() = rotation;
-            pose.translation() = Eigen::Vector3d(m4[3], m4[7], m4[11]);
+            const Eigen::Isometry3d pose = poseFrom(T_world_sensor, "T_world_sensor");
             valueOrRaise(checkRigidPose(pose));
             Scan scan;
             scan.frame = PointFrame::kSensor;
@@ -353,6 +346,37 @@ most 4,194,304 cells; the server needs esdf { enabled: true }).)doc")
           py::arg("points_sensor"), py::arg("T_world_sensor"), py::arg("sensor_id") = "python",
           py::arg("seq") = 0, py::arg("stamp_ns") = 0,
           "Sends one sensor-frame scan with its pose (4x4) to the server (stamp_ns 0: now).")
+      .def(
+          "publish_pose_correction",
+          [](PyClient& self, const std::string& sensor_id, const py::sequence& poses) {
+            const std::size_t n = py::len(poses);
+            if (n > kMaxCorrectedPoses) {
+              throw py::value_error("a pose correction carries at most " +
+                                    std::to_string(kMaxCorrectedPoses) + " poses, not " +
+                                    std::to_string(n));
+            }
+            PoseCorrection correction{.sensor_id = sensor_id};
+            correction.poses.reserve(n);
+            for (std::size_t i = 0; i < n; ++i) {
+              const std::string what = "poses[" + std::to_string(i) + "]";
+              const py::object item = poses[i];
+              if (!py::isinstance<py::sequence>(item) || py::len(item) != 2) {
+                throw py::type_error(what + " must be a (stamp_ns, T_world_sensor) pair");
+              }
+              const auto pair = item.cast<py::sequence>();
+              const auto stamp_ns = pair[0].cast<std::int64_t>();
+              const Eigen::Isometry3d pose = poseFrom(pair[1], what + " T_world_sensor");
+              valueOrRaise(checkRigidPose(pose));
+              correction.poses.push_back(toCorrectedPose(stamp_ns, pose));
+            }
+            Client& c = self.client();
+            py::gil_scoped_release release;
+            valueOrRaise(c.publishPoseCorrection(correction));
+          },
+          py::arg("sensor_id"), py::arg("poses"),
+          R"doc(Sends new poses for past scans of one sensor: poses is a sequence of
+(stamp_ns, T_world_sensor 4x4) pairs, each naming the scan with that stamp. A server with a
+history (config history) re-integrates them; status()["history"] shows its progress.)doc")
       .def(
           "publish",
           [](PyClient& self, const Scan& scan, const std::string& sensor_id, std::uint64_t seq) {

@@ -74,21 +74,6 @@ InsertResult insertPoints(Mapper& mapper, const py::handle& points, const py::ha
   return valueOrRaise(mapper.insertPointCloud(cloud, o, stamp));
 }
 
-Eigen::Isometry3d poseFrom(const py::handle& T, const std::string& what) {
-  const auto m = matrixFrom(T, what);
-  Eigen::Matrix4d matrix;
-  for (int r = 0; r < 4; ++r) {
-    for (int c = 0; c < 4; ++c) matrix(r, c) = m[r * 4 + c];
-  }
-  const Eigen::Vector4d last_row(0, 0, 0, 1);
-  if (!matrix.allFinite() || !matrix.row(3).transpose().isApprox(last_row, 1e-9)) {
-    throw py::value_error(what + " must be a finite 4x4 transform with last row (0, 0, 0, 1)");
-  }
-  Eigen::Isometry3d pose;
-  pose.matrix() = matrix;
-  return pose;
-}
-
 /// Queries `points` once: (log-odds, states), both of length N.
 std::pair<py::array_t<float>, py::array_t<std::uint8_t>> queryArrays(const Mapper& mapper,
                                                                      const py::handle& points) {
@@ -223,7 +208,8 @@ std::vector<OrientedBox> boxesFrom(const py::handle& centers, const py::handle& 
   const auto q = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(rotations);
   if (!q || q.ndim() != 2 || q.shape(1) != 4 || static_cast<std::size_t>(q.shape(0)) != c.size() ||
       e.size() != c.size()) {
-    throw py::value_error("centers and half_extents (N, 3) and rotations (N, 4: x y z w) must match");
+    throw py::value_error(
+        "centers and half_extents (N, 3) and rotations (N, 4: x y z w) must match");
   }
   std::vector<OrientedBox> boxes(c.size());
   for (std::size_t i = 0; i < c.size(); ++i) {
@@ -284,9 +270,9 @@ densemap.Error naming it.
                        bool distance_field, double max_distance, const py::object& decay_after,
                        double decay_period) {
              return valueOrRaise(Mapper::create(optionsFrom(
-                 resolution, max_range, kind, backend, integration, update_rule, threads,
-                 prob_hit, prob_miss, clamp_min, clamp_max, keep_radius, bounds, max_points,
-                 versioned_reads, distance_field, max_distance, decay_after, decay_period)));
+                 resolution, max_range, kind, backend, integration, update_rule, threads, prob_hit,
+                 prob_miss, clamp_min, clamp_max, keep_radius, bounds, max_points, versioned_reads,
+                 distance_field, max_distance, decay_after, decay_period)));
            }),
            py::kw_only(), py::arg("resolution") = d.resolution_m,
            py::arg("max_range") = d.max_range_m, py::arg("kind") = d.kind,
@@ -475,11 +461,11 @@ name their 'box'.)doc")
          bool distance_field, double max_distance, const py::object& decay_after,
          double decay_period) {
         const MapperOptions d;
-        MapperOptions o = optionsFrom(d.resolution_m, max_range, d.kind, backend, integration,
-                                      update_rule, threads, d.sensor.hit, d.sensor.miss,
-                                      d.sensor.clamp_min, d.sensor.clamp_max, keep_radius, bounds,
-                                      max_points, versioned_reads, distance_field, max_distance,
-                                      decay_after, decay_period);
+        MapperOptions o =
+            optionsFrom(d.resolution_m, max_range, d.kind, backend, integration, update_rule,
+                        threads, d.sensor.hit, d.sensor.miss, d.sensor.clamp_min,
+                        d.sensor.clamp_max, keep_radius, bounds, max_points, versioned_reads,
+                        distance_field, max_distance, decay_after, decay_period);
         py::gil_scoped_release release;
         return valueOrRaise(Mapper::load(path.string(), o));
       },

@@ -4,6 +4,12 @@
 
 namespace densemap {
 
+CorrectedPose toCorrectedPose(std::int64_t stamp_ns, const Transform& T_world_sensor) {
+  const Eigen::Vector3d t = T_world_sensor.translation();
+  const Eigen::Quaterniond q(T_world_sensor.linear());
+  return {stamp_ns, {t.x(), t.y(), t.z()}, {q.w(), q.x(), q.y(), q.z()}};
+}
+
 RawScan toRawScan(const Scan& scan, std::uint64_t seq, const std::string& sensor_id) {
   RawScan raw;
   raw.sensor_id = sensor_id;
@@ -11,10 +17,9 @@ RawScan toRawScan(const Scan& scan, std::uint64_t seq, const std::string& sensor
   raw.stamp_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
                      std::chrono::system_clock::now().time_since_epoch())
                      .count();
-  const Eigen::Vector3d t = scan.T_world_sensor.translation();
-  const Eigen::Quaterniond q(scan.T_world_sensor.linear());
-  raw.t_world_sensor = {t.x(), t.y(), t.z()};
-  raw.q_world_sensor = {q.w(), q.x(), q.y(), q.z()};
+  const CorrectedPose pose = toCorrectedPose(raw.stamp_ns, scan.T_world_sensor);
+  raw.t_world_sensor = pose.t;
+  raw.q_world_sensor = pose.q;
   const PointCloud points = scan.frame == PointFrame::kSensor
                                 ? scan.points
                                 : transformPoints(scan.T_world_sensor.inverse(), scan.points);

@@ -7,6 +7,8 @@
 #include <string>
 #include <vector>
 
+#include "densemap/geometry/rigid_transform.hpp"
+
 namespace densemap {
 
 /// A scan as it arrives from outside (DDS, files), before any check: flat coordinates in the
@@ -47,6 +49,10 @@ inline constexpr std::size_t kMaxCorrectedPoses = 100'000;
 }
 
 struct Scan;
+
+/// A pose in the raw form scans and pose corrections carry: translation and unit quaternion
+/// (w, x, y, z).
+[[nodiscard]] CorrectedPose toCorrectedPose(std::int64_t stamp_ns, const Transform& T_world_sensor);
 
 /// The raw form of a scan as a sender publishes it: sensor-frame points (world-frame scans are
 /// re-expressed in the sensor frame) and the pose as translation + unit quaternion.
