@@ -496,7 +496,16 @@ Expected<Client::Impl::CommandOutcome> Client::Impl::commandReply(dds::CommandKi
       dds_->cr_r, *dds_->cr_ws, req.id, options_.timeout * 6,
       [&](const densemap_msgs_CommandReply& r) {
         if (r.status != 0) error = text(r.error);
-        outcome = {text(r.detail), r.sent_version, r.sent_tiles, r.sent_cells};
+        outcome = {text(r.detail), r.sent_version, r.sent_tiles, r.sent_cells, {}};
+        if (r.sent_seqs._length > dds::kMaxSentSeqs) {
+          error = "a reply naming " + std::to_string(r.sent_seqs._length) + " sensors (at most " +
+                  std::to_string(dds::kMaxSentSeqs) + ")";
+          return;
+        }
+        for (std::uint32_t i = 0; i < r.sent_seqs._length; ++i) {
+          outcome.sent_seqs.emplace_back(text(r.sent_seqs._buffer[i].sensor_id),
+                                         r.sent_seqs._buffer[i].seq);
+        }
       });
   if (!ok) return std::unexpected(ok.error());
   if (!error.empty()) return makeError("server: " + error);

@@ -14,6 +14,10 @@ MapSnapshot::~MapSnapshot() = default;
 
 std::uint64_t MapSnapshot::version() const { return impl_->version; }
 
+const std::vector<std::pair<std::string, std::uint64_t>>& MapSnapshot::lastSeqs() const {
+  return impl_->last_seqs;
+}
+
 double MapSnapshot::resolution() const { return impl_->map->resolution(); }
 
 std::size_t MapSnapshot::knownCells() const { return impl_->map->knownCells(); }

@@ -13,12 +13,14 @@ namespace densemap {
 struct MapSnapshot::Impl {
   std::unique_ptr<GridMap> map;
   std::uint64_t version = 0;
+  std::vector<std::pair<std::string, std::uint64_t>> last_seqs;
 };
 
 struct MapSnapshotAccess {
-  static MapSnapshot make(std::unique_ptr<GridMap> map, std::uint64_t version) {
-    return MapSnapshot(std::make_unique<MapSnapshot::Impl>(
-        MapSnapshot::Impl{.map = std::move(map), .version = version}));
+  static MapSnapshot make(std::unique_ptr<GridMap> map, std::uint64_t version,
+                          std::vector<std::pair<std::string, std::uint64_t>> last_seqs = {}) {
+    return MapSnapshot(std::make_unique<MapSnapshot::Impl>(MapSnapshot::Impl{
+        .map = std::move(map), .version = version, .last_seqs = std::move(last_seqs)}));
   }
   static const GridMap& grid(const MapSnapshot& snapshot) { return *snapshot.impl_->map; }
 };

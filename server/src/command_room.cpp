@@ -97,6 +97,13 @@ void CommandRoom::reply(const densemap_msgs_RequestId& id, const Expected<std::s
   rep.sent_version = sent.version;
   rep.sent_tiles = sent.tiles;
   rep.sent_cells = sent.cells;
+  // Lent for the write: DDS serialises the sample and never writes through these.
+  std::vector<densemap_msgs_SensorSeq> seqs;
+  seqs.reserve(sent.last_seqs.size());
+  for (const auto& [sensor, seq] : sent.last_seqs) {
+    seqs.push_back({const_cast<char*>(sensor.c_str()), seq});
+  }
+  rep.sent_seqs = dds::borrowSequence<dds_sequence_densemap_msgs_SensorSeq>(seqs);
   const std::string error = outcome ? "" : outcome.error().message;
   const std::string detail = outcome ? *outcome : "";
   if (!outcome) stats_.refused(error);
@@ -110,7 +117,8 @@ void CommandRoom::reply(const densemap_msgs_RequestId& id, const Expected<std::s
 Expected<SentMap> CommandRoom::sendMap(const densemap_msgs_RequestId& request) {
   // One version throughout: the tiles are a consistent copy of it.
   const ReturnFreeMemory trim;  // the tiles' buffers and the writer's copies until acked
-  const auto view = ingest_.view();
+  const Ingest::Latest latest = ingest_.latest();
+  const auto& view = latest.view;
   const auto tiles = tilesOf(*view);
   std::size_t cells = 0;
   for (const auto& [id, blocks] : tiles) {
@@ -127,7 +135,10 @@ Expected<SentMap> CommandRoom::sendMap(const densemap_msgs_RequestId& request) {
                        " cells: " + ok.error().message);
     }
   }
-  return SentMap{.version = view->version(), .tiles = tiles.size(), .cells = cells};
+  return SentMap{.version = view->version(),
+                 .tiles = tiles.size(),
+                 .cells = cells,
+                 .last_seqs = latest.last_seqs};
 }
 
 }  // namespace densemap::server

@@ -50,7 +50,8 @@ Expected<std::unique_ptr<Ingest>> Ingest::create(const IngestOptions& options,
 }
 
 Ingest::Ingest(const IngestOptions& options, std::unique_ptr<Engine> engine)
-    : engine_(std::move(engine)),
+    : options_(engine->options()),
+      engine_(std::move(engine)),
       arena_(options.threads),
       history_arena_(options.history_threads),
       queue_(
@@ -58,6 +59,7 @@ Ingest::Ingest(const IngestOptions& options, std::unique_ptr<Engine> engine)
           [](const RawScan& scan) -> const std::string& { return scan.sensor_id; },
           SensorTally::kMaxSensors, rawScanBytes, options.queue_budget_bytes) {
   if (options.engine.warm_up) arena_.execute([this] { engine_->warmUp(); });
+  latest_.view = engine_->view();
 }
 
 Ingest::~Ingest() { stop(); }
@@ -140,6 +142,7 @@ void Ingest::run() {
     // guarded() takes the rest (a counter's allocation, a reject handler).
     guarded("ingest", [&] {
       runCommands();
+      applyCatchUp();
       applyCorrections();
       finishReintegration();
       auto raw = queue_.pop(std::chrono::milliseconds(20));
@@ -168,6 +171,7 @@ void Ingest::process(const RawScan& raw) {
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - raw.received)
             .count();
     recordScan(raw);
+    keepForCatchUp(raw);
     published(*outcome);
     return;
   }
@@ -238,6 +242,19 @@ void Ingest::published(IntegrationResult& result) {
       latencies_[latency_next_] = result.latency_ms;
       latency_next_ = (latency_next_ + 1) % latencies_.size();
     }
+  }
+  if (result.from_scan) {
+    const auto it = std::find_if(last_seqs_.begin(), last_seqs_.end(),
+                                 [&](const auto& s) { return s.first == result.sensor_id; });
+    if (it != last_seqs_.end()) {
+      it->second = result.scan_seq;
+    } else if (last_seqs_.size() < SensorTally::kMaxSensors) {
+      last_seqs_.emplace_back(result.sensor_id, result.scan_seq);
+    }
+  }
+  {
+    std::lock_guard lock(latest_mutex_);
+    latest_ = {engine_->view(), last_seqs_};
   }
   // A publisher that throws loses the announcement; the version is published (readers see it).
   if (publisher_)

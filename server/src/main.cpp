@@ -25,6 +25,7 @@
 #include "densemap/server/map_service.hpp"
 #include "densemap/server/server_config.hpp"
 #include "densemap/store/snapshot.hpp"
+#include "catch_up.hpp"
 
 namespace {
 
@@ -345,8 +346,23 @@ static int runMain(int argc, char** argv) {
     return fail(service.error().message, 2);
   }
   if (!service) return fail("DDS: " + service.error().message);
+  const std::string& peer = config->dds().catch_up_from();
+  if (!peer.empty()) (*ingest)->beginCatchUp();
   (*ingest)->start();
   (*service)->start();
+  // A replica started late takes its peer's map while it runs (scans it takes meanwhile are
+  // kept and caught up).
+  std::thread catch_up;
+  if (!peer.empty()) {
+    catch_up = std::thread([&ingest, &service_options, peer] {
+      const auto caught = densemap::server::catchUpFrom(**ingest, *service_options, peer, 10.0);
+      if (caught) {
+        spdlog::info("{}", *caught);
+      } else {
+        spdlog::error("{}; this replica keeps its own map", caught.error().message);
+      }
+    });
+  }
   spdlog::info("running on DDS domain {}, interface {}{}; {} backend at {} m, {} threads{}",
                service_options->domain_id, service_options->network_interface,
                service_options->security ? " with DDS Security" : "", config->map().backend(),
@@ -356,6 +372,7 @@ static int runMain(int argc, char** argv) {
   const int received = waitForStop(signals, **service);
   notifySystemd("STOPPING=1");
   spdlog::info("{}: stopping", received == SIGINT ? "SIGINT" : "SIGTERM");
+  if (catch_up.joinable()) catch_up.join();
   (*service)->stop();  // no more scans or requests
   (*ingest)->stop();   // finishes the scan in flight
   if (const int status = saveOnShutdown(**service, **ingest, *service_options); status != 0) {

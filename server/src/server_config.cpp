@@ -188,6 +188,18 @@ Expected<void> checkSnapshotAndDds(const proto::ServerConfig& config) {
     return makeError("snapshot.path: " + dir.error().message);
   }
   if (config.dds().domain_id() > 232) return makeError("dds.domain_id must be in 0..232");
+  if (const std::string& peer = config.dds().catch_up_from(); !peer.empty()) {
+    if (!dds::isInstanceName(peer) || config.dds().instance().empty() ||
+        peer == config.dds().instance()) {
+      return makeError("dds.catch_up_from: '" + peer +
+                       "' must name another instance (1 to 64 letters, digits and _), and "
+                       "dds.instance this server's");
+    }
+    if (config.map().kind() != "log_odds" || config.map().decay().enabled()) {
+      return makeError("dds.catch_up_from needs map.kind log_odds without map.decay (a dense "
+                       "map's evidence and the decay clock are not sent)");
+    }
+  }
   if (!config.dds().instance().empty() && !dds::isInstanceName(config.dds().instance())) {
     return makeError("dds.instance: '" + config.dds().instance() +
                      "' is not an instance name (1 to 64 letters, digits and _)");

@@ -1,13 +1,17 @@
 // Replicas end to end, as separate processes on loopback: two servers on one DDS domain
 // (dds.instance "a" and "b") read the same 1,000 scans from one robot and publish the same
 // changes at every version; a client that asks "a" with "b" as its replica is answered by "b"
-// within 2 s of "a" being killed with SIGKILL.
+// within 2 s of "a" being killed with SIGKILL. A replica started late (dds.catch_up_from) while
+// scans go on takes its peer's map and the scans it lacks: both then hold the same map at the
+// same version.
 #include <gtest/gtest.h>
 
 #include <cstdio>
 #include <map>
 
 #include "densemap/client/client.hpp"
+#include "densemap/client/testing.hpp"
+#include "densemap/map/map_diff.hpp"
 #include "densemap/test_support/data_dir.hpp"
 #include "densemap/test_support/server_clients.hpp"
 #include "densemap/test_support/server_process.hpp"
@@ -18,6 +22,7 @@ namespace {
 using namespace std::chrono_literals;
 
 constexpr std::uint32_t kDomain = 206;
+constexpr std::uint32_t kCatchUpDomain = 209;
 
 /// A version's changes, in a canonical order (cells sorted by key).
 std::vector<std::tuple<std::uint64_t, float, bool>> canonical(const CellChanges& changes) {
@@ -104,6 +109,57 @@ TEST(Replicas, TwoReplicasPublishTheSameChangesAtEveryVersionAndAClientFailsOver
   EXPECT_EQ(after->log_odds, before->log_odds);  // the same map: "a" answered it before
   auto again = (*client)->castRay({0, 0, 1}, {1, 0, 0}, 20.0F);
   EXPECT_TRUE(again) << again.error().message;
+  EXPECT_EQ(b.stop(), 0);
+}
+
+TEST(Replicas, AReplicaStartedLateCatchesUpFromItsPeerToTheSameMapAtTheSameVersion) {
+  test::TempDir dir;
+  constexpr int kBefore = 300, kDuring = 200;
+  const auto raws =
+      test::simulatedRawScans(dir.path(), test::smallIndoorDrive(kBefore + kDuring, 90), "robot");
+  ASSERT_EQ(raws.size(), std::size_t{kBefore + kDuring});
+  std::filesystem::create_directory(dir.path() / "a");
+  std::filesystem::create_directory(dir.path() / "b");
+  test::ServerProcess b(dir.path() / "b", kCatchUpDomain, "", false, 0, "", "instance: \"b\"");
+  auto to_b = Client::create({.domain_id = kCatchUpDomain, .timeout = 10s, .instance = "b"});
+  ASSERT_TRUE(to_b) << to_b.error().message;
+  ASSERT_TRUE((*to_b)->waitForServer());
+  test::replayScans(**to_b, std::vector<RawScan>(raws.begin(), raws.begin() + kBefore));
+
+  // "a" starts while the robot goes on: the scans of its first seconds come before, during and
+  // after its fetch of "b"'s map.
+  test::ServerProcess a(dir.path() / "a", kCatchUpDomain, "", true, 0, "",
+                        "instance: \"a\" catch_up_from: \"b\"");
+  for (int i = kBefore; i < kBefore + kDuring; ++i) {
+    ASSERT_TRUE((*to_b)->publishScan(raws[i]));
+    std::this_thread::sleep_for(20ms);
+  }
+  auto to_a = Client::create({.domain_id = kCatchUpDomain, .timeout = 10s, .instance = "a"});
+  ASSERT_TRUE(to_a) << to_a.error().message;
+  ASSERT_TRUE((*to_a)->waitForServer());
+  const std::uint64_t last = kBefore + kDuring;
+  std::uint64_t version_a = 0, version_b = 0;
+  for (const auto deadline = std::chrono::steady_clock::now() + 30s;
+       (version_a != last || version_b != last) && std::chrono::steady_clock::now() < deadline;) {
+    if (auto s = (*to_a)->status()) version_a = s->map_version;
+    if (auto s = (*to_b)->status()) version_b = s->map_version;
+    std::this_thread::sleep_for(50ms);
+  }
+  ASSERT_EQ(version_b, last);
+  ASSERT_EQ(version_a, last) << a.log();
+  EXPECT_NE(a.log().find("caught up"), std::string::npos) << a.log();
+  auto map_a = (*to_a)->fetchMap(last), map_b = (*to_b)->fetchMap(last);
+  ASSERT_TRUE(map_a && map_b);
+  EXPECT_EQ(map_a->version(), map_b->version());
+  const GridMap& grid_a = testing::gridOf(*map_a);
+  const MapDiff diff = diffMaps(grid_a, testing::gridOf(*map_b));
+  EXPECT_EQ(diff.differing(), 0U) << diff.only_in_a << " / " << diff.only_in_b << " / "
+                                  << diff.value_mismatch << " of " << diff.union_cells;
+  EXPECT_GT(grid_a.knownCells(), 100000U);
+  ASSERT_EQ(map_b->lastSeqs().size(), 1U);
+  EXPECT_EQ(map_b->lastSeqs()[0], std::make_pair(std::string("robot"), last));
+  std::printf("catch-up: %s", a.log().substr(a.log().find("caught up")).c_str());
+  EXPECT_EQ(a.stop(), 0);
   EXPECT_EQ(b.stop(), 0);
 }
 

@@ -48,6 +48,11 @@ struct IngestOptions {
 
 /// Corrections waiting for the worker at most; more are refused (counted).
 inline constexpr std::size_t kMaxPendingCorrections = 16;
+/// Scans a replica catching up keeps while it fetches its peer's map (Ingest::beginCatchUp).
+inline constexpr std::size_t kMaxCatchUpScans = 4096;
+
+/// The last scan seq integrated per sensor id, in the order the ids first came.
+using SensorSeqs = std::vector<std::pair<std::string, std::uint64_t>>;
 
 struct PipelineCounters {
   std::uint64_t received = 0;
@@ -116,7 +121,30 @@ class Ingest {
   /// returns the error.
   Expected<void> refuseCorrection(const std::string& why);
 
-  [[nodiscard]] std::shared_ptr<const MapView> view() const { return engine_->view(); }
+  [[nodiscard]] std::shared_ptr<const MapView> view() const {
+    const std::shared_lock lock(engine_swap_);
+    return engine_->view();
+  }
+  /// The latest announced version and the last scan seq integrated per sensor id in it (at
+  /// most SensorTally::kMaxSensors ids): what a send-map sends, so that a replica catching up
+  /// skips the scans its peer's map holds.
+  struct Latest {
+    std::shared_ptr<const MapView> view;
+    SensorSeqs last_seqs;
+  };
+  [[nodiscard]] Latest latest() const;
+  /// Before start(): keeps a copy of every scan integrated from now on (at most
+  /// kMaxCatchUpScans) until catchUp().
+  void beginCatchUp() { keep_scans_ = true; }
+  /// A replica started late (docs/fleet.md, replicas): on the worker, replaces the map by `map`
+  /// (a peer's at `version`, holding its scans up to `last_seqs`), integrates the kept scans it
+  /// lacks (seq above the peer's last for their sensor) in arrival order, and publishes the
+  /// change as one version. The map then equals the peer's at the same version. An error,
+  /// nothing changed, when `version` is not above this map's, or more scans came than were
+  /// kept; either way the scans are no longer kept.
+  [[nodiscard]] std::future<Expected<std::string>> catchUp(std::unique_ptr<OccupancyMap> map,
+                                                           std::uint64_t version,
+                                                           SensorSeqs last_seqs);
   /// Runs f(field, view): the distance field and the map version it was updated to, shared with
   /// other readers (it waits for an update under way, a few ms). False, f not run, when the
   /// server keeps no field (config esdf).
@@ -142,7 +170,7 @@ class Ingest {
   /// (and nothing changed) for a log-odds kind or another kernel kind's evidence.
   [[nodiscard]] Expected<void> restoreKernelEvidence(const kernel::KernelEvidence& evidence);
   [[nodiscard]] PipelineCounters counters() const;
-  [[nodiscard]] const PipelineOptions& options() const { return engine_->options(); }
+  [[nodiscard]] const PipelineOptions& options() const { return options_; }
 
  private:
   Ingest(const IngestOptions& options, std::unique_ptr<Engine> engine);
@@ -164,8 +192,15 @@ class Ingest {
   void finishReintegration();
   void cancelReintegration();
   void historyError(const std::string& message);
+  // A replica's catch-up (ingest_catch_up.cpp), on the worker: after a scan; the catch-up
+  // waiting.
+  void keepForCatchUp(const RawScan& raw);
+  void applyCatchUp();
 
+  PipelineOptions options_;
+  /// The worker's engine; replaced (catchUp) under engine_swap_, which view() reads under.
   std::unique_ptr<Engine> engine_;
+  mutable std::shared_mutex engine_swap_;
   tbb::task_arena arena_;
   std::optional<DistanceField> field_;
   mutable std::shared_mutex field_mutex_;  // the field and field_view_ change together
@@ -190,6 +225,21 @@ class Ingest {
   std::mutex corrections_mutex_;
   std::vector<PoseCorrection> corrections_;  // waiting for the worker
   HistoryStatus history_status_;             // under counters_mutex_
+
+  SensorSeqs last_seqs_;  // the worker's
+  mutable std::mutex latest_mutex_;
+  Latest latest_;  // as of the last announced version
+  std::atomic<bool> keep_scans_{false};
+  std::vector<RawScan> kept_;  // the worker's (beginCatchUp)
+  bool kept_overflow_ = false;
+  struct PendingCatchUp {
+    std::unique_ptr<OccupancyMap> map;
+    std::uint64_t version = 0;
+    SensorSeqs last_seqs;
+    std::promise<Expected<std::string>> done;
+  };
+  std::mutex catch_up_mutex_;
+  std::optional<PendingCatchUp> catch_up_;
 
   std::atomic<bool> running_{false};
   std::thread worker_;
