@@ -63,17 +63,4 @@ bool isNodeName(std::string_view name) {
   });
 }
 
-ScanPose toScanPose(const Eigen::Isometry3d& T) {
-  const Eigen::Quaterniond q(T.linear());
-  const Eigen::Vector3d t = T.translation();
-  return {{t.x(), t.y(), t.z()}, {q.w(), q.x(), q.y(), q.z()}};
-}
-
-Eigen::Isometry3d fromScanPose(const std::array<double, 3>& t, const std::array<double, 4>& q) {
-  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  T.linear() = Eigen::Quaterniond(q[0], q[1], q[2], q[3]).normalized().toRotationMatrix();
-  T.translation() = Eigen::Vector3d(t[0], t[1], t[2]);
-  return T;
-}
-
 }  // namespace densemap::ros2

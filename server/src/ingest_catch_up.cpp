@@ -36,7 +36,8 @@ std::future<Expected<std::string>> Ingest::catchUp(std::unique_ptr<OccupancyMap>
       done.set_value(makeError("a catch-up is under way already"));
       return future;
     }
-    catch_up_.emplace(PendingCatchUp{std::move(map), version, std::move(last_seqs), std::move(done)});
+    catch_up_.emplace(
+        PendingCatchUp{std::move(map), version, std::move(last_seqs), std::move(done)});
   }
   if (!running_.load()) applyCatchUp();
   return future;
@@ -59,8 +60,8 @@ void Ingest::applyCatchUp() {
   const auto old_view = engine_->view();
   if (pending->version <= old_view->version()) {
     finish(makeError("the peer's map (version " + std::to_string(pending->version) +
-                     ") is not ahead of this one (version " +
-                     std::to_string(old_view->version()) + ")"));
+                     ") is not ahead of this one (version " + std::to_string(old_view->version()) +
+                     ")"));
     return;
   }
   if (kept_overflow_) {
@@ -113,11 +114,10 @@ void Ingest::applyCatchUp() {
   cancelReintegration();
   if (history_) history_->restart(new_view);
   last_seqs_ = std::move(seqs);
-  const std::string message = "caught up: the peer's map at version " +
-                              std::to_string(pending->version) + ", then " +
-                              std::to_string(integrated) + " scans it lacked (" +
-                              std::to_string(skipped) + " kept scans were in it); version " +
-                              std::to_string(new_view->version());
+  const std::string message =
+      "caught up: the peer's map at version " + std::to_string(pending->version) + ", then " +
+      std::to_string(integrated) + " scans it lacked (" + std::to_string(skipped) +
+      " kept scans were in it); version " + std::to_string(new_view->version());
   published(result);
   finish(message);
 }

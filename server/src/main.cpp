@@ -19,13 +19,13 @@
 #include <systemd/sd-daemon.h>
 #endif
 
+#include "catch_up.hpp"
 #include "densemap/cli/allocator.hpp"
 #include "densemap/cli/guarded_main.hpp"
 #include "densemap/server/export_path.hpp"
 #include "densemap/server/map_service.hpp"
 #include "densemap/server/server_config.hpp"
 #include "densemap/store/snapshot.hpp"
-#include "catch_up.hpp"
 
 namespace {
 

@@ -27,7 +27,7 @@ std::int64_t stampNs(const builtin_interfaces_msg_dds__Time_& t) {
   return std::int64_t{t.sec} * 1'000'000'000 + t.nanosec;
 }
 
-constexpr dds_attach_t kTfTag = 1, kTfStaticTag = 2, kCloudTag0 = 16;
+constexpr dds_attach_t kTfTag = 1, kTfStaticTag = 2, kPathTag = 3, kCloudTag0 = 16;
 
 /// A QoS policy's name as DDS specifications spell it (status: why a writer was refused).
 std::string policyName(dds_qos_policy_id_t id) {
@@ -156,6 +156,15 @@ Expected<void> Ros2Bridge::addRobot(const std::string& ns) {
   if (!tf_reader || !tf_static_reader) return makeError("ros2: cannot create the TF readers");
   tfr.tf_reader = std::move(*tf_reader);
   tfr.tf_static_reader = std::move(*tf_static_reader);
+  if (const std::string& path = options_.corrected_path_topic; !path.empty()) {
+    auto topic = rosTopic(participant, nav_msgs_msg_dds__Path__desc,
+                          ns.empty() ? path : ros2::inNamespace(ns, path));
+    if (!topic) return std::unexpected(topic.error());
+    auto reader = dds::createReader(participant, *topic, dds::kRosPathQos);
+    if (!reader) return std::unexpected(reader.error());
+    tfr.path_topic = std::move(*topic);
+    tfr.path_reader = std::move(*reader);
+  }
   std::vector<dds::Entity> topics, readers;
   std::vector<std::string> names;
   for (const std::string& cloud : options_.clouds) {
@@ -170,6 +179,9 @@ Expected<void> Ros2Bridge::addRobot(const std::string& ns) {
   }
   if (auto ok = d.waitset->attachReader(tfr.tf_reader, kTfTag); !ok) return ok;
   if (auto ok = d.waitset->attachReader(tfr.tf_static_reader, kTfStaticTag); !ok) return ok;
+  if (tfr.path_reader.get() > 0) {
+    if (auto ok = d.waitset->attachReader(tfr.path_reader, kPathTag); !ok) return ok;
+  }
   for (std::size_t i = 0; i < readers.size(); ++i) {
     // All attached before any is kept: a robot is added whole or not at all (a reader
     // deleted on the way out leaves the wait set with it).
@@ -184,6 +196,7 @@ Expected<void> Ros2Bridge::addRobot(const std::string& ns) {
     d.cloud_topics.push_back(std::move(topics[i]));
     d.cloud_readers.push_back(std::move(readers[i]));
     d.cloud_names.push_back(names[i]);
+    d.cloud_frames.emplace_back();
     d.cloud_seq.push_back(0);
     d.cloud_robot.push_back(robot);
   }
@@ -201,6 +214,7 @@ Expected<void> Ros2Bridge::announce() {
   for (const RobotTfReaders& tfr : d.robots) {
     readers.push_back(&tfr.tf_reader);
     readers.push_back(&tfr.tf_static_reader);
+    if (tfr.path_reader.get() > 0) readers.push_back(&tfr.path_reader);
   }
   for (const dds::Entity& r : d.cloud_readers) readers.push_back(&r);
   for (const dds::Entity* w :
@@ -337,6 +351,7 @@ void Ros2Bridge::loop() {
       }
       const auto now = Clock::now();
       resolveWaiting(now);
+      for (std::size_t robot = 0; robot < dds_->robots.size(); ++robot) takePaths(robot);
       if (options_.publish_period_s > 0 && now >= state_->next_publish) {
         // First: a publication that throws waits a period too.
         state_->next_publish = now + std::chrono::duration_cast<Clock::duration>(
@@ -417,6 +432,7 @@ void Ros2Bridge::takeClouds(std::size_t topic) {
         }
         Waiting w;
         w.frame = dds::text(m.header.frame_id);
+        dds_->cloud_frames[topic] = w.frame;
         w.sensor_id = dds_->cloud_names[topic];
         w.robot = dds_->cloud_robot[topic];
         w.stamp_ns = stampNs(m.header.stamp);
@@ -490,6 +506,55 @@ void Ros2Bridge::resolveWaiting(Clock::time_point now) {
     }
     it = waiting.erase(it);
   }
+}
+
+void Ros2Bridge::takePaths(std::size_t robot) {
+  const dds::Entity& reader = dds_->robots[robot].path_reader;
+  if (reader.get() <= 0) return;
+  dds::takeAll<nav_msgs_msg_dds__Path_>(reader, [&](const nav_msgs_msg_dds__Path_& m) {
+    std::string frame = dds::text(m.header.frame_id);
+    while (!frame.empty() && frame.front() == '/') frame.erase(0, 1);
+    const std::string where = "ros2: a corrected path of '" + dds_->robot_names[robot] + "'";
+    if (m.poses._length > kMaxCorrectedPoses) {
+      (void)ingest_.refuseCorrection(where + " of " + std::to_string(m.poses._length) +
+                                     " poses, more than " + std::to_string(kMaxCorrectedPoses));
+      return;
+    }
+    if (frame != options_.world_frame) {
+      (void)ingest_.refuseCorrection(where + " in frame '" + frame + "', not ros2.world_frame '" +
+                                     options_.world_frame + "'");
+      return;
+    }
+    const ros2::TfBuffer& tf = state_->tf[robot];
+    for (std::size_t topic = 0; topic < dds_->cloud_names.size(); ++topic) {
+      if (dds_->cloud_robot[topic] != robot || dds_->cloud_frames[topic].empty()) continue;
+      PoseCorrection correction{.sensor_id = dds_->cloud_names[topic]};
+      std::size_t no_mount = 0;
+      for (std::uint32_t i = 0; i < m.poses._length; ++i) {
+        const auto& ps = m.poses._buffer[i];
+        const std::int64_t stamp = stampNs(ps.header.stamp);
+        // The sensor's mount on the base at that stamp (static for a fixed sensor).
+        const auto mount = tf.lookup(options_.base_frame, dds_->cloud_frames[topic], stamp);
+        if (!mount) {
+          ++no_mount;
+          continue;
+        }
+        const auto& p = ps.pose;
+        const Eigen::Isometry3d base = ros2::fromScanPose(
+            {p.position.x, p.position.y, p.position.z},
+            {p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z});
+        correction.poses.push_back(toCorrectedPose(stamp, base * *mount));
+      }
+      if (no_mount > 0) {
+        spdlog::warn("{}: {} poses have no transform {} -> {}", where, no_mount,
+                     options_.base_frame, dds_->cloud_frames[topic]);
+      }
+      if (correction.poses.empty()) continue;
+      if (auto ok = ingest_.correct(std::move(correction)); !ok) {
+        spdlog::warn("{}: {}", where, ok.error().message);
+      }
+    }
+  });
 }
 
 }  // namespace densemap::server

@@ -21,12 +21,14 @@ namespace densemap::server {
 /// One robot's TF topics (rt/tf and rt/tf_static, or <ns>/tf and <ns>/tf_static).
 struct RobotTfReaders {
   dds::Entity tf_topic, tf_static_topic, tf_reader, tf_static_reader;
+  dds::Entity path_topic, path_reader;  // its corrected path (ros2.corrected_path_topic)
 };
 
 struct Ros2Bridge::Dds {
   const dds::Entity* participant = nullptr;  // the server's; outlives the bridge
   std::vector<dds::Entity> cloud_topics, cloud_readers;
-  std::vector<std::string> cloud_names;  // ROS names, the scans' sensor ids
+  std::vector<std::string> cloud_names;   // ROS names, the scans' sensor ids
+  std::vector<std::string> cloud_frames;  // each topic's frame, as its last cloud named it
   std::vector<std::uint64_t> cloud_seq;
   std::vector<std::size_t> cloud_robot;  // the robot (index in robots) each cloud topic is of
   std::vector<RobotTfReaders> robots;    // one a robot; one for the root without ros2.robots

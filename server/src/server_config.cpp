@@ -196,8 +196,9 @@ Expected<void> checkSnapshotAndDds(const proto::ServerConfig& config) {
                        "dds.instance this server's");
     }
     if (config.map().kind() != "log_odds" || config.map().decay().enabled()) {
-      return makeError("dds.catch_up_from needs map.kind log_odds without map.decay (a dense "
-                       "map's evidence and the decay clock are not sent)");
+      return makeError(
+          "dds.catch_up_from needs map.kind log_odds without map.decay (a dense "
+          "map's evidence and the decay clock are not sent)");
     }
   }
   if (!config.dds().instance().empty() && !dds::isInstanceName(config.dds().instance())) {
@@ -316,8 +317,9 @@ Expected<std::optional<Ros2Options>> ros2Options(const proto::ServerConfig& conf
     return makeError("ros2: at most " + std::to_string(kMaxRosRobots) +
                      " cloud topics in all (robots times clouds)");
   }
-  for (const std::string* topic : {&r.octomap_topic(), &r.grid_topic(), &r.centers_topic(),
-                                   &r.esdf_slice_topic(), &r.costmap_topic()}) {
+  for (const std::string* topic :
+       {&r.octomap_topic(), &r.grid_topic(), &r.centers_topic(), &r.esdf_slice_topic(),
+        &r.costmap_topic(), &r.corrected_path_topic()}) {
     if (!topic->empty() && ros2::ddsTopicName(*topic).empty()) {
       return makeError("ros2: '" + *topic + "' is not a ROS topic name");
     }
@@ -345,6 +347,13 @@ Expected<std::optional<Ros2Options>> ros2Options(const proto::ServerConfig& conf
   o.centers_topic = r.centers_topic();
   o.esdf_slice_topic = r.esdf_slice_topic();
   o.costmap_topic = r.costmap_topic();
+  o.corrected_path_topic = r.corrected_path_topic();
+  if (!o.corrected_path_topic.empty() && !config.history().enabled()) {
+    return makeError("ros2.corrected_path_topic needs the map's history (history.enabled)");
+  }
+  o.base_frame = r.base_frame();
+  while (!o.base_frame.empty() && o.base_frame.front() == '/') o.base_frame.erase(0, 1);
+  if (o.base_frame.empty()) return makeError("ros2.base_frame must name a frame");
   if (!std::isfinite(r.esdf_slice_z_m()) || std::abs(r.esdf_slice_z_m()) > 1e6) {
     return makeError("ros2.esdf_slice_z_m must be a finite height, metres");
   }

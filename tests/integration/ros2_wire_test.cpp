@@ -445,9 +445,9 @@ void replayFleetAndCompare(std::uint32_t domain, const std::string& ros2_config,
   EXPECT_EQ(status.ros_no_transform, 0U);
   ASSERT_EQ(status.sensors.size(), fleet.size());
   for (const SensorCounters& c : status.sensors) {
-    EXPECT_TRUE(std::any_of(fleet.begin(), fleet.end(),
-                            [&](const FleetRobot& r) { return r.sensorId() == c.sensor_id; }))
-        << c.sensor_id;
+    EXPECT_TRUE(std::any_of(fleet.begin(), fleet.end(), [&](const FleetRobot& r) {
+      return r.sensorId() == c.sensor_id;
+    })) << c.sensor_id;
     EXPECT_EQ(c.received, per_robot) << c.sensor_id;
     EXPECT_EQ(c.integrated, per_robot) << c.sensor_id;
     EXPECT_EQ(c.seq_gaps, 0U) << c.sensor_id;
@@ -461,12 +461,11 @@ void replayFleetAndCompare(std::uint32_t domain, const std::string& ros2_config,
 // namespaces (their own TF trees, every one with frames named odom and base_link) and two with
 // native scans, all at once.
 TEST(Ros2Wire, FourRobotsThroughNamespacesAndNativeScansGiveTheOfflineMapInArrivalOrder) {
-  replayFleetAndCompare(201,
-                        "ros2 { enabled: true reliable_clouds: true tf_wait_s: 3 "
-                        "publish_period_s: 0 robots: \"/robot1\" robots: \"robot2\" }\n",
-                        {{"/robot1"}, {"/robot2"}, {"robot3/lidar", false},
-                         {"robot4/lidar", false}},
-                        4);
+  replayFleetAndCompare(
+      201,
+      "ros2 { enabled: true reliable_clouds: true tf_wait_s: 3 "
+      "publish_period_s: 0 robots: \"/robot1\" robots: \"robot2\" }\n",
+      {{"/robot1"}, {"/robot2"}, {"robot3/lidar", false}, {"robot4/lidar", false}}, 4);
 }
 
 // Robots found on the wire: no robot is listed, the namespace glob admits both when their
@@ -1009,6 +1008,99 @@ TEST(Ros2Wire, ANodeThatOnlyListensForUnicastDiscoveryFindsTheServerWithinASecon
   dds_delete(domain);
   ASSERT_GE(matched_after_s, 0.0) << "the server's cloud reader never matched in 15 s";
   EXPECT_LT(matched_after_s, 2.0) << "matched after " << matched_after_s << " s";
+  EXPECT_EQ(server.stop(), 0);
+}
+#endif
+
+#ifndef DENSEMAP_ROS2_REALDATA
+// A SLAM system's corrected trajectory as nav_msgs/Path: the server turns each base pose into
+// the pose of the robot's cloud topic (times the base -> sensor transform of its TF tree) and
+// re-integrates; the map it then serves equals the offline map of the clouds with those poses.
+TEST(Ros2Wire, ACorrectedPathReplacesTheCloudsPosesAndTheMapFollows) {
+  constexpr std::uint32_t kDomain = 210;
+  constexpr std::size_t kScans = 12, kCorrected = 6;
+  test::TempDir dir;
+  ASSERT_TRUE(writeSmallIndoorScans(dir.path() / "data", kScans));
+  test::ServerProcess server(
+      dir.path(), kDomain,
+      "ros2 { enabled: true reliable_clouds: true world_frame: \"map\" tf_wait_s: 3\n"
+      "       corrected_path_topic: \"/corrected_path\" base_frame: \"base_link\" }\n"
+      "history { enabled: true directory: \"" +
+          (dir.path() / "history").string() + "\" checkpoint_every: 4 }\n");
+  auto client = connect(kDomain);
+  ASSERT_TRUE(client);
+  ros2::ReplayFrames frames;
+  frames.stamp_base_ns = kStampBase;
+  frames.period_ns = static_cast<std::int64_t>(1e9 / kRate);
+  frames.stamp_offset = 0.5;
+  ASSERT_EQ(
+      runCli("--domain-id " + std::to_string(kDomain) + " replay --ros --data " +
+             (dir.path() / "data").string() + " --limit " + std::to_string(kScans) +
+             " --rate 10 --ros-stamp-offset 0.5 --ros-stamp-base-ns " + std::to_string(kStampBase)),
+      0);
+  waitForStatus(*client, [&](const ServerStatus& s) { return s.integrated == kScans; });
+  std::vector<RawScan> raws = rosScans(dir.path() / "data", 0, kScans, frames, "/points");
+  const auto config = dir.path() / "server.textproto";
+  const auto before = offlineMap(raws, config);
+
+  // The corrected base poses: the last six moved 0.3 m and turned 0.05 rad, as a loop closure
+  // moves them. Their sensor poses are what the server computes: path pose times the mount.
+  ros2::TfBuffer tf;
+  ASSERT_TRUE(tf.set(frames.base, frames.sensor, ros2::sensorMount(), true));
+  const Eigen::Isometry3d fix =
+      Eigen::Translation3d(0.3, -0.2, 0.0) * Eigen::AngleAxisd(0.05, Eigen::Vector3d::UnitZ());
+  std::vector<geometry_msgs_msg_dds__PoseStamped_> poses;
+  for (std::size_t k = kScans - kCorrected; k < kScans; ++k) {
+    const std::int64_t stamp = frames.cloudStamp(k);
+    auto mount = tf.lookup(frames.base, frames.sensor, stamp);
+    ASSERT_TRUE(mount);
+    const Eigen::Isometry3d base =
+        fix * ros2::fromScanPose(raws[k].t_world_sensor, raws[k].q_world_sensor) * mount->inverse();
+    const ScanPose p = toScanPose(base);
+    geometry_msgs_msg_dds__PoseStamped_ ps{};
+    ps.header.stamp.sec = static_cast<std::int32_t>(stamp / 1'000'000'000);
+    ps.header.stamp.nanosec = static_cast<std::uint32_t>(stamp % 1'000'000'000);
+    ps.header.frame_id = const_cast<char*>("map");
+    ps.pose.position = {p.t[0], p.t[1], p.t[2]};
+    ps.pose.orientation = {p.q[1], p.q[2], p.q[3], p.q[0]};
+    poses.push_back(ps);
+    const ScanPose sensor = toScanPose(ros2::fromScanPose(p.t, p.q) * *mount);
+    raws[k].t_world_sensor = sensor.t;
+    raws[k].q_world_sensor = sensor.q;
+  }
+  const auto corrected = offlineMap(raws, config);
+
+  auto participant = dds::createParticipant({kDomain, "lo", std::nullopt});
+  ASSERT_TRUE(participant);
+  auto topic = dds::createTopic(*participant, nav_msgs_msg_dds__Path__desc,
+                                ros2::ddsTopicName("/corrected_path"));
+  ASSERT_TRUE(topic);
+  auto writer = dds::createWriter(*participant, *topic, dds::kRosPathQos);
+  ASSERT_TRUE(writer);
+  dds_publication_matched_status_t matched{};
+  for (int i = 0; i < 500 && matched.current_count == 0; ++i) {
+    dds_get_publication_matched_status(writer->get(), &matched);
+    std::this_thread::sleep_for(10ms);
+  }
+  ASSERT_EQ(matched.current_count, 1U) << "the server's path reader";
+  nav_msgs_msg_dds__Path_ path{};
+  path.header.frame_id = const_cast<char*>("map");
+  path.poses._buffer = poses.data();
+  path.poses._length = path.poses._maximum = static_cast<std::uint32_t>(poses.size());
+  ASSERT_TRUE(dds::write(*writer, &path));
+
+  const ServerStatus status =
+      waitForStatus(*client, [](const ServerStatus& s) { return s.history.reintegrations == 1; });
+  EXPECT_EQ(status.history.corrected_scans, kCorrected);
+  EXPECT_EQ(status.history.unmatched_poses, 0U);
+  auto fetched = client->fetchMap(status.history.last_version);
+  ASSERT_TRUE(fetched) << fetched.error().message;
+  expectSameMap(testing::gridOf(*fetched), *corrected);
+  // The correction moved the map: the check above would catch a path that was not applied.
+  GridMap before_map(0.2, SensorModel{}), after_map(0.2, SensorModel{});
+  before->forEachKnown([&](const VoxelKey& k, float v) { before_map.setLogOdds(k, v); });
+  corrected->forEachKnown([&](const VoxelKey& k, float v) { after_map.setLogOdds(k, v); });
+  EXPECT_GT(diffMaps(before_map, after_map).differing(), 1000U);
   EXPECT_EQ(server.stop(), 0);
 }
 #endif

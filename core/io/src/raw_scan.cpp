@@ -4,10 +4,22 @@
 
 namespace densemap {
 
+ScanPose toScanPose(const Transform& T) {
+  const Eigen::Quaterniond q(T.linear());
+  const Eigen::Vector3d t = T.translation();
+  return {{t.x(), t.y(), t.z()}, {q.w(), q.x(), q.y(), q.z()}};
+}
+
+Transform fromScanPose(const std::array<double, 3>& t, const std::array<double, 4>& q) {
+  Transform T = Transform::Identity();
+  T.linear() = Eigen::Quaterniond(q[0], q[1], q[2], q[3]).normalized().toRotationMatrix();
+  T.translation() = Eigen::Vector3d(t[0], t[1], t[2]);
+  return T;
+}
+
 CorrectedPose toCorrectedPose(std::int64_t stamp_ns, const Transform& T_world_sensor) {
-  const Eigen::Vector3d t = T_world_sensor.translation();
-  const Eigen::Quaterniond q(T_world_sensor.linear());
-  return {stamp_ns, {t.x(), t.y(), t.z()}, {q.w(), q.x(), q.y(), q.z()}};
+  const ScanPose pose = toScanPose(T_world_sensor);
+  return {stamp_ns, pose.t, pose.q};
 }
 
 RawScan toRawScan(const Scan& scan, std::uint64_t seq, const std::string& sensor_id) {
@@ -17,7 +29,7 @@ RawScan toRawScan(const Scan& scan, std::uint64_t seq, const std::string& sensor
   raw.stamp_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
                      std::chrono::system_clock::now().time_since_epoch())
                      .count();
-  const CorrectedPose pose = toCorrectedPose(raw.stamp_ns, scan.T_world_sensor);
+  const ScanPose pose = toScanPose(scan.T_world_sensor);
   raw.t_world_sensor = pose.t;
   raw.q_world_sensor = pose.q;
   const PointCloud points = scan.frame == PointFrame::kSensor

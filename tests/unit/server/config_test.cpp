@@ -172,7 +172,7 @@ TEST(ServerConfig, EvictionNeedsTheGridLogOddsMapAndAValidBox) {
   }
 }
 
-TEST(ServerConfig, HistoryOptionsAndTheirErrors) {
+TEST(ServerConfig, HistoryCorrectedPathAndCatchUpOptionsAndTheirErrors) {
   const test::TempDir dir;
   EXPECT_FALSE(ingestOptions(proto::ServerConfig{})->history) << "off unless enabled";
   auto ok = loadServerConfig(
@@ -187,6 +187,14 @@ TEST(ServerConfig, HistoryOptionsAndTheirErrors) {
   EXPECT_EQ(options->history->checkpoint_every, 20U);
   EXPECT_EQ(options->history->max_checkpoints, 3U);
   EXPECT_EQ(options->history_threads, 2);
+  EXPECT_TRUE(loadServerConfig(writeConfig(dir, "dds { instance: \"a\" catch_up_from: \"b\" }\n")));
+  auto ros = loadServerConfig(
+      writeConfig(dir,
+                  "history { enabled: true } ros2 { enabled: true corrected_path_topic: \"/path\" "
+                  "base_frame: \"/base\" }\n"));
+  ASSERT_TRUE(ros) << ros.error().message;
+  EXPECT_EQ((*ros2Options(*ros))->corrected_path_topic, "/path");
+  EXPECT_EQ((*ros2Options(*ros))->base_frame, "base");
   for (const auto& [text, reason] : std::vector<std::pair<std::string, std::string>>{
            {"history { enabled: true directory: \"\" }", "history.directory"},
            {"history { enabled: true max_mb: 0 }", "history.max_mb"},
@@ -195,6 +203,16 @@ TEST(ServerConfig, HistoryOptionsAndTheirErrors) {
            {"history { enabled: true threads: 0 }", "history.threads"},
            {"history { enabled: true } map { kind: \"akimap_rays\" }", "need map.kind log_odds"},
            {"history { enabled: true } map { decay { enabled: true } }", "without map.decay"},
+           {"ros2 { enabled: true corrected_path_topic: \"/path\" }", "needs the map's history"},
+           {"history { enabled: true } ros2 { enabled: true corrected_path_topic: \"no space\" }",
+            "not a ROS topic name"},
+           {"history { enabled: true } ros2 { enabled: true base_frame: \"/\" }",
+            "ros2.base_frame"},
+           {"dds { instance: \"a\" catch_up_from: \"a\" }", "dds.catch_up_from"},
+           {"dds { catch_up_from: \"b\" }", "dds.catch_up_from"},
+           {"dds { instance: \"a\" catch_up_from: \"b c\" }", "dds.catch_up_from"},
+           {"dds { instance: \"a\" catch_up_from: \"b\" } map { kind: \"bgk\" }",
+            "needs map.kind log_odds"},
        }) {
     auto refused = loadServerConfig(writeConfig(dir, text + "\n"));
     ASSERT_FALSE(refused) << text;

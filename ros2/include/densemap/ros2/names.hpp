@@ -6,6 +6,8 @@
 #include <string>
 #include <string_view>
 
+#include "densemap/io/raw_scan.hpp"
+
 namespace densemap::ros2 {
 
 /// The DDS topic rmw_cyclonedds uses for a ROS 2 topic: "rt" + the fully qualified name
@@ -25,14 +27,9 @@ namespace densemap::ros2 {
 /// empty, not starting with a digit; at most 255 characters, rmw_dds_common's bound 256).
 [[nodiscard]] bool isNodeName(std::string_view name);
 
-/// A pose as densemap's RawScan carries it: translation and unit quaternion (w, x, y, z).
-struct ScanPose {
-  std::array<double, 3> t{};
-  std::array<double, 4> q{1, 0, 0, 0};
-};
-[[nodiscard]] ScanPose toScanPose(const Eigen::Isometry3d& T);
-/// The transform of a RawScan's pose (quaternion normalized).
-[[nodiscard]] Eigen::Isometry3d fromScanPose(const std::array<double, 3>& t,
-                                             const std::array<double, 4>& q);
+/// A RawScan's pose and its conversions (densemap/io/raw_scan.hpp).
+using densemap::fromScanPose;
+using densemap::ScanPose;
+using densemap::toScanPose;
 
 }  // namespace densemap::ros2

@@ -52,6 +52,11 @@ struct Ros2Options {
   /// and as a costmap inflated by the robot's radius (nav_msgs/OccupancyGrid); "": off.
   std::string esdf_slice_topic = "/esdf_slice", costmap_topic = "/costmap";
   double esdf_slice_z_m = 0.0, robot_radius_m = 0.3;
+  /// A robot's corrected trajectory (nav_msgs/Path, under its namespace like `clouds`): poses
+  /// of `base_frame` in world_frame at its clouds' stamps, handed to the ingest as pose
+  /// corrections of each of its cloud topics. "": not read.
+  std::string corrected_path_topic;
+  std::string base_frame = "base_link";
   std::size_t max_points = 2'000'000;
   /// The ROS 2 node the server shows on ros_discovery_info (`ros2 node list`): "/" + name.
   std::string node_name = "densemap_server";
@@ -76,8 +81,9 @@ struct Ros2Counters {
 /// - sensor_msgs/PointCloud2 on each configured cloud topic, transformed into `world_frame`
 ///   with the TF buffer (rt/tf, rt/tf_static) at the cloud's stamp and submitted to the
 ///   pipeline as sensor-frame scans (sensor id = the topic name). With ros2.robots, each
-///   robot's clouds are looked up in its own TF tree (<ns>/tf, <ns>/tf_static). A cloud whose transform is
-///   not there yet waits up to tf_wait (at most max_waiting clouds; the oldest goes first).
+///   robot's clouds are looked up in its own TF tree (<ns>/tf, <ns>/tf_static). A cloud whose
+///   transform is not there yet waits up to tf_wait (at most max_waiting clouds; the oldest goes
+///   first).
 /// - octomap_msgs/Octomap, nav_msgs/OccupancyGrid and sensor_msgs/PointCloud2 of occupied
 ///   centres, transient-local, at most every publish_period_s and only after the map changed,
 ///   from state kept current per version (O(changed cells)), never a walk of the map per scan.
@@ -106,6 +112,9 @@ class Ros2Bridge {
   /// One robot's transforms into its TF buffer; counts those refused into `refused`.
   void takeTransforms(std::size_t robot, std::uint64_t& refused);
   void takeClouds(std::size_t topic);
+  /// A robot's corrected paths, as pose corrections of its cloud topics (after its clouds
+  /// went to the ingest, so the corrections find their scans).
+  void takePaths(std::size_t robot);
   /// A robot's cloud readers and TF readers (ns "" : the root's), attached to the wait set.
   [[nodiscard]] Expected<void> addRobot(const std::string& ns);
   /// ros2.robot_pattern: robots whose cloud publishers appeared since the last call.

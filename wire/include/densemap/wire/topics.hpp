@@ -83,8 +83,10 @@ inline constexpr int kRosCloudDepth = 5;
   return {.reliable = reliable, .depth = kRosCloudDepth, .xcdr1_only = true};
 }
 inline constexpr QosSpec kTfQos{.depth = 100, .xcdr1_only = true};
-inline constexpr QosSpec kTfStaticReaderQos{.depth = 100, .transient_local = true,
-                                            .xcdr1_only = true};
+/// A robot's corrected path (nav_msgs/Path): reliable, keep-last 4.
+inline constexpr QosSpec kRosPathQos{.depth = 4, .xcdr1_only = true};
+inline constexpr QosSpec kTfStaticReaderQos{
+    .depth = 100, .transient_local = true, .xcdr1_only = true};
 inline constexpr QosSpec kLatchedQos{.depth = 1, .transient_local = true, .xcdr1_only = true};
 
 }  // namespace densemap::dds

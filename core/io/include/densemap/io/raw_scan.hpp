@@ -52,6 +52,15 @@ struct Scan;
 
 /// A pose in the raw form scans and pose corrections carry: translation and unit quaternion
 /// (w, x, y, z).
+struct ScanPose {
+  std::array<double, 3> t{};
+  std::array<double, 4> q{1, 0, 0, 0};
+};
+[[nodiscard]] ScanPose toScanPose(const Transform& T);
+/// The transform of a raw pose (quaternion normalized).
+[[nodiscard]] Transform fromScanPose(const std::array<double, 3>& t,
+                                     const std::array<double, 4>& q);
+/// `T_world_sensor` as the pose of the scan stamped `stamp_ns` (toScanPose).
 [[nodiscard]] CorrectedPose toCorrectedPose(std::int64_t stamp_ns, const Transform& T_world_sensor);
 
 /// The raw form of a scan as a sender publishes it: sensor-frame points (world-frame scans are
