@@ -497,14 +497,14 @@ Expected<Client::Impl::CommandOutcome> Client::Impl::commandReply(dds::CommandKi
       [&](const densemap_msgs_CommandReply& r) {
         if (r.status != 0) error = text(r.error);
         outcome = {text(r.detail), r.sent_version, r.sent_tiles, r.sent_cells, {}};
-        if (r.sent_seqs._length > dds::kMaxSentSeqs) {
-          error = "a reply naming " + std::to_string(r.sent_seqs._length) + " sensors (at most " +
-                  std::to_string(dds::kMaxSentSeqs) + ")";
+        if (r.sent_stamps._length > dds::kMaxSentStamps) {
+          error = "a reply naming " + std::to_string(r.sent_stamps._length) + " sensors (at most " +
+                  std::to_string(dds::kMaxSentStamps) + ")";
           return;
         }
-        for (std::uint32_t i = 0; i < r.sent_seqs._length; ++i) {
-          outcome.sent_seqs.emplace_back(text(r.sent_seqs._buffer[i].sensor_id),
-                                         r.sent_seqs._buffer[i].seq);
+        for (std::uint32_t i = 0; i < r.sent_stamps._length; ++i) {
+          outcome.sent_stamps.emplace_back(text(r.sent_stamps._buffer[i].sensor_id),
+                                           r.sent_stamps._buffer[i].stamp_ns);
         }
       });
   if (!ok) return std::unexpected(ok.error());

@@ -132,7 +132,7 @@ Expected<MapSnapshot> Client::Impl::fetchMap(std::uint64_t min_version) {
     return makeError("map tiles hold " + std::to_string(cells) + " cells, the server sent " +
                      std::to_string(cell_count));
   }
-  return MapSnapshotAccess::make(std::move(map), version, std::move(sent->sent_seqs));
+  return MapSnapshotAccess::make(std::move(map), version, std::move(sent->sent_stamps));
 }
 
 }  // namespace densemap

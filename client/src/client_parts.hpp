@@ -76,7 +76,7 @@ struct Client::Impl {
   struct CommandOutcome {
     std::string detail;
     std::uint64_t sent_version = 0, sent_tiles = 0, sent_cells = 0;
-    std::vector<std::pair<std::string, std::uint64_t>> sent_seqs;
+    std::vector<std::pair<std::string, std::int64_t>> sent_stamps;
   };
   Expected<CommandOutcome> commandReply(dds::CommandKind kind, const Point3f& min,
                                         const Point3f& max, const std::string& path);

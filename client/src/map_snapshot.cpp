@@ -14,8 +14,8 @@ MapSnapshot::~MapSnapshot() = default;
 
 std::uint64_t MapSnapshot::version() const { return impl_->version; }
 
-const std::vector<std::pair<std::string, std::uint64_t>>& MapSnapshot::lastSeqs() const {
-  return impl_->last_seqs;
+const std::vector<std::pair<std::string, std::int64_t>>& MapSnapshot::lastStamps() const {
+  return impl_->last_stamps;
 }
 
 double MapSnapshot::resolution() const { return impl_->map->resolution(); }

@@ -13,14 +13,14 @@ namespace densemap {
 struct MapSnapshot::Impl {
   std::unique_ptr<GridMap> map;
   std::uint64_t version = 0;
-  std::vector<std::pair<std::string, std::uint64_t>> last_seqs;
+  std::vector<std::pair<std::string, std::int64_t>> last_stamps;
 };
 
 struct MapSnapshotAccess {
   static MapSnapshot make(std::unique_ptr<GridMap> map, std::uint64_t version,
-                          std::vector<std::pair<std::string, std::uint64_t>> last_seqs = {}) {
+                          std::vector<std::pair<std::string, std::int64_t>> last_stamps = {}) {
     return MapSnapshot(std::make_unique<MapSnapshot::Impl>(MapSnapshot::Impl{
-        .map = std::move(map), .version = version, .last_seqs = std::move(last_seqs)}));
+        .map = std::move(map), .version = version, .last_stamps = std::move(last_stamps)}));
   }
   static const GridMap& grid(const MapSnapshot& snapshot) { return *snapshot.impl_->map; }
 };

@@ -98,12 +98,12 @@ void CommandRoom::reply(const densemap_msgs_RequestId& id, const Expected<std::s
   rep.sent_tiles = sent.tiles;
   rep.sent_cells = sent.cells;
   // Lent for the write: DDS serialises the sample and never writes through these.
-  std::vector<densemap_msgs_SensorSeq> seqs;
-  seqs.reserve(sent.last_seqs.size());
-  for (const auto& [sensor, seq] : sent.last_seqs) {
-    seqs.push_back({const_cast<char*>(sensor.c_str()), seq});
+  std::vector<densemap_msgs_SensorStamp> stamps;
+  stamps.reserve(sent.last_stamps.size());
+  for (const auto& [sensor, stamp] : sent.last_stamps) {
+    stamps.push_back({const_cast<char*>(sensor.c_str()), stamp});
   }
-  rep.sent_seqs = dds::borrowSequence<dds_sequence_densemap_msgs_SensorSeq>(seqs);
+  rep.sent_stamps = dds::borrowSequence<dds_sequence_densemap_msgs_SensorStamp>(stamps);
   const std::string error = outcome ? "" : outcome.error().message;
   const std::string detail = outcome ? *outcome : "";
   if (!outcome) stats_.refused(error);
@@ -138,7 +138,7 @@ Expected<SentMap> CommandRoom::sendMap(const densemap_msgs_RequestId& request) {
   return SentMap{.version = view->version(),
                  .tiles = tiles.size(),
                  .cells = cells,
-                 .last_seqs = latest.last_seqs};
+                 .last_stamps = latest.last_stamps};
 }
 
 }  // namespace densemap::server

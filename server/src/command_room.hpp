@@ -17,7 +17,7 @@ namespace densemap::server {
 /// cells of that version).
 struct SentMap {
   std::uint64_t version = 0, tiles = 0, cells = 0;
-  SensorSeqs last_seqs;  // the last scan seq integrated per sensor id at `version`
+  SensorStamps last_stamps;  // the last integrated scan's stamp per sensor id at `version`
 };
 
 /// Commands: reset, clear-bbox and save (densemap/cmd/request; they wait for the pipeline's

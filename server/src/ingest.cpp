@@ -244,17 +244,17 @@ void Ingest::published(IntegrationResult& result) {
     }
   }
   if (result.from_scan) {
-    const auto it = std::find_if(last_seqs_.begin(), last_seqs_.end(),
+    const auto it = std::find_if(last_stamps_.begin(), last_stamps_.end(),
                                  [&](const auto& s) { return s.first == result.sensor_id; });
-    if (it != last_seqs_.end()) {
-      it->second = result.scan_seq;
-    } else if (last_seqs_.size() < SensorTally::kMaxSensors) {
-      last_seqs_.emplace_back(result.sensor_id, result.scan_seq);
+    if (it != last_stamps_.end()) {
+      it->second = result.stamp_ns;
+    } else if (last_stamps_.size() < SensorTally::kMaxSensors) {
+      last_stamps_.emplace_back(result.sensor_id, result.stamp_ns);
     }
   }
   {
     std::lock_guard lock(latest_mutex_);
-    latest_ = {engine_->view(), last_seqs_};
+    latest_ = {engine_->view(), last_stamps_};
   }
   // A publisher that throws loses the announcement; the version is published (readers see it).
   if (publisher_)

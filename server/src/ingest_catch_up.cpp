@@ -27,7 +27,8 @@ void Ingest::keepForCatchUp(const RawScan& raw) {
 }
 
 std::future<Expected<std::string>> Ingest::catchUp(std::unique_ptr<OccupancyMap> map,
-                                                   std::uint64_t version, SensorSeqs last_seqs) {
+                                                   std::uint64_t version,
+                                                   SensorStamps last_stamps) {
   std::promise<Expected<std::string>> done;
   auto future = done.get_future();
   {
@@ -37,7 +38,7 @@ std::future<Expected<std::string>> Ingest::catchUp(std::unique_ptr<OccupancyMap>
       return future;
     }
     catch_up_.emplace(
-        PendingCatchUp{std::move(map), version, std::move(last_seqs), std::move(done)});
+        PendingCatchUp{std::move(map), version, std::move(last_stamps), std::move(done)});
   }
   if (!running_.load()) applyCatchUp();
   return future;
@@ -69,6 +70,19 @@ void Ingest::applyCatchUp() {
                      " scans came while the peer's map was fetched"));
     return;
   }
+  // Every sensor the peer has scans of must have its first kept scan in the peer's map: else
+  // scans between the two may have reached the peer only (before this server's reader matched
+  // the robot's writer).
+  for (const auto& [sensor, last] : pending->last_stamps) {
+    const auto first = std::find_if(kept_.begin(), kept_.end(),
+                                    [&](const RawScan& r) { return r.sensor_id == sensor; });
+    if (first != kept_.end() && first->stamp_ns > last) {
+      pending->done.set_value(makeError(std::string(kCatchUpGap) + " the first scan kept of '" +
+                                        sensor + "' (stamped " + std::to_string(first->stamp_ns) +
+                                        " ns, the peer's last " + std::to_string(last) + " ns)"));
+      return;
+    }
+  }
   PipelineOptions own = options_;
   own.warm_up = false;
   auto engine = Engine::create(own, std::move(pending->map), pending->version);
@@ -77,12 +91,12 @@ void Ingest::applyCatchUp() {
     return;
   }
   // The kept scans the peer's map lacks, in the order they came.
-  SensorSeqs seqs = pending->last_seqs;
+  SensorStamps stamps = pending->last_stamps;
   std::size_t integrated = 0, skipped = 0;
   for (const RawScan& raw : kept_) {
-    auto it = std::find_if(seqs.begin(), seqs.end(),
+    auto it = std::find_if(stamps.begin(), stamps.end(),
                            [&](const auto& s) { return s.first == raw.sensor_id; });
-    if (it != seqs.end() && raw.seq <= it->second) {
+    if (it != stamps.end() && raw.stamp_ns <= it->second) {
       ++skipped;
       continue;
     }
@@ -90,10 +104,10 @@ void Ingest::applyCatchUp() {
     arena_.execute([&] { outcome = (*engine)->integrate(raw); });
     if (!outcome) continue;  // rejected here as the peer rejected it
     ++integrated;
-    if (it != seqs.end()) {
-      it->second = raw.seq;
-    } else if (seqs.size() < SensorTally::kMaxSensors) {
-      seqs.emplace_back(raw.sensor_id, raw.seq);
+    if (it != stamps.end()) {
+      it->second = raw.stamp_ns;
+    } else if (stamps.size() < SensorTally::kMaxSensors) {
+      stamps.emplace_back(raw.sensor_id, raw.stamp_ns);
     }
   }
   const auto new_view = (*engine)->view();
@@ -113,7 +127,7 @@ void Ingest::applyCatchUp() {
   }
   cancelReintegration();
   if (history_) history_->restart(new_view);
-  last_seqs_ = std::move(seqs);
+  last_stamps_ = std::move(stamps);
   const std::string message =
       "caught up: the peer's map at version " + std::to_string(pending->version) + ", then " +
       std::to_string(integrated) + " scans it lacked (" + std::to_string(skipped) +

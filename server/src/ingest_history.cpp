@@ -33,7 +33,7 @@ Expected<void> Ingest::refuseCorrection(const std::string& why) {
 Expected<void> Ingest::correct(PoseCorrection correction) {
   if (!history_)
     return refuseCorrection("pose corrections need the map's history (config history)");
-  if (auto ok = checkCorrection(correction, engine_->options().limits); !ok) {
+  if (auto ok = checkCorrection(correction, options_.limits); !ok) {
     return refuseCorrection(ok.error().message);
   }
   {
@@ -112,7 +112,7 @@ void Ingest::startReintegration(std::uint64_t from_index) {
     historyError("no checkpoint before scan " + std::to_string(from_index));
     return;
   }
-  auto re = Reintegration::create(engine_->options(), *from);
+  auto re = Reintegration::create(options_, *from);
   if (!re) {
     historyError(re.error().message);
     return;

@@ -93,7 +93,10 @@ TEST(PoseCorrections, TheServerReintegratesACorrectedTrajectoryWhileScansAndQuer
   test::ServerProcess server(dir.path(), kDomain,
                              "history { enabled: true directory: \"" +
                                  (dir.path() / "history").string() +
-                                 "\" checkpoint_every: 50 max_checkpoints: 16 }\n");
+                                 "\" checkpoint_every: 50 max_checkpoints: 16 }\n"
+                                 // Room for the scans that arrive while the worker swaps the
+                                 // corrected map in (latest-wins would drop the oldest).
+                                 "pipeline { queue_depth: 64 }\n");
   const auto config = dir.path() / "server.textproto";
   auto client = test::connectClient(kDomain);
   ASSERT_TRUE(client);

@@ -115,12 +115,16 @@ TEST(Replicas, TwoReplicasPublishTheSameChangesAtEveryVersionAndAClientFailsOver
 TEST(Replicas, AReplicaStartedLateCatchesUpFromItsPeerToTheSameMapAtTheSameVersion) {
   test::TempDir dir;
   constexpr int kBefore = 300, kDuring = 200;
-  const auto raws =
+  auto raws =
       test::simulatedRawScans(dir.path(), test::smallIndoorDrive(kBefore + kDuring, 90), "robot");
   ASSERT_EQ(raws.size(), std::size_t{kBefore + kDuring});
+  for (RawScan& raw : raws) raw.stamp_ns = static_cast<std::int64_t>(raw.seq) * 100'000'000;
   std::filesystem::create_directory(dir.path() / "a");
   std::filesystem::create_directory(dir.path() / "b");
-  test::ServerProcess b(dir.path() / "b", kCatchUpDomain, "", false, 0, "", "instance: \"b\"");
+  // Room in the queue for the scans that arrive while "a" swaps its map (latest-wins would drop
+  // the oldest, and a scan one replica drops parts them).
+  const std::string queue = "pipeline { queue_depth: 64 }\n";
+  test::ServerProcess b(dir.path() / "b", kCatchUpDomain, queue, false, 0, "", "instance: \"b\"");
   auto to_b = Client::create({.domain_id = kCatchUpDomain, .timeout = 10s, .instance = "b"});
   ASSERT_TRUE(to_b) << to_b.error().message;
   ASSERT_TRUE((*to_b)->waitForServer());
@@ -128,7 +132,7 @@ TEST(Replicas, AReplicaStartedLateCatchesUpFromItsPeerToTheSameMapAtTheSameVersi
 
   // "a" starts while the robot goes on: the scans of its first seconds come before, during and
   // after its fetch of "b"'s map.
-  test::ServerProcess a(dir.path() / "a", kCatchUpDomain, "", true, 0, "",
+  test::ServerProcess a(dir.path() / "a", kCatchUpDomain, queue, true, 0, "",
                         "instance: \"a\" catch_up_from: \"b\"");
   for (int i = kBefore; i < kBefore + kDuring; ++i) {
     ASSERT_TRUE((*to_b)->publishScan(raws[i]));
@@ -156,8 +160,8 @@ TEST(Replicas, AReplicaStartedLateCatchesUpFromItsPeerToTheSameMapAtTheSameVersi
   EXPECT_EQ(diff.differing(), 0U) << diff.only_in_a << " / " << diff.only_in_b << " / "
                                   << diff.value_mismatch << " of " << diff.union_cells;
   EXPECT_GT(grid_a.knownCells(), 100000U);
-  ASSERT_EQ(map_b->lastSeqs().size(), 1U);
-  EXPECT_EQ(map_b->lastSeqs()[0], std::make_pair(std::string("robot"), last));
+  ASSERT_EQ(map_b->lastStamps().size(), 1U);
+  EXPECT_EQ(map_b->lastStamps()[0], std::make_pair(std::string("robot"), raws[last - 1].stamp_ns));
   std::printf("catch-up: %s", a.log().substr(a.log().find("caught up")).c_str());
   EXPECT_EQ(a.stop(), 0);
   EXPECT_EQ(b.stop(), 0);

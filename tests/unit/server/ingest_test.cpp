@@ -783,5 +783,68 @@ TEST(Pipeline, CountsEachSensorsScansAndTheirSeqGaps) {
   EXPECT_EQ(front.rejected + rear.rejected, c.rejected);
 }
 
+/// A replica's catch-up (Ingest::catchUp): a peer's map of scans 1..8 replaces this map of
+/// scans 6..12 (kept since beginCatchUp), the kept scans after the peer's last are integrated
+/// into it, and the result is the map of 1..12 at version 12, published as one version whose
+/// changes take a reader of the old version to it. A peer's map that ends before the first kept
+/// scan is refused (scans between may be missing) and the scans stay kept.
+TEST(Pipeline, ACatchUpTakesThePeersMapAndTheKeptScansItLacks) {
+  std::vector<RawScan> raws;
+  for (std::uint64_t seq = 1; seq <= 12; ++seq) {
+    raws.push_back(rawScan(seq));
+    raws.back().sensor_id = "robot";
+    raws.back().stamp_ns = static_cast<std::int64_t>(seq) * 1000;
+  }
+  const auto peerMap = [&](std::size_t scans) {
+    auto map = std::make_unique<GridMap>(0.2, SensorModel{});
+    offlineMap({raws.begin(), raws.begin() + static_cast<std::ptrdiff_t>(scans)}, -1.0)
+        ->forEachKnown([&](const VoxelKey& k, float v) { map->setLogOdds(k, v); });
+    return map;
+  };
+  auto ingest = Ingest::create({.engine = {.resolution_m = 0.2}});
+  ASSERT_TRUE(ingest);
+  Ingest& replica = **ingest;
+  Published published(replica);
+  replica.beginCatchUp();
+  replica.start();
+  for (std::size_t i = 5; i < 12; ++i) {
+    replica.submit(raws[i]);
+    ASSERT_TRUE(waitFor([&] { return replica.counters().integrated == i - 4; }));
+  }
+  const auto own = replica.view();
+  ASSERT_EQ(own->version(), 7U);
+
+  // The peer's map of 1..3: the kept scans start at 6, so 4 and 5 may be missing.
+  auto gap = replica.catchUp(peerMap(3), 9, {{"robot", raws[2].stamp_ns}}).get();
+  ASSERT_FALSE(gap);
+  EXPECT_TRUE(gap.error().message.starts_with(Ingest::kCatchUpGap)) << gap.error().message;
+  EXPECT_EQ(replica.view(), own) << "nothing changed";
+
+  auto done = replica.catchUp(peerMap(8), 8, {{"robot", raws[7].stamp_ns}}).get();
+  ASSERT_TRUE(done) << done.error().message;
+  const auto caught = replica.view();
+  EXPECT_EQ(caught->version(), 12U);
+  EXPECT_EQ(mismatchesWithOffline(*caught, raws, -1.0), 0U);
+  EXPECT_EQ(caught->knownCells(), offlineMap(raws, -1.0)->knownCells());
+  const Ingest::Latest latest = replica.latest();
+  EXPECT_EQ(latest.view, caught);
+  ASSERT_EQ(latest.last_stamps.size(), 1U);
+  EXPECT_EQ(latest.last_stamps[0].second, raws[11].stamp_ns);
+  // The one version's changes take the old version's cells to the new ones.
+  replica.stop();
+  ASSERT_FALSE(published.empty());
+  const auto& [result, view] = published.back();
+  EXPECT_EQ(result.base_version, 7U);
+  EXPECT_EQ(result.new_version, 12U);
+  GridMap followed(0.2, SensorModel{});
+  own->forEachKnown([&](const VoxelKey& k, float v) { followed.setLogOdds(k, v); });
+  followed.applyChanges(result.changes);
+  EXPECT_EQ(mismatchesWithOffline(*MapView::fromMap(followed, 12), raws, -1.0), 0U);
+  EXPECT_EQ(followed.knownCells(), caught->knownCells());
+
+  // A second catch-up: the scans are no longer kept, and the peer is not ahead.
+  EXPECT_FALSE(replica.catchUp(peerMap(8), 8, {}).get());
+}
+
 }  // namespace
 }  // namespace densemap::server

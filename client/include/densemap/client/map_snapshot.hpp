@@ -28,9 +28,9 @@ class MapSnapshot {
 
   /// The server's map version this copy holds.
   [[nodiscard]] std::uint64_t version() const;
-  /// The last scan seq the server had integrated per sensor id at that version (at most 64
-  /// ids): a replica catching up from this copy skips those scans.
-  [[nodiscard]] const std::vector<std::pair<std::string, std::uint64_t>>& lastSeqs() const;
+  /// The stamp of the last scan the server had integrated per sensor id at that version (at
+  /// most 64 ids): a replica catching up from this copy skips the scans up to it.
+  [[nodiscard]] const std::vector<std::pair<std::string, std::int64_t>>& lastStamps() const;
   /// Voxel edge, metres.
   [[nodiscard]] double resolution() const;
   /// Cells known (free or occupied).

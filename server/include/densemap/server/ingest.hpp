@@ -51,8 +51,9 @@ inline constexpr std::size_t kMaxPendingCorrections = 16;
 /// Scans a replica catching up keeps while it fetches its peer's map (Ingest::beginCatchUp).
 inline constexpr std::size_t kMaxCatchUpScans = 4096;
 
-/// The last scan seq integrated per sensor id, in the order the ids first came.
-using SensorSeqs = std::vector<std::pair<std::string, std::uint64_t>>;
+/// The stamp of the last scan integrated per sensor id, in the order the ids first came (a
+/// sensor's stamps increase; ROS clouds' seqs are each server's own count, their stamps not).
+using SensorStamps = std::vector<std::pair<std::string, std::uint64_t>>;
 
 struct PipelineCounters {
   std::uint64_t received = 0;
@@ -125,26 +126,29 @@ class Ingest {
     const std::shared_lock lock(engine_swap_);
     return engine_->view();
   }
-  /// The latest announced version and the last scan seq integrated per sensor id in it (at
-  /// most SensorTally::kMaxSensors ids): what a send-map sends, so that a replica catching up
-  /// skips the scans its peer's map holds.
+  /// The latest announced version and the stamp of the last scan integrated per sensor id in
+  /// it (at most SensorTally::kMaxSensors ids): what a send-map sends, so that a replica catching
+  /// up skips the scans its peer's map holds.
   struct Latest {
     std::shared_ptr<const MapView> view;
-    SensorSeqs last_seqs;
+    SensorStamps last_stamps;
   };
   [[nodiscard]] Latest latest() const;
   /// Before start(): keeps a copy of every scan integrated from now on (at most
   /// kMaxCatchUpScans) until catchUp().
   void beginCatchUp() { keep_scans_ = true; }
   /// A replica started late (docs/fleet.md, replicas): on the worker, replaces the map by `map`
-  /// (a peer's at `version`, holding its scans up to `last_seqs`), integrates the kept scans it
-  /// lacks (seq above the peer's last for their sensor) in arrival order, and publishes the
+  /// (a peer's at `version`, holding its scans up to `last_stamps`), integrates the kept scans
+  /// it lacks (stamped after the peer's last of their sensor) in arrival order, and publishes the
   /// change as one version. The map then equals the peer's at the same version. An error,
   /// nothing changed, when `version` is not above this map's, or more scans came than were
-  /// kept; either way the scans are no longer kept.
+  /// kept: the scans are then no longer kept. An error starting with kCatchUpGap, the scans
+  /// still kept, when the first scan kept of a sensor is stamped after the peer's last: scans
+  /// between the two may have reached the peer only; a later fetch of the peer's map holds them.
+  static constexpr std::string_view kCatchUpGap = "the peer's map does not reach";
   [[nodiscard]] std::future<Expected<std::string>> catchUp(std::unique_ptr<OccupancyMap> map,
                                                            std::uint64_t version,
-                                                           SensorSeqs last_seqs);
+                                                           SensorStamps last_stamps);
   /// Runs f(field, view): the distance field and the map version it was updated to, shared with
   /// other readers (it waits for an update under way, a few ms). False, f not run, when the
   /// server keeps no field (config esdf).
@@ -226,7 +230,7 @@ class Ingest {
   std::vector<PoseCorrection> corrections_;  // waiting for the worker
   HistoryStatus history_status_;             // under counters_mutex_
 
-  SensorSeqs last_seqs_;  // the worker's
+  SensorStamps last_stamps_;  // the worker's
   mutable std::mutex latest_mutex_;
   Latest latest_;  // as of the last announced version
   std::atomic<bool> keep_scans_{false};
@@ -235,7 +239,7 @@ class Ingest {
   struct PendingCatchUp {
     std::unique_ptr<OccupancyMap> map;
     std::uint64_t version = 0;
-    SensorSeqs last_seqs;
+    SensorStamps last_stamps;
     std::promise<Expected<std::string>> done;
   };
   std::mutex catch_up_mutex_;

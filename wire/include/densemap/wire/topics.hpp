@@ -44,8 +44,8 @@ enum class CommandKind : std::int32_t { kReset = 0, kClearBox = 1, kSave = 2, kS
 /// server refuses more, the client library splits a larger batch into requests of this size,
 /// sent one after another, so a client has one request's worth of memory in flight at a time.
 inline constexpr std::uint32_t kMaxQueryPoints = 250'000;
-/// The most sensor ids a send-map reply names with their last integrated scan (sent_seqs).
-inline constexpr std::uint32_t kMaxSentSeqs = 64;
+/// The most sensor ids a send-map reply names with their last integrated scan's stamp.
+inline constexpr std::uint32_t kMaxSentStamps = 64;
 /// The most vertices one PathQueryRequest may carry.
 inline constexpr std::uint32_t kMaxPathVertices = 100'000;
 /// The most boxes one BoxesQueryRequest may carry.
