@@ -6,7 +6,6 @@
 // ran.
 #include <gtest/gtest.h>
 
-#include <Eigen/Geometry>
 #include <atomic>
 #include <cstdio>
 #include <thread>
@@ -17,6 +16,7 @@
 #include "densemap/map/map_diff.hpp"
 #include "densemap/server/server_config.hpp"
 #include "densemap/test_support/data_dir.hpp"
+#include "densemap/test_support/drift.hpp"
 #include "densemap/test_support/server_clients.hpp"
 #include "densemap/test_support/server_process.hpp"
 
@@ -26,20 +26,6 @@ namespace {
 using namespace std::chrono_literals;
 
 constexpr std::uint32_t kDomain = 208;
-
-/// `scan` as odometry that drifted by `k` steps would place it: yawed 2 mrad and moved 1 cm a
-/// step about the world origin.
-RawScan drifted(RawScan scan, int k) {
-  const Eigen::Quaterniond drift(Eigen::AngleAxisd(0.002 * k, Eigen::Vector3d::UnitZ()));
-  const Eigen::Quaterniond q(scan.q_world_sensor[0], scan.q_world_sensor[1], scan.q_world_sensor[2],
-                             scan.q_world_sensor[3]);
-  const Eigen::Vector3d t(scan.t_world_sensor[0], scan.t_world_sensor[1], scan.t_world_sensor[2]);
-  const Eigen::Quaterniond q2 = (drift * q).normalized();
-  const Eigen::Vector3d t2 = drift * t + Eigen::Vector3d(0.01 * k, 0.005 * k, 0);
-  scan.q_world_sensor = {q2.w(), q2.x(), q2.y(), q2.z()};
-  scan.t_world_sensor = {t2.x(), t2.y(), t2.z()};
-  return scan;
-}
 
 /// The server's map built offline, from scratch, from `scans` in order (the server's own config).
 std::shared_ptr<const MapView> fromScratch(const std::vector<RawScan>& scans,
@@ -86,7 +72,7 @@ TEST(PoseCorrections, TheServerReintegratesACorrectedTrajectoryWhileScansAndQuer
   for (RawScan& s : truth) s.stamp_ns = static_cast<std::int64_t>(s.seq) * 100'000'000;
   std::vector<RawScan> live(truth.begin(), truth.begin() + kScans);
   for (int i = kScans - kCorrected; i < kScans; ++i) {
-    live[i] = drifted(truth[i], i - (kScans - kCorrected) + 1);
+    live[i] = test::drifted(truth[i], i - (kScans - kCorrected) + 1, 0.002);
   }
   const std::vector<RawScan> after(truth.begin() + kScans, truth.end());
 

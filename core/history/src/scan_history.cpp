@@ -3,7 +3,7 @@
 #include <algorithm>
 
 #include "densemap/geometry/block_layout.hpp"
-#include "densemap/map/map_factory.hpp"
+#include "densemap/store/snapshot.hpp"
 #include "densemap/query/version_delta.hpp"
 
 namespace densemap {
@@ -132,9 +132,8 @@ Expected<std::unique_ptr<Reintegration>> Reintegration::create(const PipelineOpt
   if (options.kernel || options.decay) {
     return makeError("pose corrections need a log_odds map without decay");
   }
-  auto map = makeMap(options.backend, options.resolution_m, SensorModel(options.sensor));
+  auto map = mapOfView(*from.view, SensorModel(options.sensor), options.backend);
   if (!map) return std::unexpected(map.error());
-  from.view->forEachKnown([&](const VoxelKey& key, float v) { (*map)->setLogOdds(key, v); });
   PipelineOptions own = options;
   own.versioned_views = true;  // the checkpoints taken on the way stay valid
   own.warm_up = false;

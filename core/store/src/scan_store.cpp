@@ -11,6 +11,8 @@
 #include <cstring>
 #include <system_error>
 
+#include "crc.hpp"
+
 namespace densemap {
 
 static_assert(std::endian::native == std::endian::little, "records are little-endian");
@@ -50,17 +52,6 @@ class Reader {
   std::size_t at_ = 0;
 };
 
-std::uint32_t crcOf(const std::uint8_t* data, std::size_t n) {
-  uLong crc = crc32(0L, Z_NULL, 0);
-  while (n > 0) {  // crc32 takes at most a uInt at a time
-    const auto chunk = static_cast<uInt>(std::min<std::size_t>(n, 1U << 30));
-    crc = crc32(crc, data, chunk);
-    data += chunk;
-    n -= chunk;
-  }
-  return static_cast<std::uint32_t>(crc);
-}
-
 std::string errnoText() { return std::system_category().message(errno); }
 
 }  // namespace
@@ -99,7 +90,7 @@ std::vector<std::uint8_t> encodeScanRecord(const RawScan& scan) {
   out.resize(kHeaderBytes + packed_size);
   const std::uint32_t header[4] = {kRecordMagic, static_cast<std::uint32_t>(packed_size),
                                    static_cast<std::uint32_t>(raw.size()),
-                                   crcOf(out.data() + kHeaderBytes, packed_size)};
+                                   crc32Of(out.data() + kHeaderBytes, packed_size)};
   std::memcpy(out.data(), header, kHeaderBytes);
   return out;
 }
@@ -119,7 +110,7 @@ Expected<RawScan> decodeScanRecord(std::span<const std::uint8_t> bytes) {
     return makeError("scan record: decodes to " + std::to_string(raw_size) +
                      " bytes, more than a scan may hold");
   }
-  if (crcOf(bytes.data() + kHeaderBytes, packed_size) != crc) {
+  if (crc32Of(bytes.data() + kHeaderBytes, packed_size) != crc) {
     return makeError("scan record: damaged (CRC)");
   }
   std::vector<std::uint8_t> raw(raw_size);

@@ -12,33 +12,26 @@
 #include "densemap/io/file_bytes.hpp"
 #include "densemap/io/octomap_export.hpp"
 #include "densemap/map/map_factory.hpp"
+#include "crc.hpp"
 #include "snapshot.pb.h"
 
 namespace densemap {
-namespace {
 
-Expected<std::unique_ptr<OccupancyMap>> toMap(const MapView& view, const SensorModel& model,
-                                              Backend backend) {
+Expected<std::unique_ptr<OccupancyMap>> mapOfView(const MapView& view, const SensorModel& model,
+                                                  Backend backend) {
   auto map = makeMap(backend, view.grid().resolution(), model);
   if (!map) return map;
   view.forEachKnown([&](const VoxelKey& k, float v) { (*map)->setLogOdds(k, v); });
   return map;
 }
 
+namespace {
+
 /// CRC-32 of the parts in order (zlib's): keys then values.
 std::uint32_t cellsCrc(std::initializer_list<const std::string*> parts) {
-  uLong crc = crc32(0L, Z_NULL, 0);
-  for (const std::string* part : parts) {
-    const auto* data = reinterpret_cast<const Bytef*>(part->data());
-    std::size_t left = part->size();
-    while (left > 0) {  // crc32 takes at most a uInt at a time
-      const uInt chunk = static_cast<uInt>(std::min<std::size_t>(left, 1U << 30));
-      crc = crc32(crc, data, chunk);
-      data += chunk;
-      left -= chunk;
-    }
-  }
-  return static_cast<std::uint32_t>(crc);
+  std::uint32_t crc = 0;
+  for (const std::string* part : parts) crc = crc32Of(part->data(), part->size(), crc);
+  return crc;
 }
 
 template <class T>
@@ -110,7 +103,7 @@ Expected<std::size_t> saveSnapshot(const MapView& view, const SensorModel& model
                                    const kernel::KernelEvidence* kernel, SnapshotValues kind) {
   const std::string ext = file.extension().string();
   if (ext == ".bt" || ext == ".ot") {
-    auto map = toMap(view, model, Backend::kGrid);
+    auto map = mapOfView(view, model, Backend::kGrid);
     if (!map) return std::unexpected(map.error());
     if (auto ok = exportOctomap(**map, file); !ok) return std::unexpected(ok.error());
     return std::filesystem::file_size(file);

@@ -5,48 +5,21 @@
 // the store keeps are counted, not applied.
 #include <gtest/gtest.h>
 
-#include <Eigen/Geometry>
 
 #include "densemap/history/scan_history.hpp"
-#include "densemap/io/scan_source.hpp"
 #include "densemap/query/version_delta.hpp"
-#include "densemap/sim/sequence.hpp"
 #include "densemap/test_support/data_dir.hpp"
+#include "densemap/test_support/drift.hpp"
+#include "densemap/test_support/server_clients.hpp"
 
 namespace densemap {
 namespace {
 
 /// `n` simulated VLP-16 scans through the indoor scene, stamped 100 ms apart.
 std::vector<RawScan> indoorScans(const std::filesystem::path& dir, int n) {
-  SequenceOptions o;
-  o.scene = "indoor";
-  o.sensor = "vlp16";
-  o.columns = 90;
-  o.scans = n;
-  o.ground_truth_resolution_m = 0;
-  EXPECT_TRUE(writeSimulatedSequence(o, dir / "data"));
-  auto source = openScanSource(dir / "data");
-  std::vector<RawScan> raws;
-  if (!source) return raws;
-  for (std::size_t i = 0; i < (*source)->size(); ++i) {
-    raws.push_back(toRawScan(*(*source)->load(i), i + 1, "robot"));
-    raws.back().stamp_ns = static_cast<std::int64_t>(i + 1) * 100'000'000;
-  }
+  auto raws = test::simulatedRawScans(dir, test::smallIndoorDrive(n, 90), "robot");
+  for (RawScan& raw : raws) raw.stamp_ns = static_cast<std::int64_t>(raw.seq) * 100'000'000;
   return raws;
-}
-
-/// `scan` as odometry that drifted by `k` steps would place it: yawed 3 mrad and moved 1 cm a
-/// step about the world origin.
-RawScan drifted(RawScan scan, int k) {
-  const Eigen::Quaterniond drift(Eigen::AngleAxisd(0.003 * k, Eigen::Vector3d::UnitZ()));
-  const Eigen::Quaterniond q(scan.q_world_sensor[0], scan.q_world_sensor[1], scan.q_world_sensor[2],
-                             scan.q_world_sensor[3]);
-  const Eigen::Vector3d t(scan.t_world_sensor[0], scan.t_world_sensor[1], scan.t_world_sensor[2]);
-  const Eigen::Quaterniond q2 = (drift * q).normalized();
-  const Eigen::Vector3d t2 = drift * t + Eigen::Vector3d(0.01 * k, 0.005 * k, 0);
-  scan.q_world_sensor = {q2.w(), q2.x(), q2.y(), q2.z()};
-  scan.t_world_sensor = {t2.x(), t2.y(), t2.z()};
-  return scan;
 }
 
 CorrectedPose poseOf(const RawScan& scan) {
@@ -105,7 +78,7 @@ TEST(History, ACorrectionReintegratedFromItsCheckpointGivesTheMapOfTheCorrectedP
   ASSERT_EQ(truth.size(), 160U);
   std::vector<RawScan> live_scans = truth;  // the last 100 drift
   for (std::size_t i = 60; i < truth.size(); ++i) {
-    live_scans[i] = drifted(truth[i], static_cast<int>(i) - 59);
+    live_scans[i] = test::drifted(truth[i], static_cast<int>(i) - 59, 0.003);
   }
   PipelineOptions options;
   auto live = Engine::create(options);
@@ -136,7 +109,7 @@ TEST(History, ACorrectionReintegratedFromItsCheckpointGivesTheMapOfTheCorrectedP
   std::vector<RawScan> second = truth;
   PoseCorrection back{.sensor_id = "robot"};
   for (std::size_t i = 130; i < truth.size(); ++i) {
-    second[i] = drifted(truth[i], 5);
+    second[i] = test::drifted(truth[i], 5, 0.003);
     back.poses.push_back(poseOf(second[i]));
   }
   correctAndPatch(**live, **history, back, 30);

@@ -26,6 +26,11 @@ enum class SnapshotValues {
   kUnclamped,  // any finite values (a copy of a map whose kind the writer does not know)
 };
 
+/// A map of `backend` holding `view`'s cells (a copy: loaded files, checkpoints to build on).
+[[nodiscard]] Expected<std::unique_ptr<OccupancyMap>> mapOfView(const MapView& view,
+                                                                const SensorModel& model,
+                                                                Backend backend);
+
 /// Writes `view` as a protobuf snapshot (`.dmap`) atomically (temp file, fsync, rename), or as
 /// an OctoMap `.bt`/`.ot` when the name says so. `kernel`: a dense map's evidence, of the same
 /// version as `view`, saved with it in a .dmap (OctoMap files take the probabilities only); a
