@@ -14,7 +14,8 @@ namespace densemap::server {
 
 /// A re-integration under way: its thread and whether it has caught up (or failed).
 struct Ingest::Background {
-  std::unique_ptr<Reintegration> re;
+  std::uint64_t begin = 0;            // the checkpoint it starts from
+  std::unique_ptr<Reintegration> re;  // made by the thread
   std::thread thread;
   std::atomic<bool> cancel{false};
   std::atomic<bool> ready{false};    // caught up, or failed (error)

@@ -101,7 +101,7 @@ void Ingest::applyCorrections() {
   if (!earliest) return;
   // A re-integration under way started from a checkpoint whose later scans may now have other
   // poses too: one new run from the earlier of the two covers both.
-  if (background_) earliest = std::min(*earliest, background_->re->begin());
+  if (background_) earliest = std::min(*earliest, background_->begin);
   cancelReintegration();
   startReintegration(*earliest);
 }
@@ -112,13 +112,8 @@ void Ingest::startReintegration(std::uint64_t from_index) {
     historyError("no checkpoint before scan " + std::to_string(from_index));
     return;
   }
-  auto re = Reintegration::create(options_, *from);
-  if (!re) {
-    historyError(re.error().message);
-    return;
-  }
   auto bg = std::make_unique<Background>();
-  bg->re = std::move(*re);
+  bg->begin = from->index;
   {
     std::lock_guard lock(counters_mutex_);
     history_status_.reintegrating = true;
@@ -126,8 +121,16 @@ void Ingest::startReintegration(std::uint64_t from_index) {
     history_status_.reintegration_total = history_->store().end() - from->index;
   }
   Background* b = bg.get();
-  bg->thread = std::thread([this, b] {
+  bg->thread = std::thread([this, b, from = *from] {
     try {
+      // The copy of the checkpoint's cells is made here, not on the worker: it costs O(map).
+      auto re = Reintegration::create(options_, from);
+      if (!re) {
+        b->error = re.error().message;
+        b->ready = true;
+        return;
+      }
+      b->re = std::move(*re);
       while (!b->cancel.load()) {
         const std::uint64_t end = history_->store().end();
         if (b->re->next() + kHandOverScans >= end) break;
