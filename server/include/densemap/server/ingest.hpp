@@ -53,7 +53,7 @@ inline constexpr std::size_t kMaxCatchUpScans = 4096;
 
 /// The stamp of the last scan integrated per sensor id, in the order the ids first came (a
 /// sensor's stamps increase; ROS clouds' seqs are each server's own count, their stamps not).
-using SensorStamps = std::vector<std::pair<std::string, std::uint64_t>>;
+using SensorStamps = std::vector<std::pair<std::string, std::int64_t>>;
 
 struct PipelineCounters {
   std::uint64_t received = 0;
