@@ -6,7 +6,7 @@
 #include <string>
 #include <string_view>
 
-#include "densemap/io/raw_scan.hpp"
+#include "densemap/io/scan.hpp"
 
 namespace densemap::ros2 {
 
@@ -27,7 +27,7 @@ namespace densemap::ros2 {
 /// empty, not starting with a digit; at most 255 characters, rmw_dds_common's bound 256).
 [[nodiscard]] bool isNodeName(std::string_view name);
 
-/// A RawScan's pose and its conversions (densemap/io/raw_scan.hpp).
+/// A RawScan's pose and its conversions (densemap/io/scan.hpp).
 using densemap::fromScanPose;
 using densemap::ScanPose;
 using densemap::toScanPose;

@@ -7,8 +7,6 @@
 #include <string>
 #include <vector>
 
-#include "densemap/geometry/rigid_transform.hpp"
-
 namespace densemap {
 
 /// A scan as it arrives from outside (DDS, files), before any check: flat coordinates in the
@@ -42,6 +40,13 @@ struct PoseCorrection {
 /// The most poses one correction may carry.
 inline constexpr std::size_t kMaxCorrectedPoses = 100'000;
 
+/// A pose in the raw form scans and pose corrections carry: translation and unit quaternion
+/// (w, x, y, z). Conversions: densemap/io/scan.hpp.
+struct ScanPose {
+  std::array<double, 3> t{};
+  std::array<double, 4> q{1, 0, 0, 0};
+};
+
 /// The memory a waiting scan holds: its arrays and strings (the ingest queue's byte budget).
 [[nodiscard]] inline std::size_t rawScanBytes(const RawScan& scan) {
   return sizeof(RawScan) + scan.sensor_id.capacity() +
@@ -50,18 +55,6 @@ inline constexpr std::size_t kMaxCorrectedPoses = 100'000;
 
 struct Scan;
 
-/// A pose in the raw form scans and pose corrections carry: translation and unit quaternion
-/// (w, x, y, z).
-struct ScanPose {
-  std::array<double, 3> t{};
-  std::array<double, 4> q{1, 0, 0, 0};
-};
-[[nodiscard]] ScanPose toScanPose(const Transform& T);
-/// The transform of a raw pose (quaternion normalized).
-[[nodiscard]] Transform fromScanPose(const std::array<double, 3>& t,
-                                     const std::array<double, 4>& q);
-/// `T_world_sensor` as the pose of the scan stamped `stamp_ns` (toScanPose).
-[[nodiscard]] CorrectedPose toCorrectedPose(std::int64_t stamp_ns, const Transform& T_world_sensor);
 
 /// The raw form of a scan as a sender publishes it: sensor-frame points (world-frame scans are
 /// re-expressed in the sensor frame) and the pose as translation + unit quaternion.

@@ -7,6 +7,7 @@
 
 #include "densemap/geometry/point_cloud.hpp"
 #include "densemap/geometry/rigid_transform.hpp"
+#include "densemap/io/raw_scan.hpp"
 
 namespace densemap {
 
@@ -47,5 +48,13 @@ struct Scan {
 
 /// The same pose in double (for consumers that take sensor-frame scans with a pose).
 [[nodiscard]] Transform transformFromOctomapPose(const OctomapPose& pose);
+
+/// A transform in the raw form scans and pose corrections carry (ScanPose).
+[[nodiscard]] ScanPose toScanPose(const Transform& T);
+/// The transform of a raw pose (quaternion normalized).
+[[nodiscard]] Transform fromScanPose(const std::array<double, 3>& t,
+                                     const std::array<double, 4>& q);
+/// `T_world_sensor` as the pose of the scan stamped `stamp_ns` (toScanPose).
+[[nodiscard]] CorrectedPose toCorrectedPose(std::int64_t stamp_ns, const Transform& T_world_sensor);
 
 }  // namespace densemap
