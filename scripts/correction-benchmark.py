@@ -6,7 +6,8 @@ queries --points points near the path without pause. Prints a markdown table for
 docs/benchmarks.md: the re-integration's time a scan and in all (the server's clock, from the
 correction's arrival to the swap), the point queries' p50 / p99 in the 2 s before the
 correction and while it ran, and the queried points whose state or
-log-odds differs from a second server's fed the corrected scans from scratch (0: exact).
+log-odds differs from a second server's fed the corrected scans from scratch (0: exact; the
+script exits non-zero otherwise).
 
 Usage: unshare -n sh -c 'ip link set lo up && exec scripts/correction-benchmark.py DATA
            [--first 20 --limit 80] [--resolution 0.1] [--max-range 30] [--corrected 40]
@@ -199,6 +200,8 @@ def main():
           f"| {pct('during', 50)} / {pct('during', 99)} "
           f"| {spread([len(r['during']) for r in runs], '{:.0f}')} "
           f"| {max(r['differ'] for r in runs)} |")
+    if any(r["differ"] for r in runs):
+        sys.exit("correction-benchmark: the corrected map differs from the map built from scratch")
 
 
 if __name__ == "__main__":

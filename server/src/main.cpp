@@ -20,6 +20,7 @@
 #endif
 
 #include "catch_up.hpp"
+#include "guarded.hpp"
 #include "densemap/cli/allocator.hpp"
 #include "densemap/cli/guarded_main.hpp"
 #include "densemap/server/export_path.hpp"
@@ -355,12 +356,15 @@ static int runMain(int argc, char** argv) {
   std::thread catch_up;
   if (!peer.empty()) {
     catch_up = std::thread([&ingest, &service_options, peer] {
-      const auto caught = densemap::server::catchUpFrom(**ingest, *service_options, peer, 10.0);
-      if (caught) {
-        spdlog::info("{}", *caught);
-      } else {
-        spdlog::error("{}; this replica keeps its own map", caught.error().message);
-      }
+      // Whatever the fetch throws (out of memory copying the peer's map) is logged, not fatal.
+      densemap::guarded("catch-up", [&] {
+        const auto caught = densemap::server::catchUpFrom(**ingest, *service_options, peer, 10.0);
+        if (caught) {
+          spdlog::info("{}", *caught);
+        } else {
+          spdlog::error("{}; this replica keeps its own map", caught.error().message);
+        }
+      });
     });
   }
   spdlog::info("running on DDS domain {}, interface {}{}; {} backend at {} m, {} threads{}",
