@@ -6,6 +6,7 @@
 #include <array>
 #include <deque>
 #include <mutex>
+#include <optional>
 #include <unordered_map>
 
 namespace densemap::kernel::detail {
@@ -115,7 +116,8 @@ Eigen::Vector3d HitStencils::centreOf(std::int32_t sub) const {
 /// hit_length_voxels (hit_kernel_weight); with `counts`, `positions` are voxels' mean hits, each
 /// standing for that many hits (the cell's evidence is then exactly the hits' sum). With
 /// usable `stencils`, one tabled kernel holds both, weighing the hits' count; consecutive
-/// positions in the same voxel and sub-position share one.
+/// positions in the same voxel and sub-position share one. Each position's voxel, centre and
+/// sub-position are found in parallel; the kernels are then made in order.
 void appendHitKernels(const std::vector<Eigen::Vector3d>& positions,
                       const std::vector<double>* counts, const KernelOptions& o,
                       const VoxelGrid& grid, const HitStencils* stencils,
@@ -123,35 +125,55 @@ void appendHitKernels(const std::vector<Eigen::Vector3d>& positions,
   const double resolution = grid.resolution();
   const double radius = o.hit_length_voxels * resolution;
   const bool tabled = stencils != nullptr && stencils->usable();
+  const bool keyed = tabled || o.hit_centre_pull > 0.0;
+  // Per position: its voxel (keyed only), its kernel's centre and, tabled, its sub-position.
+  struct Place {
+    std::optional<VoxelKey> key;
+    std::int32_t sub = -1;
+    Eigen::Vector3d centre;
+  };
+  std::vector<Place> places(positions.size());
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, positions.size(), 4096),
+      [&](const tbb::blocked_range<std::size_t>& range) {
+        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+          Place& place = places[i];
+          place.key = keyed ? grid.pointToKey(positions[i].cast<float>()) : std::nullopt;
+          // The hit kernel's centre (hit_centre_pull of the way to the voxel's centre).
+          place.centre = positions[i];
+          if (place.key && o.hit_centre_pull > 0.0) {
+            const VoxelKey& key = *place.key;
+            const Eigen::Vector3d voxel_centre(grid.keyToCoord(key.x), grid.keyToCoord(key.y),
+                                               grid.keyToCoord(key.z));
+            place.centre += o.hit_centre_pull * (voxel_centre - place.centre);
+          }
+          if (place.key && tabled) {
+            // The voxel's lower corner, then the centre's offsets inside it (voxels).
+            Eigen::Vector3d corner;
+            for (int a = 0; a < 3; ++a) {
+              corner[a] = grid.keyToCoord((*place.key)[a]) - 0.5 * resolution;
+            }
+            place.sub = stencils->subPosition((place.centre - corner) / resolution);
+            place.centre = corner + stencils->centreOf(place.sub) * resolution;
+          }
+        }
+      });
   std::size_t last_tabled = kernels.size();  // none yet
   for (std::size_t i = 0; i < positions.size(); ++i) {
     const double count = counts != nullptr ? (*counts)[i] : 1.0;
+    const Place& place = places[i];
     Kernel k;
     k.x = k.to = positions[i];
     k.occupied = true;
-    const std::optional<VoxelKey> key = tabled || o.hit_centre_pull > 0.0
-                                            ? grid.pointToKey(positions[i].cast<float>())
-                                            : std::nullopt;
-    // The hit kernel's centre (hit_centre_pull of the way to the voxel's centre).
-    Eigen::Vector3d centre = positions[i];
-    if (key && o.hit_centre_pull > 0.0) {
-      const Eigen::Vector3d voxel_centre(grid.keyToCoord(key->x), grid.keyToCoord(key->y),
-                                         grid.keyToCoord(key->z));
-      centre += o.hit_centre_pull * (voxel_centre - centre);
-    }
-    if (key && tabled) {
-      // The voxel's lower corner, then the centre's offsets inside it (voxels).
-      Eigen::Vector3d corner;
-      for (int a = 0; a < 3; ++a) corner[a] = grid.keyToCoord((*key)[a]) - 0.5 * resolution;
-      const std::int32_t sub = stencils->subPosition((centre - corner) / resolution);
-      if (last_tabled < kernels.size() && kernels[last_tabled].stencil_key == *key &&
-          kernels[last_tabled].stencil == sub) {
+    if (place.sub >= 0) {
+      if (last_tabled < kernels.size() && kernels[last_tabled].stencil_key == *place.key &&
+          kernels[last_tabled].stencil == place.sub) {
         kernels[last_tabled].weight += count;
         continue;
       }
-      k.stencil = sub;
-      k.stencil_key = *key;
-      k.x = k.to = corner + stencils->centreOf(sub) * resolution;
+      k.stencil = place.sub;
+      k.stencil_key = *place.key;
+      k.x = k.to = place.centre;
       k.weight = count;
       // The box the pairs are made from: the kernel's support around its centre (the cell is
       // inside it).
@@ -169,7 +191,7 @@ void appendHitKernels(const std::vector<Eigen::Vector3d>& positions,
     }
     if (o.hit_kernel_weight > 0.0) {
       k.weight = o.hit_kernel_weight * count;
-      k.x = k.to = centre;
+      k.x = k.to = place.centre;
       k.cell = false;
       k.half_extent.setConstant(radius);
       k.inverse_length = 1.0 / radius;
