@@ -12,6 +12,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <ctime>
 #include <filesystem>
 
@@ -286,6 +287,8 @@ void printValid(const std::string& config_path, const densemap::proto::ServerCon
 }  // namespace
 
 static int runMain(int argc, char** argv) {
+  // First: it may start the server again, with the heap on huge pages.
+  const densemap::cli::HeapPages heap_pages = densemap::cli::heapOnHugePages(argv);
   configureAllocator();
   // SIGINT/SIGTERM are taken by sigwait (waitForStop); block them before any thread starts so
   // that every thread (TBB, Cyclone) inherits the mask.
@@ -303,6 +306,9 @@ static int runMain(int argc, char** argv) {
   spdlog::set_default_logger(spdlog::stderr_color_mt("densemap-server"));
   spdlog::set_pattern("densemap-server: %^%l%$: %v");
   spdlog::set_level(spdlog::level::from_str(args.log_level));
+  const char* tunables = std::getenv("GLIBC_TUNABLES");
+  spdlog::debug("{} (GLIBC_TUNABLES={})", densemap::cli::describe(heap_pages),
+                tunables != nullptr ? tunables : "");
   if (args.config_path.empty() && args.check_path.empty()) {
     return fail("--config FILE is required (or --check-config FILE)", 2);
   }

@@ -312,7 +312,9 @@ int run(const Options& o) {
 }  // namespace densemap::bench
 
 static int runMain(int argc, char** argv) {
-  // As densemap-server and the Python module do: per-scan buffers stay in the heap for reuse.
+  // As densemap-server does: the heap on huge pages (it may start the bench again for that),
+  // and per-scan buffers stay in the heap for reuse (as in the Python module too).
+  const densemap::cli::HeapPages heap_pages = densemap::cli::heapOnHugePages(argv);
   densemap::cli::keepScanBuffersInHeap(std::size_t{256} << 20);
   densemap::bench::Options o;
   CLI::App app{"densemap-bench: integration speed and exactness against OctoMap, one run"};
@@ -385,6 +387,7 @@ static int runMain(int argc, char** argv) {
       ->check(CLI::Range(0, 1000))
       ->capture_default_str();
   CLI11_PARSE(app, argc, argv);
+  std::fprintf(stderr, "densemap-bench: %s\n", densemap::cli::describe(heap_pages));
   return densemap::bench::run(o);
 }
 

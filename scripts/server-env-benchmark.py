@@ -1,0 +1,116 @@
+#!/usr/bin/python3
+"""The server and densemap-bench with and without an environment setting (such as
+DENSEMAP_MALLOC=default, which turns the heap's huge pages off), alternated, --runs runs each.
+Prints two markdown tables for docs/benchmarks.md:
+
+1. scripts/realtime-check.sh at --rate Hz (the server with the replay client on the same cores):
+   scans integrated, server p50 / p99, CPU ms a received scan, minor page faults;
+2. densemap-bench on the same scans: p50 / p99 ms a scan, CPU s for the run (loading
+   included), minor page faults.
+
+Usage: scripts/server-env-benchmark.py DATA --env NAME=VALUE [--kind akimap_rays]
+           [--resolution 0.1] [--max-range 30] [--rate 10] [--runs 3]
+Run as root it runs each server inside `unshare -n` (loopback only). Binaries from
+<build>/bin (DENSEMAP_BUILD_DIR, default build).
+"""
+
+import argparse
+import os
+import re
+import resource
+import subprocess
+
+from bench_stats import cpu_model, spread
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+BIN = os.path.join(ROOT, os.environ.get("DENSEMAP_BUILD_DIR", "build"), "bin")
+
+
+def with_env(setting):
+    """This process' environment, plus NAME=VALUE when given."""
+    env = dict(os.environ)
+    if setting is not None:
+        name, value = setting.split("=", 1)
+        env[name] = value
+    return env
+
+
+def server(args, setting):
+    """One realtime-check run: (integrated, received, p50, p99, CPU s, minor faults)."""
+    env = dict(with_env(setting), BENCH="0", KIND=args.kind, DENSEMAP_BIN=BIN)
+    command = [os.path.join(ROOT, "scripts", "realtime-check.sh"), args.data,
+               str(args.resolution), str(args.max_range), str(args.rate)]
+    if os.geteuid() == 0:
+        command = ["unshare", "-n", "sh", "-c", 'ip link set lo up && exec "$@"', "sh"] + command
+    out = subprocess.run(command, env=env, cwd=ROOT, capture_output=True, text=True,
+                         check=True).stdout
+    status = re.search(r"integrated (\d+), dropped (\d+), rejected \d+; latency p50 ([\d.]+) ms "
+                       r"p99 ([\d.]+) ms", out)
+    usage = re.search(r"minor page faults: (\d+), CPU s: ([\d.]+)", out)
+    integrated, dropped = int(status.group(1)), int(status.group(2))
+    return (integrated, integrated + dropped, float(status.group(3)), float(status.group(4)),
+            float(usage.group(2)), int(usage.group(1)))
+
+
+def bench(args, setting):
+    """One densemap-bench run: (p50, p99, CPU s, minor faults) of the child."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    out = subprocess.run(
+        [os.path.join(BIN, "densemap-bench"), "--data", args.data, "--resolution",
+         str(args.resolution), "--max-range", str(args.max_range), "--threads", "2",
+         "--methods", args.kind], env=with_env(setting), capture_output=True, text=True,
+        check=True).stdout
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    row = re.search(rf"^{re.escape(args.kind)}\s+\S+\s+\S+\s+\d+\s+\d+\s+\d+\s+([\d.]+)\s+([\d.]+)",
+                    out, re.M)
+    cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+    return (float(row.group(1)), float(row.group(2)), cpu, after.ru_minflt - before.ru_minflt)
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("data")
+    p.add_argument("--env", required=True, help="NAME=VALUE, set in the compared runs")
+    p.add_argument("--kind", default="akimap_rays")
+    p.add_argument("--resolution", type=float, default=0.1)
+    p.add_argument("--max-range", type=float, default=30.0)
+    p.add_argument("--rate", type=float, default=10.0)
+    p.add_argument("--runs", type=int, default=3)
+    args = p.parse_args()
+    if "=" not in args.env:
+        p.error("--env takes NAME=VALUE")
+    settings = [None, args.env]
+    name = {None: "as built", args.env: args.env}
+    print(f"Machine: {cpu_model()}, {os.cpu_count()} vCPUs; "
+          f"{os.path.basename(os.path.normpath(args.data))} at {args.resolution:g} m / "
+          f"{args.max_range:g} m, {args.kind}, 2 threads; {args.runs} runs, alternated "
+          "(median, min .. max)\n")
+    servers = {s: [] for s in settings}
+    benches = {s: [] for s in settings}
+    for _ in range(args.runs):
+        for s in settings:
+            servers[s].append(server(args, s))
+        for s in settings:
+            benches[s].append(bench(args, s))
+    print(f"The server at {args.rate:g} Hz (scripts/realtime-check.sh):\n")
+    print("| environment | scans integrated (per run) | server p50 ms | server p99 ms | "
+          "server CPU ms a received scan | minor page faults |")
+    print("|---|---|---|---|---|---|")
+    for s in settings:
+        runs = servers[s]
+        print(f"| {name[s]} | {', '.join(f'{r[0]}/{r[1]}' for r in runs)} | "
+              f"{spread([r[2] for r in runs])} | {spread([r[3] for r in runs])} | "
+              f"{spread([1000.0 * r[4] / r[1] for r in runs], '{:.0f}')} | "
+              f"{spread([r[5] for r in runs], '{:.0f}')} |")
+    print("\ndensemap-bench on the same scans:\n")
+    print("| environment | bench p50 ms | bench p99 ms | CPU s (loading included) | "
+          "minor page faults |")
+    print("|---|---|---|---|---|")
+    for s in settings:
+        runs = benches[s]
+        print(f"| {name[s]} | {spread([r[0] for r in runs])} | {spread([r[1] for r in runs])} | "
+              f"{spread([r[2] for r in runs], '{:.2f}')} | {spread([r[3] for r in runs], '{:.0f}')} |")
+
+
+if __name__ == "__main__":
+    main()
