@@ -1,8 +1,11 @@
 """Statistics and machine facts the benchmark scripts report, defined once."""
 
 import math
+import os
 import platform
+import re
 import statistics
+import subprocess
 
 
 def percentile(values, q):
@@ -25,3 +28,19 @@ def spread(values, fmt="{:.1f}"):
     """'median (min .. max)' of several runs, each formatted with fmt."""
     return (fmt.format(statistics.median(values)) + " (" + fmt.format(min(values)) + " .. " +
             fmt.format(max(values)) + ")")
+
+
+def realtime_check(root, data, resolution, max_range, rate, env):
+    """One scripts/realtime-check.sh run (inside `unshare -n` when root) with this environment:
+    (integrated, dropped, server p50 ms, p99 ms, CPU s, minor page faults)."""
+    command = [os.path.join(root, "scripts", "realtime-check.sh"), data, str(resolution),
+               str(max_range), str(rate)]
+    if os.geteuid() == 0:
+        command = ["unshare", "-n", "sh", "-c", 'ip link set lo up && exec "$@"', "sh"] + command
+    out = subprocess.run(command, env=env, cwd=root, capture_output=True, text=True,
+                         check=True).stdout
+    status = re.search(r"integrated (\d+), dropped (\d+), rejected \d+; latency p50 ([\d.]+) ms "
+                       r"p99 ([\d.]+) ms", out)
+    usage = re.search(r"minor page faults: (\d+), CPU s: ([\d.]+)", out)
+    return (int(status.group(1)), int(status.group(2)), float(status.group(3)),
+            float(status.group(4)), float(usage.group(2)), int(usage.group(1)))

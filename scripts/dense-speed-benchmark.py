@@ -25,7 +25,7 @@ import re
 import subprocess
 import tempfile
 
-from bench_stats import cpu_model, spread
+from bench_stats import cpu_model, realtime_check, spread
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BUILD = os.path.join(ROOT, os.environ.get("DENSEMAP_BUILD_DIR", "build"))
@@ -62,17 +62,7 @@ def server(args, bin_dir):
     """One scripts/realtime-check.sh run with these binaries: (integrated, dropped, p50, p99,
     CPU s)."""
     env = dict(os.environ, BENCH="0", KIND="akimap_rays", DENSEMAP_BIN=bin_dir)
-    command = [os.path.join(ROOT, "scripts", "realtime-check.sh"), args.data,
-               str(args.resolution), str(args.max_range), str(args.rate)]
-    if os.geteuid() == 0:
-        command = ["unshare", "-n", "sh", "-c", 'ip link set lo up && exec "$@"', "sh"] + command
-    out = subprocess.run(command, env=env, cwd=ROOT, capture_output=True, text=True,
-                         check=True).stdout
-    status = re.search(r"integrated (\d+), dropped (\d+), rejected \d+; latency p50 ([\d.]+) ms "
-                       r"p99 ([\d.]+) ms", out)
-    cpu = re.search(r"CPU s: ([\d.]+)", out)
-    return (int(status.group(1)), int(status.group(2)), float(status.group(3)),
-            float(status.group(4)), float(cpu.group(1)))
+    return realtime_check(ROOT, args.data, args.resolution, args.max_range, args.rate, env)[:5]
 
 
 def accuracy(args, setting, work):

@@ -20,7 +20,7 @@ import re
 import resource
 import subprocess
 
-from bench_stats import cpu_model, spread
+from bench_stats import cpu_model, realtime_check, spread
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BIN = os.path.join(ROOT, os.environ.get("DENSEMAP_BUILD_DIR", "build"), "bin")
@@ -38,18 +38,9 @@ def with_env(setting):
 def server(args, setting):
     """One realtime-check run: (integrated, received, p50, p99, CPU s, minor faults)."""
     env = dict(with_env(setting), BENCH="0", KIND=args.kind, DENSEMAP_BIN=BIN)
-    command = [os.path.join(ROOT, "scripts", "realtime-check.sh"), args.data,
-               str(args.resolution), str(args.max_range), str(args.rate)]
-    if os.geteuid() == 0:
-        command = ["unshare", "-n", "sh", "-c", 'ip link set lo up && exec "$@"', "sh"] + command
-    out = subprocess.run(command, env=env, cwd=ROOT, capture_output=True, text=True,
-                         check=True).stdout
-    status = re.search(r"integrated (\d+), dropped (\d+), rejected \d+; latency p50 ([\d.]+) ms "
-                       r"p99 ([\d.]+) ms", out)
-    usage = re.search(r"minor page faults: (\d+), CPU s: ([\d.]+)", out)
-    integrated, dropped = int(status.group(1)), int(status.group(2))
-    return (integrated, integrated + dropped, float(status.group(3)), float(status.group(4)),
-            float(usage.group(2)), int(usage.group(1)))
+    integrated, dropped, p50, p99, cpu, faults = realtime_check(
+        ROOT, args.data, args.resolution, args.max_range, args.rate, env)
+    return (integrated, integrated + dropped, p50, p99, cpu, faults)
 
 
 def bench(args, setting):
