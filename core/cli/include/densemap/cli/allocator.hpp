@@ -49,8 +49,8 @@ enum class HeapPages {
 }
 
 /// Puts the heap on transparent huge pages: a dense map's scan buffers are tens of MiB, taken
-/// and given back every scan, and on 4 KiB pages the kernel faults them in anew (tens of
-/// thousands of faults a second) and the TLB misses on them (docs/benchmarks.md). glibc reads
+/// and given back every scan, and on 4 KiB pages the kernel faults them in anew, thousands of
+/// times a second (docs/benchmarks.md). glibc reads
 /// its `glibc.malloc.hugetlb` tunable only at start-up, so the first call adds it to
 /// GLIBC_TUNABLES and starts the program again (execv of /proc/self/exe with the same
 /// arguments, same process); the second finds it set. Call first thing in main, before any
