@@ -44,3 +44,12 @@ def realtime_check(root, data, resolution, max_range, rate, env):
     usage = re.search(r"minor page faults: (\d+), CPU s: ([\d.]+)", out)
     return (int(status.group(1)), int(status.group(2)), float(status.group(3)),
             float(status.group(4)), float(usage.group(2)), int(usage.group(1)))
+
+
+def bench_lane(out, lane):
+    """A densemap-bench lane's p50 and p99 ms a scan, from its table on stdout."""
+    row = re.search(rf"^{re.escape(lane)}\s+\S+\s+\S+\s+\d+\s+\d+\s+\d+\s+([\d.]+)\s+([\d.]+)",
+                    out, re.M)
+    if row is None:
+        raise RuntimeError(f"densemap-bench printed no row for {lane}")
+    return float(row.group(1)), float(row.group(2))

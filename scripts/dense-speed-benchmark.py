@@ -25,7 +25,7 @@ import re
 import subprocess
 import tempfile
 
-from bench_stats import cpu_model, realtime_check, spread
+from bench_stats import bench_lane, cpu_model, realtime_check, spread
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BUILD = os.path.join(ROOT, os.environ.get("DENSEMAP_BUILD_DIR", "build"))
@@ -50,11 +50,9 @@ def bench(args, settings):
     result = {}
     for setting in settings:
         name = re.escape(lane(setting))
-        row = re.search(rf"^{name}\s+kernel\s+set\s+\d+\s+\d+\s+\d+\s+([\d.]+)\s+([\d.]+)", out,
-                        re.M)
         stages = re.search(rf"^{name}\s+kernel\s+.*?([\d.]+) ([\d.]+) ([\d.]+) ([\d.]+) ([\d.]+)"
                            r"\s+\(dense", out, re.M)
-        result[setting] = (float(row.group(1)), float(row.group(2)), float(stages.group(4)))
+        result[setting] = bench_lane(out, lane(setting)) + (float(stages.group(4)),)
     return result
 
 

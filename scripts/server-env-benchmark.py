@@ -16,11 +16,10 @@ Run as root it runs each server inside `unshare -n` (loopback only). Binaries fr
 
 import argparse
 import os
-import re
 import resource
 import subprocess
 
-from bench_stats import cpu_model, realtime_check, spread
+from bench_stats import bench_lane, cpu_model, realtime_check, spread
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BIN = os.path.join(ROOT, os.environ.get("DENSEMAP_BUILD_DIR", "build"), "bin")
@@ -52,10 +51,9 @@ def bench(args, setting):
          "--methods", args.kind], env=with_env(setting), capture_output=True, text=True,
         check=True).stdout
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    row = re.search(rf"^{re.escape(args.kind)}\s+\S+\s+\S+\s+\d+\s+\d+\s+\d+\s+([\d.]+)\s+([\d.]+)",
-                    out, re.M)
     cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
-    return (float(row.group(1)), float(row.group(2)), cpu, after.ru_minflt - before.ru_minflt)
+    p50, p99 = bench_lane(out, args.kind)
+    return (p50, p99, cpu, after.ru_minflt - before.ru_minflt)
 
 
 def main():

@@ -55,7 +55,6 @@ struct ScanPose {
 
 struct Scan;
 
-
 /// The raw form of a scan as a sender publishes it: sensor-frame points (world-frame scans are
 /// re-expressed in the sensor frame) and the pose as translation + unit quaternion.
 [[nodiscard]] RawScan toRawScan(const Scan& scan, std::uint64_t seq, const std::string& sensor_id);
