@@ -4,7 +4,7 @@ it saves and what it costs. Prints three markdown tables for docs/benchmarks.md:
 
 1. densemap-bench on DATA, the default and the setting (--compare, a kernel setting such as
    free_bundle_levels=0) as lanes of the same run, taking turns, --runs runs: p50 / p99 ms a
-   scan and the free stage's mean;
+   scan and one stage's mean (--stage: free by default);
 2. with --baseline-bin DIR (the binaries of another build): scripts/realtime-check.sh at --rate
    Hz (the server with the replay client on the same cores), that build's and this one's
    alternated, --runs runs: scans integrated, server p50 / p99, CPU ms a scan;
@@ -14,6 +14,7 @@ it saves and what it costs. Prints three markdown tables for docs/benchmarks.md:
 
 Usage: scripts/dense-speed-benchmark.py DATA --compare NAME=VALUE [--baseline-bin DIR]
            [--resolution 0.1] [--max-range 30] [--rate 10] [--runs 3] [--accuracy-data DIR]
+           [--stage samples|kernels|occupied|free|apply]
 DATA: a dataset densemap-bench reads. --accuracy-data: the dense-map benchmark's real data
 (default $DENSEMAP_DATA_DIR, else ../shared/data). Run as root it runs each server inside
 `unshare -n` (loopback only). Binaries from <build>/bin (DENSEMAP_BUILD_DIR, default build).
@@ -30,6 +31,8 @@ from bench_stats import bench_lane, cpu_model, realtime_check, spread
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BUILD = os.path.join(ROOT, os.environ.get("DENSEMAP_BUILD_DIR", "build"))
 BIN = os.path.join(BUILD, "bin")
+# densemap-bench's dense stages, in the order it prints their means.
+STAGES = ["samples", "kernels", "occupied", "free", "apply"]
 
 
 def lane(setting):
@@ -41,7 +44,7 @@ def label(setting):
 
 
 def bench(args, settings):
-    """One densemap-bench run, every setting a lane: {setting: (p50, p99, free ms)}."""
+    """One densemap-bench run, every setting a lane: {setting: (p50, p99, the stage's ms)}."""
     out = subprocess.run(
         [os.path.join(BIN, "densemap-bench"), "--data", args.data, "--resolution",
          str(args.resolution), "--max-range", str(args.max_range), "--threads", "2",
@@ -52,7 +55,8 @@ def bench(args, settings):
         name = re.escape(lane(setting))
         stages = re.search(rf"^{name}\s+kernel\s+.*?([\d.]+) ([\d.]+) ([\d.]+) ([\d.]+) ([\d.]+)"
                            r"\s+\(dense", out, re.M)
-        result[setting] = bench_lane(out, lane(setting)) + (float(stages.group(4)),)
+        result[setting] = bench_lane(out, lane(setting)) + (
+            float(stages.group(STAGES.index(args.stage) + 1)),)
     return result
 
 
@@ -97,6 +101,8 @@ def main():
     p.add_argument("--max-range", type=float, default=30.0)
     p.add_argument("--rate", type=float, default=10.0)
     p.add_argument("--runs", type=int, default=3)
+    p.add_argument("--stage", choices=STAGES, default="free",
+                   help="the dense stage whose mean the bench table shows")
     p.add_argument("--accuracy-data",
                    default=os.environ.get("DENSEMAP_DATA_DIR", os.path.join(ROOT, "..", "shared",
                                                                             "data")))
@@ -108,7 +114,7 @@ def main():
 
     benches = [bench(args, settings) for _ in range(args.runs)]
     print("densemap-bench, both lanes of the same run:\n")
-    print("| akimap_rays | bench p50 ms | bench p99 ms | free stage mean ms | p50 / "
+    print(f"| akimap_rays | bench p50 ms | bench p99 ms | {args.stage} stage mean ms | p50 / "
           f"{args.compare} |")
     print("|---|---|---|---|---|")
     for setting in settings:

@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 
 #include <array>
+#include <cmath>
 #include <deque>
 #include <mutex>
 #include <optional>
@@ -200,12 +201,78 @@ void appendHitKernels(const std::vector<Eigen::Vector3d>& positions,
   }
 }
 
+/// Fits shared by cubes of `cube_voxels` voxels a side (KernelOptions::fit_cube_m): in each
+/// cube the group of the most hits (`hitsIn(g)`; the first in group order among equals, so the
+/// same whatever the thread count) is fitted, `fit(g, neighbours, normal)`, and every group of
+/// the cube gets that fit and normal, `emit(g, fit, normal)`. A cube's fullest voxel has the
+/// best-sampled neighbourhood. `position(g)`: one of the group's hits. A group outside the
+/// addressable range keeps a fit of its own.
+template <class Position, class HitsIn, class Fit, class Emit>
+void shareFitsByCube(const VoxelGrid& grid, int cube_voxels, std::size_t groups,
+                     const Position& position, const HitsIn& hitsIn, const Fit& fit,
+                     const Emit& emit) {
+  constexpr std::uint64_t kNone = ~std::uint64_t{0};
+  std::vector<std::uint64_t> cube_of(groups);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, groups, 1024),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      for (std::size_t g = range.begin(); g != range.end(); ++g) {
+                        const auto key = grid.pointToKey(position(g).template cast<float>());
+                        cube_of[g] = !key ? kNone
+                                          : (std::uint64_t(key->x / cube_voxels) << 32) |
+                                                (std::uint64_t(key->y / cube_voxels) << 16) |
+                                                std::uint64_t(key->z / cube_voxels);
+                      }
+                    });
+  // Cube -> its fullest group (open addressing, at most half full), then each group's fitter.
+  std::size_t slots = 1024;
+  while (slots < 2 * groups) slots *= 2;
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> table(slots, {kNone, 0});
+  const auto slotOf = [&](std::uint64_t cube) {
+    std::size_t i = static_cast<std::size_t>((cube * 0x9E3779B97F4A7C15ULL) >> 20) & (slots - 1);
+    while (table[i].first != kNone && table[i].first != cube) i = (i + 1) & (slots - 1);
+    return i;
+  };
+  for (std::size_t g = 0; g < groups; ++g) {
+    if (cube_of[g] == kNone) continue;
+    auto& [cube, fullest] = table[slotOf(cube_of[g])];
+    if (cube == kNone) {
+      cube = cube_of[g];
+      fullest = static_cast<std::uint32_t>(g);
+    } else if (hitsIn(g) > hitsIn(fullest)) {
+      fullest = static_cast<std::uint32_t>(g);
+    }
+  }
+  std::vector<std::uint32_t> fitter(groups);
+  for (std::size_t g = 0; g < groups; ++g) {
+    fitter[g] =
+        cube_of[g] == kNone ? static_cast<std::uint32_t>(g) : table[slotOf(cube_of[g])].second;
+  }
+  std::vector<std::uint64_t>().swap(cube_of);
+  std::vector<std::pair<std::uint64_t, std::uint32_t>>().swap(table);
+  std::vector<Kernel> fits(groups);
+  std::vector<Eigen::Vector3d> normals(groups);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, groups, 64),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      std::vector<Neighbour> neighbours;
+                      for (std::size_t g = range.begin(); g != range.end(); ++g) {
+                        if (fitter[g] == g) fits[g] = fit(g, neighbours, normals[g]);
+                      }
+                    });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, groups, 256),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      for (std::size_t g = range.begin(); g != range.end(); ++g) {
+                        emit(g, fits[fitter[g]], normals[fitter[g]]);
+                      }
+                    });
+}
+
 /// kAkimapRays with aggregate_hits: the adaptive kernels of a scan's hits (`hits`: indices of
 /// the occupied samples) and each hit's ray stop. A voxel with at least `aggregate_min_hits`
 /// hits gets one kernel at their mean, weighing their count, fitted to the neighbourhood
 /// outside the voxel; its normal sets its rays' stops. Other voxels keep a kernel per hit (a
 /// mean would lose the spread of a few hits, which is their shape: a grazing floor's), each
 /// fitted alone, or, from `shared_fit_min_hits` hits, all of the shape fitted at their mean.
+/// With `fit_cube_m`, the voxels of a cube share its fullest voxel's fit (shareFitsByCube).
 /// `means` and `counts`: where the direct hit evidence goes and how many hits it stands for.
 void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
                           const std::vector<Sample>& samples,
@@ -243,6 +310,70 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
       group_of[hits[by_voxel[p].second]] = static_cast<std::uint32_t>(g);
     }
   }
+  // The fit at group g's mean hit, fitted to the neighbourhood outside its voxel (its own hits
+  // recognised by their group, not by position: a float-to-key conversion per neighbour near
+  // the voxel's faces), and its normal.
+  const auto fitAtMean = [&](std::size_t g, std::vector<Neighbour>& neighbours,
+                             Eigen::Vector3d& normal) {
+    const std::uint32_t first = group_starts[g], last = group_starts[g + 1];
+    Sample centre;
+    centre.occupied = true;
+    for (std::uint32_t p = first; p < last; ++p) {
+      const Sample& h = samples[hits[by_voxel[p].second]];
+      centre.x += h.x;
+      centre.range += h.range;
+    }
+    const double count = last - first;
+    centre.x /= count;
+    centre.to = centre.x;
+    centre.range /= count;
+    const auto own = static_cast<std::uint32_t>(g);
+    return adaptiveKernel(
+        centre, [&](const SampleIndex::Entry& e) { return group_of[e.index] == own; }, index,
+        options, grid.resolution(), neighbours, &normal);
+  };
+  // Group g's kernels from the fit `k` and its normal: one kernel at the hits' mean (as
+  // fitAtMean sums it) weighing their count, or (fewer than min_hits) a kernel of that shape
+  // per hit.
+  const auto emit = [&](std::size_t g, Kernel k, const Eigen::Vector3d& normal) {
+    const std::uint32_t first = group_starts[g], last = group_starts[g + 1];
+    std::uint32_t out = outputs[g];
+    const std::uint32_t n = last - first;
+    if (n < min_hits) {
+      for (std::uint32_t p = first; p < last; ++p, ++out) {
+        const std::uint32_t h = by_voxel[p].second, i = hits[h];
+        kernels[out] = k;
+        kernels[out].x = kernels[out].to = samples[i].x;
+        means[out] = samples[i].x;
+        counts[out] = 1.0;
+        stops[h] = rayStop((samples[i].x - origin).normalized(), normal, options);
+      }
+      return;
+    }
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (std::uint32_t p = first; p < last; ++p) mean += samples[hits[by_voxel[p].second]].x;
+    mean /= static_cast<double>(n);
+    k.x = k.to = mean;
+    k.weight *= n;
+    kernels[out] = k;
+    means[out] = mean;
+    counts[out] = n;
+    for (std::uint32_t p = first; p < last; ++p) {
+      const std::uint32_t h = by_voxel[p].second;
+      stops[h] = rayStop((samples[hits[h]].x - origin).normalized(), normal, options);
+    }
+  };
+  const int cube_voxels =
+      options.fit_cube_m > 0.0
+          ? static_cast<int>(std::floor(options.fit_cube_m / grid.resolution() + 1e-9))
+          : 1;
+  if (cube_voxels >= 2) {
+    shareFitsByCube(
+        grid, cube_voxels, groups,
+        [&](std::size_t g) { return samples[hits[by_voxel[group_starts[g]].second]].x; },
+        [&](std::size_t g) { return group_starts[g + 1] - group_starts[g]; }, fitAtMean, emit);
+    return;
+  }
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, groups, 64),
       [&](const tbb::blocked_range<std::size_t>& range) {
@@ -267,43 +398,8 @@ void adaptiveVoxelKernels(const VoxelGrid& grid, const KernelOptions& options,
           }
           // One fit at the hits' mean: one kernel weighing their count, or (fewer than
           // min_hits, shared) a kernel per hit of that shape.
-          Sample centre;
-          centre.occupied = true;
-          for (std::uint32_t p = first; p < last; ++p) {
-            const Sample& h = samples[hits[by_voxel[p].second]];
-            centre.x += h.x;
-            centre.range += h.range;
-          }
-          const double count = n;
-          centre.x /= count;
-          centre.to = centre.x;
-          centre.range /= count;
-          // The voxel's own hits are not its neighbours: recognised by their group (they had
-          // been by position, with the key's own test near the voxel's faces: a float-to-key
-          // conversion per neighbour there).
-          const auto own = static_cast<std::uint32_t>(g);
-          Kernel k = adaptiveKernel(
-              centre, [&](const SampleIndex::Entry& e) { return group_of[e.index] == own; }, index,
-              options, grid.resolution(), neighbours, &normal);
-          if (n < min_hits) {
-            for (std::uint32_t p = first; p < last; ++p, ++out) {
-              const std::uint32_t h = by_voxel[p].second, i = hits[h];
-              kernels[out] = k;
-              kernels[out].x = kernels[out].to = samples[i].x;
-              means[out] = samples[i].x;
-              counts[out] = 1.0;
-              stops[h] = rayStop((samples[i].x - origin).normalized(), normal, options);
-            }
-            continue;
-          }
-          k.weight *= count;
-          kernels[out] = k;
-          means[out] = centre.x;
-          counts[out] = count;
-          for (std::uint32_t p = first; p < last; ++p) {
-            const std::uint32_t h = by_voxel[p].second;
-            stops[h] = rayStop((samples[hits[h]].x - origin).normalized(), normal, options);
-          }
+          const Kernel k = fitAtMean(g, neighbours, normal);
+          emit(g, k, normal);
         }
       });
 }

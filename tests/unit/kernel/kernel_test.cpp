@@ -499,6 +499,7 @@ TEST(AkimapRays, VoxelsOfTwoHitsShareOneFitAndKeepTheMapsShape) {
     KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
     ASSERT_EQ(options.shared_fit_min_hits, 2.0);
     options.max_range = 15.0;
+    options.fit_cube_m = 0.0;  // a fit per voxel (a cube's fit is at its fullest voxel's mean)
     KernelMap shared(resolution, options);
     options.shared_fit_min_hits = 0.0;
     KernelMap each(resolution, options);
@@ -508,6 +509,100 @@ TEST(AkimapRays, VoxelsOfTwoHitsShareOneFitAndKeepTheMapsShape) {
     }
     SCOPED_TRACE("resolution " + std::to_string(resolution));
     expectAnotherMapOfTheSameShape(shared, each);
+  }
+}
+
+// fit_cube_m: the kernels of every voxel of a cube have the shape that a fit per voxel gives
+// the cube's fullest voxel (one of them, where several hold as many hits), each at its own
+// hits; the map classifies as with a fit per voxel.
+TEST(AkimapRays, VoxelsOfACubeShareTheFitOfItsFullestVoxel) {
+  for (const double resolution : {0.1, 0.05}) {
+    SCOPED_TRACE("resolution " + std::to_string(resolution));
+    KernelOptions options = KernelOptions::defaults(KernelMethod::kAkimapRays);
+    ASSERT_EQ(options.fit_cube_m, 0.4);
+    options.max_range = 15.0;
+    KernelOptions each_options = options;
+    each_options.fit_cube_m = 0.0;
+    const VoxelGrid grid(resolution);
+    const Eigen::Vector3d origin(0.1, -0.2, 0.05);
+    std::vector<Sample> samples;
+    for (const Point3f& p : roomScan()) {
+      Sample s;
+      s.x = p.cast<double>();
+      s.range = (s.x - origin).norm();
+      s.occupied = true;
+      if (s.range <= options.max_range) samples.push_back(s);
+    }
+    std::vector<std::uint32_t> hits(samples.size());
+    for (std::uint32_t i = 0; i < hits.size(); ++i) hits[i] = i;
+    detail::SampleIndex::Storage storage;
+    const detail::SampleIndex index(samples, std::max(resolution, 0.25 * options.search_max),
+                                    std::size_t{1} << 21, storage);
+    struct Run {
+      std::vector<detail::Kernel> kernels;
+      std::vector<RayStop> stops;
+      std::vector<Eigen::Vector3d> means;
+      std::vector<double> counts;
+    };
+    const auto run = [&](const KernelOptions& o) {
+      Run r;
+      r.stops.resize(hits.size());
+      detail::adaptiveVoxelKernels(grid, o, samples, hits, index, origin, r.kernels, r.stops,
+                                   r.means, r.counts);
+      return r;
+    };
+    const Run shared = run(options), each = run(each_options);
+    ASSERT_EQ(shared.kernels.size(), each.kernels.size());
+    // Each kernel's voxel and cube, and each voxel's hits (the counts of its kernels).
+    const int cube_voxels = static_cast<int>(std::lround(options.fit_cube_m / resolution));
+    std::map<std::uint64_t, double> hits_of_voxel;
+    std::vector<std::uint64_t> voxel_of(each.kernels.size()), cube_of(each.kernels.size());
+    for (std::size_t k = 0; k < each.kernels.size(); ++k) {
+      const VoxelKey key = *grid.pointToKey(each.means[k].cast<float>());
+      voxel_of[k] = key.packed();
+      cube_of[k] = VoxelKey{static_cast<std::uint16_t>(key.x / cube_voxels),
+                            static_cast<std::uint16_t>(key.y / cube_voxels),
+                            static_cast<std::uint16_t>(key.z / cube_voxels)}
+                       .packed();
+      hits_of_voxel[voxel_of[k]] += each.counts[k];
+    }
+    std::map<std::uint64_t, double> most_in_cube;
+    std::map<std::uint64_t, std::set<std::uint64_t>> voxels_of_cube;
+    for (std::size_t k = 0; k < each.kernels.size(); ++k) {
+      most_in_cube[cube_of[k]] = std::max(most_in_cube[cube_of[k]], hits_of_voxel[voxel_of[k]]);
+      voxels_of_cube[cube_of[k]].insert(voxel_of[k]);
+    }
+    std::size_t shared_cubes = 0, moved = 0;
+    for (const auto& [cube, voxels] : voxels_of_cube) shared_cubes += voxels.size() > 1;
+    EXPECT_GT(shared_cubes, 50U);
+    std::map<std::uint64_t, Eigen::Matrix3d> shape_of_cube;
+    for (std::size_t k = 0; k < each.kernels.size(); ++k) {
+      const detail::Kernel& s = shared.kernels[k];
+      ASSERT_EQ(s.x, each.kernels[k].x);  // at its own hits or mean
+      ASSERT_EQ(s.weight, each.kernels[k].weight);
+      const auto [it, first] = shape_of_cube.emplace(cube_of[k], s.h_inverse);
+      ASSERT_EQ(it->second, s.h_inverse) << "two shapes in one cube";
+      if (!first) continue;
+      // The cube's shape is a fullest voxel's own fit.
+      bool found = false;
+      for (std::size_t j = 0; j < each.kernels.size(); ++j) {
+        found |= cube_of[j] == cube_of[k] &&
+                 hits_of_voxel[voxel_of[j]] == most_in_cube[cube_of[k]] &&
+                 each.kernels[j].h_inverse == s.h_inverse;
+      }
+      ASSERT_TRUE(found) << "kernel " << k;
+    }
+    for (std::size_t k = 0; k < each.kernels.size(); ++k) {
+      moved += shared.kernels[k].h_inverse != each.kernels[k].h_inverse;
+    }
+    EXPECT_GT(moved, 50U);
+    // And the map: fewer fits, the same classification.
+    KernelMap shared_map(resolution, options), each_map(resolution, each_options);
+    for (const Point3f& o : {Point3f(0, 0, 0), Point3f(0.4F, -0.3F, 0.2F)}) {
+      shared_map.integrate(roomScan(), o);
+      each_map.integrate(roomScan(), o);
+    }
+    expectAnotherMapOfTheSameShape(shared_map, each_map);
   }
 }
 

@@ -97,6 +97,12 @@ struct KernelOptions {
   /// aggregate_min_hits keeps a kernel per hit, all of one shape fitted once at their mean to
   /// the neighbourhood outside the voxel (0: a fit per hit).
   double shared_fit_min_hits = 0.0;
+  /// kAkimapRays with aggregate_hits: the voxels of hits in one cube of floor(fit_cube_m /
+  /// resolution) voxels a side (none below 2) share one fit: the voxel of the most hits is
+  /// fitted at its hits' mean (whatever shared_fit_min_hits), and the others take its shape and
+  /// normal at their own hits or mean. A surface's shape changes little across a few voxels
+  /// (0: a fit per voxel; 0.4 in KernelOptions::defaults).
+  double fit_cube_m = 0.0;
   std::uint64_t seed = 1;
   /// The plain path, for tests: visit every cell of each kernel's bounding box and evaluate it
   /// there by Kernel::at, instead of only each row's stretch that the kernel can reach (and
@@ -113,7 +119,7 @@ struct KernelOptions {
 /// occupied_weight, hit_weight, hit_kernel_weight, hit_length_voxels, hit_stencil_steps,
 /// hit_centre_pull,
 /// negative_step, search_max, search_range, min_thickness, aggregate_min_hits,
-/// shared_fit_min_hits, free_reach, free_bundle_m, free_bundle_levels), and
+/// shared_fit_min_hits, fit_cube_m, free_reach, free_bundle_m, free_bundle_levels), and
 /// free_traversal=0|1, aggregate_hits=0|1, free_bundles=0|1; errors name the setting.
 [[nodiscard]] Expected<void> applySettings(KernelOptions& options,
                                            const std::vector<std::string>& settings);
