@@ -57,8 +57,8 @@ KernelOptions KernelOptions::defaults(KernelMethod method) {
     o.aggregate_min_hits = 3.0;
     o.shared_fit_min_hits = 2.0;
     // The voxels of hits in a 0.4 m cube share the fit of its fullest voxel (2 voxels a side
-    // at 0.2 m, 4 at 0.1 m): the same accuracy on every row within 0.001 AUC and 3% MSE, a
-    // third of the fits at 0.1 m (docs/benchmarks.md).
+    // at 0.2 m, 4 at 0.1 m): every accuracy row within 0.001 AUC and 3% MSE, the kernels
+    // stage a third shorter on BALM at 0.1 m (docs/benchmarks.md).
     o.fit_cube_m = 0.4;
     // AKIMap's random free samples only shape the occupied kernels' scale and change no
     // accuracy row measurably; without them the fits cover the hits only.
