@@ -29,9 +29,8 @@ void addEvalOptions(CLI::App& app, EvalOptions& o) {
       ->capture_default_str();
   app.add_option("--kernel-set", o.kernel_settings,
                  "Override a kernel map setting for every kernel method of the run, NAME=VALUE "
-                 "(repeatable): free_step, length_scale, sf2, prior, free_margin, max_margin, "
-                 "tip_margin, tip_length_scale, occupied_weight, hit_weight, hit_kernel_weight, "
-                 "hit_length_voxels, negative_step, search_max, search_range, min_thickness "
+                 "(repeatable): every setting of KernelOptions that applySettings names, such "
+                 "as sf2, hit_weight, free_reach, fit_cube_m, or free_traversal=0|1 "
                  "(core/kernel/include/densemap/kernel/kernel_map.hpp)");
   app.add_option("--json", o.json_path, "Write the results as JSON");
   app.add_option("--roc", o.roc_prefix,
