@@ -53,3 +53,15 @@ def bench_lane(out, lane):
     if row is None:
         raise RuntimeError(f"densemap-bench printed no row for {lane}")
     return float(row.group(1)), float(row.group(2))
+
+
+def dense_rows(path):
+    """The first table of scripts/dense-map-benchmark.sh's tables.md with one method (METHODS):
+    {row: its 'AUC [+- spread] / MSE' cell, bold marks removed}."""
+    rows = {}
+    with open(path) as f:
+        for line in f:
+            cells = [c.strip() for c in line.strip().strip("|").split("|")]
+            if len(cells) == 2 and " / " in cells[1] and cells[0] not in rows:
+                rows[cells[0]] = cells[1].replace("**", "")
+    return rows

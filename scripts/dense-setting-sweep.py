@@ -16,6 +16,8 @@ import os
 import subprocess
 import tempfile
 
+from bench_stats import dense_rows
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BUILD = os.path.join(ROOT, os.environ.get("DENSEMAP_BUILD_DIR", "build"))
 
@@ -30,12 +32,9 @@ def scores(args, setting, work):
                     str(args.runs), args.data], env=env, cwd=ROOT, capture_output=True,
                    check=True)
     rows = {}
-    with open(os.path.join(out_dir, "tables.md")) as f:
-        for line in f:
-            cells = [c.strip() for c in line.strip().strip("|").split("|")]
-            if len(cells) == 2 and " / " in cells[1] and cells[0] not in rows:
-                auc, mse = cells[1].replace("**", "").split(" / ")
-                rows[cells[0]] = (float(auc.split("+-")[0]), float(mse))
+    for row, cell in dense_rows(os.path.join(out_dir, "tables.md")).items():
+        auc, mse = cell.split(" / ")
+        rows[row] = (float(auc.split("+-")[0]), float(mse))
     return rows
 
 

@@ -26,7 +26,7 @@ import re
 import subprocess
 import tempfile
 
-from bench_stats import bench_lane, cpu_model, realtime_check, spread
+from bench_stats import bench_lane, cpu_model, dense_rows, realtime_check, spread
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BUILD = os.path.join(ROOT, os.environ.get("DENSEMAP_BUILD_DIR", "build"))
@@ -74,12 +74,7 @@ def accuracy(args, setting, work):
                EVAL_ARGS="" if setting is None else f"--kernel-set {setting}")
     subprocess.run([os.path.join(ROOT, "scripts", "dense-map-benchmark.sh"), out_dir, "3",
                     args.accuracy_data], env=env, cwd=ROOT, capture_output=True, check=True)
-    rows = {}
-    with open(os.path.join(out_dir, "tables.md")) as f:
-        for line in f:
-            cells = [c.strip() for c in line.strip().strip("|").split("|")]
-            if len(cells) == 2 and " / " in cells[1] and cells[0] not in rows:
-                rows[cells[0]] = cells[1].replace("**", "")
+    rows = dense_rows(os.path.join(out_dir, "tables.md"))
     extra = [] if setting is None else ["--kernel-set", setting]
     out = subprocess.run(
         [os.path.join(BIN, "densemap-eval"), "--method", "akimap_rays", "--threads", "2",
