@@ -72,7 +72,7 @@ TEST(BoundedMemory, ALongDriveWithAKeepRadiusKeepsRssFlatWithoutItRssGrows) {
   const std::string limits = "pipeline { max_abs_position_m: 60000 }\n";
   std::vector<Sample> windowed, unbounded;
   for (const bool window : {true, false}) {
-    const std::uint32_t domain = window ? 163 : 164;
+    const std::uint32_t domain = window ? 174 : 175;
     const std::filesystem::path run = dir.path() / (window ? "window" : "unbounded");
     std::filesystem::create_directories(run);
     test::ServerProcess server(run, domain, limits, false, 0, window ? "keep_radius_m: 40" : "");

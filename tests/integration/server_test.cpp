@@ -284,9 +284,9 @@ TEST(Server, DecayFollowsTheScanStampsAsTheMapperDoes) {
   for (std::size_t i = 0; i < raws.size(); ++i) {
     raws[i].stamp_ns = 1'700'000'000'000'000'000 + static_cast<std::int64_t>(i) * 100'000'000;
   }
-  ServerProcess server(dir.path(), 226, "", false, 0,
+  ServerProcess server(dir.path(), 213, "", false, 0,
                        "decay { enabled: true after_s: 0.2 period_s: 0.1 clock: \"stamp\" }");
-  auto client = connect(226);
+  auto client = connect(213);
   ASSERT_TRUE(client);
   replay(*client, raws);
 
@@ -329,10 +329,10 @@ TEST(Server, DecayFollowsTheScanStampsAsTheMapperDoes) {
 TEST(Server, IlnUpsampleStageGivesTheOfflineDensifiedMap) {
   test::TempDir dir;
   const auto raws = simulatedScans(dir.path(), 3);  // vlp16: 16 beams, +-15 deg, 600 columns
-  ServerProcess server(dir.path(), 142,
+  ServerProcess server(dir.path(), 166,
                        "upsample { enabled: true method: \"iln\" model: \"" DENSEMAP_ILN_MODEL
                        "\" input_rows: 16 input_cols: 600 output_rows: 61 output_cols: 600 }\n");
-  auto client = connect(142);
+  auto client = connect(166);
   ASSERT_TRUE(client);
   replay(*client, raws);
   const auto densify = upsample::makeUpsampleOptions("iln", {.rows = 16, .cols = 600},
