@@ -8,7 +8,8 @@
 # Environment: DENSEMAP_BIN (default build/bin), DENSEMAP_DOMAIN (default 77), BENCH=0 skips the
 # bench, BBOX_EDGE=M adds a client sending M-metre bbox queries back to back, SNAPSHOT=1 times a
 # late joiner's fetch of the whole map, PERF=1 records `perf record -g` of the server into
-# $OUT/perf.data, WARM_UP=true turns the pipeline's warm-up on, LEGACY=1 drives a densemap
+# $OUT/perf.data, WARM_UP=true turns the pipeline's warm-up on, HEAP_KEEP_MB=N sets
+# pipeline.heap_keep_mb, LEGACY=1 drives a densemap
 # built before replay's --csv and --query-bbox-edge (before/after runs), KIND=K the server's
 # map.kind (default log_odds; a dense kind such as akimap_rays is benched as that kind),
 # METHOD=M the server's pipeline.integration (raycast, culling, superray, superray+culling),
@@ -28,7 +29,7 @@ OUT=$(mktemp -d /tmp/densemap-rt.XXXXXX)
 cat > "$OUT/server.textproto" <<CFG
 map { backend: "grid" kind: "${KIND:-log_odds}" resolution_m: $RES max_range_m: $RANGE }
 pipeline { threads: $THREADS queue_depth: 2 integration: "${METHOD:-raycast}" max_abs_position_m: 10000
-           ${WARM_UP:+warm_up: $WARM_UP} }
+           ${WARM_UP:+warm_up: $WARM_UP} ${HEAP_KEEP_MB:+heap_keep_mb: $HEAP_KEEP_MB} }
 snapshot { path: "" autosave_period_s: 0 }
 dds { domain_id: $DOMAIN network_interface: "lo" }
 ${ESDF:+esdf { enabled: true max_distance_m: $ESDF \}}

@@ -9,7 +9,7 @@ Prints two markdown tables for docs/benchmarks.md:
    included), minor page faults.
 
 Usage: scripts/server-env-benchmark.py DATA --env NAME=VALUE [--kind akimap_rays]
-           [--resolution 0.1] [--max-range 30] [--rate 10] [--runs 3]
+           [--resolution 0.1] [--max-range 30] [--rate 10] [--runs 3] [--server-only]
 Run as root it runs each server inside `unshare -n` (loopback only). Binaries from
 <build>/bin (DENSEMAP_BUILD_DIR, default build).
 """
@@ -65,6 +65,7 @@ def main():
     p.add_argument("--max-range", type=float, default=30.0)
     p.add_argument("--rate", type=float, default=10.0)
     p.add_argument("--runs", type=int, default=3)
+    p.add_argument("--server-only", action="store_true", help="no densemap-bench table")
     args = p.parse_args()
     if "=" not in args.env:
         p.error("--env takes NAME=VALUE")
@@ -80,7 +81,8 @@ def main():
         for s in settings:
             servers[s].append(server(args, s))
         for s in settings:
-            benches[s].append(bench(args, s))
+            if not args.server_only:
+                benches[s].append(bench(args, s))
     print(f"The server at {args.rate:g} Hz (scripts/realtime-check.sh):\n")
     print("| environment | scans integrated (per run) | server p50 ms | server p99 ms | "
           "server CPU ms a received scan | minor page faults |")
@@ -91,6 +93,8 @@ def main():
               f"{spread([r[2] for r in runs])} | {spread([r[3] for r in runs])} | "
               f"{spread([1000.0 * r[4] / r[1] for r in runs], '{:.0f}')} | "
               f"{spread([r[5] for r in runs], '{:.0f}')} |")
+    if args.server_only:
+        return
     print("\ndensemap-bench on the same scans:\n")
     print("| environment | bench p50 ms | bench p99 ms | CPU s (loading included) | "
           "minor page faults |")

@@ -54,18 +54,6 @@ struct Exit {
 template <class T>
 using OrExit = std::expected<T, Exit>;
 
-/// Scan-sized buffers (DDS's too) stay in the heap (cli::keepScanBuffersInHeap).
-void configureAllocator() {
-  // Free memory at the top of a heap beyond 32 MiB goes back to the OS. A thread's heap arena
-  // gives its top back only past this threshold (malloc_trim does not trim it), so a larger
-  // one leaves a point-query flood's memory behind. A dense map at 0.1 m pays for it in page
-  // faults between its stages (docs/benchmarks.md); at 0.2 m it does not.
-  densemap::cli::keepScanBuffersInHeap(std::size_t{32} << 20);
-  // Two heap arenas for all threads (glibc makes up to 8 per core): fewer thread heaps to hold
-  // freed memory after point-query floods; integration at 10 Hz does not need more.
-  mallopt(M_ARENA_MAX, 2);
-}
-
 /// The service's options from the config (DDS, snapshots, requests, security, ROS 2).
 OrExit<densemap::server::ServiceOptions> serviceOptions(const densemap::proto::ServerConfig& config,
                                                         int domain_override) {
@@ -289,7 +277,7 @@ void printValid(const std::string& config_path, const densemap::proto::ServerCon
 static int runMain(int argc, char** argv) {
   // First: it may start the server again, with the heap on huge pages.
   const densemap::cli::HeapPages heap_pages = densemap::cli::heapOnHugePages(argv);
-  configureAllocator();
+  densemap::cli::serverHeap();
   // SIGINT/SIGTERM are taken by sigwait (waitForStop); block them before any thread starts so
   // that every thread (TBB, Cyclone) inherits the mask.
   sigset_t signals;
@@ -326,6 +314,11 @@ static int runMain(int argc, char** argv) {
   if (check_only) {
     printValid(config_path, *config, *options, *service_options);
     return 0;
+  }
+  // A dense map's stage buffers stay in the heap between stages and scans (at 0.1 m on
+  // 64-beam scans, faulting them in again cost scans at 10 Hz: docs/benchmarks.md).
+  if (options->engine.kernel) {
+    densemap::cli::keepStageBuffersInHeap(std::size_t{config->pipeline().heap_keep_mb()} << 20);
   }
   // TBB's default pool has hardware threads - 1 workers, shared by every arena: on 2 cores a
   // single worker, so a query task could wait for a whole scan's integration. Room for both

@@ -140,6 +140,10 @@ Expected<void> pipelineBlock(const proto::ServerConfig& config, PipelineOptions&
   if (p.queue_depth() < 1 || p.queue_depth() > 1024) {
     return makeError("pipeline.queue_depth must be in 1..1024");
   }
+  if (p.heap_keep_mb() > 1024) {
+    return makeError("pipeline.heap_keep_mb must be in 0..1024, got " +
+                     std::to_string(p.heap_keep_mb()));
+  }
   if (p.queue_budget_mb() < 16 || p.queue_budget_mb() > 65536) {
     return makeError("pipeline.queue_budget_mb must be in 16..65536, got " +
                      std::to_string(p.queue_budget_mb()));

@@ -71,6 +71,8 @@ printf 'pipeline { max_query_cells: 18446744073709551615 }\n' >"$dir/cells.textp
 expect_fail "unbounded max_query_cells" "max_query_cells must be in" "$dir/cells.textproto"
 printf 'pipeline { queue_budget_mb: 100000 }\n' >"$dir/queue.textproto"
 expect_fail "huge queue_budget_mb" "queue_budget_mb must be in 16..65536" "$dir/queue.textproto"
+printf 'pipeline { heap_keep_mb: 4096 }\n' >"$dir/keep.textproto"
+expect_fail "huge heap_keep_mb" "heap_keep_mb must be in 0..1024" "$dir/keep.textproto"
 printf 'snapshot { autosave_period_s: 1e-9 }\n' >"$dir/autosave.textproto"
 expect_fail "continuous autosave" "autosave_period_s must be 0" "$dir/autosave.textproto"
 printf 'map { max_range_m: -1 }\n' >"$dir/range.textproto"

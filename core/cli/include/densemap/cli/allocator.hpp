@@ -3,6 +3,7 @@
 #include <malloc.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdlib>
 #include <fstream>
@@ -18,6 +19,26 @@ namespace densemap::cli {
 inline void keepScanBuffersInHeap(std::size_t trim_threshold_bytes) {
   mallopt(M_MMAP_THRESHOLD, 64 << 20);
   mallopt(M_TRIM_THRESHOLD, static_cast<int>(trim_threshold_bytes));
+}
+
+/// A dense map's stages take and give back tens of MiB each, every scan. Beyond the trim
+/// threshold a heap gives its free top back to the system, and the next stage faults those
+/// pages in again; a heap keeps `keep_bytes` of free top instead (M_TOP_PAD: a trim returns
+/// only what lies beyond it, so a larger burst, a point-query flood's, still goes back).
+/// At most 1 GiB.
+inline void keepStageBuffersInHeap(std::size_t keep_bytes) {
+  mallopt(M_TOP_PAD, static_cast<int>(std::min(keep_bytes, std::size_t{1} << 30)));
+}
+
+/// densemap-server's heap, before any thread starts (a dense map then adds
+/// keepStageBuffersInHeap). Free memory at the top of a heap beyond 32 MiB goes back to the
+/// system: a thread's heap gives its top back only past this threshold (malloc_trim does not
+/// trim it), so a larger one leaves a point-query flood's memory behind. Two heaps for all
+/// threads (glibc makes up to 8 per core): fewer thread heaps to hold freed memory after
+/// point-query floods; integration at 10 Hz does not need more.
+inline void serverHeap() {
+  keepScanBuffersInHeap(std::size_t{32} << 20);
+  mallopt(M_ARENA_MAX, 2);
 }
 
 /// How the process's heap is paged (heapOnHugePages).
