@@ -315,8 +315,8 @@ static int runMain(int argc, char** argv) {
     printValid(config_path, *config, *options, *service_options);
     return 0;
   }
-  // A dense map's stage buffers stay in the heap between stages and scans (at 0.1 m on
-  // 64-beam scans, faulting them in again cost scans at 10 Hz: docs/benchmarks.md).
+  // A dense map's stage buffers stay in the heap between stages and scans, not faulted in
+  // again (a quarter of the page faults at 0.1 m on 64-beam scans: docs/benchmarks.md).
   if (options->engine.kernel) {
     densemap::cli::keepStageBuffersInHeap(std::size_t{config->pipeline().heap_keep_mb()} << 20);
   }

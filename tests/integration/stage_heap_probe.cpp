@@ -5,6 +5,7 @@
 // Usage: stage_heap_probe KEEP_MIB
 #include <sys/resource.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
