@@ -7,12 +7,14 @@ share one.
 A test is a gtest TEST in tests/**/*.cpp, a script that CMake's add_test runs (its positional
 arguments are read where the script names them, e.g. `cli=$2 domain=$3`), or python.pytest (all
 of python/tests, one CTest test). Ids are found where they are written as:
-  - ServerProcess NAME(DIR, ID ...), connect...(ID), createParticipant({ID, ...);
-  - NAME = ID where NAME contains "domain" (constexpr kDomain = ID, .domain_id = ID);
+  - ServerProcess NAME(DIR, ID ...), connect...(ID), .domain_id = ID, createParticipant({ID, ...;
+  - there, ID may be an integer constant of the file or of the TEST (constexpr kDomain = ID);
+  - the literals assigned to a variable named like a domain (domain = secure ? 194 : 193);
   - an argument of a helper of the same file whose parameter is named like a domain;
-  - a file-scope constant of that kind, for each TEST that uses it;
   - --domain-id ID and domain_id: ID in scripts; os.environ.get("..._DOMAIN", "ID") (+ k) in
     python/tests.
+A TEST that starts a server (ServerProcess) with no id found here fails the check too, so that
+a domain written some other way is not missed silently.
 Usage: scripts/check-test-domains.py [REPO_ROOT]   (run by CTest as tests.DomainsAndPortsOwned)
 """
 import collections
@@ -23,6 +25,7 @@ import sys
 ARGS = [a for a in sys.argv[1:] if a != "-v"]
 ROOT = pathlib.Path(ARGS[0] if ARGS else pathlib.Path(__file__).parent.parent)
 owners = collections.defaultdict(set)  # ("domain" | "port", id) -> {test}
+unread = []  # TESTs that start a server on a domain this script cannot read
 
 # A domain's position in C++; ID is an integer literal or a constant of the file or the TEST.
 ID = r"(\w+)"
@@ -103,6 +106,8 @@ def cpp_file(path):
                 args = split_args(body, call.end() - 1)
                 if index < len(args) and re.fullmatch(r"\w+", args[index]):
                     own(args[index])
+        if "ServerProcess" in body and not any(name in t for t in owners.values()):
+            unread.append(name)
 
 
 def script_roles(script):
@@ -156,6 +161,9 @@ for path in sorted((ROOT / "tests").rglob("CMakeLists.txt")):
 python_tests()
 
 shared = {key: tests for key, tests in owners.items() if len(tests) > 1}
+for t in unread:
+    print(f"check-test-domains: {t} starts a server, but its domain is not written where this "
+          "script reads it")
 for (kind, value), tests in sorted(shared.items()):
     print(f"check-test-domains: {kind} {value} is used by {len(tests)} tests that may run at once:")
     for t in sorted(tests):
@@ -167,4 +175,4 @@ if "-v" in sys.argv:
 print(f"check-test-domains: {len(domains)} domain ids ({domains[0]}..{domains[-1]}), "
       f"{sum(1 for k, _ in owners if k == 'port')} ports; "
       + ("each owned by one test" if not shared else f"{len(shared)} shared"))
-sys.exit(1 if shared else 0)
+sys.exit(1 if shared or unread else 0)
