@@ -1,5 +1,5 @@
-#include "densemap/map/cell_update.hpp"
 #include "densemap/map/grid_map.hpp"
+#include "densemap/map/cell_update.hpp"
 
 #include <atomic>
 #include <bit>
@@ -40,8 +40,7 @@ struct GridMap::BlockWriter {
   const BlockNode* read;
   BlockNode* write = nullptr;
 
-  BlockWriter(GridMap& m, BlockEntry& e, Counts& c, CellChanges* changes,
-              BlockStore::WriteBatch& b)
+  BlockWriter(GridMap& m, BlockEntry& e, Counts& c, CellChanges* changes, BlockStore::WriteBatch& b)
       : map(m), entry(e), counts(c), out(changes), batch(b), read(BlockStore::latest(e)) {
     static const BlockNode kEmpty{};
     if (read == nullptr) read = &kEmpty;
@@ -83,11 +82,11 @@ struct GridMap::BlockWriter {
   }
   void applySet(std::uint64_t block_key, const ScanUpdate::Block& b, const SensorModel& model) {
 #ifdef DENSEMAP_WIDE_APPLY
-    if (hasWideLanes()) {
+    if (map.lane_bits_ >= 512 && hasWideLanes()) {
       applySetWide(block_key, b, model);
       return;
     }
-    if (hasFourLanes()) {
+    if (map.lane_bits_ >= 256 && hasFourLanes()) {
       applySetEight(block_key, b, model);
       return;
     }
@@ -243,6 +242,137 @@ struct GridMap::BlockWriter {
   }
 #endif
 
+  /// The cells of `cells` take `values[cell]` as set() gives each (an unchanged known cell is
+  /// not written; the changes in cell order), in the widest lanes the map and the processor
+  /// allow. False, with nothing written, where there are no lanes or a cell's value is NaN
+  /// (forget() is the caller's, cell by cell).
+  bool assignInLanes(std::uint64_t block_key, const block::BlockMask& cells, const float* values,
+                     float clamp_min) {
+#ifdef DENSEMAP_WIDE_APPLY
+    if (map.lane_bits_ >= 512 && hasWideLanes())
+      return assignWide(block_key, cells, values, clamp_min);
+    if (map.lane_bits_ >= 256 && hasFourLanes()) {
+      return assignEight(block_key, cells, values, clamp_min);
+    }
+#endif
+    (void)block_key, (void)cells, (void)values, (void)clamp_min;
+    return false;
+  }
+
+#ifdef DENSEMAP_WIDE_APPLY
+  /// assignInLanes sixteen cells at a time in AVX-512 lanes.
+  [[gnu::target("avx512f,avx512vl,avx512dq,avx512bw")]] bool assignWide(
+      std::uint64_t block_key, const block::BlockMask& cell_mask, const float* values,
+      float clamp_min_value) {
+    for (int wd = 0; wd < block::kMaskWords; ++wd) {
+      for (int q = 0; q < 4; ++q) {
+        const auto cells = static_cast<__mmask16>(cell_mask[wd] >> (16 * q));
+        const __m512 v = _mm512_maskz_loadu_ps(cells, values + wd * 64 + 16 * q);
+        if (_mm512_mask_cmp_ps_mask(cells, v, v, _CMP_UNORD_Q) != 0) return false;
+      }
+    }
+    const __m512 clamp_min = _mm512_set1_ps(clamp_min_value);
+    for (int wd = 0; wd < block::kMaskWords; ++wd) {
+      const std::uint64_t todo = cell_mask[wd];
+      if (todo == 0) continue;
+      counts.updated += static_cast<std::size_t>(std::popcount(todo));
+      const std::uint64_t known = read->voxels.known[wd];
+      for (int q = 0; q < 4; ++q) {
+        const int shift = 16 * q;
+        const auto cells = static_cast<__mmask16>(todo >> shift);
+        if (cells == 0) continue;
+        const auto kn = static_cast<__mmask16>(known >> shift);
+        const int first = wd * 64 + shift;
+        const __m512 old = _mm512_maskz_loadu_ps(kn, read->voxels.log_odds.data() + first);
+        const __m512 v = _mm512_maskz_loadu_ps(cells, values + first);
+        const auto changed =
+            static_cast<__mmask16>(cells & ~_mm512_mask_cmp_ps_mask(kn, old, v, _CMP_EQ_OQ));
+        if (changed == 0) continue;
+        if (write == nullptr) {
+          write = &batch.writable(entry);
+          read = write;
+        }
+        const auto newly = static_cast<__mmask16>(changed & ~kn);
+        write->voxels.known[wd] |= static_cast<std::uint64_t>(newly) << shift;
+        counts.newly_known += static_cast<std::size_t>(std::popcount(static_cast<unsigned>(newly)));
+        counts.changed += static_cast<std::size_t>(std::popcount(static_cast<unsigned>(changed)));
+        if (out != nullptr) {
+          for (unsigned c = changed; c != 0; c &= c - 1) {
+            const int k = first + std::countr_zero(c);
+            out->push_back({block::keyOf(block_key, k), values[k], true});
+          }
+        }
+        _mm512_mask_storeu_ps(write->voxels.log_odds.data() + first, changed, v);
+        const auto free =
+            static_cast<__mmask16>(_mm512_cmp_ps_mask(v, clamp_min, _CMP_LE_OQ) & changed);
+        const std::uint64_t lanes = static_cast<std::uint64_t>(changed) << shift;
+        write->fully_free[wd] =
+            (write->fully_free[wd] & ~lanes) | (static_cast<std::uint64_t>(free) << shift);
+      }
+    }
+    return true;
+  }
+
+  /// assignInLanes eight cells at a time in AVX2 lanes.
+  [[gnu::target("avx2,popcnt,bmi")]] bool assignEight(std::uint64_t block_key,
+                                                      const block::BlockMask& cell_mask,
+                                                      const float* values, float clamp_min_value) {
+    for (int wd = 0; wd < block::kMaskWords; ++wd) {
+      for (int q = 0; q < 8; ++q) {
+        const unsigned cells = (cell_mask[wd] >> (8 * q)) & 0xffU;
+        if (cells == 0) continue;
+        const __m256 v = _mm256_maskload_ps(values + wd * 64 + 8 * q, lanesOf(cells));
+        if ((static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(v, v, _CMP_UNORD_Q))) &
+             cells) != 0) {
+          return false;
+        }
+      }
+    }
+    const __m256 clamp_min = _mm256_set1_ps(clamp_min_value);
+    for (int wd = 0; wd < block::kMaskWords; ++wd) {
+      const std::uint64_t todo = cell_mask[wd];
+      if (todo == 0) continue;
+      counts.updated += static_cast<std::size_t>(__builtin_popcountll(todo));
+      const std::uint64_t known = read->voxels.known[wd];
+      for (int q = 0; q < 8; ++q) {
+        const int shift = 8 * q;
+        const unsigned cells = (todo >> shift) & 0xffU;
+        if (cells == 0) continue;
+        const unsigned kn = (known >> shift) & 0xffU;
+        const int first = wd * 64 + shift;
+        const __m256 old = _mm256_maskload_ps(read->voxels.log_odds.data() + first, lanesOf(kn));
+        const __m256 v = _mm256_maskload_ps(values + first, lanesOf(cells));
+        const unsigned changed =
+            cells &
+            ~(kn & static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(old, v, _CMP_EQ_OQ))));
+        if (changed == 0) continue;
+        if (write == nullptr) {
+          write = &batch.writable(entry);
+          read = write;
+        }
+        const unsigned newly = changed & ~kn;
+        write->voxels.known[wd] |= static_cast<std::uint64_t>(newly) << shift;
+        counts.newly_known += static_cast<std::size_t>(__builtin_popcount(newly));
+        counts.changed += static_cast<std::size_t>(__builtin_popcount(changed));
+        if (out != nullptr) {
+          for (unsigned c = changed; c != 0; c &= c - 1) {
+            const int k = first + __builtin_ctz(c);
+            out->push_back({block::keyOf(block_key, k), values[k], true});
+          }
+        }
+        _mm256_maskstore_ps(write->voxels.log_odds.data() + first, lanesOf(changed), v);
+        const unsigned free =
+            static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(v, clamp_min, _CMP_LE_OQ))) &
+            changed;
+        const std::uint64_t lanes = static_cast<std::uint64_t>(changed) << shift;
+        write->fully_free[wd] =
+            (write->fully_free[wd] & ~lanes) | (static_cast<std::uint64_t>(free) << shift);
+      }
+    }
+    return true;
+  }
+#endif
+
  private:
   /// Cell i takes `v` (it had another value, or none): the writable node on the first change.
   template <class KeyOf>
@@ -300,8 +430,7 @@ ApplyStats GridMap::writeBlocks(std::span<BlockEntry* const> entries, CellChange
     for (std::size_t j = begin; j != end; ++j) {
       if (j + 4 < end) __builtin_prefetch(entries[j + 4]);
       prefetchNode(j + 2);
-      BlockWriter w(*this, *entries[j], c, changes != nullptr ? &block_changes[j] : nullptr,
-                    batch);
+      BlockWriter w(*this, *entries[j], c, changes != nullptr ? &block_changes[j] : nullptr, batch);
       write_block(j, w);
     }
     updated += c.updated;
@@ -525,10 +654,12 @@ ApplyStats GridMap::assignBlocks(std::span<const BlockCells> blocks, const Block
   std::vector<BlockEntry*>& entries = writeEntries(blocks.size());
   for (std::size_t j = 0; j < blocks.size(); ++j) entries[j] = &store_->entry(blocks[j].key);
   std::atomic<bool> forgot{false};
+  const float clamp_min = sensorModel().clampMin();
   const ApplyStats stats = writeBlocks(entries, changes, [&](std::size_t j, BlockWriter& w) {
     std::array<float, block::kVoxels> values;  // only the mask's cells are read
     const BlockCells& b = blocks[j];
     values_of(b.key, b.cells, values);
+    if (w.assignInLanes(b.key, b.cells, values.data(), clamp_min)) return;
     block::forEachSetBit(b.cells, [&](int i) {
       if (std::isnan(values[i])) {
         w.forget(block::keyOf(b.key, i), i);

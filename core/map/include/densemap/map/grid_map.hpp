@@ -70,6 +70,11 @@ class GridMap final : public OccupancyMap {
 
   [[nodiscard]] std::size_t blockCount() const { return store_->entryCount(); }
 
+  /// The widest lanes apply and assignBlocks may write with: 512 (AVX-512), 256 (AVX2) or 0
+  /// (a cell at a time); the processor's own widest applies too. Every width writes the same
+  /// map and the same changes; tests compare them on one machine.
+  void limitLanes(int bits) { lane_bits_ = bits; }
+
   /// Versioning (MapView): before the first publish, the version the contents belong to.
   void startVersionsAt(std::uint64_t version) { store_->startAt(version); }
   /// Pre-faults room for `blocks` more blocks in the node pool (see BlockStore::reserve).
@@ -109,6 +114,7 @@ class GridMap final : public OccupancyMap {
   std::shared_ptr<BlockStore> store_;
   std::size_t known_cells_ = 0;
   std::vector<BlockEntry*> write_entries_;
+  int lane_bits_ = 512;
 };
 
 }  // namespace densemap
