@@ -6,6 +6,7 @@
 #include <limits>
 #include <utility>
 
+#include "block_logits.hpp"
 #include "kernel_scratch.hpp"
 
 /// The kernel map as a store: its cells' evidence, probabilities, erasure and eviction,
@@ -63,16 +64,11 @@ std::optional<double> KernelMap::probability(const VoxelKey& key) const {
 void KernelMap::blockLogOdds(std::uint64_t block_key, const block::BlockMask& cells,
                              std::array<float, block::kVoxels>& log_odds) const {
   const BlockEvidence* b = find(block_key);
-  block::forEachSetBit(cells, [&](int cell) {
-    // probability(), cell by cell: unknown is p = 0.5
-    double p = 0.5;
-    if (b != nullptr && block::testBit(b->known, cell)) {
-      const double alpha = options_.prior + b->alpha[cell];
-      const double beta = options_.prior + b->beta[cell];
-      p = alpha / (alpha + beta);
-    }
-    log_odds[cell] = static_cast<float>(std::log(p / (1.0 - p)));
-  });
+  if (b == nullptr) {  // every cell unknown: p = 0.5
+    block::forEachSetBit(cells, [&](int cell) { log_odds[cell] = 0.0F; });
+    return;
+  }
+  blockLogits(b->alpha, b->beta, b->known, cells, options_.prior, log_odds);
 }
 
 void KernelMap::forEachKnown(const std::function<void(const VoxelKey&, double)>& f) const {
