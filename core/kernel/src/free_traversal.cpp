@@ -13,6 +13,13 @@
 #include "densemap/geometry/rounding.hpp"
 #include "densemap/kernel/kernel_function.hpp"
 
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+
+#include "densemap/traversal/ray_traversal.hpp"  // hasWideLanes
+#define DENSEMAP_EVIDENCE_LANES 1
+#endif
+
 namespace densemap::kernel {
 namespace {
 
@@ -374,7 +381,49 @@ std::size_t rasterise(const VoxelGrid& grid, const FreeExtent& e, double reach,
   return sink.visits;
 }
 
+#ifdef DENSEMAP_EVIDENCE_LANES
+/// FreeTraversal::addEvidence sixteen cells at a time: the same conversions, product and sum
+/// (IEEE results, lane by lane).
+[[gnu::target("avx512f,avx512dq,avx512vl")]] void addEvidenceWide(
+    const FreeTraversal::Block& b, double inverse_scale, std::array<float, block::kVoxels>& beta,
+    block::BlockMask& known) {
+  const __m512d scale = _mm512_set1_pd(inverse_scale);
+  for (int wd = 0; wd < block::kMaskWords; ++wd) {
+    const std::uint64_t cells = b.mask[static_cast<std::size_t>(wd)];
+    if (cells == 0) continue;
+    known[static_cast<std::size_t>(wd)] |= cells;
+    for (int q = 0; q < 8; ++q) {
+      const auto lanes = static_cast<__mmask8>(cells >> (8 * q));
+      if (lanes == 0) continue;
+      const int first = 64 * wd + 8 * q;
+      const __m512d sum = _mm512_maskz_cvtepi32_pd(
+          0xff, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(&b.sum[first])));
+      const __m256 add = _mm512_maskz_cvtpd_ps(0xff, _mm512_mul_pd(sum, scale));
+      float* const to = &beta[static_cast<std::size_t>(first)];
+      _mm256_mask_storeu_ps(to, lanes, _mm256_add_ps(_mm256_loadu_ps(to), add));
+    }
+  }
+}
+#endif
+
 }  // namespace
+
+void FreeTraversal::addEvidence(const Block& block, double inverse_scale,
+                                std::array<float, block::kVoxels>& beta, block::BlockMask& known,
+                                bool lanes) {
+#ifdef DENSEMAP_EVIDENCE_LANES
+  if (lanes && hasWideLanes()) {
+    addEvidenceWide(block, inverse_scale, beta, known);
+    return;
+  }
+#endif
+  (void)lanes;
+  block::forEachSetBit(block.mask, [&](int cell) {
+    const auto c = static_cast<std::size_t>(cell);
+    beta[c] += static_cast<float>(static_cast<double>(block.sum[c]) * inverse_scale);
+    block::setBit(known, cell);
+  });
+}
 
 struct FreeTraversal::Buffers {
   tbb::enumerable_thread_specific<ThreadBlocks> threads;

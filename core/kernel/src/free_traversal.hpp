@@ -75,6 +75,12 @@ class FreeTraversal {
   [[nodiscard]] const std::vector<const Block*>& blocks() const { return merged_; }
   /// Units of a sum per unit of evidence in the last accumulate()'s blocks (scaleFor).
   [[nodiscard]] double scale() const { return scale_; }
+  /// A block's sums as free evidence: beta[cell] += float(sum[cell] * inverse_scale) and the
+  /// cell known, for each cell of its mask. Sixteen cells at a time in AVX-512 lanes where the
+  /// processor has them and `lanes` is set, bit for bit as a cell at a time.
+  static void addEvidence(const Block& block, double inverse_scale,
+                          std::array<float, block::kVoxels>& beta, block::BlockMask& known,
+                          bool lanes = true);
 
  private:
   struct Buffers;

@@ -569,12 +569,8 @@ void KernelMap::applyFree(std::vector<std::pair<std::uint64_t, block::BlockMask>
       reached_blocks->emplace_back(free_blocks[i]->key, free_blocks[i]->mask);
   }
   tbb::parallel_for(std::size_t{0}, free_blocks.size(), [&](std::size_t i) {
-    const FreeTraversal::Block& f = *free_blocks[i];
     BlockEvidence& b = *targets[i]->evidence;
-    block::forEachSetBit(f.mask, [&](int cell) {
-      b.beta[cell] += static_cast<float>(static_cast<double>(f.sum[cell]) * inverse_scale);
-      block::setBit(b.known, cell);
-    });
+    FreeTraversal::addEvidence(*free_blocks[i], inverse_scale, b.beta, b.known);
   });
 }
 
