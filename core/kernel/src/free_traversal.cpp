@@ -166,7 +166,16 @@ template <int AX, class Sink>
 template <int AX, class Sink>
 std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
                                 const Eigen::Vector3d& b, bool open_from, bool open_to,
-                                double reach, std::vector<Near>& out, double u_per_m2, Sink& sink) {
+                                double reach, std::vector<Near>& out, double u_per_m2,
+                                Sink& sink_out) {
+  // The sink in a local (its counters and pointers in registers: through the reference, every
+  // store to a block's sums or mask might change them), handed back on return.
+  Sink sink = sink_out;
+  struct HandBack {
+    Sink& to;
+    const Sink& from;
+    ~HandBack() { to = from; }
+  } hand_back{sink_out, sink};
   constexpr int ax = AX, bx = (AX + 1) % 3, cx = (AX + 2) % 3;
   const Eigen::Vector3d seg = b - a;
   const double len2 = seg.squaredNorm();
@@ -327,17 +336,20 @@ std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
     const auto box = static_cast<std::size_t>(j1 - j0 + 1) * static_cast<std::size_t>(k1 - k0 + 1);
     if (n + box > out.size()) out.resize(2 * (n + box));
     Near* const box_out = out.data();
-    Eigen::Vector3d c;
-    c[ax] = x;
+    // The centre's offset w from a and its distance from the segment, component by component
+    // in the axes' order (x, y, z: the sums as a vector's dot product and squared norm make
+    // them), in registers.
+    std::array<double, 3> w{};
+    w[ax] = x - a[ax];
     for (int j = j0; j <= j1; ++j) {
-      c[bx] = centreOf(j);
+      w[bx] = centreOf(j) - a[bx];
       std::uint64_t key = keyOf(i, j, k0);
       for (int k = k0; k <= k1; ++k, key += step_c) {
-        c[cx] = centreOf(k);
-        const Eigen::Vector3d w = c - a;
-        const double t_line = w.dot(seg) * inverse_len2;
+        w[cx] = centreOf(k) - a[cx];
+        const double t_line = (w[0] * seg[0] + w[1] * seg[1] + w[2] * seg[2]) * inverse_len2;
         const double t = std::clamp(t_line, 0.0, 1.0);
-        const double d2 = (w - t * seg).squaredNorm();
+        const double d0 = w[0] - t * seg[0], d1 = w[1] - t * seg[1], d2c = w[2] - t * seg[2];
+        const double d2 = d0 * d0 + d1 * d1 + d2c * d2c;
         box_out[n] = {key, d2};
         n += d2 < r2 && !(open_from && t_line < 0.0) && !(open_to && t_line > 1.0);
       }
@@ -349,16 +361,16 @@ std::size_t collectVoxelsNearOn(const VoxelGrid& grid, const Eigen::Vector3d& a,
 /// A capsule's evidence into one thread's blocks: scaled_weight * k(d / radius) per voxel, in
 /// fixed point.
 struct CapsuleSink {
-  ThreadBlocks& blocks;
-  const SquaredKernelTable& table;
+  ThreadBlocks* blocks = nullptr;
+  const SquaredKernelTable* table = nullptr;
   double scaled_weight = 0.0;
   std::size_t visits = 0;
   /// `u`: the voxel's squared distance over the radius'.
   void add(std::uint64_t block_key, int cell, double u) {
-    const double w = table(u);
+    const double w = (*table)(u);
     if (!(w > 0.0)) return;
     ++visits;
-    FreeTraversal::Block& blk = blocks.blockFor(block_key);
+    FreeTraversal::Block& blk = blocks->blockFor(block_key);
     // w >= 0: rounding half up without llround's call.
     blk.sum[static_cast<std::size_t>(cell)] += static_cast<std::int32_t>(w * scaled_weight + 0.5);
     block::setBit(blk.mask, cell);
@@ -371,7 +383,7 @@ template <int AX>
 std::size_t rasterise(const VoxelGrid& grid, const FreeExtent& e, double reach,
                       double scaled_weight, const SquaredKernelTable& table, ThreadBlocks& blocks) {
   const double u_per_m2 = 1.0 / (e.radius_m * e.radius_m);
-  CapsuleSink sink{blocks, table, scaled_weight};
+  CapsuleSink sink{&blocks, &table, scaled_weight};
   const std::size_t count = collectVoxelsNearOn<AX>(grid, e.from, e.to, e.open_from, e.open_to,
                                                     reach, blocks.near, u_per_m2, sink);
   for (std::size_t q = 0; q < count; ++q) {
