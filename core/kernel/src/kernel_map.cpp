@@ -63,6 +63,20 @@ void samplesKernels(const KernelOptions& options, double resolution,
       });
 }
 
+/// The cells a kernel reaches in one row of a block (its 8 cells share a mask word), gathered
+/// in a register and written to the block's mask once (a bit set in memory per cell made
+/// each the next one's wait, and the count's too, as the mask might alias it).
+class RowBits {
+ public:
+  explicit RowBits(int cell_in_row) : word_(cell_in_row >> 6) {}
+  void set(int cell) { bits_ |= std::uint64_t{1} << (cell & 63); }
+  void into(block::BlockMask& mask) const { mask[static_cast<std::size_t>(word_)] |= bits_; }
+
+ private:
+  int word_;
+  std::uint64_t bits_ = 0;
+};
+
 /// An isotropic point kernel's values on the cells [x0, x1] x [y0, y1] x [z0, z1] of one block
 /// (in z, y, x order), added to the block's sums: each axis' squared offsets once, then per
 /// cell the squared distance as squaredNorm sums it ((dx^2 + dy^2) + dz^2, then times 1 / l
@@ -87,6 +101,7 @@ void accumulatePointKernel(const VoxelGrid& grid, const Kernel& k, int x0, int x
   squares(2, z0, z1, sz);
   const double inverse_length = k.inverse_length;
   std::array<double, block::kVoxels>& sums = k.occupied ? sum_alpha : sum_beta;
+  std::size_t n = 0;
   for (int z = z0; z <= z1; ++z) {
     const double dz2 = sz[static_cast<std::size_t>(z - z0)];
     for (int y = y0; y <= y1; ++y) {
@@ -95,6 +110,7 @@ void accumulatePointKernel(const VoxelGrid& grid, const Kernel& k, int x0, int x
       const int row =
           block::indexOf(VoxelKey{static_cast<std::uint16_t>(x0), static_cast<std::uint16_t>(y),
                                   static_cast<std::uint16_t>(z)});
+      RowBits bits(row);
       for (int x = x0; x <= x1; ++x) {
         const double u =
             (sx[static_cast<std::size_t>(x - x0)] + dy2 + dz2) * inverse_length * inverse_length;
@@ -102,11 +118,13 @@ void accumulatePointKernel(const VoxelGrid& grid, const Kernel& k, int x0, int x
         if (!(v > 0.0)) continue;
         const int cell = row + (x - x0);
         sums[static_cast<std::size_t>(cell)] += v;
-        block::setBit(summed, cell);
-        ++updates;
+        bits.set(cell);
+        ++n;
       }
+      bits.into(summed);
     }
   }
+  updates += n;
 }
 
 /// A tabled hit kernel's values (HitStencils) on the cells [x0, x1] x [y0, y1] x [z0, z1] of
@@ -118,6 +136,7 @@ void accumulateStencilKernel(const detail::HitStencils& stencils, const Kernel& 
                              block::BlockMask& summed, std::size_t& updates) {
   const VoxelKey& c = k.stencil_key;
   const int reach = stencils.reach();
+  std::size_t n = 0;
   // The pairs' box comes from the kernel's support in float: a row past the table (at the
   // support's edge, where the kernel is 0) is skipped, never read.
   for (int z = std::max(z0, c.z - reach); z <= std::min(z1, c.z + reach); ++z) {
@@ -132,15 +151,18 @@ void accumulateStencilKernel(const detail::HitStencils& stencils, const Kernel& 
           block::indexOf(VoxelKey{static_cast<std::uint16_t>(x0), static_cast<std::uint16_t>(y),
                                   static_cast<std::uint16_t>(z)}) -
           x0;
+      RowBits bits(row + from);
       for (int x = from; x <= to; ++x) {
         const double v = k.weight * values[x + shift];
         if (!(v > 0.0)) continue;
         sum_alpha[static_cast<std::size_t>(row + x)] += v;
-        block::setBit(summed, row + x);
-        ++updates;
+        bits.set(row + x);
+        ++n;
       }
+      bits.into(summed);
     }
   }
+  updates += n;
 }
 
 /// Adds kernel `k`'s evidence to the cells of [x0, x1] x [y0, y1] x [z0, z1] (one block) that
@@ -156,6 +178,7 @@ void accumulateKernel(const VoxelGrid& grid, const KernelOptions& options, const
   const double inverse_res = 1.0 / res;
   const double base_x = grid.keyToCoord(static_cast<std::uint16_t>(x0));
   const RowIntervals rows(k);
+  std::size_t n = 0;
   for (int z = z0; z <= z1; ++z) {
     for (int y = y0; y <= y1; ++y) {
       double lo = 0.0, hi = 0.0;
@@ -177,6 +200,9 @@ void accumulateKernel(const VoxelGrid& grid, const KernelOptions& options, const
           x0 + floorToInt(std::clamp<double>((hi - base_x) * inverse_res, -1.0, x1 - x0));
       const double cy = grid.keyToCoord(static_cast<std::uint16_t>(y));
       const double cz = grid.keyToCoord(static_cast<std::uint16_t>(z));
+      RowBits bits(
+          block::indexOf(VoxelKey{static_cast<std::uint16_t>(x0), static_cast<std::uint16_t>(y),
+                                  static_cast<std::uint16_t>(z)}));
       for (int x = from; x <= to; ++x) {
         const VoxelKey key{static_cast<std::uint16_t>(x), static_cast<std::uint16_t>(y),
                            static_cast<std::uint16_t>(z)};
@@ -196,11 +222,13 @@ void accumulateKernel(const VoxelGrid& grid, const KernelOptions& options, const
         if (!(v > 0.0)) continue;
         const int cell = block::indexOf(key);
         (k.occupied ? sum_alpha : sum_beta)[cell] += v;
-        block::setBit(summed, cell);
-        ++updates;
+        bits.set(cell);
+        ++n;
       }
+      bits.into(summed);
     }
   }
+  updates += n;
 }
 
 }  // namespace
