@@ -1,6 +1,7 @@
 #!/usr/bin/python3
 """A dense map setting against the default (akimap_rays), or this build against another: what
-it saves and what it costs. Prints three markdown tables for docs/benchmarks.md:
+it saves and what it costs. Prints three markdown tables for docs/benchmarks.md (without
+--compare, two: the builds' bench runs alternated, then the server):
 
 1. densemap-bench on DATA, the default and the setting (--compare, a kernel setting such as
    free_bundle_levels=0) as lanes of the same run, taking turns, --runs runs: p50 / p99 ms a
@@ -11,8 +12,11 @@ it saves and what it costs. Prints three markdown tables for docs/benchmarks.md:
 3. accuracy: scripts/dense-map-benchmark.sh (akimap_rays, 3 seeds, BALM's 0.2 m row left out)
    with the default and with the setting, plus DATA's hold-out at --resolution / --max-range
    (densemap-eval, 40 scans).
+Without --compare (--baseline-bin then required), table 1 has the baseline build's and this
+build's densemap-bench runs, alternated, and their evidence digests: equal digests are the
+same map bit for bit, so no accuracy table is needed; different ones fail the script.
 
-Usage: scripts/dense-speed-benchmark.py DATA --compare NAME=VALUE [--baseline-bin DIR]
+Usage: scripts/dense-speed-benchmark.py DATA [--compare NAME=VALUE] [--baseline-bin DIR]
            [--resolution 0.1] [--max-range 30] [--rate 10] [--runs 3] [--accuracy-data DIR]
            [--stage samples|kernels|occupied|free|apply]
 DATA: a dataset densemap-bench reads. --accuracy-data: the dense-map benchmark's real data
@@ -43,10 +47,11 @@ def label(setting):
     return "default" if setting is None else setting
 
 
-def bench(args, settings):
-    """One densemap-bench run, every setting a lane: {setting: (p50, p99, the stage's ms)}."""
+def bench(args, settings, bin_dir=BIN):
+    """One densemap-bench run, every setting a lane: {setting: (p50, p99, the stage's ms,
+    evidence digest)}."""
     out = subprocess.run(
-        [os.path.join(BIN, "densemap-bench"), "--data", args.data, "--resolution",
+        [os.path.join(bin_dir, "densemap-bench"), "--data", args.data, "--resolution",
          str(args.resolution), "--max-range", str(args.max_range), "--threads", "2",
          "--methods", ",".join(lane(lod) for lod in settings)],
         capture_output=True, text=True, check=True).stdout
@@ -55,9 +60,35 @@ def bench(args, settings):
         name = re.escape(lane(setting))
         stages = re.search(rf"^{name}\s+kernel\s+.*?([\d.]+) ([\d.]+) ([\d.]+) ([\d.]+) ([\d.]+)"
                            r"\s+\(dense", out, re.M)
+        digest = re.search(rf"^{name}/kernel:.*evidence digest ([0-9a-f]+)", out, re.M)
         result[setting] = bench_lane(out, lane(setting)) + (
-            float(stages.group(STAGES.index(args.stage) + 1)),)
+            float(stages.group(STAGES.index(args.stage) + 1)), digest.group(1))
     return result
+
+
+def compare_builds(args):
+    """Table 1 without --compare: the baseline build's and this build's bench runs, alternated;
+    exits with an error when their maps differ."""
+    builds = [("baseline build", args.baseline_bin), ("this build", BIN)]
+    runs = {name: [] for name, _ in builds}
+    for _ in range(args.runs):
+        for name, bin_dir in builds:
+            runs[name].append(bench(args, [None], bin_dir)[None])
+    print("densemap-bench, the builds' runs alternated:\n")
+    print(f"| build | bench p50 ms | bench p99 ms | {args.stage} stage mean ms | p50 / baseline "
+          "(run by run) | evidence digest |")
+    print("|---|---|---|---|---|---|")
+    base = runs["baseline build"]
+    for name, _ in builds:
+        r = runs[name]
+        ratio = [x[0] / b[0] for x, b in zip(r, base)]
+        print(f"| {name} | {spread([x[0] for x in r])} | {spread([x[1] for x in r])} | "
+              f"{spread([x[2] for x in r])} | {spread(ratio, '{:.2f}')} | "
+              f"{', '.join(sorted({x[3] for x in r}))} |")
+    digests = {x[3] for r in runs.values() for x in r}
+    if len(digests) != 1:
+        raise SystemExit(f"the builds' maps differ (evidence digests {sorted(digests)}): "
+                         "compare their accuracy with --compare instead")
 
 
 def server(args, bin_dir):
@@ -90,7 +121,7 @@ def accuracy(args, setting, work):
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("data")
-    p.add_argument("--compare", required=True, help="a kernel setting NAME=VALUE")
+    p.add_argument("--compare", help="a kernel setting NAME=VALUE (without it: the builds)")
     p.add_argument("--baseline-bin", help="another build's bin directory, for the server runs")
     p.add_argument("--resolution", type=float, default=0.1)
     p.add_argument("--max-range", type=float, default=30.0)
@@ -102,21 +133,26 @@ def main():
                    default=os.environ.get("DENSEMAP_DATA_DIR", os.path.join(ROOT, "..", "shared",
                                                                             "data")))
     args = p.parse_args()
+    if args.compare is None and args.baseline_bin is None:
+        p.error("give --compare NAME=VALUE, --baseline-bin DIR, or both")
     settings = [args.compare, None]
     print(f"Machine: {cpu_model()}, {os.cpu_count()} vCPUs; "
           f"{os.path.basename(os.path.normpath(args.data))} at {args.resolution:g} m / "
           f"{args.max_range:g} m, 2 threads; {args.runs} runs (median, min .. max)\n")
 
-    benches = [bench(args, settings) for _ in range(args.runs)]
-    print("densemap-bench, both lanes of the same run:\n")
-    print(f"| akimap_rays | bench p50 ms | bench p99 ms | {args.stage} stage mean ms | p50 / "
-          f"{args.compare} |")
-    print("|---|---|---|---|---|")
-    for setting in settings:
-        ratio = [b[setting][0] / b[args.compare][0] for b in benches]
-        print(f"| {label(setting)} | {spread([b[setting][0] for b in benches])} | "
-              f"{spread([b[setting][1] for b in benches])} | "
-              f"{spread([b[setting][2] for b in benches])} | {spread(ratio, '{:.2f}')} |")
+    if args.compare is None:
+        compare_builds(args)
+    else:
+        benches = [bench(args, settings) for _ in range(args.runs)]
+        print("densemap-bench, both lanes of the same run:\n")
+        print(f"| akimap_rays | bench p50 ms | bench p99 ms | {args.stage} stage mean ms | p50 / "
+              f"{args.compare} |")
+        print("|---|---|---|---|---|")
+        for setting in settings:
+            ratio = [b[setting][0] / b[args.compare][0] for b in benches]
+            print(f"| {label(setting)} | {spread([b[setting][0] for b in benches])} | "
+                  f"{spread([b[setting][1] for b in benches])} | "
+                  f"{spread([b[setting][2] for b in benches])} | {spread(ratio, '{:.2f}')} |")
 
     if args.baseline_bin:
         builds = [("baseline build", args.baseline_bin), ("this build", BIN)]
@@ -136,6 +172,8 @@ def main():
                   f"{spread([r[2] for r in runs])} | {spread([r[3] for r in runs])} | "
                   f"{spread([1000.0 * r[4] / n for r, n in zip(runs, received)], '{:.0f}')} |")
 
+    if args.compare is None:
+        return
     with tempfile.TemporaryDirectory(prefix="densemap-speed-") as work:
         scores = {setting: accuracy(args, setting, work) for setting in settings}
     print("\nAccuracy, akimap_rays, AUC / MSE (scripts/dense-map-benchmark.sh rows: mean of 3 "

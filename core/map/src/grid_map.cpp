@@ -407,22 +407,29 @@ ApplyStats GridMap::writeBlocks(std::span<BlockEntry* const> entries, CellChange
     const auto prefetchNode = [&](std::size_t k) {
       if (k >= end) return;
       const ChainLink* head = entries[k]->head.load(std::memory_order_relaxed);
-      if (head == nullptr) return;
-      const auto* bytes = reinterpret_cast<const char*>(head);
-      __builtin_prefetch(bytes);
-      __builtin_prefetch(bytes + 64);
       if constexpr (!std::is_same_v<std::decay_t<CellsOf>, std::nullptr_t>) {
-        // The lines (16 values each) holding the cells to write.
-        const float* values = static_cast<const BlockNode*>(head)->voxels.log_odds.data();
+        // The lines (16 values each) holding the cells to write, and those of the block's
+        // evidence where it has some (a dense map's values are computed from it).
         const block::BlockMask cells = cells_of(k);
+        const float* values =
+            head != nullptr ? static_cast<const BlockNode*>(head)->voxels.log_odds.data() : nullptr;
+        const BlockEvidence* evidence = entries[k]->evidence.get();
         for (int w = 0; w < block::kMaskWords; ++w) {
           for (int q = 0; q < 4; ++q) {
-            if (((cells[static_cast<std::size_t>(w)] >> (16 * q)) & 0xffffU) != 0) {
-              __builtin_prefetch(values + 64 * w + 16 * q);
+            if (((cells[static_cast<std::size_t>(w)] >> (16 * q)) & 0xffffU) == 0) continue;
+            const int line = 64 * w + 16 * q;
+            if (values != nullptr) __builtin_prefetch(values + line);
+            if (evidence != nullptr) {
+              __builtin_prefetch(evidence->alpha.data() + line);
+              __builtin_prefetch(evidence->beta.data() + line);
             }
           }
         }
       }
+      if (head == nullptr) return;
+      const auto* bytes = reinterpret_cast<const char*>(head);
+      __builtin_prefetch(bytes);
+      __builtin_prefetch(bytes + 64);
     };
     for (std::size_t k = begin; k < std::min(begin + 4, end); ++k) __builtin_prefetch(entries[k]);
     prefetchNode(begin);
@@ -655,20 +662,23 @@ ApplyStats GridMap::assignBlocks(std::span<const BlockCells> blocks, const Block
   for (std::size_t j = 0; j < blocks.size(); ++j) entries[j] = &store_->entry(blocks[j].key);
   std::atomic<bool> forgot{false};
   const float clamp_min = sensorModel().clampMin();
-  const ApplyStats stats = writeBlocks(entries, changes, [&](std::size_t j, BlockWriter& w) {
-    std::array<float, block::kVoxels> values;  // only the mask's cells are read
-    const BlockCells& b = blocks[j];
-    values_of(b.key, b.cells, values);
-    if (w.assignInLanes(b.key, b.cells, values.data(), clamp_min)) return;
-    block::forEachSetBit(b.cells, [&](int i) {
-      if (std::isnan(values[i])) {
-        w.forget(block::keyOf(b.key, i), i);
-        forgot.store(true, std::memory_order_relaxed);
-      } else {
-        w.set(block::keyOf(b.key, i), i, values[i]);
-      }
-    });
-  });
+  const ApplyStats stats = writeBlocks(
+      entries, changes,
+      [&](std::size_t j, BlockWriter& w) {
+        std::array<float, block::kVoxels> values;  // only the mask's cells are read
+        const BlockCells& b = blocks[j];
+        values_of(b.key, b.cells, values);
+        if (w.assignInLanes(b.key, b.cells, values.data(), clamp_min)) return;
+        block::forEachSetBit(b.cells, [&](int i) {
+          if (std::isnan(values[i])) {
+            w.forget(block::keyOf(b.key, i), i);
+            forgot.store(true, std::memory_order_relaxed);
+          } else {
+            w.set(block::keyOf(b.key, i), i, values[i]);
+          }
+        });
+      },
+      [&](std::size_t j) { return blocks[j].cells; });
   if (forgot.load()) {  // blocks left with no known cell go, as clearBox's do
     for (BlockEntry* e : entries) {
       const BlockNode* n = BlockStore::latest(*e);

@@ -95,7 +95,8 @@ class GridMap final : public OccupancyMap {
   /// Runs write_block(j, writer) for every entry in parallel, a block per task; counts, newly
   /// known cells and the changes (in entry order) gathered.
   /// `cells_of(j)`, when given, is the mask of the cells block j's writes touch: their lines of
-  /// the block's values are fetched ahead too.
+  /// the block's values, and of its evidence where it holds a dense map's, are fetched ahead
+  /// too.
   template <class WriteBlock, class CellsOf = std::nullptr_t>
   ApplyStats writeBlocks(std::span<BlockEntry* const> entries, CellChanges* changes,
                          WriteBlock&& write_block, CellsOf&& cells_of = nullptr);
