@@ -116,6 +116,70 @@ struct GridMap::BlockWriter {
   }
 
 #ifdef DENSEMAP_WIDE_APPLY
+  /// Of the sixteen cells from bit `shift` of mask word `wd`, those of `changed` take `v`'s
+  /// lanes (`kn`: those known before), as change() does a cell at a time: the writable node on
+  /// the first change, the counts, the change list in cell order, the values and fully-free
+  /// bits.
+  [[gnu::target("avx512f,avx512vl,avx512dq,avx512bw"), gnu::always_inline]] void writeSixteen(
+      std::uint64_t block_key, int wd, int shift, __mmask16 kn, __mmask16 changed, __m512 v,
+      __m512 clamp_min) {
+    if (write == nullptr) {
+      write = &batch.writable(entry);
+      read = write;
+    }
+    const int first = wd * 64 + shift;
+    const auto newly = static_cast<__mmask16>(changed & ~kn);
+    write->voxels.known[wd] |= static_cast<std::uint64_t>(newly) << shift;
+    counts.newly_known += static_cast<std::size_t>(std::popcount(static_cast<unsigned>(newly)));
+    counts.changed += static_cast<std::size_t>(std::popcount(static_cast<unsigned>(changed)));
+    if (out != nullptr) {
+      alignas(64) float values[16];
+      _mm512_store_ps(values, v);
+      for (unsigned c = changed; c != 0; c &= c - 1) {
+        const int k = std::countr_zero(c);
+        out->push_back({block::keyOf(block_key, first + k), values[k], true});
+      }
+    }
+    _mm512_mask_storeu_ps(write->voxels.log_odds.data() + first, changed, v);
+    const auto free =
+        static_cast<__mmask16>(_mm512_cmp_ps_mask(v, clamp_min, _CMP_LE_OQ) & changed);
+    const std::uint64_t lanes = static_cast<std::uint64_t>(changed) << shift;
+    write->fully_free[wd] =
+        (write->fully_free[wd] & ~lanes) | (static_cast<std::uint64_t>(free) << shift);
+  }
+
+  /// writeSixteen for eight cells in AVX2 lanes.
+  [[gnu::target("avx2,popcnt,bmi"), gnu::always_inline]] void writeEight(std::uint64_t block_key,
+                                                                         int wd, int shift,
+                                                                         unsigned kn,
+                                                                         unsigned changed, __m256 v,
+                                                                         __m256 clamp_min) {
+    if (write == nullptr) {
+      write = &batch.writable(entry);
+      read = write;
+    }
+    const int first = wd * 64 + shift;
+    const unsigned newly = changed & ~kn;
+    write->voxels.known[wd] |= static_cast<std::uint64_t>(newly) << shift;
+    counts.newly_known += static_cast<std::size_t>(__builtin_popcount(newly));
+    counts.changed += static_cast<std::size_t>(__builtin_popcount(changed));
+    if (out != nullptr) {
+      alignas(32) float values[8];
+      _mm256_store_ps(values, v);
+      for (unsigned c = changed; c != 0; c &= c - 1) {
+        const int k = __builtin_ctz(c);
+        out->push_back({block::keyOf(block_key, first + k), values[k], true});
+      }
+    }
+    _mm256_maskstore_ps(write->voxels.log_odds.data() + first, lanesOf(changed), v);
+    const unsigned free =
+        static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(v, clamp_min, _CMP_LE_OQ))) &
+        changed;
+    const std::uint64_t lanes = static_cast<std::uint64_t>(changed) << shift;
+    write->fully_free[wd] =
+        (write->fully_free[wd] & ~lanes) | (static_cast<std::uint64_t>(free) << shift);
+  }
+
   /// applySet sixteen cells at a time in AVX-512 lanes: the same float addition and clamps, the
   /// same cells skipped and changed, the changes listed in the same order.
   [[gnu::target("avx512f,avx512vl,avx512dq,avx512bw")]] void applySetWide(
@@ -123,7 +187,6 @@ struct GridMap::BlockWriter {
     const __m512 hit = _mm512_set1_ps(model.hit()), miss = _mm512_set1_ps(model.miss());
     const __m512 clamp_min = _mm512_set1_ps(model.clampMin());
     const __m512 clamp_max = _mm512_set1_ps(model.clampMax());
-    alignas(64) float values[16];
     for (int wd = 0; wd < block::kMaskWords; ++wd) {
       const std::uint64_t occupied = b.occupied[wd];
       std::uint64_t todo = b.free[wd] | occupied;
@@ -148,27 +211,7 @@ struct GridMap::BlockWriter {
         const auto changed =
             static_cast<__mmask16>(cells & ~_mm512_mask_cmp_ps_mask(kn, old, v, _CMP_EQ_OQ));
         if (changed == 0) continue;
-        if (write == nullptr) {
-          write = &batch.writable(entry);
-          read = write;
-        }
-        const auto newly = static_cast<__mmask16>(changed & ~kn);
-        write->voxels.known[wd] |= static_cast<std::uint64_t>(newly) << shift;
-        counts.newly_known += static_cast<std::size_t>(std::popcount(static_cast<unsigned>(newly)));
-        counts.changed += static_cast<std::size_t>(std::popcount(static_cast<unsigned>(changed)));
-        if (out != nullptr) {
-          _mm512_store_ps(values, v);
-          for (unsigned c = changed; c != 0; c &= c - 1) {
-            const int k = std::countr_zero(c);
-            out->push_back({block::keyOf(block_key, first + k), values[k], true});
-          }
-        }
-        _mm512_mask_storeu_ps(write->voxels.log_odds.data() + first, changed, v);
-        const auto free =
-            static_cast<__mmask16>(_mm512_cmp_ps_mask(v, clamp_min, _CMP_LE_OQ) & changed);
-        const std::uint64_t lanes = static_cast<std::uint64_t>(changed) << shift;
-        write->fully_free[wd] =
-            (write->fully_free[wd] & ~lanes) | (static_cast<std::uint64_t>(free) << shift);
+        writeSixteen(block_key, wd, shift, kn, changed, v, clamp_min);
       }
     }
   }
@@ -187,7 +230,6 @@ struct GridMap::BlockWriter {
     const __m256 hit = _mm256_set1_ps(model.hit()), miss = _mm256_set1_ps(model.miss());
     const __m256 clamp_min = _mm256_set1_ps(model.clampMin());
     const __m256 clamp_max = _mm256_set1_ps(model.clampMax());
-    alignas(32) float values[8];
     for (int wd = 0; wd < block::kMaskWords; ++wd) {
       const std::uint64_t occupied = b.occupied[wd];
       std::uint64_t todo = b.free[wd] | occupied;
@@ -215,28 +257,7 @@ struct GridMap::BlockWriter {
             cells &
             ~(kn & static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(old, v, _CMP_EQ_OQ))));
         if (changed == 0) continue;
-        if (write == nullptr) {
-          write = &batch.writable(entry);
-          read = write;
-        }
-        const unsigned newly = changed & ~kn;
-        write->voxels.known[wd] |= static_cast<std::uint64_t>(newly) << shift;
-        counts.newly_known += static_cast<std::size_t>(__builtin_popcount(newly));
-        counts.changed += static_cast<std::size_t>(__builtin_popcount(changed));
-        if (out != nullptr) {
-          _mm256_store_ps(values, v);
-          for (unsigned c = changed; c != 0; c &= c - 1) {
-            const int k = __builtin_ctz(c);
-            out->push_back({block::keyOf(block_key, first + k), values[k], true});
-          }
-        }
-        _mm256_maskstore_ps(write->voxels.log_odds.data() + first, lanesOf(changed), v);
-        const unsigned free =
-            static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(v, clamp_min, _CMP_LE_OQ))) &
-            changed;
-        const std::uint64_t lanes = static_cast<std::uint64_t>(changed) << shift;
-        write->fully_free[wd] =
-            (write->fully_free[wd] & ~lanes) | (static_cast<std::uint64_t>(free) << shift);
+        writeEight(block_key, wd, shift, kn, changed, v, clamp_min);
       }
     }
   }
@@ -288,26 +309,7 @@ struct GridMap::BlockWriter {
         const auto changed =
             static_cast<__mmask16>(cells & ~_mm512_mask_cmp_ps_mask(kn, old, v, _CMP_EQ_OQ));
         if (changed == 0) continue;
-        if (write == nullptr) {
-          write = &batch.writable(entry);
-          read = write;
-        }
-        const auto newly = static_cast<__mmask16>(changed & ~kn);
-        write->voxels.known[wd] |= static_cast<std::uint64_t>(newly) << shift;
-        counts.newly_known += static_cast<std::size_t>(std::popcount(static_cast<unsigned>(newly)));
-        counts.changed += static_cast<std::size_t>(std::popcount(static_cast<unsigned>(changed)));
-        if (out != nullptr) {
-          for (unsigned c = changed; c != 0; c &= c - 1) {
-            const int k = first + std::countr_zero(c);
-            out->push_back({block::keyOf(block_key, k), values[k], true});
-          }
-        }
-        _mm512_mask_storeu_ps(write->voxels.log_odds.data() + first, changed, v);
-        const auto free =
-            static_cast<__mmask16>(_mm512_cmp_ps_mask(v, clamp_min, _CMP_LE_OQ) & changed);
-        const std::uint64_t lanes = static_cast<std::uint64_t>(changed) << shift;
-        write->fully_free[wd] =
-            (write->fully_free[wd] & ~lanes) | (static_cast<std::uint64_t>(free) << shift);
+        writeSixteen(block_key, wd, shift, kn, changed, v, clamp_min);
       }
     }
     return true;
@@ -346,27 +348,7 @@ struct GridMap::BlockWriter {
             cells &
             ~(kn & static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(old, v, _CMP_EQ_OQ))));
         if (changed == 0) continue;
-        if (write == nullptr) {
-          write = &batch.writable(entry);
-          read = write;
-        }
-        const unsigned newly = changed & ~kn;
-        write->voxels.known[wd] |= static_cast<std::uint64_t>(newly) << shift;
-        counts.newly_known += static_cast<std::size_t>(__builtin_popcount(newly));
-        counts.changed += static_cast<std::size_t>(__builtin_popcount(changed));
-        if (out != nullptr) {
-          for (unsigned c = changed; c != 0; c &= c - 1) {
-            const int k = first + __builtin_ctz(c);
-            out->push_back({block::keyOf(block_key, k), values[k], true});
-          }
-        }
-        _mm256_maskstore_ps(write->voxels.log_odds.data() + first, lanesOf(changed), v);
-        const unsigned free =
-            static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(v, clamp_min, _CMP_LE_OQ))) &
-            changed;
-        const std::uint64_t lanes = static_cast<std::uint64_t>(changed) << shift;
-        write->fully_free[wd] =
-            (write->fully_free[wd] & ~lanes) | (static_cast<std::uint64_t>(free) << shift);
+        writeEight(block_key, wd, shift, kn, changed, v, clamp_min);
       }
     }
     return true;
