@@ -30,7 +30,7 @@ double oddsOf(float alpha, float beta, double prior) {
 }
 
 #ifdef DENSEMAP_LOG_LANES
-// ln 2 = kLn2Hi + kLn2Lo to about 2^-75: kLn2Hi has 21 significant bits, so e * kLn2Hi is
+// ln 2 = kLn2Hi + kLn2Lo to about 2^-74: kLn2Hi has 21 significant bits, so e * kLn2Hi is
 // exact for every exponent e of a double.
 constexpr double kLn2Hi = 0x1.62e42p-1;
 constexpr double kLn2Lo = 0x1.fdf473de6af28p-22;

@@ -64,8 +64,8 @@ void samplesKernels(const KernelOptions& options, double resolution,
 }
 
 /// The cells a kernel reaches in one row of a block (its 8 cells share a mask word), gathered
-/// in a register and written to the block's mask once (a bit set in memory per cell made
-/// each the next one's wait, and the count's too, as the mask might alias it).
+/// in a register and written to the block's mask once: a bit set in memory per cell would make
+/// each cell wait for the last one's store, and the count too, which the mask may alias.
 class RowBits {
  public:
   explicit RowBits(int cell_in_row) : word_(cell_in_row >> 6) {}
