@@ -8,6 +8,7 @@
 #include <map>
 #include <memory>
 #include <random>
+#include <string>
 #include <tuple>
 
 #include "densemap/map/map_diff.hpp"
@@ -77,39 +78,46 @@ TEST(SensorModel, UpdatesClampAtBothEnds) {
   EXPECT_EQ(v, sut.clampMin());
 }
 
+// The grid against the octree over many updates, its kSet writes in AVX-512 lanes, AVX2 lanes
+// and a cell at a time (where the processor has them; limitLanes): the same map, counts and
+// changes in each.
 TEST(GridMap, MatchesTheOctreeBackendOverManyUpdates) {
-  std::mt19937 rng(11);
-  GridMap grid(0.1, SensorModel{});
-  OctreeMap octree(0.1, SensorModel{});
-  // The change lists too (the grid's kSet block writer makes its own): the same cells and
-  // values as the octree's, whatever the order.
-  const auto sorted = [](CellChanges c) {
-    std::sort(c.begin(), c.end(), [](const CellChange& x, const CellChange& y) {
-      return std::tie(x.key.x, x.key.y, x.key.z) < std::tie(y.key.x, y.key.y, y.key.z);
-    });
-    return c;
-  };
-  for (int scan = 0; scan < 12; ++scan) {
-    const ScanUpdate u = randomUpdate(rng, scan % 3 == 0 ? 0.6 : 0.1);
-    CellChanges from_grid, from_octree;
-    const ApplyStats a = grid.apply(u, &from_grid);
-    const ApplyStats b = octree.apply(u, &from_octree);
-    EXPECT_EQ(a.updated_cells, b.updated_cells);
-    EXPECT_EQ(a.changed_cells, b.changed_cells);
-    EXPECT_EQ(from_grid.size(), a.changed_cells);
-    const CellChanges g = sorted(from_grid), o = sorted(from_octree);
-    ASSERT_EQ(g.size(), o.size());
-    for (std::size_t i = 0; i < g.size(); ++i) {
-      ASSERT_EQ(g[i].key, o[i].key) << "scan " << scan << ", change " << i;
-      ASSERT_EQ(g[i].log_odds, o[i].log_odds) << "scan " << scan << ", change " << i;
-      ASSERT_EQ(g[i].known, o[i].known);
+  for (const int lanes : {512, 256, 0}) {
+    SCOPED_TRACE("lanes " + std::to_string(lanes));
+    std::mt19937 rng(11);
+    GridMap grid(0.1, SensorModel{});
+    grid.limitLanes(lanes);
+    OctreeMap octree(0.1, SensorModel{});
+    // The change lists too (the grid's kSet block writer makes its own): the same cells and
+    // values as the octree's, whatever the order.
+    const auto sorted = [](CellChanges c) {
+      std::sort(c.begin(), c.end(), [](const CellChange& x, const CellChange& y) {
+        return std::tie(x.key.x, x.key.y, x.key.z) < std::tie(y.key.x, y.key.y, y.key.z);
+      });
+      return c;
+    };
+    for (int scan = 0; scan < 12; ++scan) {
+      const ScanUpdate u = randomUpdate(rng, scan % 3 == 0 ? 0.6 : 0.1);
+      CellChanges from_grid, from_octree;
+      const ApplyStats a = grid.apply(u, &from_grid);
+      const ApplyStats b = octree.apply(u, &from_octree);
+      EXPECT_EQ(a.updated_cells, b.updated_cells);
+      EXPECT_EQ(a.changed_cells, b.changed_cells);
+      EXPECT_EQ(from_grid.size(), a.changed_cells);
+      const CellChanges g = sorted(from_grid), o = sorted(from_octree);
+      ASSERT_EQ(g.size(), o.size());
+      for (std::size_t i = 0; i < g.size(); ++i) {
+        ASSERT_EQ(g[i].key, o[i].key) << "scan " << scan << ", change " << i;
+        ASSERT_EQ(g[i].log_odds, o[i].log_odds) << "scan " << scan << ", change " << i;
+        ASSERT_EQ(g[i].known, o[i].known);
+      }
     }
+    const MapDiff diff = diffMaps(grid, octree);
+    EXPECT_EQ(diff.differing(), 0U);
+    EXPECT_GT(diff.union_cells, 100000U);
+    EXPECT_EQ(grid.knownCells(), octree.knownCells());
+    expectFullyFreeMasksMatchValues(grid);
   }
-  const MapDiff diff = diffMaps(grid, octree);
-  EXPECT_EQ(diff.differing(), 0U);
-  EXPECT_GT(diff.union_cells, 100000U);
-  EXPECT_EQ(grid.knownCells(), octree.knownCells());
-  expectFullyFreeMasksMatchValues(grid);
 }
 
 TEST(GridMap, CellsAtOrBeyondTheBoundTheirUpdateMovesTowardKeepTheirValueAsInOctoMap) {
