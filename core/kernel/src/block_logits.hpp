@@ -8,9 +8,9 @@
 
 namespace densemap::kernel {
 
-/// The published log-odds of a dense map's cell of evidence alpha and beta under `prior`:
-/// float(log(p / (1 - p))), p = (prior + alpha) / (2 prior + alpha + beta) (0 for an unknown
-/// cell: p = 0.5). The one definition; blockLogits computes it a block at a time.
+/// The published log-odds of a dense map's known cell of evidence alpha and beta under
+/// `prior`: float(log(p / (1 - p))), p = (prior + alpha) / (2 prior + alpha + beta). The one
+/// definition; blockLogits computes it a block at a time, and gives an unknown cell 0 (p = 0.5).
 [[nodiscard]] float cellLogit(float alpha, float beta, double prior);
 
 /// cellLogit of each cell of `cells` into out[cell] (an unknown cell, not in `known`: 0), bit

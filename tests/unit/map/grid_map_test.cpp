@@ -396,19 +396,29 @@ TEST(GridMap, AssignBlocksEqualsSettingCellByCellAndSkipsUnchangedCells) {
   }
   std::map<std::uint64_t, BlockCells> by_block;
   std::map<std::uint64_t, float> wanted;  // packed key -> value
+  std::vector<VoxelKey> set_before;       // round 0's cells
   for (int round = 0; round < 4; ++round) {
     if (round < 3) {  // round 3 repeats round 2's cells and values: nothing changes
       by_block.clear();
       wanted.clear();
+      const auto want = [&](const VoxelKey& k, float v) {
+        BlockCells& b = by_block[block::blockOf(k)];
+        b.key = block::blockOf(k);
+        block::setBit(b.cells, block::indexOf(k));
+        wanted[k.packed()] = v;
+      };
       for (int i = 0; i < 3000; ++i) {
         const VoxelKey k{static_cast<std::uint16_t>(coord(rng)),
                          static_cast<std::uint16_t>(coord(rng)),
                          static_cast<std::uint16_t>(coord(rng))};
-        BlockCells& b = by_block[block::blockOf(k)];
-        b.key = block::blockOf(k);
-        block::setBit(b.cells, block::indexOf(k));
-        // Round 1 forgets a few cells (NaN); some blocks so take the cell-by-cell path.
-        wanted[k.packed()] = round == 1 && nan_cell(rng) ? std::nanf("") : value(rng);
+        want(k, value(rng));
+        if (round == 0) set_before.push_back(k);
+      }
+      // Round 1 forgets a few of round 0's cells (NaN): their blocks take the cell-by-cell path.
+      if (round == 1) {
+        for (const VoxelKey& k : set_before) {
+          if (nan_cell(rng)) want(k, std::nanf(""));
+        }
       }
     }
     std::vector<BlockCells> blocks;
@@ -455,6 +465,11 @@ TEST(GridMap, AssignBlocksEqualsSettingCellByCellAndSkipsUnchangedCells) {
       if (round == 3) {
         EXPECT_TRUE(published.written_blocks.empty());
       }
+    }
+    if (round == 1) {
+      EXPECT_GT(std::count_if(expected.begin(), expected.end(),
+                              [](const CellChange& c) { return !c.known; }),
+                5);
     }
     if (round == 3) {
       EXPECT_TRUE(expected.empty());
