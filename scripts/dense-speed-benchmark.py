@@ -93,9 +93,10 @@ def compare_builds(args):
 
 def server(args, bin_dir):
     """One scripts/realtime-check.sh run with these binaries: (integrated, dropped, p50, p99,
-    CPU s)."""
+    CPU s, the replay's CPU ms a scan or None)."""
     env = dict(os.environ, BENCH="0", KIND="akimap_rays", DENSEMAP_BIN=bin_dir)
-    return realtime_check(ROOT, args.data, args.resolution, args.max_range, args.rate, env)[:5]
+    run = realtime_check(ROOT, args.data, args.resolution, args.max_range, args.rate, env)
+    return run[:5] + run[6:]
 
 
 def accuracy(args, setting, work):
@@ -163,14 +164,16 @@ def main():
         print(f"\nThe server at {args.rate:g} Hz (scripts/realtime-check.sh, KIND=akimap_rays), "
               "the builds alternated:\n")
         print("| build | scans integrated (per run) | server p50 ms | server p99 ms | "
-              "server CPU ms a received scan |")
-        print("|---|---|---|---|---|")
+              "server CPU ms a received scan | replay CPU ms a scan |")
+        print("|---|---|---|---|---|---|")
         for name, _ in builds:
             runs = servers[name]
             received = [r[0] + r[1] for r in runs]
+            sender = [r[5] for r in runs if r[5] is not None]
             print(f"| {name} | {', '.join(f'{r[0]}/{n}' for r, n in zip(runs, received))} | "
                   f"{spread([r[2] for r in runs])} | {spread([r[3] for r in runs])} | "
-                  f"{spread([1000.0 * r[4] / n for r, n in zip(runs, received)], '{:.0f}')} |")
+                  f"{spread([1000.0 * r[4] / n for r, n in zip(runs, received)], '{:.0f}')} | "
+                  f"{spread(sender, '{:.1f}') if sender else '-'} |")
 
     if args.compare is None:
         return

@@ -37,7 +37,7 @@ def with_env(setting):
 def server(args, setting):
     """One realtime-check run: (integrated, received, p50, p99, CPU s, minor faults)."""
     env = dict(with_env(setting), BENCH="0", KIND=args.kind, DENSEMAP_BIN=BIN)
-    integrated, dropped, p50, p99, cpu, faults = realtime_check(
+    integrated, dropped, p50, p99, cpu, faults, _ = realtime_check(
         ROOT, args.data, args.resolution, args.max_range, args.rate, env)
     return (integrated, integrated + dropped, p50, p99, cpu, faults)
 

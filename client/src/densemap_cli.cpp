@@ -7,6 +7,7 @@
 #include <cstdio>
 
 #include "cli_support.hpp"
+#include "densemap/cli/allocator.hpp"
 #include "densemap/cli/guarded_main.hpp"
 #include "densemap/client/client.hpp"
 #include "load_command.hpp"
@@ -87,6 +88,10 @@ static int runMain(int argc, char** argv) {
   } else {
     o.security = *files;
   }
+  // Replay and load send a scan of megabytes each period: its buffers are reused from the heap,
+  // not faulted in anew each scan, so that the sender takes less of the cores it may share
+  // with the server (before any DDS thread starts).
+  if (load.parsed() || replay.parsed()) cli::keepScanBuffersInHeap(std::size_t{32} << 20);
   if (load.parsed()) return load.run(o, interface_option->count() > 0);
 
   if (render.parsed()) return render.run();

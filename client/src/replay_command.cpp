@@ -1,5 +1,7 @@
 #include "replay_command.hpp"
 
+#include <sys/resource.h>
+
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -23,6 +25,18 @@ using Clock = std::chrono::steady_clock;
 double msSince(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
+
+/// This process's CPU seconds (user + system) and minor page faults so far.
+struct ProcessUsage {
+  double cpu_s = 0.0;
+  long minor_faults = 0;
+  static ProcessUsage now() {
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    const auto seconds = [](const timeval& t) { return t.tv_sec + 1e-6 * t.tv_usec; };
+    return {seconds(u.ru_utime) + seconds(u.ru_stime), u.ru_minflt};
+  }
+};
 
 /// --query-bbox-edge: a second client asks for bbox queries (cubes of that edge around the
 /// latest sensor position) back to back, for as long as the replay sends scans.
@@ -335,6 +349,12 @@ int ReplayCommand::run(const ClientOptions& o) {
   std::optional<std::int64_t> first_stamp;
   std::size_t sent = 0, dropped_points = 0;
   std::optional<RawScan> last_raw;
+  // The sender's own cost: it may share the server's cores, as a sensor driver would.
+  const ProcessUsage before_all = ProcessUsage::now();
+  // Faults are counted over the second half of the scans: the heap and DDS's buffers grow over
+  // the first few.
+  const std::size_t half_at = (end - first_ + 1) / 2;
+  ProcessUsage at_half;
   for (std::size_t i = first_; i < end; ++i, slot += period) {
     auto scan = (*source)->load(i);
     if (!scan) return fail(scan.error().message);
@@ -363,8 +383,10 @@ int ReplayCommand::run(const ClientOptions& o) {
     if (ros_out) last_raw = raw;
     ++sent;
     run.afterScan(scan->originWorld());
+    if (sent == half_at) at_half = ProcessUsage::now();
     progress.update(i - first_ + 1, std::to_string(run.integrated()) + " integrated");
   }
+  const ProcessUsage after_all = ProcessUsage::now();
   // A cloud stamped after its pose's TF sample needs the next one.
   if (ros_out && last_raw) {
     if (auto ok = ros_out->finish(*last_raw, sent); !ok) return fail(ok.error().message);
@@ -375,6 +397,16 @@ int ReplayCommand::run(const ClientOptions& o) {
   std::printf("replay: sent %zu scans from %s\n", sent, (*source)->describe().c_str());
   if (dropped_points > 0) {
     std::printf("replay: dropped %zu NaN/Inf points before sending\n", dropped_points);
+  }
+  if (sent > 0) {
+    const std::size_t second_half = sent - half_at;
+    std::printf(
+        "replay: sending took %.2f CPU s in this process (%.1f ms a scan); %ld minor page "
+        "faults over the last %zu scans (%.1f a scan)\n",
+        after_all.cpu_s - before_all.cpu_s, 1e3 * (after_all.cpu_s - before_all.cpu_s) / sent,
+        after_all.minor_faults - at_half.minor_faults, second_half,
+        second_half > 0 ? double(after_all.minor_faults - at_half.minor_faults) / second_half
+                        : 0.0);
   }
   printServerCounts(before, after);
   run.printLatencies();
