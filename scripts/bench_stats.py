@@ -32,8 +32,8 @@ def spread(values, fmt="{:.1f}"):
 
 def realtime_check(root, data, resolution, max_range, rate, env):
     """One scripts/realtime-check.sh run (inside `unshare -n` when root) with this environment:
-    (integrated, dropped, server p50 ms, p99 ms, CPU s, minor page faults, the replay's own CPU
-    ms a scan: None from a replay that does not print it)."""
+    (integrated, dropped, server p50 ms, p99 ms, CPU s, minor page faults, the replay client's
+    CPU s)."""
     command = [os.path.join(root, "scripts", "realtime-check.sh"), data, str(resolution),
                str(max_range), str(rate)]
     if os.geteuid() == 0:
@@ -43,11 +43,10 @@ def realtime_check(root, data, resolution, max_range, rate, env):
     status = re.search(r"integrated (\d+), dropped (\d+), rejected \d+; latency p50 ([\d.]+) ms "
                        r"p99 ([\d.]+) ms", out)
     usage = re.search(r"minor page faults: (\d+), CPU s: ([\d.]+)", out)
-    sender = re.search(r"replay: sending took [\d.]+ CPU s in this process \(([\d.]+) ms a scan\)",
-                       out)
+    sender = re.search(r"replay client CPU s: ([\d.]+)", out)
     return (int(status.group(1)), int(status.group(2)), float(status.group(3)),
             float(status.group(4)), float(usage.group(2)), int(usage.group(1)),
-            float(sender.group(1)) if sender else None)
+            float(sender.group(1)))
 
 
 def bench_lane(out, lane):

@@ -8,7 +8,8 @@ it saves and what it costs. Prints three markdown tables for docs/benchmarks.md 
    scan and one stage's mean (--stage: free by default);
 2. with --baseline-bin DIR (the binaries of another build): scripts/realtime-check.sh at --rate
    Hz (the server with the replay client on the same cores), that build's and this one's
-   alternated, --runs runs: scans integrated, server p50 / p99, CPU ms a scan;
+   alternated, --runs runs: scans integrated, server p50 / p99, the server's and the replay
+   client's CPU ms a scan;
 3. accuracy: scripts/dense-map-benchmark.sh (akimap_rays, 3 seeds, BALM's 0.2 m row left out)
    with the default and with the setting, plus DATA's hold-out at --resolution / --max-range
    (densemap-eval, 40 scans).
@@ -93,7 +94,7 @@ def compare_builds(args):
 
 def server(args, bin_dir):
     """One scripts/realtime-check.sh run with these binaries: (integrated, dropped, p50, p99,
-    CPU s, the replay's CPU ms a scan or None)."""
+    CPU s, the replay client's CPU s)."""
     env = dict(os.environ, BENCH="0", KIND="akimap_rays", DENSEMAP_BIN=bin_dir)
     run = realtime_check(ROOT, args.data, args.resolution, args.max_range, args.rate, env)
     return run[:5] + run[6:]
@@ -169,11 +170,10 @@ def main():
         for name, _ in builds:
             runs = servers[name]
             received = [r[0] + r[1] for r in runs]
-            sender = [r[5] for r in runs if r[5] is not None]
             print(f"| {name} | {', '.join(f'{r[0]}/{n}' for r, n in zip(runs, received))} | "
                   f"{spread([r[2] for r in runs])} | {spread([r[3] for r in runs])} | "
                   f"{spread([1000.0 * r[4] / n for r, n in zip(runs, received)], '{:.0f}')} | "
-                  f"{spread(sender, '{:.1f}') if sender else '-'} |")
+                  f"{spread([1000.0 * r[5] / n for r, n in zip(runs, received)], '{:.1f}')} |")
 
     if args.compare is None:
         return

@@ -2,7 +2,8 @@
 # Server against core, same scans, same session: runs densemap-server on
 # loopback at RES / RANGE, replays DATA at RATE Hz (optionally with point queries), stops it,
 # then runs densemap-bench on the same scans with the same method (METHOD, default raycast, the
-# server's default; grid, THREADS threads). Prints the server's latency p50/p99, drops, RSS, and the bench's p50/p99.
+# server's default; grid, THREADS threads). Prints the server's latency p50/p99, drops, RSS, the
+# replay client's CPU (it runs on the same cores), and the bench's p50/p99.
 # Writes $OUT/scans.csv (densemap replay --csv: per-scan latency and map size) and rss.txt.
 # Usage: scripts/realtime-check.sh DATA RES RANGE [RATE=10] [FIRST=0] [LIMIT=0] [QUERY_POINTS=0]
 # Environment: DENSEMAP_BIN (default build/bin), DENSEMAP_DOMAIN (default 77), BENCH=0 skips the
@@ -65,9 +66,12 @@ done
 read -r ticks0 steal0 < <(cpu_ticks)
 extra=(--query-bbox-edge "${BBOX_EDGE:-0}" --csv "$OUT/scans.csv")
 [ "${LEGACY:-0}" = 1 ] && extra=()  # a densemap from before these options (A/B runs)
-"$BIN/densemap" --domain-id "$DOMAIN" replay --data "$DATA" --rate "$RATE" --first "$FIRST" \
+# The replay's CPU (user and system s, bash's `time`), as it shares the server's cores.
+TIMEFORMAT='%U %S'
+{ time "$BIN/densemap" --domain-id "$DOMAIN" replay --data "$DATA" --rate "$RATE" --first "$FIRST" \
   --limit "$LIMIT" --query-points "$QUERY" "${extra[@]}" 2> "$OUT/replay.log" \
-  | tee "$OUT/replay.txt"
+  | tee "$OUT/replay.txt"; } 2> "$OUT/replay-cpu.txt"
+awk '{printf "replay client CPU s: %.2f\n", $1 + $2}' "$OUT/replay-cpu.txt" | tee -a "$OUT/replay.txt"
 read -r ticks1 steal1 < <(cpu_ticks)
 awk -v t="$((ticks1 - ticks0))" -v s="$((steal1 - steal0))" 'BEGIN {
   share = t > 0 ? 100 * s / t : 0
