@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 #include <octomap/OcTree.h>
 
+#include <cstdlib>
+#include <string>
 #include <vector>
 
 #include "densemap/test_support/random_rays.hpp"
@@ -108,6 +110,22 @@ TEST(RayTraversal, ConsecutiveKeysAreFaceNeighboursAndEndIsExcluded) {
       for (int a = 0; a < 3; ++a) manhattan += std::abs(int{keys[j][a]} - int{keys[j - 1][a]});
       ASSERT_EQ(manhattan, 1) << "ray " << i << " step " << j;
     }
+  }
+}
+
+// DENSEMAP_LANES caps every kernel's lanes (CTest also runs this binary with 256 and with 0,
+// so that the other tests here take the narrower paths): below 512 no AVX-512 path, below 256
+// no AVX2 path.
+TEST(LaneCap, FollowsDensemapLanes) {
+  const char* value = std::getenv("DENSEMAP_LANES");
+  const std::string set = value != nullptr ? value : "";
+  const int want = set == "256" ? 256 : set == "0" ? 0 : 512;
+  EXPECT_EQ(laneCap(), want);
+  if (want < 512) {
+    EXPECT_FALSE(hasWideLanes());
+  }
+  if (want < 256) {
+    EXPECT_FALSE(hasFourLanes());
   }
 }
 

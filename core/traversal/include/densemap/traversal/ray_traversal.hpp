@@ -198,10 +198,15 @@ void startTraversalLanes(const VoxelGrid& grid, const Point3f& origin, const Vox
 void startTraversals(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_origin,
                      const Point3f* ends, const VoxelKey* key_ends, int n, TraversalStarts& out,
                      bool wide = true);
+/// The widest lanes the environment allows: DENSEMAP_LANES=256 keeps every kernel to AVX2
+/// lanes, =0 to one value at a time (to compare the paths on one machine, or to step around
+/// a processor's fault); unset or any other value, 512. Read once.
+[[nodiscard]] int laneCap();
 /// Whether the processor (and the system) has the AVX-512 lanes the wide walks and starts use
-/// (AVX-512 F, VL and DQ; checked once).
+/// (AVX-512 F, VL and DQ; checked once) and laneCap() allows them.
 [[nodiscard]] bool hasWideLanes();
-/// Whether the processor has AVX2 (the four-lane kernels'), checked once.
+/// Whether the processor has AVX2 (the four-lane kernels') and laneCap() allows it, checked
+/// once.
 [[nodiscard]] bool hasFourLanes();
 
 /// The voxels of a ray's traversal when traverseRay's step visitors walk it counted (at least
