@@ -88,9 +88,12 @@ void writeOut(const TraversalLaneValues<Int>& r, const VoxelKey& key_origin,
 /// keys, steps and crossings as 64-bit ints in the vectors (exact: keys are 16-bit), stored as
 /// TraversalLanes' 32-bit ones; the same IEEE operations in the same order as startTraversal
 /// and endOf.
-[[gnu::target("avx512f,avx512vl,avx512dq")]] void lanesEight(
-    const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_origin, const Point3f* ends,
-    const VoxelKey* key_ends, int n, TraversalLanes& r) {
+[[gnu::target("avx512f,avx512vl,avx512dq")]] void lanesEight(const VoxelGrid& grid,
+                                                              const Point3f& origin,
+                                                              const VoxelKey& key_origin,
+                                                              const Point3f* ends,
+                                                              const VoxelKey* key_ends, int n,
+                                                              TraversalLanes& r) {
   constexpr double kMax = std::numeric_limits<double>::max();
   constexpr double kInf = std::numeric_limits<double>::infinity();
   alignas(32) float e[3][8];
@@ -102,23 +105,23 @@ void writeOut(const TraversalLaneValues<Int>& r, const VoxelKey& key_origin,
   for (int a = 0; a < 3; ++a) {
     dir[a] = _mm256_sub_ps(_mm256_load_ps(e[a]), _mm256_set1_ps(origin[a]));
   }
-  const __m256 norm_sq =
-      _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dir[0], dir[0]), _mm256_mul_ps(dir[1], dir[1])),
-                    _mm256_mul_ps(dir[2], dir[2]));
+  const __m256 norm_sq = _mm256_add_ps(
+      _mm256_add_ps(_mm256_mul_ps(dir[0], dir[0]), _mm256_mul_ps(dir[1], dir[1])),
+      _mm256_mul_ps(dir[2], dir[2]));
   const __m256 length = _mm512_cvtpd_ps(_mm512_sqrt_pd(_mm512_cvtps_pd(norm_sq)));
   const __mmask8 has_length = _mm256_cmp_ps_mask(length, _mm256_setzero_ps(), _CMP_GT_OQ);
   __mmask8 same = 0xff;  // both ends in one voxel
   __m512d t_max[3], t_delta[3];
   __m512i step[3], key_end[3];
   for (int a = 0; a < 3; ++a) {
-    key_end[a] =
-        _mm512_cvtepi32_epi64(_mm256_load_si256(reinterpret_cast<const __m256i*>(r.key_end[a])));
+    key_end[a] = _mm512_cvtepi32_epi64(
+        _mm256_load_si256(reinterpret_cast<const __m256i*>(r.key_end[a])));
     same &= _mm512_cmpeq_epi64_mask(key_end[a], _mm512_set1_epi64(ko[a]));
     const __m256 d = _mm256_div_ps(dir[a], length);
     const __mmask8 up = _mm256_cmp_ps_mask(d, _mm256_setzero_ps(), _CMP_GT_OQ);
     const __mmask8 down = _mm256_cmp_ps_mask(d, _mm256_setzero_ps(), _CMP_LT_OQ);
-    step[a] = _mm512_mask_mov_epi64(_mm512_maskz_mov_epi64(up, _mm512_set1_epi64(1)), down,
-                                    _mm512_set1_epi64(-1));
+    step[a] = _mm512_mask_mov_epi64(
+        _mm512_maskz_mov_epi64(up, _mm512_set1_epi64(1)), down, _mm512_set1_epi64(-1));
     // The voxel's border toward the step: the key's centre plus the (float) half step.
     const double centre = VoxelGrid::keyToCoord(ko[a], resolution);
     const double border_up = centre + static_cast<float>(1 * resolution * 0.5);
@@ -146,13 +149,13 @@ void writeOut(const TraversalLaneValues<Int>& r, const VoxelKey& key_origin,
     crossings[a] = c;
     const __mmask8 still = _mm512_cmpeq_epi64_mask(step[a], _mm512_setzero_si512());
     irregular |= _mm512_mask_cmpneq_epi64_mask(still, key_end[a], _mm512_set1_epi64(ko[a]));
-    irregular |=
-        _mm512_mask_cmplt_epi64_mask(static_cast<__mmask8>(~still), c, _mm512_setzero_si512());
+    irregular |= _mm512_mask_cmplt_epi64_mask(static_cast<__mmask8>(~still), c,
+                                              _mm512_setzero_si512());
     const auto moving = static_cast<__mmask8>(~still);
     total = _mm512_mask_add_epi64(total, moving, total, c);
     const __m512d cd = _mm512_cvtepi64_pd(c);
-    beyond[a] =
-        _mm512_mask_add_pd(_mm512_set1_pd(kInf), moving, t_max[a], _mm512_mul_pd(cd, t_delta[a]));
+    beyond[a] = _mm512_mask_add_pd(_mm512_set1_pd(kInf), moving, t_max[a],
+                                   _mm512_mul_pd(cd, t_delta[a]));
     const __mmask8 some = _mm512_mask_cmpgt_epi64_mask(moving, c, _mm512_setzero_si512());
     last[a] = _mm512_mask_add_pd(
         _mm512_set1_pd(-kInf), some, t_max[a],
@@ -168,16 +171,17 @@ void writeOut(const TraversalLaneValues<Int>& r, const VoxelKey& key_origin,
                         _mm512_add_epi64(total, _mm512_set1_epi64(8)), _mm512_set1_epi64(4))),
                     _mm512_set1_pd(0x1p-50)),
       scale);
-  __mmask8 unsure =
-      static_cast<__mmask8>(near(last[0], last[1], bound) | near(last[0], last[2], bound) |
-                            near(last[1], last[2], bound) | near(beyond[0], beyond[1], bound) |
-                            near(beyond[0], beyond[2], bound) | near(beyond[1], beyond[2], bound));
+  __mmask8 unsure = static_cast<__mmask8>(
+      near(last[0], last[1], bound) | near(last[0], last[2], bound) |
+      near(last[1], last[2], bound) | near(beyond[0], beyond[1], bound) |
+      near(beyond[0], beyond[2], bound) | near(beyond[1], beyond[2], bound));
   const __m512d last_max = _mm512_max_pd(_mm512_max_pd(last[0], last[1]), last[2]);
   const __m512d beyond_min = _mm512_min_pd(_mm512_min_pd(beyond[0], beyond[1]), beyond[2]);
   const __mmask8 some_last = _mm512_cmp_pd_mask(last_max, _mm512_set1_pd(-kInf), _CMP_GT_OQ);
-  const __mmask8 gap = _mm512_cmp_pd_mask(_mm512_sub_pd(beyond_min, last_max), bound, _CMP_GT_OQ);
-  const __mmask8 within =
-      _mm512_cmp_pd_mask(_mm512_sub_pd(_mm512_cvtps_pd(length), last_max), bound, _CMP_GT_OQ);
+  const __mmask8 gap =
+      _mm512_cmp_pd_mask(_mm512_sub_pd(beyond_min, last_max), bound, _CMP_GT_OQ);
+  const __mmask8 within = _mm512_cmp_pd_mask(
+      _mm512_sub_pd(_mm512_cvtps_pd(length), last_max), bound, _CMP_GT_OQ);
   unsure |= static_cast<__mmask8>(~(some_last & gap & within));
   for (int a = 0; a < 3; ++a) {
     _mm512_store_pd(r.tm[a], t_max[a]);
@@ -195,9 +199,12 @@ void writeOut(const TraversalLaneValues<Int>& r, const VoxelKey& key_origin,
 }
 
 /// startTraversals' eight rays with AVX-512 (lanesEight's lanes written out).
-[[gnu::target("avx512f,avx512vl,avx512dq")]] void startEight(
-    const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_origin, const Point3f* ends,
-    const VoxelKey* key_ends, int n, TraversalStarts& out) {
+[[gnu::target("avx512f,avx512vl,avx512dq")]] void startEight(const VoxelGrid& grid,
+                                                              const Point3f& origin,
+                                                              const VoxelKey& key_origin,
+                                                              const Point3f* ends,
+                                                              const VoxelKey* key_ends, int n,
+                                                              TraversalStarts& out) {
   TraversalLanes r;
   lanesEight(grid, origin, key_origin, ends, key_ends, n, r);
   writeOut(r, key_origin, key_ends, n, out);
@@ -390,8 +397,8 @@ bool hasFourLanes() {
 }
 
 void startTraversalLanes(const VoxelGrid& grid, const Point3f& origin, const VoxelKey& key_origin,
-                         const Point3f* ends, const VoxelKey* key_ends, int n, TraversalLanes& out,
-                         bool wide) {
+                         const Point3f* ends, const VoxelKey* key_ends, int n,
+                         TraversalLanes& out, bool wide) {
   if (n <= 0) return;
 #ifdef DENSEMAP_WIDE_STARTS
   if (wide && hasWideLanes()) {
